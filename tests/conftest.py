@@ -1,0 +1,33 @@
+"""Shared fixtures: the Warp devices to test on, and small meshes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+
+wp.config.quiet = True
+wp.init()
+
+DEVICES: list[str] = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+
+
+@pytest.fixture(params=DEVICES)
+def device(request: pytest.FixtureRequest) -> str:
+    """Every Warp device present: ``cpu`` always, ``cuda:0`` where a GPU exists."""
+    return request.param
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    """A seeded random generator, so that every test is reproducible."""
+    return np.random.default_rng(20261122)
+
+
+@pytest.fixture
+def unit_cube_tet4():
+    """A unit cube split into 2 x 2 x 2 hexahedra of six tets each (48 TET4)."""
+    from warptissue.mesh import block_mesh
+
+    grid = np.linspace(0.0, 1.0, 3)
+    return block_mesh(grid, grid, grid, split="six")

@@ -1,0 +1,58 @@
+import json
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.io import atomic_path, read_experiment_csv, write_csv, write_json
+
+
+def test_csv_round_trip_and_sidecar(tmp_path):
+    path = tmp_path / "run.csv"
+    t = np.linspace(0.0, 1.0, 5)
+    write_csv(path, {"time_s": t, "displacement_m": 1e-3 * t, "force_N": 0.1 * t})
+    write_json(tmp_path / "run.json", {"specimen": "liver-1", "value": np.float64(2.5)})
+    data = read_experiment_csv(path)
+    np.testing.assert_array_equal(data["time_s"], t)
+    assert data.sample_count == 5
+    assert data.metadata == {"specimen": "liver-1", "value": 2.5}
+
+
+@pytest.mark.parametrize(
+    ("text", "fragment"),
+    [
+        ("", "empty"),
+        ("time_s,force_N\n0,1\n", "missing required column"),
+        ("time_s,displacement_m,force_N\n", "no data rows"),
+        (
+            "time_s,displacement_m,force_N\n0,0,0\n1,abc,0\n",
+            ":3, column 'displacement_m': not a number",
+        ),
+        (
+            "time_s,displacement_m,force_N\n0,0,0\n1,nan,0\n",
+            ":3, column 'displacement_m': not a finite",
+        ),
+        (
+            "time_s,displacement_m,force_N\n0,0,0\n0,0,0\n",
+            ":3, column 'time_s': time_s must strictly increase",
+        ),
+        ("time_s,displacement_m,force_N\n0,0\n", ":2: expected 3 fields"),
+    ],
+)
+def test_bad_csv_names_file_line_and_column(tmp_path, text, fragment):
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(InputError) as excinfo:
+        read_experiment_csv(path)
+    assert str(path) in str(excinfo.value)
+    assert fragment in str(excinfo.value)
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    target = tmp_path / "out.json"
+    write_json(target, {"a": 1})
+    with pytest.raises(RuntimeError), atomic_path(target) as temporary:
+        temporary.write_text("half")
+        raise RuntimeError("boom")
+    assert json.loads(target.read_text()) == {"a": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["out.json"]

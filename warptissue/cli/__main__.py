@@ -1,0 +1,5 @@
+import sys
+
+from warptissue.cli import main
+
+sys.exit(main())

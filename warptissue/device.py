@@ -1,0 +1,36 @@
+"""Choosing the Warp device that host wrappers launch on."""
+
+from __future__ import annotations
+
+import warp as wp
+
+from warptissue.errors import DeviceError
+
+__all__ = ["resolve_device"]
+
+
+def resolve_device(device: str | wp.context.Device | None = None) -> wp.context.Device:
+    """Return a Warp device, initializing Warp on first use.
+
+    Args:
+        device: ``"cpu"``, ``"cuda"``, ``"cuda:N"``, a Warp device, or None for Warp's
+            default device (a GPU where one is present, else the CPU).
+
+    Returns:
+        The Warp device.
+
+    Raises:
+        DeviceError: The device does not exist on this machine.
+    """
+    wp.init()
+    if isinstance(device, wp.context.Device):
+        return device
+    if device is None:
+        return wp.get_device()
+    if str(device).startswith("cuda") and not wp.is_cuda_available():
+        raise DeviceError(f"device {device!r} was requested but no CUDA device is available")
+    try:
+        return wp.get_device(device)
+    except (RuntimeError, ValueError) as exc:
+        available = ", ".join(str(d) for d in wp.get_devices())
+        raise DeviceError(f"unknown device {device!r}; available: {available}") from exc
