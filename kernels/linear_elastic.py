@@ -26,9 +26,7 @@ class GroupParameters:
 
 
 @wp.func
-def tet_gradients(
-    x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, x3: wp.vec3d
-) -> wp.mat33d:
+def tet_gradients(x0: wp.vec3d, x1: wp.vec3d, x2: wp.vec3d, x3: wp.vec3d) -> wp.mat33d:
     """Rows 0-2: gradients of the linear shape functions of corners 1-3 (1/m)."""
     dm = wp.matrix_from_cols(x1 - x0, x2 - x0, x3 - x0)
     return wp.inverse(dm)

@@ -128,7 +128,9 @@ def combine_element_stiffness(
     if count == 0:
         return stiffness.numpy()
     parameters = kernels.GroupParameters()
-    parameters.alpha_Pa = wp.array(np.asarray(alpha_Pa, np.float64), dtype=wp.float64, device=target)
+    parameters.alpha_Pa = wp.array(
+        np.asarray(alpha_Pa, np.float64), dtype=wp.float64, device=target
+    )
     parameters.nu = wp.array(np.asarray(nu, np.float64), dtype=wp.float64, device=target)
     wp.launch(
         kernels.combine_element_stiffness,
