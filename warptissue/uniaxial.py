@@ -181,9 +181,24 @@ class HyperelasticModel:
         """d nominal stress / d parameter_vector, shape (m, n)."""
         raise NotImplementedError
 
+    def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
+        """Hessian of W(exp e1, exp e2, exp e3) in the principal log strains, (m, 3, 3), Pa.
+
+        Any extension of W off the incompressible plane e1 + e2 + e3 = 0 serves, since only
+        its restriction to that plane is used (the plane is linear in e).
+
+        Args:
+            log_strains: Principal logarithmic strains, shape (m, 3), summing to zero.
+        """
+        raise NotImplementedError
+
     def log_strain_hessian(self, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
         """Hessian of W~(e1, e2) = W(exp e1, exp e2, exp(-e1 - e2)), shape (m, 2, 2), Pa."""
-        raise NotImplementedError
+        e1 = np.atleast_1d(np.asarray(e1, dtype=np.float64))
+        e2 = np.atleast_1d(np.asarray(e2, dtype=np.float64))
+        ambient = self.principal_log_strain_hessian(np.stack([e1, e2, -e1 - e2], axis=-1))
+        basis = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
+        return basis.T @ ambient @ basis
 
     def to_dict(self) -> dict[str, Any]:
         """``{"model": name, parameter: value, ...}`` with units in the keys."""
@@ -241,22 +256,12 @@ class _InvariantModel(HyperelasticModel):
         lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
         return self.nominal_stress_gradient(lam, mode) @ self.parameter_vector
 
-    def log_strain_hessian(self, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
-        e1 = np.atleast_1d(np.asarray(e1, dtype=np.float64))
-        e2 = np.atleast_1d(np.asarray(e2, dtype=np.float64))
-        s = e1 + e2
-        p1, p2, p3 = np.exp(2.0 * e1), np.exp(2.0 * e2), np.exp(-2.0 * s)
-        i1 = p1 + p2 + p3
-        i2 = 1.0 / p1 + 1.0 / p2 + 1.0 / p3
-        grad_i1 = np.stack([2.0 * (p1 - p3), 2.0 * (p2 - p3)], axis=-1)
-        grad_i2 = np.stack([2.0 * (1.0 / p3 - 1.0 / p1), 2.0 * (1.0 / p3 - 1.0 / p2)], axis=-1)
-        hess_i1 = 4.0 * np.stack(
-            [np.stack([p1 + p3, p3], -1), np.stack([p3, p2 + p3], -1)], axis=-2
-        )
-        q3 = 1.0 / p3
-        hess_i2 = 4.0 * np.stack(
-            [np.stack([1.0 / p1 + q3, q3], -1), np.stack([q3, 1.0 / p2 + q3], -1)], axis=-2
-        )
+    def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
+        strains = np.atleast_2d(np.asarray(log_strains, dtype=np.float64))
+        squares = np.exp(2.0 * strains)
+        inverse_squares = 1.0 / squares
+        i1, i2 = squares.sum(axis=-1), inverse_squares.sum(axis=-1)
+        grad_i1, grad_i2 = 2.0 * squares, -2.0 * inverse_squares
         a, b, a11, a12, a22, _ = self._basis(i1, i2)
         p = self.parameter_vector
         w1, w2, w11, w12, w22 = a @ p, b @ p, a11 @ p, a12 @ p, a22 @ p
@@ -264,12 +269,12 @@ class _InvariantModel(HyperelasticModel):
         def outer(u: np.ndarray, v: np.ndarray) -> np.ndarray:
             return u[:, :, None] * v[:, None, :]
 
+        diagonal = 4.0 * (w1[:, None] * squares + w2[:, None] * inverse_squares)
         return (
             w11[:, None, None] * outer(grad_i1, grad_i1)
             + w12[:, None, None] * (outer(grad_i1, grad_i2) + outer(grad_i2, grad_i1))
             + w22[:, None, None] * outer(grad_i2, grad_i2)
-            + w1[:, None, None] * hess_i1
-            + w2[:, None, None] * hess_i2
+            + diagonal[:, :, None] * np.eye(3)
         )
 
 
@@ -489,17 +494,12 @@ class Ogden(HyperelasticModel):
             )
         return np.column_stack(columns)
 
-    def log_strain_hessian(self, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
-        e1 = np.atleast_1d(np.asarray(e1, dtype=np.float64))
-        e2 = np.atleast_1d(np.asarray(e2, dtype=np.float64))
-        hessian = np.zeros(e1.shape + (2, 2))
-        for mu, a in zip(self.mu_Pa, self.alpha, strict=True):
-            t1, t2, t3 = np.exp(a * e1), np.exp(a * e2), np.exp(-a * (e1 + e2))
-            hessian[:, 0, 0] += 2.0 * mu * (t1 + t3)
-            hessian[:, 1, 1] += 2.0 * mu * (t2 + t3)
-            hessian[:, 0, 1] += 2.0 * mu * t3
-            hessian[:, 1, 0] += 2.0 * mu * t3
-        return hessian
+    def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
+        strains = np.atleast_2d(np.asarray(log_strains, dtype=np.float64))
+        curvature = sum(
+            2.0 * mu * np.exp(a * strains) for mu, a in zip(self.mu_Pa, self.alpha, strict=True)
+        )
+        return curvature[:, :, None] * np.eye(3)
 
     def to_dict(self) -> dict[str, Any]:
         return {"model": self.name, "mu_Pa": list(self.mu_Pa), "alpha": list(self.alpha)}
@@ -715,10 +715,28 @@ class StabilityReport:
 
 
 def _is_stable(model: HyperelasticModel, mode: str, stretch: np.ndarray) -> np.ndarray:
+    """Positive definiteness of the Hessian on the plane of trace-free log strains.
+
+    The plane is parametrized by eliminating, point by point, the principal direction k of
+    SMALLEST ambient curvature G_kk (basis e_i - e_k, e_j - e_k). Eliminating a stiff
+    direction instead would bury the soft one under rounding: for Ogden with
+    G = diag(c), det = c_i c_j + c_k (c_i + c_j) is then formed as (c_i + c_k)(c_j + c_k)
+    - c_k^2, which cancels when c_k >> c_i, c_j.
+    """
     e1, e2 = _principal_log_strains(mode, np.log(stretch))
+    strains = np.stack([e1, e2, -e1 - e2], axis=-1)
     with np.errstate(over="ignore", invalid="ignore"):
-        hessian = model.log_strain_hessian(e1, e2)
-        h11, h12, h22 = hessian[:, 0, 0], hessian[:, 0, 1], hessian[:, 1, 1]
+        ambient = model.principal_log_strain_hessian(strains)
+        order = np.argsort(np.diagonal(ambient, axis1=1, axis2=2), axis=1)
+        k, i, j = order[:, 0], order[:, 1], order[:, 2]
+        rows = np.arange(strains.shape[0])
+
+        def g(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return ambient[rows, a, b]
+
+        h11 = g(i, i) - 2.0 * g(i, k) + g(k, k)
+        h22 = g(j, j) - 2.0 * g(j, k) + g(k, k)
+        h12 = g(i, j) - g(i, k) - g(j, k) + g(k, k)
         determinant = h11 * h22 - h12 * h12
         rounding = 16.0 * np.finfo(np.float64).eps * (np.abs(h11 * h22) + h12 * h12)
         stable = (h11 > 0.0) & (determinant > rounding)
