@@ -15,84 +15,22 @@ import scipy.optimize
 
 from warptissue.errors import InputError
 from warptissue.fit import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
+from warptissue.fit.problems import (
+    PROBLEMS,
+    freudenstein_roth,
+    meyer,
+    rosenbrock,
+    rosenbrock_jacobian,
+)
 
 METHODS = ("lm", "salm")
-
-MEYER_Y = np.array(
-    [34780, 28610, 23650, 19630, 16370, 13720, 11540, 9744, 8261, 7030, 6005, 5147, 4427, 3820,
-     3307, 2872.0]
-)  # fmt: skip
-MEYER_T = 45.0 + 5.0 * np.arange(1, 17)
-BOX_T = 0.1 * np.arange(1, 11)
-
-
-def rosenbrock(x):
-    return np.array([10.0 * (x[1] - x[0] ** 2), 1.0 - x[0]])
-
-
-def rosenbrock_jacobian(x):
-    return np.array([[-20.0 * x[0], 10.0], [-1.0, 0.0]])
-
-
-def freudenstein_roth(x):
-    return np.array(
-        [
-            -13.0 + x[0] + ((5.0 - x[1]) * x[1] - 2.0) * x[1],
-            -29.0 + x[0] + ((x[1] + 1.0) * x[1] - 14.0) * x[1],
-        ]
-    )
-
-
-def powell_singular(x):
-    return np.array(
-        [
-            x[0] + 10.0 * x[1],
-            np.sqrt(5.0) * (x[2] - x[3]),
-            (x[1] - 2.0 * x[2]) ** 2,
-            np.sqrt(10.0) * (x[0] - x[3]) ** 2,
-        ]
-    )
-
-
-def brown_badly_scaled(x):
-    return np.array([x[0] - 1e6, x[1] - 2e-6, x[0] * x[1] - 2.0])
-
-
-def meyer(x):
-    return x[0] * np.exp(x[1] / (MEYER_T + x[2])) - MEYER_Y
-
-
-def box_3d(x):
-    return (
-        np.exp(-BOX_T * x[0])
-        - np.exp(-BOX_T * x[1])
-        - x[2] * (np.exp(-BOX_T) - np.exp(-10.0 * BOX_T))
-    )
-
-
-def helical_valley(x):
-    theta = np.arctan2(x[1], x[0]) / (2.0 * np.pi)
-    if theta < -0.25:
-        theta += 1.0
-    return np.array([10.0 * (x[2] - 10.0 * theta), 10.0 * (np.hypot(x[0], x[1]) - 1.0), x[2]])
-
-
-# name: (residuals, standard start, published minimum of sum(r^2), published minimizer or None)
-PROBLEMS = {
-    "rosenbrock": (rosenbrock, [-1.2, 1.0], 0.0, [1.0, 1.0]),
-    "freudenstein_roth_local": (freudenstein_roth, [0.5, -2.0], 48.9842, [11.4128, -0.896805]),
-    "powell_singular": (powell_singular, [3.0, -1.0, 0.0, 1.0], 0.0, [0.0, 0.0, 0.0, 0.0]),
-    "brown_badly_scaled": (brown_badly_scaled, [1.0, 1.0], 0.0, [1e6, 2e-6]),
-    "meyer": (meyer, [0.02, 4000.0, 250.0], 87.9458, [0.0056096, 6181.35, 345.224]),
-    "box_3d": (box_3d, [0.0, 10.0, 20.0], 0.0, [1.0, 10.0, 1.0]),
-    "helical_valley": (helical_valley, [-1.0, 0.0, 0.0], 0.0, [1.0, 0.0, 0.0]),
-}
 
 
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("name", sorted(PROBLEMS))
 def test_more_garbow_hillstrom(name, method):
-    fun, x0, f_min, x_min = PROBLEMS[name]
+    problem = PROBLEMS[name]
+    fun, x0, f_min, x_min = problem.residuals, problem.x0, problem.minimum, problem.minimizer
     result = least_squares(
         fun, x0, method=method, max_iterations=3000, ftol=1e-12, xtol=1e-12, gtol=1e-12
     )
@@ -328,3 +266,12 @@ def test_rank_deficient_jacobian_gives_no_covariance_instead_of_nan():
     assert result.covariance is None and result.standard_errors is None
     assert result.x.sum() == pytest.approx(3.0, rel=1e-8)
     json.dumps(result.to_dict())
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_x_scale_sets_the_damping_scale(method):
+    problem = PROBLEMS["brown_badly_scaled"]
+    result = least_squares(
+        problem.residuals, problem.x0, method=method, x_scale=[1e6, 1e-6], gtol=1e-12
+    )
+    np.testing.assert_allclose(result.x, problem.minimizer, rtol=1e-9)

@@ -312,3 +312,28 @@ def test_to_material_builds_the_fe_dataclass():
     material = MooneyRivlin(100.0, 50.0).to_material(1e5)
     assert isinstance(material, materials.MooneyRivlin)
     assert material.C10_Pa == 100.0 and material.bulk_modulus_Pa == 1e5
+
+
+def test_mooney_rivlin_limits_match_the_closed_form_criterion():
+    """For Mooney-Rivlin the log-strain Hessian is diagonal in 3-D, G = diag(4 c_j) with
+    c_j = C10 l_j^2 + C01 l_j^-2, and on the trace-free plane it is positive definite iff
+    e2(c) = c1 c2 + c2 c3 + c3 c1 > 0 (with c1 + c2 + c3 > 0): the first root of e2 along a
+    mode is its stability limit."""
+    import scipy.optimize
+
+    model = MooneyRivlin(-4437.0, 4793.0)
+    report = drucker_stability(model)
+
+    def e2(strain, mode, sign):
+        lam = principal_stretches(np.array([1.0 + sign * strain]), mode)[0]
+        c = model.C10_Pa * lam**2 + model.C01_Pa / lam**2
+        return c[0] * c[1] + c[1] * c[2] + c[2] * c[0]
+
+    for entry in report.ranges:
+        mode, _, direction = entry.mode.partition("_")
+        sign = 1.0 if direction == "tension" else -1.0
+        grid = np.linspace(1e-6, 0.5, 5001)
+        values = np.array([e2(s, mode, sign) for s in grid])
+        first = int(np.flatnonzero(values <= 0.0)[0])
+        root = scipy.optimize.brentq(e2, grid[first - 1], grid[first], args=(mode, sign))
+        assert entry.unstable_from_strain == pytest.approx(root, rel=1e-6), entry.mode

