@@ -17,8 +17,8 @@ AREA_M2, HEIGHT_M = 0.070 * 0.080, 0.080
 def compression_csv(tmp_path, rng):
     displacement_m = np.linspace(0.0, 0.0127, 200)
     test = HomogeneousTest("compression", displacement_m / HEIGHT_M, np.zeros_like(displacement_m))
-    force_N = test.predicted_stress_Pa(ReducedPolynomial((600.553, 4097.45))) * AREA_M2  # noqa: N806
-    force_N = force_N + rng.normal(0.0, 0.02, force_N.size)  # noqa: N806
+    force_N = test.predicted_stress_Pa(ReducedPolynomial((600.553, 4097.45))) * AREA_M2
+    force_N = force_N + rng.normal(0.0, 0.02, force_N.size)
     path = tmp_path / "block.csv"
     lines = ["time_s,displacement_m,force_N"] + [
         f"{float(d) / 4e-4!r},{float(d)!r},{float(f)!r}"

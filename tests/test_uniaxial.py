@@ -136,7 +136,7 @@ def test_hessian_along_the_uniaxial_path_is_the_true_stress_tangent(name):
     np.testing.assert_allclose(hessian @ direction @ direction, tangent, rtol=1e-6)
 
 
-def seed_003_compression_test(rng, noise_N=0.02):  # noqa: N803
+def seed_003_compression_test(rng, noise_N=0.02):
     """Seed 003's test: 0.4 mm/s to 12.7 mm, sampled at 50 Hz, force noise 0.02 N (the
     sensor's resolution)."""
     displacement_m = np.arange(0.0, SEED_DEPTH_M + 1e-12, 0.4e-3 / 50.0)
@@ -148,8 +148,8 @@ def seed_003_compression_test(rng, noise_N=0.02):  # noqa: N803
         height_m=SEED_HEIGHT_M,
         loading="compression",
     )
-    force_N = clean.predicted_stress_Pa(truth) * SEED_AREA_M2  # noqa: N806
-    force_N = force_N + rng.normal(0.0, noise_N, force_N.size)  # noqa: N806
+    force_N = clean.predicted_stress_Pa(truth) * SEED_AREA_M2
+    force_N = force_N + rng.normal(0.0, noise_N, force_N.size)
     return HomogeneousTest.from_force_displacement(
         displacement_m, force_N, area_m2=SEED_AREA_M2, height_m=SEED_HEIGHT_M, loading="compression"
     )

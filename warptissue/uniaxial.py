@@ -49,6 +49,7 @@ Notes:
 
 from __future__ import annotations
 
+import abc
 import itertools
 import math
 from collections.abc import Sequence
@@ -134,7 +135,7 @@ def principal_stretches(stretch: np.ndarray, mode: str) -> np.ndarray:
     return np.exp(np.stack([e1, e2, -e1 - e2], axis=-1))
 
 
-class HyperelasticModel:
+class HyperelasticModel(abc.ABC):
     """Base of the incompressible closed-form models.
 
     Subclasses are frozen dataclasses whose fields are the material parameters (names and
@@ -146,9 +147,9 @@ class HyperelasticModel:
     name: str = ""
 
     @property
+    @abc.abstractmethod
     def parameter_names(self) -> tuple[str, ...]:
         """Names of the entries of :attr:`parameter_vector`."""
-        raise NotImplementedError
 
     @property
     def parameter_units(self) -> tuple[str, ...]:
@@ -156,31 +157,32 @@ class HyperelasticModel:
         return tuple("" if n.startswith("alpha") else "Pa" for n in self.parameter_names)
 
     @property
+    @abc.abstractmethod
     def parameter_vector(self) -> np.ndarray:
         """The parameters as a vector, shape (n,)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def with_parameters(self, vector: np.ndarray) -> HyperelasticModel:
         """A model of the same kind with the given parameter vector."""
-        raise NotImplementedError
 
     @property
-    def initial_shear_modulus_Pa(self) -> float:  # noqa: N802 (unit suffix)
+    @abc.abstractmethod
+    def initial_shear_modulus_Pa(self) -> float:
         """Small-strain shear modulus mu0."""
-        raise NotImplementedError
 
-    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:  # noqa: N802
+    @abc.abstractmethod
+    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:
         """Strain energy per reference volume, from principal stretches (..., 3), J = 1."""
-        raise NotImplementedError
 
-    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:  # noqa: N802
+    @abc.abstractmethod
+    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:
         """Signed nominal stress along the loading direction, shape (m,)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def nominal_stress_gradient(self, stretch: np.ndarray, mode: str) -> np.ndarray:
         """d nominal stress / d parameter_vector, shape (m, n)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
         """Hessian of W(exp e1, exp e2, exp e3) in the principal log strains, (m, 3, 3), Pa.
 
@@ -190,7 +192,6 @@ class HyperelasticModel:
         Args:
             log_strains: Principal logarithmic strains, shape (m, 3), summing to zero.
         """
-        raise NotImplementedError
 
     def log_strain_hessian(self, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
         """Hessian of W~(e1, e2) = W(exp e1, exp e2, exp(-e1 - e2)), shape (m, 2, 2), Pa."""
@@ -200,11 +201,11 @@ class HyperelasticModel:
         basis = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
         return basis.T @ ambient @ basis
 
+    @abc.abstractmethod
     def to_dict(self) -> dict[str, Any]:
         """``{"model": name, parameter: value, ...}`` with units in the keys."""
-        raise NotImplementedError
 
-    def to_material(self, bulk_modulus_Pa: float) -> Any:  # noqa: N803
+    def to_material(self, bulk_modulus_Pa: float) -> Any:
         """The matching :mod:`warptissue.materials` dataclass (nearly incompressible).
 
         Raises:
@@ -216,22 +217,23 @@ class HyperelasticModel:
             raise InputError("warptissue.materials is not available") from exc
         return self._material(materials, bulk_modulus_Pa)
 
-    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:  # noqa: N803
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
+        """Build the dataclass from the ``warptissue.materials`` module."""
 
 
 class _InvariantModel(HyperelasticModel):
     """Models W(I1, I2) that are linear in their parameters."""
 
+    @abc.abstractmethod
     def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per parameter k: (dW1/dp_k, dW2/dp_k, d2W/dI1^2 / p_k, ...) as arrays (m, n).
 
         Returns (a, b, a11, a12, a22, w) with W1 = a @ p, W2 = b @ p, W11 = a11 @ p,
         W12 = a12 @ p, W22 = a22 @ p and W = w @ p; each of shape (..., n).
         """
-        raise NotImplementedError
 
-    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:  # noqa: N802
+    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:
         squares = np.asarray(stretches, dtype=np.float64) ** 2
         i1 = squares.sum(axis=-1)
         i2 = (1.0 / squares).sum(axis=-1)
@@ -252,7 +254,7 @@ class _InvariantModel(HyperelasticModel):
             factor_1 = factor_2 = 2.0 * (lam - lam**-3)
         return factor_1[:, None] * a + factor_2[:, None] * b
 
-    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:  # noqa: N802
+    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:
         lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
         return self.nominal_stress_gradient(lam, mode) @ self.parameter_vector
 
@@ -312,7 +314,7 @@ class ReducedPolynomial(_InvariantModel):
         return ReducedPolynomial(tuple(float(v) for v in vector))
 
     @property
-    def initial_shear_modulus_Pa(self) -> float:  # noqa: N802
+    def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * self.C_Pa[0]
 
     def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -327,7 +329,7 @@ class ReducedPolynomial(_InvariantModel):
     def to_dict(self) -> dict[str, Any]:
         return {"model": self.name, "C_Pa": list(self.C_Pa)}
 
-    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:  # noqa: N803
+    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.ReducedPolynomial(C_Pa=self.C_Pa, bulk_modulus_Pa=bulk_modulus_Pa)
 
 
@@ -354,7 +356,7 @@ class NeoHookean(_InvariantModel):
         return NeoHookean(float(vector[0]))
 
     @property
-    def initial_shear_modulus_Pa(self) -> float:  # noqa: N802
+    def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * self.C10_Pa
 
     def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -363,7 +365,7 @@ class NeoHookean(_InvariantModel):
     def to_dict(self) -> dict[str, Any]:
         return {"model": self.name, "C10_Pa": self.C10_Pa}
 
-    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:  # noqa: N803
+    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.NeoHookean(C10_Pa=self.C10_Pa, bulk_modulus_Pa=bulk_modulus_Pa)
 
 
@@ -392,7 +394,7 @@ class MooneyRivlin(_InvariantModel):
         return MooneyRivlin(float(vector[0]), float(vector[1]))
 
     @property
-    def initial_shear_modulus_Pa(self) -> float:  # noqa: N802
+    def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * (self.C10_Pa + self.C01_Pa)
 
     def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -406,13 +408,13 @@ class MooneyRivlin(_InvariantModel):
     def to_dict(self) -> dict[str, Any]:
         return {"model": self.name, "C10_Pa": self.C10_Pa, "C01_Pa": self.C01_Pa}
 
-    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:  # noqa: N803
+    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.MooneyRivlin(
             C10_Pa=self.C10_Pa, C01_Pa=self.C01_Pa, bulk_modulus_Pa=bulk_modulus_Pa
         )
 
 
-def yeoh(C10_Pa: float, C20_Pa: float, C30_Pa: float) -> ReducedPolynomial:  # noqa: N803
+def yeoh(C10_Pa: float, C20_Pa: float, C30_Pa: float) -> ReducedPolynomial:
     """The Yeoh model: a reduced polynomial of order 3."""
     return ReducedPolynomial((C10_Pa, C20_Pa, C30_Pa))
 
@@ -463,17 +465,17 @@ class Ogden(HyperelasticModel):
         return Ogden(tuple(pairs[:, 0]), tuple(pairs[:, 1]))
 
     @property
-    def initial_shear_modulus_Pa(self) -> float:  # noqa: N802
+    def initial_shear_modulus_Pa(self) -> float:
         return float(sum(self.mu_Pa))
 
-    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:  # noqa: N802
+    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:
         lam = np.asarray(stretches, dtype=np.float64)
         return sum(
             2.0 * mu / a**2 * (np.sum(lam**a, axis=-1) - 3.0)
             for mu, a in zip(self.mu_Pa, self.alpha, strict=True)
         )
 
-    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:  # noqa: N802
+    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:
         lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
         k = _OGDEN_K[mode]
         return sum(
@@ -504,7 +506,7 @@ class Ogden(HyperelasticModel):
     def to_dict(self) -> dict[str, Any]:
         return {"model": self.name, "mu_Pa": list(self.mu_Pa), "alpha": list(self.alpha)}
 
-    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:  # noqa: N803
+    def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.Ogden(mu_Pa=self.mu_Pa, alpha=self.alpha, bulk_modulus_Pa=bulk_modulus_Pa)
 
 
@@ -593,7 +595,7 @@ class HomogeneousTest:
     def from_force_displacement(
         cls,
         displacement_m: np.ndarray,
-        force_N: np.ndarray,  # noqa: N803
+        force_N: np.ndarray,
         *,
         area_m2: float,
         height_m: float,
@@ -652,7 +654,7 @@ class HomogeneousTest:
             self.loading, self.nominal_strain[keep], self.nominal_stress_Pa[keep], self.name
         )
 
-    def predicted_stress_Pa(self, model: HyperelasticModel) -> np.ndarray:  # noqa: N802
+    def predicted_stress_Pa(self, model: HyperelasticModel) -> np.ndarray:
         """Model nominal stress magnitude in the loading direction, shape (m,)."""
         return self.sign * model.nominal_stress_Pa(self.stretch, self.mode)
 
