@@ -337,3 +337,17 @@ def test_mooney_rivlin_limits_match_the_closed_form_criterion():
         first = int(np.flatnonzero(values <= 0.0)[0])
         root = scipy.optimize.brentq(e2, grid[first - 1], grid[first], args=(mode, sign))
         assert entry.unstable_from_strain == pytest.approx(root, rel=1e-6), entry.mode
+
+
+def test_to_dict_uses_the_flat_material_keys():
+    assert ReducedPolynomial((600.553, 4097.45)).to_dict() == {
+        "model": "reduced_polynomial",
+        "C10_Pa": 600.553,
+        "C20_Pa": 4097.45,
+    }
+    assert Ogden((10.0,), (-2.0,)).to_dict() == {"model": "ogden", "mu1_Pa": 10.0, "alpha1": -2.0}
+    assert MooneyRivlin(1.0, 2.0).to_dict() == {
+        "model": "mooney_rivlin",
+        "C10_Pa": 1.0,
+        "C01_Pa": 2.0,
+    }

@@ -201,9 +201,13 @@ class HyperelasticModel(abc.ABC):
         basis = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
         return basis.T @ ambient @ basis
 
-    @abc.abstractmethod
     def to_dict(self) -> dict[str, Any]:
-        """``{"model": name, parameter: value, ...}`` with units in the keys."""
+        """``{"model": name, parameter: value, ...}``, the flat keys of
+        ``warptissue.materials`` (``C10_Pa``, ``C20_Pa``, ``mu1_Pa``, ``alpha1``, ...)."""
+        values = self.parameter_vector
+        return {"model": self.name} | {
+            key: float(v) for key, v in zip(self.parameter_names, values, strict=True)
+        }
 
     def to_material(self, bulk_modulus_Pa: float) -> Any:
         """The matching :mod:`warptissue.materials` dataclass (nearly incompressible).
@@ -326,9 +330,6 @@ class ReducedPolynomial(_InvariantModel):
         a11 = powers * (powers - 1) * x[..., None] ** np.maximum(powers - 2, 0)
         return a, zero, a11, zero, zero, w
 
-    def to_dict(self) -> dict[str, Any]:
-        return {"model": self.name, "C_Pa": list(self.C_Pa)}
-
     def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.ReducedPolynomial(C_Pa=self.C_Pa, bulk_modulus_Pa=bulk_modulus_Pa)
 
@@ -361,9 +362,6 @@ class NeoHookean(_InvariantModel):
 
     def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
         return ReducedPolynomial((self.C10_Pa,))._basis(i1, i2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"model": self.name, "C10_Pa": self.C10_Pa}
 
     def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.NeoHookean(C10_Pa=self.C10_Pa, bulk_modulus_Pa=bulk_modulus_Pa)
@@ -404,9 +402,6 @@ class MooneyRivlin(_InvariantModel):
         b = np.stack([0.0 * ones, ones], axis=-1)
         w = np.stack([np.asarray(i1) - 3.0, np.asarray(i2) - 3.0], axis=-1)
         return a, b, zeros, zeros, zeros, w
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"model": self.name, "C10_Pa": self.C10_Pa, "C01_Pa": self.C01_Pa}
 
     def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.MooneyRivlin(
@@ -502,9 +497,6 @@ class Ogden(HyperelasticModel):
             2.0 * mu * np.exp(a * strains) for mu, a in zip(self.mu_Pa, self.alpha, strict=True)
         )
         return curvature[:, :, None] * np.eye(3)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"model": self.name, "mu_Pa": list(self.mu_Pa), "alpha": list(self.alpha)}
 
     def _material(self, materials: Any, bulk_modulus_Pa: float) -> Any:
         return materials.Ogden(mu_Pa=self.mu_Pa, alpha=self.alpha, bulk_modulus_Pa=bulk_modulus_Pa)
