@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from warptissue.errors import InputError
+from warptissue.errors import ConvergenceError, InputError
 from warptissue.fit import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
 from warptissue.fit.problems import (
     PROBLEMS,
@@ -275,3 +275,25 @@ def test_x_scale_sets_the_damping_scale(method):
         problem.residuals, problem.x0, method=method, x_scale=[1e6, 1e-6], gtol=1e-12
     )
     np.testing.assert_allclose(result.x, problem.minimizer, rtol=1e-9)
+
+
+def test_a_jacobian_failure_mid_fit_returns_the_best_point_with_status_minus_3():
+    calls = {"count": 0}
+
+    def jacobian(x):
+        calls["count"] += 1
+        if calls["count"] == 3:
+            return np.full((2, 2), np.nan)
+        return rosenbrock_jacobian(x)
+
+    result = least_squares(rosenbrock, [-1.2, 1.0], jac=jacobian)
+    assert result.status == -3 and not result.success
+    assert result.covariance is None
+    accepted = [r for r in result.history if r.accepted]
+    assert len(accepted) == 2 and np.array_equal(result.x, accepted[-1].x)
+    assert result.cost < 0.5 * float(np.sum(rosenbrock(np.array([-1.2, 1.0])) ** 2))
+
+
+def test_a_jacobian_failure_at_x0_raises():
+    with pytest.raises(ConvergenceError):
+        least_squares(rosenbrock, [-1.2, 1.0], jac=lambda x: np.full((2, 2), np.inf))

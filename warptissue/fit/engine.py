@@ -337,8 +337,9 @@ def least_squares(
     Raises:
         InputError: Invalid arguments, ``x0`` outside the bounds, or a model that is not
             defined (refused or non-finite) at ``x0``.
-        ConvergenceError: The Jacobian could not be evaluated (non-finite analytic Jacobian,
-            or finite differences refused on both sides).
+        ConvergenceError: The Jacobian could not be evaluated at ``x0`` (non-finite analytic
+            Jacobian, or finite differences refused on both sides). Later such a failure
+            ends the fit with status -3 and the best point so far.
     """
     if method not in _METHODS:
         raise InputError(f"method must be one of {_METHODS}", value=method)
@@ -512,14 +513,23 @@ def least_squares(
                 if status is not None or accepted:
                     break
             if status is None:
-                jacobian = jacobian_at(x, residuals)
-                jacobian_is_current = True
+                try:
+                    jacobian = jacobian_at(x, residuals)
+                    jacobian_is_current = True
+                except ConvergenceError:
+                    status = -3
     finally:
         bar.close()
 
-    if not jacobian_is_current:
-        jacobian = jacobian_at(x, residuals)
-    covariance, errors, correlation = _covariance(jacobian, cost)
+    if not jacobian_is_current and status != -3:
+        try:
+            jacobian = jacobian_at(x, residuals)
+            jacobian_is_current = True
+        except ConvergenceError:
+            status = -3
+    covariance, errors, correlation = (
+        _covariance(jacobian, cost) if jacobian_is_current else (None, None, None)
+    )
     return FitResult(
         x=x,
         parameter_names=names,

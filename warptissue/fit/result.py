@@ -20,6 +20,8 @@ __all__ = ["STATUS_MESSAGES", "FitResult", "IterationRecord", "RejectStep"]
 
 
 STATUS_MESSAGES: Mapping[int, str] = {
+    -3: "The Jacobian could not be evaluated at the current point (non-finite, or finite "
+    "differences refused); x is the best point reached, without covariance.",
     -2: "No acceptable step: the damping reached its limit without reducing the cost "
     "(a local minimum to rounding precision, or an inaccurate Jacobian).",
     -1: "Stopped by the callback.",
@@ -93,7 +95,8 @@ class FitResult:
         parameter_units: One SI unit string per parameter ("" for dimensionless).
         cost: 0.5 * sum(residuals**2) at ``x``.
         residuals: The (weighted, possibly relative) residuals at ``x``, shape (m,).
-        jacobian: d residuals / d x at ``x``, shape (m, n).
+        jacobian: d residuals / d x at ``x``, shape (m, n) (status -3: at the previous
+            point, the last one where it could be evaluated).
         success: ``status > 0``.
         status: Key of :data:`STATUS_MESSAGES`.
         message: The status message.
