@@ -96,6 +96,7 @@ def run(args: argparse.Namespace) -> int:
         window = fit.min_strain
         in_window = test.nominal_strain > window if window > 0.0 else np.ones_like(fitted_stress)
         label = name.replace(":", "_")
+        r_squared = "n/a" if fit.result.r_squared is None else f"{fit.result.r_squared:.4f}"
         details = fit.to_dict()
         details.pop("fit")
         details.update(
@@ -122,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
                 "in_fit_window": in_window.astype(np.float64),
             },
             metadata=details,
-            title=f"{name} ({args.objective}), R^2 = {fit.result.r_squared:.4f}",
+            title=f"{name} ({args.objective}), R^2 = {r_squared}",
         )
         rows.append({**fit.comparison_row(), "model": name})
         if not fit.result.success:
