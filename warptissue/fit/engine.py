@@ -404,7 +404,10 @@ def least_squares(
             return _finite_difference_jacobian(
                 evaluate, point, point_residuals, lower, upper, typical
             )
-        matrix = np.asarray(jac(point.copy()), dtype=np.float64)
+        try:
+            matrix = np.asarray(jac(point.copy()), dtype=np.float64)
+        except RejectStep as exc:
+            raise ConvergenceError(f"the Jacobian was refused at x = {point.tolist()}") from exc
         if matrix.shape != (point_residuals.size, n):
             raise InputError(
                 f"jac must return shape ({point_residuals.size}, {n})", value=matrix.shape
