@@ -28,6 +28,7 @@ from warptissue.mesh.quality import (
     radius_ratios,
     tet10_jacobian_determinants,
 )
+from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
@@ -41,6 +42,7 @@ __all__ = [
     "TetMesh",
     "block_mesh",
     "boundary_faces",
+    "check_closed_surface",
     "check_mesh",
     "dihedral_angles",
     "fix_orientation",
@@ -52,6 +54,7 @@ __all__ = [
     "radius_ratios",
     "read_mesh",
     "signed_volumes",
+    "tetrahedralize_surface",
     "tet10_jacobian_determinants",
     "to_tet10",
     "write_mesh",

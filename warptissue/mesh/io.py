@@ -73,7 +73,8 @@ def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
         with contextlib.redirect_stdout(messages), contextlib.redirect_stderr(messages):
             data = meshio.read(file_path, file_format=file_format)
     except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits on ReadError
-        detail = " ".join(f"{exc} {messages.getvalue()}".split()) or type(exc).__name__
+        printed = " ".join(messages.getvalue().split())
+        detail = printed if isinstance(exc, SystemExit) else f"{exc} {printed}".strip()
         raise InputError(f"cannot read {file_format} mesh: {detail}", path=file_path) from exc
 
     tet_blocks = [i for i, block in enumerate(data.cells) if block.type in _TET_TYPES]
