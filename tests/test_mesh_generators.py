@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from warptissue.errors import InputError
+from warptissue.errors import InputError, MeshError
 from warptissue.mesh import (
     TET4_FACES,
     block_mesh,
@@ -9,6 +9,7 @@ from warptissue.mesh import (
     extrude_triangles,
     graded_coordinates,
     graded_spacing,
+    hex_to_tets,
     indentation_block,
     indentation_disc,
 )
@@ -271,3 +272,48 @@ def test_indentation_rejects_bad_parameters(options, message):
     } | options
     with pytest.raises(InputError, match=message):
         indentation_block(**arguments)
+
+
+def structured_hexes(n=3):
+    """Corner grid and VTK-ordered hexes of an n x n x n unit cube, listed in random order."""
+    grid = np.linspace(0.0, 1.0, n + 1)
+    x, y, z = np.meshgrid(grid, grid, grid, indexing="ij")
+    points = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    index = np.arange(len(points)).reshape(n + 1, n + 1, n + 1)
+    i, j, k = (a.ravel() for a in np.meshgrid(*[np.arange(n)] * 3, indexing="ij"))
+    offsets = [
+        (0, 0, 0),
+        (1, 0, 0),
+        (1, 1, 0),
+        (0, 1, 0),
+        (0, 0, 1),
+        (1, 0, 1),
+        (1, 1, 1),
+        (0, 1, 1),
+    ]
+    hexes = np.stack([index[i + a, j + b, k + c] for a, b, c in offsets], axis=1)
+    return points, hexes
+
+
+@pytest.mark.parametrize(("split", "per_hex"), [("five", 5), ("six", 6)])
+def test_hex_to_tets_on_shuffled_distorted_hexes(split, per_hex, rng):
+    points, hexes = structured_hexes()
+    hexes = hexes[rng.permutation(len(hexes))]
+    interior = np.all((points > 0) & (points < 1), axis=1)
+    points[interior] += rng.uniform(-0.05, 0.05, size=(interior.sum(), 3))
+    mesh = hex_to_tets(points, hexes, split=split)
+    assert mesh.tet_count == per_hex * len(hexes)
+    assert np.all(mesh.volumes() > 0)
+    assert mesh.volumes().sum() == pytest.approx(1.0, rel=1e-12)
+    counts = face_counts(mesh.tets)
+    assert counts.max() == 2 and (counts == 1).sum() == 6 * 9 * 2
+    assert triangle_areas(mesh.points, mesh.face_sets["boundary"]).sum() == pytest.approx(6.0)
+    assert np.array_equal(np.bincount(mesh.tet_regions), np.full(len(hexes), per_hex))
+
+
+def test_hex_to_tets_rejects_mismatched_diagonals():
+    points, hexes = structured_hexes(2)
+    # Renumber one hex by a quarter turn about z: its Kuhn diagonals no longer match.
+    hexes[0] = hexes[0][[1, 2, 3, 0, 5, 6, 7, 4]]
+    with pytest.raises(MeshError, match="not conforming"):
+        hex_to_tets(points, hexes, split="six")

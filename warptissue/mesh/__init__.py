@@ -15,6 +15,7 @@ from warptissue.mesh.generators import (
     extrude_triangles,
     graded_coordinates,
     graded_spacing,
+    hex_to_tets,
     indentation_block,
     indentation_disc,
 )
@@ -49,6 +50,7 @@ __all__ = [
     "extrude_triangles",
     "graded_coordinates",
     "graded_spacing",
+    "hex_to_tets",
     "indentation_block",
     "indentation_disc",
     "radius_ratios",
