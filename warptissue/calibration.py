@@ -45,6 +45,7 @@ __all__ = [
     "fit_calibration",
     "fit_calibrations",
     "read_calibration_csv",
+    "sample_means",
     "split_samples",
     "synthetic_sensor",
 ]
@@ -433,6 +434,16 @@ def split_samples(
     held = np.random.default_rng(seed).choice(labels, test_samples, replace=False)
     mask = np.isin(data.sample, held)
     return data.subset(~mask), data.subset(mask)
+
+
+def sample_means(data: CalibrationData, corrected_N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample: the actual force and the mean of its corrected readings (the paper's
+    "corrected force" of a sample), each shape (samples,), in order of first appearance."""
+    _, first, inverse = np.unique(data.sample, return_index=True, return_inverse=True)
+    counts = np.bincount(inverse)
+    means = np.bincount(inverse, weights=np.asarray(corrected_N, dtype=np.float64)) / counts
+    order = np.argsort(first)
+    return data.force_N[first][order], means[order]
 
 
 def calibration_metrics(actual_N: np.ndarray, corrected_N: np.ndarray) -> dict[str, float]:

@@ -13,6 +13,7 @@ Three steps, each a function:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +21,12 @@ import scipy.optimize
 import scipy.sparse as sp
 
 from warptissue.errors import InputError
-from warptissue.field.fe import LinearTetModel, alpha_from_youngs, youngs_from_alpha
+from warptissue.field.fe import (
+    LinearSolution,
+    LinearTetModel,
+    alpha_from_youngs,
+    youngs_from_alpha,
+)
 from warptissue.field.markers import MarkerGrid
 from warptissue.fit import FitResult, least_squares
 
@@ -28,6 +34,7 @@ __all__ = [
     "FieldEstimate",
     "FieldProblem",
     "HomogeneousEstimate",
+    "data_objective",
     "displacement_errors",
     "estimate_field",
     "fill_nodal_displacements",
@@ -307,6 +314,78 @@ def _resolution_and_spread(
     return resolution, covariance
 
 
+def data_objective(
+    problem: FieldProblem, *, objective: str, alpha0_Pa: float, nu0: float
+) -> tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
+    """The data residual of :func:`estimate_field` and its exact Jacobian.
+
+    Args:
+        problem: The load set.
+        objective: "force" or "displacement".
+        alpha0_Pa, nu0: Normalization: x = (alpha_g / alpha0, nu_g / nu0).
+
+    Returns:
+        ``(residual(x) -> (m,), jacobian(x) -> (m, 2 groups))``.
+    """
+    groups = problem.model.group_count
+    alpha0 = alpha0_Pa
+
+    def split(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return x[:groups] * alpha0, x[groups:] * nu0
+
+    free = problem.free_dofs
+    model = problem.model
+
+    def sensitivity_columns(
+        force_g: sp.csr_matrix, force_h: sp.csr_matrix, alpha: np.ndarray, nu: np.ndarray
+    ) -> np.ndarray:
+        """d(K u)/dx on the free dofs, dense (free, 2 groups)."""
+        d_alpha = (force_g + force_h @ sp.diags(nu)) * alpha0
+        d_nu = force_h @ sp.diags(alpha * nu0)
+        return sp.hstack([d_alpha, d_nu]).tocsr()[free].toarray()
+
+    if objective == "force":
+        force_g, force_h = model.group_forces(problem.nodal_displacement_m)
+        target = problem.force_N.ravel()[free]
+        scale = problem.force_scale_N
+
+        def data_residual(x: np.ndarray) -> np.ndarray:
+            alpha, nu = split(x)
+            return ((force_g @ alpha + force_h @ (alpha * nu))[free] - target) / scale
+
+        def data_jacobian(x: np.ndarray) -> np.ndarray:
+            alpha, nu = split(x)
+            return sensitivity_columns(force_g, force_h, alpha, nu) / scale
+
+    else:
+        markers = problem.marker_interpolation
+        expand = sp.kron(markers, sp.eye(3)).tocsr()[:, free]
+        measured = problem.marker_displacement_m.ravel()
+        scale = problem.displacement_scale_m
+        cache: dict[bytes, LinearSolution] = {}
+
+        def forward(x: np.ndarray) -> LinearSolution:
+            key = x.tobytes()
+            if key not in cache:
+                cache.clear()
+                alpha, nu = split(x)
+                cache[key] = model.solve(alpha, nu, problem.force_N, problem.fixed_nodes)
+            return cache[key]
+
+        def data_residual(x: np.ndarray) -> np.ndarray:
+            solution = forward(x)
+            return (markers @ solution.displacement_m).ravel() / scale - measured / scale
+
+        def data_jacobian(x: np.ndarray) -> np.ndarray:
+            solution = forward(x)
+            alpha, nu = split(x)
+            force_g, force_h = model.group_forces(solution.displacement_m)
+            columns = sensitivity_columns(force_g, force_h, alpha, nu)
+            return -(expand @ solution.solve_free(columns)) / scale
+
+    return data_residual, data_jacobian
+
+
 def estimate_field(
     problem: FieldProblem,
     *,
@@ -370,58 +449,9 @@ def estimate_field(
     upper = np.concatenate([np.full(groups, np.inf), np.full(groups, NU_UPPER / nu0)])
     x0 = np.clip(x0, lower, upper)
     root_gamma = np.sqrt(gamma)
-    free = problem.free_dofs
-    model = problem.model
-
-    def split(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[:groups] * alpha0, x[groups:] * nu0
-
-    def sensitivity_columns(
-        force_g: sp.csr_matrix, force_h: sp.csr_matrix, alpha: np.ndarray, nu: np.ndarray
-    ) -> np.ndarray:
-        """d(K u)/dx on the free dofs, dense (free, 2 groups)."""
-        d_alpha = (force_g + force_h @ sp.diags(nu)) * alpha0
-        d_nu = force_h @ sp.diags(alpha * nu0)
-        return sp.hstack([d_alpha, d_nu]).tocsr()[free].toarray()
-
-    if objective == "force":
-        force_g, force_h = model.group_forces(problem.nodal_displacement_m)
-        target = problem.force_N.ravel()[free]
-        scale = problem.force_scale_N
-
-        def data_residual(x: np.ndarray) -> np.ndarray:
-            alpha, nu = split(x)
-            return ((force_g @ alpha + force_h @ (alpha * nu))[free] - target) / scale
-
-        def data_jacobian(x: np.ndarray) -> np.ndarray:
-            alpha, nu = split(x)
-            return sensitivity_columns(force_g, force_h, alpha, nu) / scale
-
-    else:
-        markers = problem.marker_interpolation
-        expand = sp.kron(markers, sp.eye(3)).tocsr()[:, free]
-        measured = problem.marker_displacement_m.ravel()
-        scale = problem.displacement_scale_m
-        cache: dict[bytes, tuple] = {}
-
-        def forward(x: np.ndarray):
-            key = x.tobytes()
-            if key not in cache:
-                cache.clear()
-                alpha, nu = split(x)
-                cache[key] = model.solve(alpha, nu, problem.force_N, problem.fixed_nodes)
-            return cache[key]
-
-        def data_residual(x: np.ndarray) -> np.ndarray:
-            solution = forward(x)
-            return (markers @ solution.displacement_m).ravel() / scale - measured / scale
-
-        def data_jacobian(x: np.ndarray) -> np.ndarray:
-            solution = forward(x)
-            alpha, nu = split(x)
-            force_g, force_h = model.group_forces(solution.displacement_m)
-            columns = sensitivity_columns(force_g, force_h, alpha, nu)
-            return -(expand @ solution.solve_free(columns)) / scale
+    data_residual, data_jacobian = data_objective(
+        problem, objective=objective, alpha0_Pa=alpha0, nu0=nu0
+    )
 
     def residual(x: np.ndarray) -> np.ndarray:
         return np.concatenate([data_residual(x), root_gamma * (x - 1.0)])
@@ -443,7 +473,7 @@ def estimate_field(
         progress=progress,
         parameter_names=names,
     )
-    alpha, nu = split(result.x)
+    alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu0
     resolution, covariance = _resolution_and_spread(
         data_jacobian(result.x), data_residual(result.x), max(gamma, 1e-300)
     )

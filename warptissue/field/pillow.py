@@ -10,11 +10,13 @@ with the same linear FE; marker positions get Gaussian noise.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from warptissue.field.fe import LinearTetModel, alpha_from_youngs
 from warptissue.field.markers import MarkerGrid, grid_from_markers
+from warptissue.io import write_csv
 
 __all__ = [
     "PILLOW_FORCE_N",
@@ -22,6 +24,7 @@ __all__ = [
     "SyntheticPillow",
     "pillow_truth",
     "synthetic_pillow",
+    "write_pillow_files",
 ]
 
 PILLOW_FORCE_N: dict[str, float] = {
@@ -135,3 +138,46 @@ def synthetic_pillow(
     noise = np.random.default_rng(seed).normal(0.0, noise_m, size=reference.shape)
     measured = exact[grid.top_nodes.ravel()] + noise
     return SyntheticPillow(grid, reference, measured, exact, force, loaded_marker, youngs, nu)
+
+
+def write_pillow_files(
+    out_dir: str | Path, pillows: dict[str, SyntheticPillow]
+) -> tuple[Path, Path]:
+    """Write synthetic load sets as a marker file and a force file (formats of
+    :mod:`warptissue.field.markers`): ``markers.csv`` and ``forces.csv`` in ``out_dir``."""
+    out = Path(out_dir)
+    labels, markers, before, after, force_rows = [], [], [], [], []
+    for label, pillow in pillows.items():
+        count = len(pillow.marker_reference_m)
+        labels += [label] * count
+        markers += [f"M{k + 1:03d}" for k in range(count)]
+        before.append(pillow.marker_reference_m)
+        after.append(pillow.marker_reference_m + pillow.marker_displacement_m)
+        node = pillow.grid.top_nodes.ravel()[pillow.loaded_marker]
+        force_rows.append((label, f"M{pillow.loaded_marker + 1:03d}", *pillow.force_N[node]))
+    before, after = np.concatenate(before), np.concatenate(after)
+    markers_path = write_csv(
+        out / "markers.csv",
+        {
+            "load_set": labels,
+            "marker": markers,
+            "x0_m": before[:, 0],
+            "y0_m": before[:, 1],
+            "z0_m": before[:, 2],
+            "x1_m": after[:, 0],
+            "y1_m": after[:, 1],
+            "z1_m": after[:, 2],
+        },
+    )
+    columns = list(zip(*force_rows, strict=True))
+    forces_path = write_csv(
+        out / "forces.csv",
+        {
+            "load_set": columns[0],
+            "marker": columns[1],
+            "fx_N": columns[2],
+            "fy_N": columns[3],
+            "fz_N": columns[4],
+        },
+    )
+    return markers_path, forces_path

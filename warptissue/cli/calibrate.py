@@ -1,0 +1,121 @@
+"""``warptissue calibrate-sensor``: fit a force-sensor correction (seed 002, WCFM_SVM).
+
+Reads calibration readings (``sample,force_N,signal_V``; ``sample`` groups repeated readings
+of one applied force), holds out ``--test-samples`` samples (the paper: 70 / 6), fits the
+single models (polynomial, BP network, SVR, LSSVM) and the combinations (CFM_SVM, CFM_LSSVM,
+WCFM_LSSVM, WCFM_SVM), and writes ``calibration.json`` (the chosen model, for the recorder),
+``calibration_metrics.json`` and ``.csv`` (Table 1: MAE, the paper's MSE, MAPE on the test
+samples, each sample's force the mean of its corrected readings) and ``calibration.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``warptissue calibrate-sensor``."""
+    parser = subparsers.add_parser(
+        "calibrate-sensor",
+        help="fit a force-sensor correction (WCFM_SVM and the baselines of seed 002)",
+        description=__doc__.split("\n\n", 1)[1],
+    )
+    parser.add_argument("data", type=Path, help="CSV: [sample,]force_N,signal_V")
+    parser.add_argument("--model", default="WCFM_SVM", help="model saved to calibration.json")
+    parser.add_argument("--test-samples", type=int, default=6, help="samples held out")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the split and models")
+    parser.add_argument("--out", type=Path, default=Path("calibration_out"), help="folder")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Handle ``warptissue calibrate-sensor``."""
+    import numpy as np
+
+    from warptissue.calibration import (
+        CALIBRATION_MODELS,
+        calibration_metrics,
+        fit_calibrations,
+        read_calibration_csv,
+        sample_means,
+        split_samples,
+    )
+    from warptissue.errors import InputError
+    from warptissue.io import write_csv, write_json
+
+    if args.model not in CALIBRATION_MODELS:
+        raise InputError(f"--model must be one of {CALIBRATION_MODELS}", value=args.model)
+    data = read_calibration_csv(args.data)
+    train, test = split_samples(data, test_samples=args.test_samples, seed=args.seed)
+    calibrations = fit_calibrations(train, seed=args.seed)
+    table = {}
+    for name, calibration in calibrations.items():
+        actual, corrected = sample_means(test, calibration.correct(test.signal_V))
+        table[name] = calibration_metrics(actual, corrected)
+    chosen = calibrations[args.model]
+    chosen.metadata.update(
+        {
+            "data": str(args.data),
+            "test_samples": args.test_samples,
+            "seed": args.seed,
+            "test_metrics": table[args.model],
+        }
+    )
+    chosen.save(args.out / "calibration.json")
+    write_json(args.out / "calibration_metrics.json", table)
+    write_csv(
+        args.out / "calibration_metrics.csv",
+        {
+            "model": list(table),
+            "mae_N": [m["mae_N"] for m in table.values()],
+            "mse_paper_N": [m["mse_paper_N"] for m in table.values()],
+            "mape_percent": [m["mape_percent"] for m in table.values()],
+            "max_abs_error_N": [m["max_abs_error_N"] for m in table.values()],
+        },
+    )
+    _plot(args.out / "calibration.png", test, calibrations)
+    print(f"{'model':<11} {'MAE (N)':>9} {'MSE* (N)':>9} {'MAPE (%)':>9}")
+    for name, metrics in table.items():
+        print(
+            f"{name:<11} {metrics['mae_N']:9.4f} {metrics['mse_paper_N']:9.4f} "
+            f"{metrics['mape_percent']:9.4f}"
+        )
+    print("MSE* = 1/n sqrt(sum e^2), as seed 002 defines it")
+    print(
+        f"wrote {args.out / 'calibration.json'} ({args.model}, test samples: "
+        f"{len(np.unique(test.sample))})"
+    )
+    return 0
+
+
+def _plot(path: Path, test, calibrations) -> None:
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from warptissue.calibration import sample_means
+    from warptissue.io import atomic_path
+
+    figure, axis = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    for index, (name, calibration) in enumerate(calibrations.items()):
+        actual, corrected = sample_means(test, calibration.correct(test.signal_V))
+        order = np.argsort(actual)
+        axis.plot(
+            np.arange(len(actual)) + 0.08 * (index - 3.5),
+            np.abs(corrected - actual)[order],
+            "o-",
+            label=name,
+            ms=4,
+        )
+    axis.set_xlabel("test sample (by increasing force)")
+    axis.set_ylabel("absolute error (N)")
+    axis.set_title("Force correction on held-out samples (seed 002, Figure 3)")
+    axis.legend(ncol=2, fontsize=8)
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=120)
+    plt.close(figure)

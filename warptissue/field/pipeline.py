@@ -1,0 +1,317 @@
+"""The field-estimation workflow of seed 002 for marker data, and its outputs.
+
+Per load set: build the 5-tet hexahedral mesh on the marker grid, split the markers into
+training and test markers (the paper: 249 / 50), estimate the homogeneous (E0, nu0)
+(Eq. 13-14), estimate the heterogeneous field, and evaluate both on the test markers
+(maximum and mean displacement error, Table 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from warptissue.errors import InputError
+from warptissue.field.estimation import (
+    FieldEstimate,
+    FieldProblem,
+    HomogeneousEstimate,
+    displacement_errors,
+    estimate_field,
+    fill_nodal_displacements,
+    homogeneous_estimate,
+)
+from warptissue.field.fe import LinearTetModel
+from warptissue.field.markers import (
+    MarkerData,
+    MarkerGrid,
+    grid_from_markers,
+    surface_interpolation,
+)
+from warptissue.io import write_csv, write_json
+
+__all__ = ["LoadSetResult", "estimate_load_set", "split_markers", "write_load_set_outputs"]
+
+
+def split_markers(
+    marker_count: int, *, test_count: int, exclude: np.ndarray, seed: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random train/test split of marker indices; ``exclude`` (loaded markers) stay in train.
+
+    Returns:
+        (train, test) sorted index arrays.
+    """
+    candidates = np.setdiff1d(np.arange(marker_count), exclude)
+    if not 0 <= test_count < len(candidates):
+        raise InputError(
+            f"test marker count must be between 0 and {len(candidates) - 1}", value=test_count
+        )
+    test = np.sort(np.random.default_rng(seed).choice(candidates, test_count, replace=False))
+    return np.setdiff1d(np.arange(marker_count), test), test
+
+
+@dataclass(frozen=True)
+class LoadSetResult:
+    """Everything estimated and measured for one load set.
+
+    Attributes:
+        load_set: Its label.
+        grid: The marker grid and mesh.
+        train, test: Marker indices.
+        homogeneous: The linear homogeneous estimate (Eq. 13-14).
+        field: The heterogeneous estimate.
+        homogeneous_errors, field_errors: Test-marker errors {max_error_m, mean_error_m}.
+        homogeneous_displacement_m, field_displacement_m: Nodal displacements of the forward
+            solves, shape (node_count, 3).
+        test_measured_m: Measured test-marker displacements, shape (t, 3).
+        test_homogeneous_m, test_field_m: Predicted test-marker displacements, shape (t, 3).
+    """
+
+    load_set: str
+    grid: MarkerGrid
+    train: np.ndarray
+    test: np.ndarray
+    homogeneous: HomogeneousEstimate
+    field: FieldEstimate
+    homogeneous_errors: dict[str, float]
+    field_errors: dict[str, float]
+    homogeneous_displacement_m: np.ndarray
+    field_displacement_m: np.ndarray
+    test_measured_m: np.ndarray
+    test_homogeneous_m: np.ndarray
+    test_field_m: np.ndarray
+
+
+def estimate_load_set(
+    markers: MarkerData,
+    forces: dict[str, np.ndarray],
+    *,
+    load_set: str,
+    thickness_m: float,
+    layers: int = 1,
+    test_count: int = 50,
+    seed: int = 0,
+    objective: str = "displacement",
+    gamma: float = 1e-5,
+    method: str = "salm",
+    max_iterations: int = 60,
+    device: str | None = None,
+    progress: bool = False,
+) -> LoadSetResult:
+    """Run seed 002's estimation for one load set of marker data.
+
+    Args:
+        markers: Marker positions and displacements (all load sets).
+        forces: Marker label to applied force (3,) in N, for this load set.
+        load_set: Which load set.
+        thickness_m: Block thickness, metres; its base is fixed.
+        layers: Hexahedra through the thickness.
+        test_count: Markers held out for evaluation (the paper: 50 of 299).
+        seed: Random seed of the split.
+        objective: "displacement" (forward FE, fitted to the training markers) or "force"
+            (Eq. 6 on nodal displacements filled in from the training markers).
+        gamma: Tikhonov weight of Eq. 6 (normalized parameters).
+        method: "salm" or "lm".
+        max_iterations: LM iteration limit.
+        device: Warp device of the element kernels.
+        progress: Show progress bars.
+
+    Returns:
+        The result.
+
+    Raises:
+        InputError: Unknown load set, a force on a marker that is not on a mesh node, or a
+            bad split.
+    """
+    if load_set not in markers.load_sets:
+        raise InputError(f"unknown load set {load_set!r}; have {list(markers.load_sets)}")
+    grid = grid_from_markers(markers.reference_m, thickness_m=thickness_m, layers=layers)
+    mesh = grid.mesh
+    interpolation = surface_interpolation(mesh, markers.reference_m)
+    force = np.zeros((mesh.node_count, 3))
+    loaded = []
+    for label, vector in forces.items():
+        if label not in markers.markers:
+            raise InputError(f"force on unknown marker {label!r}", value=label)
+        index = markers.markers.index(label)
+        row = interpolation.getrow(index)
+        if row.data.max() < 1.0 - 1e-6:
+            raise InputError(
+                f"loaded marker {label!r} is not on a mesh node; forces act on nodes",
+                value=label,
+            )
+        force[row.indices[np.argmax(row.data)]] += vector
+        loaded.append(index)
+    train, test = split_markers(
+        len(markers.markers), test_count=test_count, exclude=np.array(loaded), seed=seed
+    )
+    measured = markers.displacement_m[markers.load_sets.index(load_set)]
+    model = LinearTetModel(mesh, device=device)
+    nodal = fill_nodal_displacements(grid, interpolation[train], measured[train])
+    base = mesh.node_set("zmin")
+    problem = FieldProblem(model, base, force, interpolation[train], measured[train], nodal)
+    homogeneous = homogeneous_estimate(problem)
+    field = estimate_field(
+        problem,
+        objective=objective,
+        initial=homogeneous,
+        gamma=gamma,
+        method=method,
+        max_iterations=max_iterations,
+        progress=progress,
+    )
+    groups = model.group_count
+    homogeneous_solution = model.solve(
+        np.full(groups, homogeneous.alpha_Pa),
+        np.full(groups, homogeneous.poissons_ratio),
+        force,
+        base,
+    ).displacement_m
+    field_solution = model.solve(field.alpha_Pa, field.poissons_ratio, force, base).displacement_m
+    test_homogeneous = interpolation[test] @ homogeneous_solution
+    test_field = interpolation[test] @ field_solution
+    return LoadSetResult(
+        load_set=load_set,
+        grid=grid,
+        train=train,
+        test=test,
+        homogeneous=homogeneous,
+        field=field,
+        homogeneous_errors=displacement_errors(test_homogeneous, measured[test]),
+        field_errors=displacement_errors(test_field, measured[test]),
+        homogeneous_displacement_m=homogeneous_solution,
+        field_displacement_m=field_solution,
+        test_measured_m=measured[test],
+        test_homogeneous_m=test_homogeneous,
+        test_field_m=test_field,
+    )
+
+
+def _cell_centroids(grid: MarkerGrid) -> np.ndarray:
+    nx, ny, nz = grid.hex_shape
+    i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+    centre = lambda axis, n: 0.5 * (axis[:-1] + axis[1:])[n.ravel(order="F")]  # noqa: E731
+    return np.column_stack([centre(grid.x_m, i), centre(grid.y_m, j), centre(grid.z_m, k)])
+
+
+def plot_field_maps(path: str | Path, result: LoadSetResult) -> Path:
+    """Maps of E and nu per hexahedron of the top layer (seed 002, Figure 5), PNG.
+
+    Constrained cells (:meth:`FieldEstimate.constrained_youngs`) are marked with a dot.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from warptissue.io import atomic_path
+
+    grid, field = result.grid, result.field
+    nx, ny, nz = grid.hex_shape
+    top = slice((nz - 1) * nx * ny, nz * nx * ny)
+    centroids = _cell_centroids(grid)[top]
+    constrained = field.constrained_youngs()[top]
+    figure, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    panels = (
+        (field.youngs_modulus_Pa[top] / 1e3, "Young's modulus E (kPa)"),
+        (field.poissons_ratio[top], "Poisson's ratio nu"),
+    )
+    for axis, (values, label) in zip(axes, panels, strict=True):
+        image = axis.pcolormesh(
+            grid.x_m * 100, grid.y_m * 100, values.reshape(ny, nx), cmap="viridis"
+        )
+        axis.plot(centroids[constrained, 0] * 100, centroids[constrained, 1] * 100, "w.", ms=4)
+        axis.set_aspect("equal")
+        axis.set_xlabel("x (cm)")
+        axis.set_ylabel("y (cm)")
+        axis.set_title(f"{label}, load set {result.load_set}")
+        figure.colorbar(image, ax=axis, label=label)
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=120)
+    plt.close(figure)
+    return Path(path)
+
+
+def write_load_set_outputs(out_dir: str | Path, result: LoadSetResult) -> dict[str, Path]:
+    """Write ``field_<set>.json`` (summary), ``field_<set>_cells.csv`` (per hexahedron),
+    ``field_<set>_test_markers.csv``, ``field_<set>.png`` (maps) and ``field_<set>.vtu``
+    (mesh with E, nu, alpha and constrained flags as cell data, displacements as point data).
+    """
+    from warptissue.mesh import write_mesh
+
+    out = Path(out_dir)
+    stem = f"field_{result.load_set}"
+    field = result.field
+    centroids = _cell_centroids(result.grid)
+    summary = {
+        "load_set": result.load_set,
+        "homogeneous": {
+            "youngs_modulus_Pa": result.homogeneous.youngs_modulus_Pa,
+            "poissons_ratio": result.homogeneous.poissons_ratio,
+            "test_max_error_m": result.homogeneous_errors["max_error_m"],
+            "test_mean_error_m": result.homogeneous_errors["mean_error_m"],
+        },
+        "heterogeneous": {
+            "objective": field.objective,
+            "gamma": field.gamma,
+            "method": field.fit.method,
+            "status": field.fit.status,
+            "message": field.fit.message,
+            "iterations": field.fit.iterations,
+            "test_max_error_m": result.field_errors["max_error_m"],
+            "test_mean_error_m": result.field_errors["mean_error_m"],
+            "constrained_youngs_cells": int(field.constrained_youngs().sum()),
+            "cells": int(len(field.alpha_Pa)),
+        },
+        "train_markers": len(result.train),
+        "test_markers": len(result.test),
+    }
+    paths = {"json": write_json(out / f"{stem}.json", summary)}
+    paths["cells_csv"] = write_csv(
+        out / f"{stem}_cells.csv",
+        {
+            "cell": np.arange(len(field.alpha_Pa)),
+            "x_m": centroids[:, 0],
+            "y_m": centroids[:, 1],
+            "z_m": centroids[:, 2],
+            "youngs_modulus_Pa": field.youngs_modulus_Pa,
+            "poissons_ratio": field.poissons_ratio,
+            "alpha_Pa": field.alpha_Pa,
+            "resolution_alpha": field.resolution_alpha,
+            "resolution_nu": field.resolution_nu,
+            "youngs_relative_error": field.youngs_relative_error,
+            "constrained_youngs": field.constrained_youngs().astype(int),
+        },
+    )
+    paths["test_csv"] = write_csv(
+        out / f"{stem}_test_markers.csv",
+        {
+            "marker_index": result.test,
+            "measured_dz_m": result.test_measured_m[:, 2],
+            "homogeneous_error_m": np.linalg.norm(
+                result.test_homogeneous_m - result.test_measured_m, axis=1
+            ),
+            "heterogeneous_error_m": np.linalg.norm(
+                result.test_field_m - result.test_measured_m, axis=1
+            ),
+        },
+    )
+    paths["png"] = plot_field_maps(out / f"{stem}.png", result)
+    group = result.grid.mesh.tet_regions
+    paths["vtu"] = write_mesh(
+        out / f"{stem}.vtu",
+        result.grid.mesh,
+        point_data={
+            "displacement_m": result.field_displacement_m,
+            "homogeneous_displacement_m": result.homogeneous_displacement_m,
+        },
+        cell_data={
+            "youngs_modulus_Pa": field.youngs_modulus_Pa[group],
+            "poissons_ratio": field.poissons_ratio[group],
+            "alpha_Pa": field.alpha_Pa[group],
+            "constrained_youngs": field.constrained_youngs()[group].astype(np.int32),
+        },
+    )
+    return paths
