@@ -88,15 +88,15 @@ def run(args: argparse.Namespace) -> int:
             "field_mean_error_m": [r.field_errors["mean_error_m"] for r in rows],
         },
     )
-    print(
-        f"{'set':>4} {'E0 (Pa)':>10} {'nu0':>6} {'lin max/mean (mm)':>18} {'het max/mean (mm)':>18}"
-    )
+    print(f"{'set':>4} {'E0 (Pa)':>10} {'nu0':>6}  linear max/mean (mm)  field max/mean (mm)")
     for r in rows:
+        linear = r.homogeneous_errors
+        field = r.field_errors
         print(
             f"{r.load_set:>4} {r.homogeneous.youngs_modulus_Pa:10.1f} "
-            f"{r.homogeneous.poissons_ratio:6.3f} "
-            f"{r.homogeneous_errors['max_error_m'] * 1e3:8.3f}/{r.homogeneous_errors['mean_error_m'] * 1e3:<8.3f}"
-            f"  {r.field_errors['max_error_m'] * 1e3:8.3f}/{r.field_errors['mean_error_m'] * 1e3:<8.3f}"
+            f"{r.homogeneous.poissons_ratio:6.3f}  "
+            f"{linear['max_error_m'] * 1e3:9.3f}/{linear['mean_error_m'] * 1e3:<9.3f}  "
+            f"{field['max_error_m'] * 1e3:9.3f}/{field['mean_error_m'] * 1e3:<9.3f}"
         )
     print(f"wrote {args.out}")
     return 0
