@@ -392,7 +392,7 @@ def estimate_field(
     objective: str = "force",
     initial: HomogeneousEstimate | None = None,
     start: tuple[np.ndarray, np.ndarray] | None = None,
-    gamma: float = 1e-4,
+    gamma: float = 1e-5,
     method: str = "salm",
     max_iterations: int = 100,
     ftol: float = 1e-10,
