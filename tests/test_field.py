@@ -338,3 +338,14 @@ def test_cli_fit_field_writes_outputs_and_reports_bad_input(tmp_path, capsys):
     assert status == 2
     error = capsys.readouterr().err.strip().splitlines()
     assert len(error) == 1 and "oops" in error[0]
+
+
+def test_cell_centroids_follow_the_hexahedron_numbering():
+    from warptissue.field.pipeline import _cell_centroids
+
+    markers = [[x, y, 0.1] for y in np.linspace(0, 0.3, 4) for x in np.linspace(0, 0.5, 6)]
+    grid = grid_from_markers(np.array(markers), thickness_m=0.1, layers=2)
+    mesh = grid.mesh
+    expected = np.zeros((5 * 3 * 2, 3))
+    np.add.at(expected, mesh.tet_regions, mesh.points[mesh.tets].mean(axis=1) / 5.0)
+    np.testing.assert_allclose(_cell_centroids(grid), expected, atol=1e-15)

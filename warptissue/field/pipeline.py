@@ -190,10 +190,14 @@ def estimate_load_set(
 
 
 def _cell_centroids(grid: MarkerGrid) -> np.ndarray:
+    """Hexahedron centres in cell order i + nx (j + ny k), shape (cells, 3), metres."""
     nx, ny, nz = grid.hex_shape
-    i, j, k = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
-    centre = lambda axis, n: 0.5 * (axis[:-1] + axis[1:])[n.ravel(order="F")]  # noqa: E731
-    return np.column_stack([centre(grid.x_m, i), centre(grid.y_m, j), centre(grid.z_m, k)])
+    i, j, k = (
+        index.ravel(order="F")
+        for index in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
+    )
+    centres = [0.5 * (axis[:-1] + axis[1:]) for axis in (grid.x_m, grid.y_m, grid.z_m)]
+    return np.column_stack([centres[0][i], centres[1][j], centres[2][k]])
 
 
 def plot_field_maps(path: str | Path, result: LoadSetResult) -> Path:
