@@ -44,6 +44,9 @@ __all__ = [
 NU_UPPER = 0.49
 """Upper bound of Poisson's ratio in the fits (D stays positive definite for nu < 0.5)."""
 
+NU_SCALE = 0.1
+"""Scale of Poisson's ratio in the normalized unknowns and the Tikhonov term."""
+
 
 @dataclass(frozen=True)
 class FieldProblem:
@@ -225,7 +228,7 @@ class FieldEstimate:
         initial: The homogeneous estimate used as x_1 and Tikhonov anchor.
         objective: "force" or "displacement".
         gamma: Tikhonov weight of Eq. 6 (on parameters normalized by the initial values).
-        fit: The least-squares result (parameters normalized: alpha/alpha0, nu/nu0).
+        fit: The least-squares result (parameters normalized: alpha/alpha0, nu/NU_SCALE).
         resolution_alpha: Diagonal of the model-resolution matrix for alpha per group, in
             [0, 1]: the share of each parameter set by the data rather than by the prior.
         resolution_nu: The same for nu.
@@ -315,14 +318,14 @@ def _resolution_and_spread(
 
 
 def data_objective(
-    problem: FieldProblem, *, objective: str, alpha0_Pa: float, nu0: float
+    problem: FieldProblem, *, objective: str, alpha0_Pa: float, nu_scale: float = 0.1
 ) -> tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
     """The data residual of :func:`estimate_field` and its exact Jacobian.
 
     Args:
         problem: The load set.
         objective: "force" or "displacement".
-        alpha0_Pa, nu0: Normalization: x = (alpha_g / alpha0, nu_g / nu0).
+        alpha0_Pa, nu_scale: Normalization: x = (alpha_g / alpha0, nu_g / nu_scale).
 
     Returns:
         ``(residual(x) -> (m,), jacobian(x) -> (m, 2 groups))``.
@@ -331,7 +334,7 @@ def data_objective(
     alpha0 = alpha0_Pa
 
     def split(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[:groups] * alpha0, x[groups:] * nu0
+        return x[:groups] * alpha0, x[groups:] * nu_scale
 
     free = problem.free_dofs
     model = problem.model
@@ -341,7 +344,7 @@ def data_objective(
     ) -> np.ndarray:
         """d(K u)/dx on the free dofs, dense (free, 2 groups)."""
         d_alpha = (force_g + force_h @ sp.diags(nu)) * alpha0
-        d_nu = force_h @ sp.diags(alpha * nu0)
+        d_nu = force_h @ sp.diags(alpha * nu_scale)
         return sp.hstack([d_alpha, d_nu]).tocsr()[free].toarray()
 
     if objective == "force":
@@ -402,10 +405,12 @@ def estimate_field(
 ) -> FieldEstimate:
     """Estimate alpha and nu per group (seed 002, Eq. 5-6, solved by the self-adapting LM).
 
-    The unknowns are normalized, x = (alpha_g / alpha0, nu_g / nu0), and the residual is
+    The unknowns are normalized, x = (alpha_g / alpha0, nu_g / NU_SCALE), and the residual is
 
-        r(x) = [ data residual ; sqrt(gamma) (x - 1) ]
+        r(x) = [ data residual ; sqrt(gamma) (x - x0) ]
 
+    with x0 = (1, nu0 / NU_SCALE) the homogeneous estimate (Eq. 6's Tikhonov term, made
+    dimensionless; NU_SCALE = 0.1 rather than nu0, which can be near zero)
     where the data residual is, for ``objective="force"``, (K(alpha, nu) u - f) on the free
     dofs divided by the largest applied force (Eq. 5-6; u = ``nodal_displacement_m``), and
     for ``objective="displacement"``, (P u(alpha, nu) - d) over the training markers
@@ -439,22 +444,23 @@ def estimate_field(
     initial = homogeneous_estimate(problem) if initial is None else initial
     groups = problem.model.group_count
     alpha0 = initial.alpha_Pa
-    nu0 = max(initial.poissons_ratio, 1e-3)
-    scales = np.concatenate([np.full(groups, alpha0), np.full(groups, nu0)])
+    nu_scale = NU_SCALE
+    scales = np.concatenate([np.full(groups, alpha0), np.full(groups, nu_scale)])
+    prior = np.concatenate([np.ones(groups), np.full(groups, initial.poissons_ratio / nu_scale)])
     if start is None:
-        x0 = np.concatenate([np.ones(groups), np.full(groups, initial.poissons_ratio / nu0)])
+        x0 = prior.copy()
     else:
         x0 = np.concatenate([np.asarray(start[0]), np.asarray(start[1])]) / scales
     lower = np.concatenate([np.full(groups, 1e-3), np.zeros(groups)])
-    upper = np.concatenate([np.full(groups, np.inf), np.full(groups, NU_UPPER / nu0)])
+    upper = np.concatenate([np.full(groups, np.inf), np.full(groups, NU_UPPER / nu_scale)])
     x0 = np.clip(x0, lower, upper)
     root_gamma = np.sqrt(gamma)
     data_residual, data_jacobian = data_objective(
-        problem, objective=objective, alpha0_Pa=alpha0, nu0=nu0
+        problem, objective=objective, alpha0_Pa=alpha0, nu_scale=nu_scale
     )
 
     def residual(x: np.ndarray) -> np.ndarray:
-        return np.concatenate([data_residual(x), root_gamma * (x - 1.0)])
+        return np.concatenate([data_residual(x), root_gamma * (x - prior)])
 
     def jacobian(x: np.ndarray) -> np.ndarray:
         return np.vstack([data_jacobian(x), root_gamma * np.eye(x.size)])
@@ -473,14 +479,14 @@ def estimate_field(
         progress=progress,
         parameter_names=names,
     )
-    alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu0
+    alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu_scale
     resolution, covariance = _resolution_and_spread(
         data_jacobian(result.x), data_residual(result.x), max(gamma, 1e-300)
     )
     # dE/E = d alpha / alpha + (1 / (1 + nu) - 2 / (1 - 2 nu)) d nu, in normalized x.
     cells = np.arange(groups)
     weights_alpha = alpha0 / alpha
-    weights_nu = nu0 * (1.0 / (1.0 + nu) - 2.0 / (1.0 - 2.0 * nu))
+    weights_nu = nu_scale * (1.0 / (1.0 + nu) - 2.0 / (1.0 - 2.0 * nu))
     variance_e = (
         weights_alpha**2 * covariance[cells, cells]
         + weights_nu**2 * covariance[cells + groups, cells + groups]
@@ -497,7 +503,7 @@ def estimate_field(
         resolution_alpha=resolution[:groups],
         resolution_nu=resolution[groups:],
         youngs_relative_error=np.sqrt(np.maximum(variance_e, 0.0)),
-        poissons_ratio_error=np.sqrt(np.maximum(np.diag(covariance)[groups:], 0.0)) * nu0,
+        poissons_ratio_error=np.sqrt(np.maximum(np.diag(covariance)[groups:], 0.0)) * nu_scale,
     )
 
 
