@@ -62,6 +62,7 @@ def pillow(
             seed=1,
             gamma=gamma,
             method=method,
+            objective=objective,
             device="cpu",
             progress=False,
         )
@@ -131,7 +132,12 @@ def main() -> None:
     parser.add_argument("--skip-sensor", action="store_true")
     args = parser.parse_args()
     rows = pillow(
-        args.out, noise_m=args.noise_m, sets=args.sets, gamma=args.gamma, method=args.method
+        args.out,
+        noise_m=args.noise_m,
+        sets=args.sets,
+        gamma=args.gamma,
+        method=args.method,
+        objective=args.objective,
     )
     table = {} if args.skip_sensor else sensor(args.out)
     write_json(args.out / "pillow_case.json", {"pillow": rows, "sensor": table})
