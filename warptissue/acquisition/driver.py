@@ -10,13 +10,21 @@ disconnect, and, used as a context manager, stops the rig on the way out, Ctrl-C
 
 from __future__ import annotations
 
+import struct
 import time
 from collections import deque
 from dataclasses import asdict, dataclass
 
 import serial
+from serial.urlhandler import protocol_socket
 
 from warptissue.acquisition import protocol as wire
+
+try:  # POSIX: exact byte counts for sockets (see RigClient._available)
+    import fcntl
+    import termios
+except ImportError:  # pragma: no cover - Windows
+    fcntl = termios = None
 from warptissue.errors import DeviceError
 
 __all__ = ["CommandRefused", "LinkCounters", "LinkLost", "RigClient"]
@@ -208,13 +216,32 @@ class RigClient:
             if self._port is None:
                 raise LinkLost(f"{self.url} is not open")
             try:
-                data = self._port.read(4096)
+                data = self._port.read(self._available() or 1)
             except (serial.SerialException, OSError) as exc:
                 self.close()
                 raise LinkLost(f"read from {self.url} failed: {exc}") from exc
             if not data:
                 return None
             self._buffer.extend(data)
+
+    def _available(self) -> int:
+        """Bytes waiting in the port's input buffer.
+
+        pyserial's ``socket://`` handler reports only 0 or 1 in ``in_waiting``, and its
+        ``read(n)`` discards the bytes it has gathered when the peer closes in the middle of
+        the call; asking the kernel (FIONREAD) for the exact count and reading no more than
+        that keeps every byte that arrived before a disconnect.
+        """
+        port = self._port
+        assert port is not None
+        if fcntl is not None and isinstance(port, protocol_socket.Serial):
+            try:
+                return struct.unpack("i", fcntl.ioctl(port.fileno(), termios.FIONREAD, b"\0" * 4))[
+                    0
+                ]
+            except OSError:
+                return 0
+        return port.in_waiting
 
     def read_message(self) -> wire.Message | None:
         """The next valid message, or None when nothing valid arrived within one read timeout.
