@@ -368,7 +368,7 @@ class SimulatedRig:
         return np.round(force / config.force_resolution_N) * config.force_resolution_N
 
     def _start(self, command: str, duration_s: float, path: Callable[[np.ndarray], np.ndarray]):
-        start = self.rig_time_now()
+        start = max(self.rig_time_now(), float(self._history_time_s[-1]) + 1.0 / self.rate_Hz)
         count = int(math.floor(duration_s * self.rate_Hz + 1e-9)) + 1
         local = np.arange(count) / self.rate_Hz
         position = np.clip(path(local), 0.0, self.config.travel_m)
@@ -463,7 +463,9 @@ class SimulatedRig:
             self.speed_m_per_s = speed
             return [wire.format_reply("SPEED", arguments[0])]
         if command == "ZERO":
-            time_now = np.array([self.rig_time_now()])
+            time_now = np.array(
+                [max(self.rig_time_now(), float(self._history_time_s[-1]) + 1e-6)]
+            )
             reading = self._measured_force_N(time_now, np.array([self.position_m]))
             self.tare_N += float(reading[0])
             return [wire.format_reply("ZERO")]
