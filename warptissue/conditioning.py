@@ -34,8 +34,6 @@ import numpy as np
 from warptissue.errors import InputError
 from warptissue.io import ExperimentData
 
-NOTCH_METHOD = "pad"
-
 __all__ = [
     "ConditionedRecord",
     "ContactPoint",
@@ -189,10 +187,7 @@ def remove_offset_and_drift(
     two_sided = bool(loaded.size and indices[0] < loaded[0] and indices[-1] > loaded[-1])
     elapsed = t[mask] - t[0]
     columns = [np.ones_like(elapsed)] + ([elapsed] if two_sided else [])
-    for rate in periodic_rates_Hz:
-        for multiple in range(1, harmonics + 1):
-            phase = 2 * np.pi * multiple * rate * elapsed
-            columns += [np.sin(phase), np.cos(phase)]
+    columns += _periodic_basis(elapsed, tuple(periodic_rates_Hz), harmonics)
     basis = np.column_stack(columns)
     if basis.shape[0] <= basis.shape[1]:
         raise InputError("too few unloaded samples for the baseline fit", value=basis.shape[0])
@@ -242,8 +237,8 @@ def estimate_rate_Hz(
 ) -> float:
     """Rate (Hz) of the strongest periodic component of ``signal`` within ``band_Hz``.
 
-    Scans candidate rates (a grid of 1/20 of the record's frequency resolution across the
-    band) and keeps the one whose sine and cosine at the rate and its first ``harmonics``
+    Scans candidate rates (a coarse grid of half the record's frequency resolution across
+    the band, then a grid 20 times finer around the best) and keeps the one whose sine and cosine at the rate and its first ``harmonics``
     multiples, beside a polynomial trend of ``trend_order``, explain the most of the signal
     (linear least squares at each candidate). Use a stretch where the specimen's response is
     slow: the rest before the ramp, or the hold. :func:`prepare_record` uses the rest before
@@ -253,8 +248,8 @@ def estimate_rate_Hz(
     t = np.asarray(time_s, dtype=np.float64)
     y = np.asarray(signal, dtype=np.float64)
     low, high = band_Hz
-    # Block-average to about 40 samples per period of the highest harmonic (speed only).
-    block = max(1, int(1.0 / (40.0 * harmonics * high * float(np.median(np.diff(t))))))
+    # Block-average to about 10 samples per period of the highest harmonic (speed only).
+    block = max(1, int(1.0 / (10.0 * harmonics * high * float(np.median(np.diff(t))))))
     if block > 1:
         count = len(t) // block
         t = t[: count * block].reshape(count, block).mean(axis=1)
@@ -266,17 +261,60 @@ def estimate_rate_Hz(
         raise InputError("the stretch is shorter than two periods of the band", value=span)
     centred = (t - t[0]) / span - 0.5
     trend = np.vander(centred, trend_order + 1)
-    candidates = np.arange(low, high, 1.0 / (20.0 * span))
-    explained = np.empty(len(candidates))
     base, *_ = np.linalg.lstsq(trend, y, rcond=None)
-    base_residual = y - trend @ base
-    for i, rate in enumerate(candidates):
+    base_energy = float(np.sum((y - trend @ base) ** 2))
+
+    def explained(rate: float) -> float:
         phase = 2 * np.pi * rate * (t - t[0])
         waves = [g(k * phase) for k in range(1, harmonics + 1) for g in (np.sin, np.cos)]
         basis = np.column_stack([*waves, trend])
         coefficients, *_ = np.linalg.lstsq(basis, y, rcond=None)
-        explained[i] = base_residual @ base_residual - np.sum((y - basis @ coefficients) ** 2)
-    return float(candidates[int(np.argmax(explained))])
+        return base_energy - float(np.sum((y - basis @ coefficients) ** 2))
+
+    coarse_step = 1.0 / (2.0 * span)
+    candidates = np.arange(low, high + coarse_step, coarse_step)
+    best = float(candidates[int(np.argmax([explained(r) for r in candidates]))])
+    candidates = np.arange(best - coarse_step, best + coarse_step, coarse_step / 20.0)
+    candidates = candidates[(candidates >= low) & (candidates <= high)]
+    return float(candidates[int(np.argmax([explained(r) for r in candidates]))])
+
+
+def _periodic_basis(elapsed: np.ndarray, rates_Hz: tuple[float, ...], harmonics: int):
+    columns = []
+    for rate in rates_Hz:
+        for multiple in range(1, harmonics + 1):
+            phase = 2 * np.pi * multiple * rate * elapsed
+            columns += [np.sin(phase), np.cos(phase)]
+    return columns
+
+
+def _extend(
+    t: np.ndarray, y: np.ndarray, rates_Hz: tuple[float, ...], harmonics: int, count: int
+) -> np.ndarray:
+    """``y`` with ``count`` samples of forecast added at each end.
+
+    Each end is continued by a least-squares fit, over the last (first) two periods of the
+    slowest rate, of a quadratic trend plus the periodic components: the relaxation goes
+    on smoothly and the breathing keeps its phase, so that the zero-phase filter's start-up
+    transients fall outside the record.
+    """
+    step = float(np.mean(np.diff(t)))
+    window = min(len(t), int(2.0 / (min(rates_Hz) * step)))
+    pieces = []
+    for side in ("start", "end"):
+        part = slice(0, window) if side == "start" else slice(len(t) - window, len(t))
+        anchor = t[0] if side == "start" else t[-1]
+        elapsed = t[part] - anchor
+        scale = max(float(np.ptp(elapsed)), step)
+        trend = [np.ones_like(elapsed), elapsed / scale, (elapsed / scale) ** 2]
+        basis = np.column_stack(trend + _periodic_basis(elapsed, rates_Hz, harmonics))
+        coefficients, *_ = np.linalg.lstsq(basis, y[part], rcond=None)
+        offsets = np.arange(1, count + 1) * step
+        future = -offsets[::-1] if side == "start" else offsets
+        trend_f = [np.ones_like(future), future / scale, (future / scale) ** 2]
+        pieces.append(np.column_stack(trend_f + _periodic_basis(future, rates_Hz, harmonics)))
+        pieces[-1] = pieces[-1] @ coefficients
+    return np.concatenate([pieces[0], y, pieces[1]])
 
 
 def suppress_physiological(
@@ -286,13 +324,16 @@ def suppress_physiological(
     *,
     rates_Hz: tuple[float, ...],
     harmonics: int = 3,
-    quality: float = 2.0,
+    quality: float = 4.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Band-stop the respiration and heartbeat rates (and harmonics) out of a record.
 
     Zero-phase (forward-backward) IIR notches from ``scipy.signal.iirnotch`` at each rate
-    and its first ``harmonics`` multiples below the Nyquist frequency, applied to the
-    displacement and the force alike (see the module docstring for why both).
+    and its first ``harmonics`` multiples below 0.45 times the sample rate, applied to the
+    displacement and the force alike (see the module docstring for why both). Both ends are
+    first extended by a forecast (a quadratic trend plus the periodic components, fitted to
+    the two slowest periods at that end), long enough for the notches' transients to die
+    out before they reach the record.
 
     Args:
         time_s: Uniform sample times (s), shape (n,).
@@ -300,7 +341,8 @@ def suppress_physiological(
         force_N: Force (N), shape (n,).
         rates_Hz: Fundamental rates to remove (Hz), e.g. (0.25, 1.4).
         harmonics: Multiples of each rate to notch (1: the fundamental only).
-        quality: Notch quality factor (centre frequency / -3 dB width), the same for all.
+        quality: Quality factor (centre frequency / -3 dB width) of the fundamentals'
+            notches; harmonics get ``quality * multiple`` (the same width in hertz).
 
     Returns:
         Filtered displacement and force, shape (n,) each.
@@ -312,25 +354,24 @@ def suppress_physiological(
     steps = np.diff(t)
     if np.ptp(steps) > 0.01 * np.mean(steps):
         raise InputError("notch filtering needs uniform sampling (gaps found)")
+    rates = tuple(float(r) for r in rates_Hz)
+    if not rates or not all(r > 0 for r in rates):
+        raise InputError("rates must be positive", value=rates_Hz)
     sample_rate = 1.0 / float(np.mean(steps))
-    x = np.asarray(displacement_m, dtype=np.float64).copy()
-    f = np.asarray(force_N, dtype=np.float64).copy()
-    for rate in rates_Hz:
-        if not rate > 0:
-            raise InputError("rates must be positive", value=rate)
-        for multiple in range(1, harmonics + 1):
-            centre = multiple * rate
-            if centre >= 0.45 * sample_rate:
-                break
-            b, a = iirnotch(centre, quality * multiple, fs=sample_rate)
-            if NOTCH_METHOD == "gust":
-                x = filtfilt(b, a, x, method="gust")
-                f = filtfilt(b, a, f, method="gust")
-            else:
-                pad = min(len(t) - 1, int(3 * sample_rate / rate))
-                x = filtfilt(b, a, x, padtype="even", padlen=pad)
-                f = filtfilt(b, a, f, padtype="even", padlen=pad)
-    return x, f
+    # A notch of width w = rate / quality decays as exp(-pi w t): pad 8 time constants.
+    pad = int(8.0 * quality / (np.pi * min(rates)) * sample_rate)
+    filtered = []
+    for signal in (displacement_m, force_N):
+        y = _extend(t, np.asarray(signal, dtype=np.float64), rates, harmonics, pad)
+        for rate in rates:
+            for multiple in range(1, harmonics + 1):
+                centre = multiple * rate
+                if centre >= 0.45 * sample_rate:
+                    break
+                b, a = iirnotch(centre, quality * multiple, fs=sample_rate)
+                y = filtfilt(b, a, y, padtype=None)
+        filtered.append(y[pad : pad + len(t)])
+    return filtered[0], filtered[1]
 
 
 def select_window(time_s: np.ndarray, *, start_s: float, stop_s: float) -> np.ndarray:
@@ -411,7 +452,7 @@ def prepare_record(
     *,
     physiological_rates_Hz: tuple[float, ...] | str | None = None,
     harmonics: int = 3,
-    quality: float = 2.0,
+    quality: float = 4.0,
     contact_position_m: float | None = None,
     keep_depth_m: float | None = None,
     window_s: tuple[float, float] | None = None,
@@ -453,9 +494,7 @@ def prepare_record(
         if t[max(rest.stop - 1, 0)] - t[0] < 8.0:
             settled = np.flatnonzero(np.abs(x - x[-1]) > 1e-6)
             rest = slice(int(settled[-1]) + 1 if settled.size else 0, None)
-        rates = tuple(
-            estimate_rate_Hz(t[rest], f[rest], band) for band in ((0.1, 0.7), (0.7, 3.0))
-        )
+        rates = tuple(estimate_rate_Hz(t[rest], f[rest], band) for band in ((0.1, 0.7), (0.7, 3.0)))
         steps.append(f"estimated physiological rates {rates} Hz")
     elif physiological_rates_Hz is not None:
         rates = tuple(float(r) for r in physiological_rates_Hz)

@@ -463,9 +463,7 @@ class SimulatedRig:
             self.speed_m_per_s = speed
             return [wire.format_reply("SPEED", arguments[0])]
         if command == "ZERO":
-            time_now = np.array(
-                [max(self.rig_time_now(), float(self._history_time_s[-1]) + 1e-6)]
-            )
+            time_now = np.array([max(self.rig_time_now(), float(self._history_time_s[-1]) + 1e-6)])
             reading = self._measured_force_N(time_now, np.array([self.position_m]))
             self.tare_N += float(reading[0])
             return [wire.format_reply("ZERO")]
@@ -806,6 +804,8 @@ class RigServer:
         rig = self.rig
         while not self._stop.is_set():
             self._emit()
+            if self._stop.is_set():
+                break
             writer = self._writer()
             wait = rig.next_due_wall_s()
             timeout = 0.05 if wait is None else min(wait, 0.05)
