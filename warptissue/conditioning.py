@@ -238,9 +238,10 @@ def estimate_rate_Hz(
     """Rate (Hz) of the strongest periodic component of ``signal`` within ``band_Hz``.
 
     Scans candidate rates (a coarse grid of half the record's frequency resolution across
-    the band, then a grid 20 times finer around the best) and keeps the one whose sine and cosine at the rate and its first ``harmonics``
-    multiples, beside a polynomial trend of ``trend_order``, explain the most of the signal
-    (linear least squares at each candidate). Use a stretch where the specimen's response is
+    the band, then a grid 20 times finer around the best) and keeps the one whose sine and
+    cosine at the rate and its first ``harmonics`` multiples, beside a polynomial trend of
+    ``trend_order``, explain the most of the signal (linear least squares at each
+    candidate). Use a stretch where the specimen's response is
     slow: the rest before the ramp, or the hold. :func:`prepare_record` uses the rest before
     the ramp when it lasts 8 s or more (two breaths), else the hold.
     """
