@@ -87,7 +87,7 @@ def detect_contact(
     baseline_s: float | None = None,
     threshold_sigma: float = 6.0,
     min_threshold_N: float = 0.0,
-    fit_multiple: float = 4.0,
+    fit_multiple: float = 8.0,
 ) -> ContactPoint:
     """Find the contact point of an indentation.
 
@@ -100,8 +100,8 @@ def detect_contact(
         threshold_sigma: Contact is where the force exceeds the baseline by this many noise
             standard deviations (the noise from the baseline's sample-to-sample differences).
         min_threshold_N: Lower bound of the threshold (N), e.g. the transducer resolution.
-        fit_multiple: The early loading used for the extrapolation ends where the force
-            rise reaches ``fit_multiple`` thresholds.
+        fit_multiple: The early loading used for the extrapolation runs from a rise of 2
+            thresholds to a rise of ``fit_multiple`` thresholds.
 
     Raises:
         InputError: The force never leaves the baseline, or the baseline is too short.
@@ -123,11 +123,16 @@ def detect_contact(
     if not above.size:
         raise InputError("no contact: the force never leaves the baseline", value=threshold)
     crossing = int(above[0])
-    # Early loading: from the crossing until the rise reaches fit_multiple thresholds.
-    high = np.flatnonzero(f[crossing:] - level > fit_multiple * threshold)
+    # Early loading: from the crossing until the rise reaches fit_multiple thresholds, less
+    # the first samples (picked because their noise pushed them over the threshold).
+    rise = f[crossing:] - level
+    high = np.flatnonzero(rise > fit_multiple * threshold)
     end = crossing + (int(high[0]) if high.size else min(20, len(f) - crossing - 1))
-    end = max(end, crossing + 3)
-    slope, intercept = np.polyfit(x[crossing : end + 1], f[crossing : end + 1] - level, 1)
+    clear = np.flatnonzero(rise > 2.0 * threshold)
+    begin = crossing + (int(clear[0]) if clear.size else 0)
+    begin = min(begin, max(end - 3, crossing))
+    end = max(end, begin + 3)
+    slope, intercept = np.polyfit(x[begin : end + 1], f[begin : end + 1] - level, 1)
     if slope > 0:
         contact_position = float(-intercept / slope)
     else:
