@@ -1,0 +1,75 @@
+"""The pyserial driver: line assembly, validation counters, replies, reconnection, stop."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+import serial
+from _sls_reference import ReferenceSLS
+
+from warptissue.acquisition import LinkLost, RigClient, RigConfig, RigServer, SimulatedRig
+from warptissue.acquisition import protocol as wire
+from warptissue.errors import DeviceError
+
+
+def test_loop_url_split_lines_garbage_and_crc_errors():
+    client = RigClient("loop://", read_timeout_s=0.01).open()
+    port = client._port
+    first = wire.format_sample(wire.Sample(0, 0, 0.0, 1.4, "0.0000", "1.4000"))
+    second = wire.format_sample(wire.Sample(1, 1000, 0.01, 2.1, "0.0100", "2.1000"))
+    port.write(first[:9])
+    assert client.read_message() is None  # half a line: nothing yet, nothing lost
+    port.write(first[9:] + b"\x00\xffnoise\n" + b"junk" + second)
+    port.write(second[:-6] + b"0000\r\n")  # CRC broken
+    port.write(wire.format_done("RAMP", 2, "OK"))
+    messages = []
+    while (message := client.read_message()) is not None:
+        messages.append(message)
+    assert [type(m).__name__ for m in messages] == ["Sample", "Sample", "Done"]
+    assert messages[1].sequence == 1
+    counters = client.counters
+    assert (counters.garbage_lines, counters.resynchronised_lines) == (1, 1)
+    assert counters.checksum_errors == 1
+    client.close()
+
+
+def test_command_without_reply_times_out():
+    client = RigClient("loop://", read_timeout_s=0.01, reply_timeout_s=0.2).open()
+    with pytest.raises(DeviceError, match="no reply to IDN"):
+        client.identify()  # loop:// echoes the command, which is not a reply
+    client.close()
+
+
+def test_open_failure_and_reconnect_give_up():
+    with pytest.raises(LinkLost, match="cannot open"):
+        RigClient("/dev/does-not-exist-rig").open()
+    client = RigClient("socket://127.0.0.1:9", reconnect_attempts=2, reconnect_delay_s=0.01)
+    assert client.reconnect() is False
+    assert client.counters.reconnections == 0
+
+
+def test_units_and_exit_stops_a_running_rig():
+    rig = SimulatedRig(ReferenceSLS(40.0, 20.0, 2.0), RigConfig(time_scale=1.0))
+    with RigServer(rig, transport="tcp") as server:
+        with RigClient(server.url) as client:
+            client.configure(length_unit="um", force_unit="N", rate_Hz=100)
+            assert (rig.length_unit, rig.force_unit, rig.rate_Hz) == ("um", "N", 100.0)
+            client.ramp_hold(depth_m=4e-3, speed_m_per_s=8e-3, hold_s=100.0)
+            assert client.status()[0] == "MOVING"
+            time.sleep(0.1)
+        # Leaving the block sent STOP and closed the port.
+        assert rig.motion is None
+        assert not client.is_open
+
+
+def test_peer_close_raises_link_lost():
+    rig = SimulatedRig(ReferenceSLS(40.0, 20.0, 2.0), RigConfig())
+    server = RigServer(rig, transport="tcp").start()
+    client = RigClient(server.url).open()
+    assert client.identify()["model"] == "rig-sim"
+    server.close()
+    with pytest.raises((LinkLost, serial.SerialException)):
+        for _ in range(50):
+            client.read_message()
+    client.close()
