@@ -13,8 +13,20 @@ from warptissue.viscoelastic.linear import (
     StandardLinearSolid,
     exponential_elastic_force,
 )
+from warptissue.viscoelastic.wiechert import (
+    LinearWiechert,
+    NonlinearWiechert,
+    SurfaceProfile,
+    line_indenter_force_N,
+    quadratic_profile,
+)
 
 __all__ = [
+    "LinearWiechert",
+    "NonlinearWiechert",
+    "SurfaceProfile",
+    "line_indenter_force_N",
+    "quadratic_profile",
     "NotARelaxationWarning",
     "PronySeries",
     "QuasiLinearViscoelastic",
