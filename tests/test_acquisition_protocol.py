@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 from hypothesis import given
@@ -154,3 +155,13 @@ def test_parse_quantity_errors_name_the_value(text, fragment):
     with pytest.raises(InputError, match=fragment) as caught:
         wire.parse_quantity(text, "length", name="--depth")
     assert "--depth" in str(caught.value) and repr(text) in str(caught.value)
+
+
+def test_every_example_line_in_the_protocol_document_checks_out():
+    from pathlib import Path
+
+    document = Path(__file__).resolve().parents[1] / "docs" / "rig-protocol.md"
+    examples = re.findall(r"^(\$[^*\n]*\*[0-9A-F]{4})", document.read_text(), re.MULTILINE)
+    assert len(examples) >= 10
+    for line in examples:
+        wire.unframe(line.encode("ascii"))
