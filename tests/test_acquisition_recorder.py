@@ -316,3 +316,25 @@ def test_cli_rig_sim_serves_until_ctrl_c(tmp_path):
         process.send_signal(signal.SIGINT)
         assert process.wait(timeout=10) == 0
     assert "emitted=" in process.stderr.read()
+
+
+def test_refused_test_is_reported_and_sine_is_recorded(tmp_path):
+    from warptissue.acquisition import CommandRefused, Sine
+
+    rig = SimulatedRig(ReferenceSLS(*TRUE_SLS), RigConfig(time_scale=50.0, force_noise_N=0.0))
+    with RigServer(rig, transport="tcp") as server, RigClient(server.url) as client:
+        too_deep = RampHold(depth_m=50e-3, speed_m_per_s=8e-3, hold_s=1.0)
+        with pytest.raises(CommandRefused, match="OUT_OF_RANGE"):
+            Recorder(client, tmp_path / "refused.csv", progress=False).record(too_deep)
+        sidecar = json.loads((tmp_path / "refused.json").read_text())
+        assert sidecar["status"] == "refused"
+        client.move_to(2e-3)
+        while not isinstance(client.read_message(), type(None)):
+            pass
+        sine = Sine(amplitude_m=0.5e-3, frequency_Hz=2.0, cycles=3)
+        result = Recorder(client, tmp_path / "sine.csv", rate_Hz=200, progress=False).record(sine)
+    assert result.status == "complete" and result.samples_missing == 0
+    data = read_experiment_csv(tmp_path / "sine.csv")
+    assert data.sample_count == 3 * 200 // 2 + 1
+    expected = 0.5e-3 * np.sin(2 * np.pi * 2.0 * data["time_s"])
+    np.testing.assert_allclose(data["displacement_m"], expected, atol=1e-7)

@@ -338,8 +338,8 @@ class Recorder:
 
         Raises:
             KeyboardInterrupt: Re-raised after a clean stop.
-            DeviceError: The rig could not be configured or refused the test (nothing
-                recorded yet beyond the header).
+            DeviceError: The rig could not be configured, or refused the test (the sidecar
+                then says ``"status": "refused"`` and the CSV holds only its header).
         """
         from tqdm import tqdm
 
@@ -371,7 +371,6 @@ class Recorder:
             desc=f"{test.name} {self.csv_path.name}",
         )
         rows: list[list[Any]] = []
-        status = "complete"
         origin: list[float] = []
 
         def save() -> None:
@@ -407,8 +406,10 @@ class Recorder:
             rows.append(row)
             bar.update(1)
 
+        status = "refused"
         try:
             test.start(client)
+            status = "link_lost"
             status = self._stream(keep, save, rows, state)
         except KeyboardInterrupt:
             status = "interrupted"
