@@ -24,6 +24,7 @@ from warptissue.acquisition import (
     RigConfig,
     RigServer,
     SimulatedRig,
+    load_force_calibration,
 )
 from warptissue.conditioning import prepare_record
 from warptissue.io import read_experiment_csv
@@ -231,7 +232,8 @@ def test_ctrl_c_stops_the_rig_and_saves_what_arrived(tmp_path, monkeypatch):
 def test_calibration_is_applied_and_raw_force_kept(tmp_path):
     calibration = PolynomialForceCalibration((1e-3, 1.1, -0.5))
     calibration_path = calibration.save(tmp_path / "calibration.json")
-    loaded = PolynomialForceCalibration.load(calibration_path)
+    loaded = load_force_calibration(calibration_path)
+    assert loaded == calibration
     rig = SimulatedRig(ReferenceSLS(*TRUE_SLS), RigConfig(time_scale=50.0))
     path = tmp_path / "calibrated.csv"
     with RigServer(rig, transport="tcp") as server:

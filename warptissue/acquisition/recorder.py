@@ -118,13 +118,36 @@ class PolynomialForceCalibration:
 
 
 def load_force_calibration(path: str | Path) -> ForceCorrection:
-    """Load a force calibration: ``warptissue.calibration.ForceCalibration`` when that module
-    exists and reads the file, else :class:`PolynomialForceCalibration`."""
+    """Load a force calibration file.
+
+    A minimal polynomial file (``{"model": "polynomial", "coefficients": [...]}``) is read
+    by :class:`PolynomialForceCalibration`; any other model (WCFM_SVM and the rest) by
+    ``warptissue.calibration.ForceCalibration.load``. The recorder passes ``correct()`` the
+    raw transducer force in newtons, so train a calibration against that signal.
+
+    Raises:
+        InputError: Missing or unreadable file, or a model that needs
+            ``warptissue.calibration`` when it is not installed.
+    """
+    file = Path(path)
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("calibration file not found", path=file) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not JSON: {exc.msg}", path=file, line=exc.lineno) from None
+    if isinstance(data, dict) and data.get("model") == "polynomial" and "coefficients" in data:
+        return PolynomialForceCalibration.load(file)
     try:
         from warptissue.calibration import ForceCalibration
     except ImportError:
-        return PolynomialForceCalibration.load(path)
-    return ForceCalibration.load(path)
+        raise InputError(
+            "this calibration model needs warptissue.calibration, which is not installed",
+            path=file,
+            column="model",
+            value=data.get("model") if isinstance(data, dict) else None,
+        ) from None
+    return ForceCalibration.load(file)
 
 
 @dataclass(frozen=True)
