@@ -730,7 +730,9 @@ class RigServer:
                 line = self._queue[0]
                 if line.split:
                     half = len(line.data) // 2
-                    self._send_all(line.data[:half])
+                    if not self._send_all(line.data[:half]):
+                        self._drop_connection(count=True)
+                        return
                     time.sleep(self.faults.split_pause_s)
                     self.rig.freeze(self.faults.split_pause_s)
                     self._queue[0] = _Line(line.data[half:], line.is_sample, line.corrupt)
@@ -789,7 +791,8 @@ class RigServer:
         self._partial = b""
         self._partial_lines = []
 
-    def _send_all(self, data: bytes) -> None:
+    def _send_all(self, data: bytes) -> bool:
+        """Write all of ``data`` (blocking); False when the link failed."""
         writer = self._writer()
         while data:
             try:
@@ -797,6 +800,9 @@ class RigServer:
                 data = data[sent:]
             except BlockingIOError:
                 select.select([], [writer], [], 0.05)
+            except OSError:
+                return False
+        return True
 
     # -- main loop --------------------------------------------------------------------------
     def serve_forever(self) -> None:
@@ -830,20 +836,19 @@ class RigServer:
             return
         lines = rig.due_lines(2048)
         counters = rig.counters
-        first_number = counters.emitted - sum(1 for _, s in lines if s) + 1
-        number = first_number
+        # Session number (1-based) of the first sample in this batch.
+        number = counters.emitted - sum(1 for _, is_sample in lines if is_sample)
         for data, is_sample in lines:
             if not is_sample:
                 if self._connected():
                     self._queue.append(_Line(data, False))
                 continue
-            line_number = number
             number += 1
             if not self._connected():
                 counters.undelivered += 1
                 continue
-            self._queue.extend(self._inject(_Line(data, True), line_number))
-            self._after_sample(line_number)
+            self._queue.extend(self._inject(_Line(data, True), number))
+            self._after_sample(number)
 
     def _after_sample(self, number: int) -> None:
         faults = self.faults
