@@ -7,6 +7,8 @@ import time
 import pytest
 import serial
 from _sls_reference import ReferenceSLS
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from warptissue.acquisition import LinkLost, RigClient, RigConfig, RigServer, SimulatedRig
 from warptissue.acquisition import protocol as wire
@@ -73,3 +75,30 @@ def test_peer_close_raises_link_lost():
         for _ in range(50):
             client.read_message()
     client.close()
+
+
+@given(st.lists(st.integers(1, 60), min_size=1, max_size=40), st.binary(max_size=30))
+@settings(max_examples=50, deadline=None)
+def test_any_chunking_of_the_stream_gives_the_same_messages(cuts, noise):
+    """However the link splits the byte stream, the client assembles the same messages."""
+    lines = [
+        wire.format_sample(wire.Sample(i, 1000 * i, 0.01 * i, 0.7 * i, f"{0.01 * i:.4f}", "0"))
+        for i in range(5)
+    ]
+    clean_noise = noise.replace(b"$", b"").replace(b"\n", b"") + b"\n"
+    stream = lines[0] + lines[1] + clean_noise + b"".join(lines[2:])
+    client = RigClient("loop://", read_timeout_s=0.001).open()
+    messages = []
+
+    def drain():
+        while (message := client.read_message()) is not None:
+            messages.append(message)
+
+    position = 0
+    for cut in [*cuts, len(stream)]:
+        client._port.write(stream[position : position + cut])  # one read per piece
+        position += cut
+        drain()
+    client.close()
+    assert [m.sequence for m in messages] == [0, 1, 2, 3, 4]
+    assert client.counters.garbage_lines == 1

@@ -398,6 +398,13 @@ class Recorder:
 
         def save() -> None:
             if rows:
+                latest = rows[-1]
+                bar.set_postfix(
+                    depth_mm=f"{float(latest[1]) * 1e3:.3f}",
+                    force_mN=f"{float(latest[2]) * 1e3:.2f}",
+                    missing=state.missing,
+                    refresh=False,
+                )
                 writer.writerows(rows)
                 rows.clear()
             self._sync(handle)
