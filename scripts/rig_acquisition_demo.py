@@ -30,7 +30,12 @@ from warptissue.acquisition import (
 )
 from warptissue.conditioning import prepare_record
 from warptissue.io import read_experiment_csv, to_jsonable
-from warptissue.rig_dynamics import SEED001_RIG, fit_rig_dynamics, measure_frequency_response
+from warptissue.rig_dynamics import (
+    SEED001_RIG,
+    fit_rig_dynamics,
+    measure_frequency_response,
+    plot_frequency_response,
+)
 from warptissue.viscoelastic import StandardLinearSolid
 
 TRUE = (40.0, 20.0, 2.0)
@@ -119,6 +124,9 @@ def main() -> None:
         for name in fit.free_parameters
     }
     summary["rig_fit_flat_band_Hz"] = fit.model.flat_band_Hz()
+    summary["bode_png"] = plot_frequency_response(
+        out / "rig_bode.png", fit.model, frequency_Hz=frequencies, measured=np.array(measured)
+    )
     summary["records"] = str(out)
     print(json.dumps(to_jsonable(summary), indent=2))
 

@@ -14,6 +14,7 @@ from warptissue.rig_dynamics import (
     RigDynamics,
     fit_rig_dynamics,
     measure_frequency_response,
+    plot_frequency_response,
 )
 
 UNDAMPED = replace(SEED001_RIG, link_damping_N_m_s_per_rad=0.0, contact_damping_N_m_s_per_rad=0.0)
@@ -74,7 +75,7 @@ def test_seed001_conclusion_flat_below_30_Hz_far_above_5_Hz_stimuli():
     assert bandwidth > rig.natural_frequencies_Hz()[0]
 
 
-def test_fit_recovers_parameters_from_simulated_sine_sweep(rng):
+def test_fit_recovers_parameters_from_simulated_sine_sweep(rng, tmp_path):
     """Sine-by-sine sweep 5-400 Hz simulated by time integration, 0.5 % output noise, fit
     from a start 40 % off: the free parameters come back within 3 %."""
     truth = SEED001_RIG
@@ -105,6 +106,10 @@ def test_fit_recovers_parameters_from_simulated_sine_sweep(rng):
     assert fit.model.flat_band_Hz() == pytest.approx(truth.flat_band_Hz(), rel=0.02)
     report = fit.to_dict()
     assert report["parameters"]["link_stiffness_N_m_per_rad"]["unit"] == "N m/rad"
+    png = plot_frequency_response(
+        tmp_path / "bode.png", fit.model, frequency_Hz=frequencies, measured=np.array(measured)
+    )
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_invalid_parameters_and_inputs_are_rejected():

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -41,6 +42,7 @@ __all__ = [
     "RigDynamicsFit",
     "fit_rig_dynamics",
     "measure_frequency_response",
+    "plot_frequency_response",
 ]
 
 PARAMETER_UNITS: dict[str, str] = {
@@ -380,3 +382,53 @@ def fit_rig_dynamics(
         message=str(solution.message),
         nfev=int(solution.nfev),
     )
+
+
+def plot_frequency_response(
+    path: str | Path,
+    model: RigDynamics,
+    *,
+    frequency_Hz: np.ndarray | None = None,
+    measured: np.ndarray | None = None,
+    title: str = "Rig frequency response (seed 001 Eq. 1)",
+) -> Path:
+    """Bode plot (PNG, atomic) of the model, with measured points and the flat band shaded.
+
+    Args:
+        path: Output PNG.
+        model: The rig model.
+        frequency_Hz: Measured frequencies (Hz), shape (k,), or None.
+        measured: Measured complex gains, shape (k,), or None.
+        title: Figure title.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from warptissue.io import atomic_path
+
+    top = 2.0 * model.natural_frequencies_Hz()[-1]
+    curve_f = np.geomspace(0.1, top, 2000)
+    curve = model.frequency_response(curve_f)
+    flat = model.flat_band_Hz()
+    figure, (magnitude_axes, phase_axes) = plt.subplots(2, 1, sharex=True, figsize=(7, 6))
+    magnitude_axes.loglog(curve_f, np.abs(curve), label="model")
+    phase_axes.semilogx(curve_f, np.degrees(np.unwrap(np.angle(curve))), label="model")
+    if frequency_Hz is not None and measured is not None:
+        points = np.asarray(measured)
+        magnitude_axes.loglog(frequency_Hz, np.abs(points), "o", label="measured")
+        phase_axes.semilogx(frequency_Hz, np.degrees(np.angle(points)), "o", label="measured")
+    for axes in (magnitude_axes, phase_axes):
+        axes.axvspan(curve_f[0], flat, color="0.9", label=f"flat band ({flat:.1f} Hz)")
+        axes.grid(True, which="both", alpha=0.3)
+    magnitude_axes.set_ylabel("|F_h / F_e|")
+    phase_axes.set_ylabel("phase (deg)")
+    phase_axes.set_xlabel("frequency (Hz)")
+    magnitude_axes.legend(loc="lower left")
+    magnitude_axes.set_title(title)
+    figure.tight_layout()
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, dpi=120)
+    plt.close(figure)
+    return Path(path)
