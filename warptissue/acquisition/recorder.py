@@ -5,14 +5,15 @@ the project writes every other file to a temporary file and renames it over the 
 end, so that a failed run leaves nothing half-written. For a recording that is the wrong
 trade: a power cut, a crash or a killed process an hour into a test would leave only a
 temporary file that the cleanup deletes, and the hour of data would be gone. So the recorder
-appends to the final CSV as samples arrive. The file is opened line-buffered; each row is
-written whole, and after every chunk (``flush_rows`` rows or ``flush_interval_s`` seconds)
-the file is flushed and ``os.fsync``-ed, so everything received up to the last chunk is on
-disk. The sidecar is rewritten atomically at each chunk with the number of rows saved so
-far and ``"status": "recording"``; the final sidecar says how the run ended (``complete``,
-``stopped``, ``interrupted``, ``link_lost``, ``stalled``). After a crash the CSV holds every
-chunk-flushed row (at worst a torn last line, which the sidecar's ``rows_saved`` lets a
-reader drop). An existing output is never overwritten unless asked (``overwrite=True``).
+appends to the final CSV as samples arrive. The file is opened line-buffered, so each row
+reaches the operating system when it is written (a crash of the process loses nothing
+written); after every chunk (``flush_rows`` rows or ``flush_interval_s`` seconds) it is also
+``os.fsync``-ed, so a power cut loses at most the last chunk. The sidecar is rewritten
+atomically after each chunk, with ``"status": "recording"`` and the rows saved so far
+(``counts.samples_saved``); the final sidecar says how the run ended (see
+:class:`RecordingResult`). After a crash the CSV holds every row written before it (at worst
+a torn last line after a power cut, which ``counts.samples_saved`` lets a reader drop).
+An existing output is never overwritten unless asked (``overwrite=True``).
 
 Accounting: the rig numbers its samples from 0 in each motion and reports how many it emitted
 in ``DONE`` (or ``STAT`` after a reconnection). The recorder keeps every valid sample,
@@ -222,7 +223,9 @@ class RecordingResult:
     Attributes:
         csv_path: The experiment CSV.
         sidecar_path: Its JSON sidecar.
-        status: ``complete``, ``stopped``, ``interrupted``, ``link_lost`` or ``stalled``.
+        status: ``complete``, ``stopped`` (a STOP from elsewhere), ``fault`` (the rig ended
+            the motion with FAULT), ``interrupted`` (Ctrl-C), ``link_lost`` (the port could
+            not be reopened), ``stalled`` (the rig stopped answering) or ``refused``.
         samples_sent: Samples the rig reports it emitted (None if it never said).
         samples_received: Valid samples received (saved, one row each).
         samples_missing: Sequence numbers never received (gaps and a lost tail).
