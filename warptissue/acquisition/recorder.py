@@ -396,7 +396,7 @@ class Recorder:
             disable=not self.progress,
             desc=f"{test.name} {self.csv_path.name}",
         )
-        rows: list[list[Any]] = []
+        rows: list[list[Any]] = []  # rows written since the last fsync
         origin: list[float] = []
 
         def save() -> None:
@@ -408,7 +408,6 @@ class Recorder:
                     missing=state.missing,
                     refresh=False,
                 )
-                writer.writerows(rows)
                 rows.clear()
             self._sync(handle)
             self._sidecar("recording", state.counts(client), extra)
@@ -436,6 +435,7 @@ class Recorder:
             ]
             if self.calibration is not None:
                 row.append(repr(raw_force_N))
+            writer.writerow(row)  # line-buffered: in the OS at once
             rows.append(row)
             bar.update(1)
 

@@ -229,6 +229,7 @@ class RigConfig:
         position_resolution_m: Encoder quantum (m).
         disturbance: Respiration and heartbeat, or None (ex vivo).
         time_scale: Rig seconds per wall second (``math.inf``: as fast as the link drains).
+        clock_start_s: Rig clock at power-on (s); sets the phase of the disturbance.
         seed: Seed of the noise.
         serial_number: Reported by ``IDN``.
     """
@@ -244,6 +245,7 @@ class RigConfig:
     position_resolution_m: float = 0.1e-6
     disturbance: PhysiologicalDisturbance | None = None
     time_scale: float = 1.0
+    clock_start_s: float = 0.0
     seed: int = 0
     serial_number: str = "SIM0001"
 
@@ -330,10 +332,10 @@ class SimulatedRig:
         self.tare_N = 0.0
         self.motion: _Motion | None = None
         self.last_motion_samples = 0
-        self.rig_time_s = 0.0
+        self.rig_time_s = self.config.clock_start_s
         self._wall_origin = time.monotonic()
         self._rng = np.random.default_rng(self.config.seed)
-        self._history_time_s = np.zeros(1)
+        self._history_time_s = np.array([self.config.clock_start_s])
         self._history_depth_m = np.zeros(1)
 
     # -- clock ------------------------------------------------------------------------------
@@ -342,7 +344,7 @@ class SimulatedRig:
         scale = self.config.time_scale
         if math.isinf(scale):
             return self.rig_time_s
-        return (time.monotonic() - self._wall_origin) * scale
+        return self.config.clock_start_s + (time.monotonic() - self._wall_origin) * scale
 
     def freeze(self, wall_seconds: float) -> None:
         """Shift the clock so that ``wall_seconds`` of wall time do not count (a stall)."""
