@@ -283,6 +283,9 @@ def test_cli_acquire_against_simulated_rig(tmp_path, capsys):
                 "500Hz",
                 "--out",
                 str(path),
+                "--start",
+                "1mm",
+                "--zero",
                 "--meta",
                 "specimen=phantom A",
                 "--no-progress",
@@ -290,7 +293,11 @@ def test_cli_acquire_against_simulated_rig(tmp_path, capsys):
         )
     assert status == 0
     data = read_experiment_csv(path)
-    assert data.sample_count == rig.counters.emitted
+    assert data.sample_count == data.metadata["counts"]["samples_sent"] == rig.last_motion_samples
+    move_samples = rig.counters.emitted - data.sample_count
+    assert move_samples > 0  # the --start move streamed too (and was not recorded)
+    assert rig.position_m == pytest.approx(5e-3)  # 1 mm start + 4 mm ramp
+    assert data["position_mm"][0] == pytest.approx(1.0)
     assert np.allclose(np.diff(data["time_s"]), 1 / 500)
     assert data.metadata["specimen"] == "phantom A"
     assert data.metadata["protocol"]["hold_s"] == 1.5

@@ -358,6 +358,20 @@ class RigClient:
         """``SINE``: oscillate ``amplitude_m`` (m) about the present position."""
         self.command("SINE", self._length(amplitude_m), frequency_Hz, cycles)
 
+    def wait_until_done(self, *, timeout_s: float) -> wire.Done:
+        """Read until the running motion's ``DONE`` (its samples are discarded; use
+        :class:`~warptissue.acquisition.Recorder` to keep them).
+
+        Raises:
+            DeviceError: No ``DONE`` within ``timeout_s``.
+        """
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            message = self.read_message()
+            if isinstance(message, wire.Done):
+                return message
+        raise DeviceError(f"motion on {self.url} did not finish within {timeout_s} s")
+
     def stop(self, *, drain_s: float = 1.0) -> list[wire.Message]:
         """``STOP``: end any motion, then read until its ``DONE`` (or ``drain_s``).
 

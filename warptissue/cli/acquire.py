@@ -41,6 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     acquire.add_argument("--cycles", type=float, help="number of sine cycles")
     acquire.add_argument("--rate", default="1000Hz", help="sample rate, at most 1000Hz")
     acquire.add_argument("--out", required=True, help="output CSV (the sidecar is .json)")
+    acquire.add_argument("--start", help="move to this axis position first, e.g. 10mm")
+    acquire.add_argument("--zero", action="store_true", help="tare the force before the test")
     acquire.add_argument("--calibration", help="force calibration JSON (raw column kept)")
     acquire.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
     acquire.add_argument("--stall-timeout", default="2s", help="silence before asking STAT")
@@ -121,8 +123,14 @@ def run_acquire(args: argparse.Namespace) -> int:
     calibration = None if args.calibration is None else load_force_calibration(args.calibration)
     if calibration is not None:
         metadata["calibration_file"] = args.calibration
+    start_m = None if args.start is None else _quantity(args, "start", "length")
     client = RigClient(args.port, reconnect_attempts=args.reconnect_attempts)
     with client:
+        if start_m is not None:
+            client.move_to(start_m)
+            client.wait_until_done(timeout_s=60.0)
+        if args.zero:
+            client.zero_force()
         recorder = Recorder(
             client,
             args.out,
