@@ -124,3 +124,18 @@ def test_fault_plan_parse():
         FaultPlan.parse("meteor=1")
     with pytest.raises(InputError, match="not a number"):
         FaultPlan.parse("drop=often")
+
+
+def test_stop_keeps_only_the_executed_motion_in_the_tissue_history():
+    rig = make_rig(surface_position_m=0.0, force_noise_N=0.0, force_resolution_N=1e-9)
+    reply(rig, b"RAMP 4 8 10")
+    first = rig.due_lines(200)  # 200 samples, 0.199 s: 1.6 mm down at most
+    assert len(first) == 200
+    reply(rig, b"STOP")
+    depth = rig.position_m
+    assert 1e-3 < depth < 1.6e-3
+    reply(rig, b"MOVE %f" % (depth * 1e3))  # a null move: rest at the stop depth
+    rest = samples(rig)
+    # Relaxation from the force reached at the stop, not from a 4 mm ramp that never ran.
+    assert rest[0].force * 1e-3 < 40.0 * depth * 1.001
+    assert rest[0].force * 1e-3 > 20.0 * depth

@@ -445,6 +445,10 @@ class SimulatedRig:
             if self.motion is not None:
                 motion = self.motion
                 self.position_m = float(motion.position_m[max(motion.next_index - 1, 0)])
+                unexecuted = len(motion.time_s) - max(motion.next_index, 1)
+                if unexecuted:  # the tissue only felt the part that ran
+                    self._history_time_s = self._history_time_s[:-unexecuted]
+                    self._history_depth_m = self._history_depth_m[:-unexecuted]
                 lines.append(self._finish("STOPPED"))
             return lines
         if command == "UNITS":
