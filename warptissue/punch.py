@@ -29,9 +29,7 @@ def _check(radius_m: float, poissons_ratio: float) -> None:
     if not (math.isfinite(radius_m) and radius_m > 0.0):
         raise InputError("must be a finite positive number", column="radius_m", value=radius_m)
     if not (math.isfinite(poissons_ratio) and -1.0 < poissons_ratio <= 0.5):
-        raise InputError(
-            "must lie in (-1, 0.5]", column="poissons_ratio", value=poissons_ratio
-        )
+        raise InputError("must lie in (-1, 0.5]", column="poissons_ratio", value=poissons_ratio)
 
 
 def _depth(depth_m: np.ndarray | float) -> np.ndarray:
@@ -220,9 +218,8 @@ def hertz_modulus_Pa(
     """Young's modulus from a spherical indentation: E = 3 (1 - nu^2) F / (4 sqrt(R) delta^1.5)."""
     _check(radius_m, poissons_ratio)
     force = np.asarray(force_N, dtype=np.float64)
-    return (
-        3.0 * (1.0 - poissons_ratio**2) * force / (4.0 * math.sqrt(radius_m) * _depth(depth_m) ** 1.5)
-    )
+    denominator = 4.0 * math.sqrt(radius_m) * _depth(depth_m) ** 1.5
+    return 3.0 * (1.0 - poissons_ratio**2) * force / denominator
 
 
 def hertz_contact_radius_m(depth_m: np.ndarray | float, *, radius_m: float) -> np.ndarray:
