@@ -6,6 +6,14 @@ model and the nonlinear parallel-spring model of seed 001. Forces come from samp
 displacement histories in SI units (``time_s``, ``displacement_m`` -> ``force_N``).
 """
 
+from warptissue.viscoelastic.fitting import (
+    RELAXATION_MODELS,
+    RelaxationRecord,
+    fit_qlv,
+    fit_relaxation,
+    fit_wiechert_joint,
+    model_from_result,
+)
 from warptissue.viscoelastic.linear import (
     NotARelaxationWarning,
     PronySeries,
@@ -22,6 +30,12 @@ from warptissue.viscoelastic.wiechert import (
 )
 
 __all__ = [
+    "RELAXATION_MODELS",
+    "RelaxationRecord",
+    "fit_qlv",
+    "fit_relaxation",
+    "fit_wiechert_joint",
+    "model_from_result",
     "LinearWiechert",
     "NonlinearWiechert",
     "SurfaceProfile",
