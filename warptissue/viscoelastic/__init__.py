@@ -21,6 +21,7 @@ from warptissue.viscoelastic.linear import (
     StandardLinearSolid,
     exponential_elastic_force,
 )
+from warptissue.viscoelastic.springs import ParallelNonlinearSprings, blatz_pressure_Pa, fit_blatz
 from warptissue.viscoelastic.wiechert import (
     LinearWiechert,
     NonlinearWiechert,
@@ -30,6 +31,9 @@ from warptissue.viscoelastic.wiechert import (
 )
 
 __all__ = [
+    "ParallelNonlinearSprings",
+    "blatz_pressure_Pa",
+    "fit_blatz",
     "RELAXATION_MODELS",
     "RelaxationRecord",
     "fit_qlv",
