@@ -7,16 +7,21 @@ elastic, isotropic and homogeneous, the indenter rigid and the contact frictionl
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.interpolate import CubicSpline
 
 from warptissue.errors import InputError
 
+if TYPE_CHECKING:
+    from warptissue.fit import FitResult
+
 __all__ = [
     "flat_punch_force_N",
     "flat_punch_modulus_Pa",
     "flat_punch_modulus_printed_Pa",
+    "fit_punch_modulus",
     "hayes_kappa",
     "hertz_contact_radius_m",
     "hertz_force_N",
@@ -226,3 +231,65 @@ def hertz_contact_radius_m(depth_m: np.ndarray | float, *, radius_m: float) -> n
     """Hertz contact radius a = sqrt(R delta)."""
     _check(radius_m, 0.0)
     return np.sqrt(radius_m * _depth(depth_m))
+
+
+def fit_punch_modulus(
+    depth_m: np.ndarray,
+    force_N: np.ndarray,
+    *,
+    radius_m: float,
+    poissons_ratio: float,
+    geometry: str = "flat",
+    thickness_m: float | None = None,
+    method: str = "lm",
+) -> FitResult:
+    """Least-squares Young's modulus from a whole force-depth curve.
+
+    Fits F = 2 a E delta kappa / (1 - nu^2) ("flat", Sneddon with the Hayes factor kappa
+    when ``thickness_m`` is given) or F = 4/3 E/(1 - nu^2) sqrt(R) delta^1.5 ("sphere",
+    Hertz) through :func:`warptissue.fit.fit_curve`.
+
+    Args:
+        depth_m: Depths, shape (m,), all > 0.
+        force_N: Forces, shape (m,).
+        radius_m: Punch radius a or sphere radius R.
+        poissons_ratio: nu in (-1, 0.5].
+        geometry: "flat" or "sphere".
+        thickness_m: Layer thickness for the flat-punch Hayes correction (None: half-space).
+        method: "lm" or "salm".
+
+    Returns:
+        A :class:`warptissue.fit.FitResult` with the one parameter ``youngs_modulus_Pa``.
+    """
+    from warptissue.fit import fit_curve
+
+    depth = _depth(depth_m)
+    force = np.asarray(force_N, dtype=np.float64)
+    if depth.ndim != 1 or force.shape != depth.shape or depth.size < 2:
+        raise InputError("depth_m and force_N need equal 1-D shapes with 2 or more points")
+    if geometry == "flat":
+        unit_force = flat_punch_force_N(
+            depth, radius_m=radius_m, youngs_modulus_Pa=1.0, poissons_ratio=poissons_ratio
+        )
+        if thickness_m is not None:
+            if not (math.isfinite(thickness_m) and thickness_m > 0.0):
+                raise InputError(
+                    "must be a finite positive number", column="thickness_m", value=thickness_m
+                )
+            unit_force = unit_force * hayes_kappa(radius_m / thickness_m, poissons_ratio)
+    elif geometry == "sphere":
+        unit_force = hertz_force_N(
+            depth, radius_m=radius_m, youngs_modulus_Pa=1.0, poissons_ratio=poissons_ratio
+        )
+    else:
+        raise InputError("geometry must be 'flat' or 'sphere'", column="geometry", value=geometry)
+    start = float(unit_force @ force / (unit_force @ unit_force))
+    return fit_curve(
+        lambda p: p[0] * unit_force,
+        [start if start > 0 else 1.0],
+        force,
+        jac=lambda p: unit_force[:, None],
+        method=method,
+        parameter_names=("youngs_modulus_Pa",),
+        parameter_units=("Pa",),
+    )

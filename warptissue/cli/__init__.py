@@ -21,7 +21,7 @@ from warptissue.errors import WarpTissueError
 
 __all__ = ["build_parser", "main"]
 
-COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.fit_uniaxial",)
+COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.fit_uniaxial", "warptissue.cli.fit_relaxation")
 """Modules that add commands, in the order they appear in ``--help``."""
 
 
