@@ -103,3 +103,22 @@ def test_bad_contact_input(kwargs):
         flat_punch_modulus_Pa(0.01, 1e-4, **kwargs)
     with pytest.raises(InputError, match="depth"):
         flat_punch_modulus_Pa(0.01, -1e-4, radius_m=1e-3, poissons_ratio=0.3)
+
+
+def test_fit_punch_modulus_sphere_and_layer(rng):
+    from warptissue.punch import fit_punch_modulus
+
+    depth = np.linspace(1e-5, 1e-3, 30)
+    force = hertz_force_N(depth, radius_m=2e-3, youngs_modulus_Pa=8e3, poissons_ratio=0.49)
+    noisy = force * (1 + rng.normal(0, 1e-3, depth.size))
+    sphere = fit_punch_modulus(depth, noisy, radius_m=2e-3, poissons_ratio=0.49, geometry="sphere")
+    assert sphere.parameters["youngs_modulus_Pa"] == pytest.approx(8e3, rel=5e-3)
+    layer_force = flat_punch_force_N(
+        depth, radius_m=1e-3, youngs_modulus_Pa=8e3, poissons_ratio=0.3
+    ) * hayes_kappa(0.5, 0.3)
+    layer = fit_punch_modulus(
+        depth, layer_force, radius_m=1e-3, poissons_ratio=0.3, thickness_m=2e-3
+    )
+    assert layer.parameters["youngs_modulus_Pa"] == pytest.approx(8e3, rel=1e-9)
+    with pytest.raises(InputError, match="geometry"):
+        fit_punch_modulus(depth, force, radius_m=1e-3, poissons_ratio=0.3, geometry="cone")
