@@ -21,7 +21,11 @@ from warptissue.errors import WarpTissueError
 
 __all__ = ["build_parser", "main"]
 
-COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.acquire",)
+COMMAND_MODULES: tuple[str, ...] = (
+    "warptissue.cli.fit_uniaxial",
+    "warptissue.cli.fit_relaxation",
+    "warptissue.cli.acquire",
+)
 """Modules that add commands, in the order they appear in ``--help``."""
 
 

@@ -1,20 +1,63 @@
 """Tetrahedral meshes: the container, generators, checks and file I/O."""
 
-from warptissue.mesh.core import TET4_EDGES, TetMesh, signed_volumes, to_tet10
+from warptissue.mesh.core import (
+    TET4_EDGES,
+    TET4_FACES,
+    TetMesh,
+    boundary_faces,
+    signed_volumes,
+    to_tet10,
+)
 from warptissue.mesh.generators import (
     HEX_TO_FIVE_TETS,
     HEX_TO_SIX_TETS,
     block_mesh,
+    extrude_triangles,
     graded_coordinates,
+    graded_spacing,
+    hex_to_tets,
+    indentation_block,
+    indentation_disc,
 )
+from warptissue.mesh.io import NODE_SET_PREFIX, TET_REGION_KEY, read_mesh, write_mesh
+from warptissue.mesh.quality import (
+    TET10_SWAP_1_2,
+    MeshQuality,
+    check_mesh,
+    dihedral_angles,
+    fix_orientation,
+    radius_ratios,
+    tet10_jacobian_determinants,
+)
+from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
+    "MeshQuality",
+    "NODE_SET_PREFIX",
+    "TET10_SWAP_1_2",
+    "TET_REGION_KEY",
     "TET4_EDGES",
+    "TET4_FACES",
     "TetMesh",
     "block_mesh",
+    "boundary_faces",
+    "check_closed_surface",
+    "check_mesh",
+    "dihedral_angles",
+    "fix_orientation",
+    "extrude_triangles",
     "graded_coordinates",
+    "graded_spacing",
+    "hex_to_tets",
+    "indentation_block",
+    "indentation_disc",
+    "radius_ratios",
+    "read_mesh",
     "signed_volumes",
+    "tetrahedralize_surface",
+    "tet10_jacobian_determinants",
     "to_tet10",
+    "write_mesh",
 ]

@@ -6,6 +6,14 @@ model and the nonlinear parallel-spring model of seed 001. Forces come from samp
 displacement histories in SI units (``time_s``, ``displacement_m`` -> ``force_N``).
 """
 
+from warptissue.viscoelastic.fitting import (
+    RELAXATION_MODELS,
+    RelaxationRecord,
+    fit_qlv,
+    fit_relaxation,
+    fit_wiechert_joint,
+    model_from_result,
+)
 from warptissue.viscoelastic.linear import (
     NotARelaxationWarning,
     PronySeries,
@@ -13,6 +21,7 @@ from warptissue.viscoelastic.linear import (
     StandardLinearSolid,
     exponential_elastic_force,
 )
+from warptissue.viscoelastic.springs import ParallelNonlinearSprings, blatz_pressure_Pa, fit_blatz
 from warptissue.viscoelastic.wiechert import (
     LinearWiechert,
     NonlinearWiechert,
@@ -22,6 +31,15 @@ from warptissue.viscoelastic.wiechert import (
 )
 
 __all__ = [
+    "ParallelNonlinearSprings",
+    "blatz_pressure_Pa",
+    "fit_blatz",
+    "RELAXATION_MODELS",
+    "RelaxationRecord",
+    "fit_qlv",
+    "fit_relaxation",
+    "fit_wiechert_joint",
+    "model_from_result",
     "LinearWiechert",
     "NonlinearWiechert",
     "SurfaceProfile",
