@@ -1,8 +1,9 @@
 """Reproduce the numbers of the README's "Indentation rig" section.
 
 Runs the simulated rig over a pty, records a ramp-and-hold ex vivo and in vivo, conditions
-the records, fits a standard linear solid, and reports the rig model's flat band, bandwidth
-and a fit to a simulated sine sweep. Prints a JSON summary.
+the records, fits a standard linear solid (warptissue.viscoelastic.fit_relaxation), and
+reports the rig model's flat band, bandwidth and a fit to a simulated sine sweep. Prints a
+JSON summary.
 
     python scripts/rig_acquisition_demo.py [--out runs/rig-demo]
 """
@@ -18,7 +19,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from warptissue.acquisition import (
     PhysiologicalDisturbance,
@@ -37,16 +37,15 @@ from warptissue.rig_dynamics import (
     measure_frequency_response,
     plot_frequency_response,
 )
-from warptissue.viscoelastic import StandardLinearSolid
+from warptissue.viscoelastic import StandardLinearSolid, fit_relaxation
 
 TRUE = (40.0, 20.0, 2.0)
 
 
 def fit_sls(time_s, displacement_m, force_N) -> np.ndarray:
-    def residuals(p):
-        return StandardLinearSolid(*p).force_N(time_s, displacement_m) - force_N
-
-    return least_squares(residuals, [30.0, 10.0, 1.0], x_scale="jac").x
+    """SLS parameters (k0, k_inf, tau) from warptissue.viscoelastic.fit_relaxation."""
+    result = fit_relaxation(time_s, displacement_m, force_N, model="sls")
+    return np.asarray(result.x, dtype=np.float64)
 
 
 def acquire(path: Path, config: RigConfig, test: RampHold, *, zero: bool) -> dict:
