@@ -27,6 +27,8 @@ import datetime
 import json
 import math
 import os
+import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -440,6 +442,8 @@ class Recorder:
             bar.update(1)
 
         status = "refused"
+        self._interrupt_requested = False
+        previous_handler = self._catch_ctrl_c()
         try:
             test.start(client)
             status = "link_lost"
@@ -457,6 +461,8 @@ class Recorder:
                 pass
             raise
         finally:
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
             bar.close()
             save()
             handle.close()
@@ -464,6 +470,17 @@ class Recorder:
             self._sidecar(status, state.counts(client), extra)
             self.result = state.result(self, status)
         return self.result
+
+    def _catch_ctrl_c(self):
+        """Turn Ctrl-C into a request checked between messages, so that it never cuts a
+        sample in half; returns the previous handler (None off the main thread)."""
+        if threading.current_thread() is not threading.main_thread():
+            return None
+
+        def request_stop(signum: int, frame: object) -> None:
+            self._interrupt_requested = True
+
+        return signal.signal(signal.SIGINT, request_stop)
 
     @staticmethod
     def _sync(handle: IO[str]) -> None:
@@ -482,6 +499,8 @@ class Recorder:
         asked = False
         recovered_without_reply = False
         while True:
+            if self._interrupt_requested:
+                raise KeyboardInterrupt
             try:
                 message = client.read_message()
             except LinkLost:
