@@ -345,3 +345,28 @@ def test_refused_test_is_reported_and_sine_is_recorded(tmp_path):
     assert data.sample_count == 3 * 200 // 2 + 1
     expected = 0.5e-3 * np.sin(2 * np.pi * 2.0 * data["time_s"])
     np.testing.assert_allclose(data["displacement_m"], expected, atol=1e-7)
+
+
+def test_real_sigint_stops_cleanly_without_losing_a_sample(tmp_path):
+    """A real SIGINT (what Ctrl-C sends) mid-run: the recorder finishes the message at hand,
+    sends STOP, keeps what arrives until DONE; sent = received, nothing missing."""
+    import os
+    import signal
+    import threading
+
+    rig = SimulatedRig(ReferenceSLS(*TRUE_SLS), RigConfig(time_scale=20.0))
+    path = tmp_path / "sigint.csv"
+    long_test = RampHold(depth_m=4e-3, speed_m_per_s=8e-3, hold_s=100.0)
+    timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
+    with RigServer(rig, transport="tcp") as server, RigClient(server.url) as client:
+        timer.start()
+        with pytest.raises(KeyboardInterrupt):
+            Recorder(client, path, progress=False).record(long_test)
+    timer.join()
+    sidecar = json.loads(path.with_suffix(".json").read_text())
+    counts = sidecar["counts"]
+    assert sidecar["status"] == "interrupted"
+    assert counts["samples_sent"] == rig.last_motion_samples == counts["samples_received"]
+    assert counts["samples_missing"] == 0
+    assert read_experiment_csv(path).sample_count == counts["samples_received"] > 100
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
