@@ -357,6 +357,7 @@ def test_real_sigint_stops_cleanly_without_losing_a_sample(tmp_path):
     rig = SimulatedRig(ReferenceSLS(*TRUE_SLS), RigConfig(time_scale=20.0))
     path = tmp_path / "sigint.csv"
     long_test = RampHold(depth_m=4e-3, speed_m_per_s=8e-3, hold_s=100.0)
+    handler_before = signal.getsignal(signal.SIGINT)
     timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
     with RigServer(rig, transport="tcp") as server, RigClient(server.url) as client:
         timer.start()
@@ -369,4 +370,4 @@ def test_real_sigint_stops_cleanly_without_losing_a_sample(tmp_path):
     assert counts["samples_sent"] == rig.last_motion_samples == counts["samples_received"]
     assert counts["samples_missing"] == 0
     assert read_experiment_csv(path).sample_count == counts["samples_received"] > 100
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    assert signal.getsignal(signal.SIGINT) is handler_before  # restored
