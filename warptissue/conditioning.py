@@ -1,8 +1,16 @@
 """Prepare a recorded indentation for fitting, keeping the raw data beside the result.
 
-Steps (each also usable on its own):
+Steps (each also usable on its own), in the order :func:`prepare_record` runs them:
 
-1. :func:`suppress_physiological` (in vivo records): remove respiration and heartbeat with
+1. :func:`detect_contact`: the first sample where the force leaves the pre-contact baseline
+   by more than ``threshold_sigma`` noise standard deviations, refined by extrapolating a
+   straight line through the early loading back to the baseline. In vivo, where breathing
+   moves the baseline, give the contact instead (the probe rests on the organ).
+2. :func:`remove_offset_and_drift`: subtract the baseline force (a constant from the
+   pre-contact window, or a straight line when an unloaded window after the test exists too;
+   with physiological rates, fitted together with their sines and cosines).
+3. Displacement from the contact point: ``position - contact``.
+4. :func:`suppress_physiological` (in vivo records): remove respiration and heartbeat with
    zero-phase notch filters at their rates and harmonics (scipy.signal), or keep only a
    breath-hold window with :func:`select_window`. The same filter is applied to the
    displacement and to the force. For a linear viscoelastic specimen (SLS, Prony/QLV at
@@ -11,16 +19,13 @@ Steps (each also usable on its own):
    response to the filtered displacement. Fitting the filtered pair is therefore unbiased;
    filtering the force alone would distort the ramp and bias the fit. For nonlinear models
    it is an approximation that holds while the filter leaves the ramp's spectrum alone.
-2. :func:`detect_contact`: the first sample where the force leaves the pre-contact baseline
-   by more than ``threshold_sigma`` noise standard deviations, refined by extrapolating a
-   straight line through the early loading back to the baseline.
-3. :func:`remove_offset_and_drift`: subtract the baseline force (a constant from the
-   pre-contact window, or a straight line when an unloaded window after the test exists too).
-4. Displacement from the contact point: ``max(position - contact, 0)``.
-5. :func:`trim_ramp` (ramp fits, seed 004): keep the loading ramp up to a depth, cutting the
+   :func:`estimate_rate_Hz` finds the rates when they are not known.
+5. A detected contact (approach through air) clips the depth at zero.
+6. :func:`trim_ramp` (ramp fits, seed 004): keep the loading ramp up to a depth, cutting the
    probe's deceleration (seed 004 keeps the first 3.6 mm of a 4 mm ramp).
 
-:func:`prepare_record` runs them in that order and returns a :class:`ConditionedRecord`.
+:func:`prepare_record` returns a :class:`ConditionedRecord` with the raw columns beside the
+result.
 """
 
 from __future__ import annotations
@@ -521,14 +526,13 @@ def prepare_record(
             threshold_N=0.0,
         )
         steps.append(f"contact given at {contact_position_m:.6g} m")
-    # Unloaded: before the (unfiltered) position first passes the contact, and after it
-    # comes back above it (a retraction).
-    raw_x = raw["displacement_m"]
-    loaded = np.flatnonzero(raw_x > contact.position_m + 1e-6)
+    # Unloaded: before the position first passes the contact, and after it comes back
+    # above it (a retraction).
+    loaded = np.flatnonzero(x > contact.position_m + 1e-6)
     first_loaded = int(loaded[0]) if loaded.size else len(t)
     unloaded = np.zeros(len(t), dtype=bool)
     unloaded[:first_loaded] = True
-    unloaded[first_loaded:] = raw_x[first_loaded:] < contact.position_m - 1e-6
+    unloaded[first_loaded:] = x[first_loaded:] < contact.position_m - 1e-6
     if unloaded.sum() >= 2:
         f, offset, drift = remove_offset_and_drift(
             t, f, unloaded=unloaded, periodic_rates_Hz=rates, harmonics=harmonics
