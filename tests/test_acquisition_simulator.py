@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 from _sls_reference import ReferenceSLS
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from warptissue.acquisition import protocol as wire
 from warptissue.acquisition.simulator import (
@@ -139,3 +141,11 @@ def test_stop_keeps_only_the_executed_motion_in_the_tissue_history():
     # Relaxation from the force reached at the stop, not from a 4 mm ramp that never ran.
     assert rest[0].force * 1e-3 < 40.0 * depth * 1.001
     assert rest[0].force * 1e-3 > 20.0 * depth
+
+
+@given(st.binary(max_size=80))
+@settings(max_examples=200, deadline=None)
+def test_any_command_line_gets_a_valid_reply_and_never_crashes_the_rig(line):
+    rig = make_rig()
+    for out in rig.handle_line(line.replace(b"\n", b" ").replace(b"\r", b" ")):
+        assert isinstance(wire.parse_line(out), wire.Reply | wire.ErrorReply | wire.Done)

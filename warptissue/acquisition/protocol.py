@@ -280,10 +280,16 @@ def format_reply(command: str, *fields: str) -> bytes:
     return frame(",".join(("OK", command, *fields)))
 
 
+def _printable(text: str) -> str:
+    """``text`` with every character a frame cannot carry replaced by ``?``."""
+    return "".join(c if " " <= c <= "~" and c not in "$*" else "?" for c in text)
+
+
 def format_error(code: ErrorCode, command: str, text: str) -> bytes:
-    """Frame an ``ERR`` reply; commas in ``text`` are allowed, ``$`` and ``*`` are replaced."""
-    clean = text.replace("$", "?").replace("*", "?")
-    return frame(f"ERR,{int(code)},{command},{clean}")
+    """Frame an ``ERR`` reply. Characters a frame cannot carry (in an echoed command or the
+    text) become ``?``; commas are allowed in ``text`` only."""
+    name = _printable(command).replace(",", "?") or "?"
+    return frame(f"ERR,{int(code)},{name},{_printable(text)}")
 
 
 def format_done(command: str, samples: int, status: str) -> bytes:

@@ -414,7 +414,7 @@ class SimulatedRig:
                 return [wire.format_error(wire.ErrorCode(code), "?", str(exc.args[0])[:60])]
             fields = body.split(",")
         else:
-            fields = text.decode("ascii", "replace").replace(",", " ").split()
+            fields = text.decode("ascii", "replace").replace(",", " ").split() or ["?"]
         command, arguments = fields[0].upper(), fields[1:]
         try:
             if command not in wire.COMMANDS:
