@@ -27,7 +27,7 @@ except ImportError:  # pragma: no cover - Windows
     fcntl = termios = None
 from warptissue.errors import DeviceError
 
-__all__ = ["CommandRefused", "LinkCounters", "LinkLost", "RigClient"]
+__all__ = ["CommandRefused", "LinkCounters", "LinkLost", "RigClient", "parse_status"]
 
 
 class LinkLost(DeviceError):
@@ -326,8 +326,10 @@ class RigClient:
     def status(self) -> tuple[str, int]:
         """``STAT``: the state (``IDLE`` or ``MOVING``) and the samples of the current or
         last motion."""
-        fields = self.command("STAT").fields
-        return fields[0], int(fields[1])
+        state = parse_status(self.command("STAT"))
+        if state is None:
+            raise DeviceError(f"malformed STAT reply from {self.url}")
+        return state
 
     def configure(self, *, length_unit: str = "mm", force_unit: str = "mN", rate_Hz: float):
         """``UNITS`` and ``RATE``; sample values are then in these units."""
@@ -396,3 +398,11 @@ class RigClient:
                 break
         self.pending.extend(seen)
         return seen
+
+
+def parse_status(reply: wire.Reply) -> tuple[str, int] | None:
+    """State and sample count of a ``STAT`` reply, or None when it is malformed."""
+    fields = reply.fields
+    if len(fields) < 2 or fields[0] not in ("IDLE", "MOVING") or not fields[1].isdigit():
+        return None
+    return fields[0], int(fields[1])

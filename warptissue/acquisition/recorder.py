@@ -38,7 +38,7 @@ from typing import IO, Any, Protocol
 import numpy as np
 
 from warptissue.acquisition import protocol as wire
-from warptissue.acquisition.driver import LinkLost, RigClient
+from warptissue.acquisition.driver import LinkLost, RigClient, parse_status
 from warptissue.errors import DeviceError, InputError
 from warptissue.io import software_versions, write_json
 
@@ -538,8 +538,9 @@ class Recorder:
                 state.finish(message.samples)
                 return "complete" if message.status == "OK" else message.status.lower()
             elif isinstance(message, wire.Reply) and message.command == "STAT":
-                if message.fields and message.fields[0] == "IDLE":
-                    state.finish(int(message.fields[1]))
+                status = parse_status(message)
+                if status is not None and status[0] == "IDLE":
+                    state.finish(status[1])
                     return "complete"
             if len(rows) >= self.flush_rows or now - last_save > self.flush_interval_s:
                 save()
