@@ -102,3 +102,85 @@ def test_any_chunking_of_the_stream_gives_the_same_messages(cuts, noise):
     client.close()
     assert [m.sequence for m in messages] == [0, 1, 2, 3, 4]
     assert client.counters.garbage_lines == 1
+
+
+class _Rfc2217Bridge:
+    """An RFC 2217 server (pyserial's PortManager) in front of the simulated rig's pty,
+    on 127.0.0.1: what a networked serial server in a lab would be."""
+
+    def __init__(self, pty_path: str) -> None:
+        import socket
+        import threading
+
+        from serial.rfc2217 import PortManager
+
+        class PtyPort(serial.Serial):  # a pty has no modem control lines
+            cts = dsr = ri = cd = property(lambda self: False)
+
+            def _update_dtr_state(self) -> None:
+                pass
+
+            def _update_rts_state(self) -> None:
+                pass
+
+            def _update_break_state(self) -> None:
+                pass
+
+        self._serial = PtyPort(pty_path, timeout=0.02)
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self.url = f"rfc2217://127.0.0.1:{self._listener.getsockname()[1]}"
+        self._stop = threading.Event()
+        self._manager_class = PortManager
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        import threading
+
+        connection, _ = self._listener.accept()
+        connection.settimeout(0.02)
+        lock = threading.Lock()
+
+        class Writer:
+            def write(self, data: bytes) -> None:
+                with lock:
+                    connection.sendall(data)
+
+        manager = self._manager_class(self._serial, Writer())
+        while not self._stop.is_set():
+            data = self._serial.read(4096)
+            if data:
+                Writer().write(b"".join(manager.escape(data)))
+            try:
+                received = connection.recv(4096)
+            except TimeoutError:
+                continue
+            if not received:
+                break
+            self._serial.write(b"".join(manager.filter(received)))
+        connection.close()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self._listener.close()
+        self._serial.close()
+
+
+@pytest.mark.filterwarnings("ignore::DeprecationWarning")  # inside pyserial's rfc2217
+def test_rfc2217_url_through_a_network_serial_server(tmp_path):
+    from warptissue.acquisition import RampHold, Recorder
+    from warptissue.io import read_experiment_csv
+
+    rig = SimulatedRig(ReferenceSLS(40.0, 20.0, 2.0), RigConfig(time_scale=20.0))
+    with RigServer(rig, transport="pty") as server:
+        bridge = _Rfc2217Bridge(server.url)
+        try:
+            with RigClient(bridge.url, reply_timeout_s=5.0) as client:
+                test = RampHold(depth_m=1e-3, speed_m_per_s=8e-3, hold_s=0.5)
+                result = Recorder(client, tmp_path / "rfc.csv", progress=False).record(test)
+        finally:
+            bridge.close()
+    assert result.status == "complete"
+    assert result.samples_received == result.samples_sent == rig.counters.emitted
+    assert read_experiment_csv(tmp_path / "rfc.csv").sample_count == result.samples_received

@@ -130,10 +130,11 @@ class RigClient:
         Raises:
             LinkLost: The port cannot be opened.
         """
+        options = {"baudrate": self.baudrate, "timeout": self.read_timeout_s}
+        if not self.url.startswith("rfc2217://"):  # pyserial's RFC 2217 client has none
+            options["write_timeout"] = 2.0
         try:
-            self._port = serial.serial_for_url(
-                self.url, baudrate=self.baudrate, timeout=self.read_timeout_s, write_timeout=2.0
-            )
+            self._port = serial.serial_for_url(self.url, **options)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise LinkLost(f"cannot open {self.url}: {exc}") from exc
         self._buffer.clear()
