@@ -371,3 +371,21 @@ def test_real_sigint_stops_cleanly_without_losing_a_sample(tmp_path):
     assert counts["samples_missing"] == 0
     assert read_experiment_csv(path).sample_count == counts["samples_received"] > 100
     assert signal.getsignal(signal.SIGINT) is handler_before  # restored
+
+
+def test_other_calibration_models_go_to_warptissue_calibration(tmp_path, monkeypatch):
+    import sys
+    import types
+
+    path = tmp_path / "wcfm.json"
+    path.write_text(json.dumps({"model": "WCFM_SVM", "singles": []}))
+    loaded = []
+    stub = types.ModuleType("warptissue.calibration")
+    stub.ForceCalibration = type(
+        "ForceCalibration", (), {"load": classmethod(lambda cls, p: loaded.append(p) or "cal")}
+    )
+    monkeypatch.setitem(sys.modules, "warptissue.calibration", stub)
+    assert load_force_calibration(path) == "cal" and loaded == [path]
+    monkeypatch.setitem(sys.modules, "warptissue.calibration", None)  # not installed
+    with pytest.raises(Exception, match="needs warptissue.calibration"):
+        load_force_calibration(path)
