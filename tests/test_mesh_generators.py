@@ -317,3 +317,14 @@ def test_hex_to_tets_rejects_mismatched_diagonals():
     hexes[0] = hexes[0][[1, 2, 3, 0, 5, 6, 7, 4]]
     with pytest.raises(MeshError, match="not conforming"):
         hex_to_tets(points, hexes, split="six")
+
+
+def test_layer_max_bounds_vertical_stretch():
+    loose = specimen("block", size_far_m=0.004)
+    tight = specimen("block", size_far_m=0.004, layer_max_m=0.0012)
+    layers = np.diff(np.unique(tight.points[:, 2]))
+    assert layers.max() <= 0.0012 * (1 + 1e-9) * 1.1  # fitted to the thickness: within 10 %
+    assert np.diff(np.unique(loose.points[:, 2])).max() > 0.002
+    assert check_mesh(tight).min_radius_ratio > check_mesh(loose).min_radius_ratio
+    # The plane is unchanged: same top-face triangulation.
+    assert len(tight.face_sets["top"]) == len(loose.face_sets["top"])

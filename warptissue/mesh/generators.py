@@ -374,6 +374,7 @@ def indentation_block(
     size_near_m: float,
     size_far_m: float,
     growth: float = 1.2,
+    layer_max_m: float | None = None,
 ) -> TetMesh:
     """A square block for indentation, graded toward the probe at its top centre.
 
@@ -398,6 +399,8 @@ def indentation_block(
         size_near_m: Element size under the probe and at its edge, metres.
         size_far_m: Largest element size, far from the probe, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
+        layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
+            times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
 
     Returns:
         A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
@@ -414,6 +417,7 @@ def indentation_block(
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        layer_max_m=layer_max_m,
         curved_side=False,
     )
 
@@ -428,6 +432,7 @@ def indentation_disc(
     size_near_m: float,
     size_far_m: float,
     growth: float = 1.2,
+    layer_max_m: float | None = None,
     curved_side: bool = False,
 ) -> TetMesh:
     """A cylindrical disc specimen for indentation, graded toward the probe at its top centre.
@@ -445,6 +450,8 @@ def indentation_disc(
         size_near_m: Element size under the probe and at its edge, metres.
         size_far_m: Largest element size, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
+        layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
+            times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
         curved_side: For TET10 only: move the mid-edge nodes of the edges on the cylinder onto
             it (curved, isoparametric side faces). By default every TET10 is straight-sided,
             and the side is the inscribed polygonal prism.
@@ -463,6 +470,7 @@ def indentation_disc(
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        layer_max_m=layer_max_m,
         curved_side=curved_side,
     )
 
@@ -491,6 +499,7 @@ def _indentation_specimen(
     size_near_m: float,
     size_far_m: float,
     growth: float,
+    layer_max_m: float | None,
     curved_side: bool,
 ) -> TetMesh:
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
@@ -519,7 +528,9 @@ def _indentation_specimen(
     )
     if not quarter:
         points_2d, triangles = _mirror_quarter(points_2d, triangles)
-    depth = graded_spacing(thickness_m, size_near_m, size_far_m, growth=growth)
+    layer_max_m = size_far_m if layer_max_m is None else layer_max_m
+    _require_positive(layer_max_m=layer_max_m)
+    depth = graded_spacing(thickness_m, size_near_m, max(layer_max_m, size_near_m), growth=growth)
     z = thickness_m - depth[::-1]
     z[0] = 0.0
     points, tets = extrude_triangles(points_2d, triangles, z)
