@@ -324,7 +324,7 @@ def test_layer_max_bounds_vertical_stretch():
     tight = specimen("block", size_far_m=0.004, layer_max_m=0.0012)
     layers = np.diff(np.unique(tight.points[:, 2]))
     assert layers.max() <= 0.0012 * (1 + 1e-9) * 1.1  # fitted to the thickness: within 10 %
-    assert np.diff(np.unique(loose.points[:, 2])).max() > 0.002
+    assert np.diff(np.unique(loose.points[:, 2])).max() > 0.0015
     assert check_mesh(tight).min_radius_ratio > check_mesh(loose).min_radius_ratio
     # The plane is unchanged: same top-face triangulation.
     assert len(tight.face_sets["top"]) == len(loose.face_sets["top"])
