@@ -198,3 +198,12 @@ def test_tetmesh_round_trip_keeps_empty_node_sets_out(tmp_path):
     read = read_mesh(write_mesh(tmp_path / "t.vtu", mesh))
     np.testing.assert_array_equal(read.node_sets["tip"], [3])
     assert "tip" not in read.face_sets
+
+
+def test_unit_scaling(tmp_path):
+    path = tmp_path / "model.inp"
+    path.write_text(INP)
+    mesh = read_mesh(path, unit_m=1e-3)
+    np.testing.assert_allclose(mesh.points[mesh.tets[0, :4]], CORNERS * 1e-3)
+    with pytest.raises(InputError, match="unit_m"):
+        read_mesh(path, unit_m=0.0)

@@ -145,3 +145,25 @@ def test_curved_disc_tet10_is_valid_and_close_to_the_cylinder():
     quality = check_mesh(mesh)
     assert 0.5 < quality.min_scaled_jacobian < 1.0
     assert quality.min_radius_ratio > 0.1
+
+
+def test_counts_and_overlapping_tets(unit_cube_tet4):
+    quality = check_mesh(unit_cube_tet4)
+    assert quality.boundary_face_count == 6 * 4 * 2
+    assert quality.unused_node_count == 0
+    extra = TetMesh(
+        points=np.vstack([unit_cube_tet4.points, [[5.0, 5.0, 5.0]]]), tets=unit_cube_tet4.tets
+    )
+    assert check_mesh(extra).unused_node_count == 1
+    # A third tet on an interior face (one shared by two tets already).
+    tets = unit_cube_tet4.tets
+    faces = np.sort(tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3), axis=1)
+    keys, counts = np.unique(faces, axis=0, return_counts=True)
+    interior = keys[np.flatnonzero(counts == 2)[0]]
+    points = np.vstack([unit_cube_tet4.points, [[0.3, 0.7, 0.4]]])
+    crowded = fix_orientation(
+        TetMesh(points=points, tets=np.vstack([tets, [[*interior, len(points) - 1]]]))
+    )
+    with pytest.raises(MeshError, match="shared by 3 tets") as caught:
+        check_mesh(crowded)
+    assert caught.value.element is not None

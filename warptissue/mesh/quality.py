@@ -8,7 +8,13 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import MeshError
-from warptissue.mesh.core import TET4_EDGES, TET4_FACES, TetMesh, signed_volumes
+from warptissue.mesh.core import (
+    TET4_EDGES,
+    TET4_FACES,
+    TetMesh,
+    _unique_sorted_rows,
+    signed_volumes,
+)
 
 __all__ = [
     "TET10_SWAP_1_2",
@@ -59,6 +65,8 @@ class MeshQuality:
         min_scaled_jacobian: TET10: smallest det J at the nodes and centroid over 6 times the
             corner tet's volume (1 for straight-sided elements). TET4: 1.
         worst_element: Index of the tet with the smallest radius ratio.
+        boundary_face_count: Corner triangles that belong to one tet only.
+        unused_node_count: Nodes that no tet uses (they make a stiffness matrix singular).
     """
 
     element_type: str
@@ -75,6 +83,8 @@ class MeshQuality:
     max_dihedral_deg: float
     min_scaled_jacobian: float
     worst_element: int
+    boundary_face_count: int
+    unused_node_count: int
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a JSON-ready mapping."""
@@ -96,7 +106,8 @@ def check_mesh(
     Raises:
         MeshError: The mesh has no tets, or a tet is inverted
             (negative volume), degenerate (near-zero volume for its size) or, for TET10,
-            curved so much that its Jacobian determinant is not positive somewhere. The error
+            curved so much that its Jacobian determinant is not positive somewhere, or a face
+            is shared by more than two tets. The error
             names the first offending element and carries its index in ``.element``.
     """
     if mesh.tet_count == 0:
@@ -128,6 +139,17 @@ def check_mesh(
                 f"{mesh.tets[first].tolist()}",
                 element=first,
             )
+    faces = np.sort(mesh.corner_tets[:, TET4_FACES].reshape(-1, 3), axis=1)
+    _, face_inverse, face_counts = _unique_sorted_rows(faces, return_counts=True)
+    crowded = np.flatnonzero(face_counts[face_inverse] > 2)
+    if crowded.size:
+        first = int(crowded[0] // 4)
+        raise MeshError(
+            f"face {faces[crowded[0]].tolist()} is shared by "
+            f"{int(face_counts[face_inverse[crowded[0]]])} tets (overlapping or non-manifold "
+            "elements)",
+            element=first,
+        )
     ratios = radius_ratios(mesh.points, mesh.corner_tets)
     dihedral = dihedral_angles(mesh.points, mesh.corner_tets)
     return MeshQuality(
@@ -145,6 +167,8 @@ def check_mesh(
         max_dihedral_deg=float(np.degrees(dihedral.max())),
         min_scaled_jacobian=float(scaled_jacobian.min()),
         worst_element=int(np.argmin(ratios)),
+        boundary_face_count=int((face_counts == 1).sum()),
+        unused_node_count=int(mesh.node_count - np.unique(mesh.tets).size),
     )
 
 
