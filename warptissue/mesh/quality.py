@@ -253,22 +253,26 @@ def dihedral_angles(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.pi - np.arccos(np.clip(np.nan_to_num(cosine), -1.0, 1.0))
 
 
-def tet10_jacobian_determinants(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """det(dx/dxi) of isoparametric TET10s at their 10 nodes and centroid.
+def tet10_jacobian_determinants(
+    points: np.ndarray, tets: np.ndarray, *, barycentric: np.ndarray | None = None
+) -> np.ndarray:
+    """det(dx/dxi) of isoparametric TET10s at points given in barycentric coordinates.
 
     Args:
         points: Node coordinates, shape (N, 3).
         tets: TET10 connectivity (VTK mid-edge order), shape (M, 10).
+        barycentric: Sample points (L_0, L_1, L_2, L_3), shape (S, 4). Default: the 4
+            corners, the 6 edge midpoints (in :data:`TET4_EDGES` order) and the centroid.
 
     Returns:
-        Determinants, shape (M, 11): equal to 6 times the volume everywhere for a
+        Determinants, shape (M, S): equal to 6 times the volume everywhere for a
         straight-sided element.
 
     Notes:
         Shape functions in barycentric coordinates L: corners L_i (2 L_i - 1), mid-edge nodes
         4 L_i L_j; xi = (L_1, L_2, L_3) and L_0 = 1 - L_1 - L_2 - L_3.
     """
-    samples = _TET10_SAMPLES
+    samples = _TET10_SAMPLES if barycentric is None else np.asarray(barycentric, float)
     # dN_a / dL_k at each sample: (S, 10, 4).
     d_dl = np.zeros((len(samples), 10, 4))
     for corner in range(4):
