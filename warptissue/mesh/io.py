@@ -101,7 +101,7 @@ def read_mesh(path: str | Path, *, unit_m: float = 1.0, reorient: bool = True) -
         name: np.asarray(nodes, dtype=np.int64) for name, nodes in data.point_sets.items()
     }
     for name, per_block in data.cell_sets.items():
-        if name.startswith("gmsh:") or name in data.field_data:
+        if name.startswith("gmsh:"):
             continue
         members = [
             np.asarray(data.cells[b].data)[np.asarray(cells, dtype=np.int64)].ravel()
