@@ -21,7 +21,7 @@ from warptissue.errors import WarpTissueError
 
 __all__ = ["build_parser", "main"]
 
-COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.mesh",)
+COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.fit_uniaxial", "warptissue.cli.mesh")
 """Modules that add commands, in the order they appear in ``--help``."""
 
 
