@@ -371,3 +371,11 @@ def test_indentation_meshes_are_valid_over_parameter_space(
     if not disc:
         area = (half if quarter else 2 * half) ** 2
         assert mesh.volumes().sum() == pytest.approx(area * thickness_fraction * half)
+
+
+def test_extrusion_rejects_bad_input():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    with pytest.raises(MeshError, match="strictly increasing"):
+        extrude_triangles(square, [[0, 1, 2]], np.array([0.0, 0.0]))
+    with pytest.raises(MeshError, match="outside"):
+        extrude_triangles(square, [[0, 1, 3]], np.array([0.0, 1.0]))

@@ -345,6 +345,13 @@ def extrude_triangles(
     points_2d_m = np.asarray(points_2d_m, dtype=np.float64)
     z_m = np.asarray(z_m, dtype=np.float64)
     plane_count, layer_count = len(points_2d_m), len(z_m) - 1
+    if z_m.ndim != 1 or layer_count < 1 or np.any(np.diff(z_m) <= 0):
+        raise MeshError(f"z_m must be at least two strictly increasing heights, got {z_m}")
+    triangles = np.asarray(triangles)
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or triangles.size == 0:
+        raise MeshError(f"triangles must have shape (T >= 1, 3), got {triangles.shape}")
+    if triangles.min() < 0 or triangles.max() >= plane_count:
+        raise MeshError(f"triangles index nodes outside [0, {plane_count})")
     a, b, c = np.sort(np.asarray(triangles, dtype=np.int64), axis=1).T
     prism = np.stack(
         [
@@ -354,13 +361,16 @@ def extrude_triangles(
         ],
         axis=1,
     ).transpose(2, 1, 0)  # (T, 3, 4)
-    layers = plane_count * np.arange(layer_count, dtype=np.int64)
-    tets = (prism[None, :, :, :] + layers[:, None, None, None]).reshape(-1, 4).astype(np.int32)
     points = np.column_stack(
         [np.tile(points_2d_m, (layer_count + 1, 1)), np.repeat(z_m, plane_count)]
     )
-    negative = signed_volumes(points, tets) < 0
-    tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
+    # Orientation depends only on the triangle and the pattern, not on the layer: fix it on the
+    # first layer, then stack the layers.
+    prism = prism.reshape(-1, 4)
+    negative = signed_volumes(points, prism) < 0
+    prism[negative, 1], prism[negative, 2] = prism[negative, 2].copy(), prism[negative, 1].copy()
+    layers = plane_count * np.arange(layer_count, dtype=np.int64)
+    tets = (prism[None, :, :] + layers[:, None, None]).reshape(-1, 4).astype(np.int32)
     return points, tets
 
 
