@@ -28,6 +28,7 @@ import numpy as np
 from warptissue.errors import InputError
 
 __all__ = [
+    "applied_schema_names",
     "DEFORMABLE_BODY_API",
     "TISSUE_MATERIAL_API",
     "VOLUME_DEFORMABLE_MATERIAL_API",
@@ -72,6 +73,16 @@ _REDUCED_POLYNOMIAL_KEY = "C_Pa"
 _REDUCED_POLYNOMIAL_NAME = re.compile(r"^C([1-9][0-9]*)0$")
 
 _registered = False
+
+
+def applied_schema_names(prim: Any) -> list[str]:
+    """Every API schema name applied to a prim, registered or not.
+
+    ``Usd.Prim.GetAppliedSchemas`` lists registered schemas only; the physics-deformables
+    proposal's schemas are unregistered, so this reads the composed ``apiSchemas`` list op.
+    """
+    list_op = prim.GetMetadata("apiSchemas")
+    return list(list_op.ApplyOperations([])) if list_op else []
 
 
 def register_schema_plugin() -> None:

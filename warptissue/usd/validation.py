@@ -16,7 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from warptissue.usd.reader import open_stage
-from warptissue.usd.schema import TISSUE_MATERIAL_API, VOLUME_DEFORMABLE_MATERIAL_API
+from warptissue.usd.schema import (
+    TISSUE_MATERIAL_API,
+    VOLUME_DEFORMABLE_MATERIAL_API,
+    applied_schema_names,
+)
 
 __all__ = ["validate_stage"]
 
@@ -115,7 +119,7 @@ def _material_findings(stage: object) -> list[str]:
         "physics:poissonsRatio": lambda v: -1.0 < v <= 0.5,
     }
     for prim in stage.Traverse():
-        applied = list(prim.GetAppliedSchemas())
+        applied = applied_schema_names(prim)
         if TISSUE_MATERIAL_API in applied and not prim.HasAPI(TISSUE_MATERIAL_API):
             findings.append(
                 f"Error: (warptissue:Schema) {prim.GetPath()} applies {TISSUE_MATERIAL_API} but "
