@@ -75,7 +75,7 @@ def liver_material() -> dict:
     """Seed 000: C10 = 287.5 Pa (Table 2), Prony experiment 1 (Table 1)."""
     c10 = 287.5
     return {
-        "model": "NeoHookean",
+        "model": "neo_hookean",
         "C10_Pa": c10,
         "bulk_modulus_Pa": bulk_modulus_for(2 * c10, NEARLY_INCOMPRESSIBLE_NU),
         "prony_g": [0.348, 0.358],
@@ -100,7 +100,7 @@ def beef_liver_material() -> dict:
     length, area = 0.020, 0.020**2
     total = k0 + k1 + k2
     return {
-        "model": "LinearElastic",
+        "model": "linear_elastic",
         "youngs_modulus_Pa": total * length / area,
         "poissons_ratio": NEARLY_INCOMPRESSIBLE_NU,
         "prony_g": [k1 / total, k2 / total],
@@ -198,8 +198,9 @@ def liver_slab(out: Path) -> Path:
 def _brain_material() -> dict:
     c10 = 600.553
     return {
-        "model": "ReducedPolynomial",
-        "C_Pa": [c10, 4097.45],
+        "model": "reduced_polynomial",
+        "C10_Pa": c10,
+        "C20_Pa": 4097.45,
         "bulk_modulus_Pa": bulk_modulus_for(2 * c10, NEARLY_INCOMPRESSIBLE_NU),
     }
 
@@ -260,7 +261,7 @@ def memory_pillow(out: Path) -> Path:
     return write_simulation_usd(
         out / "memory_pillow.usda",
         specimen_sets(mesh),
-        material={"model": "LinearElastic", "youngs_modulus_Pa": 20.0e3, "poissons_ratio": 0.3},
+        material={"model": "linear_elastic", "youngs_modulus_Pa": 20.0e3, "poissons_ratio": 0.3},
         provenance={
             "source": "seed 002 (Tong et al.): geometry, 23 x 13 marker grid, five-tet split",
             "assumptions": "E = 20 kPa, nu = 0.3, density 50 kg/m^3 are placeholders "

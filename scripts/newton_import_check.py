@@ -26,7 +26,7 @@ def _write_specimen(folder: Path) -> tuple[Path, dict]:
     from warptissue.usd import Indenter, write_simulation_usd
 
     mesh = block_mesh(np.linspace(0, 0.02, 4), np.linspace(0, 0.02, 4), np.linspace(0, 0.01, 3))
-    material = {"model": "NeoHookean", "C10_Pa": 287.5, "bulk_modulus_Pa": 1.0e5}
+    material = {"model": "neo_hookean", "C10_Pa": 287.5, "bulk_modulus_Pa": 1.0e5}
     density = 1060.0
     paths = write_simulation_usd(
         folder / "specimen.usda",

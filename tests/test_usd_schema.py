@@ -17,11 +17,52 @@ def _moduli(youngs, nu):
 @pytest.mark.parametrize(
     ("record", "shear"),
     [
-        ({"model": "NeoHookean", "C10_Pa": 287.5, "bulk_modulus_Pa": 5e4}, 575.0),
-        ({"model": "MooneyRivlin", "C10_Pa": 100.0, "C01_Pa": 50.0, "bulk_modulus_Pa": 5e4}, 300.0),
-        ({"model": "ReducedPolynomial", "C_Pa": [600.553, 4097.45], "bulk_modulus_Pa": 5e4}, 1201.106),
-        ({"model": "Ogden", "mu_Pa": [400.0, -50.0], "alpha": [2.0, -2.0], "bulk_modulus_Pa": 5e4}, 350.0),
-        ({"model": "CompressibleNeoHookean", "shear_modulus_Pa": 900.0, "bulk_modulus_Pa": 5e4}, 900.0),
+        ({"model": "neo_hookean", "C10_Pa": 287.5, "bulk_modulus_Pa": 5e4}, 575.0),
+        (
+            {"model": "mooney_rivlin", "C10_Pa": 100.0, "C01_Pa": 50.0, "bulk_modulus_Pa": 5e4},
+            300.0,
+        ),
+        (
+            {
+                "model": "reduced_polynomial",
+                "C10_Pa": 600.553,
+                "C20_Pa": 4097.45,
+                "bulk_modulus_Pa": 5e4,
+            },
+            1201.106,
+        ),
+        (
+            {"model": "ReducedPolynomial", "C_Pa": [600.553, 4097.45], "bulk_modulus_Pa": 5e4},
+            1201.106,
+        ),
+        (
+            {
+                "model": "ogden",
+                "mu1_Pa": 400.0,
+                "alpha1": 2.0,
+                "mu2_Pa": -50.0,
+                "alpha2": -2.0,
+                "bulk_modulus_Pa": 5e4,
+            },
+            350.0,
+        ),
+        (
+            {
+                "model": "Ogden",
+                "mu_Pa": [400.0, -50.0],
+                "alpha": [2.0, -2.0],
+                "bulk_modulus_Pa": 5e4,
+            },
+            350.0,
+        ),
+        (
+            {
+                "model": "compressible_neo_hookean",
+                "shear_modulus_Pa": 900.0,
+                "bulk_modulus_Pa": 5e4,
+            },
+            900.0,
+        ),
     ],
 )
 def test_small_strain_equivalent(record, shear):
@@ -31,10 +72,12 @@ def test_small_strain_equivalent(record, shear):
     assert bulk == pytest.approx(record["bulk_modulus_Pa"], rel=1e-10)
 
 
-def test_incompressible_and_linear():
-    assert small_strain_from_record({"model": "NeoHookean", "C10_Pa": 100.0}) == (600.0, 0.5)
-    record = {"model": "LinearElastic", "youngs_modulus_Pa": 2e4, "poissons_ratio": 0.3}
+def test_incompressible_linear_and_d1():
+    assert small_strain_from_record({"model": "neo_hookean", "C10_Pa": 100.0}) == (600.0, 0.5)
+    record = {"model": "linear_elastic", "youngs_modulus_Pa": 2e4, "poissons_ratio": 0.3}
     assert small_strain_from_record(record) == (2e4, 0.3)
+    with_d1 = small_strain_from_record({"model": "neo_hookean", "C10_Pa": 100.0, "D1_per_Pa": 2e-4})
+    assert _moduli(*with_d1)[1] == pytest.approx(1e4, rel=1e-12)
 
 
 def test_unknown_model_and_bad_values():
@@ -54,25 +97,27 @@ def test_unknown_model_and_bad_values():
 
 def test_record_maps_keys_and_inverts():
     record = {
-        "model": "ReducedPolynomial",
-        "C_Pa": [1.0, 2.0, 3.0, 4.0],
+        "model": "ogden",
+        "mu1_Pa": 400.0,
+        "alpha1": 2.0,
+        "mu2_Pa": -50.0,
+        "alpha2": -2.0,
         "bulk_modulus_Pa": 9.0,
-        "D1_per_Pa": 2 / 9,
         "prony_g": [0.2],
         "prony_tau_s": [3.0],
         "custom_thing_Pa": 5.0,
     }
     mapped = material_record(record)
-    assert mapped.hyperelastic == {
-        "C10": 1.0,
-        "C20": 2.0,
-        "C30": 3.0,
-        "C40": 4.0,
-        "bulkModulus": 9.0,
-        "D1": 2 / 9,
-        "custom_thing_Pa": 5.0,
-    }
+    assert mapped.hyperelastic.keys() == {"mu", "alpha", "bulkModulus", "custom_thing_Pa"}
+    np.testing.assert_array_equal(mapped.hyperelastic["mu"], [400.0, -50.0])
+    np.testing.assert_array_equal(mapped.hyperelastic["alpha"], [2.0, -2.0])
     np.testing.assert_array_equal(mapped.prony_g, [0.2])
     values = dict(mapped.hyperelastic)
     values.update(pronyG=list(mapped.prony_g), pronyTau=list(mapped.prony_tau_s))
-    assert record_from_attributes("ReducedPolynomial", values) == record
+    assert record_from_attributes("ogden", values) == record
+    tuple_form = material_record({"model": "reduced_polynomial", "C_Pa": [1.0, 2.0, 3.0]})
+    assert tuple_form.hyperelastic == {"C10": 1.0, "C20": 2.0, "C30": 3.0}
+    with pytest.raises(InputError, match="consecutive"):
+        material_record(
+            {"model": "ogden", "mu1_Pa": 1.0, "alpha1": 2.0, "mu3_Pa": 1.0, "alpha3": 2.0}
+        )

@@ -8,7 +8,7 @@ import pytest
 from warptissue.mesh import block_mesh
 from warptissue.usd import validate_stage, write_simulation_usd
 
-MATERIAL = {"model": "NeoHookean", "C10_Pa": 300.0, "bulk_modulus_Pa": 3.0e4}
+MATERIAL = {"model": "neo_hookean", "C10_Pa": 300.0, "bulk_modulus_Pa": 3.0e4}
 
 
 @pytest.fixture
@@ -31,7 +31,10 @@ def _findings_named(findings, name):
 
 def test_clean_scene_has_no_findings(tmp_path, mesh):
     paths = write_simulation_usd(
-        tmp_path / "ok.usda", mesh, material=MATERIAL, result=_result(mesh, np.zeros((mesh.node_count, 3)))
+        tmp_path / "ok.usda",
+        mesh,
+        material=MATERIAL,
+        result=_result(mesh, np.zeros((mesh.node_count, 3))),
     )
     assert validate_stage(paths.root) == []
 
@@ -57,7 +60,11 @@ def test_layer_rules(tmp_path, mesh):
         tmp_path / "l.usda", mesh, result=_result(mesh, np.zeros((mesh.node_count, 3)))
     )
     asset = Sdf.Layer.FindOrOpen(str(paths.asset))
-    asset.SetTimeSample(Sdf.Path("/World/Specimen/Volume.points"), 5.0, asset.GetAttributeAtPath("/World/Specimen/Volume.points").default)
+    asset.SetTimeSample(
+        Sdf.Path("/World/Specimen/Volume.points"),
+        5.0,
+        asset.GetAttributeAtPath("/World/Specimen/Volume.points").default,
+    )
     asset.Save()
     results = Sdf.Layer.FindOrOpen(str(paths.results))
     results.GetAttributeAtPath("/World/Indenter.tissue:probe:depth").default = 1.0

@@ -55,22 +55,23 @@ DEFORMABLE_BODY_API = "PhysicsDeformableBodyAPI"
 PLUGIN_DIRECTORY = Path(__file__).resolve().parent / "plugin"
 """Folder holding ``plugInfo.json`` and ``generatedSchema.usda``."""
 
-# Keys of ``Material.to_dict()`` (fe-core contract: units in key names) and the USD attribute
-# names they map to (the unit goes to the schema's documentation). Keys not listed here are
-# written verbatim under ``tissue:hyperelastic:`` so that nothing the material reports is lost.
+# ``Material.to_dict()`` (fe-core) is flat, with units in the keys: ``C10_Pa``, ``C01_Pa``,
+# ``C20_Pa``, ..., ``mu1_Pa``, ``alpha1``, ..., ``bulk_modulus_Pa``. The tuple form of the
+# constructors (``C_Pa``, ``mu_Pa``, ``alpha``) is accepted too. USD attribute names drop the unit
+# (the schema documents it). Keys not recognised are written verbatim under
+# ``tissue:hyperelastic:`` so that nothing the material reports is lost.
 _SCALAR_KEYS: dict[str, str] = {
-    "C10_Pa": "C10",
-    "C01_Pa": "C01",
     "shear_modulus_Pa": "shearModulus",
     "bulk_modulus_Pa": "bulkModulus",
     "D1_per_Pa": "D1",
     "youngs_modulus_Pa": "youngsModulus",
     "poissons_ratio": "poissonsRatio",
 }
-_ARRAY_KEYS: dict[str, str] = {"mu_Pa": "mu", "alpha": "alpha"}
 _PRONY_KEYS: dict[str, str] = {"prony_g": "pronyG", "prony_tau_s": "pronyTau"}
-_REDUCED_POLYNOMIAL_KEY = "C_Pa"
-_REDUCED_POLYNOMIAL_NAME = re.compile(r"^C([1-9][0-9]*)0$")
+_COEFFICIENT_KEY = re.compile(r"^C([0-9])([0-9])_Pa$")
+_COEFFICIENT_NAME = re.compile(r"^C([0-9])([0-9])$")
+_OGDEN_KEY = re.compile(r"^(mu|alpha)([1-9][0-9]*)(_Pa)?$")
+_TUPLE_KEYS: dict[str, str] = {"mu_Pa": "mu", "alpha": "alpha"}
 
 _registered = False
 
@@ -152,6 +153,37 @@ def _model_key(model: str) -> str:
     return re.sub(r"[^a-z]", "", model.lower())
 
 
+def _hyperelastic_values(record: Mapping[str, Any]) -> dict[str, float | np.ndarray]:
+    """``to_dict()`` keys to ``tissue:hyperelastic:`` attribute names (no namespace) and values."""
+    values: dict[str, float | np.ndarray] = {}
+    ogden: dict[str, dict[int, float]] = {"mu": {}, "alpha": {}}
+    for key, value in record.items():
+        if key == "model" or key in _PRONY_KEYS or value is None:
+            continue
+        coefficient, ogden_term = _COEFFICIENT_KEY.match(key), _OGDEN_KEY.match(key)
+        if key in _SCALAR_KEYS:
+            values[_SCALAR_KEYS[key]] = _finite(key, value)
+        elif coefficient:
+            values[f"C{coefficient.group(1)}{coefficient.group(2)}"] = _finite(key, value)
+        elif ogden_term:
+            ogden[ogden_term.group(1)][int(ogden_term.group(2))] = _finite(key, value)
+        elif key == "C_Pa":
+            for order, term in enumerate(_finite_array(key, value), start=1):
+                values[f"C{order}0"] = float(term)
+        elif key in _TUPLE_KEYS:
+            values[_TUPLE_KEYS[key]] = _finite_array(key, value)
+        elif isinstance(value, (int, float, np.number)) and not isinstance(value, bool):
+            values[key] = _finite(key, value)
+        elif isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
+            values[key] = _finite_array(key, value)
+    for name, terms in ogden.items():
+        if terms:
+            if sorted(terms) != list(range(1, len(terms) + 1)):
+                raise InputError(f"Ogden terms {name}1..{name}N are not consecutive", value=terms)
+            values[name] = np.array([terms[i] for i in sorted(terms)])
+    return values
+
+
 def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
     """Small-strain Young's modulus and Poisson's ratio of a material dictionary.
 
@@ -160,8 +192,8 @@ def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
 
     Args:
         record: ``{"model": name, ...}`` with the fe-core keys (``C10_Pa``, ``C01_Pa``,
-            ``C_Pa``, ``mu_Pa``, ``shear_modulus_Pa``, ``bulk_modulus_Pa``,
-            ``youngs_modulus_Pa``, ``poissons_ratio``).
+            ``C20_Pa``, ``mu1_Pa``, ``alpha1``, ``shear_modulus_Pa``, ``bulk_modulus_Pa``,
+            ``youngs_modulus_Pa``, ``poissons_ratio``; or the tuples ``C_Pa``, ``mu_Pa``).
 
     Returns:
         ``(E_Pa, nu)``. Without a bulk modulus the model is incompressible and nu = 0.5.
@@ -176,24 +208,17 @@ def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
     if "model" not in record:
         raise InputError("material dictionary has no 'model' key", value=dict(record))
     model = _model_key(str(record["model"]))
-    if "youngs_modulus_Pa" in record and "poissons_ratio" in record:
-        return (
-            _finite("youngs_modulus_Pa", record["youngs_modulus_Pa"]),
-            _finite("poissons_ratio", record["poissons_ratio"]),
-        )
-    if model in ("neohookean", "reducedpolynomial", "yeoh"):
-        if "C10_Pa" in record:
-            shear = 2.0 * _finite("C10_Pa", record["C10_Pa"])
-        else:
-            shear = 2.0 * float(_finite_array(_REDUCED_POLYNOMIAL_KEY, record.get("C_Pa"))[0])
-    elif model == "mooneyrivlin":
-        shear = 2.0 * (
-            _finite("C10_Pa", record.get("C10_Pa")) + _finite("C01_Pa", record.get("C01_Pa"))
-        )
-    elif model == "ogden":
-        shear = float(_finite_array("mu_Pa", record.get("mu_Pa")).sum())
-    elif model in ("compressibleneohookean", "linearelastic") and "shear_modulus_Pa" in record:
-        shear = _finite("shear_modulus_Pa", record["shear_modulus_Pa"])
+    values = _hyperelastic_values(record)
+    if "youngsModulus" in values and "poissonsRatio" in values:
+        return float(values["youngsModulus"]), float(values["poissonsRatio"])
+    if model in ("neohookean", "reducedpolynomial", "yeoh") and "C10" in values:
+        shear = 2.0 * float(values["C10"])
+    elif model == "mooneyrivlin" and "C10" in values and "C01" in values:
+        shear = 2.0 * (float(values["C10"]) + float(values["C01"]))
+    elif model == "ogden" and "mu" in values:
+        shear = float(np.sum(values["mu"]))
+    elif model == "compressibleneohookean" and "shearModulus" in values:
+        shear = float(values["shearModulus"])
     else:
         raise InputError(
             "cannot derive small-strain E and nu from this material dictionary; give "
@@ -202,12 +227,14 @@ def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
         )
     if not shear > 0:
         raise InputError("the material's initial shear modulus must be positive", value=shear)
-    if record.get("bulk_modulus_Pa") is None:
+    if "bulkModulus" in values:
+        bulk = float(values["bulkModulus"])
+    elif "D1" in values:
+        bulk = 2.0 / float(values["D1"])
+    else:
         return 3.0 * shear, 0.5
-    bulk = _finite("bulk_modulus_Pa", record["bulk_modulus_Pa"])
-    return 9.0 * bulk * shear / (3.0 * bulk + shear), (3.0 * bulk - 2.0 * shear) / (
-        2.0 * (3.0 * bulk + shear)
-    )
+    youngs = 9.0 * bulk * shear / (3.0 * bulk + shear)
+    return youngs, (3.0 * bulk - 2.0 * shear) / (2.0 * (3.0 * bulk + shear))
 
 
 def material_record(material: Any) -> MaterialRecord:
@@ -239,26 +266,8 @@ def material_record(material: Any) -> MaterialRecord:
             f"small-strain equivalent out of range: E = {youngs} Pa, nu = {poisson}",
             value=(youngs, poisson),
         )
-    hyperelastic: dict[str, float | np.ndarray] = {}
-    prony: dict[str, np.ndarray] = {}
-    for key, value in source.items():
-        if key == "model" or value is None:
-            continue
-        if key in _SCALAR_KEYS:
-            hyperelastic[_SCALAR_KEYS[key]] = _finite(key, value)
-        elif key in _ARRAY_KEYS:
-            hyperelastic[_ARRAY_KEYS[key]] = _finite_array(key, value)
-        elif key == _REDUCED_POLYNOMIAL_KEY:
-            for order, coefficient in enumerate(_finite_array(key, value), start=1):
-                hyperelastic[f"C{order}0"] = float(coefficient)
-        elif key in _PRONY_KEYS:
-            prony[key] = _finite_array(key, value)
-        elif isinstance(value, (int, float, np.number)) and not isinstance(value, bool):
-            hyperelastic[key] = _finite(key, value)
-        elif isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, str):
-            hyperelastic[key] = _finite_array(key, value)
-    prony_g = prony.get("prony_g", np.zeros(0))
-    prony_tau = prony.get("prony_tau_s", np.zeros(0))
+    prony_g = _finite_array("prony_g", source.get("prony_g", []))
+    prony_tau = _finite_array("prony_tau_s", source.get("prony_tau_s", []))
     if prony_g.shape != prony_tau.shape:
         raise InputError(
             f"prony_g has {prony_g.size} terms but prony_tau_s has {prony_tau.size}",
@@ -271,7 +280,7 @@ def material_record(material: Any) -> MaterialRecord:
         )
     return MaterialRecord(
         model=str(source["model"]),
-        hyperelastic=hyperelastic,
+        hyperelastic=_hyperelastic_values(source),
         prony_g=prony_g,
         prony_tau_s=prony_tau,
         youngs_modulus_Pa=youngs,
@@ -281,28 +290,31 @@ def material_record(material: Any) -> MaterialRecord:
 
 
 def record_from_attributes(model: str, values: Mapping[str, Any]) -> dict[str, Any]:
-    """Invert :func:`material_record`: ``tissue:`` attribute values back to ``to_dict()`` form.
+    """Invert :func:`material_record`: ``tissue:`` attribute values to flat ``to_dict()`` form.
 
     Args:
         model: ``tissue:hyperelastic:model``.
         values: Attribute name without the ``tissue:hyperelastic:`` / ``tissue:viscoelastic:``
-            namespace to its value.
+            namespace to its value (float or sequence of floats).
 
     Returns:
-        A dictionary with the fe-core keys (``C10_Pa``, ``C_Pa``, ``prony_g``, ...).
+        A dictionary with the fe-core keys (``C10_Pa``, ``mu1_Pa``, ``alpha1``,
+        ``bulk_modulus_Pa``, ``prony_g``, ...), as ``warptissue.materials.material_from_dict``
+        reads it.
     """
-    inverse = {v: k for k, v in {**_SCALAR_KEYS, **_ARRAY_KEYS, **_PRONY_KEYS}.items()}
+    inverse = {v: k for k, v in {**_SCALAR_KEYS, **_PRONY_KEYS}.items()}
     record: dict[str, Any] = {"model": model}
-    polynomial = {}
     for name, value in values.items():
-        match = _REDUCED_POLYNOMIAL_NAME.match(name)
-        if match and _model_key(model) in ("reducedpolynomial", "yeoh"):
-            polynomial[int(match.group(1))] = float(value)
-            continue
-        key = inverse.get(name, name)
-        record[key] = (
-            [float(v) for v in value] if isinstance(value, (Sequence, np.ndarray)) else float(value)
-        )
-    if polynomial:
-        record[_REDUCED_POLYNOMIAL_KEY] = [polynomial[i] for i in sorted(polynomial)]
+        if name in ("mu", "alpha"):
+            unit = "_Pa" if name == "mu" else ""
+            for i, term in enumerate(value, start=1):
+                record[f"{name}{i}{unit}"] = float(term)
+        elif _COEFFICIENT_NAME.match(name):
+            record[f"{name}_Pa"] = float(value)
+        elif name in _PRONY_KEYS.values():
+            record[inverse[name]] = [float(v) for v in value]
+        elif isinstance(value, (Sequence, np.ndarray)):
+            record[inverse.get(name, name)] = [float(v) for v in value]
+        else:
+            record[inverse.get(name, name)] = float(value)
     return record
