@@ -318,6 +318,8 @@ def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str,
         "cauchy_stress_Pa": (tet_count, 6),
         "von_mises_Pa": (tet_count,),
     }
+    if arrays["displacement_m"].ndim == 2:
+        expected["displacement_m"] = (node_count, 3)
     for name, array in arrays.items():
         if array.shape != expected[name]:
             raise InputError(
@@ -399,22 +401,26 @@ def _write_results(
     translate = UsdGeom.Xformable(indenter).GetOrderedXformOps()[0]
     contact = translate.Get()
     axis = 2 if up_axis == "Z" else 1
-    displacement = arrays["displacement_m"][:, kept]
     points_attr, surface_points, displacement_attr = (
         volume.GetPointsAttr(),
         surface.GetPointsAttr(),
         volume_api.GetPrimvar("tissue:displacement").GetAttr(),
     )
-    zero = np.zeros_like(rest)
-    steps = [(0, zero, 0.0, 0.0)] + [
-        (k + 1, displacement[k], arrays["depths_m"][k], arrays["reaction_force_N"][k])
-        for k in range(displacement.shape[0])
-    ]
-    for time_code, nodal, depth, force in steps:
+    step_count = len(arrays["depths_m"])
+    displacement = arrays["displacement_m"]
+    if displacement.ndim == 2:
+        shapes = {0: np.zeros_like(rest), step_count: displacement[kept]}
+    else:
+        shapes = {0: np.zeros_like(rest)}
+        shapes.update({k + 1: displacement[k, kept] for k in range(step_count)})
+    for time_code, nodal in shapes.items():
         deformed = (rest + nodal).astype(np.float32)
         points_attr.Set(Vt.Vec3fArray.FromNumpy(deformed), time_code)
         surface_points.Set(Vt.Vec3fArray.FromNumpy(deformed[surface_nodes]), time_code)
         displacement_attr.Set(Vt.Vec3fArray.FromNumpy(nodal.astype(np.float32)), time_code)
+    depths = np.concatenate([[0.0], arrays["depths_m"]])
+    forces = np.concatenate([[0.0], arrays["reaction_force_N"]])
+    for time_code, (depth, force) in enumerate(zip(depths, forces, strict=True)):
         position = Gf.Vec3d(contact)
         position[axis] -= float(depth)
         translate.Set(position, time_code)
@@ -423,7 +429,7 @@ def _write_results(
     if "time_s" in arrays:
         for k, time in enumerate(arrays["time_s"]):
             indenter.GetAttribute("tissue:probe:time").Set(float(time), k + 1)
-    last = len(steps) - 1
+    last = step_count
     if "cauchy_stress_Pa" in arrays:
         volume_api.GetPrimvar("tissue:cauchyStress").Set(
             Vt.DoubleArray.FromNumpy(arrays["cauchy_stress_Pa"].ravel()), last
@@ -459,7 +465,8 @@ def write_simulation_usd(
             ``small_strain_equivalent()``) or a dictionary in ``to_dict()`` form; optional keys
             ``prony_g`` and ``prony_tau_s`` add a Prony series.
         result: An ``IndentationResult`` or a mapping with ``depths_m`` (S,),
-            ``reaction_force_N`` (S,), ``displacement_m`` (S, N, 3) and optionally
+            ``reaction_force_N`` (S,), ``displacement_m`` (S, N, 3) (or (N, 3): the last
+            step only, sampled at time code S) and optionally
             ``cauchy_stress_Pa`` (M, 6) and ``von_mises_Pa`` (M,) at the last step, and
             ``time_s`` (S,). Step k is written at time code k; time code 0 is the rest state.
         provenance: JSON-like metadata (data file, fit quality, ...) stored in ``/World``'s
