@@ -122,7 +122,7 @@ def read_material_usd(path: str | Path) -> dict[str, Any]:
         "density_kg_per_m3", "youngs_modulus_Pa", "poissons_ratio"}`` (the last two are the
         small-strain equivalents under ``physics:``).
     """
-    from pxr import Usd, UsdGeom, UsdShade
+    from pxr import Usd, UsdShade
 
     path = Path(path)
     stage = open_stage(path)
@@ -144,7 +144,6 @@ def read_material_usd(path: str | Path) -> dict[str, Any]:
                 values[name[len(namespace) :]] = (
                     list(value) if hasattr(value, "__len__") else float(value)
                 )
-    del UsdGeom
     return {
         "material": record_from_attributes(
             str(material.GetAttribute("tissue:hyperelastic:model").Get()), values
