@@ -279,3 +279,22 @@ def test_reads_foreign_left_handed_tetmesh(tmp_path):
     stage.Save()
     mesh = read_tetmesh_usd(tmp_path / "foreign.usda")
     assert mesh.volumes()[0] == pytest.approx(1 / 6)
+
+
+def test_fe_core_materials_round_trip(tmp_path, specimen):
+    """Every warptissue.materials model comes back from USD equal (runs once fe-core is merged)."""
+    materials = pytest.importorskip("warptissue.materials")
+    models = [
+        materials.NeoHookean(287.5, 3e4),
+        materials.MooneyRivlin(100.0, 50.0, 3e4),
+        materials.ReducedPolynomial((600.553, 4097.45), 3e4),
+        materials.Ogden((400.0, -50.0), (2.0, -2.0), 3e4),
+        materials.LinearElastic(2e4, 0.3),
+    ]
+    for i, model in enumerate(models):
+        paths = write_simulation_usd(tmp_path / f"m{i}.usda", specimen, material=model)
+        back = read_material_usd(paths.root)
+        assert materials.material_from_dict(back["material"]) == model
+        youngs, nu = model.small_strain_equivalent()
+        assert back["youngs_modulus_Pa"] == pytest.approx(youngs, rel=1e-6)
+        assert back["poissons_ratio"] == pytest.approx(nu, rel=1e-6)

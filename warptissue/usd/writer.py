@@ -284,31 +284,28 @@ def _material_prims(stage: Any, volume_prim: Any, record: Any, density_kg_per_m3
         prim.CreateAttribute(f"physics:{name}", Sdf.ValueTypeNames.Float, custom=False).Set(
             float(value)
         )
-    prim.GetAttribute("tissue:convention").Set("abaqus")
-    prim.GetAttribute("tissue:hyperelastic:model").Set(record.model)
-    for name, value in record.hyperelastic.items():
-        attr_name = f"tissue:hyperelastic:{name}"
-        if isinstance(value, np.ndarray):
-            prim.CreateAttribute(
-                attr_name,
-                Sdf.ValueTypeNames.DoubleArray,
-                custom=False,
-                variability=Sdf.VariabilityUniform,
-            ).Set(Vt.DoubleArray.FromNumpy(value))
-        else:
-            prim.CreateAttribute(
-                attr_name,
-                Sdf.ValueTypeNames.Double,
-                custom=False,
-                variability=Sdf.VariabilityUniform,
-            ).Set(float(value))
+    # Declared types and variability match generatedSchema.usda, so the values are written
+    # the same whether or not the schema registry saw the plugin.
+    tissue_values: list[tuple[str, Any]] = [
+        ("tissue:convention", "abaqus"),
+        ("tissue:hyperelastic:model", record.model),
+    ]
+    tissue_values += [(f"tissue:hyperelastic:{k}", v) for k, v in record.hyperelastic.items()]
     if record.prony_g.size:
-        prim.GetAttribute("tissue:viscoelastic:pronyG").Set(
-            Vt.DoubleArray.FromNumpy(record.prony_g)
-        )
-        prim.GetAttribute("tissue:viscoelastic:pronyTau").Set(
-            Vt.DoubleArray.FromNumpy(record.prony_tau_s)
-        )
+        tissue_values += [
+            ("tissue:viscoelastic:pronyG", record.prony_g),
+            ("tissue:viscoelastic:pronyTau", record.prony_tau_s),
+        ]
+    for attr_name, value in tissue_values:
+        if isinstance(value, str):
+            type_name, usd_value = Sdf.ValueTypeNames.Token, value
+        elif isinstance(value, np.ndarray):
+            type_name, usd_value = Sdf.ValueTypeNames.DoubleArray, Vt.DoubleArray.FromNumpy(value)
+        else:
+            type_name, usd_value = Sdf.ValueTypeNames.Double, float(value)
+        prim.CreateAttribute(
+            attr_name, type_name, custom=False, variability=Sdf.VariabilityUniform
+        ).Set(usd_value)
     prim.SetCustomDataByKey("warptissue:material", _vt_dictionary(record.source))
     UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
         material, UsdShade.Tokens.fallbackStrength, "physics"
