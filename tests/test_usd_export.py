@@ -136,3 +136,19 @@ def test_cli_errors(tmp_path, capsys):
     (broken / "result.json").write_text("{\n  nope\n}")
     with pytest.raises(InputError, match=r"result.json:2"):
         export_result_dir(broken, tmp_path / "x.usda")
+
+
+def test_export_study(tmp_path):
+    """A study's specimen and material as USD (runs once fe-app's study module is merged)."""
+    pytest.importorskip("warptissue.study")
+    from pathlib import Path
+
+    from warptissue.usd.export import export_study
+
+    study = Path(__file__).resolve().parents[1] / "scenes" / "liver_slab_flat_punch.toml"
+    paths = export_study(study, tmp_path / "study.usda", density_kg_per_m3=1060.0)
+    assert paths.results is None
+    assert validate_stage(paths.root) == []
+    mesh = read_tetmesh_usd(paths.root)
+    assert {"top", "bottom"} <= set(mesh.node_sets)
+    assert read_material_usd(paths.root)["density_kg_per_m3"] == 1060.0
