@@ -258,6 +258,19 @@ def test_bad_inputs_write_nothing(tmp_path, specimen, rng):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_set_names_that_are_not_identifiers(tmp_path, specimen):
+    top = specimen.node_sets["zmax"]
+    named = TetMesh(
+        points=specimen.points,
+        tets=specimen.tets,
+        node_sets={"probe-ring": top[:3], "probe_ring": top[3:5], "2 mm": top[5:6]},
+    )
+    back = read_tetmesh_usd(write_simulation_usd(tmp_path / "n.usda", named).root)
+    assert back.node_sets.keys() == named.node_sets.keys()
+    for name, nodes in named.node_sets.items():
+        np.testing.assert_array_equal(back.node_sets[name], np.sort(nodes))
+
+
 def test_read_errors(tmp_path):
     with pytest.raises(InputError, match="no such USD file"):
         read_tetmesh_usd(tmp_path / "missing.usda")

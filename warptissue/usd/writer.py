@@ -185,11 +185,15 @@ def _define_subsets(
         return
     layer = geom.GetPrim().GetStage().GetEditTarget().GetLayer()
     parent = geom.GetPath()
+    used: set[str] = set()
     with Sdf.ChangeBlock():
         for name, indices in sets.items():
-            spec = Sdf.CreatePrimInLayer(
-                layer, parent.AppendChild(Tf.MakeValidIdentifier(f"{family}_{name}"))
-            )
+            # Distinct set names can share a valid identifier ("a-b", "a_b"): number repeats.
+            identifier = base = Tf.MakeValidIdentifier(f"{family}_{name}")
+            while identifier in used:
+                identifier = f"{base}_{len(used)}"
+            used.add(identifier)
+            spec = Sdf.CreatePrimInLayer(layer, parent.AppendChild(identifier))
             spec.specifier = Sdf.SpecifierDef
             spec.typeName = "GeomSubset"
             spec.customData = {"warptissue": {"name": str(name)}}
