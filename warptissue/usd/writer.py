@@ -211,13 +211,13 @@ def _define_subsets(
 
 
 def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
-    from pxr import Gf, UsdGeom
+    from pxr import Gf, Sdf, UsdGeom
 
     contact_z = top_z_m if indenter.z_m is None else indenter.z_m
     xform = UsdGeom.Xform.Define(stage, INDENTER)
     xform.AddTranslateOp().Set(Gf.Vec3d(indenter.x_m, indenter.y_m, contact_z))
     prim = xform.GetPrim()
-    prim.CreateAttribute("tissue:indenter:kind", _sdf().ValueTypeNames.Token, custom=True).Set(
+    prim.CreateAttribute("tissue:indenter:kind", Sdf.ValueTypeNames.Token, custom=True).Set(
         indenter.kind
     )
     if indenter.kind == "flat_punch":
@@ -251,21 +251,16 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
     for name, value in (("radius", indenter.radius_m), ("length", indenter.length_m)):
         if value > 0:
             attr = prim.CreateAttribute(
-                f"tissue:indenter:{name}", _sdf().ValueTypeNames.Double, custom=True
+                f"tissue:indenter:{name}", Sdf.ValueTypeNames.Double, custom=True
             )
             attr.Set(float(value))
             attr.SetCustomDataByKey("unit", "m")
 
 
-def _sdf() -> Any:
-    from pxr import Sdf
-
-    return Sdf
-
-
-def _set_stage_metadata(layer: Any, *, up_axis: str) -> None:
+def _set_stage_metadata(layer: Any) -> None:
+    """SI units and z up: the project's coordinates (indentation along -z) need no rotation."""
     layer.defaultPrim = "World"
-    metadata = {"metersPerUnit": 1.0, "kilogramsPerUnit": 1.0, "upAxis": up_axis}
+    metadata = {"metersPerUnit": 1.0, "kilogramsPerUnit": 1.0, "upAxis": "Z"}
     pseudo = layer.pseudoRoot
     for key, value in metadata.items():
         pseudo.SetInfo(key, value)
@@ -408,7 +403,6 @@ def _write_results(
     surface_nodes: np.ndarray,
     owners: np.ndarray,
     rest: np.ndarray,
-    up_axis: str,
 ) -> None:
     """Author the time samples (stage's edit target: the results layer)."""
     from pxr import Gf, UsdGeom, Vt
@@ -419,7 +413,6 @@ def _write_results(
     indenter = stage.GetPrimAtPath(INDENTER)
     translate = UsdGeom.Xformable(indenter).GetOrderedXformOps()[0]
     contact = translate.Get()
-    axis = 2 if up_axis == "Z" else 1
     points_attr, surface_points, displacement_attr = (
         volume.GetPointsAttr(),
         surface.GetPointsAttr(),
@@ -441,7 +434,7 @@ def _write_results(
     forces = np.concatenate([[0.0], arrays["reaction_force_N"]])
     for time_code, (depth, force) in enumerate(zip(depths, forces, strict=True)):
         position = Gf.Vec3d(contact)
-        position[axis] -= float(depth)
+        position[2] -= float(depth)
         translate.Set(position, time_code)
         indenter.GetAttribute("tissue:probe:depth").Set(float(depth), time_code)
         indenter.GetAttribute("tissue:probe:reactionForce").Set(float(force), time_code)
@@ -470,7 +463,6 @@ def write_simulation_usd(
     provenance: Mapping[str, Any] | None = None,
     density_kg_per_m3: float = 1000.0,
     indenter: Indenter | None = None,
-    up_axis: str = "Z",
 ) -> UsdScenePaths:
     """Write a specimen mesh, its material and a simulation result as a layered USD scene.
 
@@ -492,7 +484,6 @@ def write_simulation_usd(
             customData under ``warptissue``, with software versions added.
         density_kg_per_m3: Mass density written as ``physics:density``.
         indenter: The indenter to draw; None draws none.
-        up_axis: ``"Z"`` (the project's convention) or ``"Y"``.
 
     Returns:
         The paths written.
@@ -502,8 +493,6 @@ def write_simulation_usd(
     root_path = Path(root_path)
     if root_path.suffix != ".usda":
         raise InputError("the root layer must be a .usda file", path=root_path)
-    if up_axis not in ("Y", "Z"):
-        raise InputError("up_axis must be 'Y' or 'Z'", value=up_axis)
     if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
         raise InputError("density must be positive", value=density_kg_per_m3)
     if mesh.tet_count == 0:
@@ -523,7 +512,7 @@ def write_simulation_usd(
     rest = mesh.points[kept]
 
     asset_layer = Sdf.Layer.CreateAnonymous(".usda")
-    _set_stage_metadata(asset_layer, up_axis=up_axis)
+    _set_stage_metadata(asset_layer)
     stage = Usd.Stage.Open(asset_layer)
     world = UsdGeom.Xform.Define(stage, WORLD)
     info = {"software": software_versions(), "element_type_source": mesh.element_type}
@@ -600,7 +589,7 @@ def write_simulation_usd(
     if material is not None:
         _material_prims(stage, volume_prim, material_record(material), density_kg_per_m3)
     if indenter is not None:
-        _indenter_prims(stage, indenter, float(rest[:, 2 if up_axis == "Z" else 1].max()))
+        _indenter_prims(stage, indenter, float(rest[:, 2].max()))
     arrays = None
     if result is not None:
         arrays = _result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
@@ -615,7 +604,7 @@ def write_simulation_usd(
         world.GetPrim().SetCustomDataByKey("warptissue:result", _vt_dictionary(summary))
 
     root_layer = Sdf.Layer.CreateAnonymous(".usda")
-    _set_stage_metadata(root_layer, up_axis=up_axis)
+    _set_stage_metadata(root_layer)
     results_layer = None
     if arrays is not None:
         results_layer = Sdf.Layer.CreateAnonymous(".usdc")
@@ -630,7 +619,6 @@ def write_simulation_usd(
             surface_nodes=surface_nodes,
             owners=owners,
             rest=rest,
-            up_axis=up_axis,
         )
         del composed
         root_layer.startTimeCode = 0.0
