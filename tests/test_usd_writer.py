@@ -311,3 +311,12 @@ def test_fe_core_materials_round_trip(tmp_path, specimen):
         youngs, nu = model.small_strain_equivalent()
         assert back["youngs_modulus_Pa"] == pytest.approx(youngs, rel=1e-6)
         assert back["poissons_ratio"] == pytest.approx(nu, rel=1e-6)
+
+
+def test_indenter_validation():
+    with pytest.raises(InputError, match="kind"):
+        Indenter("wedge", radius_m=1e-3)
+    with pytest.raises(InputError, match="radius_m"):
+        Indenter("flat_punch")
+    with pytest.raises(InputError, match="length_m"):
+        Indenter("line", radius_m=1e-3)

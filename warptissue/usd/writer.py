@@ -454,6 +454,95 @@ def _write_results(
         )
 
 
+def _volume_prim(
+    stage: Any, mesh: TetMesh, *, tets: np.ndarray, rest: np.ndarray, new_index: np.ndarray
+) -> tuple[Any, np.ndarray]:
+    """The TetMesh with its node-set and region subsets; returns (prim, surface faces (F, 3))."""
+    from pxr import Gf, UsdGeom, UsdPhysics, Vt
+
+    volume = UsdGeom.TetMesh.Define(stage, VOLUME)
+    volume_prim = volume.GetPrim()
+    volume_prim.AddAppliedSchema(VOLUME_DEFORMABLE_SIM_API)
+    UsdPhysics.CollisionAPI.Apply(volume_prim)
+    volume.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.astype(np.float32)))
+    volume.CreateTetVertexIndicesAttr(Vt.Vec4iArray.FromNumpy(tets))
+    volume.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    faces = np.array(UsdGeom.TetMesh.ComputeSurfaceFaces(volume), dtype=np.int32).reshape(-1, 3)
+    volume.CreateSurfaceFaceVertexIndicesAttr(Vt.Vec3iArray.FromNumpy(faces))
+    volume.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*rest.min(0)), Gf.Vec3f(*rest.max(0))]))
+    node_sets = {}
+    for name, nodes in mesh.node_sets.items():
+        corner_nodes = new_index[nodes]
+        node_sets[name] = np.sort(corner_nodes[corner_nodes >= 0])
+    _define_subsets(
+        volume, NODE_SET_FAMILY, UsdGeom.Tokens.point, UsdGeom.Tokens.unrestricted, node_sets
+    )
+    regions = {
+        str(region): np.flatnonzero(mesh.tet_regions == region)
+        for region in np.unique(mesh.tet_regions)
+    }
+    _define_subsets(
+        volume, REGION_FAMILY, UsdGeom.Tokens.tetrahedron, UsdGeom.Tokens.partition, regions
+    )
+    return volume_prim, faces
+
+
+def _surface_prim(
+    stage: Any,
+    mesh: TetMesh,
+    *,
+    tets: np.ndarray,
+    rest: np.ndarray,
+    faces: np.ndarray,
+    new_index: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The render Mesh of the boundary with face-set subsets.
+
+    Returns:
+        The TetMesh points on the surface (n,) and the tet owning each face (F,).
+    """
+    from pxr import Gf, Sdf, UsdGeom, Vt
+
+    surface_nodes, surface_local = np.unique(faces, return_inverse=True)
+    surface_triangles = surface_local.reshape(-1, 3).astype(np.int32)
+    owners = _surface_owners(tets, faces)
+    surface = UsdGeom.Mesh.Define(stage, SURFACE)
+    surface.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest[surface_nodes].astype(np.float32)))
+    surface.CreateFaceVertexCountsAttr(
+        Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32))
+    )
+    surface.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(surface_triangles.ravel()))
+    surface.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    surface.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    surface.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*rest.min(0)), Gf.Vec3f(*rest.max(0))]))
+    surface.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set([Gf.Vec3f(0.78, 0.36, 0.32)])
+    surface_prim = surface.GetPrim()
+    index_attr = surface_prim.CreateAttribute(
+        "tissue:volumePointIndices", Sdf.ValueTypeNames.IntArray, custom=True
+    )
+    index_attr.Set(Vt.IntArray.FromNumpy(surface_nodes.astype(np.int32)))
+    owner_attr = surface_prim.CreateAttribute(
+        "tissue:volumeTetIndices", Sdf.ValueTypeNames.IntArray, custom=True
+    )
+    owner_attr.Set(Vt.IntArray.FromNumpy(owners.astype(np.int32)))
+    face_key = {tuple(sorted(f)): i for i, f in enumerate(faces.tolist())}
+    face_sets = {}
+    for name, triangles in mesh.face_sets.items():
+        renumbered = new_index[triangles]
+        missing = [t for t in renumbered.tolist() if tuple(sorted(t)) not in face_key]
+        if missing:
+            raise MeshError(
+                f"face set {name!r} holds a triangle that is not on the boundary: {missing[0]}"
+            )
+        face_sets[name] = np.array(
+            [face_key[tuple(sorted(t))] for t in renumbered.tolist()], dtype=np.int32
+        )
+    _define_subsets(
+        surface, FACE_SET_FAMILY, UsdGeom.Tokens.face, UsdGeom.Tokens.unrestricted, face_sets
+    )
+    return surface_nodes, owners
+
+
 def write_simulation_usd(
     root_path: str | Path,
     mesh: TetMesh,
@@ -488,7 +577,7 @@ def write_simulation_usd(
     Returns:
         The paths written.
     """
-    from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics, Vt
+    from pxr import Sdf, Usd, UsdGeom
 
     root_path = Path(root_path)
     if root_path.suffix != ".usda":
@@ -523,67 +612,9 @@ def write_simulation_usd(
     specimen = UsdGeom.Xform.Define(stage, SPECIMEN)
     specimen.GetPrim().AddAppliedSchema(DEFORMABLE_BODY_API)
 
-    volume = UsdGeom.TetMesh.Define(stage, VOLUME)
-    volume_prim = volume.GetPrim()
-    volume_prim.AddAppliedSchema(VOLUME_DEFORMABLE_SIM_API)
-    UsdPhysics.CollisionAPI.Apply(volume_prim)
-    volume.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.astype(np.float32)))
-    volume.CreateTetVertexIndicesAttr(Vt.Vec4iArray.FromNumpy(tets))
-    volume.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-    faces = np.array(UsdGeom.TetMesh.ComputeSurfaceFaces(volume), dtype=np.int32).reshape(-1, 3)
-    volume.CreateSurfaceFaceVertexIndicesAttr(Vt.Vec3iArray.FromNumpy(faces))
-    volume.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*rest.min(0)), Gf.Vec3f(*rest.max(0))]))
-    node_sets = {}
-    for name, nodes in mesh.node_sets.items():
-        corner_nodes = new_index[nodes]
-        node_sets[name] = np.sort(corner_nodes[corner_nodes >= 0])
-    _define_subsets(
-        volume, NODE_SET_FAMILY, UsdGeom.Tokens.point, UsdGeom.Tokens.unrestricted, node_sets
-    )
-    regions = {
-        str(region): np.flatnonzero(mesh.tet_regions == region)
-        for region in np.unique(mesh.tet_regions)
-    }
-    _define_subsets(
-        volume, REGION_FAMILY, UsdGeom.Tokens.tetrahedron, UsdGeom.Tokens.partition, regions
-    )
-
-    surface_nodes, surface_local = np.unique(faces, return_inverse=True)
-    surface_triangles = surface_local.reshape(-1, 3).astype(np.int32)
-    owners = _surface_owners(tets, faces)
-    surface = UsdGeom.Mesh.Define(stage, SURFACE)
-    surface.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest[surface_nodes].astype(np.float32)))
-    surface.CreateFaceVertexCountsAttr(
-        Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32))
-    )
-    surface.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(surface_triangles.ravel()))
-    surface.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-    surface.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
-    surface.CreateExtentAttr(volume.GetExtentAttr().Get())
-    surface.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set([Gf.Vec3f(0.78, 0.36, 0.32)])
-    surface_prim = surface.GetPrim()
-    index_attr = surface_prim.CreateAttribute(
-        "tissue:volumePointIndices", Sdf.ValueTypeNames.IntArray, custom=True
-    )
-    index_attr.Set(Vt.IntArray.FromNumpy(surface_nodes.astype(np.int32)))
-    owner_attr = surface_prim.CreateAttribute(
-        "tissue:volumeTetIndices", Sdf.ValueTypeNames.IntArray, custom=True
-    )
-    owner_attr.Set(Vt.IntArray.FromNumpy(owners.astype(np.int32)))
-    face_key = {tuple(sorted(f)): i for i, f in enumerate(faces.tolist())}
-    face_sets = {}
-    for name, triangles in mesh.face_sets.items():
-        renumbered = new_index[triangles]
-        missing = [t for t in renumbered.tolist() if tuple(sorted(t)) not in face_key]
-        if missing:
-            raise MeshError(
-                f"face set {name!r} holds a triangle that is not on the boundary: {missing[0]}"
-            )
-        face_sets[name] = np.array(
-            [face_key[tuple(sorted(t))] for t in renumbered.tolist()], dtype=np.int32
-        )
-    _define_subsets(
-        surface, FACE_SET_FAMILY, UsdGeom.Tokens.face, UsdGeom.Tokens.unrestricted, face_sets
+    volume_prim, faces = _volume_prim(stage, mesh, tets=tets, rest=rest, new_index=new_index)
+    surface_nodes, owners = _surface_prim(
+        stage, mesh, tets=tets, rest=rest, faces=faces, new_index=new_index
     )
 
     if material is not None:
