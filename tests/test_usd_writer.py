@@ -110,6 +110,7 @@ def test_result_samples(tmp_path, specimen, rng):
     from pxr import Usd, UsdGeom
 
     result = _result(specimen, rng)
+    result["time_s"] = np.array([0.5, 1.0, 1.5])
     paths = write_simulation_usd(
         tmp_path / "r.usda", specimen, result=result, indenter=Indenter("flat_punch", radius_m=1e-3)
     )
@@ -147,6 +148,8 @@ def test_result_samples(tmp_path, specimen, rng):
     np.testing.assert_array_equal(
         curve["reaction_force_N"], np.concatenate([[0], result["reaction_force_N"]])
     )
+    time_attr = stage.GetPrimAtPath("/World/Indenter").GetAttribute("tissue:probe:time")
+    assert [time_attr.Get(k) for k in (1, 2, 3)] == [0.5, 1.0, 1.5]
     translate = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Indenter")).GetOrderedXformOps()[0]
     assert translate.Get(2)[2] == pytest.approx(0.01 - result["depths_m"][1])
     assert validate_stage(paths.root) == []
