@@ -73,7 +73,7 @@ def test_qlv_recovers_seed000_table1_and_elastic_response(rng):
     time, x = ramp_and_hold(1.0, 5e-3, 250.0, 0.1)
     force = truth.force_N(time, x, substeps=32)
     noisy = force + rng.normal(0.0, 1e-3 * force.max(), force.size)
-    result = fit_qlv(time, x, noisy, substeps=8)
+    result = fit_qlv(time, x, noisy, substeps=4)
     values = result.parameters
     assert (values["g1"], values["g2"]) == pytest.approx((g1, g2), rel=0.03)
     assert (values["tau1_s"], values["tau2_s"]) == pytest.approx((tau1, tau2), rel=0.03)
