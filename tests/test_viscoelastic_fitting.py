@@ -145,3 +145,5 @@ def test_fit_relaxation_input_errors():
         fit_relaxation(time, time, time, model="sls", p0=[1.0, 2.0])
     with pytest.raises(InputError, match="force_N"):
         fit_relaxation(time, time, time[:-1])
+    with pytest.raises(InputError, match="opposite signs"):
+        fit_relaxation(time, time, -time)

@@ -83,6 +83,13 @@ def _initial_prony(record: RelaxationRecord, terms: int) -> np.ndarray:
     x_end = x[-1] if abs(x[-1]) > 0 else x_peak
     if not (abs(x_peak) > 0 and abs(x_end) > 0):
         raise InputError("the displacement is zero throughout; nothing to fit")
+    if force[peak] * x_peak < 0.0:
+        raise InputError(
+            "force and displacement have opposite signs at the force peak; use one sign "
+            "convention for both (positive when the probe pushes in)",
+            column="force_N",
+            value=float(force[peak]),
+        )
     k_end = max(force[-1] / x_end, 1e-12 * abs(force[peak] / x_peak))
     k_peak = max(force[peak] / x_peak, 1.5 * k_end)
     start = time[peak] - time[0]
