@@ -140,7 +140,8 @@ def run_relaxation(args: argparse.Namespace) -> int:
             "displacement_m": record["displacement_m"],
         },
         metadata=details,
-        title=f"{args.model} fit, R^2 = {result.r_squared:.4f}",
+        title=f"{args.model} fit, R^2 = "
+        + ("n/a" if result.r_squared is None else f"{result.r_squared:.4f}"),
     )
     return _finish(args, result, files, {"model": details["model"]})
 
