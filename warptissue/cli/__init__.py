@@ -25,6 +25,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.fit_uniaxial",
     "warptissue.cli.mesh",
     "warptissue.cli.export",
+    "warptissue.cli.fit_relaxation",
 )
 """Modules that add commands, in the order they appear in ``--help``."""
 
