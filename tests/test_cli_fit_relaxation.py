@@ -51,7 +51,10 @@ def test_relaxation_cli_writes_json_csv_png(relaxation_csv, tmp_path, capsys):
 
 
 def test_relaxation_cli_sls_summary(relaxation_csv, tmp_path, capsys):
-    assert main(["fit", "relaxation", str(relaxation_csv), "--out", str(tmp_path)]) == 0
+    assert (
+        main(["fit", "relaxation", str(relaxation_csv), "--out", str(tmp_path), "--p0", "10,5,1"])
+        == 0
+    )
     text = capsys.readouterr().out
     assert "relaxation_time_s" in text
     saved = json.loads((tmp_path / "liver_sls.json").read_text())
@@ -62,6 +65,8 @@ def test_relaxation_cli_errors_are_one_line(relaxation_csv, tmp_path, capsys):
     assert main(["fit", "relaxation", str(relaxation_csv), "--model", "maxwell"]) == 2
     error = capsys.readouterr().err
     assert error.count("\n") == 1 and "maxwell" in error
+    assert main(["fit", "relaxation", str(relaxation_csv), "--p0", "1,x"]) == 2
+    assert "--p0" in capsys.readouterr().err
     bad = tmp_path / "bad.csv"
     bad.write_text("time_s,displacement_m,force_N\n0,0,0\n1,0.001,nan\n")
     assert main(["fit", "relaxation", str(bad), "--out", str(tmp_path)]) == 2

@@ -83,6 +83,18 @@ def test_hayes_kappa_thin_layer_is_oedometric():
     assert slope == pytest.approx(math.pi * (1 - nu) ** 2 / (2 * (1 - 2 * nu)), rel=2e-3)
 
 
+def test_hayes_kappa_thin_incompressible_layer_is_lubrication_limit():
+    # nu = 0.5, a >> h: squeeze flow of a layer bonded below, shear-free on top gives
+    # p = 3 mu delta (a^2 - r^2) / (4 h^3), F = 3 pi mu a^4 delta / (8 h^3), so
+    # kappa / (a/h)^3 -> 3 pi / 64. The approach is slow (edge terms in h/a and (h/a)^2):
+    # extrapolate A + B/r + C/r^2 through r = a/h = 4, 8, 16.
+    ratios = np.array([4.0, 8.0, 16.0])
+    scaled = [hayes_kappa(r, 0.5) / r**3 for r in ratios]
+    basis = np.column_stack([np.ones(3), 1 / ratios, 1 / ratios**2])
+    limit = np.linalg.solve(basis, scaled)[0]
+    assert limit == pytest.approx(3 * math.pi / 64, rel=0.02)
+
+
 def test_thickness_correction_applies_kappa():
     kwargs = {"radius_m": 1e-3, "poissons_ratio": 0.45}
     thick = flat_punch_modulus_Pa(0.01, 2e-4, **kwargs)

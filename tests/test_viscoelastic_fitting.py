@@ -34,13 +34,14 @@ def ramp_and_hold(ramp_s, depth_m, total_s, dt_s):
     return time, depth_m * np.minimum(time / ramp_s, 1.0)
 
 
-def test_sls_recovers_seed001_kelvin_parameters(rng):
+@pytest.mark.parametrize("method", ["lm", "salm"])
+def test_sls_recovers_seed001_kelvin_parameters(method, rng):
     with pytest.warns(NotARelaxationWarning):
         truth = StandardLinearSolid.from_printed(8.0, 7.0, 130.0)  # 0.008, 0.007 N/mm; 0.130
     time, x = ramp_and_hold(0.05, 3e-3, 1.0, 1e-3)
     force = truth.force_N(time, x)
     noisy = force + rng.normal(0.0, 1e-3 * force.max(), force.size)
-    result = fit_relaxation(time, x, noisy, model="sls")
+    result = fit_relaxation(time, x, noisy, model="sls", method=method)
     assert result.success
     printed = result.fitted_model.to_printed()
     assert printed["k1_N_per_m"] == pytest.approx(8.0, rel=0.03)
@@ -73,7 +74,7 @@ def test_qlv_recovers_seed000_table1_and_elastic_response(rng):
     time, x = ramp_and_hold(1.0, 5e-3, 250.0, 0.1)
     force = truth.force_N(time, x, substeps=32)
     noisy = force + rng.normal(0.0, 1e-3 * force.max(), force.size)
-    result = fit_qlv(time, x, noisy, substeps=8)
+    result = fit_qlv(time, x, noisy, substeps=4)
     values = result.parameters
     assert (values["g1"], values["g2"]) == pytest.approx((g1, g2), rel=0.03)
     assert (values["tau1_s"], values["tau2_s"]) == pytest.approx((tau1, tau2), rel=0.03)
@@ -145,3 +146,21 @@ def test_fit_relaxation_input_errors():
         fit_relaxation(time, time, time, model="sls", p0=[1.0, 2.0])
     with pytest.raises(InputError, match="force_N"):
         fit_relaxation(time, time, time[:-1])
+    with pytest.raises(InputError, match="opposite signs"):
+        fit_relaxation(time, time, -time)
+
+
+def test_single_record_nonlinear_wiechert_and_model_round_trip(rng):
+    rate = 100 / 60e3
+    time = np.arange(0.0, 4e-3 / rate + 20.0, 0.1)
+    x = np.minimum(rate * time, 4e-3)
+    force = TABLE_I_NONLINEAR.force_N(time, x) + rng.normal(0.0, 2e-3, time.size)
+    start = TABLE_I_NONLINEAR.to_vector() * [1.2, 0.8, 1.0, 0.8, 1.0, 0.9, 1.1, 1.0]
+    result = fit_relaxation(time, x, force, model="wiechert-nonlinear", p0=start)
+    assert result.rmse == pytest.approx(2e-3, rel=0.15)
+    rebuilt = model_from_result(result)
+    assert isinstance(rebuilt, NonlinearWiechert)
+    np.testing.assert_allclose(rebuilt.force_N(time, x), result.fitted, rtol=1e-9)
+    linear = fit_relaxation(time, x, force, model="wiechert")
+    assert isinstance(model_from_result(linear), LinearWiechert)
+    assert linear.rmse > 2 * result.rmse  # the linear body cannot follow the stiffening

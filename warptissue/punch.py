@@ -137,8 +137,9 @@ def hayes_kappa(
         k(s) = (2 eta sinh 2s - 4 s) / (2 eta cosh 2s + 1 + eta^2 + 4 s^2), eta = 3 - 4 nu.
         Solved by Nystrom quadrature; F is integrated by Gauss-Legendre on s in [0, 25]
         (composite, 1 - k decays as exp(-2 s)) and splined in z. Checked in the tests against the
-        half-space limit and the thin-layer (oedometric) limit
-        d kappa / d(a/h) -> pi (1 - nu)^2 / (2 (1 - 2 nu)).
+        half-space limit, the compressible thin-layer (oedometric) limit
+        d kappa / d(a/h) -> pi (1 - nu)^2 / (2 (1 - 2 nu)) and, for nu = 0.5, the
+        squeeze-flow limit kappa / (a/h)^3 -> 3 pi / 64.
     """
     _check(1.0, poissons_ratio)
     ratio = float(radius_over_thickness)

@@ -23,6 +23,8 @@ __all__ = ["build_parser", "main"]
 
 COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.fit_uniaxial",
+    "warptissue.cli.mesh",
+    "warptissue.cli.export",
     "warptissue.cli.fit_relaxation",
     "warptissue.cli.acquire",
 )

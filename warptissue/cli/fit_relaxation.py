@@ -52,6 +52,12 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     relaxation.add_argument(
         "--model", default="sls", help="sls (default), prony:N, wiechert, wiechert-nonlinear"
     )
+    relaxation.add_argument(
+        "--p0",
+        default=None,
+        help="comma-separated initial parameters in the model's order, SI units "
+        "(default: from the data; recommended for wiechert-nonlinear)",
+    )
     relaxation.add_argument("--method", choices=("lm", "salm"), default="lm")
     relaxation.add_argument("--objective", choices=("absolute", "relative"), default="absolute")
     relaxation.add_argument("--out", type=Path, default=None, help="output folder")
@@ -101,6 +107,12 @@ def run_relaxation(args: argparse.Namespace) -> int:
     from warptissue.viscoelastic import fit_relaxation
 
     model, terms = parse_model(args.model)
+    p0 = None
+    if args.p0 is not None:
+        try:
+            p0 = [float(v) for v in args.p0.split(",")]
+        except ValueError:
+            raise InputError("--p0 needs comma-separated numbers", value=args.p0) from None
     record = read_experiment_csv(args.data)
     result = fit_relaxation(
         record["time_s"],
@@ -108,6 +120,7 @@ def run_relaxation(args: argparse.Namespace) -> int:
         record["force_N"],
         model=model,
         terms=terms,
+        p0=p0,
         method=args.method,
         objective=args.objective,
     )
@@ -127,7 +140,8 @@ def run_relaxation(args: argparse.Namespace) -> int:
             "displacement_m": record["displacement_m"],
         },
         metadata=details,
-        title=f"{args.model} fit, R^2 = {result.r_squared:.4f}",
+        title=f"{args.model} fit, R^2 = "
+        + ("n/a" if result.r_squared is None else f"{result.r_squared:.4f}"),
     )
     return _finish(args, result, files, {"model": details["model"]})
 

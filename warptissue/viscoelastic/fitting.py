@@ -83,6 +83,13 @@ def _initial_prony(record: RelaxationRecord, terms: int) -> np.ndarray:
     x_end = x[-1] if abs(x[-1]) > 0 else x_peak
     if not (abs(x_peak) > 0 and abs(x_end) > 0):
         raise InputError("the displacement is zero throughout; nothing to fit")
+    if force[peak] * x_peak < 0.0:
+        raise InputError(
+            "force and displacement have opposite signs at the force peak; use one sign "
+            "convention for both (positive when the probe pushes in)",
+            column="force_N",
+            value=float(force[peak]),
+        )
     k_end = max(force[-1] / x_end, 1e-12 * abs(force[peak] / x_peak))
     k_peak = max(force[peak] / x_peak, 1.5 * k_end)
     start = time[peak] - time[0]
@@ -139,7 +146,9 @@ def fit_relaxation(
             (k0, k1, k2, b1, b2) or "wiechert-nonlinear" (K0, K1, K2, b1, b2, kappa0..2).
         terms: Number of Prony terms (model "prony").
         p0: Initial parameters in the order above; default from the data (the nonlinear
-            Wiechert model starts from its linear fit with kappa = 0).
+            Wiechert model starts from its linear fit with kappa = 0). All parameters are
+            bounded below by 0 (kappa_j >= 0: progressive springs; a negative kappa makes
+            the spring force fall with stretch beyond 1/|kappa|).
         method: "lm" or "salm" (:func:`warptissue.fit.least_squares`).
         objective: "absolute" or "relative".
         max_iterations: Iteration limit of the engine.
@@ -161,8 +170,8 @@ def fit_relaxation(
     start = np.asarray(start, dtype=np.float64)
     if start.size != len(names):
         raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
-    lower = np.array([-np.inf if n.startswith("kappa") else 0.0 for n in names])
-    start = np.where(lower == 0.0, np.maximum(start, 1e-300), start)
+    is_kappa = np.array([n.startswith("kappa") for n in names])
+    start = np.where((start == 0.0) & ~is_kappa, 1e-300, start)
 
     def predict(p: np.ndarray) -> np.ndarray:
         return build(p).force_N(record.time_s, record.displacement_m)
@@ -172,7 +181,7 @@ def fit_relaxation(
         start,
         record.force_N,
         objective=objective,
-        bounds=(lower, np.inf),
+        bounds=(0.0, np.inf),
         method=method,
         parameter_names=names,
         parameter_units=units,
@@ -345,7 +354,8 @@ def fit_wiechert_joint(
         optimizer: "lm" (through :func:`warptissue.fit.least_squares`; residuals of each
             record divided by sqrt(its sample count), so that each test weighs as its mean
             square error) or "nelder-mead" (``scipy.optimize.minimize`` on the seed's cost,
-            the sum of the RMS errors of the records; positive parameters in log scale).
+            the sum of the RMS errors of the records; K_j, b_j in log scale). Every
+            parameter is bounded below by 0 (kappa_j >= 0, progressive springs).
         max_iterations: Iteration limit (for Nelder-Mead: 400 per parameter at most).
         progress: Progress bar (LM only).
 
@@ -388,7 +398,7 @@ def fit_wiechert_joint(
         result = least_squares(
             guarded,
             start,
-            bounds=(np.where(positive, 0.0, -np.inf), np.inf),
+            bounds=(0.0, np.inf),
             x_scale=scale,
             max_iterations=max_iterations,
             progress=progress,
@@ -435,8 +445,11 @@ def _nelder_mead(
             return math.inf
         return float(sum(np.sqrt(np.mean(e**2)) for e in errors))
 
+    def bounded_cost(z: np.ndarray) -> float:
+        return math.inf if np.any(to_parameters(z) < 0.0) else cost(z)
+
     outcome = minimize(
-        cost,
+        bounded_cost,
         np.zeros(start.size),
         method="Nelder-Mead",
         options={"maxiter": int(max_iterations), "xatol": 1e-6, "fatol": 1e-10, "adaptive": True},

@@ -308,7 +308,7 @@ def line_indenter_force_N(
     half_width_m: float,
     length_m: float,
     profile: SurfaceProfile,
-    element_count: int = 32,
+    element_count: int = 64,
     method: str = "LSODA",
     rtol: float = 1e-7,
 ) -> np.ndarray:
