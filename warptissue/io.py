@@ -64,8 +64,12 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     )
     os.close(handle)
     temporary_path = Path(temporary)
+    umask = os.umask(0)
+    os.umask(umask)
     try:
         yield temporary_path
+        # mkstemp creates owner-only files; give the result the usual mode of a new file.
+        os.chmod(temporary_path, 0o666 & ~umask)
         os.replace(temporary_path, target)
     finally:
         with contextlib.suppress(FileNotFoundError):

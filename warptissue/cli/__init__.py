@@ -25,6 +25,10 @@ COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.fit_uniaxial",
     "warptissue.cli.field",
     "warptissue.cli.calibrate",
+    "warptissue.cli.mesh",
+    "warptissue.cli.export",
+    "warptissue.cli.fit_relaxation",
+    "warptissue.cli.acquire",
 )
 """Modules that add commands, in the order they appear in ``--help``."""
 

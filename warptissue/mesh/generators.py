@@ -345,6 +345,13 @@ def extrude_triangles(
     points_2d_m = np.asarray(points_2d_m, dtype=np.float64)
     z_m = np.asarray(z_m, dtype=np.float64)
     plane_count, layer_count = len(points_2d_m), len(z_m) - 1
+    if z_m.ndim != 1 or layer_count < 1 or np.any(np.diff(z_m) <= 0):
+        raise MeshError(f"z_m must be at least two strictly increasing heights, got {z_m}")
+    triangles = np.asarray(triangles)
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or triangles.size == 0:
+        raise MeshError(f"triangles must have shape (T >= 1, 3), got {triangles.shape}")
+    if triangles.min() < 0 or triangles.max() >= plane_count:
+        raise MeshError(f"triangles index nodes outside [0, {plane_count})")
     a, b, c = np.sort(np.asarray(triangles, dtype=np.int64), axis=1).T
     prism = np.stack(
         [
@@ -354,13 +361,16 @@ def extrude_triangles(
         ],
         axis=1,
     ).transpose(2, 1, 0)  # (T, 3, 4)
-    layers = plane_count * np.arange(layer_count, dtype=np.int64)
-    tets = (prism[None, :, :, :] + layers[:, None, None, None]).reshape(-1, 4).astype(np.int32)
     points = np.column_stack(
         [np.tile(points_2d_m, (layer_count + 1, 1)), np.repeat(z_m, plane_count)]
     )
-    negative = signed_volumes(points, tets) < 0
-    tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
+    # Orientation depends only on the triangle and the pattern, not on the layer: fix it on the
+    # first layer, then stack the layers.
+    prism = prism.reshape(-1, 4)
+    negative = signed_volumes(points, prism) < 0
+    prism[negative, 1], prism[negative, 2] = prism[negative, 2].copy(), prism[negative, 1].copy()
+    layers = plane_count * np.arange(layer_count, dtype=np.int64)
+    tets = (prism[None, :, :] + layers[:, None, None]).reshape(-1, 4).astype(np.int32)
     return points, tets
 
 
@@ -374,6 +384,7 @@ def indentation_block(
     size_near_m: float,
     size_far_m: float,
     growth: float = 1.2,
+    layer_max_m: float | None = None,
 ) -> TetMesh:
     """A square block for indentation, graded toward the probe at its top centre.
 
@@ -398,6 +409,8 @@ def indentation_block(
         size_near_m: Element size under the probe and at its edge, metres.
         size_far_m: Largest element size, far from the probe, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
+        layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
+            times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
 
     Returns:
         A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
@@ -414,6 +427,7 @@ def indentation_block(
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        layer_max_m=layer_max_m,
         curved_side=False,
     )
 
@@ -428,6 +442,7 @@ def indentation_disc(
     size_near_m: float,
     size_far_m: float,
     growth: float = 1.2,
+    layer_max_m: float | None = None,
     curved_side: bool = False,
 ) -> TetMesh:
     """A cylindrical disc specimen for indentation, graded toward the probe at its top centre.
@@ -445,6 +460,8 @@ def indentation_disc(
         size_near_m: Element size under the probe and at its edge, metres.
         size_far_m: Largest element size, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
+        layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
+            times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
         curved_side: For TET10 only: move the mid-edge nodes of the edges on the cylinder onto
             it (curved, isoparametric side faces). By default every TET10 is straight-sided,
             and the side is the inscribed polygonal prism.
@@ -463,6 +480,7 @@ def indentation_disc(
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        layer_max_m=layer_max_m,
         curved_side=curved_side,
     )
 
@@ -491,6 +509,7 @@ def _indentation_specimen(
     size_near_m: float,
     size_far_m: float,
     growth: float,
+    layer_max_m: float | None,
     curved_side: bool,
 ) -> TetMesh:
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
@@ -519,7 +538,9 @@ def _indentation_specimen(
     )
     if not quarter:
         points_2d, triangles = _mirror_quarter(points_2d, triangles)
-    depth = graded_spacing(thickness_m, size_near_m, size_far_m, growth=growth)
+    layer_max_m = size_far_m if layer_max_m is None else layer_max_m
+    _require_positive(layer_max_m=layer_max_m)
+    depth = graded_spacing(thickness_m, size_near_m, max(layer_max_m, size_near_m), growth=growth)
     z = thickness_m - depth[::-1]
     z[0] = 0.0
     points, tets = extrude_triangles(points_2d, triangles, z)

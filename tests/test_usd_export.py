@@ -1,0 +1,154 @@
+"""Tests of warptissue.usd.export and ``warptissue export``: simulate output folders to USD."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from warptissue.cli import main
+from warptissue.errors import InputError
+from warptissue.mesh import block_mesh
+from warptissue.usd import read_material_usd, read_tetmesh_usd, validate_stage
+from warptissue.usd.export import export_result_dir, read_fields_vtu
+from warptissue.usd.reader import read_probe_curve_usd
+
+MATERIAL = {"model": "neo_hookean", "C10_Pa": 287.5, "bulk_modulus_Pa": 2.9e4}
+
+
+def _write_vtu(path, mesh, point_data, cell_data):
+    import meshio
+
+    nodal = dict(point_data)
+    for name, nodes in mesh.node_sets.items():
+        mask = np.zeros(mesh.node_count, dtype=np.int32)
+        mask[nodes] = 1
+        nodal[f"node_set:{name}"] = mask
+    cells = {name: [values] for name, values in cell_data.items()}
+    cells["tet_region"] = [mesh.tet_regions]
+    meshio.write(
+        path, meshio.Mesh(mesh.points, [("tetra", mesh.tets)], point_data=nodal, cell_data=cells)
+    )
+
+
+@pytest.fixture
+def simulate_folder(tmp_path, rng):
+    """A folder laid out like ``warptissue simulate --out`` output (per-step VTUs optional)."""
+    grid = np.linspace(0.0, 0.01, 3)
+    mesh = block_mesh(grid, grid, np.linspace(0.0, 0.005, 3))
+    steps = 3
+    displacement = rng.normal(scale=1e-6, size=(steps, mesh.node_count, 3))
+    stress = rng.normal(size=(mesh.tet_count, 6))
+    von_mises = rng.uniform(size=mesh.tet_count)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    _write_vtu(
+        folder / "fields.vtu",
+        mesh,
+        {"displacement_m": displacement[-1]},
+        {"cauchy_stress_Pa": stress, "von_mises_Pa": von_mises},
+    )
+    summary = {
+        "study": {
+            "path": "study.toml",
+            "name": "demo",
+            "material": MATERIAL,
+            "indenter": {"kind": "flat_punch", "radius_m": 1e-3, "contact": "bonded"},
+        },
+        "completed": True,
+        "message": "all steps converged",
+        "force_curve": {
+            "step": [1, 2, 3],
+            "depth_m": [1e-4, 2e-4, 3e-4],
+            "reaction_force_N": [0.01, 0.03, 0.06],
+        },
+        "software": {"warptissue": "0.1.0"},
+    }
+    (folder / "result.json").write_text(json.dumps(summary))
+    return folder, mesh, displacement, stress, von_mises
+
+
+def test_export_last_step_only(simulate_folder, tmp_path):
+    from pxr import Usd, UsdGeom
+
+    folder, mesh, displacement, stress, _ = simulate_folder
+    paths = export_result_dir(folder, tmp_path / "out" / "scene.usda", density_kg_per_m3=1060.0)
+    assert validate_stage(paths.root) == []
+    back = read_tetmesh_usd(paths.root)
+    np.testing.assert_array_equal(back.tets, mesh.tets)
+    np.testing.assert_array_equal(back.node_sets["zmax"], np.sort(mesh.node_sets["zmax"]))
+    stage = Usd.Stage.Open(str(paths.root))
+    points = UsdGeom.TetMesh(stage.GetPrimAtPath("/World/Specimen/Volume")).GetPointsAttr()
+    assert points.GetTimeSamples() == [0.0, 3.0]
+    np.testing.assert_array_equal(
+        np.asarray(points.Get(3)), (mesh.points + displacement[-1]).astype(np.float32)
+    )
+    curve = read_probe_curve_usd(paths.root)
+    np.testing.assert_array_equal(curve["reaction_force_N"], [0.0, 0.01, 0.03, 0.06])
+    assert read_material_usd(paths.root)["material"] == MATERIAL
+    info = stage.GetPrimAtPath("/World").GetCustomDataByKey("warptissue")
+    assert info["study_name"] == "demo" and info["result"]["completed"]
+
+
+def test_export_every_step(simulate_folder, tmp_path):
+    from pxr import Usd, UsdGeom
+
+    folder, mesh, displacement, _, _ = simulate_folder
+    for k in range(3):
+        _write_vtu(
+            folder / f"fields_{k + 1:03d}.vtu", mesh, {"displacement_m": displacement[k]}, {}
+        )
+    paths = export_result_dir(folder, tmp_path / "scene.usda")
+    stage = Usd.Stage.Open(str(paths.root))
+    points = UsdGeom.TetMesh(stage.GetPrimAtPath("/World/Specimen/Volume")).GetPointsAttr()
+    assert points.GetTimeSamples() == [0.0, 1.0, 2.0, 3.0]
+    np.testing.assert_array_equal(
+        np.asarray(points.Get(2)), (mesh.points + displacement[1]).astype(np.float32)
+    )
+
+
+def test_read_fields_vtu(simulate_folder):
+    folder, mesh, _, stress, von_mises = simulate_folder
+    back, point_data, cell_data = read_fields_vtu(folder / "fields.vtu")
+    assert back.node_sets.keys() == mesh.node_sets.keys()
+    np.testing.assert_array_equal(cell_data["cauchy_stress_Pa"], stress)
+    np.testing.assert_array_equal(cell_data["von_mises_Pa"], von_mises)
+    assert "displacement_m" in point_data
+
+
+def test_cli_export(simulate_folder, tmp_path, capsys):
+    folder = simulate_folder[0]
+    status = main(["export", str(folder), "--out", str(tmp_path / "cli.usda"), "--json"])
+    assert status == 0
+    written = json.loads(capsys.readouterr().out)
+    assert written["findings"] == [] and written["results"].endswith("cli.results.usdc")
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["export", str(tmp_path / "nothing"), "--out", str(tmp_path / "x.usda")]) == 2
+    assert "simulate output folder" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert main(["export", str(tmp_path / "empty"), "--out", str(tmp_path / "x.usda")]) == 2
+    assert "result.json" in capsys.readouterr().err
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "result.json").write_text("{\n  nope\n}")
+    with pytest.raises(InputError, match=r"result.json:2"):
+        export_result_dir(broken, tmp_path / "x.usda")
+
+
+def test_export_study(tmp_path):
+    """A study's specimen and material as USD (runs once fe-app's study module is merged)."""
+    pytest.importorskip("warptissue.study")
+    from pathlib import Path
+
+    from warptissue.usd.export import export_study
+
+    study = Path(__file__).resolve().parents[1] / "scenes" / "liver_slab_flat_punch.toml"
+    paths = export_study(study, tmp_path / "study.usda", density_kg_per_m3=1060.0)
+    assert paths.results is None
+    assert validate_stage(paths.root) == []
+    mesh = read_tetmesh_usd(paths.root)
+    assert {"top", "bottom"} <= set(mesh.node_sets)
+    assert read_material_usd(paths.root)["density_kg_per_m3"] == 1060.0

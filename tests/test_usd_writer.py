@@ -1,0 +1,325 @@
+"""Tests of warptissue.usd.writer and warptissue.usd.reader: layout and round trips."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError, MeshError
+from warptissue.mesh import TetMesh, block_mesh, graded_coordinates, to_tet10
+from warptissue.usd import (
+    Indenter,
+    read_material_usd,
+    read_tetmesh_usd,
+    validate_stage,
+    write_simulation_usd,
+)
+from warptissue.usd.reader import read_probe_curve_usd
+from warptissue.usd.schema import applied_schema_names
+
+
+@pytest.fixture
+def specimen(rng: np.random.Generator) -> TetMesh:
+    """A graded block with jittered interior nodes, two material regions and all sets."""
+    mesh = block_mesh(
+        graded_coordinates(0.02, 4, ratio=2.0),
+        np.linspace(0.0, 0.015, 3),
+        graded_coordinates(0.01, 3, ratio=0.5),
+    )
+    points = mesh.points.copy()
+    interior = np.ones(mesh.node_count, dtype=bool)
+    for nodes in mesh.node_sets.values():
+        interior[nodes] = False
+    points[interior] += rng.uniform(-2e-4, 2e-4, size=(interior.sum(), 3))
+    regions = (mesh.points[mesh.tets].mean(axis=1)[:, 0] > 0.01).astype(np.int32)
+    return TetMesh(
+        points=points,
+        tets=mesh.tets,
+        node_sets=mesh.node_sets,
+        face_sets=mesh.face_sets,
+        tet_regions=regions + 3,
+    )
+
+
+def _result(mesh: TetMesh, rng: np.random.Generator, steps: int = 3) -> dict:
+    depth = np.linspace(1e-4, 3e-4, steps)
+    return {
+        "depths_m": depth,
+        "reaction_force_N": 0.5 * depth**1.5 / 1e-6,
+        "displacement_m": rng.normal(scale=1e-6, size=(steps, mesh.node_count, 3)),
+        "cauchy_stress_Pa": rng.normal(size=(mesh.tet_count, 6)),
+        "von_mises_Pa": rng.uniform(0, 10, size=mesh.tet_count),
+        "completed": True,
+        "message": "converged",
+    }
+
+
+def _cyclic_canonical(triangles: np.ndarray) -> set[tuple[int, ...]]:
+    """Triangles up to rotation of their vertex order (orientation kept)."""
+    out = set()
+    for tri in np.asarray(triangles).tolist():
+        k = tri.index(min(tri))
+        out.add(tuple(tri[k:] + tri[:k]))
+    return out
+
+
+def test_round_trip_tet4(tmp_path, specimen):
+    paths = write_simulation_usd(
+        tmp_path / "s.usda",
+        specimen,
+        material={"model": "linear_elastic", "youngs_modulus_Pa": 3e3, "poissons_ratio": 0.45},
+    )
+    assert paths.results is None and paths.asset.is_file()
+    back = read_tetmesh_usd(paths.root)
+    np.testing.assert_array_equal(back.tets, specimen.tets)
+    np.testing.assert_array_equal(back.tet_regions, specimen.tet_regions)
+    np.testing.assert_array_equal(
+        back.points, specimen.points.astype(np.float32).astype(np.float64)
+    )
+    np.testing.assert_allclose(back.points, specimen.points, rtol=0, atol=1e-7 * 0.02)
+    assert back.node_sets.keys() == specimen.node_sets.keys()
+    for name, nodes in specimen.node_sets.items():
+        np.testing.assert_array_equal(back.node_sets[name], np.sort(nodes))
+    assert back.face_sets.keys() == specimen.face_sets.keys()
+    for name, triangles in specimen.face_sets.items():
+        assert _cyclic_canonical(back.face_sets[name]) == _cyclic_canonical(triangles)
+    assert validate_stage(paths.root) == []
+
+
+def test_layers_and_stage_metadata(tmp_path, specimen, rng):
+    from pxr import Sdf, Usd, UsdGeom
+
+    paths = write_simulation_usd(tmp_path / "r.usda", specimen, result=_result(specimen, rng))
+    root = Sdf.Layer.FindOrOpen(str(paths.root))
+    assert list(root.subLayerPaths) == ["./r.results.usdc", "./r.asset.usda"]
+    assert not root.rootPrims
+    stage = Usd.Stage.Open(str(paths.root))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert UsdGeom.GetStageUpAxis(stage) == "Z"
+    assert stage.GetRootLayer().pseudoRoot.GetInfo("kilogramsPerUnit") == 1.0
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0.0, 3.0)
+    asset = Sdf.Layer.FindOrOpen(str(paths.asset))
+    results = Sdf.Layer.FindOrOpen(str(paths.results))
+    assert results.GetFileFormat().formatId == "usdc"
+    sampled = results.ListAllTimeSamples()
+    assert list(sampled) == [0.0, 1.0, 2.0, 3.0]
+    assert not asset.ListAllTimeSamples()
+
+
+def test_result_samples(tmp_path, specimen, rng):
+    from pxr import Usd, UsdGeom
+
+    result = _result(specimen, rng)
+    result["time_s"] = np.array([0.5, 1.0, 1.5])
+    paths = write_simulation_usd(
+        tmp_path / "r.usda", specimen, result=result, indenter=Indenter("flat_punch", radius_m=1e-3)
+    )
+    stage = Usd.Stage.Open(str(paths.root))
+    volume = UsdGeom.TetMesh(stage.GetPrimAtPath("/World/Specimen/Volume"))
+    rest = np.asarray(volume.GetPointsAttr().Get(), dtype=np.float64)
+    np.testing.assert_array_equal(rest, specimen.points.astype(np.float32))
+    for k in range(3):
+        deformed = np.asarray(volume.GetPointsAttr().Get(k + 1))
+        expected = (specimen.points + result["displacement_m"][k]).astype(np.float32)
+        np.testing.assert_array_equal(deformed, expected)
+    primvars = UsdGeom.PrimvarsAPI(volume)
+    stress = primvars.GetPrimvar("tissue:cauchyStress")
+    assert stress.GetInterpolation() == "uniform" and stress.GetElementSize() == 6
+    np.testing.assert_array_equal(
+        np.asarray(stress.Get(3)).reshape(-1, 6), result["cauchy_stress_Pa"]
+    )
+    assert primvars.GetPrimvar("tissue:displacement").GetInterpolation() == "vertex"
+    # The render surface: each face carries the von Mises stress of the tet it bounds.
+    surface = stage.GetPrimAtPath("/World/Specimen/Surface")
+    mesh = UsdGeom.Mesh(surface)
+    local = np.asarray(mesh.GetFaceVertexIndicesAttr().Get()).reshape(-1, 3)
+    global_faces = np.asarray(surface.GetAttribute("tissue:volumePointIndices").Get())[local]
+    owners = np.asarray(surface.GetAttribute("tissue:volumeTetIndices").Get())
+    for face, owner in zip(global_faces, owners, strict=True):
+        assert set(face) <= set(specimen.tets[owner])
+    face_vm = np.asarray(UsdGeom.PrimvarsAPI(mesh).GetPrimvar("tissue:vonMises").Get(3))
+    np.testing.assert_array_equal(face_vm, result["von_mises_Pa"][owners])
+    # Surface winding is outward: the divergence theorem gives the enclosed volume.
+    points = specimen.points[global_faces]
+    enclosed = np.einsum("ij,ij->i", points[:, 0], np.cross(points[:, 1], points[:, 2])).sum() / 6
+    assert enclosed == pytest.approx(specimen.volumes().sum(), rel=1e-12)
+    curve = read_probe_curve_usd(paths.root)
+    np.testing.assert_array_equal(curve["depth_m"], np.concatenate([[0], result["depths_m"]]))
+    np.testing.assert_array_equal(
+        curve["reaction_force_N"], np.concatenate([[0], result["reaction_force_N"]])
+    )
+    time_attr = stage.GetPrimAtPath("/World/Indenter").GetAttribute("tissue:probe:time")
+    assert [time_attr.Get(k) for k in (1, 2, 3)] == [0.5, 1.0, 1.5]
+    translate = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Indenter")).GetOrderedXformOps()[0]
+    assert translate.Get(2)[2] == pytest.approx(0.01 - result["depths_m"][1])
+    assert validate_stage(paths.root) == []
+
+
+def test_tet10_exports_corner_tets(tmp_path, specimen, rng):
+    quadratic = to_tet10(specimen)
+    result = _result(quadratic, rng, steps=2)
+    paths = write_simulation_usd(tmp_path / "q.usda", quadratic, result=result)
+    back = read_tetmesh_usd(paths.root)
+    assert back.element_type == "TET4"
+    np.testing.assert_array_equal(back.tets, specimen.tets)
+    np.testing.assert_array_equal(back.node_sets["zmax"], np.sort(specimen.node_sets["zmax"]))
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.Open(str(paths.root))
+    volume = UsdGeom.TetMesh(stage.GetPrimAtPath("/World/Specimen/Volume"))
+    np.testing.assert_array_equal(
+        np.asarray(volume.GetPointsAttr().Get(2)),
+        (
+            quadratic.points[: specimen.node_count]
+            + result["displacement_m"][1, : specimen.node_count]
+        ).astype(np.float32),
+    )
+    info = stage.GetPrimAtPath("/World").GetCustomDataByKey("warptissue")
+    assert info["element_type_source"] == "TET10"
+    assert validate_stage(paths.root) == []
+
+
+def test_material_attributes_and_schema(tmp_path, specimen):
+    from pxr import Usd
+
+    material = {
+        "model": "reduced_polynomial",
+        "C10_Pa": 600.553,
+        "C20_Pa": 4097.45,
+        "C30_Pa": 12.5,
+        "bulk_modulus_Pa": 1.0e5,
+        "prony_g": [0.348, 0.358],
+        "prony_tau_s": [1.376, 49.369],
+    }
+    paths = write_simulation_usd(
+        tmp_path / "m.usda", specimen, material=material, density_kg_per_m3=1060.0
+    )
+    stage = Usd.Stage.Open(str(paths.root))
+    prim = stage.GetPrimAtPath("/World/Materials/Tissue")
+    assert prim.HasAPI("TissueMaterialAPI")
+    assert "PhysicsVolumeDeformableMaterialAPI" in applied_schema_names(prim)
+    assert prim.GetAttribute("tissue:hyperelastic:C20").Get() == 4097.45
+    assert prim.GetAttribute("tissue:convention").Get() == "abaqus"
+    definition = Usd.SchemaRegistry().FindAppliedAPIPrimDefinition("TissueMaterialAPI")
+    assert "tissue:viscoelastic:pronyTau" in definition.GetPropertyNames()
+    back = read_material_usd(paths.root)
+    assert back["material"] == material
+    shear, bulk = 2 * 600.553, 1.0e5
+    # Independent check of the small-strain equivalents:
+    # mu = E / (2 (1 + nu)), K = E / (3 (1 - 2 nu)).
+    youngs, nu = back["youngs_modulus_Pa"], back["poissons_ratio"]
+    assert youngs / (2 * (1 + nu)) == pytest.approx(shear, rel=1e-6)
+    assert youngs / (3 * (1 - 2 * nu)) == pytest.approx(bulk, rel=1e-4)
+    assert back["density_kg_per_m3"] == 1060.0
+    binding = stage.GetPrimAtPath("/World/Specimen/Volume").GetRelationship(
+        "material:binding:physics"
+    )
+    assert binding.GetTargets() == [prim.GetPath()]
+
+
+def test_material_object_duck_typed(tmp_path, specimen):
+    class Ogden:
+        def to_dict(self):
+            return {
+                "model": "ogden",
+                "mu1_Pa": 400.0,
+                "alpha1": 2.0,
+                "mu2_Pa": -50.0,
+                "alpha2": -2.0,
+            }
+
+        def small_strain_equivalent(self):
+            return 1050.0, 0.5
+
+    paths = write_simulation_usd(tmp_path / "o.usda", specimen, material=Ogden())
+    back = read_material_usd(paths.root)
+    assert back["material"] == Ogden().to_dict()
+    assert (back["youngs_modulus_Pa"], back["poissons_ratio"]) == (1050.0, 0.5)
+
+
+def test_bad_inputs_write_nothing(tmp_path, specimen, rng):
+    result = _result(specimen, rng)
+    result["displacement_m"] = result["displacement_m"][:, :-1]
+    with pytest.raises(InputError, match="displacement_m"):
+        write_simulation_usd(tmp_path / "bad.usda", specimen, result=result)
+    with pytest.raises(InputError, match="prony"):
+        write_simulation_usd(
+            tmp_path / "bad.usda",
+            specimen,
+            material={
+                "model": "NeoHookean",
+                "C10_Pa": 1.0,
+                "prony_g": [0.5],
+                "prony_tau_s": [1, 2],
+            },
+        )
+    with pytest.raises(InputError, match=".usda"):
+        write_simulation_usd(tmp_path / "bad.usdc", specimen)
+    inverted = TetMesh(points=specimen.points, tets=specimen.tets[:, [0, 2, 1, 3]])
+    with pytest.raises(MeshError, match="inverted"):
+        write_simulation_usd(tmp_path / "bad.usda", inverted)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_set_names_that_are_not_identifiers(tmp_path, specimen):
+    top = specimen.node_sets["zmax"]
+    named = TetMesh(
+        points=specimen.points,
+        tets=specimen.tets,
+        node_sets={"probe-ring": top[:3], "probe_ring": top[3:5], "2 mm": top[5:6]},
+    )
+    back = read_tetmesh_usd(write_simulation_usd(tmp_path / "n.usda", named).root)
+    assert back.node_sets.keys() == named.node_sets.keys()
+    for name, nodes in named.node_sets.items():
+        np.testing.assert_array_equal(back.node_sets[name], np.sort(nodes))
+
+
+def test_read_errors(tmp_path):
+    with pytest.raises(InputError, match="no such USD file"):
+        read_tetmesh_usd(tmp_path / "missing.usda")
+    empty = tmp_path / "empty.usda"
+    empty.write_text("#usda 1.0\n")
+    with pytest.raises(InputError, match="no UsdGeom.TetMesh"):
+        read_tetmesh_usd(empty)
+
+
+def test_reads_foreign_left_handed_tetmesh(tmp_path):
+    """A TetMesh from another tool (Houdini writes leftHanded) reads back positively oriented."""
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "foreign.usda"))
+    tetmesh = UsdGeom.TetMesh.Define(stage, "/Tet")
+    tetmesh.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)])
+    tetmesh.CreateTetVertexIndicesAttr([(0, 2, 1, 3)])
+    tetmesh.CreateOrientationAttr("leftHanded")
+    stage.Save()
+    mesh = read_tetmesh_usd(tmp_path / "foreign.usda")
+    assert mesh.volumes()[0] == pytest.approx(1 / 6)
+
+
+def test_fe_core_materials_round_trip(tmp_path, specimen):
+    """Every warptissue.materials model comes back from USD equal (runs once fe-core is merged)."""
+    materials = pytest.importorskip("warptissue.materials")
+    models = [
+        materials.NeoHookean(287.5, 3e4),
+        materials.MooneyRivlin(100.0, 50.0, 3e4),
+        materials.ReducedPolynomial((600.553, 4097.45), 3e4),
+        materials.Ogden((400.0, -50.0), (2.0, -2.0), 3e4),
+        materials.LinearElastic(2e4, 0.3),
+    ]
+    for i, model in enumerate(models):
+        paths = write_simulation_usd(tmp_path / f"m{i}.usda", specimen, material=model)
+        back = read_material_usd(paths.root)
+        assert materials.material_from_dict(back["material"]) == model
+        youngs, nu = model.small_strain_equivalent()
+        assert back["youngs_modulus_Pa"] == pytest.approx(youngs, rel=1e-6)
+        assert back["poissons_ratio"] == pytest.approx(nu, rel=1e-6)
+
+
+def test_indenter_validation():
+    with pytest.raises(InputError, match="kind"):
+        Indenter("wedge", radius_m=1e-3)
+    with pytest.raises(InputError, match="radius_m"):
+        Indenter("flat_punch")
+    with pytest.raises(InputError, match="length_m"):
+        Indenter("line", radius_m=1e-3)

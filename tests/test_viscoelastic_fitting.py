@@ -1,0 +1,166 @@
+"""Fits through warptissue.fit recover the seeds' parameters from synthetic records."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.viscoelastic import (
+    LinearWiechert,
+    NonlinearWiechert,
+    NotARelaxationWarning,
+    PronySeries,
+    QuasiLinearViscoelastic,
+    RelaxationRecord,
+    StandardLinearSolid,
+    exponential_elastic_force,
+    fit_qlv,
+    fit_relaxation,
+    fit_wiechert_joint,
+    model_from_result,
+)
+
+SEED000_TABLE1 = [  # tau1 (s), tau2 (s), g1, g2
+    (1.376, 49.369, 0.348, 0.358),
+    (1.087, 52.545, 0.353, 0.365),
+    (0.944, 51.698, 0.408, 0.288),
+]
+TABLE_I_NONLINEAR = NonlinearWiechert(2.03, 0.438, 0.102, 5073.0, 39.24, 909.9, 1522.0, 81.18)
+
+
+def ramp_and_hold(ramp_s, depth_m, total_s, dt_s):
+    time = np.arange(0.0, total_s + 0.5 * dt_s, dt_s)
+    return time, depth_m * np.minimum(time / ramp_s, 1.0)
+
+
+@pytest.mark.parametrize("method", ["lm", "salm"])
+def test_sls_recovers_seed001_kelvin_parameters(method, rng):
+    with pytest.warns(NotARelaxationWarning):
+        truth = StandardLinearSolid.from_printed(8.0, 7.0, 130.0)  # 0.008, 0.007 N/mm; 0.130
+    time, x = ramp_and_hold(0.05, 3e-3, 1.0, 1e-3)
+    force = truth.force_N(time, x)
+    noisy = force + rng.normal(0.0, 1e-3 * force.max(), force.size)
+    result = fit_relaxation(time, x, noisy, model="sls", method=method)
+    assert result.success
+    printed = result.fitted_model.to_printed()
+    assert printed["k1_N_per_m"] == pytest.approx(8.0, rel=0.03)
+    assert printed["k2_N_per_m"] == pytest.approx(7.0, rel=0.03)
+    assert printed["b_N_s_per_m"] == pytest.approx(130.0, rel=0.03)
+    assert isinstance(model_from_result(result), StandardLinearSolid)
+
+
+@pytest.mark.parametrize("row", SEED000_TABLE1)
+def test_prony_recovers_seed000_table1_from_real_ramp(row, rng):
+    tau1, tau2, g1, g2 = row
+    truth = PronySeries.from_normalized(50.0, (g1, g2), (tau1, tau2))
+    time, x = ramp_and_hold(0.5, 4e-3, 300.0, 0.05)  # finite 0.5 s ramp, 300 s hold
+    force = truth.force_N(time, x)
+    noisy = force + rng.normal(0.0, 1e-3 * force.max(), force.size)
+    result = fit_relaxation(time, x, noisy, model="prony", terms=2)
+    fitted = result.fitted_model
+    assert fitted.g == pytest.approx((g1, g2), rel=0.03)
+    assert fitted.relaxation_times_s == pytest.approx((tau1, tau2), rel=0.03)
+    assert result.r_squared > 0.999
+
+
+def test_qlv_recovers_seed000_table1_and_elastic_response(rng):
+    tau1, tau2, g1, g2 = SEED000_TABLE1[0]
+    truth = QuasiLinearViscoelastic(
+        (g1, g2),
+        (tau1, tau2),
+        lambda d: exponential_elastic_force(d, scale_N=0.05, rate_per_m=400.0),
+    )
+    time, x = ramp_and_hold(1.0, 5e-3, 250.0, 0.1)
+    force = truth.force_N(time, x, substeps=32)
+    noisy = force + rng.normal(0.0, 1e-3 * force.max(), force.size)
+    result = fit_qlv(time, x, noisy, substeps=4)
+    values = result.parameters
+    assert (values["g1"], values["g2"]) == pytest.approx((g1, g2), rel=0.03)
+    assert (values["tau1_s"], values["tau2_s"]) == pytest.approx((tau1, tau2), rel=0.03)
+    assert (values["A_N"], values["B_per_m"]) == pytest.approx((0.05, 400.0), rel=0.03)
+
+
+def test_ideal_step_assumption_biases_fit_but_real_ramp_does_not():
+    truth = StandardLinearSolid(10.0, 4.0, 0.5)
+    time, x = ramp_and_hold(0.4, 2e-3, 5.0, 0.01)
+    force = truth.force_N(time, x)
+    real = fit_relaxation(time, x, force, model="sls").fitted_model
+    step = fit_relaxation(time, np.full_like(x, 2e-3), force, model="sls").fitted_model
+    assert real.relaxation_time_s == pytest.approx(0.5, rel=1e-4)
+    assert abs(step.instantaneous_stiffness_N_per_m - 10.0) > 0.5  # the step fit misses G(0)
+
+
+def test_linear_wiechert_joint_fit_lm_and_nelder_mead(rng):
+    # Table I's linear set has tau = 173 s and 196 s, too close to be told apart; separate them.
+    truth = LinearWiechert(4.86, 57.81, 53.32, 500.0, 5000.0)
+    records = []
+    for rate_m_per_s, hold_s in ((12.5e-3, 300.0), (20 / 60e3, 0.0)):
+        ramp_s = 4e-3 / rate_m_per_s
+        time = np.arange(0.0, ramp_s + hold_s, 0.1)
+        x = np.minimum(rate_m_per_s * time, 4e-3)
+        force = truth.force_N(time, x)
+        records.append(RelaxationRecord(time, x, force + rng.normal(0, 2e-3, time.size)))
+    start = np.array([4.0, 70.0, 40.0, 650.0, 4000.0])
+    lm = fit_wiechert_joint(records, start, model="linear")
+    nm = fit_wiechert_joint(
+        records, start, model="linear", optimizer="nelder-mead", max_iterations=3000
+    )
+    for result in (lm, nm):
+        assert result.x == pytest.approx([4.86, 57.81, 53.32, 500.0, 5000.0], rel=0.05), (
+            result.method
+        )
+        assert result.record_rmse_N == pytest.approx([2e-3, 2e-3], rel=0.15)
+    assert nm.seed_cost_N <= lm.seed_cost_N * (1 + 1e-3)  # NM minimizes the seed's cost
+
+
+def test_nonlinear_wiechert_table_i_refit_predicts_100_mm_per_min(rng):
+    # Seed 004: 20 x 20 mm sample, 4 mm; fit near-step (750 mm/min) + 20 mm/min, predict 100.
+    noise_N = 5e-3
+
+    def record(rate_mm_per_min, hold_s, keep_to_m):
+        rate = rate_mm_per_min / 60e3
+        time = np.arange(0.0, 4e-3 / rate + hold_s, 1 / 25.0)
+        x = np.minimum(rate * time, 4e-3)
+        keep = x <= keep_to_m
+        time, x = time[keep], x[keep]
+        force = TABLE_I_NONLINEAR.force_N(time, x)
+        return RelaxationRecord(time, x, force + rng.normal(0.0, noise_N, time.size))
+
+    near_step = record(750, 40.0, 4e-3)
+    slow = record(20, 0.0, 3.6e-3)  # the seed keeps the first 3.6 mm of the ramps
+    validation = record(100, 0.0, 3.6e-3)
+    start = TABLE_I_NONLINEAR.to_vector() * [1.3, 0.7, 1.5, 0.7, 1.4, 0.8, 1.15, 0.5]
+    result = fit_wiechert_joint([near_step, slow], start, model="nonlinear")
+    assert result.record_rmse_N == pytest.approx([noise_N, noise_N], rel=0.15)
+    predicted = result.fitted_model.force_N(validation.time_s, validation.displacement_m)
+    prediction_rmse = np.sqrt(np.mean((predicted - validation.force_N) ** 2))
+    assert prediction_rmse < 1.3 * noise_N
+
+
+def test_fit_relaxation_input_errors():
+    time = np.linspace(0, 1, 10)
+    with pytest.raises(InputError, match="model"):
+        fit_relaxation(time, time, time, model="maxwell")
+    with pytest.raises(InputError, match="p0"):
+        fit_relaxation(time, time, time, model="sls", p0=[1.0, 2.0])
+    with pytest.raises(InputError, match="force_N"):
+        fit_relaxation(time, time, time[:-1])
+    with pytest.raises(InputError, match="opposite signs"):
+        fit_relaxation(time, time, -time)
+
+
+def test_single_record_nonlinear_wiechert_and_model_round_trip(rng):
+    rate = 100 / 60e3
+    time = np.arange(0.0, 4e-3 / rate + 20.0, 0.1)
+    x = np.minimum(rate * time, 4e-3)
+    force = TABLE_I_NONLINEAR.force_N(time, x) + rng.normal(0.0, 2e-3, time.size)
+    start = TABLE_I_NONLINEAR.to_vector() * [1.2, 0.8, 1.0, 0.8, 1.0, 0.9, 1.1, 1.0]
+    result = fit_relaxation(time, x, force, model="wiechert-nonlinear", p0=start)
+    assert result.rmse == pytest.approx(2e-3, rel=0.15)
+    rebuilt = model_from_result(result)
+    assert isinstance(rebuilt, NonlinearWiechert)
+    np.testing.assert_allclose(rebuilt.force_N(time, x), result.fitted, rtol=1e-9)
+    linear = fit_relaxation(time, x, force, model="wiechert")
+    assert isinstance(model_from_result(linear), LinearWiechert)
+    assert linear.rmse > 2 * result.rmse  # the linear body cannot follow the stiffening

@@ -1,0 +1,65 @@
+"""``warptissue export``: write a simulation's results (or a study's specimen) as USD."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``export`` command."""
+    parser = subparsers.add_parser(
+        "export",
+        help="write simulation results or a study's specimen as a USD scene",
+        description=(
+            "Write a 'warptissue simulate' output folder (result.json, fields.vtu, optional "
+            "fields_NNN.vtu) or a study TOML (specimen and material, no results) as a layered "
+            "USD scene: NAME.usda (root), NAME.asset.usda and, with results, "
+            "NAME.results.usdc. The scene is validated after writing. Exit status: 0 valid, "
+            "1 validation findings, 2 bad input."
+        ),
+    )
+    parser.add_argument("source", type=Path, help="a simulate output folder or a study .toml")
+    parser.add_argument("--out", type=Path, required=True, help="root layer to write (.usda)")
+    parser.add_argument(
+        "--density",
+        dest="density_kg_per_m3",
+        type=float,
+        default=1000.0,
+        help="mass density written as physics:density, kg/m^3 (default 1000)",
+    )
+    parser.add_argument("--json", action="store_true", help="print the written paths as JSON")
+    parser.set_defaults(handler=run_export)
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """Handle ``warptissue export``."""
+    from warptissue.errors import InputError
+    from warptissue.usd import validate_stage
+    from warptissue.usd.export import export_result_dir, export_study
+
+    source: Path = args.source
+    if source.is_dir():
+        paths = export_result_dir(source, args.out, density_kg_per_m3=args.density_kg_per_m3)
+    elif source.suffix == ".toml" and source.is_file():
+        paths = export_study(source, args.out, density_kg_per_m3=args.density_kg_per_m3)
+    else:
+        raise InputError("expected a simulate output folder or a study .toml file", path=source)
+    findings = validate_stage(paths.root)
+    written = {
+        "root": str(paths.root),
+        "asset": str(paths.asset),
+        "results": None if paths.results is None else str(paths.results),
+        "findings": findings,
+    }
+    if args.json:
+        print(json.dumps(written, indent=2))
+    else:
+        layers = ", ".join(str(p) for p in (paths.root, paths.asset, paths.results) if p)
+        print(f"wrote {layers}; {len(findings)} validation findings")
+        for finding in findings:
+            print(f"  {finding}")
+    return 1 if findings else 0

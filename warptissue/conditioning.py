@@ -1,0 +1,569 @@
+"""Prepare a recorded indentation for fitting, keeping the raw data beside the result.
+
+Steps (each also usable on its own), in the order :func:`prepare_record` runs them:
+
+1. :func:`detect_contact`: the first sample where the force leaves the pre-contact baseline
+   by more than ``threshold_sigma`` noise standard deviations, refined by extrapolating a
+   straight line through the early loading back to the baseline. In vivo, where breathing
+   moves the baseline, give the contact instead (the probe rests on the organ).
+2. :func:`remove_offset_and_drift`: subtract the baseline force (a constant from the
+   pre-contact window, or a straight line when an unloaded window after the test exists too;
+   with physiological rates, fitted together with their sines and cosines).
+3. Displacement from the contact point: ``position - contact``.
+4. :func:`suppress_physiological` (in vivo records): remove respiration and heartbeat with
+   zero-phase notch filters at their rates and harmonics (scipy.signal), or keep only a
+   breath-hold window with :func:`select_window`. The same filter is applied to the
+   displacement and to the force. For a linear viscoelastic specimen (SLS, Prony/QLV at
+   small strain), the force is a linear time-invariant functional of the displacement
+   history, and any LTI filter commutes with it: the filtered force is exactly the specimen's
+   response to the filtered displacement. Fitting the filtered pair is therefore unbiased;
+   filtering the force alone would distort the ramp and bias the fit. For nonlinear models
+   it is an approximation that holds while the filter leaves the ramp's spectrum alone.
+   :func:`estimate_rate_Hz` finds the rates when they are not known.
+5. A detected contact (approach through air) clips the depth at zero.
+6. :func:`trim_ramp` (ramp fits, seed 004): keep the loading ramp up to a depth, cutting the
+   probe's deceleration (seed 004 keeps the first 3.6 mm of a 4 mm ramp).
+
+:func:`prepare_record` returns a :class:`ConditionedRecord` with the raw columns beside the
+result.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import InputError
+from warptissue.io import ExperimentData
+
+__all__ = [
+    "ConditionedRecord",
+    "ContactPoint",
+    "detect_contact",
+    "estimate_rate_Hz",
+    "prepare_record",
+    "remove_offset_and_drift",
+    "select_window",
+    "suppress_physiological",
+    "trim_ramp",
+]
+
+
+@dataclass(frozen=True)
+class ContactPoint:
+    """Where the probe met the specimen.
+
+    Attributes:
+        index: First sample at or after contact.
+        time_s: Contact time (s), interpolated.
+        position_m: Axis position at contact (m), extrapolated from the early loading.
+        baseline_force_N: Mean force before contact (N).
+        noise_N: Standard deviation of the baseline force (N).
+        threshold_N: Force rise that marked the contact (N).
+    """
+
+    index: int
+    time_s: float
+    position_m: float
+    baseline_force_N: float
+    noise_N: float
+    threshold_N: float
+
+
+def _check(time_s: np.ndarray, *arrays: np.ndarray) -> None:
+    t = np.asarray(time_s)
+    if t.ndim != 1 or t.size < 4:
+        raise InputError("a record needs at least 4 samples", value=t.size)
+    for array in arrays:
+        if np.asarray(array).shape != t.shape:
+            raise InputError("columns differ in length", value=(t.shape, np.shape(array)))
+    if not np.all(np.diff(t) > 0):
+        raise InputError("time_s must strictly increase")
+
+
+def detect_contact(
+    time_s: np.ndarray,
+    position_m: np.ndarray,
+    force_N: np.ndarray,
+    *,
+    baseline_s: float | None = None,
+    threshold_sigma: float = 6.0,
+    min_threshold_N: float = 0.0,
+    fit_multiple: float = 8.0,
+) -> ContactPoint:
+    """Find the contact point of an indentation.
+
+    Args:
+        time_s: Sample times (s), shape (n,).
+        position_m: Axis position (m, increasing into the specimen), shape (n,).
+        force_N: Force (N), shape (n,).
+        baseline_s: Length of the pre-contact baseline (s); default: the samples before the
+            probe starts moving (position within 1 um of its first value), at least 10.
+        threshold_sigma: Contact is where the force exceeds the baseline by this many noise
+            standard deviations (the noise from the baseline's sample-to-sample differences).
+        min_threshold_N: Lower bound of the threshold (N), e.g. the transducer resolution.
+        fit_multiple: The early loading used for the extrapolation runs from a rise of 2
+            thresholds to a rise of ``fit_multiple`` thresholds.
+
+    Raises:
+        InputError: The force never leaves the baseline, or the baseline is too short.
+    """
+    _check(time_s, position_m, force_N)
+    t, x, f = (np.asarray(a, dtype=np.float64) for a in (time_s, position_m, force_N))
+    if baseline_s is None:
+        moving = np.flatnonzero(np.abs(x - x[0]) > 1e-6)
+        stop = int(moving[0]) if moving.size else len(t)
+    else:
+        stop = int(np.searchsorted(t, t[0] + baseline_s))
+    if stop < 10:
+        raise InputError("the pre-contact baseline has fewer than 10 samples", value=stop)
+    baseline = f[:stop]
+    level = float(np.mean(baseline))
+    noise = float(np.std(np.diff(baseline)) / math.sqrt(2.0))
+    threshold = max(threshold_sigma * noise, min_threshold_N)
+    above = np.flatnonzero((f - level > threshold) & (np.arange(len(f)) >= stop))
+    if not above.size:
+        raise InputError("no contact: the force never leaves the baseline", value=threshold)
+    crossing = int(above[0])
+    # Early loading: from the crossing until the rise reaches fit_multiple thresholds, less
+    # the first samples (picked because their noise pushed them over the threshold).
+    rise = f[crossing:] - level
+    high = np.flatnonzero(rise > fit_multiple * threshold)
+    end = crossing + (int(high[0]) if high.size else min(20, len(f) - crossing - 1))
+    clear = np.flatnonzero(rise > 2.0 * threshold)
+    begin = crossing + (int(clear[0]) if clear.size else 0)
+    begin = min(begin, max(end - 3, crossing))
+    end = max(end, begin + 3)
+    slope, intercept = np.polyfit(x[begin : end + 1], f[begin : end + 1] - level, 1)
+    if slope > 0:
+        contact_position = float(-intercept / slope)
+    else:
+        contact_position = float(x[crossing])
+    contact_position = min(max(contact_position, float(x[stop - 1])), float(x[crossing]))
+    index = int(np.searchsorted(np.maximum.accumulate(x), contact_position))
+    index = min(max(index, 0), crossing)
+    if index > 0 and x[index] != x[index - 1]:
+        share = (contact_position - x[index - 1]) / (x[index] - x[index - 1])
+        contact_time = float(t[index - 1] + np.clip(share, 0.0, 1.0) * (t[index] - t[index - 1]))
+    else:
+        contact_time = float(t[index])
+    return ContactPoint(
+        index=index,
+        time_s=contact_time,
+        position_m=contact_position,
+        baseline_force_N=level,
+        noise_N=noise,
+        threshold_N=threshold,
+    )
+
+
+def remove_offset_and_drift(
+    time_s: np.ndarray,
+    force_N: np.ndarray,
+    *,
+    unloaded: np.ndarray,
+    periodic_rates_Hz: tuple[float, ...] = (),
+    harmonics: int = 3,
+) -> tuple[np.ndarray, float, float]:
+    """Subtract the transducer baseline estimated where the probe carries no load.
+
+    With unloaded samples on one side of the test only, the baseline is a constant (an
+    offset); with unloaded samples before and after it (a probe retracted at the end), a
+    straight line (offset and drift). Both are least-squares fits to the unloaded samples;
+    with ``periodic_rates_Hz`` the fit also carries sines and cosines at those rates and
+    their harmonics, so that a baseline spanning a fraction of a breath is not biased by it.
+
+    Args:
+        time_s: Sample times (s), shape (n,).
+        force_N: Force (N), shape (n,).
+        unloaded: Boolean mask (n,) of samples without load.
+        periodic_rates_Hz: Physiological rates present in the baseline (Hz).
+        harmonics: Harmonics per rate in the baseline fit.
+
+    Returns:
+        The corrected force (n,), the offset (N, baseline at ``time_s[0]``) and the drift
+        (N/s, 0 when it cannot be told from relaxation).
+    """
+    _check(time_s, force_N, unloaded)
+    t, f = np.asarray(time_s, dtype=np.float64), np.asarray(force_N, dtype=np.float64)
+    mask = np.asarray(unloaded, dtype=bool)
+    if mask.sum() < 2:
+        raise InputError("need at least 2 unloaded samples", value=int(mask.sum()))
+    indices = np.flatnonzero(mask)
+    loaded = np.flatnonzero(~mask)
+    two_sided = bool(loaded.size and indices[0] < loaded[0] and indices[-1] > loaded[-1])
+    elapsed = t[mask] - t[0]
+    columns = [np.ones_like(elapsed)] + ([elapsed] if two_sided else [])
+    columns += _periodic_basis(elapsed, tuple(periodic_rates_Hz), harmonics)
+    basis = np.column_stack(columns)
+    if basis.shape[0] <= basis.shape[1]:
+        raise InputError("too few unloaded samples for the baseline fit", value=basis.shape[0])
+    coefficients, *_ = np.linalg.lstsq(basis, f[mask], rcond=None)
+    offset_at_zero = float(coefficients[0])
+    drift = float(coefficients[1]) if two_sided else 0.0
+    corrected = f - (offset_at_zero + drift * (t - t[0]))
+    return corrected, float(offset_at_zero), float(drift)
+
+
+def trim_ramp(
+    position_m: np.ndarray, *, contact_position_m: float, keep_depth_m: float
+) -> np.ndarray:
+    """Mask of the loading ramp from contact to ``keep_depth_m`` below it.
+
+    Seed 004 keeps the first 3.6 mm of a 4 mm ramp, dropping the end where the indenter
+    decelerates (and overshoots); the start, where it accelerates, happens in air when the
+    probe starts above the specimen.
+
+    Args:
+        position_m: Axis position (m), shape (n,).
+        contact_position_m: Position of the contact point (m).
+        keep_depth_m: Depth to keep (m).
+
+    Returns:
+        Boolean mask (n,): samples of the first, monotonic loading between contact and
+        ``contact + keep_depth_m``.
+    """
+    x = np.asarray(position_m, dtype=np.float64)
+    if not keep_depth_m > 0:
+        raise InputError("keep_depth_m must be positive", value=keep_depth_m)
+    depth = x - contact_position_m
+    beyond = np.flatnonzero(depth > keep_depth_m)
+    end = int(beyond[0]) if beyond.size else len(x)
+    mask = np.zeros(len(x), dtype=bool)
+    mask[:end] = depth[:end] >= 0.0
+    return mask
+
+
+def estimate_rate_Hz(
+    time_s: np.ndarray,
+    signal: np.ndarray,
+    band_Hz: tuple[float, float],
+    *,
+    harmonics: int = 2,
+    trend_order: int = 3,
+) -> float:
+    """Rate (Hz) of the strongest periodic component of ``signal`` within ``band_Hz``.
+
+    Scans candidate rates (a coarse grid of half the record's frequency resolution across
+    the band, then a grid 20 times finer around the best) and keeps the one whose sine and
+    cosine at the rate and its first ``harmonics`` multiples, beside a polynomial trend of
+    ``trend_order``, explain the most of the signal (linear least squares at each
+    candidate). Use a stretch where the specimen's response is
+    slow: the rest before the ramp, or the hold. :func:`prepare_record` uses the rest before
+    the ramp when it lasts 8 s or more (two breaths), else the hold.
+    """
+    _check(time_s, signal)
+    t = np.asarray(time_s, dtype=np.float64)
+    y = np.asarray(signal, dtype=np.float64)
+    low, high = band_Hz
+    # Block-average to about 10 samples per period of the highest harmonic (speed only).
+    block = max(1, int(1.0 / (10.0 * harmonics * high * float(np.median(np.diff(t))))))
+    if block > 1:
+        count = len(t) // block
+        t = t[: count * block].reshape(count, block).mean(axis=1)
+        y = y[: count * block].reshape(count, block).mean(axis=1)
+    if not 0 < low < high:
+        raise InputError("the band must be 0 < low < high", value=band_Hz)
+    span = float(t[-1] - t[0])
+    if span * high < 2.0:
+        raise InputError("the stretch is shorter than two periods of the band", value=span)
+    centred = (t - t[0]) / span - 0.5
+    trend = np.vander(centred, trend_order + 1)
+    base, *_ = np.linalg.lstsq(trend, y, rcond=None)
+    base_energy = float(np.sum((y - trend @ base) ** 2))
+
+    def explained(rate: float) -> float:
+        phase = 2 * np.pi * rate * (t - t[0])
+        waves = [g(k * phase) for k in range(1, harmonics + 1) for g in (np.sin, np.cos)]
+        basis = np.column_stack([*waves, trend])
+        coefficients, *_ = np.linalg.lstsq(basis, y, rcond=None)
+        return base_energy - float(np.sum((y - basis @ coefficients) ** 2))
+
+    coarse_step = 1.0 / (2.0 * span)
+    candidates = np.arange(low, high + coarse_step, coarse_step)
+    best = float(candidates[int(np.argmax([explained(r) for r in candidates]))])
+    candidates = np.arange(best - coarse_step, best + coarse_step, coarse_step / 20.0)
+    candidates = candidates[(candidates >= low) & (candidates <= high)]
+    return float(candidates[int(np.argmax([explained(r) for r in candidates]))])
+
+
+def _periodic_basis(elapsed: np.ndarray, rates_Hz: tuple[float, ...], harmonics: int):
+    columns = []
+    for rate in rates_Hz:
+        for multiple in range(1, harmonics + 1):
+            phase = 2 * np.pi * multiple * rate * elapsed
+            columns += [np.sin(phase), np.cos(phase)]
+    return columns
+
+
+def _extend(
+    t: np.ndarray, y: np.ndarray, rates_Hz: tuple[float, ...], harmonics: int, count: int
+) -> np.ndarray:
+    """``y`` with ``count`` samples of forecast added at each end.
+
+    Each end is continued by a least-squares fit, over the last (first) two periods of the
+    slowest rate, of a quadratic trend plus the periodic components: the relaxation goes
+    on smoothly and the breathing keeps its phase, so that the zero-phase filter's start-up
+    transients fall outside the record.
+    """
+    step = float(np.mean(np.diff(t)))
+    window = min(len(t), int(2.0 / (min(rates_Hz) * step)))
+    pieces = []
+    for side in ("start", "end"):
+        part = slice(0, window) if side == "start" else slice(len(t) - window, len(t))
+        anchor = t[0] if side == "start" else t[-1]
+        elapsed = t[part] - anchor
+        scale = max(float(np.ptp(elapsed)), step)
+        trend = [np.ones_like(elapsed), elapsed / scale, (elapsed / scale) ** 2]
+        basis = np.column_stack(trend + _periodic_basis(elapsed, rates_Hz, harmonics))
+        coefficients, *_ = np.linalg.lstsq(basis, y[part], rcond=None)
+        offsets = np.arange(1, count + 1) * step
+        future = -offsets[::-1] if side == "start" else offsets
+        trend_f = [np.ones_like(future), future / scale, (future / scale) ** 2]
+        pieces.append(np.column_stack(trend_f + _periodic_basis(future, rates_Hz, harmonics)))
+        pieces[-1] = pieces[-1] @ coefficients
+    return np.concatenate([pieces[0], y, pieces[1]])
+
+
+def suppress_physiological(
+    time_s: np.ndarray,
+    displacement_m: np.ndarray,
+    force_N: np.ndarray,
+    *,
+    rates_Hz: tuple[float, ...],
+    harmonics: int = 3,
+    quality: float = 4.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Band-stop the respiration and heartbeat rates (and harmonics) out of a record.
+
+    Zero-phase (forward-backward) IIR notches from ``scipy.signal.iirnotch`` at each rate
+    and its first ``harmonics`` multiples below 0.45 times the sample rate, applied to the
+    displacement and the force alike (see the module docstring for why both). Both ends are
+    first extended by a forecast (a quadratic trend plus the periodic components, fitted to
+    the two slowest periods at that end), long enough for the notches' transients to die
+    out before they reach the record.
+
+    Args:
+        time_s: Uniform sample times (s), shape (n,).
+        displacement_m: Displacement (m), shape (n,).
+        force_N: Force (N), shape (n,).
+        rates_Hz: Fundamental rates to remove (Hz), e.g. (0.25, 1.4).
+        harmonics: Multiples of each rate to notch (1: the fundamental only).
+        quality: Quality factor (centre frequency / -3 dB width) of the fundamentals'
+            notches; harmonics get ``quality * multiple`` (the same width in hertz).
+
+    Returns:
+        Filtered displacement and force, shape (n,) each.
+    """
+    from scipy.signal import filtfilt, iirnotch
+
+    _check(time_s, displacement_m, force_N)
+    t = np.asarray(time_s, dtype=np.float64)
+    steps = np.diff(t)
+    if np.ptp(steps) > 0.01 * np.mean(steps):
+        raise InputError("notch filtering needs uniform sampling (gaps found)")
+    rates = tuple(float(r) for r in rates_Hz)
+    if not rates or not all(r > 0 for r in rates):
+        raise InputError("rates must be positive", value=rates_Hz)
+    sample_rate = 1.0 / float(np.mean(steps))
+    # A notch of width w = rate / quality decays as exp(-pi w t): pad 8 time constants.
+    pad = int(8.0 * quality / (np.pi * min(rates)) * sample_rate)
+    filtered = []
+    for signal in (displacement_m, force_N):
+        y = _extend(t, np.asarray(signal, dtype=np.float64), rates, harmonics, pad)
+        for rate in rates:
+            for multiple in range(1, harmonics + 1):
+                centre = multiple * rate
+                if centre >= 0.45 * sample_rate:
+                    break
+                b, a = iirnotch(centre, quality * multiple, fs=sample_rate)
+                y = filtfilt(b, a, y, padtype=None)
+        filtered.append(y[pad : pad + len(t)])
+    return filtered[0], filtered[1]
+
+
+def select_window(time_s: np.ndarray, *, start_s: float, stop_s: float) -> np.ndarray:
+    """Mask of a breath-hold window ``start_s <= t <= stop_s`` (seed 001 held the breath
+    during each indentation)."""
+    t = np.asarray(time_s, dtype=np.float64)
+    if not stop_s > start_s:
+        raise InputError("the window must end after it starts", value=(start_s, stop_s))
+    return (t >= start_s) & (t <= stop_s)
+
+
+@dataclass(frozen=True)
+class ConditionedRecord:
+    """A record ready for fitting, with its raw data.
+
+    Attributes:
+        time_s: Time (s) of the kept samples, shape (m,).
+        displacement_m: Indentation depth below the contact point (m), shape (m,).
+        force_N: Force without baseline (and physiological disturbance) (N), shape (m,).
+        raw: The record's original columns, full length.
+        kept: Boolean mask (n,) of the raw samples kept.
+        contact: The contact point.
+        force_offset_N: Baseline removed (N).
+        force_drift_N_per_s: Drift removed (N/s).
+        notch_rates_Hz: Physiological rates removed (Hz), empty ex vivo.
+        steps: What was done, in order.
+    """
+
+    time_s: np.ndarray
+    displacement_m: np.ndarray
+    force_N: np.ndarray
+    raw: dict[str, np.ndarray]
+    kept: np.ndarray
+    contact: ContactPoint
+    force_offset_N: float
+    force_drift_N_per_s: float
+    notch_rates_Hz: tuple[float, ...] = ()
+    steps: tuple[str, ...] = field(default_factory=tuple)
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """Conditioned columns plus the raw ones (prefixed ``raw_``), full length; removed
+        samples have NaN in the conditioned columns."""
+        n = len(self.kept)
+        out: dict[str, np.ndarray] = {}
+        for name, values in (
+            ("time_s", self.time_s),
+            ("displacement_m", self.displacement_m),
+            ("force_N", self.force_N),
+        ):
+            full = np.full(n, np.nan)
+            full[self.kept] = values
+            out[name] = full
+        for name, values in self.raw.items():
+            out[f"raw_{name}"] = values
+        return out
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready description of the conditioning."""
+        return {
+            "contact": {
+                "index": self.contact.index,
+                "time_s": self.contact.time_s,
+                "position_m": self.contact.position_m,
+                "noise_N": self.contact.noise_N,
+                "threshold_N": self.contact.threshold_N,
+            },
+            "force_offset_N": self.force_offset_N,
+            "force_drift_N_per_s": self.force_drift_N_per_s,
+            "notch_rates_Hz": list(self.notch_rates_Hz),
+            "samples_kept": int(self.kept.sum()),
+            "samples_raw": len(self.kept),
+            "steps": list(self.steps),
+        }
+
+
+def prepare_record(
+    record: ExperimentData | dict[str, np.ndarray],
+    *,
+    physiological_rates_Hz: tuple[float, ...] | str | None = None,
+    harmonics: int = 3,
+    quality: float = 4.0,
+    contact_position_m: float | None = None,
+    keep_depth_m: float | None = None,
+    window_s: tuple[float, float] | None = None,
+    threshold_sigma: float = 6.0,
+) -> ConditionedRecord:
+    """Condition an indentation record for fitting (see the module docstring).
+
+    Args:
+        record: An experiment record with ``time_s``, ``displacement_m`` (axis position
+            relative to the start, as the recorder writes it) and ``force_N``.
+        physiological_rates_Hz: Respiration/heartbeat rates to notch out; ``"auto"``
+            estimates one rate in 0.1-0.7 Hz (respiration) and one in 0.7-3 Hz (heartbeat)
+            from the record; None: ex vivo, no filtering.
+        harmonics: Harmonics notched per rate.
+        contact_position_m: Known contact position (m) (skips detection; e.g. in vivo,
+            where the probe rests on the organ before the ramp). The depth is then
+            ``position - contact`` unclipped, so that a notch filter's ringing stays linear;
+            a detected contact (probe approaching through air) clips the depth at zero.
+        keep_depth_m: Keep only the loading ramp to this depth (seed 004: 3.6 mm);
+            None keeps the whole record (ramp and hold) for relaxation fits.
+        window_s: Keep only ``(start, stop)`` (a breath-hold window), applied last.
+        threshold_sigma: Contact threshold in baseline noise standard deviations.
+
+    Returns:
+        The conditioned record with the raw columns.
+    """
+    columns = record.columns if isinstance(record, ExperimentData) else dict(record)
+    for name in ("time_s", "displacement_m", "force_N"):
+        if name not in columns:
+            raise InputError("missing column", column=name)
+    raw = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    t, x, f = raw["time_s"], raw["displacement_m"], raw["force_N"]
+    _check(t, x, f)
+    steps: list[str] = []
+    rates: tuple[float, ...] = ()
+    if physiological_rates_Hz == "auto":
+        moving = np.flatnonzero(np.abs(x - x[0]) > 1e-6)
+        rest = slice(0, max(int(moving[0]) if moving.size else len(t), 1))
+        if t[max(rest.stop - 1, 0)] - t[0] < 8.0:
+            settled = np.flatnonzero(np.abs(x - x[-1]) > 1e-6)
+            rest = slice(int(settled[-1]) + 1 if settled.size else 0, None)
+        rates = tuple(estimate_rate_Hz(t[rest], f[rest], band) for band in ((0.1, 0.7), (0.7, 3.0)))
+        steps.append(f"estimated physiological rates {rates} Hz")
+    elif physiological_rates_Hz is not None:
+        rates = tuple(float(r) for r in physiological_rates_Hz)
+    if contact_position_m is None:
+        contact = detect_contact(t, x, f, threshold_sigma=threshold_sigma)
+        steps.append(f"contact detected at {contact.position_m:.6g} m, {contact.time_s:.6g} s")
+    else:
+        index = int(np.searchsorted(np.maximum.accumulate(x), contact_position_m))
+        moving = np.flatnonzero(np.abs(x - x[0]) > 1e-6)
+        stop = int(moving[0]) if moving.size else len(t)
+        baseline = f[: max(stop, 2)]
+        contact = ContactPoint(
+            index=index,
+            time_s=float(t[min(index, len(t) - 1)]),
+            position_m=float(contact_position_m),
+            baseline_force_N=float(np.mean(baseline)),
+            noise_N=float(np.std(baseline)),
+            threshold_N=0.0,
+        )
+        steps.append(f"contact given at {contact_position_m:.6g} m")
+    # Unloaded: before the position first passes the contact, and after it comes back
+    # above it (a retraction).
+    loaded = np.flatnonzero(x > contact.position_m + 1e-6)
+    first_loaded = int(loaded[0]) if loaded.size else len(t)
+    unloaded = np.zeros(len(t), dtype=bool)
+    unloaded[:first_loaded] = True
+    unloaded[first_loaded:] = x[first_loaded:] < contact.position_m - 1e-6
+    if unloaded.sum() >= 2:
+        f, offset, drift = remove_offset_and_drift(
+            t, f, unloaded=unloaded, periodic_rates_Hz=rates, harmonics=harmonics
+        )
+        steps.append(f"removed offset {offset:.6g} N and drift {drift:.6g} N/s")
+    else:
+        offset, drift = 0.0, 0.0
+    depth = x - contact.position_m
+    if rates:
+        depth, f = suppress_physiological(
+            t, depth, f, rates_Hz=rates, harmonics=harmonics, quality=quality
+        )
+        steps.append(f"notched {rates} Hz and {harmonics} harmonics (displacement and force)")
+    if contact_position_m is None:
+        depth = np.clip(depth, 0.0, None)
+    kept = np.ones(len(t), dtype=bool)
+    if keep_depth_m is not None:
+        kept &= trim_ramp(x, contact_position_m=contact.position_m, keep_depth_m=keep_depth_m)
+        steps.append(f"kept the ramp to {keep_depth_m:.6g} m below contact")
+    if window_s is not None:
+        kept &= select_window(t, start_s=window_s[0], stop_s=window_s[1])
+        steps.append(f"kept the window {window_s} s")
+    return ConditionedRecord(
+        time_s=t[kept],
+        displacement_m=depth[kept],
+        force_N=f[kept],
+        raw=raw,
+        kept=kept,
+        contact=contact,
+        force_offset_N=offset,
+        force_drift_N_per_s=drift,
+        notch_rates_Hz=rates,
+        steps=tuple(steps),
+    )

@@ -1,0 +1,24 @@
+"""USD reading and writing for warptissue, in one place.
+
+Importing this package registers the ``TissueMaterialAPI`` schema plugin with USD. USD builds
+its schema registry once, on first use, so import :mod:`warptissue.usd` before opening any
+stage in a process that should see the schema.
+"""
+
+from warptissue.usd.schema import register_schema_plugin
+
+register_schema_plugin()
+
+from warptissue.usd.reader import read_material_usd, read_tetmesh_usd  # noqa: E402
+from warptissue.usd.validation import validate_stage  # noqa: E402
+from warptissue.usd.writer import Indenter, UsdScenePaths, write_simulation_usd  # noqa: E402
+
+__all__ = [
+    "Indenter",
+    "UsdScenePaths",
+    "read_material_usd",
+    "read_tetmesh_usd",
+    "register_schema_plugin",
+    "validate_stage",
+    "write_simulation_usd",
+]

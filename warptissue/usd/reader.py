@@ -1,0 +1,181 @@
+"""Read warptissue scenes (and plain UsdGeom.TetMesh assets) back from USD."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import InputError, MeshError
+from warptissue.mesh import TetMesh
+from warptissue.usd.schema import record_from_attributes
+from warptissue.usd.writer import FACE_SET_FAMILY, INDENTER, NODE_SET_FAMILY, REGION_FAMILY
+
+__all__ = ["open_stage", "read_material_usd", "read_probe_curve_usd", "read_tetmesh_usd"]
+
+
+def open_stage(path: str | Path) -> Any:
+    """Open a USD stage with an error naming the file when it cannot be read."""
+    from pxr import Tf, Usd
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such USD file", path=path)
+    try:
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        raise InputError(f"cannot open USD stage: {str(exc).strip()}", path=path) from None
+    if stage is None:
+        raise InputError("cannot open USD stage", path=path)
+    return stage
+
+
+def _find_tetmesh(stage: Any, path: Path, prim_path: str | None) -> Any:
+    from pxr import UsdGeom
+
+    if prim_path is not None:
+        prim = stage.GetPrimAtPath(prim_path)
+        if not prim or not prim.IsA(UsdGeom.TetMesh):
+            raise InputError(f"no TetMesh prim at {prim_path}", path=path)
+        return prim
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.TetMesh):
+            return prim
+    raise InputError("the stage holds no UsdGeom.TetMesh", path=path)
+
+
+def _subset_name(subset: Any) -> str:
+    name = subset.GetPrim().GetCustomDataByKey("warptissue:name")
+    return str(name) if name is not None else subset.GetPrim().GetName()
+
+
+def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMesh:
+    """Read a tetrahedral mesh (rest shape) from a USD file.
+
+    Args:
+        path: A warptissue scene (root or asset layer) or any stage with a ``UsdGeom.TetMesh``.
+        prim_path: The TetMesh prim; None takes the first TetMesh in traversal order.
+
+    Returns:
+        A TET4 mesh: points (the ``points`` default value, i.e. the rest shape; float32 in
+        USD), connectivity (left-handed meshes are reordered to positive orientation), node
+        sets from ``nodeSet`` point subsets, material regions from ``materialRegion``
+        tetrahedron subsets, and face sets from the ``faceSet`` subsets of the sibling surface
+        Mesh written by :func:`warptissue.usd.write_simulation_usd`.
+    """
+    from pxr import Usd, UsdGeom
+
+    path = Path(path)
+    stage = open_stage(path)
+    prim = _find_tetmesh(stage, path, prim_path)
+    tetmesh = UsdGeom.TetMesh(prim)
+    points = tetmesh.GetPointsAttr().Get(Usd.TimeCode.Default())
+    tets = tetmesh.GetTetVertexIndicesAttr().Get()
+    if points is None or tets is None:
+        raise InputError(f"TetMesh {prim.GetPath()} lacks points or tetVertexIndices", path=path)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    tets = np.asarray(tets, dtype=np.int32).reshape(-1, 4).copy()
+    if tetmesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+        tets[:, [1, 2]] = tets[:, [2, 1]]
+    node_sets = {
+        _subset_name(subset): np.asarray(subset.GetIndicesAttr().Get(), dtype=np.int32)
+        for subset in UsdGeom.Subset.GetGeomSubsets(tetmesh, UsdGeom.Tokens.point, NODE_SET_FAMILY)
+    }
+    tet_regions = np.zeros(len(tets), dtype=np.int32)
+    for subset in UsdGeom.Subset.GetGeomSubsets(tetmesh, UsdGeom.Tokens.tetrahedron, REGION_FAMILY):
+        name = _subset_name(subset)
+        try:
+            region = int(name)
+        except ValueError:
+            raise MeshError(f"material region subset {name!r} is not an integer id") from None
+        tet_regions[np.asarray(subset.GetIndicesAttr().Get(), dtype=np.int64)] = region
+    face_sets = {}
+    for sibling in prim.GetParent().GetChildren():
+        volume_points = sibling.GetAttribute("tissue:volumePointIndices")
+        if not (sibling.IsA(UsdGeom.Mesh) and volume_points):
+            continue
+        mesh = UsdGeom.Mesh(sibling)
+        triangles = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int32).reshape(-1, 3)
+        triangles = np.asarray(volume_points.Get(), dtype=np.int32)[triangles]
+        for subset in UsdGeom.Subset.GetGeomSubsets(mesh, UsdGeom.Tokens.face, FACE_SET_FAMILY):
+            face_sets[_subset_name(subset)] = triangles[
+                np.asarray(subset.GetIndicesAttr().Get(), dtype=np.int64)
+            ]
+    return TetMesh(
+        points=points,
+        tets=tets,
+        node_sets=node_sets,
+        face_sets=face_sets,
+        tet_regions=tet_regions,
+    )
+
+
+def read_material_usd(path: str | Path) -> dict[str, Any]:
+    """Read the physics material of a warptissue scene.
+
+    Args:
+        path: A scene written by :func:`warptissue.usd.write_simulation_usd`.
+
+    Returns:
+        ``{"material": to_dict()-form record (Prony terms as prony_g / prony_tau_s),
+        "density_kg_per_m3", "youngs_modulus_Pa", "poissons_ratio"}`` (the last two are the
+        small-strain equivalents under ``physics:``).
+    """
+    from pxr import Usd, UsdShade
+
+    path = Path(path)
+    stage = open_stage(path)
+    prim = _find_tetmesh(stage, path, None)
+    bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial("physics")
+    if not bound:
+        raise InputError(f"TetMesh {prim.GetPath()} has no physics material", path=path)
+    material = bound.GetPrim()
+    values = {}
+    for attr in material.GetAttributes():
+        name = attr.GetName()
+        for namespace in ("tissue:hyperelastic:", "tissue:viscoelastic:"):
+            if (
+                name.startswith(namespace)
+                and attr.HasAuthoredValue()
+                and name != ("tissue:hyperelastic:model")
+            ):
+                value = attr.Get(Usd.TimeCode.Default())
+                values[name[len(namespace) :]] = (
+                    list(value) if hasattr(value, "__len__") else float(value)
+                )
+    return {
+        "material": record_from_attributes(
+            str(material.GetAttribute("tissue:hyperelastic:model").Get()), values
+        ),
+        "density_kg_per_m3": float(material.GetAttribute("physics:density").Get()),
+        "youngs_modulus_Pa": float(material.GetAttribute("physics:youngsModulus").Get()),
+        "poissons_ratio": float(material.GetAttribute("physics:poissonsRatio").Get()),
+    }
+
+
+def read_probe_curve_usd(path: str | Path) -> dict[str, np.ndarray]:
+    """Read the probe's time-sampled depth and reaction force.
+
+    Args:
+        path: The root layer of a scene written with a result.
+
+    Returns:
+        ``{"time_code": (S+1,), "depth_m": (S+1,), "reaction_force_N": (S+1,)}``, the rest state
+        first.
+    """
+    path = Path(path)
+    stage = open_stage(path)
+    indenter = stage.GetPrimAtPath(INDENTER)
+    depth = indenter.GetAttribute("tissue:probe:depth") if indenter else None
+    if not depth or not depth.GetTimeSamples():
+        raise InputError(
+            "the scene holds no probe curve (was it written with a result?)", path=path
+        )
+    force = indenter.GetAttribute("tissue:probe:reactionForce")
+    times = np.asarray(depth.GetTimeSamples(), dtype=np.float64)
+    return {
+        "time_code": times,
+        "depth_m": np.array([depth.Get(t) for t in times]),
+        "reaction_force_N": np.array([force.Get(t) for t in times]),
+    }

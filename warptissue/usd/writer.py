@@ -1,0 +1,673 @@
+"""Write a specimen, its material and simulated results as a layered USD scene.
+
+Layout (see the README's "USD export"):
+
+- ``NAME.usda``: the root layer. Stage metadata only (``metersPerUnit = 1``,
+  ``kilogramsPerUnit = 1``, ``upAxis``, ``defaultPrim``, the time range); it sublayers the
+  results layer over the asset layer.
+- ``NAME.asset.usda``: geometry, subsets, the material and the indenter. No time samples.
+- ``NAME.results.usdc``: time samples only (deformed points, primvars, probe curves). Written
+  only when a result is given.
+
+Prims: ``/World`` (provenance in customData), ``/World/Specimen`` (deformable body),
+``/World/Specimen/Volume`` (``UsdGeom.TetMesh``), ``/World/Specimen/Surface`` (triangle
+``UsdGeom.Mesh`` for renderers), ``/World/Materials/Tissue`` (physics material),
+``/World/Indenter``.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import InputError, MeshError
+from warptissue.io import atomic_path, software_versions, to_jsonable
+from warptissue.mesh import TetMesh
+from warptissue.usd.schema import (
+    DEFORMABLE_BODY_API,
+    TISSUE_MATERIAL_API,
+    VOLUME_DEFORMABLE_MATERIAL_API,
+    VOLUME_DEFORMABLE_SIM_API,
+    material_record,
+)
+
+__all__ = [
+    "FACE_SET_FAMILY",
+    "NODE_SET_FAMILY",
+    "REGION_FAMILY",
+    "Indenter",
+    "UsdScenePaths",
+    "write_simulation_usd",
+]
+
+NODE_SET_FAMILY = "nodeSet"
+"""GeomSubset family of the TetMesh's boundary node sets (elementType point)."""
+REGION_FAMILY = "materialRegion"
+"""GeomSubset family of the TetMesh's material regions (elementType tetrahedron, partition)."""
+FACE_SET_FAMILY = "faceSet"
+"""GeomSubset family of the surface Mesh's boundary face sets (elementType face)."""
+
+WORLD = "/World"
+SPECIMEN = "/World/Specimen"
+VOLUME = "/World/Specimen/Volume"
+SURFACE = "/World/Specimen/Surface"
+MATERIAL = "/World/Materials/Tissue"
+INDENTER = "/World/Indenter"
+
+_INDENTER_KINDS = ("flat_punch", "line", "platen")
+
+
+@dataclass(frozen=True)
+class Indenter:
+    """A rigid indenter drawn as a USD primitive, its contact point at ``(x_m, y_m, z_m)``.
+
+    Attributes:
+        kind: ``"flat_punch"`` (a ``Cylinder`` along z of radius ``radius_m``), ``"line"`` (a
+            ``Cylinder`` along y of tip radius ``radius_m`` and length ``length_m``) or
+            ``"platen"`` (a thin ``Cube`` of side ``length_m``).
+        radius_m: Punch radius or line tip radius, metres.
+        length_m: Line length or platen side, metres.
+        x_m: Contact point x, metres.
+        y_m: Contact point y, metres.
+        z_m: Contact point z (the specimen's top surface), metres; None uses the mesh's top.
+    """
+
+    kind: str
+    radius_m: float = 0.0
+    length_m: float = 0.0
+    x_m: float = 0.0
+    y_m: float = 0.0
+    z_m: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in _INDENTER_KINDS:
+            raise InputError(f"indenter kind must be one of {_INDENTER_KINDS}", value=self.kind)
+        if self.kind in ("flat_punch", "line") and not self.radius_m > 0:
+            raise InputError(f"a {self.kind} indenter needs radius_m > 0", value=self.radius_m)
+        if self.kind in ("line", "platen") and not self.length_m > 0:
+            raise InputError(f"a {self.kind} indenter needs length_m > 0", value=self.length_m)
+
+
+@dataclass(frozen=True)
+class UsdScenePaths:
+    """The files of a written scene.
+
+    Attributes:
+        root: The root layer (open this one).
+        asset: The asset layer.
+        results: The results layer, or None when no result was written.
+    """
+
+    root: Path
+    asset: Path
+    results: Path | None
+
+
+def _field(result: Any, name: str) -> Any:
+    if isinstance(result, Mapping):
+        return result.get(name)
+    return getattr(result, name, None)
+
+
+def _corner_mesh(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Corner nodes of a TET4/TET10 mesh: (kept node ids (n,), renumbered tets (M,4), map)."""
+    corners = mesh.tets[:, :4]
+    kept = np.unique(corners)
+    new_index = np.full(mesh.node_count, -1, dtype=np.int64)
+    new_index[kept] = np.arange(kept.size)
+    return kept, new_index[corners].astype(np.int32), new_index
+
+
+def _vt_dictionary(data: Mapping[str, Any]) -> dict[str, Any]:
+    """JSON-like data as values USD customData accepts (nested dicts, str, float, int, bool)."""
+    from pxr import Vt
+
+    converted: dict[str, Any] = {}
+    for key, value in to_jsonable(data).items():
+        if isinstance(value, Mapping):
+            converted[key] = _vt_dictionary(value)
+        elif isinstance(value, (str, bool, int, float)):
+            converted[key] = value
+        elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
+            converted[key] = Vt.StringArray(value)
+        elif (
+            isinstance(value, list)
+            and value
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+        ):
+            converted[key] = Vt.DoubleArray([float(v) for v in value])
+        elif value is not None:
+            converted[key] = json.dumps(value)
+    return converted
+
+
+def _surface_owners(tets: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Index of the tet that owns each boundary triangle, shape (F,)."""
+    local = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
+    tet_faces = np.sort(tets[:, local].reshape(-1, 3), axis=1)
+    owner_of_face = np.repeat(np.arange(len(tets)), 4)
+    keys = np.sort(faces, axis=1)
+    order = np.lexsort(tet_faces.T[::-1])
+    sorted_faces = tet_faces[order]
+    # Row-wise search with a structured view: lexicographic order of int triples.
+    view_dtype = np.dtype([("a", np.int64), ("b", np.int64), ("c", np.int64)])
+    haystack = np.ascontiguousarray(sorted_faces, dtype=np.int64).view(view_dtype).ravel()
+    needles = np.ascontiguousarray(keys, dtype=np.int64).view(view_dtype).ravel()
+    position = np.searchsorted(haystack, needles)
+    if np.any(position >= haystack.size) or np.any(
+        haystack[np.minimum(position, haystack.size - 1)] != needles
+    ):
+        raise MeshError("a surface triangle does not belong to any tetrahedron")
+    return owner_of_face[order[position]]
+
+
+def _define_subsets(
+    geom: Any,
+    family: str,
+    element_type: str,
+    family_type: str,
+    sets: Mapping[str, np.ndarray],
+) -> None:
+    """One GeomSubset per named set; the set's own name goes to customData ``warptissue:name``.
+
+    Authors the subset prims as Sdf specs in one change block: defining them one by one
+    through the Usd API recomposes the stage per subset, which is slow for meshes with
+    thousands of regions.
+    """
+    from pxr import Sdf, Tf, UsdGeom, Vt
+
+    if not sets:
+        return
+    layer = geom.GetPrim().GetStage().GetEditTarget().GetLayer()
+    parent = geom.GetPath()
+    used: set[str] = set()
+    with Sdf.ChangeBlock():
+        for name, indices in sets.items():
+            # Distinct set names can share a valid identifier ("a-b", "a_b"): number repeats.
+            identifier = base = Tf.MakeValidIdentifier(f"{family}_{name}")
+            while identifier in used:
+                identifier = f"{base}_{len(used)}"
+            used.add(identifier)
+            spec = Sdf.CreatePrimInLayer(layer, parent.AppendChild(identifier))
+            spec.specifier = Sdf.SpecifierDef
+            spec.typeName = "GeomSubset"
+            spec.customData = {"warptissue": {"name": str(name)}}
+            for attr_name, type_name, value in (
+                ("elementType", Sdf.ValueTypeNames.Token, element_type),
+                ("familyName", Sdf.ValueTypeNames.Token, family),
+            ):
+                Sdf.AttributeSpec(
+                    spec, attr_name, type_name, Sdf.VariabilityUniform
+                ).default = value
+            Sdf.AttributeSpec(
+                spec, "indices", Sdf.ValueTypeNames.IntArray
+            ).default = Vt.IntArray.FromNumpy(np.asarray(indices, dtype=np.int32))
+    UsdGeom.Subset.SetFamilyType(geom, family, family_type)
+
+
+def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
+    from pxr import Gf, Sdf, UsdGeom
+
+    contact_z = top_z_m if indenter.z_m is None else indenter.z_m
+    xform = UsdGeom.Xform.Define(stage, INDENTER)
+    xform.AddTranslateOp().Set(Gf.Vec3d(indenter.x_m, indenter.y_m, contact_z))
+    prim = xform.GetPrim()
+    prim.CreateAttribute("tissue:indenter:kind", Sdf.ValueTypeNames.Token, custom=True).Set(
+        indenter.kind
+    )
+    if indenter.kind == "flat_punch":
+        height = 4.0 * indenter.radius_m
+        shape = UsdGeom.Cylinder.Define(stage, f"{INDENTER}/Shape")
+        shape.CreateAxisAttr(UsdGeom.Tokens.z)
+        shape.CreateRadiusAttr(indenter.radius_m)
+        shape.CreateHeightAttr(height)
+        shape.CreateExtentAttr(
+            [
+                (-indenter.radius_m, -indenter.radius_m, -height / 2),
+                (indenter.radius_m, indenter.radius_m, height / 2),
+            ]
+        )
+        shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, height / 2))
+    elif indenter.kind == "line":
+        radius, length = indenter.radius_m, indenter.length_m
+        shape = UsdGeom.Cylinder.Define(stage, f"{INDENTER}/Shape")
+        shape.CreateAxisAttr(UsdGeom.Tokens.y)
+        shape.CreateRadiusAttr(radius)
+        shape.CreateHeightAttr(length)
+        shape.CreateExtentAttr([(-radius, -length / 2, -radius), (radius, length / 2, radius)])
+        shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, radius))
+    else:
+        thickness = 0.05 * indenter.length_m
+        shape = UsdGeom.Cube.Define(stage, f"{INDENTER}/Shape")
+        shape.CreateSizeAttr(1.0)
+        shape.CreateExtentAttr([(-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)])
+        shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, thickness / 2))
+        shape.AddScaleOp().Set(Gf.Vec3f(indenter.length_m, indenter.length_m, thickness))
+    for name, value in (("radius", indenter.radius_m), ("length", indenter.length_m)):
+        if value > 0:
+            attr = prim.CreateAttribute(
+                f"tissue:indenter:{name}", Sdf.ValueTypeNames.Double, custom=True
+            )
+            attr.Set(float(value))
+            attr.SetCustomDataByKey("unit", "m")
+
+
+def _set_stage_metadata(layer: Any) -> None:
+    """SI units and z up: the project's coordinates (indentation along -z) need no rotation."""
+    layer.defaultPrim = "World"
+    metadata = {"metersPerUnit": 1.0, "kilogramsPerUnit": 1.0, "upAxis": "Z"}
+    pseudo = layer.pseudoRoot
+    for key, value in metadata.items():
+        pseudo.SetInfo(key, value)
+
+
+def _material_prims(stage: Any, volume_prim: Any, record: Any, density_kg_per_m3: float) -> None:
+    """The physics material: proposal small-strain attributes plus the ``tissue:`` schema."""
+    from pxr import Sdf, UsdGeom, UsdShade, Vt
+
+    UsdGeom.Scope.Define(stage, MATERIAL.rsplit("/", 1)[0])
+    material = UsdShade.Material.Define(stage, MATERIAL)
+    prim = material.GetPrim()
+    prim.AddAppliedSchema(VOLUME_DEFORMABLE_MATERIAL_API)
+    prim.AddAppliedSchema(TISSUE_MATERIAL_API)
+    for name, value in (
+        ("density", density_kg_per_m3),
+        ("youngsModulus", record.youngs_modulus_Pa),
+        ("poissonsRatio", record.poissons_ratio),
+    ):
+        prim.CreateAttribute(f"physics:{name}", Sdf.ValueTypeNames.Float, custom=False).Set(
+            float(value)
+        )
+    # Declared types and variability match generatedSchema.usda, so the values are written
+    # the same whether or not the schema registry saw the plugin.
+    tissue_values: list[tuple[str, Any]] = [
+        ("tissue:convention", "abaqus"),
+        ("tissue:hyperelastic:model", record.model),
+    ]
+    tissue_values += [(f"tissue:hyperelastic:{k}", v) for k, v in record.hyperelastic.items()]
+    if record.prony_g.size:
+        tissue_values += [
+            ("tissue:viscoelastic:pronyG", record.prony_g),
+            ("tissue:viscoelastic:pronyTau", record.prony_tau_s),
+        ]
+    for attr_name, value in tissue_values:
+        if isinstance(value, str):
+            type_name, usd_value = Sdf.ValueTypeNames.Token, value
+        elif isinstance(value, np.ndarray):
+            type_name, usd_value = Sdf.ValueTypeNames.DoubleArray, Vt.DoubleArray.FromNumpy(value)
+        else:
+            type_name, usd_value = Sdf.ValueTypeNames.Double, float(value)
+        prim.CreateAttribute(
+            attr_name, type_name, custom=False, variability=Sdf.VariabilityUniform
+        ).Set(usd_value)
+    prim.SetCustomDataByKey("warptissue:material", _vt_dictionary(record.source))
+    UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
+        material, UsdShade.Tokens.fallbackStrength, "physics"
+    )
+
+
+def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str, np.ndarray]:
+    """Validated result arrays (see :func:`write_simulation_usd`)."""
+    arrays: dict[str, np.ndarray] = {}
+    for name in ("depths_m", "reaction_force_N", "displacement_m"):
+        value = _field(result, name)
+        if value is None:
+            raise InputError(f"the result has no {name!r}", value=type(result).__name__)
+        arrays[name] = np.asarray(value, dtype=np.float64)
+    for name in ("cauchy_stress_Pa", "von_mises_Pa", "time_s"):
+        value = _field(result, name)
+        if value is not None:
+            arrays[name] = np.asarray(value, dtype=np.float64)
+    step_count = arrays["depths_m"].shape[0] if arrays["depths_m"].ndim == 1 else -1
+    expected = {
+        "depths_m": (step_count,),
+        "reaction_force_N": (step_count,),
+        "time_s": (step_count,),
+        "displacement_m": (step_count, node_count, 3),
+        "cauchy_stress_Pa": (tet_count, 6),
+        "von_mises_Pa": (tet_count,),
+    }
+    if arrays["displacement_m"].ndim == 2:
+        expected["displacement_m"] = (node_count, 3)
+    for name, array in arrays.items():
+        if array.shape != expected[name]:
+            raise InputError(
+                f"result {name!r} has shape {array.shape}, expected {expected[name]}",
+                value=array.shape,
+            )
+        if not np.all(np.isfinite(array)):
+            raise InputError(f"result {name!r} holds non-finite values")
+    if step_count < 1:
+        raise InputError("the result has no load steps", value=step_count)
+    return arrays
+
+
+def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> None:
+    """Declare (type, interpolation, unit; no values) the attributes the results layer samples."""
+    from pxr import Sdf, UsdGeom
+
+    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(VOLUME))
+    surface = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(SURFACE))
+    declared = [
+        (
+            volume.CreatePrimvar(
+                "tissue:displacement", Sdf.ValueTypeNames.Vector3fArray, UsdGeom.Tokens.vertex
+            ),
+            "m",
+        ),
+    ]
+    if "cauchy_stress_Pa" in arrays:
+        stress = volume.CreatePrimvar(
+            "tissue:cauchyStress", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform, 6
+        )
+        stress.GetAttr().SetCustomDataByKey("components", "xx, yy, zz, yz, xz, xy")
+        declared.append((stress, "Pa"))
+    if "von_mises_Pa" in arrays:
+        for api in (volume, surface):
+            declared.append(
+                (
+                    api.CreatePrimvar(
+                        "tissue:vonMises", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform
+                    ),
+                    "Pa",
+                )
+            )
+    for primvar, unit in declared:
+        primvar.GetAttr().SetCustomDataByKey("unit", unit)
+    indenter = stage.GetPrimAtPath(INDENTER)
+    if not indenter:
+        from pxr import Gf
+
+        UsdGeom.Xform.Define(stage, INDENTER).AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 0.0))
+        indenter = stage.GetPrimAtPath(INDENTER)
+    curves = [("depth", "m"), ("reactionForce", "N")] + (
+        [("time", "s")] if "time_s" in arrays else []
+    )
+    for name, unit in curves:
+        attr = indenter.CreateAttribute(
+            f"tissue:probe:{name}", Sdf.ValueTypeNames.Double, custom=True
+        )
+        attr.SetCustomDataByKey("unit", unit)
+
+
+def _write_results(
+    stage: Any,
+    arrays: Mapping[str, np.ndarray],
+    *,
+    kept: np.ndarray,
+    surface_nodes: np.ndarray,
+    owners: np.ndarray,
+    rest: np.ndarray,
+) -> None:
+    """Author the time samples (stage's edit target: the results layer)."""
+    from pxr import Gf, UsdGeom, Vt
+
+    volume = UsdGeom.TetMesh(stage.GetPrimAtPath(VOLUME))
+    surface = UsdGeom.Mesh(stage.GetPrimAtPath(SURFACE))
+    volume_api = UsdGeom.PrimvarsAPI(volume)
+    indenter = stage.GetPrimAtPath(INDENTER)
+    translate = UsdGeom.Xformable(indenter).GetOrderedXformOps()[0]
+    contact = translate.Get()
+    points_attr, surface_points, displacement_attr = (
+        volume.GetPointsAttr(),
+        surface.GetPointsAttr(),
+        volume_api.GetPrimvar("tissue:displacement").GetAttr(),
+    )
+    step_count = len(arrays["depths_m"])
+    displacement = arrays["displacement_m"]
+    if displacement.ndim == 2:
+        shapes = {0: np.zeros_like(rest), step_count: displacement[kept]}
+    else:
+        shapes = {0: np.zeros_like(rest)}
+        shapes.update({k + 1: displacement[k, kept] for k in range(step_count)})
+    for time_code, nodal in shapes.items():
+        deformed = (rest + nodal).astype(np.float32)
+        points_attr.Set(Vt.Vec3fArray.FromNumpy(deformed), time_code)
+        surface_points.Set(Vt.Vec3fArray.FromNumpy(deformed[surface_nodes]), time_code)
+        displacement_attr.Set(Vt.Vec3fArray.FromNumpy(nodal.astype(np.float32)), time_code)
+    depths = np.concatenate([[0.0], arrays["depths_m"]])
+    forces = np.concatenate([[0.0], arrays["reaction_force_N"]])
+    for time_code, (depth, force) in enumerate(zip(depths, forces, strict=True)):
+        position = Gf.Vec3d(contact)
+        position[2] -= float(depth)
+        translate.Set(position, time_code)
+        indenter.GetAttribute("tissue:probe:depth").Set(float(depth), time_code)
+        indenter.GetAttribute("tissue:probe:reactionForce").Set(float(force), time_code)
+    if "time_s" in arrays:
+        for k, time in enumerate(arrays["time_s"]):
+            indenter.GetAttribute("tissue:probe:time").Set(float(time), k + 1)
+    last = step_count
+    if "cauchy_stress_Pa" in arrays:
+        volume_api.GetPrimvar("tissue:cauchyStress").Set(
+            Vt.DoubleArray.FromNumpy(arrays["cauchy_stress_Pa"].ravel()), last
+        )
+    if "von_mises_Pa" in arrays:
+        von_mises = arrays["von_mises_Pa"]
+        volume_api.GetPrimvar("tissue:vonMises").Set(Vt.DoubleArray.FromNumpy(von_mises), last)
+        UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:vonMises").Set(
+            Vt.DoubleArray.FromNumpy(von_mises[owners]), last
+        )
+
+
+def _volume_prim(
+    stage: Any, mesh: TetMesh, *, tets: np.ndarray, rest: np.ndarray, new_index: np.ndarray
+) -> tuple[Any, np.ndarray]:
+    """The TetMesh with its node-set and region subsets; returns (prim, surface faces (F, 3))."""
+    from pxr import Gf, UsdGeom, UsdPhysics, Vt
+
+    volume = UsdGeom.TetMesh.Define(stage, VOLUME)
+    volume_prim = volume.GetPrim()
+    volume_prim.AddAppliedSchema(VOLUME_DEFORMABLE_SIM_API)
+    UsdPhysics.CollisionAPI.Apply(volume_prim)
+    volume.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest.astype(np.float32)))
+    volume.CreateTetVertexIndicesAttr(Vt.Vec4iArray.FromNumpy(tets))
+    volume.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    faces = np.array(UsdGeom.TetMesh.ComputeSurfaceFaces(volume), dtype=np.int32).reshape(-1, 3)
+    volume.CreateSurfaceFaceVertexIndicesAttr(Vt.Vec3iArray.FromNumpy(faces))
+    volume.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*rest.min(0)), Gf.Vec3f(*rest.max(0))]))
+    node_sets = {}
+    for name, nodes in mesh.node_sets.items():
+        corner_nodes = new_index[nodes]
+        node_sets[name] = np.sort(corner_nodes[corner_nodes >= 0])
+    _define_subsets(
+        volume, NODE_SET_FAMILY, UsdGeom.Tokens.point, UsdGeom.Tokens.unrestricted, node_sets
+    )
+    regions = {
+        str(region): np.flatnonzero(mesh.tet_regions == region)
+        for region in np.unique(mesh.tet_regions)
+    }
+    _define_subsets(
+        volume, REGION_FAMILY, UsdGeom.Tokens.tetrahedron, UsdGeom.Tokens.partition, regions
+    )
+    return volume_prim, faces
+
+
+def _surface_prim(
+    stage: Any,
+    mesh: TetMesh,
+    *,
+    tets: np.ndarray,
+    rest: np.ndarray,
+    faces: np.ndarray,
+    new_index: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The render Mesh of the boundary with face-set subsets.
+
+    Returns:
+        The TetMesh points on the surface (n,) and the tet owning each face (F,).
+    """
+    from pxr import Gf, Sdf, UsdGeom, Vt
+
+    surface_nodes, surface_local = np.unique(faces, return_inverse=True)
+    surface_triangles = surface_local.reshape(-1, 3).astype(np.int32)
+    owners = _surface_owners(tets, faces)
+    surface = UsdGeom.Mesh.Define(stage, SURFACE)
+    surface.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rest[surface_nodes].astype(np.float32)))
+    surface.CreateFaceVertexCountsAttr(
+        Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32))
+    )
+    surface.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(surface_triangles.ravel()))
+    surface.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    surface.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    surface.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*rest.min(0)), Gf.Vec3f(*rest.max(0))]))
+    surface.CreateDisplayColorPrimvar(UsdGeom.Tokens.constant).Set([Gf.Vec3f(0.78, 0.36, 0.32)])
+    surface_prim = surface.GetPrim()
+    index_attr = surface_prim.CreateAttribute(
+        "tissue:volumePointIndices", Sdf.ValueTypeNames.IntArray, custom=True
+    )
+    index_attr.Set(Vt.IntArray.FromNumpy(surface_nodes.astype(np.int32)))
+    owner_attr = surface_prim.CreateAttribute(
+        "tissue:volumeTetIndices", Sdf.ValueTypeNames.IntArray, custom=True
+    )
+    owner_attr.Set(Vt.IntArray.FromNumpy(owners.astype(np.int32)))
+    face_key = {tuple(sorted(f)): i for i, f in enumerate(faces.tolist())}
+    face_sets = {}
+    for name, triangles in mesh.face_sets.items():
+        renumbered = new_index[triangles]
+        missing = [t for t in renumbered.tolist() if tuple(sorted(t)) not in face_key]
+        if missing:
+            raise MeshError(
+                f"face set {name!r} holds a triangle that is not on the boundary: {missing[0]}"
+            )
+        face_sets[name] = np.array(
+            [face_key[tuple(sorted(t))] for t in renumbered.tolist()], dtype=np.int32
+        )
+    _define_subsets(
+        surface, FACE_SET_FAMILY, UsdGeom.Tokens.face, UsdGeom.Tokens.unrestricted, face_sets
+    )
+    return surface_nodes, owners
+
+
+def write_simulation_usd(
+    root_path: str | Path,
+    mesh: TetMesh,
+    *,
+    material: Any = None,
+    result: Any = None,
+    provenance: Mapping[str, Any] | None = None,
+    density_kg_per_m3: float = 1000.0,
+    indenter: Indenter | None = None,
+) -> UsdScenePaths:
+    """Write a specimen mesh, its material and a simulation result as a layered USD scene.
+
+    Args:
+        root_path: The root layer, ``NAME.usda``. ``NAME.asset.usda`` and (with a result)
+            ``NAME.results.usdc`` are written beside it. All writes are atomic.
+        mesh: The specimen, TET4 or TET10, metres. USD's TetMesh is linear, so a TET10 mesh is
+            written as its corner tetrahedra: mid-edge nodes are dropped and nodal results
+            are kept at the corner nodes (node sets are restricted to corner nodes).
+        material: A ``warptissue.materials`` object (``to_dict()``,
+            ``small_strain_equivalent()``) or a dictionary in ``to_dict()`` form; optional keys
+            ``prony_g`` and ``prony_tau_s`` add a Prony series.
+        result: An ``IndentationResult`` or a mapping with ``depths_m`` (S,),
+            ``reaction_force_N`` (S,), ``displacement_m`` (S, N, 3) (or (N, 3): the last
+            step only, sampled at time code S) and optionally
+            ``cauchy_stress_Pa`` (M, 6) and ``von_mises_Pa`` (M,) at the last step, and
+            ``time_s`` (S,). Step k is written at time code k; time code 0 is the rest state.
+        provenance: JSON-like metadata (data file, fit quality, ...) stored in ``/World``'s
+            customData under ``warptissue``, with software versions added.
+        density_kg_per_m3: Mass density written as ``physics:density``.
+        indenter: The indenter to draw; None draws none.
+
+    Returns:
+        The paths written.
+    """
+    from pxr import Sdf, Usd, UsdGeom
+
+    root_path = Path(root_path)
+    if root_path.suffix != ".usda":
+        raise InputError("the root layer must be a .usda file", path=root_path)
+    if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
+        raise InputError("density must be positive", value=density_kg_per_m3)
+    if mesh.tet_count == 0:
+        raise MeshError("cannot export a mesh without tetrahedra")
+    volumes = mesh.volumes()
+    if np.any(volumes <= 0):
+        bad = int(np.flatnonzero(volumes <= 0)[0])
+        raise MeshError(
+            f"tetrahedron {bad} is inverted or degenerate (volume {volumes[bad]:.3e} m^3)",
+            element=bad,
+        )
+
+    stem = root_path.name[: -len(".usda")]
+    asset_name = f"{stem}.asset.usda"
+    results_name = f"{stem}.results.usdc"
+    kept, tets, new_index = _corner_mesh(mesh)
+    rest = mesh.points[kept]
+
+    asset_layer = Sdf.Layer.CreateAnonymous(".usda")
+    _set_stage_metadata(asset_layer)
+    stage = Usd.Stage.Open(asset_layer)
+    world = UsdGeom.Xform.Define(stage, WORLD)
+    info = {"software": software_versions(), "element_type_source": mesh.element_type}
+    if provenance:
+        info.update(provenance)
+    world.GetPrim().SetCustomDataByKey("warptissue", _vt_dictionary(info))
+
+    specimen = UsdGeom.Xform.Define(stage, SPECIMEN)
+    specimen.GetPrim().AddAppliedSchema(DEFORMABLE_BODY_API)
+
+    volume_prim, faces = _volume_prim(stage, mesh, tets=tets, rest=rest, new_index=new_index)
+    surface_nodes, owners = _surface_prim(
+        stage, mesh, tets=tets, rest=rest, faces=faces, new_index=new_index
+    )
+
+    if material is not None:
+        _material_prims(stage, volume_prim, material_record(material), density_kg_per_m3)
+    if indenter is not None:
+        _indenter_prims(stage, indenter, float(rest[:, 2].max()))
+    arrays = None
+    if result is not None:
+        arrays = _result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
+        _declare_result_attributes(stage, arrays)
+        summary = {
+            "step_count": len(arrays["depths_m"]),
+            "time_code_of_step_k": "k (time code 0 is the rest state)",
+        }
+        for name in ("completed", "message"):
+            if _field(result, name) is not None:
+                summary[name] = _field(result, name)
+        world.GetPrim().SetCustomDataByKey("warptissue:result", _vt_dictionary(summary))
+
+    root_layer = Sdf.Layer.CreateAnonymous(".usda")
+    _set_stage_metadata(root_layer)
+    results_layer = None
+    if arrays is not None:
+        results_layer = Sdf.Layer.CreateAnonymous(".usdc")
+        root_layer.subLayerPaths.append(results_layer.identifier)
+        root_layer.subLayerPaths.append(asset_layer.identifier)
+        composed = Usd.Stage.Open(root_layer)
+        composed.SetEditTarget(Usd.EditTarget(results_layer))
+        _write_results(
+            composed,
+            arrays,
+            kept=kept,
+            surface_nodes=surface_nodes,
+            owners=owners,
+            rest=rest,
+        )
+        del composed
+        root_layer.startTimeCode = 0.0
+        root_layer.endTimeCode = float(len(arrays["depths_m"]))
+
+    paths = UsdScenePaths(
+        root=root_path,
+        asset=root_path.with_name(asset_name),
+        results=root_path.with_name(results_name) if results_layer is not None else None,
+    )
+    del root_layer.subLayerPaths[:]
+    if results_layer is not None:
+        root_layer.subLayerPaths.append(f"./{results_name}")
+        with atomic_path(paths.results) as temporary:
+            results_layer.Export(str(temporary))
+    root_layer.subLayerPaths.append(f"./{asset_name}")
+    with atomic_path(paths.asset) as temporary:
+        asset_layer.Export(str(temporary))
+    with atomic_path(paths.root) as temporary:
+        root_layer.Export(str(temporary))
+    return paths

@@ -1,0 +1,483 @@
+"""Fits of the lumped viscoelastic models, all through :mod:`warptissue.fit`.
+
+Every least-squares fit here goes through the project's one engine
+(:func:`warptissue.fit.fit_curve` / :func:`warptissue.fit.least_squares`, Levenberg-Marquardt
+or the self-adapting LM). The joint Wiechert fit can also use Nelder-Mead
+(``scipy.optimize.minimize``) on seed 004's cost, the sum of the RMS errors of the curves.
+Models are simulated on the measured displacement history, ramp included, never on an
+idealized step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from warptissue.errors import ConvergenceError, InputError
+from warptissue.fit import FitResult, RejectStep, fit_curve, least_squares
+from warptissue.fit.metrics import r_squared, rmse
+from warptissue.viscoelastic._hereditary import validate_history
+from warptissue.viscoelastic.linear import (
+    PronySeries,
+    QuasiLinearViscoelastic,
+    StandardLinearSolid,
+    exponential_elastic_force,
+)
+from warptissue.viscoelastic.wiechert import LinearWiechert, NonlinearWiechert
+
+__all__ = [
+    "RELAXATION_MODELS",
+    "RelaxationRecord",
+    "fit_qlv",
+    "fit_relaxation",
+    "fit_wiechert_joint",
+    "model_from_result",
+]
+
+RELAXATION_MODELS = ("sls", "prony", "wiechert", "wiechert-nonlinear")
+"""Model names accepted by :func:`fit_relaxation`."""
+
+_WIECHERT_NAMES = ("k0_N_per_m", "k1_N_per_m", "k2_N_per_m", "b1_N_s_per_m", "b2_N_s_per_m")
+_WIECHERT_UNITS = ("N/m", "N/m", "N/m", "N s/m", "N s/m")
+_NONLINEAR_NAMES = (
+    "K0_N_per_m",
+    "K1_N_per_m",
+    "K2_N_per_m",
+    "b1_N_s_per_m",
+    "b2_N_s_per_m",
+    "kappa0_per_m",
+    "kappa1_per_m",
+    "kappa2_per_m",
+)
+_NONLINEAR_UNITS = ("N/m", "N/m", "N/m", "N s/m", "N s/m", "1/m", "1/m", "1/m")
+
+
+@dataclass(frozen=True)
+class RelaxationRecord:
+    """One measured test: sampled time, displacement and force (SI, shape (n,) each)."""
+
+    time_s: np.ndarray
+    displacement_m: np.ndarray
+    force_N: np.ndarray
+
+    def __post_init__(self) -> None:
+        time, displacement = validate_history(
+            self.time_s, self.displacement_m, name="displacement_m"
+        )
+        _, force = validate_history(time, self.force_N, name="force_N")
+        if time.size < 3:
+            raise InputError("a record needs at least 3 samples", value=time.size)
+        object.__setattr__(self, "time_s", time)
+        object.__setattr__(self, "displacement_m", displacement)
+        object.__setattr__(self, "force_N", force)
+
+
+def _initial_prony(record: RelaxationRecord, terms: int) -> np.ndarray:
+    """Data-based start: (k_inf, k_1..k_N, tau_1..tau_N) from the peak and the tail."""
+    time, x, force = record.time_s, record.displacement_m, record.force_N
+    peak = int(np.argmax(np.abs(force)))
+    x_peak = x[peak] if abs(x[peak]) > 0 else np.max(np.abs(x))
+    x_end = x[-1] if abs(x[-1]) > 0 else x_peak
+    if not (abs(x_peak) > 0 and abs(x_end) > 0):
+        raise InputError("the displacement is zero throughout; nothing to fit")
+    if force[peak] * x_peak < 0.0:
+        raise InputError(
+            "force and displacement have opposite signs at the force peak; use one sign "
+            "convention for both (positive when the probe pushes in)",
+            column="force_N",
+            value=float(force[peak]),
+        )
+    k_end = max(force[-1] / x_end, 1e-12 * abs(force[peak] / x_peak))
+    k_peak = max(force[peak] / x_peak, 1.5 * k_end)
+    start = time[peak] - time[0]
+    duration = time[-1] - time[0]
+    shortest = max(start, 5.0 * float(np.min(np.diff(time))), 1e-3 * duration)
+    taus = np.geomspace(shortest, duration / 4.0, terms) if terms > 1 else [duration / 10.0]
+    branches = np.full(terms, (k_peak - k_end) / terms)
+    return np.concatenate([[k_end], branches, taus])
+
+
+def _prony_from_vector(p: np.ndarray) -> PronySeries:
+    terms = (p.size - 1) // 2
+    return PronySeries(p[0], tuple(p[1 : 1 + terms]), tuple(p[1 + terms :]))
+
+
+def _refusing(model: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
+    """Turn a model's parameter or integration errors into RejectStep for the engine."""
+
+    def guarded(p: np.ndarray) -> np.ndarray:
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                return model(p)
+        except (InputError, ConvergenceError, FloatingPointError) as exc:
+            raise RejectStep(str(exc)) from exc
+
+    return guarded
+
+
+def fit_relaxation(
+    time_s: np.ndarray,
+    displacement_m: np.ndarray,
+    force_N: np.ndarray,
+    *,
+    model: str = "sls",
+    terms: int = 2,
+    p0: Sequence[float] | None = None,
+    method: str = "lm",
+    objective: str = "absolute",
+    max_iterations: int = 200,
+    progress: bool = False,
+) -> FitResult:
+    """Fit a lumped viscoelastic model to one measured test (ramp-and-hold or any history).
+
+    The model is driven by the measured displacement history (linear between samples), so
+    the finite ramp of a real ramp-and-hold test is part of the fit.
+
+    Args:
+        time_s: Strictly increasing sample times, shape (n,).
+        displacement_m: Displacement, shape (n,).
+        force_N: Measured force, shape (n,).
+        model: "sls" (parameters instantaneous_stiffness_N_per_m,
+            equilibrium_stiffness_N_per_m, relaxation_time_s), "prony" (``terms`` terms:
+            equilibrium_stiffness_N_per_m, k1..kN_N_per_m, tau1..tauN_s), "wiechert"
+            (k0, k1, k2, b1, b2) or "wiechert-nonlinear" (K0, K1, K2, b1, b2, kappa0..2).
+        terms: Number of Prony terms (model "prony").
+        p0: Initial parameters in the order above; default from the data (the nonlinear
+            Wiechert model starts from its linear fit with kappa = 0). All parameters are
+            bounded below by 0 (kappa_j >= 0: progressive springs; a negative kappa makes
+            the spring force fall with stretch beyond 1/|kappa|).
+        method: "lm" or "salm" (:func:`warptissue.fit.least_squares`).
+        objective: "absolute" or "relative".
+        max_iterations: Iteration limit of the engine.
+        progress: Show a progress bar.
+
+    Returns:
+        The :class:`warptissue.fit.FitResult`; its extra attribute ``fitted_model`` holds the
+        fitted model object (:func:`model_from_result` builds it again from any result).
+
+    Raises:
+        InputError: Bad data, model name or initial parameters.
+    """
+    record = RelaxationRecord(time_s, displacement_m, force_N)
+    if model not in RELAXATION_MODELS:
+        raise InputError(f"model must be one of {RELAXATION_MODELS}", column="model", value=model)
+    if model == "prony" and int(terms) < 1:
+        raise InputError("terms must be >= 1", column="terms", value=terms)
+    names, units, start, build = _model_setup(record, model, int(terms), p0, method)
+    start = np.asarray(start, dtype=np.float64)
+    if start.size != len(names):
+        raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
+    is_kappa = np.array([n.startswith("kappa") for n in names])
+    start = np.where((start == 0.0) & ~is_kappa, 1e-300, start)
+
+    def predict(p: np.ndarray) -> np.ndarray:
+        return build(p).force_N(record.time_s, record.displacement_m)
+
+    result = fit_curve(
+        _refusing(predict),
+        start,
+        record.force_N,
+        objective=objective,
+        bounds=(0.0, np.inf),
+        method=method,
+        parameter_names=names,
+        parameter_units=units,
+        x_scale=_scales(names, start, record),
+        max_iterations=max_iterations,
+        progress=progress,
+    )
+    result.fitted_model = build(result.x)
+    return result
+
+
+def _scales(names: Sequence[str], start: np.ndarray, record: RelaxationRecord) -> np.ndarray:
+    depth = max(float(np.max(np.abs(record.displacement_m))), 1e-12)
+    return np.array(
+        [
+            max(abs(v), 1.0 / depth) if n.startswith("kappa") else max(abs(v), 1e-12)
+            for n, v in zip(names, start, strict=True)
+        ]
+    )
+
+
+def _model_setup(
+    record: RelaxationRecord, model: str, terms: int, p0: Sequence[float] | None, method: str
+) -> tuple[tuple[str, ...], tuple[str, ...], np.ndarray, Callable[[np.ndarray], object]]:
+    """Names, units, initial values and builder of each model of :func:`fit_relaxation`."""
+    if model == "sls":
+        names = (
+            "instantaneous_stiffness_N_per_m",
+            "equilibrium_stiffness_N_per_m",
+            "relaxation_time_s",
+        )
+        if p0 is None:
+            k_end, k_branch, tau = _initial_prony(record, 1)
+            p0 = (k_end + k_branch, k_end, tau)
+        return (
+            names,
+            ("N/m", "N/m", "s"),
+            np.asarray(p0),
+            lambda p: StandardLinearSolid(*p),
+        )
+    if model == "prony":
+        names = (
+            ("equilibrium_stiffness_N_per_m",)
+            + tuple(f"k{i + 1}_N_per_m" for i in range(terms))
+            + tuple(f"tau{i + 1}_s" for i in range(terms))
+        )
+        units = ("N/m",) * (terms + 1) + ("s",) * terms
+        start = np.asarray(p0 if p0 is not None else _initial_prony(record, terms))
+        return names, units, start, _prony_from_vector
+    if model == "wiechert":
+        if p0 is None:
+            k = _initial_prony(record, 2)
+            p0 = (k[0], k[1], k[2], k[1] * k[3], k[2] * k[4])
+        return _WIECHERT_NAMES, _WIECHERT_UNITS, np.asarray(p0), lambda p: LinearWiechert(*p)
+    if p0 is None:
+        linear = fit_relaxation(
+            record.time_s, record.displacement_m, record.force_N, model="wiechert", method=method
+        )
+        p0 = np.concatenate([linear.x, np.zeros(3)])
+    return _NONLINEAR_NAMES, _NONLINEAR_UNITS, np.asarray(p0), NonlinearWiechert.from_vector
+
+
+def model_from_result(result: FitResult) -> object:
+    """Rebuild the fitted model object from a :func:`fit_relaxation` result's names."""
+    names, x = result.parameter_names, np.asarray(result.x)
+    if names[0] == "instantaneous_stiffness_N_per_m":
+        return StandardLinearSolid(*x)
+    if names == _WIECHERT_NAMES:
+        return LinearWiechert(*x)
+    if names == _NONLINEAR_NAMES:
+        return NonlinearWiechert.from_vector(x)
+    if names[0] == "equilibrium_stiffness_N_per_m":
+        return _prony_from_vector(x)
+    raise InputError("not a relaxation-model fit", value=names)
+
+
+def fit_qlv(
+    time_s: np.ndarray,
+    displacement_m: np.ndarray,
+    force_N: np.ndarray,
+    *,
+    terms: int = 2,
+    p0: Sequence[float] | None = None,
+    substeps: int = 4,
+    method: str = "lm",
+    max_iterations: int = 200,
+) -> FitResult:
+    """Fit QLV with an exponential elastic response to a real ramp-and-hold record.
+
+    Model: F(t) = integral G(t - s) dF_e(x(s)), G(t) = 1 - sum g_i (1 - exp(-t/tau_i)) (seed
+    000 Eq. 2, sign fixed) and F_e(x) = A (exp(B x) - 1), both fitted at once on the measured
+    history, finite ramp included.
+
+    Args:
+        time_s, displacement_m, force_N: The record, shape (n,) each.
+        terms: Prony terms N.
+        p0: (A_N, B_per_m, g1..gN, tau1..tauN_s); default from the data.
+        substeps: Sub-intervals of the hereditary integral per sample interval.
+        method: "lm" or "salm".
+        max_iterations: Iteration limit of the engine.
+
+    Returns:
+        The FitResult (parameters A_N, B_per_m, g1.., tau1.._s); ``fitted_model`` is the
+        :class:`QuasiLinearViscoelastic`.
+    """
+    record = RelaxationRecord(time_s, displacement_m, force_N)
+    n = int(terms)
+    if n < 1:
+        raise InputError("terms must be >= 1", column="terms", value=terms)
+    if p0 is None:
+        prony = _initial_prony(record, n)
+        instantaneous = prony[0] + prony[1 : 1 + n].sum()
+        depth = float(np.max(np.abs(record.displacement_m)))
+        rate = 1.0 / depth
+        scale = instantaneous * depth / math.expm1(rate * depth) if depth > 0 else 1.0
+        p0 = np.concatenate([[scale, rate], prony[1 : 1 + n] / instantaneous, prony[1 + n :]])
+    start = np.asarray(p0, dtype=np.float64)
+    if start.size != 2 + 2 * n:
+        raise InputError(f"p0 needs {2 + 2 * n} values", value=list(start))
+    names = ("A_N", "B_per_m") + tuple(f"g{i + 1}" for i in range(n))
+    names += tuple(f"tau{i + 1}_s" for i in range(n))
+    units = ("N", "1/m") + ("",) * n + ("s",) * n
+
+    def build(p: np.ndarray) -> QuasiLinearViscoelastic:
+        return QuasiLinearViscoelastic(
+            tuple(p[2 : 2 + n]),
+            tuple(p[2 + n :]),
+            lambda x: exponential_elastic_force(x, scale_N=p[0], rate_per_m=p[1]),
+        )
+
+    def predict(p: np.ndarray) -> np.ndarray:
+        return build(p).force_N(record.time_s, record.displacement_m, substeps=substeps)
+
+    lower = np.concatenate([[1e-300, -np.inf], np.zeros(2 * n)])
+    upper = np.concatenate([[np.inf, np.inf], np.ones(n), np.full(n, np.inf)])
+    depth = max(float(np.max(np.abs(record.displacement_m))), 1e-12)
+    result = fit_curve(
+        _refusing(predict),
+        start,
+        record.force_N,
+        bounds=(lower, upper),
+        method=method,
+        parameter_names=names,
+        parameter_units=units,
+        x_scale=np.maximum(
+            np.abs(start), np.concatenate([[1e-12, 1 / depth], np.full(2 * n, 1e-3)])
+        ),
+        max_iterations=max_iterations,
+    )
+    result.fitted_model = build(result.x)
+    return result
+
+
+def fit_wiechert_joint(
+    records: Sequence[RelaxationRecord],
+    p0: Sequence[float],
+    *,
+    model: str = "nonlinear",
+    optimizer: str = "lm",
+    max_iterations: int = 200,
+    progress: bool = False,
+) -> FitResult:
+    """Fit one Wiechert model to several tests at once (seed 004, Section VI).
+
+    Args:
+        records: The tests, e.g. a near-step relaxation and a constant-rate ramp.
+        p0: Initial parameters: (k0, k1, k2, b1, b2) for "linear", (K0, K1, K2, b1, b2,
+            kappa0, kappa1, kappa2) for "nonlinear".
+        model: "linear" or "nonlinear".
+        optimizer: "lm" (through :func:`warptissue.fit.least_squares`; residuals of each
+            record divided by sqrt(its sample count), so that each test weighs as its mean
+            square error) or "nelder-mead" (``scipy.optimize.minimize`` on the seed's cost,
+            the sum of the RMS errors of the records; K_j, b_j in log scale). Every
+            parameter is bounded below by 0 (kappa_j >= 0, progressive springs).
+        max_iterations: Iteration limit (for Nelder-Mead: 400 per parameter at most).
+        progress: Progress bar (LM only).
+
+    Returns:
+        A FitResult with the stacked residuals (per-record RMS weighting as above), ``rmse``
+        of all samples, and the extra attributes ``fitted_model``, ``record_rmse_N`` (one RMSE
+        per record) and ``seed_cost_N`` (their sum). For Nelder-Mead the covariance is None.
+    """
+    if model not in ("linear", "nonlinear"):
+        raise InputError("model must be 'linear' or 'nonlinear'", column="model", value=model)
+    if optimizer not in ("lm", "nelder-mead"):
+        raise InputError(
+            "optimizer must be 'lm' or 'nelder-mead'", column="optimizer", value=optimizer
+        )
+    checked = [r if isinstance(r, RelaxationRecord) else RelaxationRecord(*r) for r in records]
+    if not checked:
+        raise InputError("at least one record is needed", column="records")
+    names, units, build = (
+        (_WIECHERT_NAMES, _WIECHERT_UNITS, lambda p: LinearWiechert(*p))
+        if model == "linear"
+        else (_NONLINEAR_NAMES, _NONLINEAR_UNITS, NonlinearWiechert.from_vector)
+    )
+    start = np.asarray(p0, dtype=np.float64)
+    if start.size != len(names):
+        raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
+    positive = np.array([not n.startswith("kappa") for n in names])
+    weights = [1.0 / math.sqrt(r.time_s.size) for r in checked]
+
+    def record_errors(p: np.ndarray) -> list[np.ndarray]:
+        body = build(p)
+        return [body.force_N(r.time_s, r.displacement_m) - r.force_N for r in checked]
+
+    def stacked(p: np.ndarray) -> np.ndarray:
+        return np.concatenate([w * e for w, e in zip(weights, record_errors(p), strict=True)])
+
+    guarded = _refusing(stacked)
+    depth = max(float(np.max(np.abs(r.displacement_m))) for r in checked)
+    scale = np.where(positive, np.abs(start), np.maximum(np.abs(start), 1.0 / depth))
+    if optimizer == "lm":
+        result = least_squares(
+            guarded,
+            start,
+            bounds=(0.0, np.inf),
+            x_scale=scale,
+            max_iterations=max_iterations,
+            progress=progress,
+            parameter_names=names,
+            parameter_units=units,
+        )
+    else:
+        result = _nelder_mead(
+            guarded, record_errors, start, positive, scale, names, units, max_iterations
+        )
+    errors = record_errors(result.x)
+    result.record_rmse_N = [float(np.sqrt(np.mean(e**2))) for e in errors]
+    result.seed_cost_N = float(sum(result.record_rmse_N))
+    all_force = np.concatenate([r.force_N for r in checked])
+    fitted = all_force + np.concatenate(errors)
+    result.fitted = fitted
+    result.rmse = rmse(all_force, fitted)
+    result.r_squared = r_squared(all_force, fitted)
+    result.fitted_model = build(result.x)
+    return result
+
+
+def _nelder_mead(
+    residual: Callable[[np.ndarray], np.ndarray],
+    record_errors: Callable[[np.ndarray], list[np.ndarray]],
+    start: np.ndarray,
+    positive: np.ndarray,
+    scale: np.ndarray,
+    names: tuple[str, ...],
+    units: tuple[str, ...],
+    max_iterations: int,
+) -> FitResult:
+    """Nelder-Mead on the seed's sum-of-RMSE cost, wrapped as a FitResult."""
+    from scipy.optimize import minimize
+
+    def to_parameters(z: np.ndarray) -> np.ndarray:
+        return np.where(positive, start * np.exp(z), start + z * scale)
+
+    def cost(z: np.ndarray) -> float:
+        try:
+            with np.errstate(over="raise", invalid="raise"):
+                errors = record_errors(to_parameters(z))
+        except (InputError, ConvergenceError, FloatingPointError):
+            return math.inf
+        return float(sum(np.sqrt(np.mean(e**2)) for e in errors))
+
+    def bounded_cost(z: np.ndarray) -> float:
+        return math.inf if np.any(to_parameters(z) < 0.0) else cost(z)
+
+    outcome = minimize(
+        bounded_cost,
+        np.zeros(start.size),
+        method="Nelder-Mead",
+        options={"maxiter": int(max_iterations), "xatol": 1e-6, "fatol": 1e-10, "adaptive": True},
+    )
+    x = to_parameters(outcome.x)
+    residuals = residual(x)
+    steps = 1e-6 * np.where(positive, np.abs(x), scale)
+    jacobian = np.column_stack(
+        [(residual(x + h * np.eye(x.size)[j]) - residuals) / h for j, h in enumerate(steps)]
+    )
+    status = 2 if outcome.success else 0
+    return FitResult(
+        x=x,
+        parameter_names=names,
+        parameter_units=units,
+        cost=0.5 * float(residuals @ residuals),
+        residuals=residuals,
+        jacobian=jacobian,
+        success=status > 0,
+        status=status,
+        message=f"Nelder-Mead: {outcome.message}",
+        iterations=int(outcome.nit),
+        nfev=int(outcome.nfev),
+        njev=1,
+        covariance=None,
+        standard_errors=None,
+        correlation=None,
+        r_squared=None,
+        rmse=float(np.sqrt(np.mean(residuals**2))),
+        method="nelder-mead",
+    )
