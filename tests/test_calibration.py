@@ -156,3 +156,15 @@ def test_cli_calibrate_sensor(tmp_path, capsys):
     capsys.readouterr()
     assert main(["calibrate-sensor", str(tmp_path / "missing.csv")]) == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_recorder_loads_the_calibration_file(tmp_path, sensor_fits):
+    """The acquisition recorder's loader applies our JSON exactly (CONVENTIONS.md)."""
+    recorder = pytest.importorskip("warptissue.acquisition.recorder")
+    _, test, fits = sensor_fits
+    for name in ("polynomial", "WCFM_SVM"):
+        path = fits[name].save(tmp_path / f"{name}.json")
+        loaded = recorder.load_force_calibration(path)
+        np.testing.assert_array_equal(
+            loaded.correct(test.signal_V), fits[name].correct(test.signal_V)
+        )
