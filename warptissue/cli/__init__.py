@@ -21,7 +21,7 @@ from warptissue.errors import WarpTissueError
 
 __all__ = ["build_parser", "main"]
 
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.simulate",)
 """Modules that add commands, in the order they appear in ``--help``."""
 
 
