@@ -96,7 +96,7 @@ def symmetric_eigen(a: wp.mat33d):
     for i in range(3):
         for j in range(3):
             scale = wp.max(scale, wp.abs(a[i, j]))
-    for sweep in range(12):
+    for _sweep in range(12):
         off = wp.abs(a[0, 1]) + wp.abs(a[0, 2]) + wp.abs(a[1, 2])
         if off <= wp.float64(1.0e-300) + wp.float64(1.0e-17) * scale:
             break
