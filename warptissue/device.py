@@ -9,7 +9,7 @@ from warptissue.errors import DeviceError
 __all__ = ["resolve_device"]
 
 
-def resolve_device(device: str | wp.context.Device | None = None) -> wp.context.Device:
+def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
     """Return a Warp device, initializing Warp on first use.
 
     Args:
@@ -23,7 +23,7 @@ def resolve_device(device: str | wp.context.Device | None = None) -> wp.context.
         DeviceError: The device does not exist on this machine.
     """
     wp.init()
-    if isinstance(device, wp.context.Device):
+    if isinstance(device, wp.Device):
         return device
     if device is None:
         return wp.get_device()
