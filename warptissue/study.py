@@ -70,6 +70,7 @@ class Specimen:
         element: ``"TET10"`` (quadratic) or ``"TET4"`` (linear) tetrahedra.
         size_near_m: Target element edge length under the probe, m.
         size_far_m: Target element edge length far from the probe, m.
+        growth: Size ratio of neighbouring cells along the grading, outward and downward.
     """
 
     shape: str
@@ -80,6 +81,7 @@ class Specimen:
     element: str
     size_near_m: float
     size_far_m: float
+    growth: float
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[specimen]`` table, with every default filled in."""
@@ -94,6 +96,7 @@ class Specimen:
             element=self.element,
             size_near_m=self.size_near_m,
             size_far_m=self.size_far_m,
+            growth=self.growth,
         )
         return table
 
@@ -398,6 +401,9 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
             "resolved",
             size_near_m,
         )
+    growth = table.number("growth", default=1.2)
+    if growth < 1.0:
+        raise table.error("growth", "must be at least 1", growth)
     table.finish()
     return Specimen(
         shape=shape,
@@ -408,6 +414,7 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
         element=element,
         size_near_m=size_near_m,
         size_far_m=size_far_m,
+        growth=growth,
     )
 
 
