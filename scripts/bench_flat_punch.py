@@ -45,8 +45,14 @@ BULK_MODULUS_PA = 1000.0 * SHEAR_MODULUS_PA
 FINAL_DEPTH_M = 0.5 * PROBE_RADIUS_M
 STEP_COUNT = 20
 NEWTON_TOLERANCE = 1.0e-8
-SIZE_TARGETS = {"10k": 10_000, "20k": 20_000, "50k": 50_000, "100k": 100_000, "300k": 300_000,
-                "1m": 1_000_000}
+SIZE_TARGETS = {
+    "10k": 10_000,
+    "20k": 20_000,
+    "50k": 50_000,
+    "100k": 100_000,
+    "300k": 300_000,
+    "1m": 1_000_000,
+}
 
 
 @dataclass
@@ -129,13 +135,19 @@ def quarter_block_hex_mesh(size_near_m: float, size_far_m: float) -> tuple[np.nd
     core_points = np.column_stack([core_x.ravel(), core_y.ravel()])
     index = np.arange((n_core + 1) ** 2).reshape(n_core + 1, n_core + 1)
     core_quads = np.column_stack(
-        [index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(),
-         index[:-1, 1:].ravel()]
+        [
+            index[:-1, :-1].ravel(),
+            index[1:, :-1].ravel(),
+            index[1:, 1:].ravel(),
+            index[:-1, 1:].ravel(),
+        ]
     )
     # Rays through the core's outer edge, counter-clockwise from the x axis to the y axis.
     edge = np.concatenate(
-        [np.column_stack([np.full(n_core + 1, core), grid]),
-         np.column_stack([grid[::-1][1:], np.full(n_core, core)])]
+        [
+            np.column_stack([np.full(n_core + 1, core), grid]),
+            np.column_stack([grid[::-1][1:], np.full(n_core, core)]),
+        ]
     )
     unit = edge / np.linalg.norm(edge, axis=1, keepdims=True)
     inner_count = max(2, math.ceil((a - core) / size_near_m))
@@ -144,15 +156,21 @@ def quarter_block_hex_mesh(size_near_m: float, size_far_m: float) -> tuple[np.nd
     on_circle = a * unit
     on_side = edge * (HALF_WIDTH_M / core)
     ring = np.concatenate(
-        [edge[:, None] + inner_t[None, :, None] * (on_circle - edge)[:, None],
-         on_circle[:, None] + outer_levels[None, 1:, None] * (on_side - on_circle)[:, None]],
+        [
+            edge[:, None] + inner_t[None, :, None] * (on_circle - edge)[:, None],
+            on_circle[:, None] + outer_levels[None, 1:, None] * (on_side - on_circle)[:, None],
+        ],
         axis=1,
     )
     rays, levels = ring.shape[:2]
     ring_index = len(core_points) + np.arange(rays * levels).reshape(rays, levels)
     ring_quads = np.column_stack(
-        [ring_index[:-1, :-1].ravel(), ring_index[:-1, 1:].ravel(), ring_index[1:, 1:].ravel(),
-         ring_index[1:, :-1].ravel()]
+        [
+            ring_index[:-1, :-1].ravel(),
+            ring_index[:-1, 1:].ravel(),
+            ring_index[1:, 1:].ravel(),
+            ring_index[1:, :-1].ravel(),
+        ]
     )
     plan = np.concatenate([core_points, ring.reshape(-1, 2)])
     quads = np.concatenate([core_quads, ring_quads])
@@ -163,14 +181,13 @@ def quarter_block_hex_mesh(size_near_m: float, size_far_m: float) -> tuple[np.nd
     quads = inverse.reshape(-1)[quads]
     z = THICKNESS_M - graded_levels(THICKNESS_M, size_near_m, size_far_m)[::-1]
     layer = len(plan)
-    points = np.column_stack(
-        [np.tile(plan, (len(z), 1)), np.repeat(z, layer)]
-    )
+    points = np.column_stack([np.tile(plan, (len(z), 1)), np.repeat(z, layer)])
     bottom = quads[None] + layer * np.arange(len(z) - 1)[:, None, None]
     hexahedra = np.concatenate([bottom, bottom + layer], axis=2).reshape(-1, 8)
     corners = points[hexahedra]
     volume_sign = np.einsum(
-        "ij,ij->i", corners[:, 1] - corners[:, 0],
+        "ij,ij->i",
+        corners[:, 1] - corners[:, 0],
         np.cross(corners[:, 3] - corners[:, 0], corners[:, 4] - corners[:, 0]),
     )
     if np.any(volume_sign <= 0):
@@ -204,9 +221,7 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
     )
     x, y, z = points.T
     tolerance = 1e-9 * PROBE_RADIUS_M
-    probe = (np.abs(z - THICKNESS_M) < tolerance) & (
-        np.hypot(x, y) <= PROBE_RADIUS_M + tolerance
-    )
+    probe = (np.abs(z - THICKNESS_M) < tolerance) & (np.hypot(x, y) <= PROBE_RADIUS_M + tolerance)
     boundaries = {
         "symmetry_x": fem.Boundary(displacement[0], mask=np.abs(x) < tolerance, skip=(0, 1, 1)),
         "symmetry_y": fem.Boundary(displacement[0], mask=np.abs(y) < tolerance, skip=(1, 0, 1)),
@@ -230,9 +245,16 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
     for depth in depths_m():
         boundaries["probe_z"].update(-depth)
         ext0 = fem.dof.apply(displacement, boundaries, dof0)
-        result = fem.newtonrhapson(
-            items=[solid], dof1=dof1, dof0=dof0, ext0=ext0, solver=solver,
-            tol=NEWTON_TOLERANCE, check=relative_check, verbose=0, maxiter=25,
+        result = fem.newtonraphson(
+            items=[solid],
+            dof1=dof1,
+            dof0=dof0,
+            ext0=ext0,
+            solver=solver,
+            tol=NEWTON_TOLERANCE,
+            check=relative_check,
+            verbose=0,
+            maxiter=25,
         )
         newton += result.iterations
         # The residual at the prescribed probe dofs is the force the probe applies, along -z;
@@ -262,3 +284,264 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
         force_N=forces,
         linear_solver=solver_name,
     )
+
+
+# --------------------------------------------------------------------------- warptissue
+
+
+def warptissue_mesh(target_tets: int, element: str = "TET10") -> tuple[Any, float]:
+    """An indentation-block mesh with about ``target_tets`` tets, and its near size."""
+    from warptissue.mesh import indentation_block
+
+    size_near_m = PROBE_RADIUS_M / 4.0
+    for _ in range(4):
+        mesh = indentation_block(
+            width_m=2.0 * HALF_WIDTH_M,
+            thickness_m=THICKNESS_M,
+            probe_radius_m=PROBE_RADIUS_M,
+            quarter=True,
+            element=element,
+            size_near_m=size_near_m,
+            size_far_m=min(10.0 * size_near_m, 0.25 * THICKNESS_M),
+        )
+        ratio = mesh.tet_count / target_tets
+        if abs(ratio - 1.0) < 0.15:
+            break
+        size_near_m *= ratio ** (1.0 / 3.0)
+    return mesh, size_near_m
+
+
+def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
+    """warptissue TET10 mixed run of the benchmark on one mesh."""
+    import warp as wp
+
+    from warptissue.device import resolve_device
+    from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
+    from warptissue.materials import NeoHookean
+
+    warp_device = resolve_device(device)
+    started = time.perf_counter()
+    problem = IndentationProblem(
+        mesh,
+        NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA, bulk_modulus_Pa=BULK_MODULUS_PA),
+        FlatPunch(PROBE_RADIUS_M, contact="bonded"),
+        base="fixed",
+        symmetry_planes=("symmetry_x", "symmetry_y"),
+        formulation="mixed",
+    )
+    setup_s = time.perf_counter() - started
+    started = time.perf_counter()
+    result = simulate_indentation(
+        problem, depths_m(), device=warp_device, progress=False, tolerance=NEWTON_TOLERANCE
+    )
+    wp.synchronize_device(warp_device)
+    solve_s = time.perf_counter() - started
+    newton = int(np.sum(result.newton_iterations))
+    peak_gpu = None
+    if warp_device.is_cuda:
+        peak_gpu = wp.get_mempool_used_mem_high(warp_device) / 2**20
+    forces = [float(f) for f in result.reaction_force_N]
+    return RunRecord(
+        code="warptissue",
+        device=str(warp_device),
+        element=f"{mesh.element_type} mixed",
+        cells=mesh.tet_count,
+        nodes=mesh.node_count,
+        dofs=3 * mesh.node_count,
+        size_near_m=size_near_m,
+        steps_converged=len(forces),
+        completed=bool(result.completed),
+        newton_iterations=newton,
+        linear_iterations=int(np.sum(result.linear_iterations)),
+        setup_s=setup_s,
+        solve_s=solve_s,
+        seconds_per_step=solve_s / max(1, len(forces)),
+        seconds_per_newton_iteration=solve_s / max(1, newton),
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=peak_gpu,
+        final_depth_m=float(result.depths_m[-1]) if forces else 0.0,
+        final_force_N=forces[-1] if forces else float("nan"),
+        force_N=forces,
+        linear_solver=str(getattr(result, "linear_solver", "")),
+    )
+
+
+# --------------------------------------------------------------------------- accuracy
+
+
+def richardson(cells: list[int], forces: list[float]) -> dict[str, float] | None:
+    """Extrapolate F(h) = F* + C h^p from the three finest runs (h = cells^(-1/3)).
+
+    Returns:
+        ``{"force_N", "order"}``, or None when the three forces do not converge monotonically.
+    """
+    if len(cells) < 3:
+        return None
+    order_by_size = np.argsort(cells)[-3:]
+    h = np.asarray(cells, dtype=float)[order_by_size] ** (-1.0 / 3.0)
+    f = np.asarray(forces, dtype=float)[order_by_size]
+    d12, d23 = f[0] - f[1], f[1] - f[2]
+    if d12 * d23 <= 0 or abs(d23) >= abs(d12):
+        return None
+
+    def mismatch(p: float) -> float:
+        return (h[0] ** p - h[1] ** p) / (h[1] ** p - h[2] ** p) - d12 / d23
+
+    low, high = 0.2, 8.0
+    if mismatch(low) * mismatch(high) > 0:
+        return None
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        if mismatch(low) * mismatch(middle) <= 0:
+            high = middle
+        else:
+            low = middle
+    p = 0.5 * (low + high)
+    c = d12 / (h[0] ** p - h[1] ** p)
+    return {"force_N": float(f[2] - c * h[2] ** p), "order": float(p)}
+
+
+def time_at_error(records: list[RunRecord], target: float) -> float | None:
+    """Solve seconds to reach a relative force error, interpolated log-log between runs."""
+    points = sorted((r.relative_error, r.solve_s) for r in records if r.relative_error is not None)
+    for (e_low, t_low), (e_high, t_high) in zip(points, points[1:], strict=False):
+        if e_low <= target <= e_high and e_low > 0:
+            w = math.log(target / e_low) / math.log(e_high / e_low) if e_high > e_low else 0.0
+            return float(math.exp(math.log(t_low) + w * (math.log(t_high) - math.log(t_low))))
+    return None
+
+
+# --------------------------------------------------------------------------- main
+
+
+def machine_description() -> dict[str, Any]:
+    import os
+
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "cpu": model,
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+
+
+def print_table(records: list[RunRecord]) -> None:
+    header = (
+        f"{'code':<10} {'device':<7} {'cells':>8} {'dofs':>9} {'newton':>6} {'linear':>7} "
+        f"{'s/step':>8} {'total_s':>8} {'s/newton':>8} {'RSS_MiB':>8} {'GPU_MiB':>8} "
+        f"{'F_final_N':>11} {'error':>7}"
+    )
+    print(header)
+    for r in records:
+        gpu = f"{r.peak_gpu_MiB:8.0f}" if r.peak_gpu_MiB is not None else f"{'-':>8}"
+        linear = f"{r.linear_iterations:7d}" if r.linear_iterations is not None else f"{'-':>7}"
+        error = f"{100 * r.relative_error:6.2f}%" if r.relative_error is not None else f"{'-':>7}"
+        print(
+            f"{r.code:<10} {r.device:<7} {r.cells:8d} {r.dofs:9d} {r.newton_iterations:6d} "
+            f"{linear} {r.seconds_per_step:8.3f} {r.solve_s:8.2f} "
+            f"{r.seconds_per_newton_iteration:8.3f} {r.peak_host_rss_MiB:8.0f} {gpu} "
+            f"{r.final_force_N:11.5e} {error}"
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default="cpu", help="warptissue device: cpu, cuda, cuda:N")
+    parser.add_argument(
+        "--sizes",
+        default="10k,20k",
+        help=f"warptissue mesh sizes, comma separated, from {list(SIZE_TARGETS)} or a tet "
+        "count (empty: skip warptissue)",
+    )
+    parser.add_argument(
+        "--felupe-levels",
+        default="",
+        help="FElupe mesh levels, comma separated integers; level L has size_near = "
+        "a / (2 * 1.5^L) (empty: skip FElupe)",
+    )
+    parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
+    args = parser.parse_args(argv)
+
+    records: list[RunRecord] = []
+    notes: dict[str, Any] = {}
+    sizes = [s.strip().lower() for s in args.sizes.split(",") if s.strip()]
+    if sizes:
+        import warp as wp
+
+        wp.config.quiet = True
+        started = time.perf_counter()
+        warm_mesh, warm_size = warptissue_mesh(500)
+        run_warptissue(warm_mesh, warm_size, args.device)
+        notes["warptissue_warmup_s"] = time.perf_counter() - started
+        for size in sizes:
+            target = SIZE_TARGETS.get(size) or int(float(size))
+            mesh, size_near_m = warptissue_mesh(target)
+            record = run_warptissue(mesh, size_near_m, args.device)
+            records.append(record)
+            print_table([record])
+            sys.stdout.flush()
+    for level in [int(s) for s in args.felupe_levels.split(",") if s.strip()]:
+        size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
+        record = run_felupe(size_near_m, 10.0 * size_near_m)
+        records.append(record)
+        print_table([record])
+        sys.stdout.flush()
+
+    references = {}
+    for code in ("warptissue", "felupe"):
+        runs = [r for r in records if r.code == code and r.completed]
+        extrapolated = richardson([r.cells for r in runs], [r.final_force_N for r in runs])
+        if extrapolated is not None:
+            references[code] = extrapolated
+    reference = references.get("warptissue") or references.get("felupe")
+    if reference is not None:
+        for r in records:
+            r.relative_error = abs(r.final_force_N - reference["force_N"]) / reference["force_N"]
+    equal_accuracy = {}
+    for target in (0.05, 0.02, 0.01, 0.005):
+        times = {
+            code: time_at_error([r for r in records if r.code == code], target)
+            for code in ("warptissue", "felupe")
+        }
+        equal_accuracy[f"{target:g}"] = times
+    print()
+    print_table(records)
+    print(f"references (Richardson): {json.dumps(references)}")
+    print(f"Sneddon half-space force at the final depth: {sneddon_force_N(FINAL_DEPTH_M):.5e} N")
+    print(f"solve seconds at equal relative force error: {json.dumps(equal_accuracy)}")
+    report = {
+        "problem": {
+            "probe_radius_m": PROBE_RADIUS_M,
+            "half_width_m": HALF_WIDTH_M,
+            "thickness_m": THICKNESS_M,
+            "shear_modulus_Pa": SHEAR_MODULUS_PA,
+            "bulk_modulus_Pa": BULK_MODULUS_PA,
+            "final_depth_m": FINAL_DEPTH_M,
+            "steps": STEP_COUNT,
+            "newton_tolerance": NEWTON_TOLERANCE,
+            "sneddon_force_N": sneddon_force_N(FINAL_DEPTH_M),
+        },
+        "machine": machine_description(),
+        "runs": [asdict(r) for r in records],
+        "references": references,
+        "reference_used": reference,
+        "solve_seconds_at_equal_error": equal_accuracy,
+        "notes": notes,
+    }
+    if args.out is not None:
+        from warptissue.io import write_json
+
+        write_json(args.out, report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
