@@ -1,20 +1,53 @@
 """Tetrahedral meshes: the container, generators, checks and file I/O."""
 
-from warptissue.mesh.core import TET4_EDGES, TetMesh, signed_volumes, to_tet10
+from warptissue.mesh.core import (
+    TET4_EDGES,
+    TET4_FACES,
+    TetMesh,
+    boundary_faces,
+    signed_volumes,
+    to_tet10,
+)
 from warptissue.mesh.generators import (
     HEX_TO_FIVE_TETS,
     HEX_TO_SIX_TETS,
     block_mesh,
+    extrude_triangles,
     graded_coordinates,
+    graded_spacing,
+    indentation_block,
+    indentation_disc,
+)
+from warptissue.mesh.quality import (
+    TET10_SWAP_1_2,
+    MeshQuality,
+    check_mesh,
+    dihedral_angles,
+    fix_orientation,
+    radius_ratios,
+    tet10_jacobian_determinants,
 )
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
+    "MeshQuality",
+    "TET10_SWAP_1_2",
     "TET4_EDGES",
+    "TET4_FACES",
     "TetMesh",
     "block_mesh",
+    "boundary_faces",
+    "check_mesh",
+    "dihedral_angles",
+    "fix_orientation",
+    "extrude_triangles",
     "graded_coordinates",
+    "graded_spacing",
+    "indentation_block",
+    "indentation_disc",
+    "radius_ratios",
     "signed_volumes",
+    "tet10_jacobian_determinants",
     "to_tet10",
 ]

@@ -8,10 +8,21 @@ import numpy as np
 
 from warptissue.errors import MeshError
 
-__all__ = ["TET4_EDGES", "TetMesh", "signed_volumes", "to_tet10"]
+__all__ = [
+    "TET4_EDGES",
+    "TET4_FACES",
+    "TetMesh",
+    "boundary_faces",
+    "signed_volumes",
+    "to_tet10",
+]
 
 TET4_EDGES: np.ndarray = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]], dtype=np.int32)
 """Corner pairs of the six edges, in the order of TET10 mid-edge nodes 4..9 (VTK/meshio order)."""
+
+TET4_FACES: np.ndarray = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int32)
+"""Corner triples of the four faces (face i is opposite corner i), ordered so that the normal
+points out of a positively oriented tet."""
 
 
 @dataclass
@@ -142,8 +153,7 @@ def to_tet10(mesh: TetMesh) -> TetMesh:
     if mesh.nodes_per_tet == 10:
         return mesh
     corners = mesh.tets
-    edges = np.sort(corners[:, TET4_EDGES].reshape(-1, 2), axis=1)
-    unique_edges, inverse = np.unique(edges, axis=0, return_inverse=True)
+    unique_edges, inverse = _unique_sorted_rows(corners[:, TET4_EDGES].reshape(-1, 2))
     midpoints = 0.5 * (mesh.points[unique_edges[:, 0]] + mesh.points[unique_edges[:, 1]])
     mid_index = (mesh.node_count + inverse.reshape(-1, 6)).astype(np.int32)
     node_sets = {}
@@ -159,3 +169,51 @@ def to_tet10(mesh: TetMesh) -> TetMesh:
         face_sets=dict(mesh.face_sets),
         tet_regions=mesh.tet_regions.copy(),
     )
+
+
+def boundary_faces(tets: np.ndarray) -> np.ndarray:
+    """Corner triangles that belong to exactly one tet, oriented with outward normals.
+
+    Args:
+        tets: Positively oriented connectivity, shape (M, 4) or (M, 10) (corners are used).
+
+    Returns:
+        Boundary triangles, shape (k, 3), int32, in the order of the tets they come from.
+    """
+    faces = np.asarray(tets)[:, :4][:, TET4_FACES].reshape(-1, 3)
+    _, inverse, counts = _unique_sorted_rows(faces, return_counts=True)
+    return faces[counts[inverse] == 1].astype(np.int32)
+
+
+def _unique_sorted_rows(rows: np.ndarray, *, return_counts: bool = False) -> tuple[np.ndarray, ...]:
+    """Unique rows of small non-negative integers, ignoring the order within a row.
+
+    Rows are sorted and packed into one int64 key when that cannot overflow, which is several
+    times faster than ``np.unique(axis=0)`` for the millions of edges and faces of large meshes.
+
+    Args:
+        rows: Integer array, shape (k, w).
+        return_counts: Also return how often each unique row occurs.
+
+    Returns:
+        ``(unique_rows (u, w), inverse (k,))`` and, when asked, ``counts (u,)``.
+    """
+    key_rows = np.sort(np.asarray(rows, dtype=np.int64), axis=1)
+    width = key_rows.shape[1]
+    base = int(key_rows.max()) + 1 if key_rows.size else 1
+    if base**width < 2**62:
+        key = np.zeros(len(key_rows), dtype=np.int64)
+        for column in range(width):
+            key = key * base + key_rows[:, column]
+        _, first, inverse, counts = np.unique(
+            key, return_index=True, return_inverse=True, return_counts=True
+        )
+        unique_rows = key_rows[first]
+    else:
+        unique_rows, inverse, counts = np.unique(
+            key_rows, axis=0, return_inverse=True, return_counts=True
+        )
+    inverse = inverse.reshape(-1)
+    if return_counts:
+        return unique_rows, inverse, counts
+    return unique_rows, inverse

@@ -4,10 +4,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from warptissue.errors import MeshError
-from warptissue.mesh.core import TetMesh, signed_volumes
+from warptissue.errors import InputError, MeshError
+from warptissue.mesh.core import TET4_EDGES, TetMesh, boundary_faces, signed_volumes, to_tet10
 
-__all__ = ["HEX_TO_FIVE_TETS", "HEX_TO_SIX_TETS", "block_mesh", "graded_coordinates"]
+__all__ = [
+    "HEX_TO_FIVE_TETS",
+    "HEX_TO_SIX_TETS",
+    "block_mesh",
+    "extrude_triangles",
+    "graded_coordinates",
+    "graded_spacing",
+    "indentation_block",
+    "indentation_disc",
+]
 
 # Hexahedron corners: 0 (0,0,0), 1 (1,0,0), 2 (1,1,0), 3 (0,1,0), 4 (0,0,1), 5 (1,0,1),
 # 6 (1,1,1), 7 (0,1,1).
@@ -115,7 +124,7 @@ def block_mesh(
     tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
 
     node_sets, face_sets = {}, {}
-    faces = _boundary_faces(tets)
+    faces = boundary_faces(tets)
     for axis, label in enumerate("xyz"):
         for side, value in (("min", axes[axis][0]), ("max", axes[axis][-1])):
             on_plane = np.isclose(
@@ -128,10 +137,430 @@ def block_mesh(
     )
 
 
-def _boundary_faces(tets: np.ndarray) -> np.ndarray:
-    """Triangles that belong to exactly one tet, oriented with outward normals."""
-    local = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
-    faces = tets[:, local].reshape(-1, 3)
-    key = np.sort(faces, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    return faces[counts[inverse.ravel()] == 1].astype(np.int32)
+def graded_spacing(
+    length_m: float, first_m: float, largest_m: float, *, growth: float = 1.2
+) -> np.ndarray:
+    """Coordinates from 0 to ``length_m`` whose intervals grow geometrically up to a cap.
+
+    The first interval is about ``first_m``; each next one is ``growth`` times the previous
+    until it reaches ``largest_m``, after which intervals stay at ``largest_m``. The interval
+    count is the one whose sizes, scaled uniformly to fit ``length_m`` exactly, are closest to
+    the requested ones.
+
+    Args:
+        length_m: Total length, metres.
+        first_m: Target size of the first interval, metres.
+        largest_m: Largest interval size, metres (>= ``first_m``).
+        growth: Ratio of neighbouring intervals (>= 1).
+
+    Returns:
+        Increasing coordinates, shape (count + 1,), float64, from 0 to ``length_m``.
+    """
+    _require_positive(length_m=length_m, first_m=first_m, largest_m=largest_m)
+    if largest_m < first_m:
+        raise InputError(
+            f"largest_m ({largest_m} m) must not be smaller than first_m ({first_m} m)",
+            column="largest_m",
+            value=largest_m,
+        )
+    if not growth >= 1.0:
+        raise InputError("growth must be >= 1", column="growth", value=growth)
+    ramp_count = 1 if growth == 1.0 else int(np.ceil(np.log(largest_m / first_m) / np.log(growth)))
+    ramp = np.minimum(first_m * growth ** np.arange(max(ramp_count, 1)), largest_m)
+    ramp_total = np.cumsum(ramp)
+    if ramp_total[-1] >= length_m:
+        sizes = ramp[: int(np.searchsorted(ramp_total, length_m)) + 1]
+    else:
+        extra = int(np.ceil((length_m - ramp_total[-1]) / largest_m))
+        sizes = np.concatenate([ramp, np.full(extra, largest_m)])
+    return _fit_sizes(sizes, length_m)
+
+
+def _fit_sizes(sizes: np.ndarray, length_m: float) -> np.ndarray:
+    """Coordinates of intervals ``sizes`` (whose sum reaches ``length_m`` only with the last
+    one), dropping the last interval when that fits better, scaled to end at ``length_m``."""
+    if len(sizes) > 1 and abs(sizes[:-1].sum() - length_m) < abs(sizes.sum() - length_m):
+        sizes = sizes[:-1]
+    coordinates = np.concatenate([[0.0], np.cumsum(sizes)])
+    coordinates *= length_m / coordinates[-1]
+    coordinates[-1] = length_m
+    return coordinates
+
+
+def _radial_spacing(
+    inner_m: float,
+    outer_m: float,
+    first_m: float,
+    largest_m: float,
+    *,
+    growth: float,
+    angle_step: float,
+) -> np.ndarray:
+    """Radial offsets from ``inner_m`` to ``outer_m`` for rings with a fixed angular step.
+
+    Like :func:`graded_spacing`, but the radial size at radius r also stays below
+    ``_RADIAL_ASPECT * r * angle_step`` (when that exceeds ``first_m``), so cells far out stay
+    close to square instead of long and thin.
+    """
+    sizes = []
+    radius, size = inner_m, first_m
+    while radius < outer_m:
+        sizes.append(size)
+        radius += size
+        cap = max(first_m, _RADIAL_ASPECT * radius * angle_step)
+        size = max(size, min(size * growth, largest_m, cap))
+    return _fit_sizes(np.array(sizes), outer_m - inner_m)
+
+
+def extrude_triangles(
+    points_2d_m: np.ndarray, triangles: np.ndarray, z_m: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Extrude a planar triangulation through layers and split each prism into three tets.
+
+    Every vertical quadrilateral face is cut by the diagonal through its node of smallest
+    global index, so neighbouring prisms always agree and the mesh is conforming for any
+    triangulation and node numbering.
+
+    Args:
+        points_2d_m: Planar nodes, shape (P, 2), metres.
+        triangles: Triangles (either orientation), shape (T, 3), int.
+        z_m: Increasing layer heights, shape (L + 1,), metres.
+
+    Returns:
+        ``(points (P * (L + 1), 3), tets (3 * T * L, 4))``: node ``p`` of layer ``k`` has index
+        ``p + P * k``; tets are positively oriented and ordered layer by layer.
+    """
+    points_2d_m = np.asarray(points_2d_m, dtype=np.float64)
+    z_m = np.asarray(z_m, dtype=np.float64)
+    plane_count, layer_count = len(points_2d_m), len(z_m) - 1
+    a, b, c = np.sort(np.asarray(triangles, dtype=np.int64), axis=1).T
+    prism = np.stack(
+        [
+            [a, b, c, c + plane_count],
+            [a, b, c + plane_count, b + plane_count],
+            [a, b + plane_count, c + plane_count, a + plane_count],
+        ],
+        axis=1,
+    ).transpose(2, 1, 0)  # (T, 3, 4)
+    layers = plane_count * np.arange(layer_count, dtype=np.int64)
+    tets = (prism[None, :, :, :] + layers[:, None, None, None]).reshape(-1, 4).astype(np.int32)
+    points = np.column_stack(
+        [np.tile(points_2d_m, (layer_count + 1, 1)), np.repeat(z_m, plane_count)]
+    )
+    negative = signed_volumes(points, tets) < 0
+    tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
+    return points, tets
+
+
+def indentation_block(
+    *,
+    width_m: float,
+    thickness_m: float,
+    probe_radius_m: float,
+    quarter: bool = True,
+    element: str = "TET10",
+    size_near_m: float,
+    size_far_m: float,
+    growth: float = 1.2,
+) -> TetMesh:
+    """A square block for indentation, graded toward the probe at its top centre.
+
+    The block spans ``|x|, |y| <= width_m / 2`` (``x, y >= 0`` when ``quarter``) and
+    ``0 <= z <= thickness_m``; the probe indents the top face at ``x = y = 0``. In the plane
+    the mesh is an O-grid: a square of cells under the probe's centre, mapped rings out to a
+    ring of nodes exactly at ``r = probe_radius_m`` (so the punch edge is resolved), then
+    radial rays out to the block's sides. Sizes start at ``size_near_m`` under and around the
+    probe and grow by ``growth`` per cell outward and downward, up to ``size_far_m``. Layers
+    of triangular prisms are split into three tets each (see :func:`extrude_triangles`).
+
+    Node and face sets: ``top`` (z = thickness), ``bottom`` (z = 0), ``side`` (the lateral
+    outer faces), ``symmetry_x`` (x = 0) and ``symmetry_y`` (y = 0) when ``quarter``, and
+    ``probe`` (top nodes, and top faces, with r <= probe radius).
+
+    Args:
+        width_m: Edge length of the full square block, metres.
+        thickness_m: Height, metres.
+        probe_radius_m: Flat-punch radius, metres (< width_m / 2).
+        quarter: Mesh the quarter x, y >= 0 (two symmetry planes) instead of the full block.
+        element: ``"TET10"`` (straight-sided, mid-edge nodes) or ``"TET4"``.
+        size_near_m: Element size under the probe and at its edge, metres.
+        size_far_m: Largest element size, far from the probe, metres.
+        growth: Size ratio of neighbouring cells along the grading (>= 1).
+
+    Returns:
+        A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
+        grows roughly as the inverse cube of the scale.
+    """
+    _require_positive(width_m=width_m, thickness_m=thickness_m)
+    return _indentation_specimen(
+        outer="square",
+        half_extent_m=0.5 * width_m,
+        thickness_m=thickness_m,
+        probe_radius_m=probe_radius_m,
+        quarter=quarter,
+        element=element,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+        curved_side=False,
+    )
+
+
+def indentation_disc(
+    *,
+    radius_m: float,
+    thickness_m: float,
+    probe_radius_m: float,
+    quarter: bool = True,
+    element: str = "TET10",
+    size_near_m: float,
+    size_far_m: float,
+    growth: float = 1.2,
+    curved_side: bool = False,
+) -> TetMesh:
+    """A cylindrical disc specimen for indentation, graded toward the probe at its top centre.
+
+    The disc spans ``r <= radius_m`` (the quarter ``x, y >= 0`` when ``quarter``) and
+    ``0 <= z <= thickness_m``. The layout, grading and node/face sets are those of
+    :func:`indentation_block`; ``side`` is the cylinder ``r = radius_m``.
+
+    Args:
+        radius_m: Specimen radius, metres.
+        thickness_m: Height, metres.
+        probe_radius_m: Flat-punch radius, metres (< radius_m).
+        quarter: Mesh the quarter x, y >= 0 instead of the full disc.
+        element: ``"TET10"`` or ``"TET4"``.
+        size_near_m: Element size under the probe and at its edge, metres.
+        size_far_m: Largest element size, metres.
+        growth: Size ratio of neighbouring cells along the grading (>= 1).
+        curved_side: For TET10 only: move the mid-edge nodes of the edges on the cylinder onto
+            it (curved, isoparametric side faces). By default every TET10 is straight-sided,
+            and the side is the inscribed polygonal prism.
+
+    Returns:
+        A positively oriented, conforming mesh.
+    """
+    _require_positive(radius_m=radius_m, thickness_m=thickness_m)
+    return _indentation_specimen(
+        outer="circle",
+        half_extent_m=radius_m,
+        thickness_m=thickness_m,
+        probe_radius_m=probe_radius_m,
+        quarter=quarter,
+        element=element,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+        curved_side=curved_side,
+    )
+
+
+def _require_positive(**values: float) -> None:
+    for name, value in values.items():
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(f"{name} must be a positive finite number", column=name, value=value)
+
+
+_INNER_SQUARE_FRACTION = 0.5
+"""Half-width of the O-grid's central square over the probe radius."""
+
+_RADIAL_ASPECT = 1.25
+"""Largest radial over tangential size of the O-grid's outer rings (on the x axis)."""
+
+
+def _indentation_specimen(
+    *,
+    outer: str,
+    half_extent_m: float,
+    thickness_m: float,
+    probe_radius_m: float,
+    quarter: bool,
+    element: str,
+    size_near_m: float,
+    size_far_m: float,
+    growth: float,
+    curved_side: bool,
+) -> TetMesh:
+    """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
+    _require_positive(probe_radius_m=probe_radius_m, size_near_m=size_near_m, size_far_m=size_far_m)
+    if element not in ("TET4", "TET10"):
+        raise InputError("element must be 'TET4' or 'TET10'", column="element", value=element)
+    if probe_radius_m >= half_extent_m:
+        raise InputError(
+            f"probe_radius_m must be smaller than the specimen's half-width ({half_extent_m} m)",
+            column="probe_radius_m",
+            value=probe_radius_m,
+        )
+    if size_far_m < size_near_m:
+        raise InputError(
+            f"size_far_m must not be smaller than size_near_m ({size_near_m} m)",
+            column="size_far_m",
+            value=size_far_m,
+        )
+    points_2d, triangles = _ogrid_quarter(
+        outer=outer,
+        half_extent_m=half_extent_m,
+        probe_radius_m=probe_radius_m,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+    )
+    if not quarter:
+        points_2d, triangles = _mirror_quarter(points_2d, triangles)
+    depth = graded_spacing(thickness_m, size_near_m, size_far_m, growth=growth)
+    z = thickness_m - depth[::-1]
+    z[0] = 0.0
+    points, tets = extrude_triangles(points_2d, triangles, z)
+
+    plane_count, layer_count = len(points_2d), len(z) - 1
+    radius_2d = np.hypot(points_2d[:, 0], points_2d[:, 1])
+    tolerance = 1e-9 * half_extent_m
+    on_top = np.zeros(len(points), dtype=bool)
+    on_top[plane_count * layer_count :] = True
+    on_bottom = np.zeros(len(points), dtype=bool)
+    on_bottom[:plane_count] = True
+    in_plane = {
+        "symmetry_x": points_2d[:, 0] == 0.0,
+        "symmetry_y": points_2d[:, 1] == 0.0,
+        "probe_disc": radius_2d <= probe_radius_m + tolerance,
+    }
+    if outer == "circle":
+        side_planes = [np.abs(radius_2d - half_extent_m) <= tolerance]
+    else:
+        side_planes = [
+            np.abs(np.abs(points_2d[:, axis]) - half_extent_m) <= tolerance for axis in (0, 1)
+        ]
+    columns = {name: np.tile(mask, layer_count + 1) for name, mask in in_plane.items()}
+    side_columns = [np.tile(mask, layer_count + 1) for mask in side_planes]
+    masks = {
+        "top": on_top,
+        "bottom": on_bottom,
+        "side": np.logical_or.reduce(side_columns),
+        "probe": on_top & columns["probe_disc"],
+    }
+    if quarter:
+        masks["symmetry_x"] = columns["symmetry_x"]
+        masks["symmetry_y"] = columns["symmetry_y"]
+    faces = boundary_faces(tets)
+    face_sets = {name: faces[mask[faces].all(axis=1)] for name, mask in masks.items()}
+    face_sets["side"] = np.concatenate([faces[m[faces].all(axis=1)] for m in side_columns])
+    node_sets = {name: np.flatnonzero(mask).astype(np.int32) for name, mask in masks.items()}
+    mesh = TetMesh(points=points, tets=tets, node_sets=node_sets, face_sets=face_sets)
+    if element == "TET4":
+        return mesh
+    mesh = to_tet10(mesh)
+    if curved_side and outer == "circle":
+        _project_midnodes_to_cylinder(mesh, masks["side"], half_extent_m)
+    return mesh
+
+
+def _ogrid_quarter(
+    *,
+    outer: str,
+    half_extent_m: float,
+    probe_radius_m: float,
+    size_near_m: float,
+    size_far_m: float,
+    growth: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The planar O-grid of the quarter x, y >= 0, split into triangles.
+
+    Returns:
+        ``(points (P, 2), triangles (T, 3))`` with counter-clockwise triangles. Nodes on the
+        axes have a coordinate of exactly 0; the ring nodes at the probe radius and the outer
+        boundary nodes lie on their curves to rounding.
+    """
+    a = probe_radius_m
+    n = max(2, int(np.ceil(0.25 * np.pi * a / size_near_m)))
+    c = _INNER_SQUARE_FRACTION * a
+    step = np.arange(n + 1) / n
+    # The central square: (n + 1)^2 nodes, (i, j) -> i + (n + 1) j.
+    square = np.column_stack([np.tile(c * step, n + 1), np.repeat(c * step, n + 1)])
+    square_index = np.arange((n + 1) ** 2).reshape(n + 1, n + 1).T  # [i, j]
+    # Its outer boundary in angular order: up the side x = c, then left along y = c.
+    t = np.arange(2 * n + 1)
+    boundary_i = np.where(t <= n, n, 2 * n - t)
+    boundary_j = np.where(t <= n, t, n)
+    boundary_index = square_index[boundary_i, boundary_j]
+    angle = t * (0.25 * np.pi / n)
+    direction = np.column_stack([np.cos(angle), np.sin(angle)])
+    direction[-1] = (0.0, 1.0)
+    # Rings from the square to the probe edge (uniform), then out to the outer boundary.
+    inner_count = max(1, int(round((a - c) / (0.25 * np.pi * a / n))))
+    if outer == "circle":
+        reach = np.full(len(t), half_extent_m)
+    else:
+        reach = half_extent_m / np.maximum(np.abs(direction[:, 0]), np.abs(direction[:, 1]))
+    outer_fraction = _radial_spacing(
+        a, half_extent_m, size_near_m, size_far_m, growth=growth, angle_step=angle[1]
+    )
+    outer_fraction = outer_fraction[1:] / outer_fraction[-1]
+    inner_fraction = np.arange(1, inner_count + 1) / inner_count
+    start = square[boundary_index]
+    arc = a * direction
+    inner_rings = start[None] + inner_fraction[:, None, None] * (arc - start)[None]
+    radius = a + outer_fraction[:, None] * (reach - a)[None, :]
+    outer_rings = radius[:, :, None] * direction[None]
+    rings = np.concatenate([inner_rings, outer_rings])  # (ring_count, 2n + 1, 2)
+    rings[:, 0, 1] = 0.0
+    rings[:, -1, 0] = 0.0
+    if outer == "square":
+        on_x_side = direction[:, 0] >= direction[:, 1]
+        rings[-1, on_x_side, 0] = half_extent_m
+        rings[-1, ~on_x_side, 1] = half_extent_m
+    ring_count = len(rings)
+    ring_index = len(square) + np.arange(ring_count * len(t)).reshape(ring_count, len(t))
+    ring_index = np.vstack([boundary_index[None], ring_index])  # [k, t], k = 0 is the square
+    points = np.vstack([square, rings.reshape(-1, 2)])
+
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    square_quads = np.stack(
+        [
+            square_index[ii, jj],
+            square_index[ii + 1, jj],
+            square_index[ii + 1, jj + 1],
+            square_index[ii, jj + 1],
+        ],
+        axis=-1,
+    ).reshape(-1, 4)
+    kk, tt = np.meshgrid(np.arange(ring_count), np.arange(2 * n), indexing="ij")
+    ring_quads = np.stack(
+        [
+            ring_index[kk, tt],
+            ring_index[kk + 1, tt],
+            ring_index[kk + 1, tt + 1],
+            ring_index[kk, tt + 1],
+        ],
+        axis=-1,
+    ).reshape(-1, 4)
+    return points, _split_quads(points, np.vstack([square_quads, ring_quads]))
+
+
+def _split_quads(points_2d: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """Split counter-clockwise convex quads along their shorter diagonal into two triangles."""
+    p = points_2d[quads]
+    diagonal_02 = np.linalg.norm(p[:, 2] - p[:, 0], axis=1)
+    diagonal_13 = np.linalg.norm(p[:, 3] - p[:, 1], axis=1)
+    use_02 = (diagonal_02 <= diagonal_13)[:, None]
+    first = np.where(use_02, quads[:, [0, 1, 2]], quads[:, [0, 1, 3]])
+    second = np.where(use_02, quads[:, [0, 2, 3]], quads[:, [1, 2, 3]])
+    return np.vstack([first, second]).astype(np.int64)
+
+
+def _mirror_quarter(points_2d: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reflect a quarter (x, y >= 0) triangulation into the full plane, merging axis nodes."""
+    signs = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
+    copies = (points_2d[None] * signs[:, None]) + 0.0  # + 0.0 turns -0.0 into 0.0
+    merged, inverse = np.unique(copies.reshape(-1, 2), axis=0, return_inverse=True)
+    inverse = inverse.reshape(4, -1)
+    full = np.vstack([inverse[q][triangles] for q in range(4)])
+    return merged, full
+
+
+def _project_midnodes_to_cylinder(mesh: TetMesh, side: np.ndarray, radius_m: float) -> None:
+    """Move mid-edge nodes of edges with both corners on the cylinder r = radius onto it."""
+    corners = mesh.tets[:, TET4_EDGES.ravel()].reshape(-1, 6, 2)
+    on_side = side[corners].all(axis=2)
+    mids = np.unique(mesh.tets[:, 4:][on_side])
+    xy = mesh.points[mids, :2]
+    mesh.points[mids, :2] = xy * (radius_m / np.hypot(xy[:, 0], xy[:, 1]))[:, None]
