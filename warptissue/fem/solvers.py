@@ -220,6 +220,9 @@ class QuasistaticResult:
         linear_iterations: Linear-solver iterations per requested load, shape (S,).
         completed: Whether every requested load converged.
         message: What happened, in one sentence.
+        cutbacks: Increment halvings used.
+        linear_solver: The linear solver used.
+        history: One record per attempted increment (load, converged, iterations, reason).
     """
 
     loads: np.ndarray
@@ -230,6 +233,7 @@ class QuasistaticResult:
     completed: bool
     message: str
     cutbacks: int = 0
+    linear_solver: str = ""
     history: list[dict] = field(default_factory=list)
 
 
@@ -330,6 +334,7 @@ def solve_quasistatic(
     max_cutbacks: int = 8,
     progress: bool = False,
     progress_label: str = "load steps",
+    load_name: str = "load",
     initial_displacement_m: np.ndarray | None = None,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
@@ -352,6 +357,7 @@ def solve_quasistatic(
         max_cutbacks: Halvings allowed per requested load.
         progress: Show a tqdm bar over the requested loads.
         progress_label: The bar's label.
+        load_name: What the load is called in messages (e.g. ``"depth (m)"``).
         initial_displacement_m: Start state (N, 3); zero by default (load 0).
 
     Returns:
@@ -374,7 +380,7 @@ def solve_quasistatic(
     force_floor = 1e-13 * assembler.material.initial_shear_modulus_Pa * length**2
     load = 0.0
     reached, states, reactions, newton_counts, linear_counts = [], [], [], [], []
-    message = f"converged at all {len(loads)} load steps"
+    message = f"converged at all {len(loads)} requested values of {load_name}"
     completed = True
     total_cutbacks = 0
     history: list[dict] = []
@@ -427,8 +433,9 @@ def solve_quasistatic(
                 if halvings > max_cutbacks:
                     completed = False
                     message = (
-                        f"stopped at load {load:.6g} on the way to {target:.6g}: Newton failed "
-                        f"({step.reason}) after {max_cutbacks} cutbacks (last increment "
+                        f"stopped at {load_name} {load:.6g} on the way to {target:.6g}: "
+                        f"Newton failed ({step.reason}) after {max_cutbacks} cutbacks "
+                        f"(last increment "
                         f"{increment:.3g}); the {len(reached)} converged steps are kept"
                     )
                     break
@@ -455,5 +462,6 @@ def solve_quasistatic(
         completed=completed,
         message=message,
         cutbacks=total_cutbacks,
+        linear_solver=solver.method,
         history=history,
     )
