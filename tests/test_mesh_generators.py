@@ -5,6 +5,7 @@ from warptissue.errors import InputError
 from warptissue.mesh import (
     TET4_FACES,
     block_mesh,
+    check_mesh,
     extrude_triangles,
     graded_coordinates,
     graded_spacing,
@@ -126,6 +127,8 @@ def test_indentation_specimen_volume_and_conformity(kind, quarter):
     mesh = specimen(kind, quarter=quarter)
     volumes = mesh.volumes()
     assert np.all(volumes > 0)
+    quality = check_mesh(mesh)
+    assert quality.min_radius_ratio > 0.15  # in-plane stretch below the probe is 5:1 here
     counts = face_counts(mesh.tets)
     assert counts.max() == 2  # every interior face is shared by exactly two tets
     # The named surfaces (probe lies inside top) cover the whole boundary, once.

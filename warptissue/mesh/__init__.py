@@ -18,20 +18,41 @@ from warptissue.mesh.generators import (
     indentation_block,
     indentation_disc,
 )
+from warptissue.mesh.io import NODE_SET_PREFIX, TET_REGION_KEY, read_mesh, write_mesh
+from warptissue.mesh.quality import (
+    TET10_SWAP_1_2,
+    MeshQuality,
+    check_mesh,
+    dihedral_angles,
+    fix_orientation,
+    radius_ratios,
+    tet10_jacobian_determinants,
+)
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
+    "MeshQuality",
+    "NODE_SET_PREFIX",
+    "TET10_SWAP_1_2",
+    "TET_REGION_KEY",
     "TET4_EDGES",
     "TET4_FACES",
     "TetMesh",
     "block_mesh",
     "boundary_faces",
+    "check_mesh",
+    "dihedral_angles",
+    "fix_orientation",
     "extrude_triangles",
     "graded_coordinates",
     "graded_spacing",
     "indentation_block",
     "indentation_disc",
+    "radius_ratios",
+    "read_mesh",
     "signed_volumes",
+    "tet10_jacobian_determinants",
     "to_tet10",
+    "write_mesh",
 ]

@@ -173,12 +173,43 @@ def graded_spacing(
     else:
         extra = int(np.ceil((length_m - ramp_total[-1]) / largest_m))
         sizes = np.concatenate([ramp, np.full(extra, largest_m)])
+    return _fit_sizes(sizes, length_m)
+
+
+def _fit_sizes(sizes: np.ndarray, length_m: float) -> np.ndarray:
+    """Coordinates of intervals ``sizes`` (whose sum reaches ``length_m`` only with the last
+    one), dropping the last interval when that fits better, scaled to end at ``length_m``."""
     if len(sizes) > 1 and abs(sizes[:-1].sum() - length_m) < abs(sizes.sum() - length_m):
         sizes = sizes[:-1]
     coordinates = np.concatenate([[0.0], np.cumsum(sizes)])
     coordinates *= length_m / coordinates[-1]
     coordinates[-1] = length_m
     return coordinates
+
+
+def _radial_spacing(
+    inner_m: float,
+    outer_m: float,
+    first_m: float,
+    largest_m: float,
+    *,
+    growth: float,
+    angle_step: float,
+) -> np.ndarray:
+    """Radial offsets from ``inner_m`` to ``outer_m`` for rings with a fixed angular step.
+
+    Like :func:`graded_spacing`, but the radial size at radius r also stays below
+    ``_RADIAL_ASPECT * r * angle_step`` (when that exceeds ``first_m``), so cells far out stay
+    close to square instead of long and thin.
+    """
+    sizes = []
+    radius, size = inner_m, first_m
+    while radius < outer_m:
+        sizes.append(size)
+        radius += size
+        cap = max(first_m, _RADIAL_ASPECT * radius * angle_step)
+        size = max(size, min(size * growth, largest_m, cap))
+    return _fit_sizes(np.array(sizes), outer_m - inner_m)
 
 
 def extrude_triangles(
@@ -333,6 +364,9 @@ def _require_positive(**values: float) -> None:
 _INNER_SQUARE_FRACTION = 0.5
 """Half-width of the O-grid's central square over the probe radius."""
 
+_RADIAL_ASPECT = 1.25
+"""Largest radial over tangential size of the O-grid's outer rings (on the x axis)."""
+
 
 def _indentation_specimen(
     *,
@@ -457,7 +491,9 @@ def _ogrid_quarter(
         reach = np.full(len(t), half_extent_m)
     else:
         reach = half_extent_m / np.maximum(np.abs(direction[:, 0]), np.abs(direction[:, 1]))
-    outer_fraction = graded_spacing(half_extent_m - a, size_near_m, size_far_m, growth=growth)
+    outer_fraction = _radial_spacing(
+        a, half_extent_m, size_near_m, size_far_m, growth=growth, angle_step=angle[1]
+    )
     outer_fraction = outer_fraction[1:] / outer_fraction[-1]
     inner_fraction = np.arange(1, inner_count + 1) / inner_count
     start = square[boundary_index]
