@@ -81,9 +81,10 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.boundary.base == "fixed"
     assert study.solver.device == "auto"
     assert study.solver.formulation == "mixed"
-    assert study.solver.tolerance == pytest.approx(1e-8)
+    assert study.solver.linear_solver == "auto"
+    assert study.solver.tolerance == pytest.approx(1e-9)
     assert study.solver.max_newton_iterations == 25
-    assert study.solver.max_cutbacks == 5
+    assert study.solver.max_cutbacks == 8
 
 
 def test_explicit_depth_list_and_disc(tmp_path):

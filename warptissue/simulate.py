@@ -131,16 +131,20 @@ def _write_fields(out_dir: Path, mesh: Any, result: Any, *, every_step: bool) ->
     files: dict[str, Path] = {}
     converged = len(result.depths_m)
     displacements = np.asarray(result.displacement_m, dtype=np.float64)
-    final = displacements[-1] if converged else np.zeros_like(mesh.points)
+    if converged:
+        final = displacements[-1]
+        stress = np.asarray(result.cauchy_stress_Pa, dtype=np.float64)
+        von_mises = np.asarray(result.von_mises_Pa, dtype=np.float64)
+    else:  # nothing converged: the undeformed, unstressed state
+        final = np.zeros_like(mesh.points)
+        stress = np.zeros((mesh.tet_count, 6))
+        von_mises = np.zeros(mesh.tet_count)
     files["fields"] = out_dir / "fields.vtu"
     write_mesh(
         files["fields"],
         mesh,
         point_data={"displacement_m": final},
-        cell_data={
-            "cauchy_stress_Pa": np.asarray(result.cauchy_stress_Pa, dtype=np.float64),
-            "von_mises_Pa": np.asarray(result.von_mises_Pa, dtype=np.float64),
-        },
+        cell_data={"cauchy_stress_Pa": stress, "von_mises_Pa": von_mises},
     )
     if every_step:
         for step in range(converged):
@@ -192,6 +196,7 @@ def run_study(
         np.asarray(study.protocol.depths_m, dtype=np.float64),
         device=warp_device,
         progress=progress,
+        linear_solver=study.solver.linear_solver,
         tolerance=study.solver.tolerance,
         max_newton_iterations=study.solver.max_newton_iterations,
         max_cutbacks=study.solver.max_cutbacks,
@@ -220,6 +225,8 @@ def run_study(
         "completed": bool(result.completed),
         "message": str(result.message),
         "device": str(warp_device),
+        "linear_solver": str(result.linear_solver),
+        "cutbacks": int(result.cutbacks),
         "force_curve": {
             "step": steps,
             "depth_m": result.depths_m,

@@ -52,6 +52,7 @@ INDENTER_KINDS: tuple[str, ...] = ("flat_punch",)
 CONTACT_KINDS: tuple[str, ...] = ("bonded", "frictionless")
 BASE_KINDS: tuple[str, ...] = ("fixed", "sliding")
 FORMULATIONS: tuple[str, ...] = ("mixed", "displacement")
+LINEAR_SOLVERS: tuple[str, ...] = ("auto", "pardiso", "superlu", "cg")
 DEVICE_PATTERN = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 _MISSING = object()
@@ -172,6 +173,8 @@ class Solver:
             ``"cuda:N"``.
         formulation: ``"mixed"`` (locking-free for nearly incompressible material) or
             ``"displacement"`` (pure displacement; locks when nearly incompressible).
+        linear_solver: ``"auto"`` (PARDISO where pypardiso is installed, else SuperLU, on the
+            CPU; conjugate gradients on CUDA), ``"pardiso"``, ``"superlu"`` or ``"cg"``.
         tolerance: Newton convergence tolerance on the residual force norm relative to the
             reaction force norm (dimensionless).
         max_newton_iterations: Newton iterations allowed per load step before a cutback.
@@ -181,6 +184,7 @@ class Solver:
 
     device: str
     formulation: str
+    linear_solver: str
     tolerance: float
     max_newton_iterations: int
     max_cutbacks: int
@@ -190,6 +194,7 @@ class Solver:
         return {
             "device": self.device,
             "formulation": self.formulation,
+            "linear_solver": self.linear_solver,
             "tolerance": self.tolerance,
             "max_newton_iterations": self.max_newton_iterations,
             "max_cutbacks": self.max_cutbacks,
@@ -486,15 +491,17 @@ def _read_solver(table: _Table) -> Solver:
     if not DEVICE_PATTERN.match(device):
         raise table.error("device", "must be 'auto', 'cpu', 'cuda' or 'cuda:N'", device)
     formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
-    tolerance = table.number("tolerance", default=1.0e-8)
+    linear_solver = table.string("linear_solver", default="auto", choices=LINEAR_SOLVERS)
+    tolerance = table.number("tolerance", default=1.0e-9)
     if tolerance >= 1.0:
         raise table.error("tolerance", "must be less than 1", tolerance)
     max_newton_iterations = table.integer("max_newton_iterations", default=25)
-    max_cutbacks = table.integer("max_cutbacks", default=5, minimum=0)
+    max_cutbacks = table.integer("max_cutbacks", default=8, minimum=0)
     table.finish()
     return Solver(
         device=device,
         formulation=formulation,
+        linear_solver=linear_solver,
         tolerance=tolerance,
         max_newton_iterations=max_newton_iterations,
         max_cutbacks=max_cutbacks,

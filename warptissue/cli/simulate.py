@@ -51,9 +51,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue simulate``; returns the exit status."""
+    import warp as wp
+
     from warptissue.simulate import run_study
     from warptissue.study import load_study
 
+    wp.config.quiet = True
     study = load_study(args.study)
     out_dir = args.out if args.out is not None else Path("runs") / study.name
     outputs = run_study(
