@@ -123,6 +123,16 @@ def graded_levels(length_m: float, first_m: float, last_m: float) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(sizes)])
 
 
+def geometric_levels(length_m: float, first_m: float, growth: float) -> np.ndarray:
+    """Node positions 0..length with spacing first_m, first_m * growth, ... (last one fitted)."""
+    sizes = [first_m]
+    while sum(sizes) < length_m:
+        sizes.append(sizes[-1] * growth)
+    positions = np.concatenate([[0.0], np.cumsum(sizes)])
+    positions *= length_m / positions[-1]
+    return positions
+
+
 def quarter_block_hex_mesh(size_near_m: float, size_far_m: float) -> tuple[np.ndarray, np.ndarray]:
     """O-grid hexahedral mesh of the quarter block with a ring of nodes at r = a.
 
@@ -239,12 +249,6 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
     dof0, dof1 = fem.dof.partition(displacement, boundaries)
     probe_z_dofs = boundaries["probe_z"].dof
 
-    def relative_check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
-        residual = np.linalg.norm(f[dof1])
-        reaction = np.linalg.norm(f[dof0])
-        fnorm = residual / reaction if reaction > 0 else residual
-        return np.linalg.norm(dx), fnorm, bool(fnorm < ftol)
-
     setup_s = time.perf_counter() - started
     forces: list[float] = []
     newton = 0
@@ -260,7 +264,7 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
             ext0=ext0,
             solver=solver,
             tol=NEWTON_TOLERANCE,
-            check=relative_check,
+            check=_relative_check,
             verbose=0,
             maxiter=25,
         )
@@ -294,6 +298,95 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
         force_N=forces,
         linear_solver=solver_name,
     )
+
+
+def run_felupe_axisymmetric_disc(size_near_m: float) -> RunRecord:
+    """Axisymmetric Q1/P0 FElupe run on a DISC of radius HALF_WIDTH_M (verification only).
+
+    The disc of radius 10 a and thickness 10 a is the round counterpart of the benchmark
+    block; in 2-D a very fine mesh is cheap, so this converges far enough to check
+    warptissue's ``indentation_disc`` against an independent code.
+    """
+    import felupe as fem
+
+    solver, solver_name = felupe_linear_solver()
+    started = time.perf_counter()
+    a = PROBE_RADIUS_M
+    radial = np.concatenate(
+        [
+            np.linspace(0.0, a, max(2, math.ceil(a / size_near_m)) + 1),
+            a + geometric_levels(HALF_WIDTH_M - a, size_near_m, 1.08)[1:],
+        ]
+    )
+    axial = THICKNESS_M - geometric_levels(THICKNESS_M, size_near_m, 1.08)[::-1]
+    mesh = fem.Grid(axial, radial)  # x_1 = axial (z), x_2 = radial (r)
+    region = fem.RegionQuad(mesh)
+    displacement = fem.FieldContainer([fem.FieldAxisymmetric(region, dim=2)])
+    solid = fem.SolidBodyNearlyIncompressible(
+        fem.NeoHooke(mu=SHEAR_MODULUS_PA), displacement, bulk=BULK_MODULUS_PA
+    )
+    z, r = mesh.points.T
+    tolerance = 1e-9 * a
+    probe = (np.abs(z - THICKNESS_M) < tolerance) & (r <= a + tolerance)
+    boundaries = {
+        "axis": fem.Boundary(displacement[0], mask=r < tolerance, skip=(1, 0)),
+        "bottom": fem.Boundary(displacement[0], mask=np.abs(z) < tolerance),
+        "probe_r": fem.Boundary(displacement[0], mask=probe, skip=(1, 0)),
+        "probe_z": fem.Boundary(displacement[0], mask=probe, skip=(0, 1)),
+    }
+    dof0, dof1 = fem.dof.partition(displacement, boundaries)
+    setup_s = time.perf_counter() - started
+    forces, newton = [], 0
+    started, cpu_started = time.perf_counter(), time.process_time()
+    for depth in depths_m():
+        boundaries["probe_z"].update(-depth)
+        ext0 = fem.dof.apply(displacement, boundaries, dof0)
+        result = fem.newtonraphson(
+            items=[solid],
+            dof1=dof1,
+            dof0=dof0,
+            ext0=ext0,
+            solver=solver,
+            tol=NEWTON_TOLERANCE,
+            check=_relative_check,
+            verbose=0,
+            maxiter=25,
+        )
+        newton += result.iterations
+        forces.append(-float(np.sum(result.fun[boundaries["probe_z"].dof])))
+    solve_s = time.perf_counter() - started
+    return RunRecord(
+        code="felupe-axisymmetric-disc",
+        device="cpu",
+        element="QUAD4 Q1/P0 axisymmetric",
+        cells=mesh.ncells,
+        nodes=mesh.npoints,
+        dofs=2 * mesh.npoints,
+        size_near_m=size_near_m,
+        steps_converged=len(forces),
+        completed=True,
+        newton_iterations=newton,
+        linear_iterations=None,
+        setup_s=setup_s,
+        solve_s=solve_s,
+        solve_cpu_s=time.process_time() - cpu_started,
+        seconds_per_step=solve_s / STEP_COUNT,
+        seconds_per_newton_iteration=solve_s / newton,
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=None,
+        final_depth_m=FINAL_DEPTH_M,
+        final_force_N=forces[-1],
+        force_N=forces,
+        linear_solver=solver_name,
+    )
+
+
+def _relative_check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
+    """Newton test: free-dof residual norm relative to the reaction norm (as warptissue)."""
+    residual = np.linalg.norm(f[dof1])
+    reaction = np.linalg.norm(f[dof0])
+    fnorm = residual / reaction if reaction > 0 else residual
+    return np.linalg.norm(dx), fnorm, bool(fnorm < ftol)
 
 
 # --------------------------------------------------------------------------- warptissue
