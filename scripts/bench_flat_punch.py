@@ -475,8 +475,10 @@ def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
 # --------------------------------------------------------------------------- accuracy
 
 
-def richardson(cells: list[int], forces: list[float]) -> dict[str, float] | None:
-    """Extrapolate F(h) = F* + C h^p from the three finest runs (h = cells^(-1/3)).
+def richardson(
+    cells: list[int], forces: list[float], *, dimension: int = 3
+) -> dict[str, float] | None:
+    """Extrapolate F(h) = F* + C h^p from the three finest runs (h = cells^(-1/dimension)).
 
     Returns:
         ``{"force_N", "order"}``, or None when the three forces do not converge monotonically.
@@ -484,7 +486,7 @@ def richardson(cells: list[int], forces: list[float]) -> dict[str, float] | None
     if len(cells) < 3:
         return None
     order_by_size = np.argsort(cells)[-3:]
-    h = np.asarray(cells, dtype=float)[order_by_size] ** (-1.0 / 3.0)
+    h = np.asarray(cells, dtype=float)[order_by_size] ** (-1.0 / dimension)
     f = np.asarray(forces, dtype=float)[order_by_size]
     d12, d23 = f[0] - f[1], f[1] - f[2]
     if d12 * d23 <= 0 or abs(d23) >= abs(d12):
@@ -551,7 +553,7 @@ def print_table(records: list[RunRecord]) -> None:
         linear = f"{r.linear_iterations:7d}" if r.linear_iterations is not None else f"{'-':>7}"
         error = f"{100 * r.relative_error:6.2f}%" if r.relative_error is not None else f"{'-':>7}"
         print(
-            f"{r.code:<10} {r.device:<7} {r.cells:8d} {r.dofs:9d} {r.newton_iterations:6d} "
+            f"{r.code[:10]:<10} {r.device:<7} {r.cells:8d} {r.dofs:9d} {r.newton_iterations:6d} "
             f"{linear} {r.seconds_per_step:8.3f} {r.solve_s:8.2f} {r.solve_cpu_s:8.2f} "
             f"{r.seconds_per_newton_iteration:8.3f} {r.peak_host_rss_MiB:8.0f} {gpu} "
             f"{r.final_force_N:11.5e} {error}"
@@ -572,6 +574,13 @@ def main(argv: list[str] | None = None) -> int:
         default="",
         help="FElupe mesh levels, comma separated integers; level L has size_near = "
         "a / (2 * 1.5^L) (empty: skip FElupe)",
+    )
+    parser.add_argument(
+        "--felupe-axisymmetric-levels",
+        default="",
+        help="verification: axisymmetric FElupe runs on the round counterpart of the block "
+        "(a disc of radius 10 a), comma separated integers; level L has size_near = "
+        "a / (4 * 2^L) (empty: skip)",
     )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     args = parser.parse_args(argv)
@@ -601,15 +610,25 @@ def main(argv: list[str] | None = None) -> int:
         print_table([record])
         sys.stdout.flush()
 
+    for level in [int(s) for s in args.felupe_axisymmetric_levels.split(",") if s.strip()]:
+        record = run_felupe_axisymmetric_disc(0.25 * PROBE_RADIUS_M / 2**level)
+        records.append(record)
+        print_table([record])
+        sys.stdout.flush()
+
     references = {}
-    for code in ("warptissue", "felupe"):
+    for code in ("warptissue", "felupe", "felupe-axisymmetric-disc"):
         runs = [r for r in records if r.code == code and r.completed]
-        extrapolated = richardson([r.cells for r in runs], [r.final_force_N for r in runs])
+        extrapolated = richardson(
+            [r.cells for r in runs],
+            [r.final_force_N for r in runs],
+            dimension=2 if code == "felupe-axisymmetric-disc" else 3,
+        )
         if extrapolated is not None:
             references[code] = extrapolated
     reference = references.get("warptissue") or references.get("felupe")
     if reference is not None:
-        for r in records:
+        for r in (r for r in records if r.code in ("warptissue", "felupe")):
             r.relative_error = abs(r.final_force_N - reference["force_N"]) / reference["force_N"]
     equal_accuracy = {}
     for target in (0.05, 0.02, 0.01, 0.005):
