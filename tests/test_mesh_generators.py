@@ -1,7 +1,9 @@
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
-from warptissue.errors import InputError
+from warptissue.errors import InputError, MeshError
 from warptissue.mesh import (
     TET4_FACES,
     block_mesh,
@@ -9,6 +11,7 @@ from warptissue.mesh import (
     extrude_triangles,
     graded_coordinates,
     graded_spacing,
+    hex_to_tets,
     indentation_block,
     indentation_disc,
 )
@@ -271,3 +274,108 @@ def test_indentation_rejects_bad_parameters(options, message):
     } | options
     with pytest.raises(InputError, match=message):
         indentation_block(**arguments)
+
+
+def structured_hexes(n=3):
+    """Corner grid and VTK-ordered hexes of an n x n x n unit cube, listed in random order."""
+    grid = np.linspace(0.0, 1.0, n + 1)
+    x, y, z = np.meshgrid(grid, grid, grid, indexing="ij")
+    points = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    index = np.arange(len(points)).reshape(n + 1, n + 1, n + 1)
+    i, j, k = (a.ravel() for a in np.meshgrid(*[np.arange(n)] * 3, indexing="ij"))
+    offsets = [
+        (0, 0, 0),
+        (1, 0, 0),
+        (1, 1, 0),
+        (0, 1, 0),
+        (0, 0, 1),
+        (1, 0, 1),
+        (1, 1, 1),
+        (0, 1, 1),
+    ]
+    hexes = np.stack([index[i + a, j + b, k + c] for a, b, c in offsets], axis=1)
+    return points, hexes
+
+
+@pytest.mark.parametrize(("split", "per_hex"), [("five", 5), ("six", 6)])
+def test_hex_to_tets_on_shuffled_distorted_hexes(split, per_hex, rng):
+    points, hexes = structured_hexes()
+    hexes = hexes[rng.permutation(len(hexes))]
+    interior = np.all((points > 0) & (points < 1), axis=1)
+    points[interior] += rng.uniform(-0.05, 0.05, size=(interior.sum(), 3))
+    mesh = hex_to_tets(points, hexes, split=split)
+    assert mesh.tet_count == per_hex * len(hexes)
+    assert np.all(mesh.volumes() > 0)
+    assert mesh.volumes().sum() == pytest.approx(1.0, rel=1e-12)
+    counts = face_counts(mesh.tets)
+    assert counts.max() == 2 and (counts == 1).sum() == 6 * 9 * 2
+    assert triangle_areas(mesh.points, mesh.face_sets["boundary"]).sum() == pytest.approx(6.0)
+    assert np.array_equal(np.bincount(mesh.tet_regions), np.full(len(hexes), per_hex))
+
+
+def test_hex_to_tets_rejects_mismatched_diagonals():
+    points, hexes = structured_hexes(2)
+    # Renumber one hex by a quarter turn about z: its Kuhn diagonals no longer match.
+    hexes[0] = hexes[0][[1, 2, 3, 0, 5, 6, 7, 4]]
+    with pytest.raises(MeshError, match="not conforming"):
+        hex_to_tets(points, hexes, split="six")
+
+
+def test_layer_max_bounds_vertical_stretch():
+    loose = specimen("block", size_far_m=0.004)
+    tight = specimen("block", size_far_m=0.004, layer_max_m=0.0012)
+    layers = np.diff(np.unique(tight.points[:, 2]))
+    assert layers.max() <= 0.0012 * (1 + 1e-9) * 1.1  # fitted to the thickness: within 10 %
+    assert np.diff(np.unique(loose.points[:, 2])).max() > 0.0015
+    assert check_mesh(tight).min_radius_ratio > check_mesh(loose).min_radius_ratio
+    # The plane is unchanged: same top-face triangulation.
+    assert len(tight.face_sets["top"]) == len(loose.face_sets["top"])
+
+
+@settings(max_examples=20, deadline=None)
+@given(
+    probe_fraction=st.floats(0.05, 0.9),
+    near_fraction=st.floats(0.1, 3.0),
+    far_ratio=st.floats(1.0, 8.0),
+    growth=st.floats(1.0, 1.6),
+    thickness_fraction=st.floats(0.1, 1.5),
+    quarter=st.booleans(),
+    disc=st.booleans(),
+)
+def test_indentation_meshes_are_valid_over_parameter_space(
+    probe_fraction, near_fraction, far_ratio, growth, thickness_fraction, quarter, disc
+):
+    half = 0.01
+    probe = probe_fraction * half
+    near = near_fraction * probe
+    shape = {"radius_m": half} if disc else {"width_m": 2 * half}
+    mesh = (indentation_disc if disc else indentation_block)(
+        **shape,
+        thickness_m=thickness_fraction * half,
+        probe_radius_m=probe,
+        quarter=quarter,
+        element="TET4",
+        size_near_m=near,
+        size_far_m=far_ratio * near,
+        growth=growth,
+    )
+    assume(mesh.tet_count < 30000)
+    quality = check_mesh(mesh)  # raises on inverted, degenerate or crowded tets
+    assert quality.unused_node_count == 0
+    counts = face_counts(mesh.tets)
+    assert counts.max() == 2
+    assert (counts == 1).sum() == sum(len(f) for n, f in mesh.face_sets.items() if n != "probe")
+    top = mesh.node_set("top")
+    radius = np.hypot(mesh.points[top, 0], mesh.points[top, 1])
+    assert np.count_nonzero(np.abs(radius - probe) <= 1e-12 * probe) >= (5 if quarter else 16)
+    if not disc:
+        area = (half if quarter else 2 * half) ** 2
+        assert mesh.volumes().sum() == pytest.approx(area * thickness_fraction * half)
+
+
+def test_extrusion_rejects_bad_input():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    with pytest.raises(MeshError, match="strictly increasing"):
+        extrude_triangles(square, [[0, 1, 2]], np.array([0.0, 0.0]))
+    with pytest.raises(MeshError, match="outside"):
+        extrude_triangles(square, [[0, 1, 3]], np.array([0.0, 1.0]))

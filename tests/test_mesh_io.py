@@ -82,22 +82,25 @@ def assert_vtk_midnodes(mesh):
     np.testing.assert_allclose(mesh.points[mesh.tets[:, 4:]], expected)
 
 
-def test_gmsh_tet10_node_order(tmp_path):
-    # A hand-written Gmsh 2.2 file in Gmsh's own order: nodes 9 and 10 (1-based) of a 10-node
-    # tet sit on edges (3,4) and (2,4), the reverse of VTK's (2,4), (3,4). A physical surface
-    # (triangle, tag 5) names the base.
-    gmsh_mid = [(0, 1), (1, 2), (0, 2), (0, 3), (2, 3), (1, 3)]
-    points = np.vstack([CORNERS, [midpoint(i, j) for i, j in gmsh_mid]])
-    nodes = "\n".join(f"{k + 1} {x:g} {y:g} {z:g}" for k, (x, y, z) in enumerate(points))
-    text = f"""$MeshFormat
-2.2 0 8
-$EndMeshFormat
-$PhysicalNames
+GMSH_PHYSICAL_NAMES = """$PhysicalNames
 2
 2 5 "base"
 3 7 "tissue"
 $EndPhysicalNames
-$Nodes
+"""
+
+
+def gmsh_text(version, points):
+    """A one-tet Gmsh file: a TET10 (type 11) in physical volume 7 "tissue" and its base
+    triangle (type 2) in physical surface 5 "base"."""
+    tags = "\n".join(str(k + 1) for k in range(len(points)))
+    coordinates = "\n".join(f"{x:g} {y:g} {z:g}" for x, y, z in points)
+    if version == "2.2":
+        nodes = "\n".join(f"{k + 1} {x:g} {y:g} {z:g}" for k, (x, y, z) in enumerate(points))
+        return f"""$MeshFormat
+2.2 0 8
+$EndMeshFormat
+{GMSH_PHYSICAL_NAMES}$Nodes
 10
 {nodes}
 $EndNodes
@@ -107,8 +110,38 @@ $Elements
 2 11 2 7 1 1 2 3 4 5 6 7 8 9 10
 $EndElements
 """
+    return f"""$MeshFormat
+4.1 0 8
+$EndMeshFormat
+{GMSH_PHYSICAL_NAMES}$Entities
+0 0 1 1
+1 0 0 0 2 2 0 1 5 0
+1 0 0 0 2 2 2 1 7 1 1
+$EndEntities
+$Nodes
+1 10 1 10
+3 1 0 10
+{tags}
+{coordinates}
+$EndNodes
+$Elements
+2 2 1 2
+2 1 2 1
+1 1 3 2
+3 1 11 1
+2 1 2 3 4 5 6 7 8 9 10
+$EndElements
+"""
+
+
+@pytest.mark.parametrize("version", ["2.2", "4.1"])
+def test_gmsh_tet10_node_order_and_physical_groups(tmp_path, version):
+    # Hand-written in Gmsh's own order: nodes 9 and 10 (1-based) of a 10-node tet sit on
+    # edges (3,4) and (2,4), the reverse of VTK's (2,4), (3,4).
+    gmsh_mid = [(0, 1), (1, 2), (0, 2), (0, 3), (2, 3), (1, 3)]
+    points = np.vstack([CORNERS, [midpoint(i, j) for i, j in gmsh_mid]])
     path = tmp_path / "one.msh"
-    path.write_text(text)
+    path.write_text(gmsh_text(version, points))
     mesh = read_mesh(path)
     assert mesh.element_type == "TET10" and mesh.tet_count == 1
     assert_vtk_midnodes(mesh)
@@ -198,3 +231,12 @@ def test_tetmesh_round_trip_keeps_empty_node_sets_out(tmp_path):
     read = read_mesh(write_mesh(tmp_path / "t.vtu", mesh))
     np.testing.assert_array_equal(read.node_sets["tip"], [3])
     assert "tip" not in read.face_sets
+
+
+def test_unit_scaling(tmp_path):
+    path = tmp_path / "model.inp"
+    path.write_text(INP)
+    mesh = read_mesh(path, unit_m=1e-3)
+    np.testing.assert_allclose(mesh.points[mesh.tets[0, :4]], CORNERS * 1e-3)
+    with pytest.raises(InputError, match="unit_m"):
+        read_mesh(path, unit_m=0.0)

@@ -145,3 +145,57 @@ def test_curved_disc_tet10_is_valid_and_close_to_the_cylinder():
     quality = check_mesh(mesh)
     assert 0.5 < quality.min_scaled_jacobian < 1.0
     assert quality.min_radius_ratio > 0.1
+
+
+def test_counts_and_overlapping_tets(unit_cube_tet4):
+    quality = check_mesh(unit_cube_tet4)
+    assert quality.boundary_face_count == 6 * 4 * 2
+    assert quality.unused_node_count == 0
+    extra = TetMesh(
+        points=np.vstack([unit_cube_tet4.points, [[5.0, 5.0, 5.0]]]), tets=unit_cube_tet4.tets
+    )
+    assert check_mesh(extra).unused_node_count == 1
+    # A third tet on an interior face (one shared by two tets already).
+    tets = unit_cube_tet4.tets
+    faces = np.sort(tets[:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]].reshape(-1, 3), axis=1)
+    keys, counts = np.unique(faces, axis=0, return_counts=True)
+    interior = keys[np.flatnonzero(counts == 2)[0]]
+    points = np.vstack([unit_cube_tet4.points, [[0.3, 0.7, 0.4]]])
+    crowded = fix_orientation(
+        TetMesh(points=points, tets=np.vstack([tets, [[*interior, len(points) - 1]]]))
+    )
+    with pytest.raises(MeshError, match="shared by 3 tets") as caught:
+        check_mesh(crowded)
+    assert caught.value.element is not None
+
+
+def isoparametric_volume(mesh):
+    """Volume of curved TET10s: det J integrated with a degree-3 exact rule (det J is cubic).
+
+    Stroud T3:3-1 on the reference tet (volume 1/6): the centroid with weight -4/5 and the
+    four points (1/2, 1/6, 1/6, 1/6) (and permutations) with weight 9/20 each.
+    """
+    points = np.vstack([[[0.25] * 4], np.full((4, 4), 1 / 6) + np.eye(4) / 3])
+    weights = np.array([-4 / 5] + [9 / 20] * 4) / 6
+    return tet10_jacobian_determinants(mesh.points, mesh.tets, barycentric=points) @ weights
+
+
+def test_curved_disc_volume_converges_to_the_cylinder():
+    radius, thickness = 0.01, 0.005
+    options = {
+        "radius_m": radius,
+        "thickness_m": thickness,
+        "probe_radius_m": 0.003,
+        "element": "TET10",
+        "size_near_m": 0.001,
+        "size_far_m": 0.003,
+    }
+    cylinder = np.pi * radius**2 * thickness / 4
+    straight = indentation_disc(**options)
+    curved = indentation_disc(**options, curved_side=True)
+    # Straight-sided: the quadrature reproduces the corner volumes (an inscribed polygon).
+    np.testing.assert_allclose(isoparametric_volume(straight), straight.volumes(), rtol=1e-12)
+    polygon_error = cylinder - straight.volumes().sum()
+    curved_error = cylinder - isoparametric_volume(curved).sum()
+    assert polygon_error > 0
+    assert abs(curved_error) < 0.01 * polygon_error  # quadratic arcs: O(h^4) against O(h^2)

@@ -21,7 +21,11 @@ from warptissue.errors import WarpTissueError
 
 __all__ = ["build_parser", "main"]
 
-COMMAND_MODULES: tuple[str, ...] = ("warptissue.cli.simulate",)
+COMMAND_MODULES: tuple[str, ...] = (
+    "warptissue.cli.simulate",
+    "warptissue.cli.fit_uniaxial",
+    "warptissue.cli.mesh",
+)
 """Modules that add commands, in the order they appear in ``--help``."""
 
 

@@ -15,6 +15,7 @@ from warptissue.mesh.generators import (
     extrude_triangles,
     graded_coordinates,
     graded_spacing,
+    hex_to_tets,
     indentation_block,
     indentation_disc,
 )
@@ -28,6 +29,7 @@ from warptissue.mesh.quality import (
     radius_ratios,
     tet10_jacobian_determinants,
 )
+from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
@@ -41,17 +43,20 @@ __all__ = [
     "TetMesh",
     "block_mesh",
     "boundary_faces",
+    "check_closed_surface",
     "check_mesh",
     "dihedral_angles",
     "fix_orientation",
     "extrude_triangles",
     "graded_coordinates",
     "graded_spacing",
+    "hex_to_tets",
     "indentation_block",
     "indentation_disc",
     "radius_ratios",
     "read_mesh",
     "signed_volumes",
+    "tetrahedralize_surface",
     "tet10_jacobian_determinants",
     "to_tet10",
     "write_mesh",

@@ -5,7 +5,14 @@ from __future__ import annotations
 import numpy as np
 
 from warptissue.errors import InputError, MeshError
-from warptissue.mesh.core import TET4_EDGES, TetMesh, boundary_faces, signed_volumes, to_tet10
+from warptissue.mesh.core import (
+    TET4_EDGES,
+    TetMesh,
+    _unique_sorted_rows,
+    boundary_faces,
+    signed_volumes,
+    to_tet10,
+)
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
@@ -14,6 +21,7 @@ __all__ = [
     "extrude_triangles",
     "graded_coordinates",
     "graded_spacing",
+    "hex_to_tets",
     "indentation_block",
     "indentation_disc",
 ]
@@ -108,20 +116,8 @@ def block_mesh(
         [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
     )
     hexes = np.stack([node(ci + o[0], cj + o[1], ck + o[2]) for o in offsets], axis=1)
-    cell_index = np.arange(len(hexes), dtype=np.int32)
-    if split == "six":
-        tets = hexes[:, HEX_TO_SIX_TETS].reshape(-1, 4)
-        regions = np.repeat(cell_index, 6)
-    else:
-        parity = (ci + cj + ck) % 2
-        tets = np.take_along_axis(
-            hexes[:, None, :], HEX_TO_FIVE_TETS[parity].reshape(len(hexes), 1, 20), axis=2
-        )
-        tets = tets.reshape(-1, 4)
-        regions = np.repeat(cell_index, 5)
-    tets = tets.astype(np.int32)
-    negative = signed_volumes(points, tets) < 0
-    tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
+    tets = _split_hexes(points, hexes, split=split, parity=(ci + cj + ck) % 2)
+    regions = np.repeat(np.arange(len(hexes), dtype=np.int32), 5 if split == "five" else 6)
 
     node_sets, face_sets = {}, {}
     faces = boundary_faces(tets)
@@ -135,6 +131,122 @@ def block_mesh(
     return TetMesh(
         points=points, tets=tets, node_sets=node_sets, face_sets=face_sets, tet_regions=regions
     )
+
+
+def hex_to_tets(
+    points_m: np.ndarray,
+    hexes: np.ndarray,
+    *,
+    split: str = "six",
+    parity: np.ndarray | None = None,
+) -> TetMesh:
+    """Split an unstructured hexahedral mesh into tets with the tables of :func:`block_mesh`.
+
+    Corner order is VTK's: 0-3 counter-clockwise on one face, 4-7 above them. The split is
+    conforming when neighbouring hexes number their shared face compatibly (as structured and
+    block-structured meshes do); this is checked, and a mismatch raises an error rather than
+    returning a mesh with cracks.
+
+    Args:
+        points_m: Node coordinates, shape (N, 3), metres.
+        hexes: Corner connectivity, shape (H, 8), int.
+        split: ``"six"`` (:data:`HEX_TO_SIX_TETS`) or ``"five"``
+            (:data:`HEX_TO_FIVE_TETS`, alternating between the two mirror splits).
+        parity: For ``"five"``: which of the two splits each hex uses, shape (H,), 0 or 1.
+            Neighbours across a face need different parities. None 2-colours the face
+            adjacency graph by breadth-first search.
+
+    Returns:
+        A positively oriented TET4 mesh with ``tet_regions`` = source hex index and node and
+        face set ``"boundary"``.
+
+    Raises:
+        MeshError: Bad shapes, a hex mesh whose face graph cannot be 2-coloured (``"five"``),
+            or a split whose face diagonals do not match across hexes (non-conforming).
+    """
+    points = np.asarray(points_m, dtype=np.float64)
+    cells = np.asarray(hexes, dtype=np.int64)
+    if cells.ndim != 2 or cells.shape[1] != 8 or len(cells) == 0:
+        raise MeshError(f"hexes must have shape (H >= 1, 8), got {cells.shape}")
+    if split not in ("five", "six"):
+        raise MeshError(f"split must be 'five' or 'six', got {split!r}")
+    quads = cells[:, _HEX_FACES].reshape(-1, 4)
+    _, quad_inverse, quad_counts = _unique_sorted_rows(quads, return_counts=True)
+    if quad_counts.max() > 2:
+        raise MeshError("a hex face is shared by more than two hexes (non-manifold mesh)")
+    if split == "five" and parity is None:
+        parity = _two_colouring(quad_inverse.reshape(-1, 6), quad_counts)
+    tets = _split_hexes(points, cells, split=split, parity=parity)
+    per_hex = 5 if split == "five" else 6
+    faces = boundary_faces(tets)
+    boundary_quads = int((quad_counts == 1).sum())
+    if len(faces) != 2 * boundary_quads:
+        raise MeshError(
+            f"the {split}-tet split is not conforming: {len(faces)} boundary triangles where "
+            f"{2 * boundary_quads} were expected (neighbouring hexes cut a shared face along "
+            "different diagonals); renumber the hexes consistently or use the other split"
+        )
+    return TetMesh(
+        points=points,
+        tets=tets,
+        node_sets={"boundary": np.unique(faces).astype(np.int32)},
+        face_sets={"boundary": faces},
+        tet_regions=np.repeat(np.arange(len(cells), dtype=np.int32), per_hex),
+    )
+
+
+_HEX_FACES = np.array(
+    [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+)
+"""The six quadrilateral faces of a VTK-ordered hexahedron."""
+
+
+def _split_hexes(
+    points: np.ndarray, hexes: np.ndarray, *, split: str, parity: np.ndarray | None
+) -> np.ndarray:
+    """Apply the five- or six-tet table to each hex; orient every tet positively."""
+    if split == "six":
+        tets = hexes[:, HEX_TO_SIX_TETS].reshape(-1, 4)
+    else:
+        parity = np.asarray(parity, dtype=np.int64)
+        if parity.shape != (len(hexes),) or not np.all((parity == 0) | (parity == 1)):
+            raise MeshError(f"parity must be 0 or 1 per hex, shape ({len(hexes)},)")
+        tets = np.take_along_axis(
+            hexes[:, None, :], HEX_TO_FIVE_TETS[parity].reshape(len(hexes), 1, 20), axis=2
+        ).reshape(-1, 4)
+    tets = tets.astype(np.int32)
+    negative = signed_volumes(points, tets) < 0
+    tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
+    return tets
+
+
+def _two_colouring(hex_faces: np.ndarray, face_counts: np.ndarray) -> np.ndarray:
+    """Parity 0/1 per hex such that hexes sharing a face differ, by breadth-first search."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order, connected_components
+
+    hex_count = len(hex_faces)
+    owner = np.repeat(np.arange(hex_count), 6)
+    face_id = hex_faces.ravel()
+    shared = face_counts[face_id] == 2
+    order = np.argsort(face_id[shared], kind="stable")
+    pairs = owner[shared][order].reshape(-1, 2)
+    graph = coo_matrix(
+        (np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(hex_count, hex_count)
+    ).tocsr()
+    _, component = connected_components(graph, directed=False)
+    parity = np.full(hex_count, -1, dtype=np.int64)
+    for root in np.unique(component, return_index=True)[1]:
+        visit, predecessor = breadth_first_order(graph, root, directed=False)
+        parity[root] = 0
+        for node in visit[1:]:
+            parity[node] = 1 - parity[predecessor[node]]
+    if np.any(parity[pairs[:, 0]] == parity[pairs[:, 1]]):
+        raise MeshError(
+            "the five-tet split needs neighbouring hexes in alternating parity, but this hex "
+            "mesh's face graph has an odd cycle; use split='six'"
+        )
+    return parity
 
 
 def graded_spacing(
@@ -233,6 +345,13 @@ def extrude_triangles(
     points_2d_m = np.asarray(points_2d_m, dtype=np.float64)
     z_m = np.asarray(z_m, dtype=np.float64)
     plane_count, layer_count = len(points_2d_m), len(z_m) - 1
+    if z_m.ndim != 1 or layer_count < 1 or np.any(np.diff(z_m) <= 0):
+        raise MeshError(f"z_m must be at least two strictly increasing heights, got {z_m}")
+    triangles = np.asarray(triangles)
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or triangles.size == 0:
+        raise MeshError(f"triangles must have shape (T >= 1, 3), got {triangles.shape}")
+    if triangles.min() < 0 or triangles.max() >= plane_count:
+        raise MeshError(f"triangles index nodes outside [0, {plane_count})")
     a, b, c = np.sort(np.asarray(triangles, dtype=np.int64), axis=1).T
     prism = np.stack(
         [
@@ -242,13 +361,16 @@ def extrude_triangles(
         ],
         axis=1,
     ).transpose(2, 1, 0)  # (T, 3, 4)
-    layers = plane_count * np.arange(layer_count, dtype=np.int64)
-    tets = (prism[None, :, :, :] + layers[:, None, None, None]).reshape(-1, 4).astype(np.int32)
     points = np.column_stack(
         [np.tile(points_2d_m, (layer_count + 1, 1)), np.repeat(z_m, plane_count)]
     )
-    negative = signed_volumes(points, tets) < 0
-    tets[negative, 1], tets[negative, 2] = tets[negative, 2].copy(), tets[negative, 1].copy()
+    # Orientation depends only on the triangle and the pattern, not on the layer: fix it on the
+    # first layer, then stack the layers.
+    prism = prism.reshape(-1, 4)
+    negative = signed_volumes(points, prism) < 0
+    prism[negative, 1], prism[negative, 2] = prism[negative, 2].copy(), prism[negative, 1].copy()
+    layers = plane_count * np.arange(layer_count, dtype=np.int64)
+    tets = (prism[None, :, :] + layers[:, None, None]).reshape(-1, 4).astype(np.int32)
     return points, tets
 
 
@@ -262,6 +384,7 @@ def indentation_block(
     size_near_m: float,
     size_far_m: float,
     growth: float = 1.2,
+    layer_max_m: float | None = None,
 ) -> TetMesh:
     """A square block for indentation, graded toward the probe at its top centre.
 
@@ -286,6 +409,8 @@ def indentation_block(
         size_near_m: Element size under the probe and at its edge, metres.
         size_far_m: Largest element size, far from the probe, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
+        layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
+            times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
 
     Returns:
         A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
@@ -302,6 +427,7 @@ def indentation_block(
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        layer_max_m=layer_max_m,
         curved_side=False,
     )
 
@@ -316,6 +442,7 @@ def indentation_disc(
     size_near_m: float,
     size_far_m: float,
     growth: float = 1.2,
+    layer_max_m: float | None = None,
     curved_side: bool = False,
 ) -> TetMesh:
     """A cylindrical disc specimen for indentation, graded toward the probe at its top centre.
@@ -333,6 +460,8 @@ def indentation_disc(
         size_near_m: Element size under the probe and at its edge, metres.
         size_far_m: Largest element size, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
+        layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
+            times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
         curved_side: For TET10 only: move the mid-edge nodes of the edges on the cylinder onto
             it (curved, isoparametric side faces). By default every TET10 is straight-sided,
             and the side is the inscribed polygonal prism.
@@ -351,6 +480,7 @@ def indentation_disc(
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        layer_max_m=layer_max_m,
         curved_side=curved_side,
     )
 
@@ -379,6 +509,7 @@ def _indentation_specimen(
     size_near_m: float,
     size_far_m: float,
     growth: float,
+    layer_max_m: float | None,
     curved_side: bool,
 ) -> TetMesh:
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
@@ -407,7 +538,9 @@ def _indentation_specimen(
     )
     if not quarter:
         points_2d, triangles = _mirror_quarter(points_2d, triangles)
-    depth = graded_spacing(thickness_m, size_near_m, size_far_m, growth=growth)
+    layer_max_m = size_far_m if layer_max_m is None else layer_max_m
+    _require_positive(layer_max_m=layer_max_m)
+    depth = graded_spacing(thickness_m, size_near_m, max(layer_max_m, size_near_m), growth=growth)
     z = thickness_m - depth[::-1]
     z[0] = 0.0
     points, tets = extrude_triangles(points_2d, triangles, z)

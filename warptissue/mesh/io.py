@@ -34,7 +34,7 @@ _TET_TYPES = {"tetra": 4, "tetra10": 10}
 _GMSH_COMPONENTS = (1, 3, 9)
 
 
-def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
+def read_mesh(path: str | Path, *, unit_m: float = 1.0, reorient: bool = True) -> TetMesh:
     """Read a tetrahedral mesh from a VTU, Gmsh MSH (v2 or v4) or Abaqus INP file.
 
     Only tets are kept (``tetra`` or ``tetra10``; a file may not mix them); nodes no tet uses
@@ -47,11 +47,12 @@ def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
 
     Args:
         path: The file; its suffix (.vtu, .msh, .inp) picks the format.
+        unit_m: Length of the file's coordinate unit in metres (1e-3 for a file in mm).
         reorient: Turn negatively oriented tets positive (:func:`fix_orientation`); some
             tools write tets in the opposite orientation.
 
     Returns:
-        The mesh, in the file's length unit (warptissue expects metres).
+        The mesh, in metres.
 
     Raises:
         InputError: The file is missing, has an unknown suffix, cannot be parsed, has no
@@ -60,6 +61,8 @@ def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
     import meshio
 
     file_path = Path(path)
+    if not (np.isfinite(unit_m) and unit_m > 0):
+        raise InputError("unit_m must be a positive length in metres", value=unit_m)
     file_format = _READ_FORMATS.get(file_path.suffix.lower())
     if file_format is None:
         raise InputError(
@@ -73,7 +76,8 @@ def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
         with contextlib.redirect_stdout(messages), contextlib.redirect_stderr(messages):
             data = meshio.read(file_path, file_format=file_format)
     except (Exception, SystemExit) as exc:  # meshio raises many kinds, and exits on ReadError
-        detail = " ".join(f"{exc} {messages.getvalue()}".split()) or type(exc).__name__
+        printed = " ".join(messages.getvalue().split())
+        detail = printed if isinstance(exc, SystemExit) else f"{exc} {printed}".strip()
         raise InputError(f"cannot read {file_format} mesh: {detail}", path=file_path) from exc
 
     tet_blocks = [i for i, block in enumerate(data.cells) if block.type in _TET_TYPES]
@@ -97,7 +101,7 @@ def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
         name: np.asarray(nodes, dtype=np.int64) for name, nodes in data.point_sets.items()
     }
     for name, per_block in data.cell_sets.items():
-        if name.startswith("gmsh:") or name in data.field_data:
+        if name.startswith("gmsh:"):
             continue
         members = [
             np.asarray(data.cells[b].data)[np.asarray(cells, dtype=np.int64)].ravel()
@@ -120,7 +124,10 @@ def read_mesh(path: str | Path, *, reorient: bool = True) -> TetMesh:
     }
     try:
         mesh = TetMesh(
-            points=points[used], tets=renumber[tets], node_sets=node_sets, tet_regions=regions
+            points=points[used] * unit_m,
+            tets=renumber[tets],
+            node_sets=node_sets,
+            tet_regions=regions,
         )
     except MeshError as exc:
         raise InputError(str(exc), path=file_path) from exc

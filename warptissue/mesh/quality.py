@@ -8,7 +8,13 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import MeshError
-from warptissue.mesh.core import TET4_EDGES, TET4_FACES, TetMesh, signed_volumes
+from warptissue.mesh.core import (
+    TET4_EDGES,
+    TET4_FACES,
+    TetMesh,
+    _unique_sorted_rows,
+    signed_volumes,
+)
 
 __all__ = [
     "TET10_SWAP_1_2",
@@ -59,6 +65,8 @@ class MeshQuality:
         min_scaled_jacobian: TET10: smallest det J at the nodes and centroid over 6 times the
             corner tet's volume (1 for straight-sided elements). TET4: 1.
         worst_element: Index of the tet with the smallest radius ratio.
+        boundary_face_count: Corner triangles that belong to one tet only.
+        unused_node_count: Nodes that no tet uses (they make a stiffness matrix singular).
     """
 
     element_type: str
@@ -75,6 +83,8 @@ class MeshQuality:
     max_dihedral_deg: float
     min_scaled_jacobian: float
     worst_element: int
+    boundary_face_count: int
+    unused_node_count: int
 
     def to_dict(self) -> dict[str, Any]:
         """The fields as a JSON-ready mapping."""
@@ -96,7 +106,8 @@ def check_mesh(
     Raises:
         MeshError: The mesh has no tets, or a tet is inverted
             (negative volume), degenerate (near-zero volume for its size) or, for TET10,
-            curved so much that its Jacobian determinant is not positive somewhere. The error
+            curved so much that its Jacobian determinant is not positive somewhere, or a face
+            is shared by more than two tets. The error
             names the first offending element and carries its index in ``.element``.
     """
     if mesh.tet_count == 0:
@@ -117,18 +128,35 @@ def check_mesh(
         )
     scaled_jacobian = np.ones(mesh.tet_count)
     if mesh.nodes_per_tet == 10:
-        determinants = tet10_jacobian_determinants(mesh.points, mesh.tets)
-        scaled_jacobian = determinants.min(axis=1) / (6.0 * volumes)
-        curved = np.flatnonzero(scaled_jacobian <= 0)
-        if curved.size:
-            first = int(curved[0])
+        # Straight-sided elements (mid nodes at edge midpoints) have det J = 6 V everywhere;
+        # evaluate the Jacobian only where a mid node is off its edge's midpoint.
+        corners = mesh.points[mesh.tets[:, :4]]
+        midpoints = 0.5 * (corners[:, TET4_EDGES[:, 0]] + corners[:, TET4_EDGES[:, 1]])
+        offset = np.linalg.norm(mesh.points[mesh.tets[:, 4:]] - midpoints, axis=2)
+        curved = np.flatnonzero((offset > 1e-12 * edge_lengths).any(axis=1))
+        determinants = tet10_jacobian_determinants(mesh.points, mesh.tets[curved])
+        scaled_jacobian[curved] = determinants.min(axis=1) / (6.0 * volumes[curved])
+        bad_jacobian = np.flatnonzero(scaled_jacobian <= 0)
+        if bad_jacobian.size:
+            first = int(bad_jacobian[0])
             raise MeshError(
                 "TET10 Jacobian determinant is not positive inside the element (mid-edge node "
-                f"too far from its edge; {curved.size} such tets), nodes "
+                f"too far from its edge; {bad_jacobian.size} such tets), nodes "
                 f"{mesh.tets[first].tolist()}",
                 element=first,
             )
-    ratios = radius_ratios(mesh.points, mesh.corner_tets)
+    faces = np.sort(mesh.corner_tets[:, TET4_FACES].reshape(-1, 3), axis=1)
+    _, face_inverse, face_counts = _unique_sorted_rows(faces, return_counts=True)
+    crowded = np.flatnonzero(face_counts[face_inverse] > 2)
+    if crowded.size:
+        first = int(crowded[0] // 4)
+        raise MeshError(
+            f"face {faces[crowded[0]].tolist()} is shared by "
+            f"{int(face_counts[face_inverse[crowded[0]]])} tets (overlapping or non-manifold "
+            "elements)",
+            element=first,
+        )
+    ratios = _radius_ratios(mesh.points, mesh.corner_tets, edge_lengths)
     dihedral = dihedral_angles(mesh.points, mesh.corner_tets)
     return MeshQuality(
         element_type=mesh.element_type,
@@ -145,6 +173,10 @@ def check_mesh(
         max_dihedral_deg=float(np.degrees(dihedral.max())),
         min_scaled_jacobian=float(scaled_jacobian.min()),
         worst_element=int(np.argmin(ratios)),
+        boundary_face_count=int((face_counts == 1).sum()),
+        unused_node_count=int(
+            np.count_nonzero(np.bincount(mesh.tets.ravel(), minlength=mesh.node_count) == 0)
+        ),
     )
 
 
@@ -190,11 +222,15 @@ def radius_ratios(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
         opposite edge lengths p = a a', q = b b', r = c c':
         r_circ = sqrt((p + q + r)(p + q - r)(p - q + r)(-p + q + r)) / (24 |V|).
     """
+    return _radius_ratios(points, tets, _edge_lengths(points, tets))
+
+
+def _radius_ratios(points: np.ndarray, tets: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """:func:`radius_ratios` with the edge lengths (M, 6) already computed."""
     corners = tets[:, :4]
     volume = np.abs(signed_volumes(points, corners))
     x = points[corners[:, TET4_FACES]]  # (M, 4, 3, 3)
     area = 0.5 * np.linalg.norm(np.cross(x[:, :, 1] - x[:, :, 0], x[:, :, 2] - x[:, :, 0]), axis=2)
-    lengths = _edge_lengths(points, corners)
     # Opposite edge pairs in TET4_EDGES order: (0,1)-(2,3), (1,2)-(0,3), (0,2)-(1,3).
     p, q, r = (
         lengths[:, 0] * lengths[:, 5],
@@ -229,22 +265,26 @@ def dihedral_angles(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return np.pi - np.arccos(np.clip(np.nan_to_num(cosine), -1.0, 1.0))
 
 
-def tet10_jacobian_determinants(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """det(dx/dxi) of isoparametric TET10s at their 10 nodes and centroid.
+def tet10_jacobian_determinants(
+    points: np.ndarray, tets: np.ndarray, *, barycentric: np.ndarray | None = None
+) -> np.ndarray:
+    """det(dx/dxi) of isoparametric TET10s at points given in barycentric coordinates.
 
     Args:
         points: Node coordinates, shape (N, 3).
         tets: TET10 connectivity (VTK mid-edge order), shape (M, 10).
+        barycentric: Sample points (L_0, L_1, L_2, L_3), shape (S, 4). Default: the 4
+            corners, the 6 edge midpoints (in :data:`TET4_EDGES` order) and the centroid.
 
     Returns:
-        Determinants, shape (M, 11): equal to 6 times the volume everywhere for a
+        Determinants, shape (M, S): equal to 6 times the volume everywhere for a
         straight-sided element.
 
     Notes:
         Shape functions in barycentric coordinates L: corners L_i (2 L_i - 1), mid-edge nodes
         4 L_i L_j; xi = (L_1, L_2, L_3) and L_0 = 1 - L_1 - L_2 - L_3.
     """
-    samples = _TET10_SAMPLES
+    samples = _TET10_SAMPLES if barycentric is None else np.asarray(barycentric, float)
     # dN_a / dL_k at each sample: (S, 10, 4).
     d_dl = np.zeros((len(samples), 10, 4))
     for corner in range(4):
@@ -261,19 +301,19 @@ def tet10_jacobian_determinants(points: np.ndarray, tets: np.ndarray) -> np.ndar
         batch = tets[start : start + _BATCH]
         coordinates = points[batch].transpose(0, 2, 1).reshape(-1, 10)
         jacobians = (coordinates @ shape_gradients).reshape(len(batch), 3, len(samples), 3)
-        determinants[start : start + len(batch)] = _det3(
-            jacobians[..., 0], jacobians[..., 1], jacobians[..., 2]
-        )
+        # Columns d first, rows c second, contiguous: (3, 3, m, S).
+        columns = np.ascontiguousarray(jacobians.transpose(3, 1, 0, 2))
+        determinants[start : start + len(batch)] = _det3(columns[0], columns[1], columns[2])
     return determinants
 
 
 def _det3(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Determinants of 3x3 matrices given by columns u, v, w, each shaped (..., 3, ...) with
-    the row index on axis 1: det = u . (v x w)."""
+    """Determinants of 3x3 matrices given by columns u, v, w, each shaped (3, ...) with the
+    row index first: det = u . (v x w)."""
     return (
-        u[:, 0] * (v[:, 1] * w[:, 2] - v[:, 2] * w[:, 1])
-        + u[:, 1] * (v[:, 2] * w[:, 0] - v[:, 0] * w[:, 2])
-        + u[:, 2] * (v[:, 0] * w[:, 1] - v[:, 1] * w[:, 0])
+        u[0] * (v[1] * w[2] - v[2] * w[1])
+        + u[1] * (v[2] * w[0] - v[0] * w[2])
+        + u[2] * (v[0] * w[1] - v[1] * w[0])
     )
 
 

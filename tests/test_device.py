@@ -1,0 +1,23 @@
+import pytest
+import warp as wp
+
+from warptissue.device import resolve_device
+from warptissue.errors import DeviceError
+
+
+def test_resolves_cpu_and_passes_devices_through():
+    cpu = resolve_device("cpu")
+    assert cpu.is_cpu
+    assert resolve_device(cpu) is cpu
+    assert resolve_device(None) == wp.get_device()
+
+
+@pytest.mark.skipif(wp.is_cuda_available(), reason="only meaningful without a GPU")
+def test_cuda_without_gpu_is_a_device_error():
+    with pytest.raises(DeviceError, match="no CUDA device"):
+        resolve_device("cuda")
+
+
+def test_unknown_device_lists_available():
+    with pytest.raises(DeviceError, match="available: .*cpu"):
+        resolve_device("tpu")

@@ -1,0 +1,49 @@
+import json
+
+import numpy as np
+
+from warptissue.cli import main
+from warptissue.mesh import read_mesh
+
+
+def test_generate_check_and_convert(tmp_path, capsys):
+    out = tmp_path / "disc.msh"
+    status = main(
+        [
+            "mesh", "disc", "--radius-m", "0.01", "--thickness-m", "0.004",
+            "--probe-radius-m", "0.003", "--size-near-m", "0.001", "--size-far-m", "0.002",
+            "--element", "TET4", "--out", str(out), "--json", str(tmp_path / "q.json"),
+        ]
+    )  # fmt: skip
+    assert status == 0
+    mesh = read_mesh(out)
+    quality = json.loads((tmp_path / "q.json").read_text())["quality"]
+    assert quality["tet_count"] == mesh.tet_count
+    assert quality["total_volume_m3"] == mesh.volumes().sum()
+    assert "min_radius_ratio" in capsys.readouterr().out
+    assert main(["mesh", "convert", str(out), str(tmp_path / "disc.vtu")]) == 0
+    converted = read_mesh(tmp_path / "disc.vtu")
+    np.testing.assert_array_equal(converted.tets, mesh.tets)
+    assert main(["mesh", "check", str(tmp_path / "disc.vtu")]) == 0
+
+
+def test_errors_are_one_line_with_exit_codes(tmp_path, capsys):
+    assert main(["mesh", "check", str(tmp_path / "missing.vtu")]) == 2
+    assert "missing.vtu" in capsys.readouterr().err
+    bad = tmp_path / "inverted.inp"
+    bad.write_text(
+        "*NODE\n1, 0, 0, 0\n2, 1, 0, 0\n3, 0, 1, 0\n4, 0, 0, 1\n5, 1, 1, 1e-14\n"
+        "*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n2, 1, 2, 3, 5\n"
+    )
+    assert main(["mesh", "check", str(bad)]) == 3
+    assert "element 1: degenerate" in capsys.readouterr().err
+    status = main(
+        [
+            "mesh", "block", "--width-m", "0.01", "--thickness-m", "0.01",
+            "--probe-radius-m", "0.02", "--size-near-m", "0.001", "--size-far-m", "0.002",
+            "--out", str(tmp_path / "b.vtu"),
+        ]
+    )  # fmt: skip
+    assert status == 2
+    assert "probe_radius_m" in capsys.readouterr().err
+    assert not (tmp_path / "b.vtu").exists()

@@ -1,0 +1,97 @@
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.mesh import check_mesh
+from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
+
+BOX_VERTICES = (
+    np.array(
+        [[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0], [0, 0, 3], [2, 0, 3], [2, 1, 3], [0, 1, 3]],
+        dtype=float,
+    )
+    * 0.01
+)
+BOX_TRIANGLES = np.array(
+    [[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4],
+     [1, 2, 6], [1, 6, 5], [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]]
+)  # fmt: skip
+
+
+def icosphere(subdivisions):
+    """A unit sphere triangulated by subdividing an icosahedron."""
+    t = (1 + 5**0.5) / 2
+    corners = [[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+               [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]]  # fmt: skip
+    faces = [[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+             [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+             [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]]  # fmt: skip
+    vertices = [np.array(v, float) / np.linalg.norm(v) for v in corners]
+    for _ in range(subdivisions):
+        midpoint_of, refined = {}, []
+        for face in faces:
+            mids = []
+            for i, j in ((face[0], face[1]), (face[1], face[2]), (face[2], face[0])):
+                key = (min(i, j), max(i, j))
+                if key not in midpoint_of:
+                    m = vertices[i] + vertices[j]
+                    vertices.append(m / np.linalg.norm(m))
+                    midpoint_of[key] = len(vertices) - 1
+                mids.append(midpoint_of[key])
+            ab, bc, ca = mids
+            a, b, c = face
+            refined += [[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]
+        faces = refined
+    return np.array(vertices), np.array(faces)
+
+
+def enclosed_volume(vertices, triangles):
+    """Volume inside a closed, consistently outward-oriented surface (divergence theorem)."""
+    x = vertices[triangles]
+    return np.einsum("ij,ij->i", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() / 6
+
+
+def test_box_volume_and_surface():
+    mesh = tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, max_volume_m3=2e-8)
+    assert np.all(mesh.volumes() > 0)
+    assert mesh.volumes().sum() == pytest.approx(6e-6, rel=1e-12)
+    assert mesh.tet_count > 6e-6 / 2e-8  # the volume bound forced refinement
+    assert mesh.volumes().max() < 1.5 * 2e-8
+    np.testing.assert_array_equal(mesh.points[:8], BOX_VERTICES)  # inputs keep their index
+    surface = mesh.points[mesh.node_sets["surface"]]
+    on_box = np.isclose(surface, 0).any(1) | np.isclose(surface, BOX_VERTICES.max(0)).any(1)
+    assert np.all(on_box)
+    assert enclosed_volume(mesh.points, mesh.face_sets["surface"]) == pytest.approx(6e-6)
+    check_mesh(mesh)
+
+
+def test_sphere_volume():
+    vertices, triangles = icosphere(3)
+    radius = 0.02
+    mesh = tetrahedralize_surface(radius * vertices, triangles, quality=1.3, min_dihedral_deg=15)
+    polyhedron = enclosed_volume(radius * vertices, triangles)
+    assert mesh.volumes().sum() == pytest.approx(polyhedron, rel=1e-10)
+    assert mesh.volumes().sum() == pytest.approx(4 / 3 * np.pi * radius**3, rel=0.015)
+    quality = check_mesh(mesh)
+    rough = check_mesh(tetrahedralize_surface(radius * vertices, triangles, quality=None))
+    assert quality.min_dihedral_deg > rough.min_dihedral_deg
+    assert quality.mean_radius_ratio > rough.mean_radius_ratio
+
+
+def test_open_surface_is_rejected_naming_the_edge():
+    with pytest.raises(InputError, match=r"not closed: edge \[\d+, \d+\] belongs to 1"):
+        tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES[:-1])
+
+
+def test_non_manifold_and_malformed_surfaces_are_rejected():
+    doubled = np.vstack([BOX_TRIANGLES, BOX_TRIANGLES[:1]])
+    with pytest.raises(InputError, match="non-manifold"):
+        check_closed_surface(BOX_VERTICES, doubled)
+    with pytest.raises(InputError, match="triangle 3 indexes a vertex"):
+        check_closed_surface(BOX_VERTICES, np.vstack([BOX_TRIANGLES[:3], [[0, 1, 99]]]))
+    flat = BOX_TRIANGLES.copy()
+    flat[5] = [0, 1, 1]
+    with pytest.raises(InputError, match="triangle 5 is degenerate"):
+        check_closed_surface(BOX_VERTICES, flat)
+    with pytest.raises(InputError, match="quality"):
+        tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, quality=0.9)

@@ -1,0 +1,22 @@
+"""Least-squares fitting for every model of warptissue.
+
+``least_squares`` minimizes a residual function with Levenberg-Marquardt (``method="lm"``)
+or seed 002's self-adapting LM (``method="salm"``), with bounds, refusals of trial points
+(:class:`RejectStep`), finite-difference or caller-supplied Jacobians, and parameter
+statistics. ``fit_curve`` fits model predictions to data with an absolute or relative
+objective. See :mod:`warptissue.fit.engine` for the algorithms and the seed's misprints.
+"""
+
+from warptissue.fit import metrics
+from warptissue.fit.engine import fit_curve, least_squares
+from warptissue.fit.result import STATUS_MESSAGES, FitResult, IterationRecord, RejectStep
+
+__all__ = [
+    "STATUS_MESSAGES",
+    "FitResult",
+    "IterationRecord",
+    "RejectStep",
+    "fit_curve",
+    "least_squares",
+    "metrics",
+]

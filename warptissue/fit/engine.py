@@ -1,0 +1,685 @@
+"""The least-squares engine of warptissue: Levenberg-Marquardt and self-adapting LM.
+
+Every fit in the project (analytic stress-strain curves, lumped viscoelastic models, the
+heterogeneous field estimator, inverse FE) goes through :func:`least_squares` or its curve
+front end :func:`fit_curve`. The front end follows ``scipy.optimize.least_squares``: validate
+the input first, then iterate, then return a :class:`~warptissue.fit.result.FitResult` with an
+integer status from :data:`~warptissue.fit.result.STATUS_MESSAGES`.
+
+Notes:
+    Both methods solve the damped Gauss-Newton system for the step d,
+
+        (J^T J + lambda D^2) d = -J^T r,
+
+    through the SVD of the column-scaled Jacobian J D^-1 (as a damped least-squares problem,
+    which is better conditioned than forming J^T J). The cost is 0.5 * ||r||^2.
+
+    ``method="lm"``: Levenberg-Marquardt with Marquardt's scaling, D^2 = diag(J^T J) (seed
+    000, Eq. 8, prints the Levenberg form J^T J + lambda I; Marquardt's diagonal makes the
+    step invariant to the units of each parameter, which matters for moduli in Pa next to
+    dimensionless exponents). D is taken from the current Jacobian at every iteration; a
+    zero column (a parameter without effect) gets D = 1, so D^2 stays positive. (MINPACK's
+    running maximum of the column norms was tried: on Powell's singular function it needs
+    296 steps instead of 130, because the columns shrink near the solution.)
+    The damping lambda follows Nielsen's rule (Madsen, Nielsen & Tingleff 2004): with
+    rho = actual / predicted cost reduction, an accepted step (rho > 1e-4) multiplies lambda
+    by max(1/3, 1 - (2 rho - 1)^3); a rejected step multiplies it by nu (2, 4, 8, ...).
+    The ``gtol`` test is MINPACK's: the largest cosine between r and a column of J.
+
+    ``method="salm"``: the self-adapting LM of seed 002 (Tong et al.), Eq. 7-12 and
+    Algorithm 1, with D = I (or 1/x_scale):
+
+        lambda_k = eta_k (theta m_k / ||Y_k|| + (1 - theta) m_k / ||J_k^T Y_k||),
+            m_k = min(||Y_k||^2, ||J_k^T Y_k||^2)                               (Eq. 8)
+        tau_k = (||Y_k||^2 - ||Y(x_k + d_k)||^2) / (||Y_k||^2 - ||Y_k + J_k d_k||^2) (Eq. 11)
+        x_{k+1} = x_k + d_k if tau_k > p0, else x_k                                 (Eq. 12)
+        eta_{k+1} = max(c, eta_k q(tau_k)),  q(tau) = max(0.5, 1 - 2 (2 tau - 1)^3)
+
+    and the loop runs while ||J^T Y||_2 >= epsilon (``gtol``). Two misprints of the seed are
+    corrected here. (1) Eq. 9 prints eta_{k+1} = min{c, eta_k q}, but Algorithm 1 asks for
+    eta_1 > c, which only makes sense if c is a lower bound: with min, eta could never exceed
+    c again and the initial value would be meaningless. It is max{c, .}, as in the
+    self-adaptive LM of Fan & Pan (2006) that the method builds on. (2) Eq. 10 prints
+    q(tau) = max{0.5, 1 - (2 tau - 1)^2}, which never exceeds 1: the damping could then
+    only shrink, also after a rejected step, so a rejected step would be retried with a
+    LONGER step, forever. Fan & Pan's q is max{1/4, 1 - 2 (2 tau - 1)^3}, which grows the
+    damping (q(0) = 3) after a poor step and shrinks it (q(1) = 1/4) after a good one; we
+    use that cubic with the seed's floor of 0.5. Defaults: theta = 0.5, c = 1e-8,
+    p0 = 1e-4, eta_1 = 1 (the seed gives no values). The seed has no ``ftol``/``xtol``
+    tests; they are added as safeguards, with the same meaning as for "lm".
+
+    Refused trial points (``RejectStep`` raised by the model, or non-finite residuals) are
+    rejected steps with extra damping: lambda (lm) or eta (salm) grows by a further factor
+    of 10.
+
+    Bounds are kept by projection (Kanzow, Yamashita & Fukushima 2004): parameters at a
+    bound whose gradient points outward are held fixed for the step, the step of the others
+    is projected onto the box, and the predicted reduction uses the projected step. Iterates
+    are therefore always feasible and a model is never evaluated outside the bounds (finite
+    differences step inward at a bound).
+
+    Finite differences (``jac=None``): forward differences with step
+    h_j = sqrt(eps) * max(|x_j|, s_j), where s_j is ``x_scale`` (default 1), taken toward
+    the inside of the bounds; a refused point is retried on the other side.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import ConvergenceError, InputError
+from warptissue.fit.metrics import r_squared, rmse
+from warptissue.fit.result import STATUS_MESSAGES, FitResult, IterationRecord, RejectStep
+
+__all__ = ["fit_curve", "least_squares"]
+
+_EPS = float(np.finfo(np.float64).eps)
+_METHODS = ("lm", "salm")
+_OPTION_DEFAULTS: Mapping[str, Mapping[str, float]] = {
+    "lm": {"initial_damping": 1e-3, "p0": 1e-4},
+    "salm": {"theta": 0.5, "c": 1e-8, "p0": 1e-4, "eta0": 1.0},
+}
+_REFUSAL_FACTOR = 10.0
+_DAMPING_LIMIT = 1e300
+
+
+class _Evaluator:
+    """Counts residual evaluations and turns refusals into None."""
+
+    def __init__(self, fun: Callable[[np.ndarray], Any], residual_count: int | None) -> None:
+        self.fun = fun
+        self.residual_count = residual_count
+        self.nfev = 0
+
+    def __call__(self, x: np.ndarray) -> np.ndarray | None:
+        self.nfev += 1
+        try:
+            value = self.fun(x.copy())
+        except RejectStep:
+            return None
+        residuals = np.asarray(value, dtype=np.float64)
+        if residuals.ndim != 1 or residuals.size == 0:
+            raise InputError(
+                "the residual function must return a non-empty 1-D array",
+                value=residuals.shape,
+            )
+        if self.residual_count is not None and residuals.size != self.residual_count:
+            raise InputError(
+                f"the residual function returned {residuals.size} values, "
+                f"expected {self.residual_count}"
+            )
+        if not np.all(np.isfinite(residuals)):
+            return None
+        return residuals
+
+
+class _MarquardtDamping:
+    """Levenberg-Marquardt with Marquardt's diagonal scaling and Nielsen's damping update."""
+
+    def __init__(self, options: Mapping[str, float], x_scale: np.ndarray | None) -> None:
+        self.damping = float(options["initial_damping"])
+        self.p0 = float(options["p0"])
+        self.nu = 2.0
+        self.fixed_scale = None if x_scale is None else 1.0 / x_scale
+
+    def scale(self, jacobian: np.ndarray) -> np.ndarray:
+        if self.fixed_scale is not None:
+            return self.fixed_scale
+        norms = np.linalg.norm(jacobian, axis=0)
+        return np.where(norms > 0.0, norms, 1.0)
+
+    def gradient_norm(
+        self, jacobian: np.ndarray, residuals: np.ndarray, gradient: np.ndarray, free: np.ndarray
+    ) -> float:
+        residual_norm = float(np.linalg.norm(residuals))
+        norms = np.linalg.norm(jacobian, axis=0)
+        active = free & (norms > 0.0)
+        if residual_norm == 0.0 or not np.any(active):
+            return 0.0
+        return float(np.max(np.abs(gradient[active]) / (norms[active] * residual_norm)))
+
+    def value(self, residual_norm: float, scaled_gradient_norm: float) -> float:
+        return self.damping
+
+    def update(self, ratio: float | None) -> None:
+        if ratio is None:
+            self.damping *= _REFUSAL_FACTOR * self.nu
+            self.nu *= 2.0
+        elif ratio > self.p0:
+            self.damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
+            self.damping = max(self.damping, 1e-300)
+            self.nu = 2.0
+        else:
+            self.damping *= self.nu
+            self.nu *= 2.0
+
+
+class _SelfAdaptingDamping:
+    """Tong et al.'s self-adapting LM (seed 002, Eq. 8-12), misprints corrected."""
+
+    def __init__(self, options: Mapping[str, float], x_scale: np.ndarray | None) -> None:
+        self.theta = float(options["theta"])
+        self.c = float(options["c"])
+        self.p0 = float(options["p0"])
+        self.eta = float(options["eta0"])
+        if not 0.0 <= self.theta <= 1.0:
+            raise InputError("salm option theta must lie in [0, 1]", value=self.theta)
+        if not (self.c > 0.0 and 0.0 < self.p0 < 1.0 and self.eta > self.c):
+            raise InputError(
+                "salm options need c > 0, 0 < p0 < 1 and eta0 > c (seed 002, Algorithm 1)",
+                value=dict(options),
+            )
+        self.fixed_scale = None if x_scale is None else 1.0 / x_scale
+        self.damping = 0.0
+
+    def scale(self, jacobian: np.ndarray) -> np.ndarray:
+        if self.fixed_scale is not None:
+            return self.fixed_scale
+        return np.ones(jacobian.shape[1])
+
+    def gradient_norm(
+        self, jacobian: np.ndarray, residuals: np.ndarray, gradient: np.ndarray, free: np.ndarray
+    ) -> float:
+        scale = self.scale(jacobian)
+        return float(np.linalg.norm(np.where(free, gradient / scale, 0.0)))
+
+    def value(self, residual_norm: float, scaled_gradient_norm: float) -> float:
+        smaller = min(residual_norm**2, scaled_gradient_norm**2)
+        self.damping = self.eta * (
+            self.theta * smaller / residual_norm
+            + (1.0 - self.theta) * smaller / scaled_gradient_norm
+        )
+        return self.damping
+
+    def update(self, ratio: float | None) -> None:
+        if ratio is None:
+            factor = _REFUSAL_FACTOR * self._q(0.0)
+        else:
+            factor = self._q(ratio)
+        self.eta = max(self.c, self.eta * factor)
+
+    @staticmethod
+    def _q(ratio: float) -> float:
+        return max(0.5, 1.0 - 2.0 * (2.0 * ratio - 1.0) ** 3)
+
+
+def _as_vector(name: str, value: Any, size: int) -> np.ndarray:
+    try:
+        array = np.broadcast_to(np.asarray(value, dtype=np.float64), (size,)).copy()
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be a number or an array of {size}", value=value) from None
+    return array
+
+
+def _validate_names(
+    names: Sequence[str] | None, size: int, default_prefix: str, what: str
+) -> tuple[str, ...]:
+    if names is None:
+        return tuple(f"{default_prefix}{i}" for i in range(size))
+    result = tuple(str(name) for name in names)
+    if len(result) != size:
+        raise InputError(f"{what} needs {size} entries", value=list(result))
+    return result
+
+
+def _finite_difference_jacobian(
+    evaluate: _Evaluator,
+    x: np.ndarray,
+    residuals: np.ndarray,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    typical: np.ndarray,
+) -> np.ndarray:
+    jacobian = np.empty((residuals.size, x.size))
+    for j in range(x.size):
+        h = math.sqrt(_EPS) * max(abs(x[j]), typical[j])
+        room_up, room_down = upper[j] - x[j], x[j] - lower[j]
+        first = h if room_up >= h or room_up >= room_down else -h
+        candidates = [first, -first]
+        for k, step in enumerate(candidates):
+            room = room_up if step > 0 else room_down
+            step = math.copysign(min(abs(step), room), step)
+            if step == 0.0:
+                continue
+            probe = x.copy()
+            probe[j] += step
+            actual = probe[j] - x[j]
+            value = evaluate(probe)
+            if value is not None:
+                jacobian[:, j] = (value - residuals) / actual
+                break
+            if k == len(candidates) - 1:
+                raise ConvergenceError(
+                    f"finite differences: the model refused both x{j} +/- {abs(step):.3g} "
+                    f"around x = {x.tolist()}"
+                )
+        else:
+            raise ConvergenceError(
+                f"finite differences: no room inside the bounds for parameter {j}"
+            )
+    return jacobian
+
+
+def _covariance(
+    jacobian: np.ndarray, cost: float
+) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
+    """(J^T J)^-1 * SSR / (m - n), its standard errors and correlation, or Nones."""
+    m, n = jacobian.shape
+    if m <= n:
+        return None, None, None
+    _, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
+    if singular[0] == 0.0 or singular[-1] <= singular[0] * max(m, n) * _EPS:
+        return None, None, None
+    variance = 2.0 * cost / (m - n)
+    covariance = (vt.T / singular**2) @ vt * variance
+    errors = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    if np.all(errors > 0.0):
+        correlation = covariance / np.outer(errors, errors)
+        np.fill_diagonal(correlation, 1.0)
+    else:
+        correlation = None
+    return covariance, errors, correlation
+
+
+def least_squares(
+    fun: Callable[[np.ndarray], np.ndarray],
+    x0: Sequence[float] | np.ndarray,
+    *,
+    jac: Callable[[np.ndarray], np.ndarray] | None = None,
+    bounds: tuple[Any, Any] = (-np.inf, np.inf),
+    method: str = "lm",
+    x_scale: Sequence[float] | np.ndarray | float | None = None,
+    max_iterations: int = 200,
+    ftol: float = 1e-8,
+    xtol: float = 1e-8,
+    gtol: float = 1e-8,
+    callback: Callable[[IterationRecord], bool | None] | None = None,
+    progress: bool = False,
+    parameter_names: Sequence[str] | None = None,
+    parameter_units: Sequence[str] | None = None,
+    options: Mapping[str, float] | None = None,
+) -> FitResult:
+    """Minimize 0.5 * sum(fun(x)**2) subject to lower <= x <= upper.
+
+    Args:
+        fun: Residuals, ``fun(x) -> (m,)``. It may raise :class:`RejectStep` (or return
+            non-finite values) to refuse a trial point; the engine then damps harder.
+        x0: Initial parameters, shape (n,); must lie within the bounds.
+        jac: Jacobian of the residuals, ``jac(x) -> (m, n)`` (analytic or FE sensitivities),
+            or None for forward finite differences.
+        bounds: (lower, upper), scalars or arrays of n; ``-inf``/``inf`` for none.
+        method: "lm" (Levenberg-Marquardt, Marquardt scaling) or "salm" (seed 002's
+            self-adapting LM).
+        x_scale: Characteristic scale of each parameter, shape (n,) or scalar. When given,
+            the damping uses D = 1/x_scale in place of the method's own scaling.
+        max_iterations: Maximum number of trial steps (each costs one evaluation of ``fun``).
+        ftol: Stop when an accepted step reduced the cost by less than ``ftol * cost``.
+        xtol: Stop when the scaled step is shorter than ``xtol * (xtol + ||D x||)``.
+        gtol: Stop when the gradient measure falls below ``gtol`` ("lm": the largest cosine
+            between the residuals and a Jacobian column; "salm": ||J^T r||_2, Algorithm 1's
+            epsilon).
+        callback: Called after every trial step with its :class:`IterationRecord`; return
+            True (or raise StopIteration) to stop (status -1).
+        progress: Show a tqdm progress bar with the cost and damping.
+        parameter_names: One name per parameter (default x0, x1, ...).
+        parameter_units: One unit per parameter (default "").
+        options: Method constants: "lm": initial_damping (1e-3), p0 (1e-4); "salm": theta
+            (0.5), c (1e-8), p0 (1e-4), eta0 (1.0).
+
+    Returns:
+        The :class:`FitResult`. ``r_squared`` is None (there is no data); ``rmse`` is the root
+        mean square of the residuals.
+
+    Raises:
+        InputError: Invalid arguments, ``x0`` outside the bounds, or a model that is not
+            defined (refused or non-finite) at ``x0``.
+        ConvergenceError: The Jacobian could not be evaluated at ``x0`` (non-finite analytic
+            Jacobian, or finite differences refused on both sides). Later such a failure
+            ends the fit with status -3 and the best point so far.
+    """
+    if method not in _METHODS:
+        raise InputError(f"method must be one of {_METHODS}", value=method)
+    x = np.asarray(x0, dtype=np.float64).reshape(-1).copy()
+    n = x.size
+    if n == 0 or not np.all(np.isfinite(x)):
+        raise InputError("x0 must be a non-empty array of finite numbers", value=x0)
+    names = _validate_names(parameter_names, n, "x", "parameter_names")
+    units = (
+        ("",) * n
+        if parameter_units is None
+        else _validate_names(parameter_units, n, "", "parameter_units")
+    )
+    if len(bounds) != 2:
+        raise InputError("bounds must be a pair (lower, upper)", value=bounds)
+    lower = _as_vector("lower bound", bounds[0], n)
+    upper = _as_vector("upper bound", bounds[1], n)
+    if np.any(np.isnan(lower)) or np.any(np.isnan(upper)) or np.any(lower >= upper):
+        raise InputError("each lower bound must be below its upper bound", value=bounds)
+    outside = np.flatnonzero((x < lower) | (x > upper))
+    if outside.size:
+        j = int(outside[0])
+        raise InputError(
+            f"x0 is outside the bounds [{lower[j]}, {upper[j]}] for {names[j]}",
+            value=float(x[j]),
+        )
+    scale_vector = None
+    if x_scale is not None:
+        scale_vector = _as_vector("x_scale", x_scale, n)
+        if not np.all(np.isfinite(scale_vector) & (scale_vector > 0.0)):
+            raise InputError("x_scale must be positive and finite", value=x_scale)
+    if int(max_iterations) < 1:
+        raise InputError("max_iterations must be at least 1", value=max_iterations)
+    for tol_name, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
+        if not (tol >= 0.0 and math.isfinite(tol)):
+            raise InputError(f"{tol_name} must be a finite number >= 0", value=tol)
+    merged = dict(_OPTION_DEFAULTS[method])
+    for key, value in (options or {}).items():
+        if key not in merged:
+            raise InputError(
+                f"unknown option for method {method!r}; known: {sorted(merged)}", value=key
+            )
+        merged[key] = float(value)
+    damping = (
+        _MarquardtDamping(merged, scale_vector)
+        if method == "lm"
+        else _SelfAdaptingDamping(merged, scale_vector)
+    )
+
+    evaluate = _Evaluator(fun, None)
+    residuals = evaluate(x)
+    if residuals is None:
+        raise InputError("the model is not defined (refused or non-finite) at x0", value=x.tolist())
+    evaluate.residual_count = residuals.size
+    typical = np.ones(n) if scale_vector is None else scale_vector
+    njev = 0
+
+    def jacobian_at(point: np.ndarray, point_residuals: np.ndarray) -> np.ndarray:
+        nonlocal njev
+        njev += 1
+        if jac is None:
+            return _finite_difference_jacobian(
+                evaluate, point, point_residuals, lower, upper, typical
+            )
+        try:
+            matrix = np.asarray(jac(point.copy()), dtype=np.float64)
+        except RejectStep as exc:
+            raise ConvergenceError(f"the Jacobian was refused at x = {point.tolist()}") from exc
+        if matrix.shape != (point_residuals.size, n):
+            raise InputError(
+                f"jac must return shape ({point_residuals.size}, {n})", value=matrix.shape
+            )
+        if not np.all(np.isfinite(matrix)):
+            raise ConvergenceError(f"the Jacobian is not finite at x = {point.tolist()}")
+        return matrix
+
+    cost = 0.5 * float(residuals @ residuals)
+    jacobian = jacobian_at(x, residuals)
+    jacobian_is_current = True
+    history: list[IterationRecord] = []
+    iteration = 0
+    status: int | None = None
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(
+        total=int(max_iterations),
+        desc=f"least squares ({method})",
+        unit="step",
+        disable=not progress,
+        leave=False,
+    )
+    try:
+        while status is None:
+            gradient = jacobian.T @ residuals
+            scale = damping.scale(jacobian)
+            at_lower = (x <= lower) & (gradient > 0.0)
+            at_upper = (x >= upper) & (gradient < 0.0)
+            free = ~(at_lower | at_upper)
+            gradient_norm = damping.gradient_norm(jacobian, residuals, gradient, free)
+            if gradient_norm <= gtol:
+                status = 1
+                break
+            if iteration >= max_iterations:
+                status = 0
+                break
+            scaled_jacobian = jacobian[:, free] / scale[free]
+            u, singular, vt = np.linalg.svd(scaled_jacobian, full_matrices=False)
+            projected_residuals = u.T @ residuals
+            residual_norm = math.sqrt(2.0 * cost)
+            scaled_gradient_norm = float(np.linalg.norm(scaled_jacobian.T @ residuals))
+            x_norm = float(np.linalg.norm(scale * x))
+            while True:
+                lam = damping.value(residual_norm, scaled_gradient_norm)
+                if not (lam < _DAMPING_LIMIT):
+                    status = -2
+                    break
+                z = -(vt.T @ (singular * projected_residuals / (singular**2 + lam)))
+                step = np.zeros(n)
+                step[free] = z / scale[free]
+                trial = np.clip(x + step, lower, upper)
+                step = trial - x
+                step_norm = float(np.linalg.norm(scale * step))
+                predicted = -(2.0 * float(gradient @ step) + float(np.sum((jacobian @ step) ** 2)))
+                iteration += 1
+                trial_residuals = evaluate(trial) if predicted > 0.0 else None
+                if trial_residuals is None:
+                    trial_cost = None
+                    ratio = None
+                else:
+                    trial_cost = 0.5 * float(trial_residuals @ trial_residuals)
+                    ratio = (cost - trial_cost) / (0.5 * predicted)
+                damping.update(ratio if predicted > 0.0 else -1.0)
+                accepted = ratio is not None and ratio > damping.p0
+                small_step = step_norm <= xtol * (xtol + x_norm)
+                previous_cost = cost
+                if accepted:
+                    x, residuals, cost = trial, trial_residuals, trial_cost
+                    jacobian_is_current = False
+                record = IterationRecord(
+                    iteration=iteration,
+                    x=x.copy(),
+                    cost=cost,
+                    trial_cost=trial_cost,
+                    step_norm=step_norm,
+                    damping=lam,
+                    gradient_norm=gradient_norm,
+                    ratio=ratio,
+                    accepted=accepted,
+                )
+                history.append(record)
+                bar.update(1)
+                bar.set_postfix(cost=f"{cost:.4g}", damping=f"{lam:.2g}", refresh=False)
+                try:
+                    stop = bool(callback(record)) if callback is not None else False
+                except StopIteration:
+                    stop = True
+                if accepted:
+                    small_reduction = (previous_cost - cost) <= ftol * previous_cost and (
+                        ratio > 0.25
+                    )
+                    if small_reduction and small_step:
+                        status = 4
+                    elif small_reduction:
+                        status = 2
+                    elif small_step:
+                        status = 3
+                elif small_step:
+                    status = 3
+                if status is None and stop:
+                    status = -1
+                if status is None and not accepted and iteration >= max_iterations:
+                    status = 0
+                if status is not None or accepted:
+                    break
+            if status is None:
+                try:
+                    jacobian = jacobian_at(x, residuals)
+                    jacobian_is_current = True
+                except ConvergenceError:
+                    status = -3
+    finally:
+        bar.close()
+
+    if not jacobian_is_current and status != -3:
+        try:
+            jacobian = jacobian_at(x, residuals)
+            jacobian_is_current = True
+        except ConvergenceError:
+            status = -3
+    covariance, errors, correlation = (
+        _covariance(jacobian, cost) if jacobian_is_current else (None, None, None)
+    )
+    return FitResult(
+        x=x,
+        parameter_names=names,
+        parameter_units=units,
+        cost=cost,
+        residuals=residuals,
+        jacobian=jacobian,
+        success=status > 0,
+        status=status,
+        message=STATUS_MESSAGES[status],
+        iterations=iteration,
+        nfev=evaluate.nfev,
+        njev=njev,
+        covariance=covariance,
+        standard_errors=errors,
+        correlation=correlation,
+        r_squared=None,
+        rmse=float(np.sqrt(np.mean(residuals**2))),
+        history=history,
+        method=method,
+    )
+
+
+def fit_curve(
+    model: Callable[[np.ndarray], np.ndarray],
+    p0: Sequence[float] | np.ndarray,
+    y_data: Sequence[float] | np.ndarray,
+    *,
+    objective: str = "absolute",
+    weights: Sequence[float] | np.ndarray | None = None,
+    jac: Callable[[np.ndarray], np.ndarray] | None = None,
+    bounds: tuple[Any, Any] = (-np.inf, np.inf),
+    method: str = "lm",
+    parameter_names: Sequence[str] | None = None,
+    parameter_units: Sequence[str] | None = None,
+    relative_floor: float | None = None,
+    x_scale: Sequence[float] | np.ndarray | float | None = None,
+    max_iterations: int = 200,
+    ftol: float = 1e-8,
+    xtol: float = 1e-8,
+    gtol: float = 1e-8,
+    callback: Callable[[IterationRecord], bool | None] | None = None,
+    progress: bool = False,
+    options: Mapping[str, float] | None = None,
+) -> FitResult:
+    """Fit model predictions to data with an absolute or a relative error objective.
+
+    Residuals: ``w * (model(p) - y)`` ("absolute", seed 003 Eq. 4) or
+    ``w * (model(p) - y) / y`` ("relative", seed 000 Eq. 7 and seed 003 Eq. 5, the objective
+    Abaqus uses). Relative residuals are undefined where the data are zero; by default any
+    |y_i| below 1e-6 * max|y| is an InputError (select a data window, e.g. strain > 0.05 as
+    seed 003 does). With ``relative_floor`` set, the divisor is instead
+    sign(y) * max(|y|, relative_floor), documented in the result's ``objective``.
+
+    Args:
+        model: Predictions, ``model(p) -> (m,)``; may raise :class:`RejectStep`.
+        p0: Initial parameters, shape (n,).
+        y_data: Measured values, shape (m,).
+        objective: "absolute" or "relative".
+        weights: Positive weights, shape (m,) (default 1).
+        jac: d model / d p, ``jac(p) -> (m, n)``, or None for finite differences. The engine
+            applies the weights and the relative scaling itself.
+        bounds, method, x_scale, max_iterations, ftol, xtol, gtol, callback, progress,
+        options: As in :func:`least_squares`.
+        parameter_names, parameter_units: Names and SI units for the result.
+        relative_floor: Smallest |y| used as a divisor for the relative objective, in the
+            units of ``y``; None raises on near-zero data instead.
+
+    Returns:
+        The :class:`FitResult`, with ``fitted`` (model at the solution), ``r_squared`` and
+        ``rmse`` of the fitted curve against the data (unweighted, in data units; R² is None
+        for constant data), and the covariance of the parameters for the chosen objective.
+
+    Raises:
+        InputError: Invalid data, weights or objective, near-zero data with a relative
+            objective, or a model that returns the wrong number of values.
+    """
+    y = np.asarray(y_data, dtype=np.float64).reshape(-1)
+    if y.size == 0 or not np.all(np.isfinite(y)):
+        raise InputError("y_data must be a non-empty array of finite numbers")
+    if weights is None:
+        w = np.ones_like(y)
+    else:
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape != y.shape:
+            raise InputError(f"weights need {y.size} entries", value=w.size)
+        if not np.all(np.isfinite(w) & (w > 0.0)):
+            bad = int(np.flatnonzero(~(np.isfinite(w) & (w > 0.0)))[0])
+            raise InputError(f"weights must be positive and finite (index {bad})", value=w[bad])
+    if objective == "absolute":
+        divisor = np.ones_like(y)
+    elif objective == "relative":
+        if relative_floor is None:
+            threshold = 1e-6 * float(np.max(np.abs(y)))
+            small = np.flatnonzero(np.abs(y) <= threshold)
+            if small.size:
+                raise InputError(
+                    f"relative objective: data value at index {int(small[0])} is (near) zero; "
+                    "select a data window away from zero or set relative_floor",
+                    value=float(y[small[0]]),
+                )
+            divisor = y.copy()
+        else:
+            if not (relative_floor > 0.0 and math.isfinite(relative_floor)):
+                raise InputError("relative_floor must be positive", value=relative_floor)
+            divisor = np.where(y < 0.0, -1.0, 1.0) * np.maximum(np.abs(y), relative_floor)
+    else:
+        raise InputError("objective must be 'absolute' or 'relative'", value=objective)
+    factor = w / divisor
+
+    def predictions(p: np.ndarray) -> np.ndarray:
+        values = np.asarray(model(p), dtype=np.float64).reshape(-1)
+        if values.size != y.size:
+            raise InputError(
+                f"the model returned {values.size} predictions for {y.size} data points"
+            )
+        return values
+
+    def residual(p: np.ndarray) -> np.ndarray:
+        return factor * (predictions(p) - y)
+
+    def residual_jacobian(p: np.ndarray) -> np.ndarray:
+        return factor[:, None] * np.asarray(jac(p), dtype=np.float64)
+
+    result = least_squares(
+        residual,
+        p0,
+        jac=None if jac is None else residual_jacobian,
+        bounds=bounds,
+        method=method,
+        x_scale=x_scale,
+        max_iterations=max_iterations,
+        ftol=ftol,
+        xtol=xtol,
+        gtol=gtol,
+        callback=callback,
+        progress=progress,
+        parameter_names=parameter_names,
+        parameter_units=parameter_units,
+        options=options,
+    )
+    fitted = y + result.residuals / factor
+    result.fitted = fitted
+    result.objective = objective
+    result.rmse = rmse(y, fitted)
+    try:
+        result.r_squared = r_squared(y, fitted)
+    except InputError:
+        result.r_squared = None
+    return result
