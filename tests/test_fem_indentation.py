@@ -175,6 +175,8 @@ def test_bad_inputs_are_named():
         IndentationProblem(mesh, material, FlatPunch(RADIUS_M), symmetry_planes=("symmetry_z",))
     with pytest.raises(InputError, match="base"):
         IndentationProblem(mesh, material, FlatPunch(RADIUS_M), base="floating")
+    with pytest.raises(InputError, match="TET10"):
+        IndentationProblem(_block(near=1.0, element="TET4"), material, FlatPunch(RADIUS_M))
     problem = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
     with pytest.raises(InputError, match="increasing"):
         simulate_indentation(problem, [2e-4, 1e-4], device="cpu", progress=False)
