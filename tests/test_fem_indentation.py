@@ -49,8 +49,10 @@ def sneddon_layer_stiffness(radius_m: float, thickness_m: float, shear_modulus_p
     """Flat-punch stiffness of an incompressible layer bonded to a rigid base.
 
     Sneddon's half-space value 2 a E / (1 - nu^2) = 8 mu a (nu = 1/2), times the finite-layer
-    factor 1 + 1.33 (a/h) + 1.33 (a/h)^3 (Shull 2002, Mater. Sci. Eng. R 36, Eq. 33: the fit to
-    the numerical solutions for a layer with no slip at the substrate).
+    factor 1 + 1.33 (a/h) + 1.33 (a/h)^3 for an incompressible layer with no slip at the rigid
+    substrate (Shull 2002, Mater. Sci. Eng. R 36, 1-45, flat-punch compliance of thin layers).
+    scripts/verify_flat_punch.py checks the factor independently: the Richardson-extrapolated
+    FE stiffness at h/a = 4 is within 0.2 % of it (README "Finite elements").
     """
     ratio = radius_m / thickness_m
     return 8.0 * shear_modulus_pa * radius_m * (1.0 + 1.33 * ratio + 1.33 * ratio**3)
@@ -61,7 +63,7 @@ def test_small_depth_stiffness_matches_sneddon_with_layer_correction():
     mesh = _block(thickness_over_radius=4.0, near=0.5)
     expected = sneddon_layer_stiffness(RADIUS_M, thickness, SHEAR_MODULUS_PA)
     stiffness = _stiffness(mesh, _material(1000.0))
-    assert stiffness == pytest.approx(expected, rel=0.03)
+    assert stiffness == pytest.approx(expected, rel=0.02)
 
 
 def test_force_is_insensitive_to_bulk_modulus_in_the_mixed_formulation():
@@ -83,21 +85,28 @@ def test_displacement_tet4_locks_but_mixed_tet10_does_not():
 
 
 def test_bonded_punch_reaches_half_the_radius_and_stops_cleanly_beyond():
-    mesh = _block()
+    """Half the radius in two steps; then a jump to 3 a that two halvings cannot rescue stops
+    with a message and keeps the curve (scripts/verify_flat_punch.py reaches 2 a in steps of
+    0.05 a)."""
+    mesh = _block(near=1.0)
     problem = IndentationProblem(mesh, _material(1000.0), FlatPunch(RADIUS_M))
-    depths = RADIUS_M * np.array([0.1, 0.25, 0.5, 3.0])
-    result = simulate_indentation(problem, depths, device="cpu", progress=False, max_cutbacks=3)
-    assert result.depths_m[2] == pytest.approx(0.5 * RADIUS_M)
-    assert np.all(np.diff(result.reaction_force_N) > 0)
+    depths = RADIUS_M * np.array([0.25, 0.5, 3.0])
+    options = {"device": "cpu", "progress": False, "max_cutbacks": 2, "max_newton_iterations": 12}
+    result = simulate_indentation(problem, depths, **options)
     assert not result.completed
-    assert len(result.depths_m) == 3 and result.displacement_m.shape[0] == 3
-    assert "depth" in result.message and "cutbacks" in result.message
+    np.testing.assert_allclose(result.depths_m, depths[:2])
+    assert result.displacement_m.shape == (2, mesh.node_count, 3)
+    assert 0 < result.reaction_force_N[0] < result.reaction_force_N[1]
+    assert "depth" in result.message and "2 cutbacks" in result.message
     assert result.cauchy_stress_Pa.shape == (mesh.tet_count, 6)
     assert result.von_mises_Pa.max() > 0
+    # the punch nodes sit at the prescribed depth, bonded (no lateral slip)
+    punch = problem.punch_nodes
+    np.testing.assert_allclose(result.displacement_m[1, punch, 2], -0.5 * RADIUS_M)
+    np.testing.assert_allclose(result.displacement_m[1, punch, :2], 0.0, atol=1e-15)
+    options["max_cutbacks"] = 0
     with pytest.raises(ConvergenceError) as error:
-        simulate_indentation(
-            problem, [3.0 * RADIUS_M], device="cpu", progress=False, max_cutbacks=1, strict=True
-        )
+        simulate_indentation(problem, depths[2:], strict=True, **options)
     assert len(error.value.partial_result.depths_m) == 0
 
 
@@ -166,6 +175,8 @@ def test_bad_inputs_are_named():
         IndentationProblem(mesh, material, FlatPunch(RADIUS_M), symmetry_planes=("symmetry_z",))
     with pytest.raises(InputError, match="base"):
         IndentationProblem(mesh, material, FlatPunch(RADIUS_M), base="floating")
+    with pytest.raises(InputError, match="TET10"):
+        IndentationProblem(_block(near=1.0, element="TET4"), material, FlatPunch(RADIUS_M))
     problem = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
     with pytest.raises(InputError, match="increasing"):
         simulate_indentation(problem, [2e-4, 1e-4], device="cpu", progress=False)

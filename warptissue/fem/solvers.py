@@ -5,8 +5,10 @@ Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite el
 - ``"pardiso"``: Intel MKL PARDISO through pypardiso (CPU; the default on x86_64 where it
   imports). Fastest direct solver measured here.
 - ``"superlu"``: SciPy's SuperLU (CPU; the default where MKL is not available, e.g. ARM).
-- ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) with a
-  block-Jacobi preconditioner on the device's own arrays (the default on CUDA). The
+- ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) on the
+  device's own arrays (the default on CUDA), with Warp's adaptive factorized sparse approximate
+  inverse (FSAI) preconditioner by default: on a 3k-dof nearly incompressible indentation
+  tangent (K/mu = 1000) it needed 1020 iterations against 2460 for the diagonal (Jacobi) one. The
   mean-dilatation tangent is symmetric and positive definite at stable states. Warp's Krylov
   solvers are slow on the CPU backend, and nearly incompressible tangents are ill conditioned,
   so expect many iterations; the iteration count is reported.
@@ -120,7 +122,9 @@ class LinearSolver:
             ``"superlu"`` or ``"cg"``.
         device: The Warp device of the matrices.
         tolerance: Relative residual tolerance of CG.
-        max_iterations: Iteration limit of CG (None: 10 x the number of dofs).
+        max_iterations: Iteration limit of CG (None: 30 x the number of dofs).
+        preconditioner: CG preconditioner, any ``ptype`` of
+            ``warp.optim.linear.preconditioner`` (``"fsai"``, ``"diag"``, ...).
     """
 
     def __init__(
@@ -130,6 +134,7 @@ class LinearSolver:
         device: wp.Device,
         tolerance: float = 1e-12,
         max_iterations: int | None = None,
+        preconditioner: str = "fsai",
     ) -> None:
         if method not in LINEAR_SOLVERS:
             raise InputError(
@@ -158,6 +163,8 @@ class LinearSolver:
         self.device = device
         self.tolerance = tolerance
         self.max_iterations = max_iterations
+        self.preconditioner = preconditioner
+        self._pardiso = None
 
     def solve(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         """Solve ``matrix x = rhs``.
@@ -183,9 +190,16 @@ class LinearSolver:
         ).tocsr()
         b = rhs.reshape(-1)
         if self.method == "pardiso":
-            import pypardiso
+            # The tangent is symmetric (hyperelastic, symmetric elimination): factorize it as
+            # real symmetric indefinite (mtype -2, upper triangle), 1.8x faster than the
+            # general LU on a 26k-dof punch tangent, same solution to 5e-13.
+            if self._pardiso is None:
+                import pypardiso
 
-            x = pypardiso.spsolve(csr, b)
+                self._pardiso = pypardiso.PyPardisoSolver(mtype=-2)
+            upper = sp.triu(csr, format="csr")
+            upper.sort_indices()
+            x = self._pardiso.solve(upper, b)
         else:
             x = sp.linalg.spsolve(csr.tocsc(), b)
         return np.asarray(x).reshape(n, 3), 1
@@ -202,7 +216,7 @@ class LinearSolver:
             x,
             tol=self.tolerance,
             maxiter=max_iterations,
-            M=preconditioner(matrix, ptype="diag"),
+            M=preconditioner(matrix, ptype=self.preconditioner),
             use_cuda_graph=False,
         )
         return x.numpy(), int(iterations)
