@@ -1,8 +1,8 @@
 """Time the parts of one Newton iteration of the flat-punch benchmark on a CUDA device.
 
 For each mesh size: tangent assembly, residual-only assembly, Dirichlet elimination, the BSR
--> CSR copy, cuDSS numerical factorization and solve (after one analysis), one application of
-the factorization as a preconditioner, and one BSR product, each synchronized and repeated;
+-> CSR copy, cuDSS numerical factorization and solve (after one analysis), and one BSR
+matrix-vector product, each synchronized and repeated;
 plus the bytes each part must move at least, so that its time can be set against the
 memory-bandwidth floor (``--bandwidth-GBps``, measured device-to-device copy rate).
 
@@ -80,7 +80,7 @@ def profile(target_tets: int, device_name: str, repeats: int, bandwidth: float) 
     assembler.assemble(u)
     eliminate_s = timed(lambda: assembler.eliminate(constrained_wp), device, repeats)
     started = time.perf_counter()
-    solver = CudssSolver(assembler.matrix, max_preconditioned_iterations=0)
+    solver = CudssSolver(assembler.matrix)
     wp.synchronize_device(device)
     analysis_s = time.perf_counter() - started
     parts = {
@@ -91,12 +91,9 @@ def profile(target_tets: int, device_name: str, repeats: int, bandwidth: float) 
         ),
         "factorize_and_solve_s": timed(lambda: solver.solve(rhs), device, repeats),
     }
-    x, _ = solver.solve(rhs)
+    x = solver.solve(rhs)
     vector = wp.array(rhs, dtype=wp.vec3d, device=device)
     applied = wp.zeros_like(vector)
-    parts["apply_factorization_s"] = timed(
-        lambda: solver._apply_factorization(vector, applied, applied, 1.0, 0.0), device, repeats
-    )
     parts["bsr_mv_s"] = timed(lambda: wps.bsr_mv(k, vector, applied), device, repeats)
     values = k.values.numpy()[:blocks]
     product = np.zeros_like(rhs)

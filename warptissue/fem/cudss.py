@@ -4,10 +4,9 @@ The tangent lives in a 3x3-block ``warp.sparse`` BSR matrix whose sparsity patte
 for a mesh. :class:`CudssSolver` builds a scalar CSR copy of it once on the device (a Warp
 kernel, :mod:`warptissue.kernels.sparse`), hands CuPy views of those Warp arrays to
 ``nvmath.sparse.advanced.DirectSolver`` without copying (``__cuda_array_interface__``), and
-runs cuDSS's analysis (fill-reducing reordering and symbolic factorization) once. A
-factorization refreshes the CSR values in place from the BSR blocks and factorizes
-numerically; between factorizations the last one preconditions conjugate gradients on the
-current tangent (see :class:`CudssSolver`). All of it runs on Warp's stream of the device.
+runs cuDSS's analysis (fill-reducing reordering and symbolic factorization) once. Each solve
+then refreshes the CSR values in place from the BSR blocks, factorizes numerically and
+solves; all of it on Warp's stream of the device.
 
 The matrix is declared symmetric (LDL^T with pivoting, lower triangle read): the eliminated
 consistent tangent of a hyperelastic energy is symmetric, and pivoting keeps the factorization
@@ -103,23 +102,11 @@ def bsr33_csr_values(matrix: wps.BsrMatrix, block_rows: wp.array, csr_values: wp
 
 
 class CudssSolver:
-    """Repeated solves of one BSR sparsity pattern with cuDSS on a CUDA device.
-
-    The first solve factorizes. Later solves run Warp's conjugate gradient on the CURRENT
-    matrix, preconditioned by the last factorization (one pair of cuDSS triangular solves per
-    iteration); when that does not reach ``tolerance`` within ``max_preconditioned_iterations``
-    (the tangent has drifted too far, or is indefinite), the current matrix is factorized
-    again and solved directly. Newton's method therefore sees solves of its current tangent to
-    a relative residual of ``tolerance`` either way, while most iterations skip the
-    factorization, which dominates the cost (README "Performance").
+    """Repeated direct solves of one BSR sparsity pattern with cuDSS on a CUDA device.
 
     Args:
         matrix: Square 3x3-block float64 BSR matrix (N x N blocks) on a CUDA device. Its
             pattern (offsets, columns) must stay fixed; its values may change between solves.
-        tolerance: Relative residual ``|b - A x| / |b|`` the preconditioned iterations must
-            reach.
-        max_preconditioned_iterations: Iterations with the old factorization before
-            refactorizing (0: factorize at every solve).
 
     Attributes:
         factorizations: Numerical factorizations done so far.
@@ -128,13 +115,7 @@ class CudssSolver:
         DeviceError: The matrix is not on a CUDA device, or cuDSS could not be loaded.
     """
 
-    def __init__(
-        self,
-        matrix: wps.BsrMatrix,
-        *,
-        tolerance: float = 1e-10,
-        max_preconditioned_iterations: int = 20,
-    ) -> None:
+    def __init__(self, matrix: wps.BsrMatrix) -> None:
         device = matrix.device
         if not device.is_cuda:
             raise DeviceError(f"cuDSS needs a CUDA device; the matrix is on {device}")
@@ -147,22 +128,15 @@ class CudssSolver:
                 "the cuDSS solver needs nvmath-python, nvidia-cudss-cu13 and cupy-cuda13x "
                 "(pip install 'warptissue[gpu]')"
             ) from exc
-        from warp.optim.linear import LinearOperator
-
         self.matrix = matrix
         self.device = device
-        self.tolerance = tolerance
-        self.max_preconditioned_iterations = max_preconditioned_iterations
         self.factorizations = 0
         self.row_count = 3 * matrix.nrow
         self._csr_offsets, self._csr_columns, self._block_rows = bsr33_csr_pattern(matrix)
         self._csr_values = wp.zeros(self._csr_columns.shape[0], dtype=wp.float64, device=device)
         self._rhs = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=device)
         self._cupy = cupy
-        self._stream = cupy.cuda.ExternalStream(device.stream.cuda_stream, device.ordinal)
-        self._preconditioner = LinearOperator(
-            matrix.shape, wp.float64, device, matvec=self._apply_factorization
-        )
+        self._stream = cupy.cuda.Stream.from_external(device.stream)
         with cupy.cuda.Device(device.ordinal), self._stream:
             csr = cupyx.scipy.sparse.csr_matrix(
                 (
@@ -189,58 +163,25 @@ class CudssSolver:
             except (RuntimeError, OSError) as exc:
                 raise DeviceError(f"cuDSS could not be set up on {device}: {exc}") from exc
 
-    def _apply_factorization(
-        self, x: wp.array, y: wp.array, z: wp.array, alpha: float, beta: float
-    ) -> None:
-        """``z = alpha F^-1 x + beta y`` with F the last factorized matrix (a LinearOperator)."""
-        wp.copy(self._rhs, x)
-        cupy = self._cupy
-        with cupy.cuda.Device(self.device.ordinal), self._stream:
-            solution = self._solver.solve()
-            out = cupy.asarray(z).reshape(-1)
-            if beta == 0.0:
-                cupy.multiply(solution, alpha, out=out)
-            else:
-                out[...] = alpha * solution + beta * cupy.asarray(y).reshape(-1)
-
-    def solve(self, rhs: np.ndarray) -> tuple[np.ndarray, int]:
-        """Solve ``matrix x = rhs`` for the matrix's current values.
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Factorize the matrix's current values and solve ``matrix x = rhs``.
 
         Args:
             rhs: Right-hand side, shape (N, 3).
 
         Returns:
-            (x of shape (N, 3), iterations): preconditioned iterations, plus 1 for a
-            factorization and direct solve.
+            x, shape (N, 3).
         """
-        from warp.optim.linear import cg
-
         rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
         if rhs.shape != (self.row_count // 3, 3):
             raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
-        iterations = 0
-        if self.factorizations and self.max_preconditioned_iterations > 0:
-            b = wp.array(rhs, dtype=wp.vec3d, device=self.device)
-            x = wp.zeros_like(b)
-            iterations, residual, limit = cg(
-                self.matrix,
-                b,
-                x,
-                tol=self.tolerance,
-                maxiter=self.max_preconditioned_iterations,
-                M=self._preconditioner,
-                check_every=1,
-                use_cuda_graph=False,
-            )
-            if residual <= limit:
-                return x.numpy(), int(iterations)
         bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
         self._rhs.assign(rhs)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream:
             self._solver.factorize()
             self.factorizations += 1
             x = self._solver.solve()
-            return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3), int(iterations) + 1
+            return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
 
     def free(self) -> None:
         """Release cuDSS's factors and workspace now (they are also freed with the object)."""

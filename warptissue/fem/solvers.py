@@ -7,9 +7,8 @@ Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite el
 - ``"superlu"``: SciPy's SuperLU (CPU; the default where MKL is not available, e.g. ARM).
 - ``"cudss"``: NVIDIA cuDSS sparse direct solver on the GPU through nvmath-python
   (:mod:`warptissue.fem.cudss`; the optional extra ``warptissue[gpu]``): analysis once per
-  mesh; a numerical LDL^T factorization preconditions CG on later tangents until CG needs
-  more than 20 iterations, then the tangent is factorized again. The default on CUDA where
-  it loads (measured on an H100, see README "Performance").
+  mesh, a numerical LDL^T factorization and solve per Newton iteration. The default on CUDA
+  where it loads (measured on an H100, see README "Performance").
 - ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) with a
   block-Jacobi preconditioner on the device's own arrays (the CUDA default without cuDSS). The
   mean-dilatation tangent is symmetric and positive definite at stable states. Warp's Krylov
@@ -195,7 +194,7 @@ class LinearSolver:
         if self.method == "cudss":
             if self._cudss is None or self._cudss.matrix is not matrix:
                 self._cudss = CudssSolver(matrix)
-            return self._cudss.solve(rhs)
+            return self._cudss.solve(rhs), 1
         nnz = matrix.nnz_sync()
         csr = sp.bsr_matrix(
             (
