@@ -148,3 +148,31 @@ def test_cli_bad_study_is_one_line_exit_2(tmp_path, capsys):
     assert len(error) == 1
     assert "bad.toml" in error[0] and "material.C10_Pa" in error[0] and "-1.0" in error[0]
     assert not (tmp_path / "out").exists()
+
+
+def test_cli_json_stdout_is_pure_json_in_a_fresh_process(tiny_record, tmp_path):
+    """Warp's start-up notes must not leak into ``--json`` output."""
+    import subprocess
+    import sys
+
+    record = dict(tiny_record)
+    record["protocol"] = {"depths_m": DEPTHS_M[:1]}
+    study_path = tmp_path / "tiny.toml"
+    study_path.write_text(tomli_w.dumps(record))
+    completed = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "warptissue.cli",
+            "simulate",
+            str(study_path),
+            "--json",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert json.loads(completed.stdout)["completed"] is True

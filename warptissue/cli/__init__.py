@@ -22,9 +22,9 @@ from warptissue.errors import WarpTissueError
 __all__ = ["build_parser", "main"]
 
 COMMAND_MODULES: tuple[str, ...] = (
+    "warptissue.cli.simulate",
     "warptissue.cli.fit_uniaxial",
     "warptissue.cli.mesh",
-    "warptissue.cli.simulate",
 )
 """Modules that add commands, in the order they appear in ``--help``."""
 
