@@ -20,12 +20,13 @@ steps that converged, and reports ``completed = False`` with the solver's messag
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from warptissue.errors import ConvergenceError
 from warptissue.io import software_versions, write_csv, write_json
 from warptissue.study import Study
 
@@ -59,8 +60,6 @@ class SimulationOutputs:
     @property
     def exit_code(self) -> int:
         """0 when complete, else the convergence-error exit status (4)."""
-        from warptissue.errors import ConvergenceError
-
         return 0 if self.completed else ConvergenceError.exit_code
 
 
@@ -114,15 +113,11 @@ def build_problem(study: Study, mesh: Any) -> Any:
 
 
 def _mesh_statistics(mesh: Any) -> dict[str, Any]:
-    volumes = mesh.volumes()
-    return {
-        "element_type": mesh.element_type,
-        "node_count": mesh.node_count,
-        "tet_count": mesh.tet_count,
-        "displacement_dof_count": 3 * mesh.node_count,
-        "min_tet_volume_m3": float(volumes.min()),
-        "max_tet_volume_m3": float(volumes.max()),
-    }
+    """Size and shape quality of the mesh (raises MeshError on an inverted or flat tet)."""
+    from warptissue.mesh import check_mesh
+
+    quality = check_mesh(mesh)
+    return {**asdict(quality), "displacement_dof_count": 3 * mesh.node_count}
 
 
 def _write_fields(out_dir: Path, mesh: Any, result: Any, *, every_step: bool) -> dict[str, Path]:
@@ -189,6 +184,7 @@ def run_study(
     warp_device = resolve_device(None if chosen == "auto" else chosen)
     started = time.perf_counter()
     mesh = build_mesh(study)
+    mesh_statistics = _mesh_statistics(mesh)
     problem = build_problem(study, mesh)
     meshed = time.perf_counter()
     result = simulate_indentation(
@@ -236,7 +232,7 @@ def run_study(
         },
         "steps_requested": study.protocol.step_count,
         "steps_converged": converged,
-        "mesh": _mesh_statistics(mesh),
+        "mesh": mesh_statistics,
         "timings_s": {
             "mesh_and_setup": meshed - started,
             "solve": solved - meshed,
