@@ -8,9 +8,10 @@ runs cuDSS's analysis (fill-reducing reordering and symbolic factorization) once
 then refreshes the CSR values in place from the BSR blocks, factorizes numerically and
 solves; all of it on Warp's stream of the device.
 
-The matrix is declared symmetric (LDL^T with pivoting, lower triangle read): the eliminated
-consistent tangent of a hyperelastic energy is symmetric, and pivoting keeps the factorization
-valid when a trial state makes it indefinite.
+The matrix is declared symmetric, not positive definite (cuDSS's LDL^T with its default
+pivoting; only the lower triangle is read): the eliminated consistent tangent of a
+hyperelastic energy is symmetric, and a trial state far from equilibrium can make it
+indefinite, where a Cholesky factorization would fail.
 
 Install: ``pip install 'warptissue[gpu]'`` (nvmath-python with NVIDIA cuDSS for CUDA 13, and
 CuPy for CUDA 13).
@@ -45,7 +46,10 @@ def cudss_available() -> bool:
 
 
 def _cupy_view(array: wp.array, cupy_module):
-    """A CuPy array on the same device memory as a contiguous 1-D Warp array (no copy)."""
+    """A CuPy array on the same device memory as a contiguous Warp array (no copy).
+
+    A vec3d array of n entries becomes a float64 CuPy array of shape (n, 3).
+    """
     return cupy_module.asarray(array)
 
 
