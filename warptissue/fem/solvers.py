@@ -9,11 +9,13 @@ Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite el
   (:mod:`warptissue.fem.cudss`; the optional extra ``warptissue[gpu]``): analysis once per
   mesh, a numerical LDL^T factorization and solve per Newton iteration. The default on CUDA
   where it loads (measured on an H100, see README "Performance").
-- ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) with a
-  block-Jacobi preconditioner on the device's own arrays (the CUDA default without cuDSS). The
-  mean-dilatation tangent is symmetric and positive definite at stable states. Warp's Krylov
-  solvers are slow on the CPU backend, and nearly incompressible tangents are ill conditioned,
-  so expect many iterations; the iteration count is reported.
+- ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) on the
+  device's own arrays (the CUDA default without cuDSS), with Warp's adaptive factorized sparse
+  approximate inverse (FSAI) preconditioner by default: on a 3k-dof nearly incompressible
+  indentation tangent (K/mu = 1000) it needed 1020 iterations against 2460 for the diagonal
+  (Jacobi) one. The mean-dilatation tangent is symmetric and positive definite at stable
+  states. Warp's Krylov solvers are slow on the CPU backend, and nearly incompressible tangents
+  are ill conditioned, so expect many iterations; the iteration count is reported.
 
 Dirichlet conditions are imposed by elimination: rows and columns of prescribed dofs are zeroed
 with 1 on the diagonal, and the first Newton iteration of each load increment carries the
@@ -125,7 +127,9 @@ class LinearSolver:
             else CG), ``"pardiso"``, ``"superlu"``, ``"cudss"`` or ``"cg"``.
         device: The Warp device of the matrices.
         tolerance: Relative residual tolerance of CG.
-        max_iterations: Iteration limit of CG (None: 10 x the number of dofs).
+        max_iterations: Iteration limit of CG (None: 30 x the number of dofs).
+        preconditioner: CG preconditioner, any ``ptype`` of
+            ``warp.optim.linear.preconditioner`` (``"fsai"``, ``"diag"``, ...).
     """
 
     def __init__(
@@ -135,6 +139,7 @@ class LinearSolver:
         device: wp.Device,
         tolerance: float = 1e-12,
         max_iterations: int | None = None,
+        preconditioner: str = "fsai",
     ) -> None:
         if method not in LINEAR_SOLVERS:
             raise InputError(
@@ -177,6 +182,7 @@ class LinearSolver:
         self._cudss: CudssSolver | None = None
         self.tolerance = tolerance
         self.max_iterations = max_iterations
+        self.preconditioner = preconditioner
 
     def solve(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         """Solve ``matrix x = rhs``.
@@ -225,7 +231,7 @@ class LinearSolver:
             x,
             tol=self.tolerance,
             maxiter=max_iterations,
-            M=preconditioner(matrix, ptype="diag"),
+            M=preconditioner(matrix, ptype=self.preconditioner),
             use_cuda_graph=False,
         )
         return x.numpy(), int(iterations)
