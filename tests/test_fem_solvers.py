@@ -94,7 +94,9 @@ def test_linear_solvers_agree(rng):
     conditions = _compression_conditions(mesh)
     u = 1e-4 * rng.standard_normal((mesh.node_count, 3))
     assembly = assembler.assemble(u)
-    assembler.eliminate(wp.array(conditions.mask(mesh.node_count), dtype=wp.vec3d))
+    assembler.eliminate(
+        wp.array(conditions.mask(mesh.node_count), dtype=wp.vec3d, device=assembler.device)
+    )
     rhs = rng.standard_normal((mesh.node_count, 3))
     methods = ["superlu", "cg"] + (["pardiso"] if _pardiso_available() else [])
     solutions = {}

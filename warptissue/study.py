@@ -52,7 +52,7 @@ INDENTER_KINDS: tuple[str, ...] = ("flat_punch",)
 CONTACT_KINDS: tuple[str, ...] = ("bonded", "frictionless")
 BASE_KINDS: tuple[str, ...] = ("fixed", "sliding")
 FORMULATIONS: tuple[str, ...] = ("mixed", "displacement")
-LINEAR_SOLVERS: tuple[str, ...] = ("auto", "pardiso", "superlu", "cg")
+LINEAR_SOLVERS: tuple[str, ...] = ("auto", "pardiso", "superlu", "cudss", "cg")
 DEVICE_PATTERN = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 _MISSING = object()
@@ -174,7 +174,8 @@ class Solver:
         formulation: ``"mixed"`` (locking-free for nearly incompressible material) or
             ``"displacement"`` (pure displacement; locks when nearly incompressible).
         linear_solver: ``"auto"`` (PARDISO where pypardiso is installed, else SuperLU, on the
-            CPU; conjugate gradients on CUDA), ``"pardiso"``, ``"superlu"`` or ``"cg"``.
+            CPU; cuDSS on CUDA where installed, else conjugate gradients), ``"pardiso"``,
+            ``"superlu"``, ``"cudss"`` or ``"cg"``.
         tolerance: Newton convergence tolerance on the residual force norm relative to the
             reaction force norm (dimensionless).
         max_newton_iterations: Newton iterations allowed per load step before a cutback.

@@ -5,13 +5,17 @@ Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite el
 - ``"pardiso"``: Intel MKL PARDISO through pypardiso (CPU; the default on x86_64 where it
   imports). Fastest direct solver measured here.
 - ``"superlu"``: SciPy's SuperLU (CPU; the default where MKL is not available, e.g. ARM).
+- ``"cudss"``: NVIDIA cuDSS sparse direct solver on the GPU through nvmath-python
+  (:mod:`warptissue.fem.cudss`; the optional extra ``warptissue[gpu]``): analysis once per
+  mesh, a numerical LDL^T factorization and solve per Newton iteration. The default on CUDA
+  where it loads (measured on an H100, see README "Performance").
 - ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) on the
-  device's own arrays (the default on CUDA), with Warp's adaptive factorized sparse approximate
-  inverse (FSAI) preconditioner by default: on a 3k-dof nearly incompressible indentation
-  tangent (K/mu = 1000) it needed 1020 iterations against 2460 for the diagonal (Jacobi) one. The
-  mean-dilatation tangent is symmetric and positive definite at stable states. Warp's Krylov
-  solvers are slow on the CPU backend, and nearly incompressible tangents are ill conditioned,
-  so expect many iterations; the iteration count is reported.
+  device's own arrays (the CUDA default without cuDSS), with Warp's adaptive factorized sparse
+  approximate inverse (FSAI) preconditioner by default: on a 3k-dof nearly incompressible
+  indentation tangent (K/mu = 1000) it needed 1020 iterations against 2460 for the diagonal
+  (Jacobi) one. The mean-dilatation tangent is symmetric and positive definite at stable
+  states. Warp's Krylov solvers are slow on the CPU backend, and nearly incompressible tangents
+  are ill conditioned, so expect many iterations; the iteration count is reported.
 
 Dirichlet conditions are imposed by elimination: rows and columns of prescribed dofs are zeroed
 with 1 on the diagonal, and the first Newton iteration of each load increment carries the
@@ -31,6 +35,7 @@ import warp.sparse as wps
 
 from warptissue.errors import InputError
 from warptissue.fem.assembly import Assembler
+from warptissue.fem.cudss import CudssSolver, cudss_available
 
 __all__ = [
     "LINEAR_SOLVERS",
@@ -40,7 +45,7 @@ __all__ = [
     "solve_quasistatic",
 ]
 
-LINEAR_SOLVERS = ("auto", "pardiso", "superlu", "cg")
+LINEAR_SOLVERS = ("auto", "pardiso", "superlu", "cudss", "cg")
 
 
 def _pardiso_available() -> bool:
@@ -118,8 +123,8 @@ class LinearSolver:
     """Solves the eliminated tangent system on the assembler's device.
 
     Args:
-        method: ``"auto"`` (PARDISO or SuperLU on the CPU, CG on CUDA), ``"pardiso"``,
-            ``"superlu"`` or ``"cg"``.
+        method: ``"auto"`` (PARDISO or SuperLU on the CPU; cuDSS on CUDA where it loads,
+            else CG), ``"pardiso"``, ``"superlu"``, ``"cudss"`` or ``"cg"``.
         device: The Warp device of the matrices.
         tolerance: Relative residual tolerance of CG.
         max_iterations: Iteration limit of CG (None: 30 x the number of dofs).
@@ -144,7 +149,7 @@ class LinearSolver:
             )
         if method == "auto":
             if device.is_cuda:
-                method = "cg"
+                method = "cudss" if cudss_available() else "cg"
             else:
                 method = "pardiso" if _pardiso_available() else "superlu"
         if method == "pardiso" and not _pardiso_available():
@@ -159,8 +164,22 @@ class LinearSolver:
                 column="linear_solver",
                 value=method,
             )
+        if method == "cudss" and not device.is_cuda:
+            raise InputError(
+                f"'cudss' runs on CUDA devices; use 'pardiso' or 'superlu' on {device}",
+                column="linear_solver",
+                value=method,
+            )
+        if method == "cudss" and not cudss_available():
+            raise InputError(
+                "the cuDSS solver needs nvmath-python, nvidia-cudss-cu13 and cupy-cuda13x "
+                "(pip install 'warptissue[gpu]')",
+                column="linear_solver",
+                value=method,
+            )
         self.method = method
         self.device = device
+        self._cudss: CudssSolver | None = None
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.preconditioner = preconditioner
@@ -179,6 +198,10 @@ class LinearSolver:
         n = rhs.shape[0]
         if self.method == "cg":
             return self._solve_cg(matrix, rhs)
+        if self.method == "cudss":
+            if self._cudss is None or self._cudss.matrix is not matrix:
+                self._cudss = CudssSolver(matrix)
+            return self._cudss.solve(rhs), 1
         nnz = matrix.nnz_sync()
         csr = sp.bsr_matrix(
             (

@@ -1,0 +1,136 @@
+"""The FE on CUDA: the BSR -> CSR hand-off to cuDSS, and CUDA results against the CPU's.
+
+The CPU reference is a direct solve (PARDISO or SuperLU). The CUDA runs use each CUDA linear
+solver present (cuDSS through nvmath-python where it loads, Warp's CG always); they must
+reproduce the CPU force curve and displacements to 1e-8 relative. Tests that need a GPU are
+skipped without one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import warp as wp
+import warp.sparse as wps
+
+from warptissue.errors import InputError
+from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, simulate_indentation
+from warptissue.fem.cudss import bsr33_csr_pattern, bsr33_csr_values, cudss_available
+from warptissue.materials import NeoHookean
+from warptissue.mesh import TetMesh, block_mesh, to_tet10
+
+NEWTON_TOLERANCE = 1e-11
+"""Tight, so that two converged solutions agree far below the 1e-8 the tests ask."""
+RELATIVE_TOLERANCE = {"cudss": 1e-8, "cg": 1e-7}
+"""CG stops at a relative linear residual of 1e-12: on the CPU its curve differs from the
+direct solver's by 3e-8, so the CUDA CG run is held to 1e-7."""
+needs_cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
+CUDA_SOLVERS = (["cudss"] if cudss_available() else []) + ["cg"]
+
+
+def _random_bsr(rng: np.random.Generator, device: str, block_rows: int = 7):
+    """A random 3x3-block BSR matrix with some empty rows, and its dense copy."""
+    rows = rng.integers(0, block_rows - 2, size=40)  # the last two block rows stay empty
+    cols = rng.integers(0, block_rows, size=40)
+    keys = np.unique(rows * block_rows + cols)
+    rows, cols = keys // block_rows, keys % block_rows
+    blocks = rng.standard_normal((len(keys), 3, 3))
+    matrix = wps.bsr_from_triplets(
+        block_rows,
+        block_rows,
+        wp.array(rows.astype(np.int32), dtype=wp.int32, device=device),
+        wp.array(cols.astype(np.int32), dtype=wp.int32, device=device),
+        wp.array(blocks, dtype=wp.mat33d, device=device),
+    )
+    dense = np.zeros((3 * block_rows, 3 * block_rows))
+    for r, c, block in zip(rows, cols, blocks, strict=True):
+        dense[3 * r : 3 * r + 3, 3 * c : 3 * c + 3] = block
+    return matrix, dense
+
+
+def test_bsr33_to_csr_matches_the_dense_matrix(device, rng):
+    matrix, dense = _random_bsr(rng, device)
+    offsets, columns, block_rows = bsr33_csr_pattern(matrix)
+    values = wp.full(columns.shape[0], np.nan, dtype=wp.float64, device=device)
+    bsr33_csr_values(matrix, block_rows, values)
+    csr = sp.csr_matrix((values.numpy(), columns.numpy(), offsets.numpy()), shape=dense.shape)
+    assert not np.isnan(values.numpy()).any()
+    np.testing.assert_array_equal(csr.toarray(), dense)
+    assert csr.has_sorted_indices
+    # The same pattern serves new values of the same blocks.
+    matrix.values.assign(2.0 * matrix.values.numpy())
+    bsr33_csr_values(matrix, block_rows, values)
+    np.testing.assert_array_equal(
+        sp.csr_matrix((values.numpy(), columns.numpy(), offsets.numpy())).toarray(), 2.0 * dense
+    )
+
+
+def test_cudss_needs_a_cuda_device():
+    with pytest.raises(InputError, match="cudss"):
+        LinearSolver(method="cudss", device=wp.get_device("cpu"))
+
+
+def _bonded_punch_problem() -> IndentationProblem:
+    """A quarter 1 mm block of 108 TET10 under a bonded punch of radius 0.4 mm, K/mu = 1000."""
+    grid = np.linspace(0.0, 1e-3, 4)
+    block = to_tet10(block_mesh(grid, grid, np.linspace(0.0, 1e-3, 3), split="six"))
+    names = {"top": "zmax", "bottom": "zmin", "symmetry_x": "xmin", "symmetry_y": "ymin"}
+    mesh = TetMesh(
+        block.points,
+        block.tets,
+        node_sets={name: block.node_set(source) for name, source in names.items()},
+    )
+    return IndentationProblem(
+        mesh,
+        NeoHookean(C10_Pa=287.5, bulk_modulus_Pa=1000.0 * 575.0),
+        FlatPunch(0.4e-3, contact="bonded"),
+    )
+
+
+@pytest.fixture(scope="module")
+def cpu_reference():
+    problem = _bonded_punch_problem()
+    depths = np.array([2e-5, 5e-5, 1e-4])
+    result = simulate_indentation(
+        problem, depths, device="cpu", progress=False, tolerance=NEWTON_TOLERANCE
+    )
+    assert result.completed
+    return problem, depths, result
+
+
+@needs_cuda
+@pytest.mark.parametrize("linear_solver", CUDA_SOLVERS)
+def test_cuda_equals_cpu(cpu_reference, linear_solver):
+    problem, depths, reference = cpu_reference
+    result = simulate_indentation(
+        problem,
+        depths,
+        device="cuda:0",
+        progress=False,
+        linear_solver=linear_solver,
+        tolerance=NEWTON_TOLERANCE,
+    )
+    assert result.completed, result.message
+    assert result.linear_solver == linear_solver
+    force_error = np.abs(result.reaction_force_N / reference.reaction_force_N - 1.0).max()
+    displacement_error = np.linalg.norm(
+        result.displacement_m - reference.displacement_m
+    ) / np.linalg.norm(reference.displacement_m)
+    stress_error = np.abs(result.von_mises_Pa - reference.von_mises_Pa).max() / (
+        reference.von_mises_Pa.max()
+    )
+    print(
+        f"{linear_solver}: force {force_error:.2e}, displacement {displacement_error:.2e}, "
+        f"stress {stress_error:.2e}"
+    )
+    rtol = RELATIVE_TOLERANCE[linear_solver]
+    assert force_error <= rtol
+    assert displacement_error <= rtol
+    assert stress_error <= rtol
+
+
+@needs_cuda
+def test_auto_prefers_cudss_on_cuda():
+    solver = LinearSolver(method="auto", device=wp.get_device("cuda:0"))
+    assert solver.method == ("cudss" if cudss_available() else "cg")

@@ -1,0 +1,192 @@
+"""Sparse direct solves on the GPU with NVIDIA cuDSS, through nvmath-python.
+
+The tangent lives in a 3x3-block ``warp.sparse`` BSR matrix whose sparsity pattern is fixed
+for a mesh. :class:`CudssSolver` builds a scalar CSR copy of it once on the device (a Warp
+kernel, :mod:`warptissue.kernels.sparse`), hands CuPy views of those Warp arrays to
+``nvmath.sparse.advanced.DirectSolver`` without copying (``__cuda_array_interface__``), and
+runs cuDSS's analysis (fill-reducing reordering and symbolic factorization) once. Each solve
+then refreshes the CSR values in place from the BSR blocks, factorizes numerically and
+solves; all of it on Warp's stream of the device.
+
+The matrix is declared symmetric, not positive definite (cuDSS's LDL^T with its default
+pivoting; only the lower triangle is read): the eliminated consistent tangent of a
+hyperelastic energy is symmetric, and a trial state far from equilibrium can make it
+indefinite, where a Cholesky factorization would fail.
+
+Install: ``pip install 'warptissue[gpu]'`` (nvmath-python with NVIDIA cuDSS for CUDA 13, and
+CuPy for CUDA 13).
+"""
+
+from __future__ import annotations
+
+import functools
+import importlib.util
+
+import numpy as np
+import warp as wp
+import warp.sparse as wps
+
+from warptissue.errors import DeviceError
+
+__all__ = ["CudssSolver", "bsr33_csr_pattern", "bsr33_csr_values", "cudss_available"]
+
+
+@functools.cache
+def cudss_available() -> bool:
+    """Whether nvmath-python and CuPy import and the cuDSS library loads."""
+    if any(importlib.util.find_spec(name) is None for name in ("nvmath", "cupy")):
+        return False
+    try:
+        from nvmath.bindings import cudss
+
+        cudss.get_property(0)
+    except Exception:  # any failure to import or load the library means "not available"
+        return False
+    return True
+
+
+def _cupy_view(array: wp.array, cupy_module):
+    """A CuPy array on the same device memory as a contiguous Warp array (no copy).
+
+    A vec3d array of n entries becomes a float64 CuPy array of shape (n, 3).
+    """
+    return cupy_module.asarray(array)
+
+
+def bsr33_csr_pattern(matrix: wps.BsrMatrix) -> tuple[wp.array, wp.array, wp.array]:
+    """The scalar CSR pattern of a 3x3-block BSR matrix, on the matrix's device.
+
+    Args:
+        matrix: Square or rectangular BSR matrix with 3x3 blocks (n block rows, b blocks).
+
+    Returns:
+        (csr_offsets (3 n + 1,), csr_columns (9 b,), block_rows (b,)), int32 Warp arrays;
+        ``block_rows`` is each block's row, for :func:`bsr33_csr_values`.
+    """
+    from warptissue.kernels import sparse as ks
+
+    device = matrix.device
+    block_count = matrix.nnz_sync()
+    csr_offsets = wp.zeros(3 * matrix.nrow + 1, dtype=wp.int32, device=device)
+    csr_columns = wp.empty(9 * block_count, dtype=wp.int32, device=device)
+    block_rows = wp.empty(block_count, dtype=wp.int32, device=device)
+    if matrix.nrow == 0:
+        return csr_offsets, csr_columns, block_rows
+    wp.launch(
+        ks.bsr33_csr_pattern_kernel,
+        dim=matrix.nrow,
+        inputs=[matrix.offsets[: matrix.nrow + 1], matrix.columns],
+        outputs=[csr_offsets, csr_columns, block_rows],
+        device=device,
+    )
+    return csr_offsets, csr_columns, block_rows
+
+
+def bsr33_csr_values(matrix: wps.BsrMatrix, block_rows: wp.array, csr_values: wp.array) -> None:
+    """Copy the block values of a 3x3-block BSR matrix into its scalar CSR values, in place.
+
+    Args:
+        matrix: The BSR matrix (b blocks).
+        block_rows: Each block's row, (b,) int32, from :func:`bsr33_csr_pattern`.
+        csr_values: Output, (9 b,) float64 Warp array on the matrix's device.
+    """
+    from warptissue.kernels import sparse as ks
+
+    if block_rows.shape[0] == 0:
+        return
+    if csr_values.shape[0] != 9 * block_rows.shape[0]:
+        raise ValueError("csr_values must hold 9 values per block")
+    wp.launch(
+        ks.bsr33_csr_values_kernel,
+        dim=block_rows.shape[0],
+        inputs=[matrix.offsets[: matrix.nrow + 1], block_rows, matrix.values],
+        outputs=[csr_values],
+        device=matrix.device,
+    )
+
+
+class CudssSolver:
+    """Repeated direct solves of one BSR sparsity pattern with cuDSS on a CUDA device.
+
+    Args:
+        matrix: Square 3x3-block float64 BSR matrix (N x N blocks) on a CUDA device. Its
+            pattern (offsets, columns) must stay fixed; its values may change between solves.
+
+    Attributes:
+        factorizations: Numerical factorizations done so far.
+
+    Raises:
+        DeviceError: The matrix is not on a CUDA device, or cuDSS could not be loaded.
+    """
+
+    def __init__(self, matrix: wps.BsrMatrix) -> None:
+        device = matrix.device
+        if not device.is_cuda:
+            raise DeviceError(f"cuDSS needs a CUDA device; the matrix is on {device}")
+        try:
+            import cupy
+            import cupyx.scipy.sparse
+            import nvmath.sparse.advanced as nvs
+        except ImportError as exc:
+            raise DeviceError(
+                "the cuDSS solver needs nvmath-python, nvidia-cudss-cu13 and cupy-cuda13x "
+                "(pip install 'warptissue[gpu]')"
+            ) from exc
+        self.matrix = matrix
+        self.device = device
+        self.factorizations = 0
+        self.row_count = 3 * matrix.nrow
+        self._csr_offsets, self._csr_columns, self._block_rows = bsr33_csr_pattern(matrix)
+        self._csr_values = wp.zeros(self._csr_columns.shape[0], dtype=wp.float64, device=device)
+        self._rhs = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=device)
+        self._cupy = cupy
+        self._stream = cupy.cuda.Stream.from_external(device.stream)
+        with cupy.cuda.Device(device.ordinal), self._stream:
+            csr = cupyx.scipy.sparse.csr_matrix(
+                (
+                    _cupy_view(self._csr_values, cupy),
+                    _cupy_view(self._csr_columns, cupy),
+                    _cupy_view(self._csr_offsets, cupy),
+                ),
+                shape=(self.row_count, self.row_count),
+                copy=False,
+            )
+            options = nvs.DirectSolverOptions(
+                sparse_system_type=nvs.DirectSolverMatrixType.SYMMETRIC,
+                sparse_system_view=nvs.DirectSolverMatrixViewType.LOWER,
+            )
+            try:
+                self._solver = nvs.DirectSolver(
+                    csr,
+                    _cupy_view(self._rhs, cupy).reshape(-1),
+                    options=options,
+                    execution="cuda",
+                )
+                bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
+                self._solver.plan()
+            except (RuntimeError, OSError) as exc:
+                raise DeviceError(f"cuDSS could not be set up on {device}: {exc}") from exc
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """Factorize the matrix's current values and solve ``matrix x = rhs``.
+
+        Args:
+            rhs: Right-hand side, shape (N, 3).
+
+        Returns:
+            x, shape (N, 3).
+        """
+        rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
+        if rhs.shape != (self.row_count // 3, 3):
+            raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
+        bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
+        self._rhs.assign(rhs)
+        with self._cupy.cuda.Device(self.device.ordinal), self._stream:
+            self._solver.factorize()
+            self.factorizations += 1
+            x = self._solver.solve()
+            return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+
+    def free(self) -> None:
+        """Release cuDSS's factors and workspace now (they are also freed with the object)."""
+        self._solver.free()
