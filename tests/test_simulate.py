@@ -178,3 +178,20 @@ def test_cli_json_stdout_is_pure_json_in_a_fresh_process(tiny_record, tmp_path):
     )
     assert completed.returncode == 0, completed.stderr
     assert json.loads(completed.stdout)["completed"] is True
+
+
+def test_cli_usd_scene_validates_and_reads_back(tiny_record, tmp_path):
+    from warptissue.usd import read_tetmesh_usd, validate_stage
+
+    study_path = tmp_path / "tiny.toml"
+    record = dict(tiny_record)
+    record["protocol"] = {"depths_m": DEPTHS_M[:1]}
+    study_path.write_text(tomli_w.dumps(record))
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet", "--usd"]) == 0
+    scene = out_dir / "scene.usda"
+    assert validate_stage(scene) == []
+    fields = meshio.read(out_dir / "fields.vtu")
+    mesh = read_tetmesh_usd(scene)
+    corners = next(c.data for c in fields.cells if c.type.startswith("tetra"))[:, :4]
+    np.testing.assert_array_equal(mesh.tets, corners)

@@ -46,6 +46,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also write fields_NNN.vtu with the displacement of every load step",
     )
+    parser.add_argument(
+        "--usd",
+        action="store_true",
+        help="also write the mesh, material, deformed shapes and force curve as a layered USD "
+        "scene (scene.usda over scene.asset.usda and scene.results.usdc)",
+    )
     parser.set_defaults(handler=run)
 
 
@@ -66,6 +72,10 @@ def run(args: argparse.Namespace) -> int:
         progress=not (args.quiet or args.json),
         vtu_every_step=args.vtu_every_step,
     )
+    if args.usd:
+        from warptissue.usd.export import export_result_dir
+
+        outputs.files["usd"] = export_result_dir(out_dir, out_dir / "scene.usda").root
     if args.json:
         sys.stdout.write(outputs.files["result"].read_text(encoding="utf-8"))
     elif not args.quiet:
