@@ -135,3 +135,25 @@ def test_conditions_validate():
     np.testing.assert_array_equal(merged.nodes, [1, 3])
     with pytest.raises(InputError, match="linear solver"):
         LinearSolver(method="lu", device=wp.get_device("cpu"))
+
+
+@pytest.mark.parametrize(
+    "spec", ["neo_hookean", "mooney_rivlin", "reduced_polynomial:2", "ogden:1"]
+)
+def test_fe_agrees_with_the_closed_form_fitting_models(spec):
+    """The incompressible closed forms that the analytic fits use (warptissue.uniaxial) agree
+    with a homogeneous nearly incompressible FE run of the material they convert to."""
+    from warptissue.uniaxial import model_from_name
+
+    parameters = {
+        "neo_hookean": [150.0],
+        "mooney_rivlin": [120.0, 30.0],
+        "reduced_polynomial:2": [600.553, 4097.45],
+        "ogden:1": [300.0, 4.0],
+    }[spec]
+    model = model_from_name(spec).with_parameters(np.array(parameters))
+    material = model.to_material(2000.0 * model.initial_shear_modulus_Pa)
+    stretches = np.array([0.9, 0.8, 0.7])
+    stress, _ = _nominal_stress(material, stretches)
+    closed_form = model.nominal_stress_Pa(stretches, "uniaxial")
+    np.testing.assert_allclose(stress, closed_form, rtol=5e-3)
