@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 import warp as wp
 
-wp.config.quiet = True
+from warptissue.device import quiet_warp
+
+quiet_warp()
 wp.init()
 
 DEVICES: list[str] = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])

@@ -6,7 +6,7 @@ import warp as wp
 
 from warptissue.errors import DeviceError
 
-__all__ = ["resolve_device"]
+__all__ = ["quiet_warp", "resolve_device"]
 
 
 def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
@@ -34,3 +34,14 @@ def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
     except (RuntimeError, ValueError) as exc:
         available = ", ".join(str(d) for d in wp.get_devices())
         raise DeviceError(f"unknown device {device!r}; available: {available}") from exc
+
+
+def quiet_warp() -> None:
+    """Keep Warp's start-up and module-load notes off stdout (so ``--json`` prints only JSON).
+
+    Warp 1.19 replaced ``wp.config.quiet`` with log levels; both are handled.
+    """
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    else:
+        wp.config.quiet = True

@@ -57,12 +57,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue simulate``; returns the exit status."""
-    import warp as wp
-
+    from warptissue.device import quiet_warp
     from warptissue.simulate import run_study
     from warptissue.study import load_study
 
-    _silence_warp_info(wp)
+    quiet_warp()
     study = load_study(args.study)
     out_dir = args.out if args.out is not None else Path("runs") / study.name
     outputs = run_study(
@@ -83,14 +82,6 @@ def run(args: argparse.Namespace) -> int:
     if not outputs.completed:
         print(f"warptissue: error: stopped early: {outputs.message}", file=sys.stderr)
     return outputs.exit_code
-
-
-def _silence_warp_info(wp) -> None:
-    """Keep Warp's start-up and module-load notes off stdout (``--json`` prints only JSON)."""
-    if hasattr(wp, "LOG_WARNING"):  # Warp >= 1.19 replaced config.quiet with log levels
-        wp.config.log_level = wp.LOG_WARNING
-    else:
-        wp.config.quiet = True
 
 
 def _print_summary(outputs: SimulationOutputs) -> None:
