@@ -85,3 +85,41 @@ def test_missing_column_names_the_file(tmp_path, capsys):
     status = main(["fit", "uniaxial", str(path), "--area-m2", "1", "--height-m", "1"])
     assert status == 2
     assert "bad.csv" in capsys.readouterr().err
+
+
+def test_usd_writes_the_best_model_as_a_material_layer(compression_csv, tmp_path, capsys):
+    from warptissue.materials import ReducedPolynomial as ReducedPolynomialMaterial
+    from warptissue.usd import read_material_usd, validate_stage
+
+    out, usd = tmp_path / "out", tmp_path / "tissue.usda"
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", str(HEIGHT_M), "--model", "neo_hookean,reduced_polynomial:2",
+            "--out", str(out), "--usd", str(usd), "--bulk-modulus-ratio", "500", "--json",
+        ]
+    )  # fmt: skip
+    assert status == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["files"]["usd"]["material"] == str(usd)
+    assert validate_stage(usd) == []
+    fit = json.loads((out / "block_reduced_polynomial_2.json").read_text())
+    c10 = fit["parameters"]["C10_Pa"]["value"]
+    c20 = fit["parameters"]["C20_Pa"]["value"]
+    back = read_material_usd(usd)
+    # The best model (by R^2) with K = 500 mu0 = 500 * 2 C10, values exact to float64.
+    assert ReducedPolynomialMaterial((c10, c20), 500.0 * 2.0 * c10).to_dict() == back["material"]
+    assert back["material"]["C10_Pa"] == c10
+    assert back["material"]["C20_Pa"] == c20
+
+
+def test_usd_must_be_usda(compression_csv, tmp_path):
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", str(HEIGHT_M), "--model", "neo_hookean",
+            "--out", str(tmp_path / "o"), "--usd", str(tmp_path / "x.usdc"),
+        ]
+    )  # fmt: skip
+    assert status == 2
+    assert not (tmp_path / "o").exists()

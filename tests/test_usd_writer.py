@@ -12,6 +12,7 @@ from warptissue.usd import (
     read_material_usd,
     read_tetmesh_usd,
     validate_stage,
+    write_material_usd,
     write_simulation_usd,
 )
 from warptissue.usd.reader import read_probe_curve_usd
@@ -235,6 +236,47 @@ def test_material_object_duck_typed(tmp_path, specimen):
     back = read_material_usd(paths.root)
     assert back["material"] == Ogden().to_dict()
     assert (back["youngs_modulus_Pa"], back["poissons_ratio"]) == (1050.0, 0.5)
+
+
+def test_material_layer_validates_and_round_trips(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    material = {
+        "model": "reduced_polynomial",
+        "C10_Pa": 600.553,
+        "C20_Pa": 4097.45,
+        "bulk_modulus_Pa": 1.0e5,
+        "prony_g": [0.348, 0.358],
+        "prony_tau_s": [1.376, 49.369],
+    }
+    provenance = {"data_file": "block.csv", "fit": {"r_squared": 0.998}}
+    path = write_material_usd(
+        tmp_path / "tissue.usda", material, provenance=provenance, density_kg_per_m3=1060.0
+    )
+    assert validate_stage(path) == []
+    stage = Usd.Stage.Open(str(path))
+    assert UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
+    assert not any(prim.IsA(UsdGeom.TetMesh) for prim in stage.Traverse())
+    info = stage.GetPrimAtPath("/World").GetCustomDataByKey("warptissue")
+    assert info["data_file"] == "block.csv"
+    assert info["fit"]["r_squared"] == 0.998
+    assert "software" in info
+    back = read_material_usd(path)
+    assert back["material"] == material
+    assert back["density_kg_per_m3"] == 1060.0
+    # The scene writer authors the identical material prim (one shared helper).
+    scene = write_simulation_usd(
+        tmp_path / "scene.usda", block_mesh([0.0, 0.01], [0.0, 0.01], [0.0, 0.01]),
+        material=material, density_kg_per_m3=1060.0,
+    )  # fmt: skip
+    scene_back = read_material_usd(scene.root)
+    assert scene_back == back
+    with pytest.raises(InputError, match="usda"):
+        write_material_usd(tmp_path / "tissue.usdc", material)
+    with pytest.raises(InputError, match="density"):
+        write_material_usd(tmp_path / "bad.usda", material, density_kg_per_m3=0.0)
+    assert not (tmp_path / "bad.usda").exists()
 
 
 def test_bad_inputs_write_nothing(tmp_path, specimen, rng):

@@ -5,7 +5,9 @@ increase), converts it to nominal strain d / H0 and nominal stress F / A0 (magni
 positive in the loading direction: for ``--loading compression`` a shortening and a
 compressive force are positive), fits each model, and writes per model ``NAME.json``,
 ``NAME.csv`` and ``NAME.png`` plus a comparison table ranked by R² with each model's Drucker
-stable range (``STEM_comparison.txt`` and ``.json``).
+stable range (``STEM_comparison.txt`` and ``.json``). With ``--usd PATH`` the best model by
+R² is also written as a USD material layer (nearly incompressible: bulk modulus
+K = --bulk-modulus-ratio x the initial shear modulus).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 __all__ = ["ALL_MODELS", "register_fit"]
 
@@ -59,6 +62,22 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--method", choices=("lm", "salm"), default="lm")
     parser.add_argument("--out", type=Path, default=None, help="output folder")
     parser.add_argument(
+        "--usd",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="write the best model by R^2 as a USD material layer (.usda)",
+    )
+    parser.add_argument(
+        "--bulk-modulus-ratio",
+        type=float,
+        default=1000.0,
+        help="K / mu0 of the --usd material (default 1000, nu about 0.4995)",
+    )
+    parser.add_argument(
+        "--density-kg-per-m3", type=float, default=1000.0, help="density of the --usd material"
+    )
+    parser.add_argument(
         "--json", action="store_true", help="print the comparison as JSON instead of a table"
     )
     parser.set_defaults(handler=run)
@@ -68,11 +87,17 @@ def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the comparison; return the exit status."""
     import numpy as np
 
+    from warptissue.errors import InputError
     from warptissue.io import read_experiment_csv
     from warptissue.report import comparison_table, write_comparison, write_fit_outputs
     from warptissue.uniaxial import HomogeneousTest, fit_hyperelastic, model_from_name
 
     names = ALL_MODELS if args.model == "all" else tuple(args.model.split(","))
+    if args.usd is not None:
+        if args.usd.suffix != ".usda":
+            raise InputError("--usd must name a .usda file", path=args.usd)
+        if not (np.isfinite(args.bulk_modulus_ratio) and args.bulk_modulus_ratio > 1.0):
+            raise InputError("--bulk-modulus-ratio must be > 1", value=args.bulk_modulus_ratio)
     for name in names:
         model_from_name(name)
     record = read_experiment_csv(
@@ -87,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         name=args.data.stem,
     )
     out_dir = args.out if args.out is not None else Path(f"{args.data.stem}_uniaxial_fit")
-    rows, files = [], {}
+    rows, files, fits = [], {}, {}
     for name in names:
         fit = fit_hyperelastic(
             name, test, objective=args.objective, min_strain=args.min_strain, method=args.method
@@ -126,10 +151,13 @@ def run(args: argparse.Namespace) -> int:
             title=f"{name} ({args.objective}), R^2 = {r_squared}",
         )
         rows.append({**fit.comparison_row(), "model": name})
+        fits[name] = fit
         if not fit.result.success:
             print(f"warptissue: warning: {name}: {fit.result.message}", file=sys.stderr)
     rows.sort(key=lambda row: -np.inf if row["r_squared"] is None else -row["r_squared"])
     files["comparison"] = write_comparison(out_dir, f"{args.data.stem}_comparison", rows)
+    if args.usd is not None:
+        files["usd"] = {"material": _write_best_usd(args, rows[0], fits[rows[0]["model"]])}
     if args.json:
         listing = {label: {k: str(v) for k, v in paths.items()} for label, paths in files.items()}
         print(json.dumps({"models": rows, "files": listing}, indent=2))
@@ -137,3 +165,30 @@ def run(args: argparse.Namespace) -> int:
         print(comparison_table(rows))
         print(f"outputs in {out_dir}")
     return 0
+
+
+def _write_best_usd(args: argparse.Namespace, row: dict[str, Any], fit: Any) -> Path:
+    """Write the best fit as a USD material layer with the fit's quality as provenance."""
+    from warptissue.usd import write_material_usd
+
+    model = fit.model
+    bulk_modulus_Pa = args.bulk_modulus_ratio * model.initial_shear_modulus_Pa
+    provenance = {
+        "data_file": str(args.data),
+        "fit": {
+            "command": "warptissue fit uniaxial",
+            "model": row["model"],
+            "objective": args.objective,
+            "loading": args.loading,
+            "r_squared": row["r_squared"],
+            "rmse_Pa": row["rmse_Pa"],
+            "status": row["status"],
+            "bulk_modulus_ratio": args.bulk_modulus_ratio,
+        },
+    }
+    return write_material_usd(
+        args.usd,
+        model.to_material(bulk_modulus_Pa),
+        provenance=provenance,
+        density_kg_per_m3=args.density_kg_per_m3,
+    )

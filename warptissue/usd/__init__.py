@@ -11,7 +11,12 @@ register_schema_plugin()
 
 from warptissue.usd.reader import read_material_usd, read_tetmesh_usd  # noqa: E402
 from warptissue.usd.validation import validate_stage  # noqa: E402
-from warptissue.usd.writer import Indenter, UsdScenePaths, write_simulation_usd  # noqa: E402
+from warptissue.usd.writer import (  # noqa: E402
+    Indenter,
+    UsdScenePaths,
+    write_material_usd,
+    write_simulation_usd,
+)
 
 __all__ = [
     "Indenter",
@@ -20,5 +25,6 @@ __all__ = [
     "read_tetmesh_usd",
     "register_schema_plugin",
     "validate_stage",
+    "write_material_usd",
     "write_simulation_usd",
 ]

@@ -10,7 +10,13 @@ import numpy as np
 from warptissue.errors import InputError, MeshError
 from warptissue.mesh import TetMesh
 from warptissue.usd.schema import record_from_attributes
-from warptissue.usd.writer import FACE_SET_FAMILY, INDENTER, NODE_SET_FAMILY, REGION_FAMILY
+from warptissue.usd.writer import (
+    FACE_SET_FAMILY,
+    INDENTER,
+    MATERIAL,
+    NODE_SET_FAMILY,
+    REGION_FAMILY,
+)
 
 __all__ = ["open_stage", "read_material_usd", "read_probe_curve_usd", "read_tetmesh_usd"]
 
@@ -112,25 +118,32 @@ def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMe
 
 
 def read_material_usd(path: str | Path) -> dict[str, Any]:
-    """Read the physics material of a warptissue scene.
+    """Read the physics material of a warptissue scene or material layer.
 
     Args:
-        path: A scene written by :func:`warptissue.usd.write_simulation_usd`.
+        path: A scene written by :func:`warptissue.usd.write_simulation_usd` (the material
+            bound to its TetMesh with purpose ``physics``) or a material layer written by
+            :func:`warptissue.usd.write_material_usd` (its ``/World/Materials/Tissue``).
 
     Returns:
         ``{"material": to_dict()-form record (Prony terms as prony_g / prony_tau_s),
         "density_kg_per_m3", "youngs_modulus_Pa", "poissons_ratio"}`` (the last two are the
         small-strain equivalents under ``physics:``).
     """
-    from pxr import Usd, UsdShade
+    from pxr import Usd, UsdGeom, UsdShade
 
     path = Path(path)
     stage = open_stage(path)
-    prim = _find_tetmesh(stage, path, None)
-    bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial("physics")
-    if not bound:
-        raise InputError(f"TetMesh {prim.GetPath()} has no physics material", path=path)
-    material = bound.GetPrim()
+    if any(prim.IsA(UsdGeom.TetMesh) for prim in stage.Traverse()):
+        prim = _find_tetmesh(stage, path, None)
+        bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial("physics")
+        if not bound:
+            raise InputError(f"TetMesh {prim.GetPath()} has no physics material", path=path)
+        material = bound.GetPrim()
+    else:
+        material = stage.GetPrimAtPath(MATERIAL)
+        if not material:
+            raise InputError(f"the stage holds no TetMesh and no {MATERIAL}", path=path)
     values = {}
     for attr in material.GetAttributes():
         name = attr.GetName()

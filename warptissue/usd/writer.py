@@ -42,6 +42,7 @@ __all__ = [
     "REGION_FAMILY",
     "Indenter",
     "UsdScenePaths",
+    "write_material_usd",
     "write_simulation_usd",
 ]
 
@@ -257,6 +258,11 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
             attr.SetCustomDataByKey("unit", "m")
 
 
+def _check_density(density_kg_per_m3: float) -> None:
+    if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
+        raise InputError("density must be positive", value=density_kg_per_m3)
+
+
 def _set_stage_metadata(layer: Any) -> None:
     """SI units and z up: the project's coordinates (indentation along -z) need no rotation."""
     layer.defaultPrim = "World"
@@ -266,8 +272,12 @@ def _set_stage_metadata(layer: Any) -> None:
         pseudo.SetInfo(key, value)
 
 
-def _material_prims(stage: Any, volume_prim: Any, record: Any, density_kg_per_m3: float) -> None:
-    """The physics material: proposal small-strain attributes plus the ``tissue:`` schema."""
+def _material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
+    """The physics material: proposal small-strain attributes plus the ``tissue:`` schema.
+
+    Returns:
+        The ``UsdShade.Material`` at ``/World/Materials/Tissue``.
+    """
     from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     UsdGeom.Scope.Define(stage, MATERIAL.rsplit("/", 1)[0])
@@ -306,9 +316,7 @@ def _material_prims(stage: Any, volume_prim: Any, record: Any, density_kg_per_m3
             attr_name, type_name, custom=False, variability=Sdf.VariabilityUniform
         ).Set(usd_value)
     prim.SetCustomDataByKey("warptissue:material", _vt_dictionary(record.source))
-    UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
-        material, UsdShade.Tokens.fallbackStrength, "physics"
-    )
+    return material
 
 
 def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str, np.ndarray]:
@@ -582,8 +590,7 @@ def write_simulation_usd(
     root_path = Path(root_path)
     if root_path.suffix != ".usda":
         raise InputError("the root layer must be a .usda file", path=root_path)
-    if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
-        raise InputError("density must be positive", value=density_kg_per_m3)
+    _check_density(density_kg_per_m3)
     if mesh.tet_count == 0:
         raise MeshError("cannot export a mesh without tetrahedra")
     volumes = mesh.volumes()
@@ -618,7 +625,12 @@ def write_simulation_usd(
     )
 
     if material is not None:
-        _material_prims(stage, volume_prim, material_record(material), density_kg_per_m3)
+        from pxr import UsdShade
+
+        tissue = _material_prims(stage, material_record(material), density_kg_per_m3)
+        UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
+            tissue, UsdShade.Tokens.fallbackStrength, "physics"
+        )
     if indenter is not None:
         _indenter_prims(stage, indenter, float(rest[:, 2].max()))
     arrays = None
@@ -671,3 +683,50 @@ def write_simulation_usd(
     with atomic_path(paths.root) as temporary:
         root_layer.Export(str(temporary))
     return paths
+
+
+def write_material_usd(
+    path: str | Path,
+    material: Any,
+    *,
+    provenance: Mapping[str, Any] | None = None,
+    density_kg_per_m3: float = 1000.0,
+) -> Path:
+    """Write one fitted material as a material-library asset layer.
+
+    The layer holds ``/World`` (provenance in customData under ``warptissue``, with software
+    versions added) and the physics material ``/World/Materials/Tissue``, authored by the same
+    code as the scene writer's material: ``physics:density``, ``physics:youngsModulus`` and
+    ``physics:poissonsRatio`` (small-strain equivalent) plus the ``tissue:*`` attributes of
+    ``TissueMaterialAPI``. Stage metadata: ``metersPerUnit = 1``, ``kilogramsPerUnit = 1``,
+    ``upAxis = "Z"``. Reference it from a scene and bind it with purpose ``physics``.
+
+    Args:
+        path: The layer, a ``.usda`` file; written atomically.
+        material: A ``warptissue.materials`` object or a dictionary in ``to_dict()`` form
+            (see :func:`write_simulation_usd`).
+        provenance: JSON-like metadata (fit quality, data file, ...).
+        density_kg_per_m3: Mass density written as ``physics:density``.
+
+    Returns:
+        The path written.
+    """
+    from pxr import Sdf, Usd, UsdGeom
+
+    path = Path(path)
+    if path.suffix != ".usda":
+        raise InputError("the material layer must be a .usda file", path=path)
+    _check_density(density_kg_per_m3)
+    record = material_record(material)
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    _set_stage_metadata(layer)
+    stage = Usd.Stage.Open(layer)
+    world = UsdGeom.Xform.Define(stage, WORLD)
+    info = {"software": software_versions()}
+    if provenance:
+        info.update(provenance)
+    world.GetPrim().SetCustomDataByKey("warptissue", _vt_dictionary(info))
+    _material_prims(stage, record, density_kg_per_m3)
+    with atomic_path(path) as temporary:
+        layer.Export(str(temporary))
+    return path
