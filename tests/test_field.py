@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -315,9 +317,23 @@ def test_cli_fit_field_writes_outputs_and_reports_bad_input(tmp_path, capsys):
             "lm",
             "--out",
             str(out),
+            "--usd",
+            str(tmp_path / "pillow.usda"),
         ]
     )
     assert status == 0
+    from warptissue.usd import read_material_usd, read_tetmesh_usd, validate_stage
+
+    scene = tmp_path / "pillow.usda"
+    assert validate_stage(scene) == []
+    summary = json.loads((out / "field_C.json").read_text())["homogeneous"]
+    back = read_material_usd(scene)
+    assert back["material"] == {
+        "model": "linear_elastic",
+        "youngs_modulus_Pa": summary["youngs_modulus_Pa"],
+        "poissons_ratio": summary["poissons_ratio"],
+    }
+    assert read_tetmesh_usd(scene).tet_count == 15 * 5
     for name in (
         "field_C.json",
         "field_C_cells.csv",

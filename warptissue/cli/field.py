@@ -6,12 +6,17 @@ and test markers, the homogeneous linear estimate (Eq. 13-14) and the heterogene
 are estimated, and both are evaluated on the test markers (Table 3). Writes per load set
 ``field_<set>.json``, ``field_<set>_cells.csv``, ``field_<set>_test_markers.csv``,
 ``field_<set>.png`` (E and nu maps) and ``field_<set>.vtu``, plus ``field_summary.csv``.
+With ``--usd PATH`` each load set's mesh is also written as a USD scene whose physics
+material is the homogeneous linear estimate (E0, nu0); the per-cell (E, nu) field stays in
+the ``.vtu`` and ``_cells.csv`` (the USD writer has no per-tet material primvars). One load
+set writes PATH; several write ``STEM_<set>.usda`` beside it.
 """
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 __all__ = ["register_fit"]
 
@@ -40,6 +45,16 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--load-set", action="append", default=None, help="only these sets")
     parser.add_argument("--device", default="cpu", help="Warp device (cpu, cuda:0)")
     parser.add_argument("--out", type=Path, default=Path("field_out"), help="output folder")
+    parser.add_argument(
+        "--usd",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="write the mesh with the homogeneous estimate as a USD scene (.usda)",
+    )
+    parser.add_argument(
+        "--density-kg-per-m3", type=float, default=1000.0, help="density of the --usd material"
+    )
     parser.set_defaults(handler=run)
 
 
@@ -52,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
     from warptissue.field.pipeline import estimate_load_set, write_load_set_outputs
     from warptissue.io import write_csv
 
+    if args.usd is not None and args.usd.suffix != ".usda":
+        raise InputError("--usd must name a .usda file", path=args.usd)
     markers = read_markers_csv(args.markers)
     forces = read_forces_csv(args.forces)
     load_sets = args.load_set or list(markers.load_sets)
@@ -75,6 +92,11 @@ def run(args: argparse.Namespace) -> int:
             device=args.device,
         )
         write_load_set_outputs(args.out, result)
+        if args.usd is not None:
+            usd_path = args.usd
+            if len(load_sets) > 1:
+                usd_path = args.usd.with_name(f"{args.usd.stem}_{label}.usda")
+            _write_usd(usd_path, args, result)
         rows.append(result)
     write_csv(
         args.out / "field_summary.csv",
@@ -100,3 +122,32 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"wrote {args.out}")
     return 0
+
+
+def _write_usd(path: Path, args: argparse.Namespace, result: Any) -> None:
+    """The load set's mesh bound to the homogeneous linear estimate, with fit provenance."""
+    from warptissue.materials import LinearElastic
+    from warptissue.usd import write_simulation_usd
+
+    homogeneous = result.homogeneous
+    provenance = {
+        "data_file": str(args.markers),
+        "forces_file": str(args.forces),
+        "fit": {
+            "command": "warptissue fit field",
+            "load_set": result.load_set,
+            "material": "homogeneous linear estimate (seed 002, Eq. 13-14)",
+            "homogeneous_test_max_error_m": result.homogeneous_errors["max_error_m"],
+            "homogeneous_test_mean_error_m": result.homogeneous_errors["mean_error_m"],
+            "field_test_max_error_m": result.field_errors["max_error_m"],
+            "field_test_mean_error_m": result.field_errors["mean_error_m"],
+            "per_cell_field": f"field_{result.load_set}_cells.csv",
+        },
+    }
+    write_simulation_usd(
+        path,
+        result.grid.mesh,
+        material=LinearElastic(homogeneous.youngs_modulus_Pa, homogeneous.poissons_ratio),
+        provenance=provenance,
+        density_kg_per_m3=args.density_kg_per_m3,
+    )
