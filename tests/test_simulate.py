@@ -175,6 +175,7 @@ def test_cli_json_stdout_is_pure_json_in_a_fresh_process(tiny_record, tmp_path):
         capture_output=True,
         text=True,
         check=False,
+        cwd=tmp_path,  # not the checkout, whose kernels/ is not yet warptissue.kernels
     )
     assert completed.returncode == 0, completed.stderr
     assert json.loads(completed.stdout)["completed"] is True
