@@ -27,6 +27,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.export",
     "warptissue.cli.fit_relaxation",
     "warptissue.cli.acquire",
+    "warptissue.cli.simulate",
 )
 """Modules that add commands, in the order they appear in ``--help``."""
 

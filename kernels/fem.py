@@ -1,0 +1,218 @@
+"""Tetrahedral finite-element kernels: element residual and tangent, Dirichlet elimination,
+stress recovery (float64).
+
+Elements are TET4 (one quadrature point) or TET10 (four points), with reference shape-function
+gradients precomputed per quadrature point on the host. Two formulations share one kernel:
+
+- displacement (``mixed == 0``): ``Pi_e = int psi_dev(F) + U(J) dV``.
+- mean dilatation (``mixed == 1``, TET10/P0): ``Pi_e = int psi_dev(F) dV + V_e U(Jbar)`` with
+  ``Jbar = (1/V_e) int J dV``. With ``g_a = (1/V_e) int J F^-T grad N_a dV`` (so that
+  ``dJbar = sum_a g_a . du_a``) the residual is ``int P_dev grad N_a dV + V_e U'(Jbar) g_a``
+  and the exact tangent is ``int grad N_a . (A_dev + U'(Jbar) d2J/dF2) . grad N_b dV
+  + V_e U''(Jbar) g_a (x) g_b``. The pressure ``U'(Jbar)`` is constant per element, i.e. the
+  P2/P0 pair, which satisfies the inf-sup condition (Boffi, Brezzi and Fortin 2013, Sec. 8.6).
+"""
+
+import warp as wp
+from warptissue.kernels.materials import (
+    MaterialParams,
+    add_pressure_terms,
+    deviatoric_response,
+    flat,
+    volumetric_energy,
+)
+
+wp.set_module_options({"enable_backward": False})
+
+mat10x3d = wp.types.matrix(shape=(10, 3), dtype=wp.float64)
+mat3x9d = wp.types.matrix(shape=(3, 9), dtype=wp.float64)
+
+
+@wp.func
+def deformation_gradient(
+    e: int,
+    q: int,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    displacement: wp.array(dtype=wp.vec3d),
+) -> wp.mat33d:
+    """F = I + sum_a u_a (x) grad_X N_a at quadrature point q of element e."""
+    f = wp.identity(n=3, dtype=wp.float64)
+    for a in range(tets.shape[1]):
+        f += wp.outer(displacement[tets[e, a]], shape_gradients[e, q, a])
+    return f
+
+
+@wp.kernel
+def assemble_elements_kernel(
+    params: MaterialParams,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    quadrature_volumes: wp.array2d(dtype=wp.float64),
+    displacement: wp.array(dtype=wp.vec3d),
+    block_index: wp.array2d(dtype=wp.int32),
+    mixed: int,
+    with_tangent: int,
+    residual: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+    min_jacobian: wp.array(dtype=wp.float64),
+):
+    """Add element internal forces to ``residual`` and tangent blocks to ``matrix_values``.
+
+    ``block_index[e, a * nodes_per_tet + b]`` is the BSR block of node pair (a, b) of tet e.
+    ``energy[0]`` accumulates the stored energy (J) and ``min_jacobian[0]`` the smallest J.
+    """
+    e = wp.tid()
+    npe = tets.shape[1]
+    nq = quadrature_volumes.shape[1]
+
+    # Pass 1: mean dilatation Jbar and its gradient g_a (mixed formulation only).
+    volume = wp.float64(0.0)
+    deformed_volume = wp.float64(0.0)
+    g = mat10x3d()
+    for q in range(nq):
+        f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+        j = wp.determinant(f)
+        wp.atomic_min(min_jacobian, 0, j)
+        dv = quadrature_volumes[e, q]
+        volume += dv
+        deformed_volume += j * dv
+        if mixed != 0 and j > wp.float64(0.0):
+            f_inv_t = wp.transpose(wp.inverse(f))
+            for a in range(npe):
+                ga = j * dv * (f_inv_t @ shape_gradients[e, q, a])
+                for i in range(3):
+                    g[a, i] = g[a, i] + ga[i]
+    j_bar = deformed_volume / volume
+    if j_bar <= wp.float64(0.0):
+        return
+    u_bar, p_bar, k_bar = volumetric_energy(params, j_bar)
+    element_energy = wp.float64(0.0)
+    if mixed != 0:
+        element_energy = volume * u_bar
+
+    # Pass 2: quadrature of the deviatoric part (and U(J) for the displacement formulation).
+    for q in range(nq):
+        f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+        j = wp.determinant(f)
+        if j <= wp.float64(0.0):
+            continue
+        dv = quadrature_volumes[e, q]
+        psi, p, a_mat = deviatoric_response(params, f, with_tangent)
+        pressure = p_bar
+        stiffness = wp.float64(0.0)
+        if mixed == 0:
+            u, du, ddu = volumetric_energy(params, j)
+            psi += u
+            pressure = du
+            stiffness = ddu
+        p, a_mat = add_pressure_terms(p, a_mat, f, pressure, stiffness, with_tangent)
+        element_energy += psi * dv
+        for a in range(npe):
+            grad_a = shape_gradients[e, q, a]
+            wp.atomic_add(residual, tets[e, a], dv * (p @ grad_a))
+            if with_tangent != 0:
+                # t[i, 3k + L] = sum_J grad_a[J] A[3i + J, 3k + L]
+                t = mat3x9d()
+                for i in range(3):
+                    for col in range(9):
+                        t[i, col] = dv * (
+                            grad_a[0] * a_mat[flat(i, 0), col]
+                            + grad_a[1] * a_mat[flat(i, 1), col]
+                            + grad_a[2] * a_mat[flat(i, 2), col]
+                        )
+                for b in range(npe):
+                    grad_b = shape_gradients[e, q, b]
+                    block = wp.mat33d()
+                    for i in range(3):
+                        for k in range(3):
+                            block[i, k] = (
+                                t[i, flat(k, 0)] * grad_b[0]
+                                + t[i, flat(k, 1)] * grad_b[1]
+                                + t[i, flat(k, 2)] * grad_b[2]
+                            )
+                    wp.atomic_add(matrix_values, block_index[e, a * npe + b], block)
+
+    if mixed != 0 and with_tangent != 0:
+        # g holds V_e g_a = int J F^-T grad N_a dV; the pressure U'(Jbar) J F^-T already went
+        # into P above, this adds the rank-one part V_e U''(Jbar) g_a (x) g_b.
+        for a in range(npe):
+            ga = wp.vec3d(g[a, 0], g[a, 1], g[a, 2])
+            for b in range(npe):
+                gb = wp.vec3d(g[b, 0], g[b, 1], g[b, 2])
+                wp.atomic_add(
+                    matrix_values, block_index[e, a * npe + b], (k_bar / volume) * wp.outer(ga, gb)
+                )
+    wp.atomic_add(energy, 0, element_energy)
+
+
+@wp.kernel
+def eliminate_dirichlet_kernel(
+    offsets: wp.array(dtype=wp.int32),
+    columns: wp.array(dtype=wp.int32),
+    constrained: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+):
+    """Zero the rows and columns of constrained dofs and put 1 on their diagonal.
+
+    ``constrained[n][i]`` is 1 where component i of node n is prescribed, else 0.
+    """
+    row = wp.tid()
+    row_mask = constrained[row]
+    for idx in range(offsets[row], offsets[row + 1]):
+        col = columns[idx]
+        col_mask = constrained[col]
+        block = matrix_values[idx]
+        for i in range(3):
+            for k in range(3):
+                if row_mask[i] != wp.float64(0.0) or col_mask[k] != wp.float64(0.0):
+                    block[i, k] = wp.float64(0.0)
+                    if row == col and i == k:
+                        block[i, k] = wp.float64(1.0)
+        matrix_values[idx] = block
+
+
+@wp.kernel
+def cauchy_stress_kernel(
+    params: MaterialParams,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    quadrature_volumes: wp.array2d(dtype=wp.float64),
+    displacement: wp.array(dtype=wp.vec3d),
+    mixed: int,
+    stress: wp.array2d(dtype=wp.float64),
+):
+    """Volume-averaged Cauchy stress per tet, Voigt order xx, yy, zz, yz, xz, xy (Pa).
+
+    sigma = P F^T / J at each quadrature point; in the mixed formulation the pressure part is
+    U'(Jbar) I, constant over the element.
+    """
+    e = wp.tid()
+    nq = quadrature_volumes.shape[1]
+    volume = wp.float64(0.0)
+    deformed_volume = wp.float64(0.0)
+    for q in range(nq):
+        f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+        dv = quadrature_volumes[e, q]
+        volume += dv
+        deformed_volume += wp.determinant(f) * dv
+    u_bar, p_bar, k_bar = volumetric_energy(params, deformed_volume / volume)
+    sigma = wp.mat33d()
+    for q in range(nq):
+        f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+        j = wp.determinant(f)
+        dv = quadrature_volumes[e, q]
+        psi, p, a_mat = deviatoric_response(params, f, 0)
+        pressure = p_bar
+        if mixed == 0:
+            u, du, ddu = volumetric_energy(params, j)
+            pressure = du
+        p, a_mat = add_pressure_terms(p, a_mat, f, pressure, wp.float64(0.0), 0)
+        sigma += (dv / (j * volume)) * (p @ wp.transpose(f))
+    stress[e, 0] = sigma[0, 0]
+    stress[e, 1] = sigma[1, 1]
+    stress[e, 2] = sigma[2, 2]
+    stress[e, 3] = wp.float64(0.5) * (sigma[1, 2] + sigma[2, 1])
+    stress[e, 4] = wp.float64(0.5) * (sigma[0, 2] + sigma[2, 0])
+    stress[e, 5] = wp.float64(0.5) * (sigma[0, 1] + sigma[1, 0])

@@ -1,0 +1,681 @@
+"""Benchmark: the flat-punch indentation curve, warptissue against FElupe at equal accuracy.
+
+The problem (issue 2): a quarter of a 20 mm x 20 mm x 10 mm block (symmetry planes x = 0 and
+y = 0, fixed base), a bonded rigid flat punch of radius a = 1 mm pressed to a / 2 in 20 load
+steps, nearly incompressible neo-Hookean tissue with mu = 575 Pa (C10 = 287.5 Pa, porcine
+liver, seed 000) and K / mu = 1000.
+
+- warptissue: TET10 mixed formulation on meshes from about 10k to about 1M tets
+  (``--sizes``), on the CPU or CUDA (``--device``).
+- FElupe (``--felupe-levels``): Q1/P0 three-field hexahedra
+  (``felupe.SolidBodyNearlyIncompressible``, Hu-Washizu with element-constant pressure and
+  dilatation) on an O-grid hexahedral mesh of the same quarter block with a ring of nodes at
+  r = a, the same boundary conditions and load steps, on the CPU, with PyPardiso when
+  installed (else SciPy's SuperLU).
+- Reference: Richardson extrapolation of the final force over the finest three meshes of one
+  code (refinement ratio constant), so that both codes can be compared at EQUAL force
+  accuracy: for an error target, the time each code needs is interpolated (log-log) between
+  its runs.
+
+Examples:
+    python scripts/bench_flat_punch.py --sizes 10k,20k --felupe-levels 1,2,3 --out bench.json
+    python scripts/bench_flat_punch.py --device cuda --sizes 10k,100k,1m --out $OUT/bench.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import platform
+import resource
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+PROBE_RADIUS_M = 1.0e-3
+HALF_WIDTH_M = 10.0e-3
+THICKNESS_M = 10.0e-3
+SHEAR_MODULUS_PA = 575.0
+BULK_MODULUS_PA = 1000.0 * SHEAR_MODULUS_PA
+FINAL_DEPTH_M = 0.5 * PROBE_RADIUS_M
+STEP_COUNT = 20
+NEWTON_TOLERANCE = 1.0e-8
+SIZE_TARGETS = {
+    "10k": 10_000,
+    "20k": 20_000,
+    "50k": 50_000,
+    "100k": 100_000,
+    "300k": 300_000,
+    "1m": 1_000_000,
+}
+
+
+@dataclass
+class RunRecord:
+    """One run of one code on one mesh."""
+
+    code: str
+    device: str
+    element: str
+    cells: int
+    nodes: int
+    dofs: int
+    size_near_m: float
+    steps_converged: int
+    completed: bool
+    newton_iterations: int
+    linear_iterations: int | None
+    setup_s: float
+    solve_s: float
+    solve_cpu_s: float
+    seconds_per_step: float
+    seconds_per_newton_iteration: float
+    peak_host_rss_MiB: float
+    peak_gpu_MiB: float | None
+    final_depth_m: float
+    final_force_N: float
+    force_N: list[float] = field(default_factory=list)
+    linear_solver: str = ""
+    relative_error: float | None = None
+
+
+def parse_count(text: str) -> int:
+    """``"1.2k"`` -> 1200, ``"1m"`` -> 1000000, ``"5000"`` -> 5000."""
+    scale = {"k": 1_000, "m": 1_000_000}.get(text[-1:].lower(), 1)
+    return int(float(text[:-1] if scale > 1 else text) * scale)
+
+
+def peak_rss_mib() -> float:
+    """Peak resident set size of this process so far, MiB (Linux reports KiB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def sneddon_force_N(depth_m: float) -> float:
+    """Half-space, incompressible, flat punch: F = 8 mu a delta (Sneddon 1965)."""
+    return 8.0 * SHEAR_MODULUS_PA * PROBE_RADIUS_M * depth_m
+
+
+def depths_m() -> np.ndarray:
+    return FINAL_DEPTH_M * np.arange(1, STEP_COUNT + 1) / STEP_COUNT
+
+
+# --------------------------------------------------------------------------- FElupe
+
+
+def graded_levels(length_m: float, first_m: float, last_m: float) -> np.ndarray:
+    """Node positions 0..length with geometrically growing spacing from first_m to ~last_m."""
+    if first_m >= length_m:
+        return np.array([0.0, length_m])
+    last_m = max(min(last_m, length_m), first_m)
+    if math.isclose(first_m, last_m):
+        count = max(1, round(length_m / first_m))
+        return np.linspace(0.0, length_m, count + 1)
+    ratio = (length_m - first_m) / (length_m - last_m) if last_m < length_m else 2.0
+    ratio = max(ratio, 1.0 + 1e-9)
+    count = max(1, math.ceil(math.log(last_m / first_m) / math.log(ratio)) + 1)
+    sizes = first_m * ratio ** np.arange(count)
+    sizes *= length_m / sizes.sum()
+    return np.concatenate([[0.0], np.cumsum(sizes)])
+
+
+def geometric_levels(length_m: float, first_m: float, growth: float) -> np.ndarray:
+    """Node positions 0..length with spacing first_m, first_m * growth, ... (last one fitted)."""
+    sizes = [first_m]
+    while sum(sizes) < length_m:
+        sizes.append(sizes[-1] * growth)
+    positions = np.concatenate([[0.0], np.cumsum(sizes)])
+    positions *= length_m / positions[-1]
+    return positions
+
+
+def quarter_block_hex_mesh(size_near_m: float, size_far_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """O-grid hexahedral mesh of the quarter block with a ring of nodes at r = a.
+
+    In plan: a square core [0, a/2]^2, a ring from the core's edge to the circle r = a, and
+    an outer ring from the circle to the block's sides, all on rays through the core's edge
+    nodes; the radial spacing grows from ``size_near_m`` at r = a to ``size_far_m``. Through
+    the thickness the spacing grows from ``size_near_m`` at the top to ``size_far_m``.
+
+    Returns:
+        points (N, 3) m, hexahedra (M, 8) in VTK order with positive volume.
+    """
+    a = PROBE_RADIUS_M
+    core = 0.5 * a
+    n_core = max(2, math.ceil(0.5 * math.pi * a / (2.0 * size_near_m)))
+    grid = np.linspace(0.0, core, n_core + 1)
+    core_x, core_y = np.meshgrid(grid, grid, indexing="ij")
+    core_points = np.column_stack([core_x.ravel(), core_y.ravel()])
+    index = np.arange((n_core + 1) ** 2).reshape(n_core + 1, n_core + 1)
+    core_quads = np.column_stack(
+        [
+            index[:-1, :-1].ravel(),
+            index[1:, :-1].ravel(),
+            index[1:, 1:].ravel(),
+            index[:-1, 1:].ravel(),
+        ]
+    )
+    # Rays through the core's outer edge, counter-clockwise from the x axis to the y axis.
+    edge = np.concatenate(
+        [
+            np.column_stack([np.full(n_core + 1, core), grid]),
+            np.column_stack([grid[::-1][1:], np.full(n_core, core)]),
+        ]
+    )
+    unit = edge / np.linalg.norm(edge, axis=1, keepdims=True)
+    inner_count = max(2, math.ceil((a - core) / size_near_m))
+    inner_t = np.linspace(0.0, 1.0, inner_count + 1)
+    outer_levels = graded_levels(HALF_WIDTH_M - a, size_near_m, size_far_m) / (HALF_WIDTH_M - a)
+    on_circle = a * unit
+    on_side = edge * (HALF_WIDTH_M / core)
+    ring = np.concatenate(
+        [
+            edge[:, None] + inner_t[None, :, None] * (on_circle - edge)[:, None],
+            on_circle[:, None] + outer_levels[None, 1:, None] * (on_side - on_circle)[:, None],
+        ],
+        axis=1,
+    )
+    rays, levels = ring.shape[:2]
+    ring_index = len(core_points) + np.arange(rays * levels).reshape(rays, levels)
+    ring_quads = np.column_stack(
+        [
+            ring_index[:-1, :-1].ravel(),
+            ring_index[:-1, 1:].ravel(),
+            ring_index[1:, 1:].ravel(),
+            ring_index[1:, :-1].ravel(),
+        ]
+    )
+    plan = np.concatenate([core_points, ring.reshape(-1, 2)])
+    quads = np.concatenate([core_quads, ring_quads])
+    # Merge the ring's first level with the core's edge nodes.
+    keys = np.round(plan / (1e-9 * a)).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    plan = plan[first]
+    quads = inverse.reshape(-1)[quads]
+    z = THICKNESS_M - graded_levels(THICKNESS_M, size_near_m, size_far_m)[::-1]
+    layer = len(plan)
+    points = np.column_stack([np.tile(plan, (len(z), 1)), np.repeat(z, layer)])
+    bottom = quads[None] + layer * np.arange(len(z) - 1)[:, None, None]
+    hexahedra = np.concatenate([bottom, bottom + layer], axis=2).reshape(-1, 8)
+    corners = points[hexahedra]
+    volume_sign = np.einsum(
+        "ij,ij->i",
+        corners[:, 1] - corners[:, 0],
+        np.cross(corners[:, 3] - corners[:, 0], corners[:, 4] - corners[:, 0]),
+    )
+    if np.any(volume_sign <= 0):
+        raise RuntimeError("the O-grid generator made an inverted hexahedron")
+    return points, hexahedra.astype(np.int64)
+
+
+def felupe_linear_solver() -> tuple[Any, str]:
+    try:
+        from pypardiso import spsolve
+
+        return spsolve, "pypardiso (MKL PARDISO)"
+    except ImportError:
+        from scipy.sparse.linalg import spsolve
+
+        return spsolve, "scipy.sparse.linalg.spsolve (SuperLU)"
+
+
+def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
+    """Q1/P0 three-field FElupe run of the benchmark on one mesh."""
+    import felupe as fem
+
+    solver, solver_name = felupe_linear_solver()
+    started = time.perf_counter()
+    points, hexahedra = quarter_block_hex_mesh(size_near_m, size_far_m)
+    mesh = fem.Mesh(points, hexahedra, "hexahedron")
+    region = fem.RegionHexahedron(mesh)
+    displacement = fem.FieldContainer([fem.Field(region, dim=3)])
+    solid = fem.SolidBodyNearlyIncompressible(
+        fem.NeoHooke(mu=SHEAR_MODULUS_PA), displacement, bulk=BULK_MODULUS_PA
+    )
+    x, y, z = points.T
+    tolerance = 1e-9 * PROBE_RADIUS_M
+    probe = (np.abs(z - THICKNESS_M) < tolerance) & (np.hypot(x, y) <= PROBE_RADIUS_M + tolerance)
+    boundaries = {
+        "symmetry_x": fem.Boundary(displacement[0], mask=np.abs(x) < tolerance, skip=(0, 1, 1)),
+        "symmetry_y": fem.Boundary(displacement[0], mask=np.abs(y) < tolerance, skip=(1, 0, 1)),
+        "bottom": fem.Boundary(displacement[0], mask=np.abs(z) < tolerance),
+        "probe_xy": fem.Boundary(displacement[0], mask=probe, skip=(0, 0, 1)),
+        "probe_z": fem.Boundary(displacement[0], mask=probe, skip=(1, 1, 0)),
+    }
+    dof0, dof1 = fem.dof.partition(displacement, boundaries)
+    probe_z_dofs = boundaries["probe_z"].dof
+
+    setup_s = time.perf_counter() - started
+    forces: list[float] = []
+    newton = 0
+    started = time.perf_counter()
+    cpu_started = time.process_time()
+    for depth in depths_m():
+        boundaries["probe_z"].update(-depth)
+        ext0 = fem.dof.apply(displacement, boundaries, dof0)
+        result = fem.newtonraphson(
+            items=[solid],
+            dof1=dof1,
+            dof0=dof0,
+            ext0=ext0,
+            solver=solver,
+            tol=NEWTON_TOLERANCE,
+            check=_relative_check,
+            verbose=0,
+            maxiter=25,
+        )
+        newton += result.iterations
+        # The residual at the prescribed probe dofs is the force the probe applies, along -z;
+        # four quarters make the full probe.
+        forces.append(-4.0 * float(np.sum(result.fun[probe_z_dofs])))
+    solve_s = time.perf_counter() - started
+    solve_cpu_s = time.process_time() - cpu_started
+    return RunRecord(
+        code="felupe",
+        device="cpu",
+        element="HEX8 Q1/P0",
+        cells=len(hexahedra),
+        nodes=len(points),
+        dofs=3 * len(points),
+        size_near_m=size_near_m,
+        steps_converged=len(forces),
+        completed=True,
+        newton_iterations=newton,
+        linear_iterations=None,
+        setup_s=setup_s,
+        solve_s=solve_s,
+        solve_cpu_s=solve_cpu_s,
+        seconds_per_step=solve_s / STEP_COUNT,
+        seconds_per_newton_iteration=solve_s / newton,
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=None,
+        final_depth_m=FINAL_DEPTH_M,
+        final_force_N=forces[-1],
+        force_N=forces,
+        linear_solver=solver_name,
+    )
+
+
+def run_felupe_axisymmetric_disc(size_near_m: float) -> RunRecord:
+    """Axisymmetric Q1/P0 FElupe run on a DISC of radius HALF_WIDTH_M (verification only).
+
+    The disc of radius 10 a and thickness 10 a is the round counterpart of the benchmark
+    block; in 2-D a very fine mesh is cheap, so this converges far enough to check
+    warptissue's ``indentation_disc`` against an independent code.
+    """
+    import felupe as fem
+
+    solver, solver_name = felupe_linear_solver()
+    started = time.perf_counter()
+    a = PROBE_RADIUS_M
+    radial = np.concatenate(
+        [
+            np.linspace(0.0, a, max(2, math.ceil(a / size_near_m)) + 1),
+            a + geometric_levels(HALF_WIDTH_M - a, size_near_m, 1.08)[1:],
+        ]
+    )
+    axial = THICKNESS_M - geometric_levels(THICKNESS_M, size_near_m, 1.08)[::-1]
+    mesh = fem.Grid(axial, radial)  # x_1 = axial (z), x_2 = radial (r)
+    region = fem.RegionQuad(mesh)
+    displacement = fem.FieldContainer([fem.FieldAxisymmetric(region, dim=2)])
+    solid = fem.SolidBodyNearlyIncompressible(
+        fem.NeoHooke(mu=SHEAR_MODULUS_PA), displacement, bulk=BULK_MODULUS_PA
+    )
+    z, r = mesh.points.T
+    tolerance = 1e-9 * a
+    probe = (np.abs(z - THICKNESS_M) < tolerance) & (r <= a + tolerance)
+    boundaries = {
+        "axis": fem.Boundary(displacement[0], mask=r < tolerance, skip=(1, 0)),
+        "bottom": fem.Boundary(displacement[0], mask=np.abs(z) < tolerance),
+        "probe_r": fem.Boundary(displacement[0], mask=probe, skip=(1, 0)),
+        "probe_z": fem.Boundary(displacement[0], mask=probe, skip=(0, 1)),
+    }
+    dof0, dof1 = fem.dof.partition(displacement, boundaries)
+    setup_s = time.perf_counter() - started
+    forces, newton = [], 0
+    started, cpu_started = time.perf_counter(), time.process_time()
+    for depth in depths_m():
+        boundaries["probe_z"].update(-depth)
+        ext0 = fem.dof.apply(displacement, boundaries, dof0)
+        result = fem.newtonraphson(
+            items=[solid],
+            dof1=dof1,
+            dof0=dof0,
+            ext0=ext0,
+            solver=solver,
+            tol=NEWTON_TOLERANCE,
+            check=_relative_check,
+            verbose=0,
+            maxiter=25,
+        )
+        newton += result.iterations
+        forces.append(-float(np.sum(result.fun[boundaries["probe_z"].dof])))
+    solve_s = time.perf_counter() - started
+    return RunRecord(
+        code="felupe-axisymmetric-disc",
+        device="cpu",
+        element="QUAD4 Q1/P0 axisymmetric",
+        cells=mesh.ncells,
+        nodes=mesh.npoints,
+        dofs=2 * mesh.npoints,
+        size_near_m=size_near_m,
+        steps_converged=len(forces),
+        completed=True,
+        newton_iterations=newton,
+        linear_iterations=None,
+        setup_s=setup_s,
+        solve_s=solve_s,
+        solve_cpu_s=time.process_time() - cpu_started,
+        seconds_per_step=solve_s / STEP_COUNT,
+        seconds_per_newton_iteration=solve_s / newton,
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=None,
+        final_depth_m=FINAL_DEPTH_M,
+        final_force_N=forces[-1],
+        force_N=forces,
+        linear_solver=solver_name,
+    )
+
+
+def _relative_check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
+    """Newton test: free-dof residual norm relative to the reaction norm (as warptissue)."""
+    residual = np.linalg.norm(f[dof1])
+    reaction = np.linalg.norm(f[dof0])
+    fnorm = residual / reaction if reaction > 0 else residual
+    return np.linalg.norm(dx), fnorm, bool(fnorm < ftol)
+
+
+# --------------------------------------------------------------------------- warptissue
+
+
+def warptissue_mesh(target_tets: int, element: str = "TET10") -> tuple[Any, float]:
+    """An indentation-block mesh with about ``target_tets`` tets, and its near size."""
+    from warptissue.mesh import indentation_block
+
+    size_near_m = PROBE_RADIUS_M / 4.0
+    for _ in range(4):
+        mesh = indentation_block(
+            width_m=2.0 * HALF_WIDTH_M,
+            thickness_m=THICKNESS_M,
+            probe_radius_m=PROBE_RADIUS_M,
+            quarter=True,
+            element=element,
+            size_near_m=size_near_m,
+            size_far_m=min(10.0 * size_near_m, 0.25 * THICKNESS_M),
+        )
+        ratio = mesh.tet_count / target_tets
+        if abs(ratio - 1.0) < 0.15:
+            break
+        size_near_m *= ratio ** (1.0 / 3.0)
+    return mesh, size_near_m
+
+
+def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
+    """warptissue TET10 mixed run of the benchmark on one mesh."""
+    import warp as wp
+
+    from warptissue.device import resolve_device
+    from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
+    from warptissue.materials import NeoHookean
+
+    warp_device = resolve_device(device)
+    started = time.perf_counter()
+    problem = IndentationProblem(
+        mesh,
+        NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA, bulk_modulus_Pa=BULK_MODULUS_PA),
+        FlatPunch(PROBE_RADIUS_M, contact="bonded"),
+        base="fixed",
+        symmetry_planes=("symmetry_x", "symmetry_y"),
+        formulation="mixed",
+    )
+    setup_s = time.perf_counter() - started
+    started = time.perf_counter()
+    cpu_started = time.process_time()
+    result = simulate_indentation(
+        problem, depths_m(), device=warp_device, progress=False, tolerance=NEWTON_TOLERANCE
+    )
+    wp.synchronize_device(warp_device)
+    solve_s = time.perf_counter() - started
+    solve_cpu_s = time.process_time() - cpu_started
+    newton = int(np.sum(result.newton_iterations))
+    peak_gpu = None
+    if warp_device.is_cuda:
+        peak_gpu = wp.get_mempool_used_mem_high(warp_device) / 2**20
+    forces = [float(f) for f in result.reaction_force_N]
+    return RunRecord(
+        code="warptissue",
+        device=str(warp_device),
+        element=f"{mesh.element_type} mixed",
+        cells=mesh.tet_count,
+        nodes=mesh.node_count,
+        dofs=3 * mesh.node_count,
+        size_near_m=size_near_m,
+        steps_converged=len(forces),
+        completed=bool(result.completed),
+        newton_iterations=newton,
+        linear_iterations=int(np.sum(result.linear_iterations)),
+        setup_s=setup_s,
+        solve_s=solve_s,
+        solve_cpu_s=solve_cpu_s,
+        seconds_per_step=solve_s / max(1, len(forces)),
+        seconds_per_newton_iteration=solve_s / max(1, newton),
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=peak_gpu,
+        final_depth_m=float(result.depths_m[-1]) if forces else 0.0,
+        final_force_N=forces[-1] if forces else float("nan"),
+        force_N=forces,
+        linear_solver=str(getattr(result, "linear_solver", "")),
+    )
+
+
+# --------------------------------------------------------------------------- accuracy
+
+
+def richardson(
+    cells: list[int], forces: list[float], *, dimension: int = 3
+) -> dict[str, float] | None:
+    """Extrapolate F(h) = F* + C h^p from the three finest runs (h = cells^(-1/dimension)).
+
+    Returns:
+        ``{"force_N", "order"}``, or None when the three forces do not converge monotonically.
+    """
+    if len(cells) < 3:
+        return None
+    order_by_size = np.argsort(cells)[-3:]
+    h = np.asarray(cells, dtype=float)[order_by_size] ** (-1.0 / dimension)
+    f = np.asarray(forces, dtype=float)[order_by_size]
+    d12, d23 = f[0] - f[1], f[1] - f[2]
+    if d12 * d23 <= 0 or abs(d23) >= abs(d12):
+        return None
+
+    def mismatch(p: float) -> float:
+        return (h[0] ** p - h[1] ** p) / (h[1] ** p - h[2] ** p) - d12 / d23
+
+    low, high = 0.2, 8.0
+    if mismatch(low) * mismatch(high) > 0:
+        return None
+    for _ in range(200):
+        middle = 0.5 * (low + high)
+        if mismatch(low) * mismatch(middle) <= 0:
+            high = middle
+        else:
+            low = middle
+    p = 0.5 * (low + high)
+    c = d12 / (h[0] ** p - h[1] ** p)
+    return {"force_N": float(f[2] - c * h[2] ** p), "order": float(p)}
+
+
+def cheapest_run_within(records: list[RunRecord], target: float) -> dict[str, Any] | None:
+    """The cheapest measured run (by CPU seconds) whose relative force error is <= target.
+
+    No interpolation: the error of a mesh family need not fall monotonically with its cost.
+    """
+    within = [r for r in records if r.relative_error is not None and r.relative_error <= target]
+    if not within:
+        return None
+    best = min(within, key=lambda r: r.solve_cpu_s)
+    return {
+        "cells": best.cells,
+        "relative_error": best.relative_error,
+        "solve_s": best.solve_s,
+        "solve_cpu_s": best.solve_cpu_s,
+    }
+
+
+# --------------------------------------------------------------------------- main
+
+
+def machine_description() -> dict[str, Any]:
+    import os
+
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "cpu": model,
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+    }
+
+
+def print_table(records: list[RunRecord]) -> None:
+    header = (
+        f"{'code':<10} {'device':<7} {'cells':>8} {'dofs':>9} {'newton':>6} {'linear':>7} "
+        f"{'s/step':>8} {'total_s':>8} {'cpu_s':>8} {'s/newton':>8} {'RSS_MiB':>8} {'GPU_MiB':>8} "
+        f"{'F_final_N':>11} {'error':>7}"
+    )
+    print(header)
+    for r in records:
+        gpu = f"{r.peak_gpu_MiB:8.0f}" if r.peak_gpu_MiB is not None else f"{'-':>8}"
+        linear = f"{r.linear_iterations:7d}" if r.linear_iterations is not None else f"{'-':>7}"
+        error = f"{100 * r.relative_error:6.2f}%" if r.relative_error is not None else f"{'-':>7}"
+        print(
+            f"{r.code[:10]:<10} {r.device:<7} {r.cells:8d} {r.dofs:9d} {r.newton_iterations:6d} "
+            f"{linear} {r.seconds_per_step:8.3f} {r.solve_s:8.2f} {r.solve_cpu_s:8.2f} "
+            f"{r.seconds_per_newton_iteration:8.3f} {r.peak_host_rss_MiB:8.0f} {gpu} "
+            f"{r.final_force_N:11.5e} {error}"
+        )
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--device", default="cpu", help="warptissue device: cpu, cuda, cuda:N")
+    parser.add_argument(
+        "--sizes",
+        default="10k,20k",
+        help=f"warptissue mesh sizes, comma separated, from {list(SIZE_TARGETS)} or a tet "
+        "count (empty: skip warptissue)",
+    )
+    parser.add_argument(
+        "--felupe-levels",
+        default="",
+        help="FElupe mesh levels, comma separated integers; level L has size_near = "
+        "a / (2 * 1.5^L) (empty: skip FElupe)",
+    )
+    parser.add_argument(
+        "--felupe-axisymmetric-levels",
+        default="",
+        help="verification: axisymmetric FElupe runs on the round counterpart of the block "
+        "(a disc of radius 10 a), comma separated integers; level L has size_near = "
+        "a / (4 * 2^L) (empty: skip)",
+    )
+    parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
+    args = parser.parse_args(argv)
+
+    records: list[RunRecord] = []
+    notes: dict[str, Any] = {}
+    sizes = [s.strip().lower() for s in args.sizes.split(",") if s.strip()]
+    if sizes:
+        import warp as wp
+
+        wp.config.quiet = True
+        started = time.perf_counter()
+        warm_mesh, warm_size = warptissue_mesh(500)
+        run_warptissue(warm_mesh, warm_size, args.device)
+        notes["warptissue_warmup_s"] = time.perf_counter() - started
+        for size in sizes:
+            target = SIZE_TARGETS.get(size) or parse_count(size)
+            mesh, size_near_m = warptissue_mesh(target)
+            record = run_warptissue(mesh, size_near_m, args.device)
+            records.append(record)
+            print_table([record])
+            sys.stdout.flush()
+    for level in [int(s) for s in args.felupe_levels.split(",") if s.strip()]:
+        size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
+        record = run_felupe(size_near_m, 10.0 * size_near_m)
+        records.append(record)
+        print_table([record])
+        sys.stdout.flush()
+
+    for level in [int(s) for s in args.felupe_axisymmetric_levels.split(",") if s.strip()]:
+        record = run_felupe_axisymmetric_disc(0.25 * PROBE_RADIUS_M / 2**level)
+        records.append(record)
+        print_table([record])
+        sys.stdout.flush()
+
+    references = {}
+    for code in ("warptissue", "felupe", "felupe-axisymmetric-disc"):
+        runs = [r for r in records if r.code == code and r.completed]
+        extrapolated = richardson(
+            [r.cells for r in runs],
+            [r.final_force_N for r in runs],
+            dimension=2 if code == "felupe-axisymmetric-disc" else 3,
+        )
+        if extrapolated is not None:
+            references[code] = extrapolated
+    reference = references.get("warptissue") or references.get("felupe")
+    if reference is not None:
+        for r in (r for r in records if r.code in ("warptissue", "felupe")):
+            r.relative_error = abs(r.final_force_N - reference["force_N"]) / reference["force_N"]
+    equal_accuracy = {}
+    for target in (0.05, 0.02, 0.01, 0.005):
+        times = {
+            code: cheapest_run_within([r for r in records if r.code == code], target)
+            for code in ("warptissue", "felupe")
+        }
+        equal_accuracy[f"{target:g}"] = times
+    print()
+    print_table(records)
+    print(f"references (Richardson): {json.dumps(references)}")
+    print(f"Sneddon half-space force at the final depth: {sneddon_force_N(FINAL_DEPTH_M):.5e} N")
+    print("cheapest run within each relative force error:")
+    for target, runs in equal_accuracy.items():
+        print(f"  {target}: {json.dumps(runs)}")
+    report = {
+        "problem": {
+            "probe_radius_m": PROBE_RADIUS_M,
+            "half_width_m": HALF_WIDTH_M,
+            "thickness_m": THICKNESS_M,
+            "shear_modulus_Pa": SHEAR_MODULUS_PA,
+            "bulk_modulus_Pa": BULK_MODULUS_PA,
+            "final_depth_m": FINAL_DEPTH_M,
+            "steps": STEP_COUNT,
+            "newton_tolerance": NEWTON_TOLERANCE,
+            "sneddon_force_N": sneddon_force_N(FINAL_DEPTH_M),
+        },
+        "machine": machine_description(),
+        "runs": [asdict(r) for r in records],
+        "references": references,
+        "reference_used": reference,
+        "cheapest_run_within_error": equal_accuracy,
+        "notes": notes,
+    }
+    if args.out is not None:
+        from warptissue.io import write_json
+
+        write_json(args.out, report)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,186 @@
+"""Flat-punch indentation: boundary conditions, Sneddon's stiffness with the finite-layer
+correction, insensitivity to the bulk modulus, locking of displacement TET4, large bonded
+depths with a clean stop, and CPU/device agreement.
+
+The heavier mesh-convergence study is ``scripts/verify_flat_punch.py`` (README "Finite
+elements").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warptissue.errors import ConvergenceError, InputError
+from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
+from warptissue.materials import NeoHookean
+from warptissue.mesh import indentation_block
+
+RADIUS_M = 1e-3
+SHEAR_MODULUS_PA = 200.0
+
+
+def _block(*, thickness_over_radius: float = 4.0, near: float = 0.5, element: str = "TET10"):
+    thickness = thickness_over_radius * RADIUS_M
+    return indentation_block(
+        width_m=4.0 * thickness,
+        thickness_m=thickness,
+        probe_radius_m=RADIUS_M,
+        element=element,
+        size_near_m=near * RADIUS_M,
+        size_far_m=thickness / 3.0,
+    )
+
+
+def _material(bulk_over_shear: float) -> NeoHookean:
+    return NeoHookean(SHEAR_MODULUS_PA / 2.0, bulk_over_shear * SHEAR_MODULUS_PA)
+
+
+def _stiffness(mesh, material, *, contact="bonded", formulation="mixed", depth=2e-3 * RADIUS_M):
+    problem = IndentationProblem(
+        mesh, material, FlatPunch(RADIUS_M, contact=contact), formulation=formulation
+    )
+    result = simulate_indentation(problem, [depth], device="cpu", progress=False)
+    assert result.completed, result.message
+    return result.reaction_force_N[0] / depth
+
+
+def sneddon_layer_stiffness(radius_m: float, thickness_m: float, shear_modulus_pa: float) -> float:
+    """Flat-punch stiffness of an incompressible layer bonded to a rigid base.
+
+    Sneddon's half-space value 2 a E / (1 - nu^2) = 8 mu a (nu = 1/2), times the finite-layer
+    factor 1 + 1.33 (a/h) + 1.33 (a/h)^3 (Shull 2002, Mater. Sci. Eng. R 36, Eq. 33: the fit to
+    the numerical solutions for a layer with no slip at the substrate).
+    """
+    ratio = radius_m / thickness_m
+    return 8.0 * shear_modulus_pa * radius_m * (1.0 + 1.33 * ratio + 1.33 * ratio**3)
+
+
+def test_small_depth_stiffness_matches_sneddon_with_layer_correction():
+    thickness = 4.0 * RADIUS_M
+    mesh = _block(thickness_over_radius=4.0, near=0.5)
+    expected = sneddon_layer_stiffness(RADIUS_M, thickness, SHEAR_MODULUS_PA)
+    stiffness = _stiffness(mesh, _material(1000.0))
+    assert stiffness == pytest.approx(expected, rel=0.03)
+
+
+def test_force_is_insensitive_to_bulk_modulus_in_the_mixed_formulation():
+    mesh = _block()
+    soft = _stiffness(mesh, _material(100.0))
+    stiff = _stiffness(mesh, _material(10000.0))
+    assert abs(stiff / soft - 1.0) < 0.02
+
+
+def test_displacement_tet4_locks_but_mixed_tet10_does_not():
+    tet4 = _block(element="TET4")
+    tet10 = _block(element="TET10")
+    material = _material(1000.0)
+    locked = _stiffness(tet4, material, formulation="displacement")
+    mixed = _stiffness(tet10, material)
+    reference = sneddon_layer_stiffness(RADIUS_M, 4.0 * RADIUS_M, SHEAR_MODULUS_PA)
+    assert locked > 1.5 * mixed
+    assert abs(mixed / reference - 1.0) < 0.1
+
+
+def test_bonded_punch_reaches_half_the_radius_and_stops_cleanly_beyond():
+    mesh = _block()
+    problem = IndentationProblem(mesh, _material(1000.0), FlatPunch(RADIUS_M))
+    depths = RADIUS_M * np.array([0.1, 0.25, 0.5, 3.0])
+    result = simulate_indentation(problem, depths, device="cpu", progress=False, max_cutbacks=3)
+    assert result.depths_m[2] == pytest.approx(0.5 * RADIUS_M)
+    assert np.all(np.diff(result.reaction_force_N) > 0)
+    assert not result.completed
+    assert len(result.depths_m) == 3 and result.displacement_m.shape[0] == 3
+    assert "depth" in result.message and "cutbacks" in result.message
+    assert result.cauchy_stress_Pa.shape == (mesh.tet_count, 6)
+    assert result.von_mises_Pa.max() > 0
+    with pytest.raises(ConvergenceError) as error:
+        simulate_indentation(
+            problem, [3.0 * RADIUS_M], device="cpu", progress=False, max_cutbacks=1, strict=True
+        )
+    assert len(error.value.partial_result.depths_m) == 0
+
+
+def _prescribed(conditions) -> dict:
+    triples = zip(conditions.nodes, conditions.components, conditions.values_per_load, strict=True)
+    return {(int(n), int(k)): v for n, k, v in triples}
+
+
+def test_boundary_conditions():
+    mesh = _block()
+    material = _material(1000.0)
+    bonded = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
+    frictionless = IndentationProblem(
+        mesh, material, FlatPunch(RADIUS_M, contact="frictionless"), base="sliding"
+    )
+    punch = bonded.punch_nodes
+    assert np.array_equal(np.sort(punch), np.sort(mesh.node_sets["probe"]))
+    assert bonded.symmetry_factor == 4
+    c = bonded.dirichlet_conditions()
+    prescribed = _prescribed(c)
+    centre = punch[0]
+    assert prescribed[(centre, 2)] == -1.0 and prescribed[(centre, 0)] == 0.0
+    c = frictionless.dirichlet_conditions()
+    prescribed = _prescribed(c)
+    off_axis = [n for n in punch if mesh.points[n, 0] > 0 and mesh.points[n, 1] > 0]
+    assert (off_axis[0], 0) not in prescribed and prescribed[(off_axis[0], 2)] == -1.0
+    bottom_inner = [
+        n
+        for n in mesh.node_sets["bottom"]
+        if mesh.points[n, 0] > 0.1 * RADIUS_M and mesh.points[n, 1] > 0.1 * RADIUS_M
+    ]
+    assert (bottom_inner[0], 2) in prescribed and (bottom_inner[0], 0) not in prescribed
+    symmetry_node = mesh.node_sets["symmetry_x"][-1]
+    assert prescribed[(symmetry_node, 0)] == 0.0
+
+
+def test_full_model_with_sliding_base_matches_quarter_model():
+    quarter = _block(near=1.0)
+    full = indentation_block(
+        width_m=16 * RADIUS_M,
+        thickness_m=4 * RADIUS_M,
+        probe_radius_m=RADIUS_M,
+        quarter=False,
+        size_near_m=RADIUS_M,
+        size_far_m=4 * RADIUS_M / 3,
+    )
+    material = _material(1000.0)
+    punch = FlatPunch(RADIUS_M, contact="frictionless")
+    forces = []
+    for mesh, planes in ((quarter, ("symmetry_x", "symmetry_y")), (full, ())):
+        problem = IndentationProblem(mesh, material, punch, base="sliding", symmetry_planes=planes)
+        result = simulate_indentation(problem, [0.05 * RADIUS_M], device="cpu", progress=False)
+        assert result.completed, result.message
+        forces.append(result.reaction_force_N[0])
+    assert forces[1] == pytest.approx(forces[0], rel=0.03)
+
+
+def test_bad_inputs_are_named():
+    mesh = _block(near=1.0)
+    material = _material(100.0)
+    with pytest.raises(InputError, match="radius"):
+        FlatPunch(-1.0)
+    with pytest.raises(InputError, match="contact"):
+        FlatPunch(RADIUS_M, contact="glued")
+    with pytest.raises(InputError, match="node set 'symmetry_z'"):
+        IndentationProblem(mesh, material, FlatPunch(RADIUS_M), symmetry_planes=("symmetry_z",))
+    with pytest.raises(InputError, match="base"):
+        IndentationProblem(mesh, material, FlatPunch(RADIUS_M), base="floating")
+    problem = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
+    with pytest.raises(InputError, match="increasing"):
+        simulate_indentation(problem, [2e-4, 1e-4], device="cpu", progress=False)
+
+
+def test_cpu_and_device_agree(device):
+    mesh = _block(near=1.0)
+    problem = IndentationProblem(mesh, _material(1000.0), FlatPunch(RADIUS_M))
+    depths = RADIUS_M * np.array([0.05, 0.1])
+    cpu = simulate_indentation(problem, depths, device="cpu", progress=False, tolerance=1e-11)
+    other = simulate_indentation(problem, depths, device=device, progress=False, tolerance=1e-11)
+    np.testing.assert_allclose(other.reaction_force_N, cpu.reaction_force_N, rtol=1e-8)
+    np.testing.assert_allclose(
+        other.cauchy_stress_Pa,
+        cpu.cauchy_stress_Pa,
+        rtol=0,
+        atol=1e-7 * np.abs(cpu.cauchy_stress_Pa).max(),
+    )

@@ -1,0 +1,135 @@
+"""Newton load stepping and linear solvers: homogeneous uniaxial compression against the
+incompressible analytic solutions (seed 003, Eq. 3), solver agreement, cutback."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+
+from warptissue.errors import InputError
+from warptissue.fem import Assembler, DirichletConditions, LinearSolver, solve_quasistatic
+from warptissue.fem.solvers import _pardiso_available
+from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
+from warptissue.mesh import block_mesh, to_tet10
+
+SIDE_M = 1e-2
+
+
+def _cube():
+    grid = np.linspace(0.0, SIDE_M, 3)
+    return to_tet10(block_mesh(grid, grid, grid))
+
+
+def _compression_conditions(mesh) -> DirichletConditions:
+    """Frictionless plates: symmetry on x=0, y=0, z=0 and uz = -load on the top."""
+    parts = []
+    for name, axis, value in (
+        ("xmin", 0, 0.0),
+        ("ymin", 1, 0.0),
+        ("zmin", 2, 0.0),
+        ("zmax", 2, -1.0),
+    ):
+        nodes = mesh.node_sets[name]
+        parts.append(
+            DirichletConditions(nodes, np.full(len(nodes), axis), np.full(len(nodes), value))
+        )
+    return DirichletConditions.combine(*parts)
+
+
+def _nominal_stress(material, stretches, *, linear_solver="auto"):
+    mesh = _cube()
+    weights = np.zeros((mesh.node_count, 3))
+    weights[mesh.node_sets["zmax"], 2] = 1.0
+    assembler = Assembler(mesh, material, formulation="mixed", device="cpu")
+    path = solve_quasistatic(
+        assembler,
+        _compression_conditions(mesh),
+        SIDE_M * (1.0 - stretches),
+        reaction_weights=weights,
+        linear_solver=linear_solver,
+    )
+    assert path.completed, path.message
+    return path.reaction / SIDE_M**2, path
+
+
+# Incompressible uniaxial nominal stress S(l) = dW/dl with W(l, l^-1/2, l^-1/2), derived here:
+# NH:  W = C10 (l^2 + 2/l - 3)                      -> S = 2 C10 (l - l^-2)
+# MR:  + C01 (2 l + l^-2 - 3)                        -> S = 2 (1 - l^-3)(C10 l + C01)
+# RP2: + C20 (I1 - 3)^2                              -> S = 2 (l - l^-2)(C10 + 2 C20 (I1 - 3))
+# Ogden: W = sum 2 mu/a^2 (l^a + 2 l^(-a/2) - 3)     -> S = sum 2 mu/a (l^(a-1) - l^(-a/2-1))
+ANALYTIC = {
+    "neo_hookean": (
+        NeoHookean(100.0, 2.0e5),
+        lambda s: 2 * 100.0 * (s - s**-2),
+    ),
+    "mooney_rivlin": (
+        MooneyRivlin(80.0, 20.0, 2.0e5),
+        lambda s: 2 * (1 - s**-3) * (80.0 * s + 20.0),
+    ),
+    "reduced_polynomial_2": (
+        ReducedPolynomial((600.553, 4097.45), 1.2e7),
+        lambda s: 2 * (s - s**-2) * (600.553 + 2 * 4097.45 * (s**2 + 2 / s - 3)),
+    ),
+    "ogden": (
+        Ogden((150.0, -20.0), (6.0, -3.0), 2.6e5),
+        lambda s: 2 * 150.0 / 6.0 * (s**5 - s**-4) + 2 * -20.0 / -3.0 * (s**-4 - s**0.5),
+    ),
+}
+
+
+@pytest.mark.parametrize("name", list(ANALYTIC))
+def test_uniaxial_compression_matches_incompressible_analytic(name):
+    material, analytic = ANALYTIC[name]
+    assert material.bulk_modulus_Pa >= 1000 * material.initial_shear_modulus_Pa
+    stretches = np.array([0.9, 0.8, 0.7])
+    stress, path = _nominal_stress(material, stretches)
+    np.testing.assert_allclose(stress, analytic(stretches), rtol=5e-3)
+    assert np.all(path.newton_iterations <= 8)  # quadratic convergence, consistent tangent
+
+
+def test_linear_solvers_agree(rng):
+    mesh = _cube()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device="cpu")
+    conditions = _compression_conditions(mesh)
+    u = 1e-4 * rng.standard_normal((mesh.node_count, 3))
+    assembly = assembler.assemble(u)
+    assembler.eliminate(wp.array(conditions.mask(mesh.node_count), dtype=wp.vec3d))
+    rhs = rng.standard_normal((mesh.node_count, 3))
+    methods = ["superlu", "cg"] + (["pardiso"] if _pardiso_available() else [])
+    solutions = {}
+    for method in methods:
+        solver = LinearSolver(method=method, device=assembler.device, tolerance=1e-13)
+        solutions[method], iterations = solver.solve(assembly.matrix, rhs)
+        assert iterations >= 1
+    reference = solutions["superlu"]
+    for method, x in solutions.items():
+        np.testing.assert_allclose(
+            x, reference, rtol=0, atol=1e-8 * np.abs(reference).max(), err_msg=method
+        )
+
+
+def test_cutback_recovers_and_reports(rng):
+    """One huge increment (to stretch 0.3) needs cutbacks; with none allowed it stops cleanly."""
+    material = NeoHookean(100.0, 2.0e5)
+    mesh = _cube()
+    assembler = Assembler(mesh, material, device="cpu")
+    conditions = _compression_conditions(mesh)
+    target = [SIDE_M * 0.2, SIDE_M * 0.7]
+    path = solve_quasistatic(assembler, conditions, target, max_iterations=4)
+    assert path.completed and path.cutbacks > 0
+    stopped = solve_quasistatic(assembler, conditions, target, max_iterations=4, max_cutbacks=0)
+    assert not stopped.completed
+    assert len(stopped.loads) == 1 and stopped.loads[0] == target[0]
+    assert "cutbacks" in stopped.message and "kept" in stopped.message
+
+
+def test_conditions_validate():
+    with pytest.raises(InputError, match="conflicting"):
+        DirichletConditions([0, 0], [2, 2], [0.0, 1.0])
+    with pytest.raises(InputError, match="components"):
+        DirichletConditions([0], [3], [0.0])
+    merged = DirichletConditions([3, 1, 3], [0, 2, 0], [0.5, 0.0, 0.5])
+    np.testing.assert_array_equal(merged.nodes, [1, 3])
+    with pytest.raises(InputError, match="linear solver"):
+        LinearSolver(method="lu", device=wp.get_device("cpu"))

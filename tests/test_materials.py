@@ -1,0 +1,205 @@
+"""Materials: derivatives by finite differences, stress-free reference, small-strain limit,
+frame invariance, and serialization."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.materials import (
+    CompressibleNeoHookean,
+    LinearElastic,
+    MooneyRivlin,
+    NeoHookean,
+    Ogden,
+    ReducedPolynomial,
+    Yeoh,
+    evaluate_material,
+    material_from_dict,
+)
+
+# Bulk moduli of about 10 shear moduli, so that the deviatoric parts are not masked by U(J).
+MATERIALS = {
+    "neo_hookean": NeoHookean(150.0, 3000.0),
+    "mooney_rivlin": MooneyRivlin(-40.0, 160.0, 2500.0),
+    "reduced_polynomial_2": ReducedPolynomial((600.553, 4097.45), 12000.0),
+    "yeoh": Yeoh(300.0, -20.0, 15.0, 6000.0),
+    "reduced_polynomial_6": ReducedPolynomial((300.0, 40.0, -5.0, 3.0, 1.0, 0.5), 6000.0),
+    "ogden_1": Ogden((200.0,), (6.5,), 4000.0),
+    "ogden_3": Ogden((250.0, -30.0, 5.0), (3.0, -2.0, 8.0), 4000.0),
+    "compressible_neo_hookean": CompressibleNeoHookean(200.0, 1500.0),
+    "linear_elastic": LinearElastic(600.0, 0.3),
+}
+FINITE_STRAIN = [name for name in MATERIALS if name != "linear_elastic"]
+
+
+def _deformation_gradients(rng: np.random.Generator) -> np.ndarray:
+    """General F, plus states with two and three equal principal stretches."""
+    general = np.eye(3) + 0.25 * rng.standard_normal((4, 3, 3))
+    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    uniaxial = q @ np.diag([0.7, 1.0 / np.sqrt(0.7), 1.0 / np.sqrt(0.7)]) @ q.T
+    dilatation = 1.05 * q
+    return np.concatenate([general, uniaxial[None], dilatation[None]])
+
+
+def _finite_differences(material, f: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Central differences of energy (-> P) and of P (-> A) over the nine entries of F."""
+    plus, minus = [], []
+    for k in range(3):
+        for col in range(3):
+            e = np.zeros((3, 3))
+            e[k, col] = step
+            plus.append(f + e)
+            minus.append(f - e)
+    up = evaluate_material(material, np.array(plus), device="cpu")
+    down = evaluate_material(material, np.array(minus), device="cpu")
+    p_fd = ((up.energy_density_Pa - down.energy_density_Pa) / (2 * step)).reshape(3, 3)
+    a_fd = ((up.first_piola_Pa - down.first_piola_Pa) / (2 * step)).reshape(9, 9).T
+    return p_fd, a_fd
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+def test_stress_and_tangent_match_finite_differences(name, rng):
+    material = MATERIALS[name]
+    fs = _deformation_gradients(rng)
+    exact = evaluate_material(material, fs, device="cpu")
+    for i, f in enumerate(fs):
+        p_fd, a_fd = _finite_differences(material, f, step=1e-6)
+        p, a = exact.first_piola_Pa[i], exact.tangent_Pa[i]
+        assert np.abs(p - p_fd).max() <= 1e-6 * np.abs(p).max(), (name, i)
+        assert np.abs(a - a_fd).max() <= 1e-6 * np.abs(a).max(), (name, i)
+        assert np.abs(a - a.T).max() <= 1e-10 * np.abs(a).max()  # hyperelastic: symmetric
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+def test_reference_state_is_stress_free_with_the_small_strain_tangent(name):
+    """At F = I: P = 0, psi = 0, and A is the isotropic elasticity tensor of (mu0, K)."""
+    material = MATERIALS[name]
+    result = evaluate_material(material, np.eye(3), device="cpu")
+    mu = material.initial_shear_modulus_Pa
+    lam = material.bulk_modulus - 2.0 * mu / 3.0
+    d = np.eye(3)
+    expected = (
+        lam * np.einsum("ij,kl->ijkl", d, d)
+        + mu * np.einsum("ik,jl->ijkl", d, d)
+        + mu * np.einsum("il,jk->ijkl", d, d)
+    ).reshape(9, 9)
+    assert abs(result.energy_density_Pa[0]) < 1e-12 * mu
+    assert np.abs(result.first_piola_Pa[0]).max() < 1e-12 * mu
+    np.testing.assert_allclose(result.tangent_Pa[0], expected, rtol=0, atol=1e-9 * lam)
+
+
+@pytest.mark.parametrize("name", FINITE_STRAIN)
+def test_frame_invariance(name, rng):
+    material = MATERIALS[name]
+    fs = _deformation_gradients(rng)
+    q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    base = evaluate_material(material, fs, device="cpu")
+    rotated = evaluate_material(material, q[None] @ fs, device="cpu")
+    scale = np.abs(base.first_piola_Pa).max()
+    np.testing.assert_allclose(rotated.energy_density_Pa, base.energy_density_Pa, rtol=1e-11)
+    np.testing.assert_allclose(
+        rotated.first_piola_Pa, q[None] @ base.first_piola_Pa, rtol=0, atol=1e-11 * scale
+    )
+
+
+def test_isochoric_energy_does_not_depend_on_volume():
+    """Pure dilatation stores only U(J) = K/2 (J - 1)^2 in the Abaqus models."""
+    j = 1.1
+    f = np.cbrt(j) * np.eye(3)
+    for name in ("neo_hookean", "mooney_rivlin", "reduced_polynomial_2", "ogden_3"):
+        material = MATERIALS[name]
+        energy = evaluate_material(material, f, device="cpu").energy_density_Pa[0]
+        assert energy == pytest.approx(0.5 * material.bulk_modulus_Pa * (j - 1.0) ** 2, rel=1e-12)
+
+
+def test_ogden_with_alpha_two_is_neo_hookean(rng):
+    """Ogden N=1, alpha=2 is neo-Hookean with C10 = mu/2 (Abaqus convention)."""
+    fs = _deformation_gradients(rng)
+    ogden = evaluate_material(Ogden((300.0,), (2.0,), 5000.0), fs, device="cpu")
+    neo = evaluate_material(NeoHookean(150.0, 5000.0), fs, device="cpu")
+    np.testing.assert_allclose(ogden.energy_density_Pa, neo.energy_density_Pa, rtol=1e-11)
+    np.testing.assert_allclose(ogden.tangent_Pa, neo.tangent_Pa, rtol=0, atol=1e-9 * 5000.0)
+
+
+def test_cpu_and_device_agree(device, rng):
+    fs = _deformation_gradients(rng)
+    for material in MATERIALS.values():
+        cpu = evaluate_material(material, fs, device="cpu")
+        other = evaluate_material(material, fs, device=device)
+        scale = np.abs(cpu.tangent_Pa).max()
+        np.testing.assert_allclose(
+            other.first_piola_Pa, cpu.first_piola_Pa, rtol=0, atol=1e-10 * scale
+        )
+        np.testing.assert_allclose(other.tangent_Pa, cpu.tangent_Pa, rtol=0, atol=1e-10 * scale)
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+def test_dictionary_round_trip_and_parameter_vector(name):
+    material = MATERIALS[name]
+    data = material.to_dict()
+    assert data["model"] == material.model_name
+    assert material_from_dict(data) == material
+    vector = material.parameter_vector()
+    assert len(vector) == len(material.parameter_names)
+    assert material.with_parameters(vector) == material
+
+
+def test_small_strain_equivalent_and_d1():
+    material = NeoHookean(100.0, 2.0e5)
+    youngs, nu = material.small_strain_equivalent()
+    assert material.D1_per_Pa == pytest.approx(1e-5)
+    assert youngs == pytest.approx(9 * 2e5 * 200 / (3 * 2e5 + 200))
+    assert nu == pytest.approx((3 * 2e5 - 400) / (2 * (3 * 2e5 + 200)))
+    assert LinearElastic(600.0, 0.3).small_strain_equivalent() == (600.0, 0.3)
+
+
+def test_from_dict_variants():
+    yeoh = material_from_dict(
+        {"model": "yeoh", "C10_Pa": 1.0, "C20_Pa": 2.0, "C30_Pa": 3.0, "D1_per_Pa": 0.01}
+    )
+    assert yeoh == ReducedPolynomial((1.0, 2.0, 3.0), 200.0)
+    ogden = material_from_dict(
+        {"model": "ogden", "mu_Pa": [1.0, 2.0], "alpha": [3.0, -1.0], "bulk_modulus_Pa": 10.0}
+    )
+    assert ogden == Ogden((1.0, 2.0), (3.0, -1.0), 10.0)
+
+
+@pytest.mark.parametrize(
+    ("data", "key"),
+    [
+        ({"model": "neo_hookean", "C10_Pa": 1.0}, "bulk_modulus_Pa"),
+        ({"model": "neo_hookean", "C10_Pa": -1.0, "bulk_modulus_Pa": 1.0}, "C10_Pa"),
+        ({"model": "neo_hookean", "C10_Pa": 1.0, "bulk_modulus_Pa": 1.0, "C01_Pa": 1}, "C01_Pa"),
+        ({"model": "neo_hookean", "C10_Pa": "soft", "bulk_modulus_Pa": 1.0}, "C10_Pa"),
+        ({"model": "rubber"}, "model"),
+        (
+            {"model": "linear_elastic", "youngs_modulus_Pa": 1.0, "poissons_ratio": 0.5},
+            "poissons_ratio",
+        ),
+        ({"model": "ogden", "mu1_Pa": 1.0, "alpha1": 0.0, "bulk_modulus_Pa": 1.0}, "alpha1"),
+        (
+            {"model": "mooney_rivlin", "C10_Pa": -2.0, "C01_Pa": 1.0, "bulk_modulus_Pa": 1.0},
+            "C01_Pa",
+        ),
+    ],
+)
+def test_bad_parameters_name_the_key(data, key):
+    with pytest.raises(InputError) as error:
+        material_from_dict(data)
+    assert error.value.column == key
+
+
+def test_ogden_term_counts_must_match():
+    with pytest.raises(InputError, match="alpha"):
+        Ogden((1.0, 2.0), (3.0,), 10.0)
+    with pytest.raises(InputError):
+        ReducedPolynomial(tuple(range(1, 8)), 10.0)
+
+
+def test_evaluate_rejects_inverted_gradients():
+    with pytest.raises(InputError, match="det F"):
+        evaluate_material(NeoHookean(1.0, 10.0), -np.eye(3), device="cpu")

@@ -1,0 +1,180 @@
+"""End-to-end tests of warptissue.simulate (run_study) and ``warptissue simulate``.
+
+One tiny study (the bundled liver slab geometry on a coarse TET10 mesh, three shallow load
+steps) is run through the Python API and through the CLI. The force is checked against
+Sneddon's flat-punch solution for an incompressible half-space, F = 8 mu a delta, times a
+finite-size factor: for this block (10 a wide and thick, bonded to a rigid base) an
+axisymmetric FElupe Q1/P0 reference of the round counterpart converges to 1.09 at small depth
+(scripts/bench_flat_punch.py --felupe-axisymmetric-levels), and Shull's laterally infinite
+layer gives 1 + 1.33 a/h + 1.33 (a/h)^3 = 1.13 (fe-core's test). The loose window (1.0, 1.3)
+catches locking (TET4-like forces are several times too high), a wrong symmetry factor (x4 or
+x1/4) and a sign error, without depending on this coarse mesh's 1-2 % discretization error.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+import tomli_w
+
+from warptissue.cli import main
+from warptissue.simulate import FORCE_CURVE_COLUMNS, run_study
+from warptissue.study import load_study, study_from_dict
+
+REPOSITORY = Path(__file__).resolve().parents[1]
+SCENE = REPOSITORY / "scenes" / "liver_slab_flat_punch.toml"
+DEPTHS_M = [2.0e-5, 5.0e-5, 1.0e-4]
+
+
+@pytest.fixture(scope="module")
+def tiny_record() -> dict:
+    """The bundled scene, coarsened and shortened to three shallow steps."""
+    record = load_study(SCENE).to_dict()
+    record["name"] = "tiny"
+    record["specimen"].update(size_near_m=5.0e-4, size_far_m=5.0e-3, growth=1.4)
+    record["protocol"] = {"depths_m": DEPTHS_M}
+    record["solver"]["device"] = "cpu"
+    return record
+
+
+@pytest.fixture(scope="module")
+def api_run(tiny_record, tmp_path_factory):
+    out_dir = tmp_path_factory.mktemp("api")
+    study = study_from_dict(tiny_record)
+    return study, run_study(study, out_dir=out_dir, progress=False, vtu_every_step=True)
+
+
+def read_csv(path: Path) -> tuple[list[str], list[list[float]]]:
+    with path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    return rows[0], [[float(v) for v in row] for row in rows[1:]]
+
+
+def test_api_writes_curve_json_and_fields(api_run):
+    study, outputs = api_run
+    assert outputs.completed and outputs.exit_code == 0
+    header, rows = read_csv(outputs.out_dir / "force_curve.csv")
+    assert header == list(FORCE_CURVE_COLUMNS)
+    assert [int(r[0]) for r in rows] == [1, 2, 3]
+    assert [r[1] for r in rows] == pytest.approx(DEPTHS_M)
+    assert all(r[3] >= 1 for r in rows)
+
+    summary = json.loads((outputs.out_dir / "result.json").read_text())
+    assert summary["completed"] is True
+    assert summary["steps_converged"] == summary["steps_requested"] == 3
+    assert summary["study"]["material"]["C10_Pa"] == pytest.approx(287.5)
+    assert summary["study"]["specimen"]["element"] == "TET10"
+    assert summary["force_curve"]["reaction_force_N"] == pytest.approx([r[2] for r in rows])
+    assert summary["mesh"]["tet_count"] > 0
+    assert summary["mesh"]["displacement_dof_count"] == 3 * summary["mesh"]["node_count"]
+    assert set(summary["timings_s"]) == {"mesh_and_setup", "solve", "write_fields", "total"}
+    assert "warp-lang" in summary["software"]
+
+    fields = meshio.read(outputs.out_dir / "fields.vtu")
+    displacement = fields.point_data["displacement_m"]
+    assert displacement.shape == (summary["mesh"]["node_count"], 3)
+    # The probe pushed the top centre down by the final depth.
+    top_centre = np.argmin(np.linalg.norm(fields.points - [0, 0, 0.01], axis=1))
+    assert displacement[top_centre, 2] == pytest.approx(-DEPTHS_M[-1], rel=1e-9)
+    cells = sum(len(block.data) for block in fields.cells)
+    assert cells == summary["mesh"]["tet_count"]
+    von_mises = np.concatenate(fields.cell_data["von_mises_Pa"])
+    assert von_mises.max() > 0
+    assert np.concatenate(fields.cell_data["cauchy_stress_Pa"]).shape == (cells, 6)
+    for step in (1, 2, 3):
+        assert (outputs.out_dir / f"fields_{step:03d}.vtu").is_file()
+
+
+def test_force_is_positive_increasing_and_close_to_sneddon(api_run):
+    study, outputs = api_run
+    force = np.asarray(outputs.result.reaction_force_N)
+    depth = np.asarray(outputs.result.depths_m)
+    assert np.all(force > 0)
+    assert np.all(np.diff(force) > 0)
+    shear_modulus_Pa = 2.0 * study.material.C10_Pa
+    sneddon_N = 8.0 * shear_modulus_Pa * study.indenter.radius_m * depth
+    ratio = force / sneddon_N
+    assert np.all(ratio > 1.0)
+    assert np.all(ratio < 1.3)
+
+
+def test_cli_json_and_files(tiny_record, tmp_path, capsys):
+    study_path = tmp_path / "tiny.toml"
+    record = dict(tiny_record)
+    record["protocol"] = {"depths_m": DEPTHS_M[:1]}
+    study_path.write_text(tomli_w.dumps(record))
+    out_dir = tmp_path / "out"
+    status = main(["simulate", str(study_path), "--out", str(out_dir), "--json"])
+    assert status == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["completed"] is True
+    assert printed["study"]["name"] == "tiny"
+    assert printed["force_curve"]["reaction_force_N"][0] > 0
+    assert json.loads((out_dir / "result.json").read_text()) == printed
+    assert (out_dir / "force_curve.csv").is_file() and (out_dir / "fields.vtu").is_file()
+    assert not (out_dir / "fields_001.vtu").exists()
+
+
+def test_early_stop_keeps_partial_curve_and_exits_nonzero(tiny_record, tmp_path, capsys):
+    record = dict(tiny_record)
+    # Two shallow steps, then a jump to 40 % compression with no cutback allowed: an element
+    # inverts and the run must stop after the two converged steps.
+    record["protocol"] = {"depths_m": [2.0e-5, 5.0e-5, 4.0e-3]}
+    record["solver"] = dict(tiny_record["solver"], max_cutbacks=0, max_newton_iterations=6)
+    study_path = tmp_path / "jump.toml"
+    study_path.write_text(tomli_w.dumps(record))
+    out_dir = tmp_path / "out"
+    status = main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"])
+    assert status == 4
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and error[0].startswith("warptissue: error: stopped early")
+    header, rows = read_csv(out_dir / "force_curve.csv")
+    assert [r[1] for r in rows] == pytest.approx([2.0e-5, 5.0e-5])
+    summary = json.loads((out_dir / "result.json").read_text())
+    assert summary["completed"] is False and summary["steps_converged"] == 2
+    assert summary["steps_requested"] == 3
+    assert (out_dir / "fields.vtu").is_file()
+
+
+def test_cli_bad_study_is_one_line_exit_2(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text(SCENE.read_text().replace("C10_Pa = 287.5", "C10_Pa = -1.0"))
+    status = main(["simulate", str(path), "--out", str(tmp_path / "out")])
+    assert status == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1
+    assert "bad.toml" in error[0] and "material.C10_Pa" in error[0] and "-1.0" in error[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_cli_json_stdout_is_pure_json_in_a_fresh_process(tiny_record, tmp_path):
+    """Warp's start-up notes must not leak into ``--json`` output."""
+    import subprocess
+    import sys
+
+    record = dict(tiny_record)
+    record["protocol"] = {"depths_m": DEPTHS_M[:1]}
+    study_path = tmp_path / "tiny.toml"
+    study_path.write_text(tomli_w.dumps(record))
+    completed = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "warptissue.cli",
+            "simulate",
+            str(study_path),
+            "--json",
+            "--out",
+            str(tmp_path / "out"),
+        ],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert json.loads(completed.stdout)["completed"] is True

@@ -1,0 +1,241 @@
+"""Residual and tangent assembly into a 3x3-block ``warp.sparse`` BSR matrix.
+
+The sparsity pattern is built once per mesh (node pairs that share a tet); every Newton
+iteration then zeroes the values and lets the element kernel add its blocks in place through a
+precomputed element-block to BSR-block map, so the topology is never rebuilt.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import warp as wp
+import warp.sparse as wps
+
+from warptissue.device import resolve_device
+from warptissue.errors import InputError
+from warptissue.fem.elements import element_geometry
+from warptissue.materials import Material
+from warptissue.mesh import TetMesh
+
+__all__ = ["Assembler", "Assembly", "FORMULATIONS", "von_mises"]
+
+FORMULATIONS = ("mixed", "displacement")
+"""``mixed``: TET10 with element mean dilatation (P2/P0); ``displacement``: pure displacement."""
+
+
+@dataclass
+class Assembly:
+    """One evaluation of the discrete system at a displacement.
+
+    Attributes:
+        residual: Internal nodal forces f_int (no external loads), Warp array (N,) vec3d, N.
+        matrix: Tangent stiffness d f_int / d u as a 3x3-block BSR matrix (N/m), or None when
+            only the residual was assembled. Shared with the assembler: the next assembly
+            overwrites it.
+        energy_J: Stored strain energy, J.
+        min_jacobian: Smallest det F over all quadrature points (<= 0 means inverted).
+    """
+
+    residual: wp.array
+    matrix: wps.BsrMatrix | None
+    energy_J: float
+    min_jacobian: float
+
+
+def von_mises(cauchy_stress_Pa: np.ndarray) -> np.ndarray:
+    """Von Mises stress from Voigt Cauchy stress (xx, yy, zz, yz, xz, xy), shape (M, 6) -> (M,)."""
+    s = np.asarray(cauchy_stress_Pa, dtype=np.float64)
+    return np.sqrt(
+        0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
+        + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2)
+    )
+
+
+class Assembler:
+    """Assembles internal forces and the consistent tangent of a tet mesh on a Warp device.
+
+    Args:
+        mesh: TET4 or TET10 mesh (metres).
+        material: Any :mod:`warptissue.materials` material.
+        formulation: ``"mixed"`` (TET10 only: element mean dilatation, locking free) or
+            ``"displacement"``.
+        device: Warp device; None for Warp's default.
+
+    Attributes:
+        node_count, tet_count, device, formulation, material.
+        tet_volumes: Reference element volumes, shape (tet_count,), m^3.
+    """
+
+    def __init__(
+        self,
+        mesh: TetMesh,
+        material: Material,
+        *,
+        formulation: str = "mixed",
+        device: str | None = None,
+    ) -> None:
+        if formulation not in FORMULATIONS:
+            raise InputError(
+                f"formulation must be one of {FORMULATIONS}",
+                column="formulation",
+                value=formulation,
+            )
+        if formulation == "mixed" and mesh.nodes_per_tet != 10:
+            raise InputError(
+                "the mixed (mean-dilatation) formulation needs TET10 elements: with TET4 a "
+                "constant pressure per element locks; promote the mesh with "
+                "warptissue.mesh.to_tet10 or use formulation='displacement'",
+                column="formulation",
+                value=formulation,
+            )
+        if mesh.tet_count == 0:
+            raise InputError("the mesh has no elements")
+        self.device = resolve_device(device)
+        self.formulation = formulation
+        self.node_count = mesh.node_count
+        self.tet_count = mesh.tet_count
+        self.nodes_per_tet = mesh.nodes_per_tet
+        geometry = element_geometry(mesh)
+        self.tet_volumes = geometry.tet_volumes
+        dev = self.device
+        self._tets = wp.array(mesh.tets, dtype=wp.int32, device=dev)
+        self._shape_gradients = wp.array(geometry.shape_gradients, dtype=wp.vec3d, device=dev)
+        self._quadrature_volumes = wp.array(
+            geometry.quadrature_volumes, dtype=wp.float64, device=dev
+        )
+        self._build_pattern(mesh.tets)
+        self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
+        self._energy = wp.zeros(1, dtype=wp.float64, device=dev)
+        self._min_jacobian = wp.zeros(1, dtype=wp.float64, device=dev)
+        self.set_material(material)
+
+    def set_material(self, material: Material) -> None:
+        """Use new material parameters from the next assembly on (same mesh and pattern)."""
+        if not isinstance(material, Material):
+            raise InputError("material must be a warptissue.materials material", value=material)
+        self.material = material
+        self._params = material.device_params()
+
+    def _build_pattern(self, tets: np.ndarray) -> None:
+        npe = tets.shape[1]
+        n = self.node_count
+        rows = np.repeat(tets, npe, axis=1).astype(np.int64)  # (M, npe*npe): a-major
+        cols = np.tile(tets, (1, npe)).astype(np.int64)
+        keys = rows * n + cols
+        unique_keys = np.unique(keys)
+        self._block_index_host = np.searchsorted(unique_keys, keys).astype(np.int32)
+        self._block_index = wp.array(self._block_index_host, dtype=wp.int32, device=self.device)
+        block_rows = (unique_keys // n).astype(np.int32)
+        block_cols = (unique_keys % n).astype(np.int32)
+        self.matrix = wps.bsr_zeros(n, n, block_type=wp.mat33d, device=self.device)
+        wps.bsr_set_from_triplets(
+            self.matrix,
+            wp.array(block_rows, dtype=wp.int32, device=self.device),
+            wp.array(block_cols, dtype=wp.int32, device=self.device),
+            wp.zeros(len(unique_keys), dtype=wp.mat33d, device=self.device),
+            prune_numerical_zeros=False,
+        )
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(block_rows, minlength=n))])
+        nnz = len(unique_keys)
+        if not (
+            np.array_equal(self.matrix.offsets.numpy()[: n + 1], offsets)
+            and np.array_equal(self.matrix.columns.numpy()[:nnz], block_cols)
+        ):
+            raise RuntimeError("warp.sparse reordered the sparsity pattern unexpectedly")
+        self.block_count = nnz
+
+    def assemble(
+        self, displacement_m: np.ndarray | wp.array, *, with_tangent: bool = True
+    ) -> Assembly:
+        """Internal forces, tangent and energy at a nodal displacement.
+
+        Args:
+            displacement_m: Nodal displacements, shape (N, 3) (NumPy or a vec3d Warp array on
+                the assembler's device), metres.
+            with_tangent: Also assemble the tangent matrix.
+
+        Returns:
+            An :class:`Assembly`; its arrays live on the assembler's device and are reused by
+            the next call.
+        """
+        from warptissue.kernels import fem as kf
+
+        u = self._as_device_displacement(displacement_m)
+        self._residual.zero_()
+        self._energy.zero_()
+        self._min_jacobian.fill_(np.inf)
+        if with_tangent:
+            self.matrix.values.zero_()
+        wp.launch(
+            kf.assemble_elements_kernel,
+            dim=self.tet_count,
+            inputs=[
+                self._params,
+                self._tets,
+                self._shape_gradients,
+                self._quadrature_volumes,
+                u,
+                self._block_index,
+                int(self.formulation == "mixed"),
+                int(with_tangent),
+            ],
+            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
+            device=self.device,
+        )
+        return Assembly(
+            residual=self._residual,
+            matrix=self.matrix if with_tangent else None,
+            energy_J=float(self._energy.numpy()[0]),
+            min_jacobian=float(self._min_jacobian.numpy()[0]),
+        )
+
+    def eliminate(self, constrained: wp.array) -> None:
+        """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal.
+
+        Args:
+            constrained: Warp vec3d array (N,), 1.0 where a component is prescribed.
+        """
+        from warptissue.kernels import fem as kf
+
+        wp.launch(
+            kf.eliminate_dirichlet_kernel,
+            dim=self.node_count,
+            inputs=[self.matrix.offsets, self.matrix.columns, constrained],
+            outputs=[self.matrix.values],
+            device=self.device,
+        )
+
+    def cauchy_stress(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:
+        """Volume-averaged Cauchy stress per tet (xx, yy, zz, yz, xz, xy), shape (M, 6), Pa."""
+        from warptissue.kernels import fem as kf
+
+        u = self._as_device_displacement(displacement_m)
+        stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
+        wp.launch(
+            kf.cauchy_stress_kernel,
+            dim=self.tet_count,
+            inputs=[
+                self._params,
+                self._tets,
+                self._shape_gradients,
+                self._quadrature_volumes,
+                u,
+                int(self.formulation == "mixed"),
+            ],
+            outputs=[stress],
+            device=self.device,
+        )
+        return stress.numpy()
+
+    def _as_device_displacement(self, displacement_m: Any) -> wp.array:
+        if isinstance(displacement_m, wp.array):
+            if displacement_m.shape != (self.node_count,) or displacement_m.dtype != wp.vec3d:
+                raise InputError("displacement must be a vec3d array of one entry per node")
+            return displacement_m
+        u = np.asarray(displacement_m, dtype=np.float64)
+        if u.shape != (self.node_count, 3):
+            raise InputError(f"displacement must have shape ({self.node_count}, 3)", value=u.shape)
+        return wp.array(u, dtype=wp.vec3d, device=self.device)

@@ -1,0 +1,321 @@
+"""Flat-punch indentation: boundary conditions, the load path and the reaction force.
+
+Coordinates (CONVENTIONS.md): the punch is centred on x = y = 0 on the top surface and moves
+in -z; the base is z = 0. Quarter models keep x >= 0, y >= 0 with symmetry planes
+"symmetry_x" (x = 0) and "symmetry_y" (y = 0).
+
+- Bonded punch (seed 003): every node of the punch surface with r <= a gets
+  ``(ux, uy, uz) = (0, 0, -depth)``.
+- Frictionless punch: only ``uz = -depth`` on those nodes.
+- Symmetry planes: the normal displacement component is zero on each named node set.
+- Base ``"fixed"``: all components zero on "bottom"; ``"sliding"``: ``uz = 0`` on "bottom",
+  plus pins that remove the in-plane rigid motions the other conditions leave free.
+
+The reaction force is the sum of the z-components of the internal force over the punch nodes,
+times the symmetry factor (2 per symmetry plane), positive when the punch pushes in.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import ConvergenceError, InputError
+from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
+from warptissue.fem.solvers import DirichletConditions, solve_quasistatic
+from warptissue.materials import Material
+from warptissue.mesh import TetMesh
+
+__all__ = ["FlatPunch", "IndentationProblem", "IndentationResult", "simulate_indentation"]
+
+CONTACTS = ("bonded", "frictionless")
+BASES = ("fixed", "sliding")
+
+
+@dataclass(frozen=True)
+class FlatPunch:
+    """A rigid flat cylindrical punch centred on x = y = 0.
+
+    Args:
+        radius_m: Punch radius a, m.
+        contact: ``"bonded"`` (no slip under the punch, seed 003) or ``"frictionless"``.
+        surface: Node set of the indented surface.
+    """
+
+    radius_m: float
+    contact: str = field(default="bonded", kw_only=True)
+    surface: str = field(default="top", kw_only=True)
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.radius_m, (int, float)) and np.isfinite(self.radius_m)) or not (
+            self.radius_m > 0
+        ):
+            raise InputError(
+                "punch radius must be a positive number", column="radius_m", value=self.radius_m
+            )
+        object.__setattr__(self, "radius_m", float(self.radius_m))
+        if self.contact not in CONTACTS:
+            raise InputError(
+                f"contact must be one of {CONTACTS}", column="contact", value=self.contact
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"type": "flat_punch", "radius_m", "contact", "surface"}``."""
+        return {
+            "type": "flat_punch",
+            "radius_m": self.radius_m,
+            "contact": self.contact,
+            "surface": self.surface,
+        }
+
+
+def _plane_component(mesh: TetMesh, name: str) -> int:
+    """The axis normal to a planar node set (the coordinate that does not vary on it)."""
+    nodes = mesh.node_set(name)
+    if nodes.size == 0:
+        raise InputError(f"symmetry node set {name!r} is empty", column="symmetry_planes")
+    points = mesh.points[nodes]
+    spread = np.ptp(points, axis=0)
+    size = float(np.ptp(mesh.points, axis=0).max())
+    axis = int(np.argmin(spread))
+    if spread[axis] > 1e-9 * size:
+        raise InputError(
+            f"symmetry node set {name!r} is not an axis-aligned plane", column="symmetry_planes"
+        )
+    return axis
+
+
+@dataclass(frozen=True)
+class IndentationProblem:
+    """A specimen mesh, its material, a flat punch and the supports.
+
+    Args:
+        mesh: TET10 (``formulation="mixed"``) or TET4/TET10 (``"displacement"``), metres, with
+            node sets for the punch surface, "bottom" and the symmetry planes.
+        material: A :mod:`warptissue.materials` material.
+        punch: The :class:`FlatPunch`.
+        base: ``"fixed"`` or ``"sliding"``.
+        symmetry_planes: Node sets with zero normal displacement; each doubles the force.
+        formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
+    """
+
+    mesh: TetMesh
+    material: Material
+    punch: FlatPunch
+    base: str = field(default="fixed", kw_only=True)
+    symmetry_planes: tuple[str, ...] = field(default=("symmetry_x", "symmetry_y"), kw_only=True)
+    formulation: str = field(default="mixed", kw_only=True)
+
+    def __post_init__(self) -> None:
+        if self.base not in BASES:
+            raise InputError(f"base must be one of {BASES}", column="base", value=self.base)
+        if self.formulation not in FORMULATIONS:
+            raise InputError(
+                f"formulation must be one of {FORMULATIONS}",
+                column="formulation",
+                value=self.formulation,
+            )
+        object.__setattr__(self, "symmetry_planes", tuple(self.symmetry_planes))
+        for name in (self.punch.surface, "bottom", *self.symmetry_planes):
+            if name not in self.mesh.node_sets:
+                raise InputError(
+                    f"the mesh has no node set {name!r} (it has {sorted(self.mesh.node_sets)})",
+                    column="mesh",
+                )
+        if self.punch_nodes.size == 0:
+            raise InputError(
+                f"no node of {self.punch.surface!r} lies within the punch radius "
+                f"{self.punch.radius_m} m of the axis x = y = 0",
+                column="radius_m",
+            )
+
+    @property
+    def symmetry_factor(self) -> int:
+        """2 per symmetry plane: 4 for a quarter model."""
+        return 2 ** len(self.symmetry_planes)
+
+    @property
+    def punch_nodes(self) -> np.ndarray:
+        """Nodes of the punch surface with r <= radius (1e-9 relative tolerance)."""
+        nodes = self.mesh.node_set(self.punch.surface)
+        xy = self.mesh.points[nodes, :2]
+        radius = self.punch.radius_m
+        inside = np.einsum("ij,ij->i", xy, xy) <= (radius * (1.0 + 1e-9)) ** 2
+        return nodes[inside].astype(np.int64)
+
+    def dirichlet_conditions(self) -> DirichletConditions:
+        """Prescribed dofs with ``u = depth * values_per_load`` (load = depth in metres)."""
+        parts = []
+        punch = self.punch_nodes
+        punch_components = (2,) if self.punch.contact == "frictionless" else (0, 1, 2)
+        for comp in punch_components:
+            parts.append(_fixed(punch, comp, -1.0 if comp == 2 else 0.0))
+        planes = {}
+        for name in self.symmetry_planes:
+            axis = _plane_component(self.mesh, name)
+            planes[axis] = name
+            parts.append(_fixed(self.mesh.node_set(name), axis, 0.0))
+        bottom = self.mesh.node_set("bottom").astype(np.int64)
+        base_components = (0, 1, 2) if self.base == "fixed" else (2,)
+        for comp in base_components:
+            parts.append(_fixed(bottom, comp, 0.0))
+        if self.base == "sliding" and self.punch.contact == "frictionless":
+            parts.extend(self._rigid_body_pins(bottom, planes))
+        return DirichletConditions.combine(*parts)
+
+    def _rigid_body_pins(self, bottom: np.ndarray, planes: dict[int, str]) -> list:
+        """Pins on the base for the in-plane translations and the rotation about z."""
+        points = self.mesh.points[bottom]
+        centre = bottom[int(np.argmin(np.einsum("ij,ij->i", points[:, :2], points[:, :2])))]
+        pins = [_fixed(np.array([centre]), axis, 0.0) for axis in (0, 1) if axis not in planes]
+        if not planes:
+            far = bottom[int(np.argmax(points[:, 0]))]
+            pins.append(_fixed(np.array([far]), 1, 0.0))
+        return pins
+
+
+def _fixed(nodes: np.ndarray, component: int, value: float) -> DirichletConditions:
+    nodes = np.asarray(nodes, dtype=np.int64)
+    return DirichletConditions(nodes, np.full(len(nodes), component), np.full(len(nodes), value))
+
+
+@dataclass
+class IndentationResult:
+    """Force-depth curve and fields of a flat-punch indentation.
+
+    Attributes:
+        depths_m: Depths reached, shape (S,), m (a prefix of the requested ones).
+        reaction_force_N: Full punch force (symmetry factor applied, positive pushing in), (S,).
+        newton_iterations: Newton iterations per depth (all substeps), (S,).
+        linear_iterations: Linear-solver iterations per depth (1 per direct solve), (S,).
+        displacement_m: Nodal displacements per depth, (S, N, 3).
+        cauchy_stress_Pa: Per-tet Cauchy stress at the last depth (xx, yy, zz, yz, xz, xy),
+            (M, 6).
+        von_mises_Pa: Per-tet von Mises stress at the last depth, (M,).
+        completed: Whether every requested depth converged.
+        message: What happened.
+        cutbacks: Number of increment halvings used.
+        formulation, element_type, symmetry_factor, linear_solver: How it was solved.
+    """
+
+    depths_m: np.ndarray
+    reaction_force_N: np.ndarray
+    newton_iterations: np.ndarray
+    linear_iterations: np.ndarray
+    displacement_m: np.ndarray
+    cauchy_stress_Pa: np.ndarray
+    von_mises_Pa: np.ndarray
+    completed: bool
+    message: str
+    cutbacks: int = 0
+    formulation: str = "mixed"
+    element_type: str = "TET10"
+    symmetry_factor: int = 4
+    linear_solver: str = "auto"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
+        return {
+            "depths_m": self.depths_m.tolist(),
+            "reaction_force_N": self.reaction_force_N.tolist(),
+            "newton_iterations": self.newton_iterations.tolist(),
+            "linear_iterations": self.linear_iterations.tolist(),
+            "completed": bool(self.completed),
+            "message": self.message,
+            "cutbacks": int(self.cutbacks),
+            "formulation": self.formulation,
+            "element_type": self.element_type,
+            "symmetry_factor": int(self.symmetry_factor),
+            "linear_solver": self.linear_solver,
+            "max_von_mises_Pa": float(self.von_mises_Pa.max()) if self.von_mises_Pa.size else None,
+        }
+
+
+def simulate_indentation(
+    problem: IndentationProblem,
+    depths_m: np.ndarray,
+    *,
+    device: str | None = None,
+    progress: bool = True,
+    linear_solver: str = "auto",
+    tolerance: float = 1e-9,
+    max_newton_iterations: int = 25,
+    max_cutbacks: int = 8,
+    strict: bool = False,
+    assembler: Assembler | None = None,
+) -> IndentationResult:
+    """Push the punch to each depth in turn and record the reaction force.
+
+    Args:
+        problem: The :class:`IndentationProblem`.
+        depths_m: Increasing positive depths, shape (S,), m.
+        device: Warp device (``"cpu"``, ``"cuda:0"``); None for Warp's default.
+        progress: Show a tqdm progress bar over the depths.
+        linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (see
+            :class:`warptissue.fem.solvers.LinearSolver`).
+        tolerance: Newton tolerance on the free-dof residual relative to the reaction forces.
+        max_newton_iterations: Per increment.
+        max_cutbacks: Increment halvings allowed per depth before stopping.
+        strict: Raise :class:`ConvergenceError` (carrying the partial result) instead of
+            returning an incomplete one.
+        assembler: Reuse an :class:`Assembler` built for this mesh, material and formulation
+            (for repeated solves in a fit); built when None.
+
+    Returns:
+        An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
+        out; the curve up to there is kept).
+    """
+    depths = np.atleast_1d(np.asarray(depths_m, dtype=np.float64))
+    if depths.ndim != 1 or depths.size == 0 or not np.all(np.isfinite(depths)):
+        raise InputError("depths_m must be a non-empty 1-D sequence of numbers", value=depths_m)
+    if np.any(depths <= 0) or np.any(np.diff(depths) <= 0):
+        raise InputError("depths_m must be positive and strictly increasing", value=depths.tolist())
+    mesh = problem.mesh
+    if assembler is None:
+        assembler = Assembler(
+            mesh, problem.material, formulation=problem.formulation, device=device
+        )
+    elif assembler.node_count != mesh.node_count or assembler.formulation != problem.formulation:
+        raise InputError("the assembler was built for another mesh or formulation")
+    else:
+        assembler.set_material(problem.material)
+    weights = np.zeros((mesh.node_count, 3))
+    weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
+    path = solve_quasistatic(
+        assembler,
+        problem.dirichlet_conditions(),
+        depths,
+        reaction_weights=weights,
+        linear_solver=linear_solver,
+        tolerance=tolerance,
+        max_iterations=max_newton_iterations,
+        max_cutbacks=max_cutbacks,
+        progress=progress,
+        progress_label="indentation depths",
+        load_name="depth (m)",
+    )
+    if len(path.loads):
+        stress = assembler.cauchy_stress(path.displacement_m[-1])
+    else:
+        stress = np.zeros((0, 6))
+    result = IndentationResult(
+        depths_m=path.loads,
+        reaction_force_N=path.reaction,
+        newton_iterations=path.newton_iterations,
+        linear_iterations=path.linear_iterations,
+        displacement_m=path.displacement_m,
+        cauchy_stress_Pa=stress,
+        von_mises_Pa=von_mises(stress) if len(stress) else np.zeros(0),
+        completed=path.completed,
+        message=path.message,
+        cutbacks=path.cutbacks,
+        formulation=problem.formulation,
+        element_type=mesh.element_type,
+        symmetry_factor=problem.symmetry_factor,
+        linear_solver=path.linear_solver,
+    )
+    if strict and not result.completed:
+        raise ConvergenceError(result.message, partial_result=result)
+    return result
