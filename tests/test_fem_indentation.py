@@ -49,8 +49,10 @@ def sneddon_layer_stiffness(radius_m: float, thickness_m: float, shear_modulus_p
     """Flat-punch stiffness of an incompressible layer bonded to a rigid base.
 
     Sneddon's half-space value 2 a E / (1 - nu^2) = 8 mu a (nu = 1/2), times the finite-layer
-    factor 1 + 1.33 (a/h) + 1.33 (a/h)^3 (Shull 2002, Mater. Sci. Eng. R 36, Eq. 33: the fit to
-    the numerical solutions for a layer with no slip at the substrate).
+    factor 1 + 1.33 (a/h) + 1.33 (a/h)^3 for an incompressible layer with no slip at the rigid
+    substrate (Shull 2002, Mater. Sci. Eng. R 36, 1-45, flat-punch compliance of thin layers).
+    scripts/verify_flat_punch.py checks the factor independently: the Richardson-extrapolated
+    FE stiffness at h/a = 4 is within 0.2 % of it (README "Finite elements").
     """
     ratio = radius_m / thickness_m
     return 8.0 * shear_modulus_pa * radius_m * (1.0 + 1.33 * ratio + 1.33 * ratio**3)
@@ -61,7 +63,7 @@ def test_small_depth_stiffness_matches_sneddon_with_layer_correction():
     mesh = _block(thickness_over_radius=4.0, near=0.5)
     expected = sneddon_layer_stiffness(RADIUS_M, thickness, SHEAR_MODULUS_PA)
     stiffness = _stiffness(mesh, _material(1000.0))
-    assert stiffness == pytest.approx(expected, rel=0.03)
+    assert stiffness == pytest.approx(expected, rel=0.02)
 
 
 def test_force_is_insensitive_to_bulk_modulus_in_the_mixed_formulation():

@@ -399,7 +399,7 @@ class CompressibleNeoHookean(Material):
 
     Args:
         shear_modulus_Pa: mu, Pa, > 0.
-        bulk_modulus_Pa: K, Pa, > 2 mu / 3 (so that lambda = K - 2 mu / 3 >= 0 ... > 0).
+        bulk_modulus_Pa: K, Pa, > 2 mu / 3 (so that lambda = K - 2 mu / 3 > 0).
     """
 
     shear_modulus_Pa: float
