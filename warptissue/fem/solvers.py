@@ -3,7 +3,8 @@
 Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite elements"):
 
 - ``"pardiso"``: Intel MKL PARDISO through pypardiso (CPU; the default on x86_64 where it
-  imports). Fastest direct solver measured here.
+  imports), symmetric indefinite, with the symbolic analysis done once per sparsity pattern
+  (:mod:`warptissue.fem.direct`). Fastest direct solver measured here.
 - ``"superlu"``: SciPy's SuperLU (CPU; the default where MKL is not available, e.g. ARM).
 - ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) with a
   block-Jacobi preconditioner on the device's own arrays (the default on CUDA). The
@@ -23,12 +24,12 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
 from warptissue.fem.assembly import Assembler
+from warptissue.fem.direct import CpuDirectSolver
 
 __all__ = [
     "LINEAR_SOLVERS",
@@ -121,6 +122,11 @@ class LinearSolver:
         device: The Warp device of the matrices.
         tolerance: Relative residual tolerance of CG.
         max_iterations: Iteration limit of CG (None: 10 x the number of dofs).
+
+    Attributes:
+        direct: The CPU direct solver of the last matrix (PARDISO or SuperLU), or None. It
+            holds the matrix's scalar pattern and PARDISO's symbolic analysis, and is reused
+            while the same matrix object (fixed pattern, new values) is passed in.
     """
 
     def __init__(
@@ -156,6 +162,7 @@ class LinearSolver:
             )
         self.method = method
         self.device = device
+        self.direct: CpuDirectSolver | None = None
         self.tolerance = tolerance
         self.max_iterations = max_iterations
 
@@ -169,26 +176,11 @@ class LinearSolver:
         Returns:
             (x of shape (N, 3), iterations): Krylov iterations, or 1 for a direct solve.
         """
-        n = rhs.shape[0]
         if self.method == "cg":
             return self._solve_cg(matrix, rhs)
-        nnz = matrix.nnz_sync()
-        csr = sp.bsr_matrix(
-            (
-                matrix.values.numpy()[:nnz],
-                matrix.columns.numpy()[:nnz],
-                matrix.offsets.numpy()[: n + 1],
-            ),
-            shape=(3 * n, 3 * n),
-        ).tocsr()
-        b = rhs.reshape(-1)
-        if self.method == "pardiso":
-            import pypardiso
-
-            x = pypardiso.spsolve(csr, b)
-        else:
-            x = sp.linalg.spsolve(csr.tocsc(), b)
-        return np.asarray(x).reshape(n, 3), 1
+        if self.direct is None or self.direct.matrix is not matrix:
+            self.direct = CpuDirectSolver(matrix, method=self.method)
+        return self.direct.solve(rhs), 1
 
     def _solve_cg(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         from warp.optim.linear import cg, preconditioner
