@@ -23,6 +23,7 @@ the MKL routine that pypardiso loads is called directly, with the phases above.
 from __future__ import annotations
 
 import ctypes
+import functools
 
 import numpy as np
 import scipy.sparse as sp
@@ -33,6 +34,15 @@ __all__ = ["CPU_DIRECT_METHODS", "CpuDirectSolver", "bsr33_scalar_pattern"]
 CPU_DIRECT_METHODS = ("pardiso", "superlu")
 
 _PARDISO_SYMMETRIC_INDEFINITE = -2
+
+
+@functools.cache
+def _pardiso_routine():
+    """MKL's ``pardiso`` routine, loaded once per process (pypardiso searches for the library
+    and declares the argument types)."""
+    from pypardiso import PyPardisoSolver
+
+    return PyPardisoSolver()._mkl_pardiso
 
 
 def bsr33_scalar_pattern(
@@ -135,10 +145,7 @@ class CpuDirectSolver:
         np.take(values, self._source, out=self._data)
 
     def _init_pardiso(self) -> None:
-        from pypardiso import PyPardisoSolver
-
-        # pypardiso finds and loads MKL's runtime library and declares the routine's argtypes.
-        self._pardiso_routine = PyPardisoSolver()._mkl_pardiso
+        self._pardiso_routine = _pardiso_routine()
         self._handle = np.zeros(64, dtype=np.int64)  # PARDISO's internal pointers
         self._perm = np.zeros(0, dtype=np.int32)
         iparm = np.zeros(64, dtype=np.int32)
