@@ -15,7 +15,8 @@ pivoting, upper triangle): the consistent tangent of a hyperelastic energy is sy
 Dirichlet elimination zeroes the rows AND columns of prescribed dofs (unit diagonal), so the
 eliminated matrix stays symmetric. It is not declared positive definite: nothing guarantees
 that along a load path (the geometric stiffness of compressed states, trial states near
-instability), and the indefinite factorization costs little more (README "Performance").
+instability; a flat-punch predictor state at 10k TET10 tets has 3 negative eigenvalues), and
+the indefinite factorization costs only a few per cent more (README "Performance").
 pypardiso's ``spsolve``/``solve`` repeat the analysis whenever the matrix values change, so
 the MKL routine that pypardiso loads is called directly, with the phases above.
 """
@@ -83,6 +84,11 @@ def bsr33_scalar_pattern(
     if upper:
         keep = scalar_cols >= scalar_rows
         scalar_rows, scalar_cols, source = scalar_rows[keep], scalar_cols[keep], source[keep]
+    if scalar_cols.shape[0] >= 2**31:
+        raise ValueError(
+            f"{scalar_cols.shape[0]} matrix entries exceed the 32-bit indices of the CPU "
+            "direct solvers; use a CUDA device for a mesh this large"
+        )
     indptr = np.zeros(3 * row_count + 1, dtype=np.int64)
     np.cumsum(np.bincount(scalar_rows, minlength=3 * row_count), out=indptr[1:])
     return indptr.astype(np.int32), scalar_cols.astype(np.int32), source
