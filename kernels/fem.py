@@ -19,6 +19,8 @@ from warptissue.kernels.materials import (
     add_pressure_terms,
     deviatoric_response,
     flat,
+    mat99d,
+    material_response,
     volumetric_energy,
 )
 
@@ -216,3 +218,19 @@ def cauchy_stress_kernel(
     stress[e, 3] = wp.float64(0.5) * (sigma[1, 2] + sigma[2, 1])
     stress[e, 4] = wp.float64(0.5) * (sigma[0, 2] + sigma[2, 0])
     stress[e, 5] = wp.float64(0.5) * (sigma[0, 1] + sigma[1, 0])
+
+
+@wp.kernel
+def evaluate_material_kernel(
+    params: MaterialParams,
+    deformation_gradients: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+    stress: wp.array(dtype=wp.mat33d),
+    tangent: wp.array(dtype=mat99d),
+):
+    """Energy density, first Piola-Kirchhoff stress and tangent for a batch of F."""
+    i = wp.tid()
+    psi, p, a = material_response(params, deformation_gradients[i], 1)
+    energy[i] = psi
+    stress[i] = p
+    tangent[i] = a

@@ -10,7 +10,9 @@ part and ``volumetric_energy`` gives ``U`` and its first two derivatives, so tha
 pointwise ``J``. ``material_response`` adds both for the pointwise (displacement) formulation.
 
 One ``MaterialParams`` struct with a ``model`` id is the single dispatch point, so that one
-compiled kernel serves every model.
+compiled kernel serves every model. This file holds functions only; the kernels that call them
+(including the pointwise ``evaluate_material_kernel``) live in ``fem.py``, so the constitutive
+code is compiled once, in one Warp module.
 
 Notes:
     Abaqus conventions (Abaqus Theory Manual 4.6.1; seed 003, Eq. 2): isochoric invariants
@@ -407,19 +409,3 @@ def material_response(params: MaterialParams, f: wp.mat33d, with_tangent: int):
     u, du, ddu = volumetric_energy(params, wp.determinant(f))
     p_out, a_out = add_pressure_terms(p, tangent, f, du, ddu, with_tangent)
     return psi + u, p_out, a_out
-
-
-@wp.kernel
-def evaluate_material_kernel(
-    params: MaterialParams,
-    deformation_gradients: wp.array(dtype=wp.mat33d),
-    energy: wp.array(dtype=wp.float64),
-    stress: wp.array(dtype=wp.mat33d),
-    tangent: wp.array(dtype=mat99d),
-):
-    """Energy density, first Piola-Kirchhoff stress and tangent for a batch of F."""
-    i = wp.tid()
-    psi, p, a = material_response(params, deformation_gradients[i], 1)
-    energy[i] = psi
-    stress[i] = p
-    tangent[i] = a

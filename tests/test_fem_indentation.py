@@ -85,21 +85,28 @@ def test_displacement_tet4_locks_but_mixed_tet10_does_not():
 
 
 def test_bonded_punch_reaches_half_the_radius_and_stops_cleanly_beyond():
-    mesh = _block()
+    """Half the radius in two steps; then a jump to 3 a that two halvings cannot rescue stops
+    with a message and keeps the curve (scripts/verify_flat_punch.py reaches 2 a in steps of
+    0.05 a)."""
+    mesh = _block(near=1.0)
     problem = IndentationProblem(mesh, _material(1000.0), FlatPunch(RADIUS_M))
-    depths = RADIUS_M * np.array([0.1, 0.25, 0.5, 3.0])
-    result = simulate_indentation(problem, depths, device="cpu", progress=False, max_cutbacks=3)
-    assert result.depths_m[2] == pytest.approx(0.5 * RADIUS_M)
-    assert np.all(np.diff(result.reaction_force_N) > 0)
+    depths = RADIUS_M * np.array([0.25, 0.5, 3.0])
+    options = {"device": "cpu", "progress": False, "max_cutbacks": 2, "max_newton_iterations": 12}
+    result = simulate_indentation(problem, depths, **options)
     assert not result.completed
-    assert len(result.depths_m) == 3 and result.displacement_m.shape[0] == 3
-    assert "depth" in result.message and "cutbacks" in result.message
+    np.testing.assert_allclose(result.depths_m, depths[:2])
+    assert result.displacement_m.shape == (2, mesh.node_count, 3)
+    assert 0 < result.reaction_force_N[0] < result.reaction_force_N[1]
+    assert "depth" in result.message and "2 cutbacks" in result.message
     assert result.cauchy_stress_Pa.shape == (mesh.tet_count, 6)
     assert result.von_mises_Pa.max() > 0
+    # the punch nodes sit at the prescribed depth, bonded (no lateral slip)
+    punch = problem.punch_nodes
+    np.testing.assert_allclose(result.displacement_m[1, punch, 2], -0.5 * RADIUS_M)
+    np.testing.assert_allclose(result.displacement_m[1, punch, :2], 0.0, atol=1e-15)
+    options["max_cutbacks"] = 0
     with pytest.raises(ConvergenceError) as error:
-        simulate_indentation(
-            problem, [3.0 * RADIUS_M], device="cpu", progress=False, max_cutbacks=1, strict=True
-        )
+        simulate_indentation(problem, depths[2:], strict=True, **options)
     assert len(error.value.partial_result.depths_m) == 0
 
 
@@ -168,6 +175,8 @@ def test_bad_inputs_are_named():
         IndentationProblem(mesh, material, FlatPunch(RADIUS_M), symmetry_planes=("symmetry_z",))
     with pytest.raises(InputError, match="base"):
         IndentationProblem(mesh, material, FlatPunch(RADIUS_M), base="floating")
+    with pytest.raises(InputError, match="TET10"):
+        IndentationProblem(_block(near=1.0, element="TET4"), material, FlatPunch(RADIUS_M))
     problem = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
     with pytest.raises(InputError, match="increasing"):
         simulate_indentation(problem, [2e-4, 1e-4], device="cpu", progress=False)

@@ -596,6 +596,7 @@ def evaluate_material(
     Returns:
         A :class:`MaterialEvaluation` with arrays of leading size n.
     """
+    from warptissue.kernels import fem as kf
     from warptissue.kernels import materials as km
 
     f = np.asarray(deformation_gradients, dtype=np.float64)
@@ -618,7 +619,7 @@ def evaluate_material(
     stress = wp.zeros(n, dtype=wp.mat33d, device=dev)
     tangent = wp.zeros(n, dtype=km.mat99d, device=dev)
     wp.launch(
-        km.evaluate_material_kernel,
+        kf.evaluate_material_kernel,
         dim=n,
         inputs=[material.device_params(), f_wp],
         outputs=[energy, stress, tangent],

@@ -117,6 +117,14 @@ class IndentationProblem:
                 column="formulation",
                 value=self.formulation,
             )
+        if self.formulation == "mixed" and self.mesh.nodes_per_tet != 10:
+            raise InputError(
+                "formulation 'mixed' needs a TET10 mesh (use warptissue.mesh.to_tet10 or "
+                "element='TET10'); 'displacement' accepts TET4 but locks when nearly "
+                "incompressible",
+                column="formulation",
+                value=self.formulation,
+            )
         object.__setattr__(self, "symmetry_planes", tuple(self.symmetry_planes))
         for name in (self.punch.surface, "bottom", *self.symmetry_planes):
             if name not in self.mesh.node_sets:

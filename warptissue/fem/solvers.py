@@ -6,8 +6,10 @@ Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite el
   imports), symmetric indefinite, with the symbolic analysis done once per sparsity pattern
   (:mod:`warptissue.fem.direct`). Fastest direct solver measured here.
 - ``"superlu"``: SciPy's SuperLU (CPU; the default where MKL is not available, e.g. ARM).
-- ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) with a
-  block-Jacobi preconditioner on the device's own arrays (the default on CUDA). The
+- ``"cg"``: Warp's preconditioned conjugate gradient (``warp.optim.linear.cg``) on the
+  device's own arrays (the default on CUDA), with Warp's adaptive factorized sparse approximate
+  inverse (FSAI) preconditioner by default: on a 3k-dof nearly incompressible indentation
+  tangent (K/mu = 1000) it needed 1020 iterations against 2460 for the diagonal (Jacobi) one. The
   mean-dilatation tangent is symmetric and positive definite at stable states. Warp's Krylov
   solvers are slow on the CPU backend, and nearly incompressible tangents are ill conditioned,
   so expect many iterations; the iteration count is reported.
@@ -121,7 +123,9 @@ class LinearSolver:
             ``"superlu"`` or ``"cg"``.
         device: The Warp device of the matrices.
         tolerance: Relative residual tolerance of CG.
-        max_iterations: Iteration limit of CG (None: 10 x the number of dofs).
+        max_iterations: Iteration limit of CG (None: 30 x the number of dofs).
+        preconditioner: CG preconditioner, any ``ptype`` of
+            ``warp.optim.linear.preconditioner`` (``"fsai"``, ``"diag"``, ...).
 
     Attributes:
         direct: The CPU direct solver of the last matrix (PARDISO or SuperLU), or None. It
@@ -136,6 +140,7 @@ class LinearSolver:
         device: wp.Device,
         tolerance: float = 1e-12,
         max_iterations: int | None = None,
+        preconditioner: str = "fsai",
     ) -> None:
         if method not in LINEAR_SOLVERS:
             raise InputError(
@@ -165,6 +170,7 @@ class LinearSolver:
         self.direct: CpuDirectSolver | None = None
         self.tolerance = tolerance
         self.max_iterations = max_iterations
+        self.preconditioner = preconditioner
 
     def solve(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         """Solve ``matrix x = rhs``.
@@ -194,7 +200,7 @@ class LinearSolver:
             x,
             tol=self.tolerance,
             maxiter=max_iterations,
-            M=preconditioner(matrix, ptype="diag"),
+            M=preconditioner(matrix, ptype=self.preconditioner),
             use_cuda_graph=False,
         )
         return x.numpy(), int(iterations)
