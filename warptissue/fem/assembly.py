@@ -108,6 +108,7 @@ class Assembler:
         )
         self._build_pattern(mesh.tets)
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
+        self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._energy = wp.zeros(1, dtype=wp.float64, device=dev)
         self._min_jacobian = wp.zeros(1, dtype=wp.float64, device=dev)
         self.set_material(material)
@@ -238,4 +239,5 @@ class Assembler:
         u = np.asarray(displacement_m, dtype=np.float64)
         if u.shape != (self.node_count, 3):
             raise InputError(f"displacement must have shape ({self.node_count}, 3)", value=u.shape)
-        return wp.array(u, dtype=wp.vec3d, device=self.device)
+        self._displacement.assign(u)
+        return self._displacement

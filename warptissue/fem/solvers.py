@@ -3,7 +3,8 @@
 Linear solver per device (measured on a 2-core x86_64 CPU, see README "Finite elements"):
 
 - ``"pardiso"``: Intel MKL PARDISO through pypardiso (CPU; the default on x86_64 where it
-  imports). Fastest direct solver measured here.
+  imports), symmetric indefinite, with the symbolic analysis done once per sparsity pattern
+  (:mod:`warptissue.fem.direct`). Fastest direct solver measured here.
 - ``"superlu"``: SciPy's SuperLU (CPU; the default where MKL is not available, e.g. ARM).
 - ``"cudss"``: NVIDIA cuDSS sparse direct solver on the GPU through nvmath-python
   (:mod:`warptissue.fem.cudss`; the optional extra ``warptissue[gpu]``): analysis once per
@@ -29,13 +30,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
 import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
 from warptissue.fem.assembly import Assembler
 from warptissue.fem.cudss import CudssSolver, cudss_available
+from warptissue.fem.direct import CpuDirectSolver
 
 __all__ = [
     "LINEAR_SOLVERS",
@@ -130,6 +131,11 @@ class LinearSolver:
         max_iterations: Iteration limit of CG (None: 30 x the number of dofs).
         preconditioner: CG preconditioner, any ``ptype`` of
             ``warp.optim.linear.preconditioner`` (``"fsai"``, ``"diag"``, ...).
+
+    Attributes:
+        direct: The CPU direct solver of the last matrix (PARDISO or SuperLU), or None. It
+            holds the matrix's scalar pattern and PARDISO's symbolic analysis, and is reused
+            while the same matrix object (fixed pattern, new values) is passed in.
     """
 
     def __init__(
@@ -180,10 +186,10 @@ class LinearSolver:
         self.method = method
         self.device = device
         self._cudss: CudssSolver | None = None
+        self.direct: CpuDirectSolver | None = None
         self.tolerance = tolerance
         self.max_iterations = max_iterations
         self.preconditioner = preconditioner
-        self._pardiso = None
 
     def solve(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         """Solve ``matrix x = rhs``.
@@ -195,37 +201,15 @@ class LinearSolver:
         Returns:
             (x of shape (N, 3), iterations): Krylov iterations, or 1 for a direct solve.
         """
-        n = rhs.shape[0]
         if self.method == "cg":
             return self._solve_cg(matrix, rhs)
         if self.method == "cudss":
             if self._cudss is None or self._cudss.matrix is not matrix:
                 self._cudss = CudssSolver(matrix)
             return self._cudss.solve(rhs), 1
-        nnz = matrix.nnz_sync()
-        csr = sp.bsr_matrix(
-            (
-                matrix.values.numpy()[:nnz],
-                matrix.columns.numpy()[:nnz],
-                matrix.offsets.numpy()[: n + 1],
-            ),
-            shape=(3 * n, 3 * n),
-        ).tocsr()
-        b = rhs.reshape(-1)
-        if self.method == "pardiso":
-            # The tangent is symmetric (hyperelastic, symmetric elimination): factorize it as
-            # real symmetric indefinite (mtype -2, upper triangle), 1.8x faster than the
-            # general LU on a 26k-dof punch tangent, same solution to 5e-13.
-            if self._pardiso is None:
-                import pypardiso
-
-                self._pardiso = pypardiso.PyPardisoSolver(mtype=-2)
-            upper = sp.triu(csr, format="csr")
-            upper.sort_indices()
-            x = self._pardiso.solve(upper, b)
-        else:
-            x = sp.linalg.spsolve(csr.tocsc(), b)
-        return np.asarray(x).reshape(n, 3), 1
+        if self.direct is None or self.direct.matrix is not matrix:
+            self.direct = CpuDirectSolver(matrix, method=self.method)
+        return self.direct.solve(rhs), 1
 
     def _solve_cg(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         from warp.optim.linear import cg, preconditioner
@@ -274,6 +258,16 @@ class QuasistaticResult:
     history: list[dict] = field(default_factory=list)
 
 
+def _norm(values: np.ndarray) -> float:
+    """Euclidean norm of all entries.
+
+    ``np.einsum`` sums in NumPy's own loop; ``np.linalg.norm`` goes through the BLAS dot
+    product, whose thread start-up costs about 100x more on the (N, 3) arrays of the Newton
+    loop on a busy 2-core machine.
+    """
+    return math.sqrt(float(np.einsum("ij,ij->", values, values)))
+
+
 @dataclass
 class _Step:
     converged: bool
@@ -316,7 +310,7 @@ def _newton_increment(
             return _Step(
                 False, u, iteration, linear_total, "the linear solve gave non-finite values"
             )
-        old_norm = float(np.linalg.norm(residual * free))
+        old_norm = _norm(residual * free)
         old_energy = assembly.energy_J
         slope = float(np.sum(residual * free * du))
         # Backtracking line search on the free part (the prescribed increment is applied whole).
@@ -326,7 +320,7 @@ def _newton_increment(
             trial = u + alpha * du * free + (prescribed_increment if iteration == 1 else 0.0)
             check = assembler.assemble(trial, with_tangent=False)
             if check.min_jacobian > 0.0 and math.isfinite(check.energy_J):
-                new_norm = float(np.linalg.norm(check.residual.numpy() * free))
+                new_norm = _norm(check.residual.numpy() * free)
                 if (
                     iteration == 1
                     or new_norm < old_norm
@@ -345,13 +339,13 @@ def _newton_increment(
         u = trial
         assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
-        free_norm = float(np.linalg.norm(residual * free))
-        reaction_norm = float(np.linalg.norm(residual * (1.0 - free)))
-        step_norm = float(np.linalg.norm(alpha * du * free))
+        free_norm = _norm(residual * free)
+        reaction_norm = _norm(residual * (1.0 - free))
+        step_norm = _norm(alpha * du * free)
         limit = max(tolerance * reaction_norm, force_floor)
         # A correction at roundoff relative to the increment means the residual sits at its
         # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
-        increment_norm = float(np.linalg.norm(u - u_start))
+        increment_norm = _norm(u - u_start)
         at_roundoff = step_norm <= 1e-10 * increment_norm
         if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
             return _Step(True, u, iteration, linear_total, "converged")

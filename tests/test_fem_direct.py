@@ -1,0 +1,144 @@
+"""CPU direct solver: the scalar pattern against SciPy's BSR -> CSR conversion, solves against
+SciPy's spsolve on assembled and eliminated tangents, symmetry of the eliminated tangent, and
+reuse of PARDISO's symbolic analysis along a Newton path."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import warp as wp
+
+from warptissue.fem import Assembler, DirichletConditions, LinearSolver, solve_quasistatic
+from warptissue.fem.direct import CPU_DIRECT_METHODS, CpuDirectSolver, bsr33_scalar_pattern
+from warptissue.fem.solvers import _pardiso_available
+from warptissue.materials import NeoHookean
+from warptissue.mesh import block_mesh, to_tet10
+
+SIDE_M = 1e-2
+METHODS = [
+    pytest.param(
+        method,
+        marks=pytest.mark.skipif(
+            method == "pardiso" and not _pardiso_available(), reason="pypardiso not installed"
+        ),
+    )
+    for method in CPU_DIRECT_METHODS
+]
+
+
+def _mesh():
+    grid = np.linspace(0.0, SIDE_M, 3)
+    return to_tet10(block_mesh(grid, grid, np.linspace(0.0, SIDE_M, 2)))
+
+
+def _conditions(mesh) -> DirichletConditions:
+    """Fixed base, top pushed down (-z) and sheared (+x)."""
+    bottom, top = mesh.node_sets["zmin"], mesh.node_sets["zmax"]
+    return DirichletConditions.combine(
+        DirichletConditions(
+            np.repeat(bottom, 3), np.tile([0, 1, 2], len(bottom)), 0.0 * bottom.repeat(3)
+        ),
+        DirichletConditions(top, np.full(len(top), 2), np.full(len(top), -1.0)),
+        DirichletConditions(top, np.full(len(top), 0), np.full(len(top), 0.3)),
+    )
+
+
+def _scipy_csr(matrix, node_count: int) -> sp.csr_matrix:
+    nnz = matrix.nnz_sync()
+    return sp.bsr_matrix(
+        (
+            matrix.values.numpy()[:nnz],
+            matrix.columns.numpy()[:nnz],
+            matrix.offsets.numpy()[: node_count + 1],
+        ),
+        shape=(3 * node_count, 3 * node_count),
+    ).tocsr()
+
+
+def _eliminated_tangent(assembler, conditions, u):
+    assembly = assembler.assemble(u)
+    mask = conditions.mask(assembler.node_count)
+    assembler.eliminate(wp.array(mask, dtype=wp.vec3d, device=assembler.device))
+    return assembly.matrix, mask
+
+
+@pytest.mark.parametrize("upper", [False, True])
+def test_scalar_pattern_matches_scipy(upper, rng):
+    """Random block pattern (sorted columns per row, diagonal present) and random values."""
+    node_count = 7
+    dense_blocks = rng.random((node_count, node_count)) < 0.4
+    dense_blocks |= dense_blocks.T
+    np.fill_diagonal(dense_blocks, True)
+    rows, cols = np.nonzero(dense_blocks)
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=node_count))])
+    values = rng.standard_normal((len(cols), 3, 3))
+    indptr, indices, source = bsr33_scalar_pattern(offsets, cols, upper=upper)
+    reference = sp.bsr_matrix((values, cols, offsets), shape=(3 * node_count,) * 2).tocsr()
+    if upper:
+        reference = sp.triu(reference, format="csr")
+    reference.sort_indices()
+    np.testing.assert_array_equal(indptr, reference.indptr)
+    np.testing.assert_array_equal(indices, reference.indices)
+    np.testing.assert_array_equal(values.reshape(-1)[source], reference.data)
+
+
+def test_eliminated_tangent_is_symmetric(rng):
+    mesh = _mesh()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+    conditions = _conditions(mesh)
+    u = conditions.values(2e-4, mesh.node_count) + 1e-4 * rng.standard_normal((mesh.node_count, 3))
+    matrix, mask = _eliminated_tangent(assembler, conditions, u)
+    csr = _scipy_csr(matrix, mesh.node_count)
+    scale = np.abs(csr.data).max()
+    assert np.abs(csr - csr.T).max() <= 1e-13 * scale
+    dense = csr.toarray()
+    prescribed = np.flatnonzero(mask.reshape(-1))
+    free = np.flatnonzero(mask.reshape(-1) == 0.0)
+    assert prescribed.size and free.size
+    np.testing.assert_array_equal(dense[np.ix_(prescribed, free)], 0.0)
+    np.testing.assert_array_equal(dense[np.ix_(free, prescribed)], 0.0)
+    np.testing.assert_array_equal(dense[np.ix_(prescribed, prescribed)], np.eye(prescribed.size))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_solve_matches_scipy_and_reuses_analysis(method, rng):
+    """New tangent values each solve: results match spsolve, the analysis is done once."""
+    mesh = _mesh()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+    conditions = _conditions(mesh)
+    solver = LinearSolver(method=method, device=assembler.device)
+    for step in range(3):
+        u = conditions.values(1e-4 * step, mesh.node_count)
+        u += 5e-5 * rng.standard_normal((mesh.node_count, 3))
+        matrix, _ = _eliminated_tangent(assembler, conditions, u)
+        rhs = rng.standard_normal((mesh.node_count, 3))
+        x, iterations = solver.solve(matrix, rhs)
+        reference = sp.linalg.spsolve(_scipy_csr(matrix, mesh.node_count).tocsc(), rhs.ravel())
+        np.testing.assert_allclose(
+            x.ravel(), reference, rtol=0, atol=1e-10 * np.abs(reference).max(), err_msg=method
+        )
+        assert iterations == 1
+    assert solver.direct.factorizations == 3
+    assert solver.direct.analyses == (1 if method == "pardiso" else 3)
+
+
+@pytest.mark.skipif(not _pardiso_available(), reason="pypardiso not installed")
+def test_newton_path_analyses_once(monkeypatch):
+    """Along a whole load path PARDISO analyses once and factorizes once per Newton iteration."""
+    phases: list[int] = []
+    original = CpuDirectSolver._pardiso
+
+    def recording(self, phase, rhs=None):
+        phases.append(phase)
+        return original(self, phase, rhs)
+
+    monkeypatch.setattr(CpuDirectSolver, "_pardiso", recording)
+    mesh = _mesh()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+    path = solve_quasistatic(assembler, _conditions(mesh), [1e-3, 2e-3], linear_solver="pardiso")
+    assert path.completed, path.message
+    newton = int(path.newton_iterations.sum())
+    assert newton >= 4
+    assert phases.count(11) == 1
+    assert phases.count(22) == phases.count(33) == newton
