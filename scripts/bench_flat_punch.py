@@ -247,33 +247,11 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
         "probe_z": fem.Boundary(displacement[0], mask=probe, skip=(1, 1, 0)),
     }
     dof0, dof1 = fem.dof.partition(displacement, boundaries)
-    probe_z_dofs = boundaries["probe_z"].dof
-
     setup_s = time.perf_counter() - started
-    forces: list[float] = []
-    newton = 0
-    started = time.perf_counter()
-    cpu_started = time.process_time()
-    for depth in depths_m():
-        boundaries["probe_z"].update(-depth)
-        ext0 = fem.dof.apply(displacement, boundaries, dof0)
-        result = fem.newtonraphson(
-            items=[solid],
-            dof1=dof1,
-            dof0=dof0,
-            ext0=ext0,
-            solver=solver,
-            tol=NEWTON_TOLERANCE,
-            check=_relative_check,
-            verbose=0,
-            maxiter=25,
-        )
-        newton += result.iterations
-        # The residual at the prescribed probe dofs is the force the probe applies, along -z;
-        # four quarters make the full probe.
-        forces.append(-4.0 * float(np.sum(result.fun[probe_z_dofs])))
-    solve_s = time.perf_counter() - started
-    solve_cpu_s = time.process_time() - cpu_started
+    # Four quarters make the full probe.
+    forces, newton, solve_s, solve_cpu_s = _felupe_depth_sweep(
+        fem, solid, displacement, boundaries, dof0, dof1, solver, force_scale=4.0
+    )
     return RunRecord(
         code="felupe",
         device="cpu",
@@ -336,7 +314,54 @@ def run_felupe_axisymmetric_disc(size_near_m: float) -> RunRecord:
     }
     dof0, dof1 = fem.dof.partition(displacement, boundaries)
     setup_s = time.perf_counter() - started
-    forces, newton = [], 0
+    forces, newton, solve_s, solve_cpu_s = _felupe_depth_sweep(
+        fem, solid, displacement, boundaries, dof0, dof1, solver, force_scale=1.0
+    )
+    return RunRecord(
+        code="felupe-axisymmetric-disc",
+        device="cpu",
+        element="QUAD4 Q1/P0 axisymmetric",
+        cells=mesh.ncells,
+        nodes=mesh.npoints,
+        dofs=2 * mesh.npoints,
+        size_near_m=size_near_m,
+        steps_converged=len(forces),
+        completed=True,
+        newton_iterations=newton,
+        linear_iterations=None,
+        setup_s=setup_s,
+        solve_s=solve_s,
+        solve_cpu_s=solve_cpu_s,
+        seconds_per_step=solve_s / STEP_COUNT,
+        seconds_per_newton_iteration=solve_s / newton,
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=None,
+        final_depth_m=FINAL_DEPTH_M,
+        final_force_N=forces[-1],
+        force_N=forces,
+        linear_solver=solver_name,
+    )
+
+
+def _felupe_depth_sweep(
+    fem: Any,
+    solid: Any,
+    displacement: Any,
+    boundaries: dict[str, Any],
+    dof0: np.ndarray,
+    dof1: np.ndarray,
+    solver: Any,
+    *,
+    force_scale: float,
+) -> tuple[list[float], int, float, float]:
+    """Step the ``probe_z`` boundary through :func:`depths_m` with FElupe's Newton solver.
+
+    Returns:
+        Probe force per step (N, ``force_scale`` times the -z residual at the probe dofs),
+        total Newton iterations, and the wall and CPU seconds of the sweep.
+    """
+    forces: list[float] = []
+    newton = 0
     started, cpu_started = time.perf_counter(), time.process_time()
     for depth in depths_m():
         boundaries["probe_z"].update(-depth)
@@ -353,32 +378,9 @@ def run_felupe_axisymmetric_disc(size_near_m: float) -> RunRecord:
             maxiter=25,
         )
         newton += result.iterations
-        forces.append(-float(np.sum(result.fun[boundaries["probe_z"].dof])))
-    solve_s = time.perf_counter() - started
-    return RunRecord(
-        code="felupe-axisymmetric-disc",
-        device="cpu",
-        element="QUAD4 Q1/P0 axisymmetric",
-        cells=mesh.ncells,
-        nodes=mesh.npoints,
-        dofs=2 * mesh.npoints,
-        size_near_m=size_near_m,
-        steps_converged=len(forces),
-        completed=True,
-        newton_iterations=newton,
-        linear_iterations=None,
-        setup_s=setup_s,
-        solve_s=solve_s,
-        solve_cpu_s=time.process_time() - cpu_started,
-        seconds_per_step=solve_s / STEP_COUNT,
-        seconds_per_newton_iteration=solve_s / newton,
-        peak_host_rss_MiB=peak_rss_mib(),
-        peak_gpu_MiB=None,
-        final_depth_m=FINAL_DEPTH_M,
-        final_force_N=forces[-1],
-        force_N=forces,
-        linear_solver=solver_name,
-    )
+        # The residual at the prescribed probe dofs is the force the probe applies, along -z.
+        forces.append(-force_scale * float(np.sum(result.fun[boundaries["probe_z"].dof])))
+    return forces, newton, time.perf_counter() - started, time.process_time() - cpu_started
 
 
 def _relative_check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):

@@ -4,7 +4,14 @@ import numpy as np
 import pytest
 
 from warptissue.errors import InputError
-from warptissue.io import atomic_path, read_experiment_csv, write_csv, write_json
+from warptissue.io import (
+    atomic_path,
+    csv_number,
+    read_csv_rows,
+    read_experiment_csv,
+    write_csv,
+    write_json,
+)
 
 
 def test_csv_round_trip_and_sidecar(tmp_path):
@@ -46,6 +53,28 @@ def test_bad_csv_names_file_line_and_column(tmp_path, text, fragment):
         read_experiment_csv(path)
     assert str(path) in str(excinfo.value)
     assert fragment in str(excinfo.value)
+
+
+def test_read_csv_rows_keeps_text_and_file_lines(tmp_path):
+    path = tmp_path / "labels.csv"
+    path.write_text(" name , force_N\nA,1.5\nB,nan\n", encoding="utf-8")
+    rows = read_csv_rows(path, required=("name", "force_N"))
+    assert [(line, row["name"]) for line, row in rows] == [(2, "A"), (3, "B")]
+    assert csv_number(path, *rows[0], "force_N") == 1.5
+    with pytest.raises(InputError) as caught:
+        csv_number(path, *rows[1], "force_N")
+    assert (caught.value.line, caught.value.column, caught.value.value) == (3, "force_N", "nan")
+    assert "not a finite number" in str(caught.value)
+
+
+def test_read_csv_rows_names_missing_columns_and_files(tmp_path):
+    path = tmp_path / "labels.csv"
+    path.write_text("name\nA\n", encoding="utf-8")
+    with pytest.raises(InputError, match=r"missing column\(s\) \['force_N'\]") as caught:
+        read_csv_rows(path, required=("name", "force_N"))
+    assert (caught.value.path, caught.value.line) == (path, 1)
+    with pytest.raises(InputError, match="cannot read file"):
+        read_csv_rows(tmp_path / "absent.csv", required=("name",))
 
 
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):

@@ -23,7 +23,6 @@ sample); it is optional (each row its own sample). The train/test split is by sa
 
 from __future__ import annotations
 
-import csv
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -33,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
-from warptissue.io import atomic_path, software_versions, to_jsonable
+from warptissue.io import atomic_path, csv_number, read_csv_rows, software_versions, to_jsonable
 
 __all__ = [
     "CALIBRATION_MODELS",
@@ -390,33 +389,11 @@ def read_calibration_csv(path: str | Path) -> CalibrationData:
             or fewer than 10 readings.
     """
     path = Path(path)
-    try:
-        handle = path.open(newline="", encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read file: {exc.strerror}", path=path) from exc
-    with handle:
-        reader = csv.DictReader(handle)
-        header = [name.strip() for name in (reader.fieldnames or [])]
-        missing = [c for c in ("force_N", "signal_V") if c not in header]
-        if missing:
-            raise InputError(f"missing column(s) {missing}; header is {header}", path=path, line=1)
-        reader.fieldnames = header
-        samples, forces, signals = [], [], []
-        for line, row in enumerate(reader, start=2):
-            for column, out in (("force_N", forces), ("signal_V", signals)):
-                text = (row.get(column) or "").strip()
-                try:
-                    value = float(text)
-                except ValueError:
-                    raise InputError(
-                        "not a number", path=path, line=line, column=column, value=text
-                    ) from None
-                if not np.isfinite(value):
-                    raise InputError(
-                        "not a finite number", path=path, line=line, column=column, value=text
-                    )
-                out.append(value)
-            samples.append((row.get("sample") or str(line)).strip())
+    samples, forces, signals = [], [], []
+    for line, row in read_csv_rows(path, required=("force_N", "signal_V")):
+        forces.append(csv_number(path, line, row, "force_N"))
+        signals.append(csv_number(path, line, row, "signal_V"))
+        samples.append((row.get("sample") or str(line)).strip())
     if len(forces) < 10:
         raise InputError(f"need at least 10 readings, got {len(forces)}", path=path)
     return CalibrationData(np.array(samples), np.array(forces), np.array(signals))

@@ -273,6 +273,55 @@ def read_experiment_csv(
     return ExperimentData(columns=columns, metadata=read_sidecar(csv_path), path=csv_path)
 
 
+def read_csv_rows(path: str | Path, *, required: Sequence[str]) -> list[tuple[int, dict[str, str]]]:
+    """Read a CSV with a header row into text rows, checking that columns are present.
+
+    For files with text columns (labels) beside numbers; parse numbers with
+    :func:`csv_number`. All-numeric files should use :func:`read_experiment_csv`.
+
+    Args:
+        path: The CSV file.
+        required: Column names that must be present (header names are stripped).
+
+    Returns:
+        ``(line, row)`` pairs, the 1-based file line (header is line 1) and the row by column.
+
+    Raises:
+        InputError: The file cannot be read, or a required column is missing.
+    """
+    csv_path = Path(path)
+    try:
+        handle = csv_path.open(newline="", encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"cannot read file: {exc.strerror}", path=csv_path) from exc
+    with handle:
+        reader = csv.DictReader(handle)
+        header = [name.strip() for name in (reader.fieldnames or [])]
+        missing = [name for name in required if name not in header]
+        if missing:
+            raise InputError(
+                f"missing column(s) {missing}; header is {header}", path=csv_path, line=1
+            )
+        reader.fieldnames = header
+        return [(index + 2, row) for index, row in enumerate(reader)]
+
+
+def csv_number(path: str | Path, line: int, row: Mapping[str, str | None], column: str) -> float:
+    """One finite float from a row of :func:`read_csv_rows`.
+
+    Raises:
+        InputError: The value is not a finite number (names the file, line, column and value).
+    """
+    text = (row.get(column) or "").strip()
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError("not a number", path=path, line=line, column=column, value=text) from None
+    if not math.isfinite(value):
+        raise InputError("not a finite number", path=path, line=line, column=column, value=text)
+    return value
+
+
 def software_versions() -> dict[str, str]:
     """Versions of warptissue, Python and the numerical libraries, for provenance records."""
     versions = {"python": platform.python_version()}

@@ -61,6 +61,17 @@ class ForceCorrection(Protocol):
         ...
 
 
+def _read_calibration_json(file: Path) -> Any:
+    """The parsed JSON of a calibration file; InputError if missing or not JSON."""
+    try:
+        data = json.loads(file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("calibration file not found", path=file) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not JSON: {exc.msg}", path=file, line=exc.lineno) from None
+    return data
+
+
 @dataclass(frozen=True)
 class PolynomialForceCalibration:
     """A minimal force calibration: ``force_N = sum_i c_i * raw_N**i``.
@@ -84,12 +95,7 @@ class PolynomialForceCalibration:
             InputError: Missing file, bad JSON, wrong model or coefficients (named).
         """
         file = Path(path)
-        try:
-            data = json.loads(file.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise InputError("calibration file not found", path=file) from None
-        except json.JSONDecodeError as exc:
-            raise InputError(f"not JSON: {exc.msg}", path=file, line=exc.lineno) from None
+        data = _read_calibration_json(file)
         if not isinstance(data, dict) or data.get("model") != "polynomial":
             raise InputError(
                 "expected a polynomial calibration", path=file, column="model", value=data
@@ -133,12 +139,7 @@ def load_force_calibration(path: str | Path) -> ForceCorrection:
             ``warptissue.calibration`` when it is not installed.
     """
     file = Path(path)
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("calibration file not found", path=file) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"not JSON: {exc.msg}", path=file, line=exc.lineno) from None
+    data = _read_calibration_json(file)
     if isinstance(data, dict) and data.get("model") == "polynomial" and "coefficients" in data:
         return PolynomialForceCalibration.load(file)
     try:

@@ -18,7 +18,6 @@ optional as above.
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from warptissue.errors import InputError, MeshError
+from warptissue.io import csv_number, read_csv_rows
 from warptissue.mesh import TetMesh, block_mesh
 
 __all__ = [
@@ -59,33 +59,10 @@ class MarkerData:
 
 
 def _read_rows(path: str | Path, required: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
-    path = Path(path)
-    try:
-        handle = path.open(newline="", encoding="utf-8")
-    except OSError as exc:
-        raise InputError(f"cannot read file: {exc.strerror}", path=path) from exc
-    with handle:
-        reader = csv.DictReader(handle)
-        header = [name.strip() for name in (reader.fieldnames or [])]
-        missing = [name for name in required if name not in header]
-        if missing:
-            raise InputError(f"missing column(s) {missing}; header is {header}", path=path, line=1)
-        reader.fieldnames = header
-        rows = [(index + 2, row) for index, row in enumerate(reader)]
+    rows = read_csv_rows(path, required=required)
     if not rows:
-        raise InputError("no data rows", path=path, line=2)
+        raise InputError("no data rows", path=Path(path), line=2)
     return rows
-
-
-def _number(path: str | Path, line: int, row: dict[str, str], column: str) -> float:
-    text = (row.get(column) or "").strip()
-    try:
-        value = float(text)
-    except ValueError:
-        raise InputError("not a number", path=path, line=line, column=column, value=text) from None
-    if not np.isfinite(value):
-        raise InputError("not a finite number", path=path, line=line, column=column, value=text)
-    return value
 
 
 def read_markers_csv(path: str | Path) -> MarkerData:
@@ -102,7 +79,7 @@ def read_markers_csv(path: str | Path) -> MarkerData:
         marker = (row.get("marker") or "").strip()
         if not marker:
             raise InputError("empty marker label", path=path, line=line, column="marker")
-        values = np.array([_number(path, line, row, c) for c in MARKER_COLUMNS[1:]])
+        values = np.array([csv_number(path, line, row, c) for c in MARKER_COLUMNS[1:]])
         entries = sets.setdefault(label, {})
         if marker in entries:
             raise InputError(
@@ -150,7 +127,7 @@ def read_forces_csv(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
     for line, row in _read_rows(path, FORCE_COLUMNS):
         label = (row.get("load_set") or "A").strip() or "A"
         marker = (row.get("marker") or "").strip()
-        vector = np.array([_number(path, line, row, c) for c in FORCE_COLUMNS[1:]])
+        vector = np.array([csv_number(path, line, row, c) for c in FORCE_COLUMNS[1:]])
         forces.setdefault(label, {})[marker] = vector
     return forces
 
