@@ -249,32 +249,24 @@ def run_felupe(size_near_m: float, size_far_m: float) -> RunRecord:
     dof0, dof1 = fem.dof.partition(displacement, boundaries)
     setup_s = time.perf_counter() - started
     # Four quarters make the full probe.
-    forces, newton, solve_s, solve_cpu_s = _felupe_depth_sweep(
-        fem, solid, displacement, boundaries, dof0, dof1, solver, force_scale=4.0
-    )
-    return RunRecord(
-        code="felupe",
-        device="cpu",
-        element="HEX8 Q1/P0",
-        cells=len(hexahedra),
-        nodes=len(points),
-        dofs=3 * len(points),
-        size_near_m=size_near_m,
-        steps_converged=len(forces),
-        completed=True,
-        newton_iterations=newton,
-        linear_iterations=None,
-        setup_s=setup_s,
-        solve_s=solve_s,
-        solve_cpu_s=solve_cpu_s,
-        seconds_per_step=solve_s / STEP_COUNT,
-        seconds_per_newton_iteration=solve_s / newton,
-        peak_host_rss_MiB=peak_rss_mib(),
-        peak_gpu_MiB=None,
-        final_depth_m=FINAL_DEPTH_M,
-        final_force_N=forces[-1],
-        force_N=forces,
-        linear_solver=solver_name,
+    return _felupe_depth_sweep(
+        fem,
+        solid,
+        displacement,
+        boundaries,
+        dof0,
+        dof1,
+        (solver, solver_name),
+        force_scale=4.0,
+        record={
+            "code": "felupe",
+            "element": "HEX8 Q1/P0",
+            "cells": len(hexahedra),
+            "nodes": len(points),
+            "dofs": 3 * len(points),
+            "size_near_m": size_near_m,
+            "setup_s": setup_s,
+        },
     )
 
 
@@ -314,32 +306,24 @@ def run_felupe_axisymmetric_disc(size_near_m: float) -> RunRecord:
     }
     dof0, dof1 = fem.dof.partition(displacement, boundaries)
     setup_s = time.perf_counter() - started
-    forces, newton, solve_s, solve_cpu_s = _felupe_depth_sweep(
-        fem, solid, displacement, boundaries, dof0, dof1, solver, force_scale=1.0
-    )
-    return RunRecord(
-        code="felupe-axisymmetric-disc",
-        device="cpu",
-        element="QUAD4 Q1/P0 axisymmetric",
-        cells=mesh.ncells,
-        nodes=mesh.npoints,
-        dofs=2 * mesh.npoints,
-        size_near_m=size_near_m,
-        steps_converged=len(forces),
-        completed=True,
-        newton_iterations=newton,
-        linear_iterations=None,
-        setup_s=setup_s,
-        solve_s=solve_s,
-        solve_cpu_s=solve_cpu_s,
-        seconds_per_step=solve_s / STEP_COUNT,
-        seconds_per_newton_iteration=solve_s / newton,
-        peak_host_rss_MiB=peak_rss_mib(),
-        peak_gpu_MiB=None,
-        final_depth_m=FINAL_DEPTH_M,
-        final_force_N=forces[-1],
-        force_N=forces,
-        linear_solver=solver_name,
+    return _felupe_depth_sweep(
+        fem,
+        solid,
+        displacement,
+        boundaries,
+        dof0,
+        dof1,
+        (solver, solver_name),
+        force_scale=1.0,
+        record={
+            "code": "felupe-axisymmetric-disc",
+            "element": "QUAD4 Q1/P0 axisymmetric",
+            "cells": mesh.ncells,
+            "nodes": mesh.npoints,
+            "dofs": 2 * mesh.npoints,
+            "size_near_m": size_near_m,
+            "setup_s": setup_s,
+        },
     )
 
 
@@ -350,16 +334,24 @@ def _felupe_depth_sweep(
     boundaries: dict[str, Any],
     dof0: np.ndarray,
     dof1: np.ndarray,
-    solver: Any,
+    solver: tuple[Any, str],
     *,
     force_scale: float,
-) -> tuple[list[float], int, float, float]:
+    record: dict[str, Any],
+) -> RunRecord:
     """Step the ``probe_z`` boundary through :func:`depths_m` with FElupe's Newton solver.
 
+    Args:
+        solver: FElupe's linear solver and its name.
+        force_scale: Probe force per step is ``force_scale`` times the -z residual at the
+            probe dofs (4 for a quarter model).
+        record: The run's own fields of the RunRecord (code, element, cells, nodes, dofs,
+            size_near_m, setup_s).
+
     Returns:
-        Probe force per step (N, ``force_scale`` times the -z residual at the probe dofs),
-        total Newton iterations, and the wall and CPU seconds of the sweep.
+        The run's record, with the force per step (N), Newton iterations and timings.
     """
+    solver, solver_name = solver
     forces: list[float] = []
     newton = 0
     started, cpu_started = time.perf_counter(), time.process_time()
@@ -380,7 +372,25 @@ def _felupe_depth_sweep(
         newton += result.iterations
         # The residual at the prescribed probe dofs is the force the probe applies, along -z.
         forces.append(-force_scale * float(np.sum(result.fun[boundaries["probe_z"].dof])))
-    return forces, newton, time.perf_counter() - started, time.process_time() - cpu_started
+    solve_s, solve_cpu_s = time.perf_counter() - started, time.process_time() - cpu_started
+    return RunRecord(
+        device="cpu",
+        steps_converged=len(forces),
+        completed=True,
+        newton_iterations=newton,
+        linear_iterations=None,
+        solve_s=solve_s,
+        solve_cpu_s=solve_cpu_s,
+        seconds_per_step=solve_s / STEP_COUNT,
+        seconds_per_newton_iteration=solve_s / newton,
+        peak_host_rss_MiB=peak_rss_mib(),
+        peak_gpu_MiB=None,
+        final_depth_m=FINAL_DEPTH_M,
+        final_force_N=forces[-1],
+        force_N=forces,
+        linear_solver=solver_name,
+        **record,
+    )
 
 
 def _relative_check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
