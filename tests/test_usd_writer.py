@@ -254,6 +254,7 @@ def test_material_field_of_a_tet10_mesh_is_per_corner_tet(tmp_path, specimen, rn
         ("youngs_modulus_Pa", 5, 0.0, "youngs_modulus_Pa must be > 0.*index 5"),
         ("youngs_modulus_Pa", 1, np.nan, "non-finite.*index 1"),
         ("youngs_modulus_Pa", None, None, "shape"),
+        ("poissons_ratio", "all", "soft", "not an array of numbers"),
         (None, None, None, "must map exactly"),
     ],
 )
@@ -263,6 +264,8 @@ def test_bad_material_field_writes_nothing(tmp_path, specimen, rng, key, index, 
         del field["poissons_ratio"]
     elif index is None:
         field[key] = field[key][:-1]
+    elif index == "all":
+        field[key] = [value] * specimen.tet_count
     else:
         field[key][index] = value
     with pytest.raises(InputError, match=message):
@@ -432,6 +435,27 @@ def test_reads_foreign_left_handed_tetmesh(tmp_path):
     stage.Save()
     mesh = read_tetmesh_usd(tmp_path / "foreign.usda")
     assert mesh.volumes()[0] == pytest.approx(1 / 6)
+
+
+def test_reads_an_indexed_material_field(tmp_path):
+    """Another tool may write the field as an indexed primvar: it reads back flattened."""
+    from pxr import Sdf, Usd, UsdGeom, Vt
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "indexed.usda"))
+    tetmesh = UsdGeom.TetMesh.Define(stage, "/Tet")
+    tetmesh.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)])
+    tetmesh.CreateTetVertexIndicesAttr([(0, 1, 2, 3), (1, 2, 3, 4)])
+    primvars = UsdGeom.PrimvarsAPI(tetmesh)
+    for name, values in (("youngsModulus", [4e3, 6e3]), ("poissonsRatio", [0.2, 0.4])):
+        primvar = primvars.CreatePrimvar(
+            f"tissue:{name}", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform
+        )
+        primvar.Set(values)
+        primvar.SetIndices(Vt.IntArray([1, 0]))
+    stage.Save()
+    field = read_material_field_usd(tmp_path / "indexed.usda")
+    np.testing.assert_array_equal(field["youngs_modulus_Pa"], [6e3, 4e3])
+    np.testing.assert_array_equal(field["poissons_ratio"], [0.4, 0.2])
 
 
 def test_fe_core_materials_round_trip(tmp_path, specimen):

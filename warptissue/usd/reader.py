@@ -154,7 +154,7 @@ def read_material_field_usd(
     field = {}
     for key, (name, _) in MATERIAL_FIELD_PRIMVARS.items():
         primvar = primvars.GetPrimvar(name)
-        value = primvar.Get() if primvar else None
+        value = primvar.ComputeFlattened() if primvar else None
         if value is None:
             raise InputError(f"TetMesh {prim.GetPath()} has no primvars:{name}", path=path)
         if primvar.GetInterpolation() != UsdGeom.Tokens.uniform or len(value) != tet_count:

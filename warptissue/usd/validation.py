@@ -161,7 +161,7 @@ def _material_field_findings(stage: object) -> list[str]:
             problems = []
             if primvar.GetInterpolation() != UsdGeom.Tokens.uniform:
                 problems.append(f"interpolation is {primvar.GetInterpolation()}, not uniform")
-            value = primvar.Get()
+            value = primvar.ComputeFlattened()
             if value is None:
                 problems.append("no default value")
             else:

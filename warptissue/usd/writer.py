@@ -286,7 +286,10 @@ def material_field_problems(key: str, values: Any, *, count: int) -> list[str]:
         One sentence per problem: shape, non-finite values, values out of range (the first
         offending index and value named).
     """
-    array = np.asarray(values, dtype=np.float64)
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        return [f"{key} is not an array of numbers"]
     if array.shape != (count,):
         return [f"{key} has shape {array.shape}, expected ({count},)"]
     problems = []
