@@ -322,7 +322,12 @@ def test_cli_fit_field_writes_outputs_and_reports_bad_input(tmp_path, capsys):
         ]
     )
     assert status == 0
-    from warptissue.usd import read_material_usd, read_tetmesh_usd, validate_stage
+    from warptissue.usd import (
+        read_material_field_usd,
+        read_material_usd,
+        read_tetmesh_usd,
+        validate_stage,
+    )
 
     scene = tmp_path / "pillow.usda"
     assert validate_stage(scene) == []
@@ -333,7 +338,20 @@ def test_cli_fit_field_writes_outputs_and_reports_bad_input(tmp_path, capsys):
         "youngs_modulus_Pa": summary["youngs_modulus_Pa"],
         "poissons_ratio": summary["poissons_ratio"],
     }
-    assert read_tetmesh_usd(scene).tet_count == 15 * 5
+    scene_mesh = read_tetmesh_usd(scene)
+    assert scene_mesh.tet_count == 15 * 5
+    # The per-tet field in the scene is the fitted field of the CSV (per hexahedron, exact
+    # decimal round trip) and of the VTU, tet for tet; the regions are the hexahedra.
+    scene_field = read_material_field_usd(scene)
+    cells = np.genfromtxt(out / "field_C_cells.csv", delimiter=",", names=True)
+    np.testing.assert_array_equal(np.unique(scene_mesh.tet_regions), cells["cell"])
+    import meshio
+
+    vtu = meshio.read(out / "field_C.vtu")
+    for key in ("youngs_modulus_Pa", "poissons_ratio"):
+        np.testing.assert_array_equal(scene_field[key], cells[key][scene_mesh.tet_regions])
+        np.testing.assert_array_equal(scene_field[key], vtu.cell_data[key][0])
+    assert np.ptp(scene_field["youngs_modulus_Pa"]) > 0  # a field, not the homogeneous value
     for name in (
         "field_C.json",
         "field_C_cells.csv",
@@ -343,9 +361,6 @@ def test_cli_fit_field_writes_outputs_and_reports_bad_input(tmp_path, capsys):
         "field_summary.csv",
     ):
         assert (out / name).stat().st_size > 0
-    import meshio
-
-    vtu = meshio.read(out / "field_C.vtu")
     assert vtu.cell_data["youngs_modulus_Pa"][0].shape == (15 * 5,)
     capsys.readouterr()
     bad = tmp_path / "bad.csv"

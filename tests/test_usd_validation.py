@@ -102,3 +102,47 @@ def test_surface_faces_must_match(tmp_path, mesh):
     spec.default = Vt.Vec3iArray.FromNumpy(np.ascontiguousarray(faces[:-1]))
     asset.Save()
     assert len(_findings_named(validate_stage(paths.root), "SurfaceFaces")) == 1
+
+
+def test_material_field_values_sizes_and_interpolation(tmp_path, mesh):
+    from pxr import Sdf, UsdGeom, Vt
+
+    field = {
+        "youngs_modulus_Pa": np.linspace(1e3, 2e3, mesh.tet_count),
+        "poissons_ratio": np.linspace(0.1, 0.45, mesh.tet_count),
+    }
+    paths = write_simulation_usd(
+        tmp_path / "mf.usda", mesh, material=MATERIAL, material_field=field
+    )
+    assert validate_stage(paths.root) == []
+    asset = Sdf.Layer.FindOrOpen(str(paths.asset))
+    volume = "/World/Specimen/Volume.primvars:tissue:"
+    surface = "/World/Specimen/Surface.primvars:tissue:"
+    nu = field["poissons_ratio"].copy()
+    nu[7] = 0.5
+    asset.GetAttributeAtPath(volume + "poissonsRatio").default = Vt.DoubleArray.FromNumpy(nu)
+    youngs = asset.GetAttributeAtPath(surface + "youngsModulus")
+    faces = np.asarray(youngs.default).copy()
+    faces[2] = -1.0
+    youngs.default = Vt.DoubleArray.FromNumpy(faces)
+    short = field["youngs_modulus_Pa"][:-1].copy()
+    asset.GetAttributeAtPath(volume + "youngsModulus").default = Vt.DoubleArray.FromNumpy(short)
+    asset.GetAttributeAtPath(surface + "poissonsRatio").SetInfo(
+        "interpolation", UsdGeom.Tokens.vertex
+    )
+    asset.Save()
+    findings = _findings_named(validate_stage(paths.root), "MaterialField")
+    assert len(findings) == 4
+    assert any(
+        "Volume.primvars:tissue:poissonsRatio" in f and "index 7: 0.5" in f for f in findings
+    )
+    assert any(
+        "Surface.primvars:tissue:youngsModulus" in f and "index 2: -1.0" in f for f in findings
+    )
+    assert any(
+        "Volume.primvars:tissue:youngsModulus" in f and f"expected ({mesh.tet_count},)" in f
+        for f in findings
+    )
+    assert any(
+        "Surface.primvars:tissue:poissonsRatio" in f and "not uniform" in f for f in findings
+    )

@@ -9,6 +9,7 @@ from warptissue.errors import InputError, MeshError
 from warptissue.mesh import TetMesh, block_mesh, graded_coordinates, to_tet10
 from warptissue.usd import (
     Indenter,
+    read_material_field_usd,
     read_material_usd,
     read_tetmesh_usd,
     validate_stage,
@@ -180,6 +181,98 @@ def test_tet10_exports_corner_tets(tmp_path, specimen, rng):
     assert validate_stage(paths.root) == []
 
 
+def _material_field(mesh: TetMesh, rng: np.random.Generator) -> dict:
+    """A heterogeneous field with values no float32 can hold (exact float64 round trip)."""
+    return {
+        "youngs_modulus_Pa": rng.uniform(2e3, 9e3, mesh.tet_count) * (1.0 + 1e-13),
+        "poissons_ratio": rng.uniform(-0.2, 0.49, mesh.tet_count),
+    }
+
+
+def test_material_field_round_trip(tmp_path, specimen, rng):
+    from pxr import Sdf, Usd, UsdGeom
+
+    field = _material_field(specimen, rng)
+    paths = write_simulation_usd(
+        tmp_path / "h.usda",
+        specimen,
+        material={"model": "linear_elastic", "youngs_modulus_Pa": 5e3, "poissons_ratio": 0.3},
+        result=_result(specimen, rng, steps=1),
+        material_field=field,
+    )
+    back = read_material_field_usd(paths.root)
+    assert back.keys() == field.keys()
+    for key, values in field.items():
+        assert back[key].dtype == np.float64
+        np.testing.assert_array_equal(back[key], values)
+    # The homogeneous material stays bound for simulators that read one.
+    assert read_material_usd(paths.root)["youngs_modulus_Pa"] == pytest.approx(5e3)
+    # Static material data: defaults in the asset layer, nothing in the results layer.
+    asset = Sdf.Layer.FindOrOpen(str(paths.asset))
+    results = Sdf.Layer.FindOrOpen(str(paths.results))
+    for name in ("tissue:youngsModulus", "tissue:poissonsRatio"):
+        for prim in ("Volume", "Surface"):
+            attr_path = f"/World/Specimen/{prim}.primvars:{name}"
+            assert asset.GetAttributeAtPath(attr_path).HasDefaultValue()
+            assert results.GetAttributeAtPath(attr_path) is None
+    stage = Usd.Stage.Open(str(paths.root))
+    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath("/World/Specimen/Volume"))
+    youngs = volume.GetPrimvar("tissue:youngsModulus")
+    assert youngs.GetInterpolation() == "uniform"
+    assert youngs.GetTypeName() == Sdf.ValueTypeNames.DoubleArray
+    assert youngs.GetAttr().GetCustomDataByKey("unit") == "Pa"
+    assert volume.GetPrimvar("tissue:poissonsRatio").GetAttr().GetCustomDataByKey("unit") == "1"
+    # Each render face carries the value of the tet it bounds.
+    surface_prim = stage.GetPrimAtPath("/World/Specimen/Surface")
+    owners = np.asarray(surface_prim.GetAttribute("tissue:volumeTetIndices").Get())
+    surface = UsdGeom.PrimvarsAPI(surface_prim)
+    for key, name in (
+        ("youngs_modulus_Pa", "tissue:youngsModulus"),
+        ("poissons_ratio", "tissue:poissonsRatio"),
+    ):
+        primvar = surface.GetPrimvar(name)
+        assert primvar.GetInterpolation() == "uniform"
+        np.testing.assert_array_equal(np.asarray(primvar.Get()), field[key][owners])
+    # The material regions (fitted groups) come back one to one with the field's tets.
+    np.testing.assert_array_equal(read_tetmesh_usd(paths.root).tet_regions, specimen.tet_regions)
+    assert validate_stage(paths.root) == []
+
+
+def test_material_field_of_a_tet10_mesh_is_per_corner_tet(tmp_path, specimen, rng):
+    field = _material_field(specimen, rng)
+    paths = write_simulation_usd(tmp_path / "q.usda", to_tet10(specimen), material_field=field)
+    back = read_material_field_usd(paths.root)
+    np.testing.assert_array_equal(back["poissons_ratio"], field["poissons_ratio"])
+    assert validate_stage(paths.root) == []
+
+
+@pytest.mark.parametrize(
+    ("key", "index", "value", "message"),
+    [
+        ("poissons_ratio", 3, 0.5, "poissons_ratio must be in \\(-1, 0.5\\).*index 3"),
+        ("poissons_ratio", 0, -1.0, "poissons_ratio must be in"),
+        ("youngs_modulus_Pa", 5, 0.0, "youngs_modulus_Pa must be > 0.*index 5"),
+        ("youngs_modulus_Pa", 1, np.nan, "non-finite.*index 1"),
+        ("youngs_modulus_Pa", None, None, "shape"),
+        ("poissons_ratio", "all", "soft", "not an array of numbers"),
+        (None, None, None, "must map exactly"),
+    ],
+)
+def test_bad_material_field_writes_nothing(tmp_path, specimen, rng, key, index, value, message):
+    field = _material_field(specimen, rng)
+    if key is None:
+        del field["poissons_ratio"]
+    elif index is None:
+        field[key] = field[key][:-1]
+    elif index == "all":
+        field[key] = [value] * specimen.tet_count
+    else:
+        field[key][index] = value
+    with pytest.raises(InputError, match=message):
+        write_simulation_usd(tmp_path / "bad.usda", specimen, material_field=field)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_material_attributes_and_schema(tmp_path, specimen):
     from pxr import Usd
 
@@ -323,6 +416,11 @@ def test_read_errors(tmp_path):
     empty.write_text("#usda 1.0\n")
     with pytest.raises(InputError, match="no UsdGeom.TetMesh"):
         read_tetmesh_usd(empty)
+    plain = write_simulation_usd(
+        tmp_path / "plain.usda", block_mesh(*[np.linspace(0, 0.01, 2)] * 3)
+    )
+    with pytest.raises(InputError, match="no primvars:tissue:youngsModulus"):
+        read_material_field_usd(plain.root)
 
 
 def test_reads_foreign_left_handed_tetmesh(tmp_path):
@@ -337,6 +435,27 @@ def test_reads_foreign_left_handed_tetmesh(tmp_path):
     stage.Save()
     mesh = read_tetmesh_usd(tmp_path / "foreign.usda")
     assert mesh.volumes()[0] == pytest.approx(1 / 6)
+
+
+def test_reads_an_indexed_material_field(tmp_path):
+    """Another tool may write the field as an indexed primvar: it reads back flattened."""
+    from pxr import Sdf, Usd, UsdGeom, Vt
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "indexed.usda"))
+    tetmesh = UsdGeom.TetMesh.Define(stage, "/Tet")
+    tetmesh.CreatePointsAttr([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1)])
+    tetmesh.CreateTetVertexIndicesAttr([(0, 1, 2, 3), (1, 2, 3, 4)])
+    primvars = UsdGeom.PrimvarsAPI(tetmesh)
+    for name, values in (("youngsModulus", [4e3, 6e3]), ("poissonsRatio", [0.2, 0.4])):
+        primvar = primvars.CreatePrimvar(
+            f"tissue:{name}", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform
+        )
+        primvar.Set(values)
+        primvar.SetIndices(Vt.IntArray([1, 0]))
+    stage.Save()
+    field = read_material_field_usd(tmp_path / "indexed.usda")
+    np.testing.assert_array_equal(field["youngs_modulus_Pa"], [6e3, 4e3])
+    np.testing.assert_array_equal(field["poissons_ratio"], [0.4, 0.2])
 
 
 def test_fe_core_materials_round_trip(tmp_path, specimen):

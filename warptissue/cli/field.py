@@ -6,9 +6,11 @@ and test markers, the homogeneous linear estimate (Eq. 13-14) and the heterogene
 are estimated, and both are evaluated on the test markers (Table 3). Writes per load set
 ``field_<set>.json``, ``field_<set>_cells.csv``, ``field_<set>_test_markers.csv``,
 ``field_<set>.png`` (E and nu maps) and ``field_<set>.vtu``, plus ``field_summary.csv``.
-With ``--usd PATH`` each load set's mesh is also written as a USD scene whose physics
-material is the homogeneous linear estimate (E0, nu0); the per-cell (E, nu) field stays in
-the ``.vtu`` and ``_cells.csv`` (the USD writer has no per-tet material primvars). One load
+With ``--usd PATH`` each load set's mesh is also written as a USD scene: the heterogeneous
+(E, nu) per tet as the uniform primvars ``tissue:youngsModulus`` (Pa) and
+``tissue:poissonsRatio`` of the TetMesh (and per face of the surface Mesh), the hexahedron
+(group) of each tet as its ``materialRegion`` subset, and, bound as the one physics material
+for simulators that read a single one, the homogeneous linear estimate (E0, nu0). One load
 set writes PATH; several write ``STEM_<set>.usda`` beside it.
 """
 
@@ -50,7 +52,8 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         type=Path,
         default=None,
         metavar="PATH",
-        help="write the mesh with the homogeneous estimate as a USD scene (.usda)",
+        help="write the mesh, the per-tet (E, nu) field and the homogeneous estimate as a "
+        "USD scene (.usda)",
     )
     parser.add_argument(
         "--density-kg-per-m3", type=float, default=1000.0, help="density of the --usd material"
@@ -125,11 +128,19 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _write_usd(path: Path, args: argparse.Namespace, result: Any) -> None:
-    """The load set's mesh bound to the homogeneous linear estimate, with fit provenance."""
+    """The load set's mesh with the per-tet (E, nu) field, bound to the homogeneous linear
+    estimate (the single material for simulators that read one), with fit provenance."""
+    import numpy as np
+
     from warptissue.materials import LinearElastic
     from warptissue.usd import write_simulation_usd
 
     homogeneous = result.homogeneous
+    mesh = result.grid.mesh
+    group = mesh.tet_regions
+    youngs = result.field.youngs_modulus_Pa[group]
+    nu = result.field.poissons_ratio[group]
+    volume_m3 = mesh.volumes()
     provenance = {
         "data_file": str(args.markers),
         "forces_file": str(args.forces),
@@ -142,12 +153,17 @@ def _write_usd(path: Path, args: argparse.Namespace, result: Any) -> None:
             "field_test_max_error_m": result.field_errors["max_error_m"],
             "field_test_mean_error_m": result.field_errors["mean_error_m"],
             "per_cell_field": f"field_{result.load_set}_cells.csv",
+            "material_field": "heterogeneous estimate per tet: primvars:tissue:youngsModulus, "
+            "primvars:tissue:poissonsRatio; group = materialRegion subset (hexahedron)",
+            "field_volume_mean_youngs_modulus_Pa": float(np.average(youngs, weights=volume_m3)),
+            "field_volume_mean_poissons_ratio": float(np.average(nu, weights=volume_m3)),
         },
     }
     write_simulation_usd(
         path,
-        result.grid.mesh,
+        mesh,
         material=LinearElastic(homogeneous.youngs_modulus_Pa, homogeneous.poissons_ratio),
         provenance=provenance,
         density_kg_per_m3=args.density_kg_per_m3,
+        material_field={"youngs_modulus_Pa": youngs, "poissons_ratio": nu},
     )

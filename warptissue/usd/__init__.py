@@ -9,7 +9,11 @@ from warptissue.usd.schema import register_schema_plugin
 
 register_schema_plugin()
 
-from warptissue.usd.reader import read_material_usd, read_tetmesh_usd  # noqa: E402
+from warptissue.usd.reader import (  # noqa: E402
+    read_material_field_usd,
+    read_material_usd,
+    read_tetmesh_usd,
+)
 from warptissue.usd.validation import validate_stage  # noqa: E402
 from warptissue.usd.writer import (  # noqa: E402
     Indenter,
@@ -21,6 +25,7 @@ from warptissue.usd.writer import (  # noqa: E402
 __all__ = [
     "Indenter",
     "UsdScenePaths",
+    "read_material_field_usd",
     "read_material_usd",
     "read_tetmesh_usd",
     "register_schema_plugin",

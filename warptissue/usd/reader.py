@@ -14,11 +14,18 @@ from warptissue.usd.writer import (
     FACE_SET_FAMILY,
     INDENTER,
     MATERIAL,
+    MATERIAL_FIELD_PRIMVARS,
     NODE_SET_FAMILY,
     REGION_FAMILY,
 )
 
-__all__ = ["open_stage", "read_material_usd", "read_probe_curve_usd", "read_tetmesh_usd"]
+__all__ = [
+    "open_stage",
+    "read_material_field_usd",
+    "read_material_usd",
+    "read_probe_curve_usd",
+    "read_tetmesh_usd",
+]
 
 
 def open_stage(path: str | Path) -> Any:
@@ -115,6 +122,49 @@ def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMe
         face_sets=face_sets,
         tet_regions=tet_regions,
     )
+
+
+def read_material_field_usd(
+    path: str | Path, *, prim_path: str | None = None
+) -> dict[str, np.ndarray]:
+    """Read the per-tet material field of a TetMesh.
+
+    Args:
+        path: A scene written by :func:`warptissue.usd.write_simulation_usd` with a
+            ``material_field``, or any stage whose TetMesh has those primvars.
+        prim_path: The TetMesh prim; None takes the first TetMesh in traversal order.
+
+    Returns:
+        ``{"youngs_modulus_Pa": (M,), "poissons_ratio": (M,)}``, float64, in the order of
+        ``tetVertexIndices`` (the order of :func:`read_tetmesh_usd`'s tets), from the uniform
+        primvars ``primvars:tissue:youngsModulus`` and ``primvars:tissue:poissonsRatio``.
+
+    Raises:
+        InputError: A primvar is missing, has no default value, is not uniform or does not
+            hold one value per tet.
+    """
+    from pxr import UsdGeom
+
+    path = Path(path)
+    stage = open_stage(path)
+    prim = _find_tetmesh(stage, path, prim_path)
+    tetmesh = UsdGeom.TetMesh(prim)
+    tet_count = len(tetmesh.GetTetVertexIndicesAttr().Get() or [])
+    primvars = UsdGeom.PrimvarsAPI(prim)
+    field = {}
+    for key, (name, _) in MATERIAL_FIELD_PRIMVARS.items():
+        primvar = primvars.GetPrimvar(name)
+        value = primvar.ComputeFlattened() if primvar else None
+        if value is None:
+            raise InputError(f"TetMesh {prim.GetPath()} has no primvars:{name}", path=path)
+        if primvar.GetInterpolation() != UsdGeom.Tokens.uniform or len(value) != tet_count:
+            raise InputError(
+                f"primvars:{name} of {prim.GetPath()} must be uniform with one value per tet "
+                f"({tet_count}); it is {primvar.GetInterpolation()} with {len(value)}",
+                path=path,
+            )
+        field[key] = np.asarray(value, dtype=np.float64)
+    return field
 
 
 def read_material_usd(path: str | Path) -> dict[str, Any]:

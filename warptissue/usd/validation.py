@@ -5,8 +5,9 @@ usd-core 26.8 removed ``UsdUtils.ComplianceChecker``; its checks live on as vali
 what those validators do not: inverted tetrahedra (``UsdGeom.TetMesh.FindInvertedElements``) in
 the rest shape and at every time sample, the surface faces against
 ``UsdGeom.TetMesh.ComputeSurfaceFaces``, SI stage units, the layering rules (no time samples in
-an asset layer, only time samples in a results layer), and physically valid deformable
-material values.
+an asset layer, only time samples in a results layer), physically valid deformable
+material values, and the per-tet material field primvars where a TetMesh or Mesh has them
+(uniform, one value per tet or face, finite, E > 0, -1 < nu < 0.5).
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from warptissue.usd.schema import (
     VOLUME_DEFORMABLE_MATERIAL_API,
     applied_schema_names,
 )
+from warptissue.usd.writer import MATERIAL_FIELD_PRIMVARS, material_field_problems
 
 __all__ = ["validate_stage"]
 
@@ -138,6 +140,36 @@ def _material_findings(stage: object) -> list[str]:
     return findings
 
 
+def _material_field_findings(stage: object) -> list[str]:
+    from pxr import UsdGeom
+
+    findings = []
+    for prim in stage.Traverse():
+        if prim.IsA(UsdGeom.TetMesh):
+            counts = UsdGeom.TetMesh(prim).GetTetVertexIndicesAttr().Get()
+        elif prim.IsA(UsdGeom.Mesh):
+            counts = UsdGeom.Mesh(prim).GetFaceVertexCountsAttr().Get()
+        else:
+            continue
+        count = len(counts or [])
+        primvars = UsdGeom.PrimvarsAPI(prim)
+        for key, (name, _) in MATERIAL_FIELD_PRIMVARS.items():
+            primvar = primvars.GetPrimvar(name)
+            if not (primvar and primvar.HasAuthoredValue()):
+                continue
+            where = f"{prim.GetPath()}.primvars:{name}"
+            problems = []
+            if primvar.GetInterpolation() != UsdGeom.Tokens.uniform:
+                problems.append(f"interpolation is {primvar.GetInterpolation()}, not uniform")
+            value = primvar.ComputeFlattened()
+            if value is None:
+                problems.append("no default value")
+            else:
+                problems += material_field_problems(key, np.asarray(value), count=count)
+            findings += [f"Error: (warptissue:MaterialField) {where}: {p}" for p in problems]
+    return findings
+
+
 def validate_stage(path: str | Path) -> list[str]:
     """Validate a USD scene and return its findings (an empty list means valid).
 
@@ -154,4 +186,5 @@ def validate_stage(path: str | Path) -> list[str]:
         + _tetmesh_findings(stage)
         + _layer_findings(stage)
         + _material_findings(stage)
+        + _material_field_findings(stage)
     )

@@ -12,7 +12,9 @@ Layout (see the README's "USD export"):
 Prims: ``/World`` (provenance in customData), ``/World/Specimen`` (deformable body),
 ``/World/Specimen/Volume`` (``UsdGeom.TetMesh``), ``/World/Specimen/Surface`` (triangle
 ``UsdGeom.Mesh`` for renderers), ``/World/Materials/Tissue`` (physics material),
-``/World/Indenter``.
+``/World/Indenter``. A heterogeneous material field (per-tet Young's modulus and Poisson's
+ratio, :data:`MATERIAL_FIELD_PRIMVARS`) is written as uniform primvars of the TetMesh and of
+the surface Mesh (each face takes the value of the tet it bounds), in the asset layer.
 """
 
 from __future__ import annotations
@@ -38,10 +40,12 @@ from warptissue.usd.schema import (
 
 __all__ = [
     "FACE_SET_FAMILY",
+    "MATERIAL_FIELD_PRIMVARS",
     "NODE_SET_FAMILY",
     "REGION_FAMILY",
     "Indenter",
     "UsdScenePaths",
+    "material_field_problems",
     "write_material_usd",
     "write_simulation_usd",
 ]
@@ -52,6 +56,11 @@ REGION_FAMILY = "materialRegion"
 """GeomSubset family of the TetMesh's material regions (elementType tetrahedron, partition)."""
 FACE_SET_FAMILY = "faceSet"
 """GeomSubset family of the surface Mesh's boundary face sets (elementType face)."""
+MATERIAL_FIELD_PRIMVARS = {
+    "youngs_modulus_Pa": ("tissue:youngsModulus", "Pa"),
+    "poissons_ratio": ("tissue:poissonsRatio", "1"),
+}
+"""Per-tet material field: ``material_field`` key -> (uniform primvar name, unit customData)."""
 
 WORLD = "/World"
 SPECIMEN = "/World/Specimen"
@@ -261,6 +270,82 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
 def _check_density(density_kg_per_m3: float) -> None:
     if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
         raise InputError("density must be positive", value=density_kg_per_m3)
+
+
+def material_field_problems(key: str, values: Any, *, count: int) -> list[str]:
+    """What is wrong with one array of a per-tet material field (empty when it is valid).
+
+    Args:
+        key: ``"youngs_modulus_Pa"`` (must be > 0) or ``"poissons_ratio"`` (must lie in the
+            open interval (-1, 0.5): a linear elastic solid is stable there, and nu = 0.5
+            makes the bulk modulus infinite).
+        values: The array, one value per element.
+        count: The expected number of values (tets, or faces of the surface Mesh).
+
+    Returns:
+        One sentence per problem: shape, non-finite values, values out of range (the first
+        offending index and value named).
+    """
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        return [f"{key} is not an array of numbers"]
+    if array.shape != (count,):
+        return [f"{key} has shape {array.shape}, expected ({count},)"]
+    problems = []
+    finite = np.isfinite(array)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite)[0])
+        problems.append(f"{key} holds non-finite values (first at index {bad}: {array[bad]})")
+    if key == "youngs_modulus_Pa":
+        invalid = finite & ~(array > 0.0)
+        allowed = "> 0"
+    else:
+        invalid = finite & ~((array > -1.0) & (array < 0.5))
+        allowed = "in (-1, 0.5)"
+    if invalid.any():
+        bad = int(np.flatnonzero(invalid)[0])
+        problems.append(
+            f"{key} must be {allowed}: {int(invalid.sum())} values are not "
+            f"(first at index {bad}: {float(array[bad])!r})"
+        )
+    return problems
+
+
+def _material_field_arrays(material_field: Mapping[str, Any], *, tet_count: int) -> dict:
+    """Validated per-tet arrays of ``material_field`` (see :func:`write_simulation_usd`)."""
+    if not isinstance(material_field, Mapping) or set(material_field) != set(
+        MATERIAL_FIELD_PRIMVARS
+    ):
+        keys = sorted(material_field) if isinstance(material_field, Mapping) else None
+        raise InputError(
+            f"material_field must map exactly {sorted(MATERIAL_FIELD_PRIMVARS)} to per-tet arrays",
+            value=keys,
+        )
+    arrays = {}
+    for key in MATERIAL_FIELD_PRIMVARS:
+        problems = material_field_problems(key, material_field[key], count=tet_count)
+        if problems:
+            raise InputError(f"material_field: {problems[0]}")
+        arrays[key] = np.asarray(material_field[key], dtype=np.float64)
+    return arrays
+
+
+def _material_field_primvars(
+    stage: Any, arrays: Mapping[str, np.ndarray], *, owners: np.ndarray
+) -> None:
+    """Per-tet values on the TetMesh and per-face values (of the owning tet) on the surface."""
+    from pxr import Sdf, UsdGeom, Vt
+
+    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(VOLUME))
+    surface = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(SURFACE))
+    for key, (name, unit) in MATERIAL_FIELD_PRIMVARS.items():
+        for api, values in ((volume, arrays[key]), (surface, arrays[key][owners])):
+            primvar = api.CreatePrimvar(
+                name, Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform
+            )
+            primvar.Set(Vt.DoubleArray.FromNumpy(np.ascontiguousarray(values)))
+            primvar.GetAttr().SetCustomDataByKey("unit", unit)
 
 
 def _set_stage_metadata(layer: Any) -> None:
@@ -560,6 +645,7 @@ def write_simulation_usd(
     provenance: Mapping[str, Any] | None = None,
     density_kg_per_m3: float = 1000.0,
     indenter: Indenter | None = None,
+    material_field: Mapping[str, Any] | None = None,
 ) -> UsdScenePaths:
     """Write a specimen mesh, its material and a simulation result as a layered USD scene.
 
@@ -581,6 +667,13 @@ def write_simulation_usd(
             customData under ``warptissue``, with software versions added.
         density_kg_per_m3: Mass density written as ``physics:density``.
         indenter: The indenter to draw; None draws none.
+        material_field: A heterogeneous linear elastic field, ``{"youngs_modulus_Pa": (M,),
+            "poissons_ratio": (M,)}`` with E > 0 Pa and -1 < nu < 0.5, one value per tet of
+            ``mesh`` (TET10: per corner tet, one to one). Written to the asset layer as the
+            uniform primvars ``primvars:tissue:youngsModulus`` (customData unit ``Pa``) and
+            ``primvars:tissue:poissonsRatio`` (unit ``1``) of the TetMesh, and per face
+            (the value of the tet each face bounds) of the surface Mesh. ``material`` stays
+            the one homogeneous material bound for simulators that read a single one.
 
     Returns:
         The paths written.
@@ -593,6 +686,11 @@ def write_simulation_usd(
     _check_density(density_kg_per_m3)
     if mesh.tet_count == 0:
         raise MeshError("cannot export a mesh without tetrahedra")
+    field_arrays = (
+        None
+        if material_field is None
+        else _material_field_arrays(material_field, tet_count=mesh.tet_count)
+    )
     volumes = mesh.volumes()
     if np.any(volumes <= 0):
         bad = int(np.flatnonzero(volumes <= 0)[0])
@@ -623,6 +721,8 @@ def write_simulation_usd(
     surface_nodes, owners = _surface_prim(
         stage, mesh, tets=tets, rest=rest, faces=faces, new_index=new_index
     )
+    if field_arrays is not None:
+        _material_field_primvars(stage, field_arrays, owners=owners)
 
     if material is not None:
         from pxr import UsdShade
