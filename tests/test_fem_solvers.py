@@ -157,38 +157,3 @@ def test_fe_agrees_with_the_closed_form_fitting_models(spec):
     stress, _ = _nominal_stress(material, stretches)
     closed_form = model.nominal_stress_Pa(stretches, "uniaxial")
     np.testing.assert_allclose(stress, closed_form, rtol=5e-3)
-
-
-def test_extrapolated_predictor_saves_iterations_and_keeps_the_path():
-    """Secant-extrapolated start states reach the same converged states in fewer iterations."""
-    material = MooneyRivlin(80.0, 20.0, 2.0e5)
-    mesh = _cube()
-    weights = np.zeros((mesh.node_count, 3))
-    weights[mesh.node_sets["zmax"], 2] = 1.0
-    conditions = _compression_conditions(mesh)
-    loads = SIDE_M * np.linspace(0.05, 0.3, 6)
-    paths = {
-        extrapolate: solve_quasistatic(
-            Assembler(mesh, material, device="cpu"),
-            conditions,
-            loads,
-            reaction_weights=weights,
-            tolerance=1e-10,
-            extrapolate=extrapolate,
-        )
-        for extrapolate in (False, True)
-    }
-    plain, secant = paths[False], paths[True]
-    assert plain.completed and secant.completed
-    np.testing.assert_allclose(secant.reaction, plain.reaction, rtol=1e-9)
-    np.testing.assert_allclose(
-        secant.displacement_m, plain.displacement_m, rtol=0, atol=1e-9 * SIDE_M
-    )
-    assert [record["predictor"] for record in secant.history] == ["linearized"] + 5 * [
-        "extrapolated"
-    ]
-    assert {record["predictor"] for record in plain.history} == {"linearized"}
-    assert secant.newton_iterations[1:].sum() < plain.newton_iterations[1:].sum()
-    print(
-        f"Newton iterations: linearized {plain.newton_iterations}, secant {secant.newton_iterations}"
-    )

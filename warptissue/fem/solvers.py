@@ -243,8 +243,7 @@ class QuasistaticResult:
         message: What happened, in one sentence.
         cutbacks: Increment halvings used.
         linear_solver: The linear solver used.
-        history: One record per attempted increment (load, predictor ``"extrapolated"`` or
-            ``"linearized"``, converged, iterations, reason).
+        history: One record per attempted increment (load, converged, iterations, reason).
     """
 
     loads: np.ndarray
@@ -289,26 +288,15 @@ def _newton_increment(
     tolerance: float,
     force_floor: float,
     max_iterations: int,
-    predictor: np.ndarray | None = None,
 ) -> _Step:
-    """Newton iterations for one load increment from the converged state ``u_start``.
-
-    Without ``predictor`` the first iteration is the linearized predictor: it applies
-    ``prescribed_increment`` to the constrained dofs and carries ``-K_fp du_p`` to the free
-    ones. With ``predictor`` (a start state that already holds the new prescribed values, e.g.
-    extrapolated from the last two converged states) every iteration is a plain Newton
-    correction of it, and ``prescribed_increment`` must be zero.
-    """
-    u = u_start.copy() if predictor is None else predictor.copy()
+    """Newton iterations for one load increment, starting from a converged state."""
+    u = u_start.copy()
     linear_total = 0
     dev = assembler.device
     increment_wp = wp.array(prescribed_increment, dtype=wp.vec3d, device=dev)
     k_times_increment = wp.zeros_like(increment_wp)
     assembly = assembler.assemble(u)
-    if predictor is not None and not assembly.min_jacobian > 0.0:
-        return _Step(False, u, 0, 0, "the extrapolated predictor inverts an element")
     residual = assembly.residual.numpy()
-    linearized = predictor is None
     for iteration in range(1, max_iterations + 1):
         if iteration == 1:
             wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
@@ -325,8 +313,7 @@ def _newton_increment(
         old_norm = _norm(residual * free)
         old_energy = assembly.energy_J
         slope = float(np.sum(residual * free * du))
-        # Backtracking line search on the free part (the prescribed increment is applied whole,
-        # and the linearized predictor is taken even where it raises the energy).
+        # Backtracking line search on the free part (the prescribed increment is applied whole).
         alpha = 1.0
         accepted = False
         for _ in range(8):
@@ -335,7 +322,7 @@ def _newton_increment(
             if check.min_jacobian > 0.0 and math.isfinite(check.energy_J):
                 new_norm = _norm(check.residual.numpy() * free)
                 if (
-                    (iteration == 1 and linearized)
+                    iteration == 1
                     or new_norm < old_norm
                     or check.energy_J <= old_energy + 1e-4 * alpha * slope
                 ):
@@ -383,7 +370,6 @@ def solve_quasistatic(
     progress_label: str = "load steps",
     load_name: str = "load",
     initial_displacement_m: np.ndarray | None = None,
-    extrapolate: bool = True,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -391,15 +377,6 @@ def solve_quasistatic(
     Newton fails (no convergence, no line-search decrease, or an inverted element) the
     increment is halved and retried, up to ``max_cutbacks`` halvings, and grows back after
     successes. When the halvings run out the path stops there, keeping what converged.
-
-    The first increment starts from the linearized predictor (the prescribed increment with
-    ``-K_fp du_p`` carried to the free dofs). Later ones, with ``extrapolate``, start from the
-    secant extrapolation of the last two converged states, ``u_n + r (u_n - u_{n-1})`` with
-    ``r = (load_{n+1} - load_n) / (load_n - load_{n-1})``, which is second-order accurate in
-    the increment where the linearized predictor is first order; when Newton fails from there
-    (or the extrapolated state inverts an element) the increment is retried from the
-    linearized predictor before it is halved. Both converge to the same state (to the
-    tolerance); the extrapolation only saves iterations (README "Performance").
 
     Args:
         assembler: The discretized body.
@@ -416,7 +393,6 @@ def solve_quasistatic(
         progress_label: The bar's label.
         load_name: What the load is called in messages (e.g. ``"depth (m)"``).
         initial_displacement_m: Start state (N, 3); zero by default (load 0).
-        extrapolate: Start increments after the first from the secant extrapolation.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -437,7 +413,6 @@ def solve_quasistatic(
     length = float(np.sum(assembler.tet_volumes)) ** (1.0 / 3.0)
     force_floor = 1e-13 * assembler.material.initial_shear_modulus_Pa * length**2
     load = 0.0
-    previous: tuple[np.ndarray, float] | None = None  # the converged state before u, its load
     reached, states, reactions, newton_counts, linear_counts = [], [], [], [], []
     message = f"converged at all {len(loads)} requested values of {load_name}"
     completed = True
@@ -457,40 +432,28 @@ def solve_quasistatic(
                 if abs(target - next_load) <= 1e-12 * max(abs(target), 1e-300):
                     next_load = target
                 prescribed = conditions.values(next_load, n) - conditions.values(load, n)
-                predictors: list[tuple[str, np.ndarray | None]] = []
-                if extrapolate and previous is not None and previous[1] != load:
-                    ratio = (next_load - load) / (load - previous[1])
-                    secant = (u + ratio * (u - previous[0])) * free + (u + prescribed) * mask
-                    predictors.append(("extrapolated", secant))
-                predictors.append(("linearized", None))
-                for predictor_name, predictor in predictors:
-                    step = _newton_increment(
-                        assembler,
-                        solver,
-                        u,
-                        prescribed if predictor is None else np.zeros_like(prescribed),
-                        free,
-                        constrained_wp,
-                        tolerance=tolerance,
-                        force_floor=force_floor,
-                        max_iterations=max_iterations,
-                        predictor=predictor,
-                    )
-                    step_newton += step.iterations
-                    step_linear += step.linear_iterations
-                    history.append(
-                        {
-                            "load": next_load,
-                            "predictor": predictor_name,
-                            "converged": step.converged,
-                            "iterations": step.iterations,
-                            "reason": step.reason,
-                        }
-                    )
-                    if step.converged:
-                        break
+                step = _newton_increment(
+                    assembler,
+                    solver,
+                    u,
+                    prescribed,
+                    free,
+                    constrained_wp,
+                    tolerance=tolerance,
+                    force_floor=force_floor,
+                    max_iterations=max_iterations,
+                )
+                step_newton += step.iterations
+                step_linear += step.linear_iterations
+                history.append(
+                    {
+                        "load": next_load,
+                        "converged": step.converged,
+                        "iterations": step.iterations,
+                        "reason": step.reason,
+                    }
+                )
                 if step.converged:
-                    previous = (u, load)
                     u, load = step.displacement, next_load
                     if next_load == target:
                         break
