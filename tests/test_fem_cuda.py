@@ -15,19 +15,8 @@ import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
-from warptissue.fem import (
-    Assembler,
-    FlatPunch,
-    IndentationProblem,
-    LinearSolver,
-    simulate_indentation,
-)
-from warptissue.fem.cudss import (
-    CudssSolver,
-    bsr33_csr_pattern,
-    bsr33_csr_values,
-    cudss_available,
-)
+from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, simulate_indentation
+from warptissue.fem.cudss import bsr33_csr_pattern, bsr33_csr_values, cudss_available
 from warptissue.materials import NeoHookean
 from warptissue.mesh import TetMesh, block_mesh, to_tet10
 
@@ -139,39 +128,6 @@ def test_cuda_equals_cpu(cpu_reference, linear_solver):
     assert force_error <= rtol
     assert displacement_error <= rtol
     assert stress_error <= rtol
-
-
-def test_cudss_refinement_steps_are_checked(rng):
-    matrix, _ = _random_bsr(rng, "cpu")
-    for bad in (-1, 1.5, True):
-        with pytest.raises(ValueError, match="refinement_steps"):
-            CudssSolver(matrix, refinement_steps=bad)
-
-
-@needs_cuda
-@pytest.mark.skipif(not cudss_available(), reason="needs nvmath-python with cuDSS")
-def test_cudss_refinement_keeps_the_solve_accurate(cpu_reference, rng):
-    """The eliminated tangent of a nearly incompressible bonded punch, solved with and without
-    iterative refinement: with it, the relative residual is at the float64 floor."""
-    problem, _, reference = cpu_reference
-    assembler = Assembler(problem.mesh, problem.material, device="cuda:0")
-    assembly = assembler.assemble(reference.displacement_m[-1])
-    mask = problem.dirichlet_conditions().mask(problem.mesh.node_count)
-    assembler.eliminate(wp.array(mask, dtype=wp.vec3d, device="cuda:0"))
-    matrix = assembly.matrix
-    nnz = matrix.nnz_sync()
-    dense = sp.bsr_matrix(
-        (matrix.values.numpy()[:nnz], matrix.columns.numpy()[:nnz], matrix.offsets.numpy()),
-        shape=(3 * matrix.nrow, 3 * matrix.nrow),
-    )
-    rhs = rng.standard_normal((matrix.nrow, 3)) * (1.0 - mask)
-    residuals = {}
-    for steps in (0, 2):
-        x = CudssSolver(matrix, refinement_steps=steps).solve(rhs)
-        residuals[steps] = np.linalg.norm(dense @ x.ravel() - rhs.ravel()) / np.linalg.norm(rhs)
-    print(f"cuDSS relative residual: {residuals}")
-    assert residuals[2] <= max(residuals[0], 1e-13)
-    assert residuals[2] <= 1e-10
 
 
 @needs_cuda

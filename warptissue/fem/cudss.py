@@ -111,9 +111,6 @@ class CudssSolver:
     Args:
         matrix: Square 3x3-block float64 BSR matrix (N x N blocks) on a CUDA device. Its
             pattern (offsets, columns) must stay fixed; its values may change between solves.
-        refinement_steps: Iterative refinement steps of each solve (cuDSS's ``ir_num_steps``;
-            2, as PARDISO on the CPU): LDL^T perturbs tiny pivots, and refinement gives back
-            the accuracy of the solve that Newton's quadratic convergence needs.
 
     Attributes:
         factorizations: Numerical factorizations done so far.
@@ -122,10 +119,8 @@ class CudssSolver:
         DeviceError: The matrix is not on a CUDA device, or cuDSS could not be loaded.
     """
 
-    def __init__(self, matrix: wps.BsrMatrix, *, refinement_steps: int = 2) -> None:
+    def __init__(self, matrix: wps.BsrMatrix) -> None:
         device = matrix.device
-        if type(refinement_steps) is not int or refinement_steps < 0:
-            raise ValueError(f"refinement_steps must be an int >= 0, got {refinement_steps!r}")
         if not device.is_cuda:
             raise DeviceError(f"cuDSS needs a CUDA device; the matrix is on {device}")
         try:
@@ -167,7 +162,6 @@ class CudssSolver:
                     options=options,
                     execution="cuda",
                 )
-                self._solver.solution_config.ir_num_steps = refinement_steps
                 bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
                 self._solver.plan()
             except (RuntimeError, OSError) as exc:
