@@ -45,6 +45,28 @@ def deformation_gradient(
     return f
 
 
+@wp.func
+def quadrature_point_response(
+    params: MaterialParams,
+    f: wp.mat33d,
+    mixed: int,
+    element_pressure: wp.float64,
+    with_tangent: int,
+):
+    """Energy density, P and A at one quadrature point of either formulation (Pa).
+
+    Displacement formulation (``mixed == 0``): the full pointwise response, U(J) included.
+    Mixed: ``psi_dev`` only, and P and A carry the element's constant pressure
+    ``element_pressure = U'(Jbar)`` (its stiffness ``U''(Jbar)`` is the element's rank-one
+    term, added by the caller).
+    """
+    if mixed == 0:
+        return material_response(params, f, with_tangent)
+    psi, p, a_mat = deviatoric_response(params, f, with_tangent)
+    p, a_mat = add_pressure_terms(p, a_mat, f, element_pressure, wp.float64(0.0), with_tangent)
+    return psi, p, a_mat
+
+
 @wp.kernel
 def assemble_elements_kernel(
     params: MaterialParams,
@@ -101,15 +123,7 @@ def assemble_elements_kernel(
         if j <= wp.float64(0.0):
             continue
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = deviatoric_response(params, f, with_tangent)
-        pressure = p_bar
-        stiffness = wp.float64(0.0)
-        if mixed == 0:
-            u, du, ddu = volumetric_energy(params, j)
-            psi += u
-            pressure = du
-            stiffness = ddu
-        p, a_mat = add_pressure_terms(p, a_mat, f, pressure, stiffness, with_tangent)
+        psi, p, a_mat = quadrature_point_response(params, f, mixed, p_bar, with_tangent)
         element_energy += psi * dv
         for a in range(npe):
             grad_a = shape_gradients[e, q, a]
@@ -205,12 +219,7 @@ def cauchy_stress_kernel(
         f = deformation_gradient(e, q, tets, shape_gradients, displacement)
         j = wp.determinant(f)
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = deviatoric_response(params, f, 0)
-        pressure = p_bar
-        if mixed == 0:
-            u, du, ddu = volumetric_energy(params, j)
-            pressure = du
-        p, a_mat = add_pressure_terms(p, a_mat, f, pressure, wp.float64(0.0), 0)
+        psi, p, a_mat = quadrature_point_response(params, f, mixed, p_bar, 0)
         sigma += (dv / (j * volume)) * (p @ wp.transpose(f))
     stress[e, 0] = sigma[0, 0]
     stress[e, 1] = sigma[1, 1]
