@@ -137,6 +137,30 @@ def unit_direction(k: int, l: int) -> wp.mat33d:
 
 
 @wp.func
+def right_cauchy_green_variation(f: wp.mat33d, k: int, l: int) -> wp.mat33d:
+    """dC = dF^T F + F^T dF of C = F^T F in the direction dF = e_k (x) e_l."""
+    df = unit_direction(k, l)
+    return wp.transpose(df) @ f + wp.transpose(f) @ df
+
+
+@wp.func
+def with_piola_tangent_column(
+    tangent: mat99d, f: wp.mat33d, s: wp.mat33d, ds: wp.mat33d, k: int, l: int
+) -> mat99d:
+    """``tangent`` with its column (k, l) set to dP = dF S + F dS, dF = e_k (x) e_l.
+
+    The column of ``A = dP/dF`` for ``P = F S``, given the model's second Piola-Kirchhoff
+    stress ``s`` and its variation ``ds`` along ``dC = right_cauchy_green_variation(f, k, l)``.
+    """
+    dp = unit_direction(k, l) @ s + f @ ds
+    out = tangent
+    for i in range(3):
+        for j in range(3):
+            out[flat(i, j), flat(k, l)] = dp[i, j]
+    return out
+
+
+@wp.func
 def invariant_energy_derivatives(params: MaterialParams, i1b: wp.float64, i2b: wp.float64):
     """W(I1b, I2b) = sum C_i0 (I1b - 3)^i + C01 (I2b - 3) and its derivatives.
 
@@ -207,8 +231,7 @@ def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
     if with_tangent != 0:
         for k in range(3):
             for l in range(3):
-                df = unit_direction(k, l)
-                dc = wp.transpose(df) @ f + wp.transpose(f) @ df
+                dc = right_cauchy_green_variation(f, k, l)
                 di = wp.vec3d(wp.trace(dc), wp.ddot(dI2, dc), wp.ddot(dI3, dc))
                 hdi = h @ di
                 ds = wp.float64(2.0) * (
@@ -218,10 +241,7 @@ def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                     + d[1] * (di[0] * eye - dc)
                     + d[2] * (di[2] * c_inv - i3 * (c_inv @ dc @ c_inv))
                 )
-                dp = df @ s + f @ ds
-                for i in range(3):
-                    for j in range(3):
-                        tangent[flat(i, j), flat(k, l)] = dp[i, j]
+                tangent = with_piola_tangent_column(tangent, f, s, ds, k, l)
     return psi, p, tangent
 
 
@@ -283,8 +303,7 @@ def ogden_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                         theta[a, b] = gg[a, a] - gg[a, b]
         for k in range(3):
             for l in range(3):
-                df = unit_direction(k, l)
-                dc = wp.transpose(df) @ f + wp.transpose(f) @ df
+                dc = right_cauchy_green_variation(f, k, l)
                 ds = wp.mat33d()
                 for a in range(3):
                     na = wp.vec3d(vecs[0, a], vecs[1, a], vecs[2, a])
@@ -300,10 +319,7 @@ def ogden_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                                 * dab
                                 * (wp.outer(na, nb) + wp.outer(nb, na))
                             )
-                dp = df @ s + f @ ds
-                for i in range(3):
-                    for j in range(3):
-                        tangent[flat(i, j), flat(k, l)] = dp[i, j]
+                tangent = with_piola_tangent_column(tangent, f, s, ds, k, l)
     return psi, p, tangent
 
 
