@@ -49,21 +49,28 @@ def deformation_gradient(
 def quadrature_point_response(
     params: MaterialParams,
     f: wp.mat33d,
+    j: wp.float64,
     mixed: int,
     element_pressure: wp.float64,
     with_tangent: int,
 ):
     """Energy density, P and A at one quadrature point of either formulation (Pa).
 
-    Displacement formulation (``mixed == 0``): the full pointwise response, U(J) included.
-    Mixed: ``psi_dev`` only, and P and A carry the element's constant pressure
-    ``element_pressure = U'(Jbar)`` (its stiffness ``U''(Jbar)`` is the element's rank-one
-    term, added by the caller).
+    Displacement formulation (``mixed == 0``): the full pointwise response, U(J) included,
+    with ``j = det F``. Mixed: ``psi_dev`` only, and P and A carry the element's constant
+    pressure ``element_pressure = U'(Jbar)`` (its stiffness ``U''(Jbar)`` is the element's
+    rank-one term, added by the caller). The material code is called once, not per branch, so
+    that it is inlined once into each kernel.
     """
-    if mixed == 0:
-        return material_response(params, f, with_tangent)
     psi, p, a_mat = deviatoric_response(params, f, with_tangent)
-    p, a_mat = add_pressure_terms(p, a_mat, f, element_pressure, wp.float64(0.0), with_tangent)
+    pressure = element_pressure
+    stiffness = wp.float64(0.0)
+    if mixed == 0:
+        u, du, ddu = volumetric_energy(params, j)
+        psi += u
+        pressure = du
+        stiffness = ddu
+    p, a_mat = add_pressure_terms(p, a_mat, f, pressure, stiffness, with_tangent)
     return psi, p, a_mat
 
 
@@ -123,7 +130,7 @@ def assemble_elements_kernel(
         if j <= wp.float64(0.0):
             continue
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = quadrature_point_response(params, f, mixed, p_bar, with_tangent)
+        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, with_tangent)
         element_energy += psi * dv
         for a in range(npe):
             grad_a = shape_gradients[e, q, a]
@@ -219,7 +226,7 @@ def cauchy_stress_kernel(
         f = deformation_gradient(e, q, tets, shape_gradients, displacement)
         j = wp.determinant(f)
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = quadrature_point_response(params, f, mixed, p_bar, 0)
+        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, 0)
         sigma += (dv / (j * volume)) * (p @ wp.transpose(f))
     stress[e, 0] = sigma[0, 0]
     stress[e, 1] = sigma[1, 1]
