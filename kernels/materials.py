@@ -144,20 +144,12 @@ def right_cauchy_green_variation(f: wp.mat33d, k: int, l: int) -> wp.mat33d:
 
 
 @wp.func
-def with_piola_tangent_column(
-    tangent: mat99d, f: wp.mat33d, s: wp.mat33d, ds: wp.mat33d, k: int, l: int
-) -> mat99d:
-    """``tangent`` with its column (k, l) set to dP = dF S + F dS, dF = e_k (x) e_l.
+def piola_variation(f: wp.mat33d, s: wp.mat33d, ds: wp.mat33d, k: int, l: int) -> wp.mat33d:
+    """dP = dF S + F dS of P = F S in the direction dF = e_k (x) e_l: column (k, l) of A.
 
-    The column of ``A = dP/dF`` for ``P = F S``, given the model's second Piola-Kirchhoff
-    stress ``s`` and its variation ``ds`` along ``dC = right_cauchy_green_variation(f, k, l)``.
+    ``ds`` is the model's variation of S along ``dC = right_cauchy_green_variation(f, k, l)``.
     """
-    dp = unit_direction(k, l) @ s + f @ ds
-    out = tangent
-    for i in range(3):
-        for j in range(3):
-            out[flat(i, j), flat(k, l)] = dp[i, j]
-    return out
+    return unit_direction(k, l) @ s + f @ ds
 
 
 @wp.func
@@ -241,7 +233,10 @@ def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                     + d[1] * (di[0] * eye - dc)
                     + d[2] * (di[2] * c_inv - i3 * (c_inv @ dc @ c_inv))
                 )
-                tangent = with_piola_tangent_column(tangent, f, s, ds, k, l)
+                dp = piola_variation(f, s, ds, k, l)
+                for i in range(3):
+                    for j in range(3):
+                        tangent[flat(i, j), flat(k, l)] = dp[i, j]
     return psi, p, tangent
 
 
@@ -319,7 +314,10 @@ def ogden_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                                 * dab
                                 * (wp.outer(na, nb) + wp.outer(nb, na))
                             )
-                tangent = with_piola_tangent_column(tangent, f, s, ds, k, l)
+                dp = piola_variation(f, s, ds, k, l)
+                for i in range(3):
+                    for j in range(3):
+                        tangent[flat(i, j), flat(k, l)] = dp[i, j]
     return psi, p, tangent
 
 
