@@ -20,7 +20,6 @@ from warptissue.kernels.materials import (
     deviatoric_response,
     flat,
     mat99d,
-    material_response,
     volumetric_energy,
 )
 
@@ -244,9 +243,13 @@ def evaluate_material_kernel(
     stress: wp.array(dtype=wp.mat33d),
     tangent: wp.array(dtype=mat99d),
 ):
-    """Energy density, first Piola-Kirchhoff stress and tangent for a batch of F."""
+    """Energy density, first Piola-Kirchhoff stress and tangent for a batch of F.
+
+    Each F is a point of the displacement formulation: the full response, U(J) included.
+    """
     i = wp.tid()
-    psi, p, a = material_response(params, deformation_gradients[i], 1)
+    f = deformation_gradients[i]
+    psi, p, a = quadrature_point_response(params, f, wp.determinant(f), 0, wp.float64(0.0), 1)
     energy[i] = psi
     stress[i] = p
     tangent[i] = a

@@ -7,7 +7,8 @@ Every model returns the strain energy density ``psi`` (Pa), the first Piola-Kirc
 The energy is split as ``psi(F) = psi_dev(F) + U(J)``. ``deviatoric_response`` gives the first
 part and ``volumetric_energy`` gives ``U`` and its first two derivatives, so that the mixed
 (mean-dilatation) element can evaluate ``U`` at the element's mean dilatation instead of the
-pointwise ``J``. ``material_response`` adds both for the pointwise (displacement) formulation.
+pointwise ``J``. ``quadrature_point_response`` in ``fem.py`` combines them for either
+formulation.
 
 One ``MaterialParams`` struct with a ``model`` id is the single dispatch point, so that one
 compiled kernel serves every model. This file holds functions only; the kernels that call them
@@ -414,12 +415,3 @@ def add_pressure_terms(
                             * (f_inv[jj, i] * f_inv[l, k] - f_inv[jj, k] * f_inv[l, i])
                         )
     return p_out, a_out
-
-
-@wp.func
-def material_response(params: MaterialParams, f: wp.mat33d, with_tangent: int):
-    """Full energy psi_dev(F) + U(J), stress P and tangent A at a point."""
-    psi, p, tangent = deviatoric_response(params, f, with_tangent)
-    u, du, ddu = volumetric_energy(params, wp.determinant(f))
-    p_out, a_out = add_pressure_terms(p, tangent, f, du, ddu, with_tangent)
-    return psi + u, p_out, a_out
