@@ -278,6 +278,9 @@ def graded_spacing(
     if not growth >= 1.0:
         raise InputError("growth must be >= 1", column="growth", value=growth)
     ramp_count = 1 if growth == 1.0 else int(np.ceil(np.log(largest_m / first_m) / np.log(growth)))
+    # Every ramp interval is >= first_m, so no more than this many can be used (a growth just
+    # above 1 would otherwise ask for an astronomically long ramp).
+    ramp_count = min(ramp_count, int(np.ceil(length_m / first_m)) + 1)
     ramp = np.minimum(first_m * growth ** np.arange(max(ramp_count, 1)), largest_m)
     ramp_total = np.cumsum(ramp)
     if ramp_total[-1] >= length_m:
