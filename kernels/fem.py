@@ -20,7 +20,6 @@ from warptissue.kernels.materials import (
     deviatoric_response,
     flat,
     mat99d,
-    material_response,
     volumetric_energy,
 )
 
@@ -43,6 +42,35 @@ def deformation_gradient(
     for a in range(tets.shape[1]):
         f += wp.outer(displacement[tets[e, a]], shape_gradients[e, q, a])
     return f
+
+
+@wp.func
+def quadrature_point_response(
+    params: MaterialParams,
+    f: wp.mat33d,
+    j: wp.float64,
+    mixed: int,
+    element_pressure: wp.float64,
+    with_tangent: int,
+):
+    """Energy density, P and A at one quadrature point of either formulation (Pa).
+
+    Displacement formulation (``mixed == 0``): the full pointwise response, U(J) included,
+    with ``j = det F``. Mixed: ``psi_dev`` only, and P and A carry the element's constant
+    pressure ``element_pressure = U'(Jbar)`` (its stiffness ``U''(Jbar)`` is the element's
+    rank-one term, added by the caller). The material code is called once, not per branch, so
+    that it is inlined once into each kernel.
+    """
+    psi, p, a_mat = deviatoric_response(params, f, with_tangent)
+    pressure = element_pressure
+    stiffness = wp.float64(0.0)
+    if mixed == 0:
+        u, du, ddu = volumetric_energy(params, j)
+        psi += u
+        pressure = du
+        stiffness = ddu
+    p, a_mat = add_pressure_terms(p, a_mat, f, pressure, stiffness, with_tangent)
+    return psi, p, a_mat
 
 
 @wp.kernel
@@ -101,15 +129,7 @@ def assemble_elements_kernel(
         if j <= wp.float64(0.0):
             continue
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = deviatoric_response(params, f, with_tangent)
-        pressure = p_bar
-        stiffness = wp.float64(0.0)
-        if mixed == 0:
-            u, du, ddu = volumetric_energy(params, j)
-            psi += u
-            pressure = du
-            stiffness = ddu
-        p, a_mat = add_pressure_terms(p, a_mat, f, pressure, stiffness, with_tangent)
+        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, with_tangent)
         element_energy += psi * dv
         for a in range(npe):
             grad_a = shape_gradients[e, q, a]
@@ -205,12 +225,7 @@ def cauchy_stress_kernel(
         f = deformation_gradient(e, q, tets, shape_gradients, displacement)
         j = wp.determinant(f)
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = deviatoric_response(params, f, 0)
-        pressure = p_bar
-        if mixed == 0:
-            u, du, ddu = volumetric_energy(params, j)
-            pressure = du
-        p, a_mat = add_pressure_terms(p, a_mat, f, pressure, wp.float64(0.0), 0)
+        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, 0)
         sigma += (dv / (j * volume)) * (p @ wp.transpose(f))
     stress[e, 0] = sigma[0, 0]
     stress[e, 1] = sigma[1, 1]
@@ -228,9 +243,13 @@ def evaluate_material_kernel(
     stress: wp.array(dtype=wp.mat33d),
     tangent: wp.array(dtype=mat99d),
 ):
-    """Energy density, first Piola-Kirchhoff stress and tangent for a batch of F."""
+    """Energy density, first Piola-Kirchhoff stress and tangent for a batch of F.
+
+    Each F is a point of the displacement formulation: the full response, U(J) included.
+    """
     i = wp.tid()
-    psi, p, a = material_response(params, deformation_gradients[i], 1)
+    f = deformation_gradients[i]
+    psi, p, a = quadrature_point_response(params, f, wp.determinant(f), 0, wp.float64(0.0), 1)
     energy[i] = psi
     stress[i] = p
     tangent[i] = a

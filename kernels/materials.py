@@ -7,7 +7,8 @@ Every model returns the strain energy density ``psi`` (Pa), the first Piola-Kirc
 The energy is split as ``psi(F) = psi_dev(F) + U(J)``. ``deviatoric_response`` gives the first
 part and ``volumetric_energy`` gives ``U`` and its first two derivatives, so that the mixed
 (mean-dilatation) element can evaluate ``U`` at the element's mean dilatation instead of the
-pointwise ``J``. ``material_response`` adds both for the pointwise (displacement) formulation.
+pointwise ``J``. ``quadrature_point_response`` in ``fem.py`` combines them for either
+formulation.
 
 One ``MaterialParams`` struct with a ``model`` id is the single dispatch point, so that one
 compiled kernel serves every model. This file holds functions only; the kernels that call them
@@ -137,6 +138,22 @@ def unit_direction(k: int, l: int) -> wp.mat33d:
 
 
 @wp.func
+def right_cauchy_green_variation(f: wp.mat33d, k: int, l: int) -> wp.mat33d:
+    """dC = dF^T F + F^T dF of C = F^T F in the direction dF = e_k (x) e_l."""
+    df = unit_direction(k, l)
+    return wp.transpose(df) @ f + wp.transpose(f) @ df
+
+
+@wp.func
+def piola_variation(f: wp.mat33d, s: wp.mat33d, ds: wp.mat33d, k: int, l: int) -> wp.mat33d:
+    """dP = dF S + F dS of P = F S in the direction dF = e_k (x) e_l: column (k, l) of A.
+
+    ``ds`` is the model's variation of S along ``dC = right_cauchy_green_variation(f, k, l)``.
+    """
+    return unit_direction(k, l) @ s + f @ ds
+
+
+@wp.func
 def invariant_energy_derivatives(params: MaterialParams, i1b: wp.float64, i2b: wp.float64):
     """W(I1b, I2b) = sum C_i0 (I1b - 3)^i + C01 (I2b - 3) and its derivatives.
 
@@ -207,8 +224,7 @@ def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
     if with_tangent != 0:
         for k in range(3):
             for l in range(3):
-                df = unit_direction(k, l)
-                dc = wp.transpose(df) @ f + wp.transpose(f) @ df
+                dc = right_cauchy_green_variation(f, k, l)
                 di = wp.vec3d(wp.trace(dc), wp.ddot(dI2, dc), wp.ddot(dI3, dc))
                 hdi = h @ di
                 ds = wp.float64(2.0) * (
@@ -218,7 +234,7 @@ def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                     + d[1] * (di[0] * eye - dc)
                     + d[2] * (di[2] * c_inv - i3 * (c_inv @ dc @ c_inv))
                 )
-                dp = df @ s + f @ ds
+                dp = piola_variation(f, s, ds, k, l)
                 for i in range(3):
                     for j in range(3):
                         tangent[flat(i, j), flat(k, l)] = dp[i, j]
@@ -283,8 +299,7 @@ def ogden_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                         theta[a, b] = gg[a, a] - gg[a, b]
         for k in range(3):
             for l in range(3):
-                df = unit_direction(k, l)
-                dc = wp.transpose(df) @ f + wp.transpose(f) @ df
+                dc = right_cauchy_green_variation(f, k, l)
                 ds = wp.mat33d()
                 for a in range(3):
                     na = wp.vec3d(vecs[0, a], vecs[1, a], vecs[2, a])
@@ -300,7 +315,7 @@ def ogden_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
                                 * dab
                                 * (wp.outer(na, nb) + wp.outer(nb, na))
                             )
-                dp = df @ s + f @ ds
+                dp = piola_variation(f, s, ds, k, l)
                 for i in range(3):
                     for j in range(3):
                         tangent[flat(i, j), flat(k, l)] = dp[i, j]
@@ -400,12 +415,3 @@ def add_pressure_terms(
                             * (f_inv[jj, i] * f_inv[l, k] - f_inv[jj, k] * f_inv[l, i])
                         )
     return p_out, a_out
-
-
-@wp.func
-def material_response(params: MaterialParams, f: wp.mat33d, with_tangent: int):
-    """Full energy psi_dev(F) + U(J), stress P and tangent A at a point."""
-    psi, p, tangent = deviatoric_response(params, f, with_tangent)
-    u, du, ddu = volumetric_energy(params, wp.determinant(f))
-    p_out, a_out = add_pressure_terms(p, tangent, f, du, ddu, with_tangent)
-    return psi + u, p_out, a_out

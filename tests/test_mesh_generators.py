@@ -101,6 +101,14 @@ def test_graded_spacing_sizes():
     assert len(short) == 4 and np.allclose(short[1:] / short[:-1], 1.25)
 
 
+def test_graded_spacing_growth_just_above_one_is_uniform():
+    # log(growth) ~ 2e-16 once asked for a ramp of ~1e16 intervals; with growth -> 1 the
+    # spacing is uniform: ten intervals of the requested first size.
+    sizes = np.diff(graded_spacing(0.01, 0.001, 0.002, growth=1.0 + 2.0**-52))
+    assert len(sizes) == 10
+    assert np.allclose(sizes, 0.001, rtol=1e-12)
+
+
 def test_graded_spacing_rejects_bad_sizes():
     with pytest.raises(InputError, match="largest_m"):
         graded_spacing(1.0, 0.1, 0.01)

@@ -83,8 +83,8 @@ def _check_terms(name: str, values: Any) -> tuple[float, ...]:
 class Material:
     """Common behaviour of the material dataclasses.
 
-    Subclasses define ``model_name``, ``initial_shear_modulus_Pa``, ``bulk_modulus``,
-    ``_flat_parameters`` and ``_from_flat``.
+    Subclasses define ``model_name``, ``initial_shear_modulus_Pa``, ``_flat_parameters`` and
+    ``_from_flat``, and either a ``bulk_modulus_Pa`` field or their own ``bulk_modulus``.
     """
 
     model_name: ClassVar[str]
@@ -96,8 +96,12 @@ class Material:
 
     @property
     def bulk_modulus(self) -> float:
-        """Bulk modulus at zero strain, Pa."""
-        raise NotImplementedError
+        """Bulk modulus at zero strain, Pa.
+
+        The ``bulk_modulus_Pa`` field of the models that take one; a model without that field
+        (LinearElastic) overrides this property.
+        """
+        return self.bulk_modulus_Pa
 
     @property
     def D1_per_Pa(self) -> float:  # noqa: N802 (Abaqus name)
@@ -192,10 +196,6 @@ class ReducedPolynomial(Material):
     def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * self.C_Pa[0]
 
-    @property
-    def bulk_modulus(self) -> float:
-        return self.bulk_modulus_Pa
-
     def _flat_parameters(self) -> dict[str, float]:
         out = {f"C{i + 1}0_Pa": c for i, c in enumerate(self.C_Pa)}
         out["bulk_modulus_Pa"] = self.bulk_modulus_Pa
@@ -232,10 +232,6 @@ class NeoHookean(Material):
     @property
     def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * self.C10_Pa
-
-    @property
-    def bulk_modulus(self) -> float:
-        return self.bulk_modulus_Pa
 
     def _flat_parameters(self) -> dict[str, float]:
         return {"C10_Pa": self.C10_Pa, "bulk_modulus_Pa": self.bulk_modulus_Pa}
@@ -281,10 +277,6 @@ class MooneyRivlin(Material):
     @property
     def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * (self.C10_Pa + self.C01_Pa)
-
-    @property
-    def bulk_modulus(self) -> float:
-        return self.bulk_modulus_Pa
 
     def _flat_parameters(self) -> dict[str, float]:
         return {
@@ -365,10 +357,6 @@ class Ogden(Material):
     def initial_shear_modulus_Pa(self) -> float:
         return float(sum(self.mu_Pa))
 
-    @property
-    def bulk_modulus(self) -> float:
-        return self.bulk_modulus_Pa
-
     def _flat_parameters(self) -> dict[str, float]:
         out: dict[str, float] = {}
         for i, (mu, a) in enumerate(zip(self.mu_Pa, self.alpha, strict=True)):
@@ -421,10 +409,6 @@ class CompressibleNeoHookean(Material):
     @property
     def initial_shear_modulus_Pa(self) -> float:
         return self.shear_modulus_Pa
-
-    @property
-    def bulk_modulus(self) -> float:
-        return self.bulk_modulus_Pa
 
     def _flat_parameters(self) -> dict[str, float]:
         return {"shear_modulus_Pa": self.shear_modulus_Pa, "bulk_modulus_Pa": self.bulk_modulus_Pa}

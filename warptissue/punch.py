@@ -101,14 +101,25 @@ def flat_punch_modulus_Pa(
     """
     _check(radius_m, poissons_ratio)
     force = np.asarray(force_N, dtype=np.float64)
-    correction = 1.0
-    if thickness_m is not None:
-        if not (math.isfinite(thickness_m) and thickness_m > 0.0):
-            raise InputError(
-                "must be a finite positive number", column="thickness_m", value=thickness_m
-            )
-        correction = hayes_kappa(radius_m / thickness_m, poissons_ratio)
+    correction = _layer_kappa(radius_m, poissons_ratio, thickness_m)
     return (1.0 - poissons_ratio**2) * force / (2.0 * radius_m * _depth(depth_m) * correction)
+
+
+def _layer_kappa(radius_m: float, poissons_ratio: float, thickness_m: float | None) -> float:
+    """kappa of a flat punch on a layer of ``thickness_m`` bonded to a rigid base.
+
+    1.0 for a half-space (``thickness_m`` None), else :func:`hayes_kappa` (a / h, nu).
+
+    Raises:
+        InputError: ``thickness_m`` is given but not a finite positive number.
+    """
+    if thickness_m is None:
+        return 1.0
+    if not (math.isfinite(thickness_m) and thickness_m > 0.0):
+        raise InputError(
+            "must be a finite positive number", column="thickness_m", value=thickness_m
+        )
+    return hayes_kappa(radius_m / thickness_m, poissons_ratio)
 
 
 def hayes_kappa(
@@ -271,13 +282,7 @@ def fit_punch_modulus(
     if geometry == "flat":
         unit_force = flat_punch_force_N(
             depth, radius_m=radius_m, youngs_modulus_Pa=1.0, poissons_ratio=poissons_ratio
-        )
-        if thickness_m is not None:
-            if not (math.isfinite(thickness_m) and thickness_m > 0.0):
-                raise InputError(
-                    "must be a finite positive number", column="thickness_m", value=thickness_m
-                )
-            unit_force = unit_force * hayes_kappa(radius_m / thickness_m, poissons_ratio)
+        ) * _layer_kappa(radius_m, poissons_ratio, thickness_m)
     elif geometry == "sphere":
         unit_force = hertz_force_N(
             depth, radius_m=radius_m, youngs_modulus_Pa=1.0, poissons_ratio=poissons_ratio

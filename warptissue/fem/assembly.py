@@ -174,11 +174,7 @@ class Assembler:
             kf.assemble_elements_kernel,
             dim=self.tet_count,
             inputs=[
-                self._params,
-                self._tets,
-                self._shape_gradients,
-                self._quadrature_volumes,
-                u,
+                *self._element_inputs(u),
                 self._block_index,
                 int(self.formulation == "mixed"),
                 int(with_tangent),
@@ -218,18 +214,29 @@ class Assembler:
         wp.launch(
             kf.cauchy_stress_kernel,
             dim=self.tet_count,
-            inputs=[
-                self._params,
-                self._tets,
-                self._shape_gradients,
-                self._quadrature_volumes,
-                u,
-                int(self.formulation == "mixed"),
-            ],
+            inputs=[*self._element_inputs(u), int(self.formulation == "mixed")],
             outputs=[stress],
             device=self.device,
         )
         return stress.numpy()
+
+    def _element_inputs(self, displacement: wp.array) -> list[Any]:
+        """The leading inputs of every element kernel of ``kernels/fem.py``.
+
+        Args:
+            displacement: Nodal displacements on the assembler's device, vec3d (N,), metres.
+
+        Returns:
+            ``[params, tets, shape_gradients, quadrature_volumes, displacement]``, in the order
+            of the kernels' first five arguments.
+        """
+        return [
+            self._params,
+            self._tets,
+            self._shape_gradients,
+            self._quadrature_volumes,
+            displacement,
+        ]
 
     def _as_device_displacement(self, displacement_m: Any) -> wp.array:
         if isinstance(displacement_m, wp.array):

@@ -278,6 +278,9 @@ def graded_spacing(
     if not growth >= 1.0:
         raise InputError("growth must be >= 1", column="growth", value=growth)
     ramp_count = 1 if growth == 1.0 else int(np.ceil(np.log(largest_m / first_m) / np.log(growth)))
+    # Every ramp interval is >= first_m, so no more than this many can be used (a growth just
+    # above 1 would otherwise ask for an astronomically long ramp).
+    ramp_count = min(ramp_count, int(np.ceil(length_m / first_m)) + 1)
     ramp = np.minimum(first_m * growth ** np.arange(max(ramp_count, 1)), largest_m)
     ramp_total = np.cumsum(ramp)
     if ramp_total[-1] >= length_m:
@@ -646,27 +649,24 @@ def _ogrid_quarter(
     ring_index = np.vstack([boundary_index[None], ring_index])  # [k, t], k = 0 is the square
     points = np.vstack([square, rings.reshape(-1, 2)])
 
-    ii, jj = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    square_quads = np.stack(
-        [
-            square_index[ii, jj],
-            square_index[ii + 1, jj],
-            square_index[ii + 1, jj + 1],
-            square_index[ii, jj + 1],
-        ],
+    quads = np.vstack([_grid_quads(square_index), _grid_quads(ring_index)])
+    return points, _split_quads(points, quads)
+
+
+def _grid_quads(node_index: np.ndarray) -> np.ndarray:
+    """The cells of a structured grid of nodes as quadrilaterals.
+
+    Args:
+        node_index: Node numbers of the grid, shape (I + 1, J + 1), int.
+
+    Returns:
+        Cell (i, j) as ``[node (i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)]``, row-major
+        in (i, j), shape (I * J, 4).
+    """
+    return np.stack(
+        [node_index[:-1, :-1], node_index[1:, :-1], node_index[1:, 1:], node_index[:-1, 1:]],
         axis=-1,
     ).reshape(-1, 4)
-    kk, tt = np.meshgrid(np.arange(ring_count), np.arange(2 * n), indexing="ij")
-    ring_quads = np.stack(
-        [
-            ring_index[kk, tt],
-            ring_index[kk + 1, tt],
-            ring_index[kk + 1, tt + 1],
-            ring_index[kk, tt + 1],
-        ],
-        axis=-1,
-    ).reshape(-1, 4)
-    return points, _split_quads(points, np.vstack([square_quads, ring_quads]))
 
 
 def _split_quads(points_2d: np.ndarray, quads: np.ndarray) -> np.ndarray:
