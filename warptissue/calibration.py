@@ -591,6 +591,7 @@ def fit_calibrations(
     models: Sequence[str] = CALIBRATION_MODELS,
     folds: int = 5,
     seed: int = 0,
+    progress: bool = False,
 ) -> dict[str, ForceCalibration]:
     """Fit several force corrections (seed 002, Eq. 1 and Table 1) sharing the single models.
 
@@ -615,6 +616,7 @@ def fit_calibrations(
         models: Names from :data:`CALIBRATION_MODELS`.
         folds: Folds of the cross-validation.
         seed: Random seed (network initialization, folds).
+        progress: Show a progress bar (one step per tuned model).
 
     Returns:
         Model name to fitted calibration; ``metadata`` holds the chosen hyperparameters,
@@ -625,6 +627,7 @@ def fit_calibrations(
             ``2 folds`` samples.
     """
     from threadpoolctl import threadpool_limits
+    from tqdm import tqdm
 
     unknown = [m for m in models if m not in CALIBRATION_MODELS]
     if unknown:
@@ -663,13 +666,17 @@ def fit_calibrations(
         )
 
     # Small problems: one BLAS/OpenMP thread each is much faster than oversubscribed threads.
-    with threadpool_limits(limits=1):
-        tuned = {
-            kind: _cross_validate(
+    bar = tqdm(
+        total=len(needed) + len(combined), desc="calibration", unit="model", disable=not progress
+    )
+    with threadpool_limits(limits=1), bar:
+        tuned = {}
+        for kind in needed:
+            bar.set_postfix_str(kind)
+            tuned[kind] = _cross_validate(
                 kind, HYPERPARAMETER_GRIDS[kind], features, target, fold_masks, seed
             )
-            for kind in needed
-        }
+            bar.update(1)
         singles = {
             kind: _fit_model(kind, features, target, tuned[kind].params, seed) for kind in needed
         }
@@ -682,6 +689,7 @@ def fit_calibrations(
         weighted = combination_weights(out_of_fold * force_scale + force_offset, force)
         equal = np.full(len(SINGLE_MODELS), 1.0 / len(SINGLE_MODELS))
         for m in combined:
+            bar.set_postfix_str(m)
             weights = weighted if m.startswith("WCFM") else equal
             combiner_kind = "svm" if m.endswith("_SVM") else "lssvm"
             inputs = (out_of_fold * weights[:, None]).T
@@ -705,6 +713,7 @@ def fit_calibrations(
                 combiner=combiner,
             )
             fitted[m].metadata["weights"] = dict(zip(SINGLE_MODELS, weights.tolist(), strict=True))
+            bar.update(1)
     return {m: fitted[m] for m in models}
 
 
