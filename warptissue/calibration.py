@@ -7,6 +7,11 @@ multiplied by a weight from the inverse summed relative error (Eq. 1), are the i
 SVR that outputs the corrected force. The baselines of Table 1 are the combinations with
 equal weights (CFM_SVM, CFM_LSSVM) and the weighted LSSVM combination (WCFM_LSSVM).
 
+Each sample (one applied force) is one example: its k readings (the paper takes five) are
+the inputs of the BP network, the SVR and the LSSVM, and their mean that of the polynomial.
+Hyperparameters are chosen by cross-validation on the training samples, and the combiners
+are trained on the single models' out-of-fold forecasts (:func:`fit_calibrations`).
+
 A :class:`ForceCalibration` holds one fitted model and applies it (``.correct``); it is
 saved as JSON (``.save``/``.load``) with every number prediction needs (polynomial
 coefficients, network weights, support vectors, dual coefficients, intercepts, kernel
@@ -17,8 +22,9 @@ Calibration data (CSV, one row per sensor reading)::
 
     sample,force_N,signal_V
 
-``sample`` groups the repeated readings of one applied force (the paper takes five per
-sample); it is optional (each row its own sample). The train/test split is by sample.
+``sample`` groups the readings of one applied force (every sample needs the same number);
+it is optional (each row its own sample, one reading each). The train/test split is by
+sample.
 """
 
 from __future__ import annotations
