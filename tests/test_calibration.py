@@ -242,6 +242,9 @@ def test_calibration_csv_errors_name_line_and_column(tmp_path):
     with pytest.raises(InputError) as info:
         read_calibration_csv(path)
     assert "sensor.csv:12" in str(info.value) and "force_N" in str(info.value)
+    path.write_text("sample,force_N,signal_V\n" + "S1,1.0,0.1\n" * 10 + "S2,2.0,0.2\n")
+    with pytest.raises(InputError, match=r"sensor.csv, column 'sample'.*same number.*'S"):
+        read_calibration_csv(path)
 
 
 def test_cli_calibrate_sensor(tmp_path, capsys):

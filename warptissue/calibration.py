@@ -491,7 +491,8 @@ def read_calibration_csv(path: str | Path) -> CalibrationData:
 
     Raises:
         InputError: Missing columns, non-numeric or non-finite values (file, line, column),
-            or fewer than 10 readings.
+            fewer than 10 readings, or samples with unequal numbers of readings or two
+            forces (file, sample).
     """
     path = Path(path)
     samples, forces, signals = [], [], []
@@ -501,7 +502,12 @@ def read_calibration_csv(path: str | Path) -> CalibrationData:
         samples.append((row.get("sample") or str(line)).strip())
     if len(forces) < 10:
         raise InputError(f"need at least 10 readings, got {len(forces)}", path=path)
-    return CalibrationData(np.array(samples), np.array(forces), np.array(signals))
+    data = CalibrationData(np.array(samples), np.array(forces), np.array(signals))
+    try:
+        sample_readings(data)
+    except InputError as exc:
+        raise InputError(exc.message, path=path, column=exc.column, value=exc.value) from None
+    return data
 
 
 def split_samples(
@@ -532,7 +538,7 @@ def sample_readings(data: CalibrationData) -> tuple[np.ndarray, np.ndarray, np.n
     labels, first, inverse = np.unique(data.sample, return_index=True, return_inverse=True)
     counts = np.bincount(inverse)
     if np.any(counts != counts[0]):
-        odd = labels[np.argmax(counts != counts[0])]
+        odd = str(labels[np.argmax(counts != counts[0])])
         raise InputError(
             f"every sample needs the same number of readings ({counts[0]})",
             column="sample",
@@ -541,7 +547,7 @@ def sample_readings(data: CalibrationData) -> tuple[np.ndarray, np.ndarray, np.n
     order = np.argsort(first)
     force = data.force_N[first]
     if np.any(data.force_N != force[inverse]):
-        odd = data.sample[np.argmax(data.force_N != force[inverse])]
+        odd = str(data.sample[np.argmax(data.force_N != force[inverse])])
         raise InputError("one sample has two different force_N values", column="sample", value=odd)
     positions = np.argsort(inverse, kind="stable").reshape(len(labels), counts[0])
     return labels[order], force[order], data.signal_V[positions][order]
