@@ -24,9 +24,8 @@ import numpy as np
 
 from warptissue.calibration import (
     CALIBRATION_MODELS,
-    calibration_metrics,
+    evaluate_calibrations,
     fit_calibrations,
-    sample_means,
     split_samples,
     synthetic_sensor,
 )
@@ -107,12 +106,11 @@ def sensor(out: Path) -> dict:
     data = synthetic_sensor(samples=76, seed=2017)
     train, test = split_samples(data, test_samples=6, seed=0)
     fits = fit_calibrations(train, seed=0)
-    table = {}
+    table = evaluate_calibrations(fits, test)
     print("\nsensor: 76 samples x 5 readings, 70 / 6 split (MSE* = 1/n sqrt(sum e^2), seed 002)")
     print(f"{'model':<11} {'MAE (N)':>9} {'MSE* (N)':>9} {'MAPE (%)':>9} {'max (N)':>9}")
     for name in CALIBRATION_MODELS:
-        metrics = calibration_metrics(*sample_means(test, fits[name].correct(test.signal_V)))
-        table[name] = metrics
+        metrics = table[name]
         print(
             f"{name:<11} {metrics['mae_N']:9.4f} {metrics['mse_paper_N']:9.4f} "
             f"{metrics['mape_percent']:9.4f} {metrics['max_abs_error_N']:9.4f}"

@@ -7,6 +7,11 @@ multiplied by a weight from the inverse summed relative error (Eq. 1), are the i
 SVR that outputs the corrected force. The baselines of Table 1 are the combinations with
 equal weights (CFM_SVM, CFM_LSSVM) and the weighted LSSVM combination (WCFM_LSSVM).
 
+Each sample (one applied force) is one example: its k readings (the paper takes five) are
+the inputs of the BP network, the SVR and the LSSVM, and their mean that of the polynomial.
+Hyperparameters are chosen by cross-validation on the training samples, and the combiners
+are trained on the single models' out-of-fold forecasts (:func:`fit_calibrations`).
+
 A :class:`ForceCalibration` holds one fitted model and applies it (``.correct``); it is
 saved as JSON (``.save``/``.load``) with every number prediction needs (polynomial
 coefficients, network weights, support vectors, dual coefficients, intercepts, kernel
@@ -17,8 +22,9 @@ Calibration data (CSV, one row per sensor reading)::
 
     sample,force_N,signal_V
 
-``sample`` groups the repeated readings of one applied force (the paper takes five per
-sample); it is optional (each row its own sample). The train/test split is by sample.
+``sample`` groups the readings of one applied force (every sample needs the same number);
+it is optional (each row its own sample, one reading each). The train/test split is by
+sample.
 """
 
 from __future__ import annotations
@@ -43,8 +49,9 @@ __all__ = [
     "combination_weights",
     "fit_calibration",
     "fit_calibrations",
+    "evaluate_calibrations",
     "read_calibration_csv",
-    "sample_means",
+    "sample_readings",
     "split_samples",
     "synthetic_sensor",
 ]
@@ -140,41 +147,84 @@ class LeastSquaresSVM:
 # Each fitted single or combining model is a plain dict of arrays (its JSON form), and
 # prediction reads only that dict, so a saved file predicts exactly like the fitted model.
 
+HYPERPARAMETER_GRIDS: dict[str, tuple[dict[str, float], ...]] = {
+    "polynomial": tuple({"degree": degree} for degree in (1, 2, 3, 4, 5)),
+    "bp": tuple(
+        {"hidden": hidden, "alpha": alpha} for hidden in (2, 4, 8) for alpha in (1e-4, 1e-2)
+    ),
+    "svm": tuple(
+        {"C": c, "gamma": gamma, "epsilon": epsilon}
+        for c in (1.0, 1e1, 1e2, 1e3)
+        for gamma in (0.03, 0.3, 3.0)
+        for epsilon in (1e-4, 1e-3)
+    ),
+    "lssvm": tuple(
+        {"regularization": regularization, "gamma": gamma}
+        for regularization in (1e2, 1e3, 1e4, 1e5, 1e6)
+        for gamma in (0.03, 0.3, 3.0)
+    ),
+}
+"""Candidate hyperparameters of the single models (on min-max normalized readings and force;
+an RBF ``gamma`` is divided by the number of inputs). Chosen by cross-validation on the
+training samples only."""
+
+COMBINER_GRIDS: dict[str, tuple[dict[str, float], ...]] = {
+    "svm": tuple(
+        {"C": c, "epsilon": epsilon}
+        for c in (0.1, 1.0, 10.0, 100.0, 1e3)
+        for epsilon in (1e-5, 1e-4, 1e-3)
+    ),
+    "lssvm": tuple({"regularization": regularization} for regularization in (1.0, 1e2, 1e4, 1e6)),
+}
+"""Candidate hyperparameters of the combining SVR / LSSVM (linear kernel)."""
+
 
 def _fit_model(
-    kind: str, features: np.ndarray, target: np.ndarray, seed: int, *, kernel: str = "rbf"
+    kind: str,
+    features: np.ndarray,
+    target: np.ndarray,
+    params: dict[str, float],
+    seed: int,
+    *,
+    kernel: str = "rbf",
 ) -> dict:
     """Fit one model on normalized features (n, d) and target (n,); return its parameters.
 
+    ``params`` holds the kind's hyperparameters (see :data:`HYPERPARAMETER_GRIDS`);
     ``kernel`` ("rbf" or "linear") applies to the "svm" and "lssvm" kinds."""
     if kind == "polynomial":
-        coefficients = np.polynomial.polynomial.polyfit(features.mean(axis=1), target, 3)
-        return {"kind": kind, "coefficients": coefficients}
+        degree = int(params["degree"])
+        coefficients = np.polynomial.polynomial.polyfit(features.mean(axis=1), target, degree)
+        return {"kind": kind, "hyperparameters": params, "coefficients": coefficients}
     if kind == "bp":
         from sklearn.neural_network import MLPRegressor
 
         network = MLPRegressor(
-            hidden_layer_sizes=(8,),
+            hidden_layer_sizes=(int(params["hidden"]),),
             activation="tanh",
             solver="lbfgs",
-            alpha=1e-5,
-            max_iter=5000,
-            tol=1e-9,
+            alpha=float(params["alpha"]),
+            max_iter=2000,
+            tol=1e-7,
             random_state=seed,
         ).fit(features, target)
         return {
             "kind": kind,
+            "hyperparameters": params,
             "activation": "tanh",
-            "weights": [w for w in network.coefs_],
-            "biases": [b for b in network.intercepts_],
+            "weights": list(network.coefs_),
+            "biases": list(network.intercepts_),
         }
+    gamma = float(params.get("gamma", 1.0)) / features.shape[1]
     if kind == "svm":
         from sklearn.svm import SVR
 
-        gamma = _scale_gamma(features)
-        machine = SVR(kernel=kernel, C=1e3, epsilon=1e-4, gamma=gamma).fit(features, target)
+        machine = SVR(
+            kernel=kernel, C=float(params["C"]), epsilon=float(params["epsilon"]), gamma=gamma
+        ).fit(features, target)
         return {
             "kind": kind,
+            "hyperparameters": params,
             "kernel": kernel,
             "gamma": gamma,
             "support_vectors": machine.support_vectors_,
@@ -182,9 +232,12 @@ def _fit_model(
             "intercept": float(machine.intercept_[0]),
         }
     if kind == "lssvm":
-        machine = LeastSquaresSVM(regularization=1e3, kernel=kernel).fit(features, target)
+        machine = LeastSquaresSVM(
+            regularization=float(params["regularization"]), gamma=gamma, kernel=kernel
+        ).fit(features, target)
         return {
             "kind": kind,
+            "hyperparameters": params,
             "kernel": kernel,
             "gamma": machine.gamma,
             "support_vectors": machine.support_vectors,
@@ -220,6 +273,40 @@ def _predict_model(model: dict, features: np.ndarray) -> np.ndarray:
     raise InputError(f"unknown model kind {kind!r} in calibration")
 
 
+@dataclass(frozen=True)
+class _Tuned:
+    """The cross-validated choice for one model: hyperparameters, the out-of-fold
+    predictions they give (n,), and their cross-validated mean absolute error."""
+
+    params: dict[str, float]
+    out_of_fold: np.ndarray
+    cv_mae: float
+
+
+def _cross_validate(
+    kind: str,
+    grid: Sequence[dict[str, float]],
+    features: np.ndarray,
+    target: np.ndarray,
+    folds: Sequence[np.ndarray],
+    seed: int,
+    *,
+    kernel: str = "rbf",
+) -> _Tuned:
+    """The grid entry with the smallest k-fold mean absolute error, with its out-of-fold
+    predictions (each sample predicted by the model fitted without its fold)."""
+    best: _Tuned | None = None
+    for params in grid:
+        out_of_fold = np.empty_like(target)
+        for held in folds:
+            model = _fit_model(kind, features[~held], target[~held], params, seed, kernel=kernel)
+            out_of_fold[held] = _predict_model(model, features[held])
+        cv_mae = float(np.abs(out_of_fold - target).mean())
+        if best is None or cv_mae < best.cv_mae:
+            best = _Tuned(dict(params), out_of_fold, cv_mae)
+    return best
+
+
 def combination_weights(predictions: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Seed 002 Eq. 1: w_i = (1 / E_i) / sum_k (1 / E_k).
 
@@ -251,6 +338,7 @@ class ForceCalibration:
         weights: Combination weights (Eq. 1, or equal for CFM), shape (m,); empty for a
             single model.
         combiner: The combining SVR or LSSVM (parameter dict), or None for a single model.
+        readings: Readings per sample, k: the models' inputs are a sample's k readings.
         metadata: Free-form provenance (data file, split, metrics, software versions).
     """
 
@@ -262,24 +350,38 @@ class ForceCalibration:
     singles: list[dict]
     weights: np.ndarray
     combiner: dict | None = None
+    readings: int = 1
     metadata: dict[str, Any] = field(default_factory=dict)
 
+    def _features(self, raw_signal: np.ndarray | Sequence[float]) -> np.ndarray:
+        """Normalized model inputs, shape (n, k), from readings (n, k), or (n,) / a scalar
+        (one reading per sample, used for all k inputs: a live reading stream)."""
+        signal = np.asarray(raw_signal, dtype=np.float64)
+        if signal.ndim < 2:
+            signal = np.repeat(np.atleast_1d(signal)[:, None], self.readings, axis=1)
+        if signal.ndim != 2 or signal.shape[1] != self.readings:
+            raise InputError(
+                f"raw_signal must have shape (n,) or (n, {self.readings}) (readings per sample)",
+                value=signal.shape,
+            )
+        if not np.all(np.isfinite(signal)):
+            raise InputError("raw_signal must be finite volts")
+        return (signal - self.signal_offset_V) / self.signal_scale_V
+
     def correct(self, raw_signal: np.ndarray | Sequence[float]) -> np.ndarray:
-        """Corrected force for sensor signals.
+        """Corrected force of each sample.
 
         Args:
-            raw_signal: Sensor signal, shape (n,) (or a scalar), volts.
+            raw_signal: Sensor readings, volts: shape (n, k) (the k readings of each of n
+                samples), or (n,) or a scalar (one reading per sample; it stands for all k).
 
         Returns:
             Force, shape (n,), newtons.
 
         Raises:
-            InputError: The signal holds non-finite values.
+            InputError: Wrong shape or non-finite values.
         """
-        signal = np.atleast_1d(np.asarray(raw_signal, dtype=np.float64))
-        if signal.ndim != 1 or not np.all(np.isfinite(signal)):
-            raise InputError("raw_signal must be a finite 1-D array of volts")
-        features = ((signal - self.signal_offset_V) / self.signal_scale_V)[:, None]
+        features = self._features(raw_signal)
         normalized = np.array([_predict_model(single, features) for single in self.singles])
         if self.combiner is None:
             output = normalized[0]
@@ -287,10 +389,11 @@ class ForceCalibration:
             output = _predict_model(self.combiner, (normalized * self.weights[:, None]).T)
         return output * self.force_scale_N + self.force_offset_N
 
-    def single_predictions(self, raw_signal: np.ndarray) -> np.ndarray:
-        """Force predicted by each single model, shape (m, n), newtons."""
-        features = (np.asarray(raw_signal, np.float64) - self.signal_offset_V) / self.signal_scale_V
-        outputs = [_predict_model(single, features[:, None]) for single in self.singles]
+    def single_predictions(self, raw_signal: np.ndarray | Sequence[float]) -> np.ndarray:
+        """Force predicted by each single model, shape (m, n), newtons (input as
+        :meth:`correct`)."""
+        features = self._features(raw_signal)
+        outputs = [_predict_model(single, features) for single in self.singles]
         return np.array(outputs) * self.force_scale_N + self.force_offset_N
 
     def to_dict(self) -> dict[str, Any]:
@@ -304,6 +407,7 @@ class ForceCalibration:
                     "column": "signal_V",
                     "offset": self.signal_offset_V,
                     "scale": self.signal_scale_V,
+                    "readings": self.readings,
                 },
                 "output": {
                     "column": "force_N",
@@ -356,6 +460,7 @@ class ForceCalibration:
                 singles=list(data["singles"]),
                 weights=np.asarray(data["weights"], dtype=np.float64),
                 combiner=data.get("combiner"),
+                readings=int(data["input"].get("readings", 1)),
                 metadata=dict(data.get("metadata") or {}),
             )
         except (KeyError, TypeError, ValueError) as exc:
@@ -386,7 +491,8 @@ def read_calibration_csv(path: str | Path) -> CalibrationData:
 
     Raises:
         InputError: Missing columns, non-numeric or non-finite values (file, line, column),
-            or fewer than 10 readings.
+            fewer than 10 readings, or samples with unequal numbers of readings or two
+            forces (file, sample).
     """
     path = Path(path)
     samples, forces, signals = [], [], []
@@ -396,7 +502,12 @@ def read_calibration_csv(path: str | Path) -> CalibrationData:
         samples.append((row.get("sample") or str(line)).strip())
     if len(forces) < 10:
         raise InputError(f"need at least 10 readings, got {len(forces)}", path=path)
-    return CalibrationData(np.array(samples), np.array(forces), np.array(signals))
+    data = CalibrationData(np.array(samples), np.array(forces), np.array(signals))
+    try:
+        sample_readings(data)
+    except InputError as exc:
+        raise InputError(exc.message, path=path, column=exc.column, value=exc.value) from None
+    return data
 
 
 def split_samples(
@@ -413,14 +524,45 @@ def split_samples(
     return data.subset(~mask), data.subset(mask)
 
 
-def sample_means(data: CalibrationData, corrected_N: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample: the actual force and the mean of its corrected readings (the paper's
-    "corrected force" of a sample), each shape (samples,), in order of first appearance."""
-    _, first, inverse = np.unique(data.sample, return_index=True, return_inverse=True)
+def sample_readings(data: CalibrationData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The readings grouped by sample, in order of first appearance.
+
+    Returns:
+        Sample labels (n,), actual force (n,) in N, and readings (n, k) in V, k the readings
+        per sample.
+
+    Raises:
+        InputError: Samples with different numbers of readings, or one sample with two
+            different actual forces.
+    """
+    labels, first, inverse = np.unique(data.sample, return_index=True, return_inverse=True)
     counts = np.bincount(inverse)
-    means = np.bincount(inverse, weights=np.asarray(corrected_N, dtype=np.float64)) / counts
+    if np.any(counts != counts[0]):
+        odd = str(labels[np.argmax(counts != counts[0])])
+        raise InputError(
+            f"every sample needs the same number of readings ({counts[0]})",
+            column="sample",
+            value=odd,
+        )
     order = np.argsort(first)
-    return data.force_N[first][order], means[order]
+    force = data.force_N[first]
+    if np.any(data.force_N != force[inverse]):
+        odd = str(data.sample[np.argmax(data.force_N != force[inverse])])
+        raise InputError("one sample has two different force_N values", column="sample", value=odd)
+    positions = np.argsort(inverse, kind="stable").reshape(len(labels), counts[0])
+    return labels[order], force[order], data.signal_V[positions][order]
+
+
+def evaluate_calibrations(
+    calibrations: dict[str, ForceCalibration], data: CalibrationData
+) -> dict[str, dict[str, float]]:
+    """Table 1: :func:`calibration_metrics` of each calibration on ``data``'s samples (each
+    sample's corrected force from its k readings)."""
+    _, force, readings = sample_readings(data)
+    return {
+        name: calibration_metrics(force, calibration.correct(readings))
+        for name, calibration in calibrations.items()
+    }
 
 
 def calibration_metrics(actual_N: np.ndarray, corrected_N: np.ndarray) -> dict[str, float]:
@@ -444,10 +586,15 @@ def calibration_metrics(actual_N: np.ndarray, corrected_N: np.ndarray) -> dict[s
     }
 
 
-def _group_folds(samples: np.ndarray, folds: int, seed: int) -> list[np.ndarray]:
-    labels = np.unique(samples)
-    order = np.random.default_rng(seed).permutation(len(labels))
-    return [np.isin(samples, labels[order[k::folds]]) for k in range(folds)]
+def _folds(count: int, folds: int, seed: int) -> list[np.ndarray]:
+    """``folds`` boolean masks (count,) that partition a random permutation of the rows."""
+    order = np.random.default_rng(seed).permutation(count)
+    masks = []
+    for k in range(folds):
+        mask = np.zeros(count, dtype=bool)
+        mask[order[k::folds]] = True
+        masks.append(mask)
+    return masks
 
 
 def fit_calibrations(
@@ -456,78 +603,129 @@ def fit_calibrations(
     models: Sequence[str] = CALIBRATION_MODELS,
     folds: int = 5,
     seed: int = 0,
+    progress: bool = False,
 ) -> dict[str, ForceCalibration]:
     """Fit several force corrections (seed 002, Eq. 1 and Table 1) sharing the single models.
 
-    Single models (``polynomial``: cubic in the signal; ``bp``: an 8-neuron tanh network,
-    L-BFGS; ``svm``: RBF epsilon-SVR; ``lssvm``: RBF least-squares SVM) are fitted on the
-    normalized signal and force. For a combination, the inputs of the combining SVR/LSSVM are
-    the single models' predictions, each multiplied by its weight (Eq. 1 for WCFM, 1/m for
-    CFM). Those training inputs are out-of-fold predictions (``folds`` folds by sample), so
-    that the combiner learns how the single models err on data they have not seen; the
-    weights' summed relative errors E_i use the same out-of-fold predictions. The deployed
-    single models are fitted on all the training data.
+    Each sample (one applied force, its k readings) is one training example. The single
+    models (``polynomial``: a polynomial in the mean reading; ``bp``: a one-hidden-layer
+    tanh network, L-BFGS; ``svm``: RBF epsilon-SVR; ``lssvm``: RBF least-squares SVM; the
+    last three take the k readings as inputs) work on min-max normalized readings and force.
+    Each model's hyperparameters are chosen from :data:`HYPERPARAMETER_GRIDS` by
+    ``folds``-fold cross-validation on ``data`` (mean absolute error); the deployed model is
+    then refitted on all of ``data``.
+
+    A combination's inputs are the single models' forecasts, each multiplied by its weight
+    (Eq. 1 for WCFM, 1/m for CFM), into a linear-kernel SVR (``*_SVM``) or LSSVM
+    (``*_LSSVM``). It is trained on the out-of-fold forecasts of the chosen single models
+    (each sample forecast by the models fitted without its fold), so that it learns how
+    they err on data they have not seen; the weights' summed relative errors E_i use the same
+    forecasts, and the combiner's own hyperparameters (:data:`COMBINER_GRIDS`) are chosen
+    by cross-validation on them. Nothing outside ``data`` is used for any choice.
 
     Args:
-        data: Training readings.
+        data: Training readings (every sample with the same number of readings).
         models: Names from :data:`CALIBRATION_MODELS`.
-        folds: Folds for the out-of-fold predictions.
+        folds: Folds of the cross-validation.
         seed: Random seed (network initialization, folds).
+        progress: Show a progress bar (one step per tuned model).
 
     Returns:
-        Model name to fitted calibration.
+        Model name to fitted calibration; ``metadata`` holds the chosen hyperparameters,
+        the cross-validated MAE (N) and, for combinations, the Eq. 1 weights.
+
+    Raises:
+        InputError: Unknown model names, unequal readings per sample, or fewer than
+            ``2 folds`` samples.
     """
+    from threadpoolctl import threadpool_limits
+    from tqdm import tqdm
+
     unknown = [m for m in models if m not in CALIBRATION_MODELS]
     if unknown:
         raise InputError(f"models must be among {CALIBRATION_MODELS}", value=unknown)
-    if len(np.unique(data.sample)) < folds:
-        raise InputError(f"need at least {folds} samples to fit", value=len(data.sample))
-    signal_offset = float(data.signal_V.min())
-    signal_scale = float(np.ptp(data.signal_V)) or 1.0
-    force_offset = float(data.force_N.min())
-    force_scale = float(np.ptp(data.force_N)) or 1.0
-    features = ((data.signal_V - signal_offset) / signal_scale)[:, None]
-    target = (data.force_N - force_offset) / force_scale
-    singles = {kind: _fit_model(kind, features, target, seed) for kind in SINGLE_MODELS}
+    _, force, readings = sample_readings(data)
+    if folds < 2 or len(force) < 2 * folds:
+        raise InputError(
+            f"need at least {2 * folds} samples and 2 folds to fit", value=(len(force), folds)
+        )
+    signal_offset = float(readings.min())
+    signal_scale = float(np.ptp(readings)) or 1.0
+    force_offset = float(force.min())
+    force_scale = float(np.ptp(force)) or 1.0
+    features = (readings - signal_offset) / signal_scale
+    target = (force - force_offset) / force_scale
+    fold_masks = _folds(len(target), folds, seed)
+    combined = [m for m in models if m in COMBINED_MODELS]
+    needed = SINGLE_MODELS if combined else tuple(m for m in SINGLE_MODELS if m in models)
 
-    def calibration(model: str, **parts: Any) -> ForceCalibration:
+    def calibration(model: str, tuned: _Tuned, **parts: Any) -> ForceCalibration:
         return ForceCalibration(
             model=model,
             signal_offset_V=signal_offset,
             signal_scale_V=signal_scale,
             force_offset_N=force_offset,
             force_scale_N=force_scale,
-            metadata={"software": software_versions(), "training_readings": len(target)},
+            readings=readings.shape[1],
+            metadata={
+                "software": software_versions(),
+                "training_samples": len(target),
+                "cv_folds": folds,
+                "cv_mae_N": tuned.cv_mae * force_scale,
+                "hyperparameters": tuned.params,
+            },
             **parts,
         )
 
-    fitted = {
-        m: calibration(m, singles=[singles[m]], weights=np.zeros(0))
-        for m in models
-        if m in SINGLE_MODELS
-    }
-    combined = [m for m in models if m in COMBINED_MODELS]
-    if not combined:
-        return fitted
-    out_of_fold = np.zeros((len(SINGLE_MODELS), len(target)))
-    for held in _group_folds(data.sample, folds, seed):
-        for index, kind in enumerate(SINGLE_MODELS):
-            fold_model = _fit_model(kind, features[~held], target[~held], seed)
-            out_of_fold[index, held] = _predict_model(fold_model, features[held])
-    weighted = combination_weights(out_of_fold * force_scale + force_offset, data.force_N)
-    equal = np.full(len(SINGLE_MODELS), 1.0 / len(SINGLE_MODELS))
-    for m in combined:
-        weights = weighted if m.startswith("WCFM") else equal
-        combiner_kind = "svm" if m.endswith("_SVM") else "lssvm"
-        combiner = _fit_model(
-            combiner_kind, (out_of_fold * weights[:, None]).T, target, seed, kernel=COMBINER_KERNEL
-        )
-        fitted[m] = calibration(
-            m,
-            singles=[singles[kind] for kind in SINGLE_MODELS],
-            weights=weights,
-            combiner=combiner,
-        )
+    # Small problems: one BLAS/OpenMP thread each is much faster than oversubscribed threads.
+    bar = tqdm(
+        total=len(needed) + len(combined), desc="calibration", unit="model", disable=not progress
+    )
+    with threadpool_limits(limits=1), bar:
+        tuned = {}
+        for kind in needed:
+            bar.set_postfix_str(kind)
+            tuned[kind] = _cross_validate(
+                kind, HYPERPARAMETER_GRIDS[kind], features, target, fold_masks, seed
+            )
+            bar.update(1)
+        singles = {
+            kind: _fit_model(kind, features, target, tuned[kind].params, seed) for kind in needed
+        }
+        fitted = {
+            m: calibration(m, tuned[m], singles=[singles[m]], weights=np.zeros(0))
+            for m in models
+            if m in SINGLE_MODELS
+        }
+        out_of_fold = np.array([tuned[kind].out_of_fold for kind in SINGLE_MODELS])
+        weighted = combination_weights(out_of_fold * force_scale + force_offset, force)
+        equal = np.full(len(SINGLE_MODELS), 1.0 / len(SINGLE_MODELS))
+        for m in combined:
+            bar.set_postfix_str(m)
+            weights = weighted if m.startswith("WCFM") else equal
+            combiner_kind = "svm" if m.endswith("_SVM") else "lssvm"
+            inputs = (out_of_fold * weights[:, None]).T
+            chosen = _cross_validate(
+                combiner_kind,
+                COMBINER_GRIDS[combiner_kind],
+                inputs,
+                target,
+                fold_masks,
+                seed,
+                kernel=COMBINER_KERNEL,
+            )
+            combiner = _fit_model(
+                combiner_kind, inputs, target, chosen.params, seed, kernel=COMBINER_KERNEL
+            )
+            fitted[m] = calibration(
+                m,
+                chosen,
+                singles=[singles[kind] for kind in SINGLE_MODELS],
+                weights=weights,
+                combiner=combiner,
+            )
+            fitted[m].metadata["weights"] = dict(zip(SINGLE_MODELS, weights.tolist(), strict=True))
+            bar.update(1)
     return {m: fitted[m] for m in models}
 
 
@@ -538,39 +736,72 @@ def fit_calibration(
     return fit_calibrations(data, models=(model,), folds=folds, seed=seed)[model]
 
 
+GRAM_FORCE_N = 9.80665e-3
+"""One gram-force in newtons."""
+
+
 def synthetic_sensor(
     *,
     samples: int = 76,
     readings: int = 5,
-    max_force_N: float = 3.0 * 9.80665,
-    noise_V: float = 1e-3,
-    drift_V_per_K: float = 1e-3,
     seed: int = 2017,
+    noise_V: float = 1e-3,
+    emi_probability: float = 0.05,
+    emi_V: float = 0.02,
+    temperature_coefficient_per_K: float = 5e-4,
 ) -> CalibrationData:
-    """A synthetic miniature force sensor (nonlinear gain, temperature drift, noise).
+    """A synthetic calibration session of a 3 kg load cell (seed 002's set-up, simulated).
 
-    The applied forces are uniform on (2%, 100%] of ``max_force_N`` (the paper: 0-3000 g on a
-    2 g scale), applied in random order during one session. The signal of a reading is
+    ``samples`` weights, uniform on 2-100 % of 3000 g, are applied one after another in
+    random order, 60 s each; the sensor is read ``readings`` times, 1 s apart, from 10 s after
+    the load is applied. The actual force is the reference scale's reading, the true force
+    rounded to its 2 g resolution. Each reading (volts) is
 
-        V = 2.5 tanh(F / F_s) + 0.15 (F / F_max)^2 + k_T T(t) (1 + F / F_max) + n
+        V = V0 + S F_FS g(x) c(t) (1 + b dT) + a V_FS dT + n + e,    x = F / F_FS,
 
-    with F_s = 1.2 F_max (a saturating gain with a quadratic term), a room temperature that
-    swings T(t) = 2 K sin(2 pi t / t_session + phase) over the session and shifts offset
-    and gain by ``drift_V_per_K`` per kelvin (not recorded, so it acts as a slow disturbance),
-    and white noise n of ``noise_V`` per reading.
+    quantized by a 12-bit ADC over 0-5 V, with
+
+    - V0 = 0.5 V zero output, S F_FS = V_FS = 4 V span at F_FS = 3000 g;
+    - gain nonlinearity g(x) = x - 0.06 x^2 + 0.02 x^3 (sensitivity 6 % lower at full scale,
+      full-scale output 4 % below the initial tangent; a cheap load cell);
+    - creep c(t) = 1 + 0.002 ln(1 + t / 2 s) with t the time under load;
+    - temperature (not recorded): dT(t) = 2 K (1 - exp(-t / 20 min)) (warm-up of the
+      electronics after power-on) + 1 K sin(2 pi t / 90 min + phase) (room), t the session
+      time; zero coefficient a and span coefficient b, each
+      ``temperature_coefficient_per_K`` (0.05 %/K: 2 mV/K of zero, about 0.015 N/K);
+    - n: white noise, ``noise_V`` rms per reading (amplifier and ADC);
+    - e: electromagnetic interference, a spike of ``emi_V`` rms (Gaussian) on each reading
+      with probability ``emi_probability``.
+
+    The parameters are typical data-sheet values of a low-cost load cell with an
+    instrumentation amplifier, chosen before any model was fitted.
+
+    Returns:
+        Readings with labels S000, S001, ... (the session order).
     """
     rng = np.random.default_rng(seed)
-    force = rng.uniform(0.02, 1.0, samples) * max_force_N
-    time_fraction = (np.arange(samples)[:, None] * readings + np.arange(readings)) / (
-        samples * readings
+    full_scale_g = 3000.0
+    grams = rng.uniform(0.02, 1.0, samples) * full_scale_g
+    actual_N = np.round(grams / 2.0) * 2.0 * GRAM_FORCE_N
+    time_under_load_s = 10.0 + np.arange(readings, dtype=np.float64)
+    session_s = 60.0 * np.arange(samples)[:, None] + time_under_load_s[None, :]
+    delta_K = 2.0 * (1.0 - np.exp(-session_s / 1200.0)) + np.sin(
+        2.0 * np.pi * session_s / 5400.0 + rng.uniform(0.0, 2.0 * np.pi)
     )
-    temperature_K = 2.0 * np.sin(2.0 * np.pi * time_fraction + rng.uniform(0, 2 * np.pi))
-    relative = (force / max_force_N)[:, None]
-    clean = 2.5 * np.tanh(relative / 1.2) + 0.15 * relative**2
+    x = (grams / full_scale_g)[:, None]
+    span_V = 4.0
+    load_V = (
+        span_V * (x - 0.06 * x**2 + 0.02 * x**3) * (1.0 + 0.002 * np.log1p(time_under_load_s / 2.0))
+    )
     signal = (
-        clean
-        + drift_V_per_K * temperature_K * (1.0 + relative)
+        0.5
+        + load_V * (1.0 + temperature_coefficient_per_K * delta_K)
+        + temperature_coefficient_per_K * span_V * delta_K
         + rng.normal(0.0, noise_V, (samples, readings))
+        + (rng.random((samples, readings)) < emi_probability)
+        * rng.normal(0.0, emi_V, (samples, readings))
     )
+    lsb_V = 5.0 / 4096
+    signal = np.round(signal / lsb_V) * lsb_V
     labels = np.repeat([f"S{k:03d}" for k in range(samples)], readings)
-    return CalibrationData(labels, np.repeat(force, readings), signal.ravel())
+    return CalibrationData(labels, np.repeat(actual_N, readings), signal.ravel())

@@ -2,10 +2,12 @@
 
 Reads calibration readings (``sample,force_N,signal_V``; ``sample`` groups repeated readings
 of one applied force), holds out ``--test-samples`` samples (the paper: 70 / 6), fits the
-single models (polynomial, BP network, SVR, LSSVM) and the combinations (CFM_SVM, CFM_LSSVM,
-WCFM_LSSVM, WCFM_SVM), and writes ``calibration.json`` (the chosen model, for the recorder),
-``calibration_metrics.json`` and ``.csv`` (Table 1: MAE, the paper's MSE, MAPE on the test
-samples, each sample's force the mean of its corrected readings) and ``calibration.png``.
+single models (polynomial, BP network, SVR, LSSVM; hyperparameters by cross-validation on
+the training samples) and the combinations (CFM_SVM, CFM_LSSVM, WCFM_LSSVM, WCFM_SVM), and
+writes ``calibration.json`` (the chosen model, for the recorder), ``calibration_metrics.json``
+and ``.csv`` (Table 1: MAE, the paper's MSE, MAPE on the test samples, each sample's force
+corrected from its readings) and ``calibration.png``. Every sample needs the same number of
+readings.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--model", default="WCFM_SVM", help="model saved to calibration.json")
     parser.add_argument("--test-samples", type=int, default=6, help="samples held out")
     parser.add_argument("--seed", type=int, default=0, help="seed of the split and models")
+    parser.add_argument("--folds", type=int, default=5, help="cross-validation folds")
     parser.add_argument("--out", type=Path, default=Path("calibration_out"), help="folder")
     parser.set_defaults(handler=run)
 
@@ -37,10 +40,9 @@ def run(args: argparse.Namespace) -> int:
 
     from warptissue.calibration import (
         CALIBRATION_MODELS,
-        calibration_metrics,
+        evaluate_calibrations,
         fit_calibrations,
         read_calibration_csv,
-        sample_means,
         split_samples,
     )
     from warptissue.errors import InputError
@@ -50,17 +52,15 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--model must be one of {CALIBRATION_MODELS}", value=args.model)
     data = read_calibration_csv(args.data)
     train, test = split_samples(data, test_samples=args.test_samples, seed=args.seed)
-    calibrations = fit_calibrations(train, seed=args.seed)
-    table = {}
-    for name, calibration in calibrations.items():
-        actual, corrected = sample_means(test, calibration.correct(test.signal_V))
-        table[name] = calibration_metrics(actual, corrected)
+    calibrations = fit_calibrations(train, folds=args.folds, seed=args.seed, progress=True)
+    table = evaluate_calibrations(calibrations, test)
     chosen = calibrations[args.model]
     chosen.metadata.update(
         {
             "data": str(args.data),
             "test_samples": args.test_samples,
             "seed": args.seed,
+            "folds": args.folds,
             "test_metrics": table[args.model],
         }
     )
@@ -98,13 +98,14 @@ def _plot(path: Path, test, calibrations) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from warptissue.calibration import sample_means
+    from warptissue.calibration import sample_readings
     from warptissue.io import atomic_path
 
+    _, actual, readings = sample_readings(test)
+    order = np.argsort(actual)
     figure, axis = plt.subplots(figsize=(7, 4), constrained_layout=True)
     for index, (name, calibration) in enumerate(calibrations.items()):
-        actual, corrected = sample_means(test, calibration.correct(test.signal_V))
-        order = np.argsort(actual)
+        corrected = calibration.correct(readings)
         axis.plot(
             np.arange(len(actual)) + 0.08 * (index - 3.5),
             np.abs(corrected - actual)[order],
