@@ -19,6 +19,7 @@ from warptissue.calibration import (
     calibration_metrics,
     combination_weights,
     evaluate_calibrations,
+    fit_calibration,
     fit_calibrations,
     read_calibration_csv,
     sample_readings,
@@ -191,6 +192,17 @@ def test_wcfm_svm_against_the_single_models_on_306_held_out_samples(sensor_fits)
     best_single = min(mae[name] for name in ("polynomial", "bp", "svm", "lssvm"))
     assert mae["WCFM_SVM"] < 0.85 * mae["bp"]
     assert mae["WCFM_SVM"] < 1.15 * best_single
+
+
+def test_a_single_model_fits_alone_and_equals_its_part_of_the_full_fit(sensor_fits):
+    """Fitting only the polynomial (no combination, so no other single model) gives the same
+    calibration as the polynomial of the full fit."""
+    train, _, held, fits = sensor_fits
+    alone = fit_calibration(train, model="polynomial", seed=0)
+    _, _, readings = sample_readings(held)
+    np.testing.assert_allclose(
+        alone.correct(readings), fits["polynomial"].correct(readings), rtol=0, atol=1e-12
+    )
 
 
 def test_correct_takes_samples_or_a_reading_stream(sensor_fits):

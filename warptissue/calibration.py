@@ -697,9 +697,10 @@ def fit_calibrations(
             for m in models
             if m in SINGLE_MODELS
         }
-        out_of_fold = np.array([tuned[kind].out_of_fold for kind in SINGLE_MODELS])
-        weighted = combination_weights(out_of_fold * force_scale + force_offset, force)
-        equal = np.full(len(SINGLE_MODELS), 1.0 / len(SINGLE_MODELS))
+        if combined:
+            out_of_fold = np.array([tuned[kind].out_of_fold for kind in SINGLE_MODELS])
+            weighted = combination_weights(out_of_fold * force_scale + force_offset, force)
+            equal = np.full(len(SINGLE_MODELS), 1.0 / len(SINGLE_MODELS))
         for m in combined:
             bar.set_postfix_str(m)
             weights = weighted if m.startswith("WCFM") else equal
