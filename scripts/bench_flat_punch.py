@@ -80,6 +80,7 @@ class RunRecord:
     final_depth_m: float
     final_force_N: float
     force_N: list[float] = field(default_factory=list)
+    newton_iterations_per_step: list[int] = field(default_factory=list)
     linear_solver: str = ""
     relative_error: float | None = None
 
@@ -480,6 +481,7 @@ def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
         final_depth_m=float(result.depths_m[-1]) if forces else 0.0,
         final_force_N=forces[-1] if forces else float("nan"),
         force_N=forces,
+        newton_iterations_per_step=[int(n) for n in result.newton_iterations],
         linear_solver=str(getattr(result, "linear_solver", "")),
     )
 

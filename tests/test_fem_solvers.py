@@ -9,7 +9,7 @@ import warp as wp
 
 from warptissue.errors import InputError
 from warptissue.fem import Assembler, DirichletConditions, LinearSolver, solve_quasistatic
-from warptissue.fem.solvers import _pardiso_available
+from warptissue.fem.solvers import _line_search, _pardiso_available
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
 from warptissue.mesh import block_mesh, to_tet10
 
@@ -124,6 +124,51 @@ def test_cutback_recovers_and_reports(rng):
     assert not stopped.completed
     assert len(stopped.loads) == 1 and stopped.loads[0] == target[0]
     assert "cutbacks" in stopped.message and "kept" in stopped.message
+
+
+def test_line_search_finds_the_energy_minimum_along_an_overshooting_direction(rng):
+    """Three times a Newton direction overshoots: the search must stop near the energy minimum
+    along it (checked against a dense scan) and meet its curvature test; near a quadratic
+    minimum it takes the full Newton step at once."""
+    mesh = _cube()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e4), formulation="mixed", device="cpu")
+    conditions = _compression_conditions(mesh)
+    mask = conditions.mask(mesh.node_count)
+    free = 1.0 - mask
+    solver = LinearSolver(method="superlu", device=assembler.device)
+
+    def state(scale):
+        u = scale * rng.standard_normal((mesh.node_count, 3)) * free
+        assembly = assembler.assemble(u)
+        residual = assembly.residual.numpy()
+        assembler.eliminate(wp.array(mask, dtype=wp.vec3d, device=assembler.device))
+        newton, _ = solver.solve(assembly.matrix, -residual * free)
+        return u, assembly.energy_J, np.linalg.norm(residual * free), newton
+
+    def slope_at(u, direction, alpha):
+        r = assembler.assemble(u + alpha * direction, with_tangent=False).residual.numpy()
+        return float(np.sum(r * free * direction))
+
+    u, energy_J, residual_norm, newton = state(2e-4)
+    direction = 3.0 * newton
+    g0 = slope_at(u, direction, 0.0)
+    assert g0 < 0.0
+    scan = np.linspace(0.0, 1.0, 201)
+    energies = [assembler.assemble(u + a * direction, with_tangent=False).energy_J for a in scan]
+    alpha_min = scan[int(np.argmin(energies))]
+    assert alpha_min < 0.5  # the full step overshoots: a real test of the search
+    search = _line_search(assembler, u, direction, free, energy_J, g0, residual_norm)
+    assert search.assembly is not None
+    assert abs(slope_at(u, direction, search.alpha)) <= 0.5 * abs(g0)
+    assert abs(search.alpha - alpha_min) < 0.05
+    assert search.assembly.energy_J < energy_J
+    np.testing.assert_allclose(search.state, u + search.alpha * direction)
+
+    u, energy_J, residual_norm, newton = state(1e-8)
+    exact = _line_search(
+        assembler, u, newton, free, energy_J, slope_at(u, newton, 0.0), residual_norm
+    )
+    assert exact.alpha == 1.0
 
 
 def test_conditions_validate():

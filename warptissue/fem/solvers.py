@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -277,6 +278,114 @@ class _Step:
     reason: str
 
 
+@dataclass
+class _Search:
+    """Outcome of a line search: the accepted state and its assembly (None if none)."""
+
+    alpha: float
+    state: np.ndarray
+    assembly: Any
+    reason: str = ""
+
+
+def _first_iteration_step(
+    assembler: Assembler, start: np.ndarray, direction: np.ndarray
+) -> _Search:
+    """Step of a load increment's first iteration (prescribed increment applied whole).
+
+    The state with only the prescribed dofs moved is no reference for a descent test, so the
+    free part of the step is only halved while an element inverts.
+    """
+    alpha = 1.0
+    for _ in range(8):
+        trial = start + alpha * direction
+        check = assembler.assemble(trial, with_tangent=False)
+        if check.min_jacobian > 0.0 and math.isfinite(check.energy_J):
+            return _Search(alpha, trial, check)
+        alpha *= 0.5
+    return _Search(alpha, start, None, "an element inverted (J <= 0)")
+
+
+def _line_search(
+    assembler: Assembler,
+    u: np.ndarray,
+    direction: np.ndarray,
+    free: np.ndarray,
+    energy_J: float,
+    slope: float,
+    residual_norm: float,
+    *,
+    max_evaluations: int = 10,
+    curvature: float = 0.5,
+) -> _Search:
+    """Step length along a Newton direction of the free dofs.
+
+    The full step is taken when it decreases the energy (Armijo) or the free residual, and
+    the directional derivative of the energy has dropped to ``curvature`` times its start
+    value (or is still negative). Otherwise a safeguarded secant search on that derivative,
+    ``g(alpha) = r(u + alpha d) . d`` (free dofs), brackets the energy minimum along the
+    direction; states with an inverted element shrink the bracket. A residual-only assembly
+    is far cheaper than the factorization of a Newton iteration, so a few of them that save
+    an iteration pay for themselves.
+
+    Args:
+        assembler: The discretized body.
+        u: Current displacement (N, 3), m.
+        direction: Newton direction, zero on prescribed dofs (N, 3), m.
+        free: 1 on free dofs, 0 on prescribed ones (N, 3).
+        energy_J: Energy at ``u``, J.
+        slope: ``g(0)``, J.
+        residual_norm: Free residual norm at ``u``, N.
+        max_evaluations: Residual assemblies allowed.
+        curvature: The strong-Wolfe factor on ``|g|``.
+
+    Returns:
+        The accepted step, or the one with the lowest energy that passed the decrease test,
+        or a failed :class:`_Search`.
+    """
+    low, g_low = 0.0, slope
+    high, g_high = math.inf, math.nan
+    alpha = 1.0
+    best: _Search | None = None
+    best_energy = math.inf
+    inverted = False
+    for _ in range(max_evaluations):
+        trial = u + alpha * direction
+        check = assembler.assemble(trial, with_tangent=False)
+        if check.min_jacobian <= 0.0 or not math.isfinite(check.energy_J):
+            inverted = True
+            high, g_high = alpha, math.nan
+        else:
+            residual = check.residual.numpy()
+            g = float(np.sum(residual * free * direction))
+            decrease = (
+                check.energy_J <= energy_J + 1e-4 * alpha * slope
+                or _norm(residual * free) < residual_norm
+            )
+            if decrease and (abs(g) <= curvature * abs(slope) or (g < 0.0 and alpha >= 1.0)):
+                return _Search(alpha, trial, check)
+            if decrease and check.energy_J < best_energy:
+                best, best_energy = _Search(alpha, trial, check), check.energy_J
+            if g < 0.0 and decrease:
+                low, g_low = alpha, g
+            else:
+                high, g_high = alpha, g
+        if slope >= 0.0:
+            # Not a descent direction (indefinite tangent): plain halving.
+            alpha *= 0.5
+            continue
+        width = high - low
+        if math.isfinite(g_high) and g_high > g_low:
+            alpha = low - g_low * width / (g_high - g_low)
+            alpha = min(max(alpha, low + 0.1 * width), high - 0.1 * width)
+        else:
+            alpha = low + 0.5 * width
+    if best is not None:
+        return best
+    reason = "an element inverted (J <= 0)" if inverted else "the line search found no decrease"
+    return _Search(alpha, u, None, reason)
+
+
 def _newton_increment(
     assembler: Assembler,
     solver: LinearSolver,
@@ -311,31 +420,14 @@ def _newton_increment(
                 False, u, iteration, linear_total, "the linear solve gave non-finite values"
             )
         old_norm = _norm(residual * free)
-        old_energy = assembly.energy_J
         slope = float(np.sum(residual * free * du))
-        # Backtracking line search on the free part (the prescribed increment is applied whole).
-        alpha = 1.0
-        accepted = False
-        for _ in range(8):
-            trial = u + alpha * du * free + (prescribed_increment if iteration == 1 else 0.0)
-            check = assembler.assemble(trial, with_tangent=False)
-            if check.min_jacobian > 0.0 and math.isfinite(check.energy_J):
-                new_norm = _norm(check.residual.numpy() * free)
-                if (
-                    iteration == 1
-                    or new_norm < old_norm
-                    or check.energy_J <= old_energy + 1e-4 * alpha * slope
-                ):
-                    accepted = True
-                    break
-            alpha *= 0.5
-        if not accepted:
-            reason = (
-                "an element inverted (J <= 0)"
-                if check.min_jacobian <= 0.0
-                else "the line search found no decrease"
-            )
-            return _Step(False, u, iteration, linear_total, reason)
+        if iteration == 1:
+            search = _first_iteration_step(assembler, u + prescribed_increment, du * free)
+        else:
+            search = _line_search(assembler, u, du * free, free, assembly.energy_J, slope, old_norm)
+        if search.assembly is None:
+            return _Step(False, u, iteration, linear_total, search.reason)
+        trial, alpha = search.state, search.alpha
         u = trial
         assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
