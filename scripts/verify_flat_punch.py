@@ -2,14 +2,18 @@
 
 Runs, on the CPU:
 
-1. mesh convergence of the small-depth punch stiffness (TET10 mean dilatation, bonded punch,
-   thickness h = 4a, K/mu = 1000), with the observed order and a Richardson extrapolation;
-2. the stiffness against Sneddon's 8 mu a for h/a = 2, 4, 8, with Shull's (2002) finite-layer
-   factor and an extrapolation of the FE stiffness to the half-space (a/h -> 0);
-3. the change of the stiffness as K/mu goes 100 -> 10,000;
-4. the locking contrast: displacement-only TET4 vs TET10 mean dilatation;
-5. how deep the bonded punch goes before the cutbacks run out;
-6. timings of one ~20k-tet TET10 problem: assembly, and one linear solve with PARDISO and SuperLU.
+1. mesh convergence of the small-depth punch stiffness (TET10 mean dilatation, frictionless and
+   bonded punch, thickness h = 4a, block width 8h, K/mu = 1000), with the observed order and a
+   Richardson extrapolation, against Sneddon's 8 mu a times the finite-layer factor of Hayes et
+   al. (1972) that ``warptissue.punch.hayes_kappa`` computes (layer of infinite extent bonded
+   to a rigid base, frictionless punch), and against Shull's (2002) fitted factor;
+2. the effect of the block's finite width (4h, 8h, 16h);
+3. the stiffness for h/a = 2, 4, 8 against the same factors, and an extrapolation of the FE
+   stiffness to the half-space (a/h -> 0);
+4. the change of the stiffness as K/mu goes 100 -> 10,000;
+5. the locking contrast: displacement-only TET4 vs TET10 mean dilatation;
+6. how deep the bonded punch goes before the cutbacks run out;
+7. timings of one ~20k-tet TET10 problem: assembly, and one linear solve with PARDISO and SuperLU.
 
 Usage:
     python scripts/verify_flat_punch.py --out runs/verify_flat_punch.json [--quick]
@@ -32,16 +36,23 @@ from warptissue.fem import (
 from warptissue.io import write_json
 from warptissue.materials import NeoHookean
 from warptissue.mesh import indentation_block
+from warptissue.punch import hayes_kappa
 
 RADIUS_M = 1e-3
 SHEAR_MODULUS_PA = 200.0
 DEPTH_M = 2e-3 * RADIUS_M
 
 
-def block(thickness_over_radius: float, near: float, element: str = "TET10"):
+def block(
+    thickness_over_radius: float,
+    near: float,
+    element: str = "TET10",
+    *,
+    width_over_thickness: float = 4.0,
+):
     thickness = thickness_over_radius * RADIUS_M
     return indentation_block(
-        width_m=4.0 * thickness,
+        width_m=width_over_thickness * thickness,
         thickness_m=thickness,
         probe_radius_m=RADIUS_M,
         element=element,
@@ -68,10 +79,23 @@ def normalized_stiffness(mesh, bulk_over_shear=1000.0, formulation="mixed", cont
     return result.reaction_force_N[0] / DEPTH_M / (8.0 * SHEAR_MODULUS_PA * RADIUS_M)
 
 
+def hayes_factor(radius_over_thickness: float, bulk_over_shear: float = 1000.0) -> float:
+    """Hayes et al. (1972) finite-layer factor at the material's Poisson's ratio (computed)."""
+    poissons_ratio = (3.0 * bulk_over_shear - 2.0) / (6.0 * bulk_over_shear + 2.0)
+    return hayes_kappa(radius_over_thickness, poissons_ratio)
+
+
 def shull_factor(radius_over_thickness: float) -> float:
-    """Shull (2002) finite-layer factor for an incompressible layer bonded to a rigid base."""
+    """Shull's (2002) fit for an incompressible layer bonded to a rigid base, for comparison."""
     x = radius_over_thickness
     return 1.0 + 1.33 * x + 1.33 * x**3
+
+
+def richardson(values: list[float]) -> tuple[float, float]:
+    """Observed order and extrapolation from the three finest of levels halving the size."""
+    k = np.asarray(values[-3:])
+    order = float(np.log2(abs(k[1] - k[0]) / abs(k[2] - k[1])))
+    return order, float(k[2] + (k[2] - k[1]) / (2.0**order - 1.0))
 
 
 def main() -> None:
@@ -86,47 +110,64 @@ def main() -> None:
         "machine": "2-core x86_64 CPU (shared)",
     }
 
+    contacts = ("frictionless", "bonded")
     sizes = [1.0, 0.5, 0.25] if args.quick else [1.0, 0.5, 0.25, 0.125]
     convergence = []
     for near in sizes:
-        mesh = block(4.0, near)
+        mesh = block(4.0, near, width_over_thickness=8.0)
         start = time.perf_counter()
-        k = normalized_stiffness(mesh)
-        convergence.append(
-            {
-                "size_near_over_a": near,
-                "tets": mesh.tet_count,
-                "k_over_8mua": k,
-                "seconds": time.perf_counter() - start,
-            }
-        )
-        print(convergence[-1], flush=True)
-    k = np.array([c["k_over_8mua"] for c in convergence])
-    order = float(np.log2(abs(k[-2] - k[-3]) / abs(k[-1] - k[-2])))
-    extrapolated = float(k[-1] + (k[-1] - k[-2]) / (2.0**order - 1.0))
+        level = {"size_near_over_a": near, "tets": mesh.tet_count}
+        for contact in contacts:
+            level[contact] = normalized_stiffness(mesh, contact=contact)
+        level["seconds"] = time.perf_counter() - start
+        convergence.append(level)
+        print(level, flush=True)
     report["mesh_convergence"] = {
+        "width_over_thickness": 8.0,
         "levels": convergence,
-        "observed_order": order,
-        "richardson_k_over_8mua": extrapolated,
+        "hayes_k_over_8mua": hayes_factor(0.25),
         "shull_k_over_8mua": shull_factor(0.25),
     }
+    for contact in contacts:
+        order, extrapolated = richardson([level[contact] for level in convergence])
+        report["mesh_convergence"][contact] = {
+            "observed_order": order,
+            "richardson_k_over_8mua": extrapolated,
+            "relative_to_hayes": extrapolated / hayes_factor(0.25) - 1.0,
+        }
     print(report["mesh_convergence"], flush=True)
+
+    width_study = []
+    for width in (4.0, 8.0, 16.0):
+        mesh = block(4.0, 0.5, width_over_thickness=width)
+        width_study.append(
+            {"width_over_thickness": width, "tets": mesh.tet_count}
+            | {contact: normalized_stiffness(mesh, contact=contact) for contact in contacts}
+        )
+        print(width_study[-1], flush=True)
+    report["block_width"] = width_study
 
     thickness_study = []
     for h_over_a in (2.0, 4.0, 8.0):
-        k_fe = normalized_stiffness(block(h_over_a, 0.25))
+        mesh = block(h_over_a, 0.25, width_over_thickness=8.0)
         thickness_study.append(
-            {"h_over_a": h_over_a, "k_over_8mua": k_fe, "shull": shull_factor(1.0 / h_over_a)}
+            {
+                "h_over_a": h_over_a,
+                "hayes": hayes_factor(1.0 / h_over_a),
+                "shull": shull_factor(1.0 / h_over_a),
+            }
+            | {contact: normalized_stiffness(mesh, contact=contact) for contact in contacts}
         )
         print(thickness_study[-1], flush=True)
     x = np.array([1.0 / t["h_over_a"] for t in thickness_study])
     fit = np.linalg.solve(
-        np.column_stack([np.ones(3), x, x**3]), [t["k_over_8mua"] for t in thickness_study]
+        np.column_stack([np.ones(3), x, x**3]), [t["frictionless"] for t in thickness_study]
     )
     report["sneddon"] = {
+        "width_over_thickness": 8.0,
         "thicknesses": thickness_study,
-        "half_space_extrapolation_k_over_8mua": float(fit[0]),
-        "fitted_linear_coefficient": float(fit[1]),
+        "frictionless_half_space_extrapolation_k_over_8mua": float(fit[0]),
+        "frictionless_fitted_linear_coefficient": float(fit[1]),
     }
     print(report["sneddon"], flush=True)
 

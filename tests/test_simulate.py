@@ -5,10 +5,11 @@ steps) is run through the Python API and through the CLI. The force is checked a
 Sneddon's flat-punch solution for an incompressible half-space, F = 8 mu a delta, times a
 finite-size factor: for this block (10 a wide and thick, bonded to a rigid base) an
 axisymmetric FElupe Q1/P0 reference of the round counterpart converges to 1.09 at small depth
-(scripts/bench_flat_punch.py --felupe-axisymmetric-levels), and Shull's laterally infinite
-layer gives 1 + 1.33 a/h + 1.33 (a/h)^3 = 1.13 (fe-core's test). The loose window (1.0, 1.3)
-catches locking (TET4-like forces are several times too high), a wrong symmetry factor (x4 or
-x1/4) and a sign error, without depending on this coarse mesh's 1-2 % discretization error.
+(scripts/bench_flat_punch.py --felupe-axisymmetric-levels), and the laterally infinite layer
+gives 1.126 (``warptissue.punch.hayes_kappa(0.1, 0.4995)``, test_fem_indentation.py). The
+loose window (1.0, 1.3) catches locking (TET4-like forces are several times too high), a
+wrong symmetry factor (x4 or x1/4) and a sign error, without depending on this coarse mesh's
+1-2 % discretization error.
 """
 
 from __future__ import annotations
