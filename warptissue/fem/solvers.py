@@ -28,14 +28,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
-from warptissue.fem.assembly import Assembler
+from warptissue.fem.assembly import Assembler, Assembly
 from warptissue.fem.cudss import CudssSolver, cudss_available
 from warptissue.fem.direct import CpuDirectSolver
 
@@ -284,7 +283,7 @@ class _Search:
 
     alpha: float
     state: np.ndarray
-    assembly: Any
+    assembly: Assembly | None
     reason: str = ""
 
 
@@ -427,8 +426,7 @@ def _newton_increment(
             search = _line_search(assembler, u, du * free, free, assembly.energy_J, slope, old_norm)
         if search.assembly is None:
             return _Step(False, u, iteration, linear_total, search.reason)
-        trial, alpha = search.state, search.alpha
-        u = trial
+        u, alpha = search.state, search.alpha
         assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
         free_norm = _norm(residual * free)
