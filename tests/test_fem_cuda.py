@@ -15,8 +15,14 @@ import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
-from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, simulate_indentation
-from warptissue.fem.cudss import bsr33_csr_pattern, bsr33_csr_values, cudss_available
+from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, cudss, simulate_indentation
+from warptissue.fem.cudss import (
+    CudssSolver,
+    bsr33_csr_pattern,
+    bsr33_csr_values,
+    cudss_available,
+    cudss_threading_library,
+)
 from warptissue.materials import NeoHookean
 from warptissue.mesh import TetMesh, block_mesh, to_tet10
 
@@ -63,6 +69,52 @@ def test_bsr33_to_csr_matches_the_dense_matrix(device, rng):
     bsr33_csr_values(matrix, block_rows, values)
     np.testing.assert_array_equal(
         sp.csr_matrix((values.numpy(), columns.numpy(), offsets.numpy())).toarray(), 2.0 * dense
+    )
+
+
+def test_threading_layer_is_found_in_the_nvidia_namespace(tmp_path, monkeypatch):
+    """The finder looks in every ``nvidia`` package folder for the wheel's cu*/lib layout."""
+    library = tmp_path / "site" / "nvidia" / "cu13" / "lib" / "libcudss_mtlayer_gomp.so.0"
+    library.parent.mkdir(parents=True)
+    library.write_bytes(b"")
+    empty = tmp_path / "other" / "nvidia"
+    empty.mkdir(parents=True)
+
+    class Spec:
+        submodule_search_locations = [str(empty), str(library.parents[2])]
+
+    monkeypatch.setattr(cudss.importlib.util, "find_spec", lambda name: Spec())
+    cudss_threading_library.cache_clear()
+    try:
+        assert cudss_threading_library() == str(library)
+        Spec.submodule_search_locations = [str(empty)]
+        cudss_threading_library.cache_clear()
+        assert cudss_threading_library() is None
+    finally:
+        cudss_threading_library.cache_clear()
+
+
+@needs_cuda
+@pytest.mark.skipif(not cudss_available(), reason="needs nvmath-python with cuDSS")
+def test_cudss_solves_with_its_threading_layer(rng):
+    """A symmetric positive definite system solved by cuDSS equals NumPy's solution; the
+    solver runs with the wheel's threading layer where that is installed."""
+    dense = rng.standard_normal((21, 21))
+    spd = dense @ dense.T + 3.0 * np.eye(21)
+    blocks = spd.reshape(7, 3, 7, 3).transpose(0, 2, 1, 3).reshape(49, 3, 3)
+    rows, cols = np.divmod(np.arange(49), 7)
+    matrix = wps.bsr_from_triplets(
+        7,
+        7,
+        wp.array(rows.astype(np.int32), dtype=wp.int32, device="cuda:0"),
+        wp.array(cols.astype(np.int32), dtype=wp.int32, device="cuda:0"),
+        wp.array(blocks, dtype=wp.mat33d, device="cuda:0"),
+    )
+    rhs = rng.standard_normal((7, 3))
+    solver = CudssSolver(matrix)
+    assert solver.threading_library == cudss_threading_library()
+    np.testing.assert_allclose(
+        solver.solve(rhs).ravel(), np.linalg.solve(spd, rhs.ravel()), rtol=1e-10, atol=1e-12
     )
 
 

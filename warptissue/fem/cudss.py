@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+from pathlib import Path
 
 import numpy as np
 import warp as wp
@@ -28,7 +29,13 @@ import warp.sparse as wps
 
 from warptissue.errors import DeviceError
 
-__all__ = ["CudssSolver", "bsr33_csr_pattern", "bsr33_csr_values", "cudss_available"]
+__all__ = [
+    "CudssSolver",
+    "bsr33_csr_pattern",
+    "bsr33_csr_values",
+    "cudss_available",
+    "cudss_threading_library",
+]
 
 
 @functools.cache
@@ -43,6 +50,22 @@ def cudss_available() -> bool:
     except Exception:  # any failure to import or load the library means "not available"
         return False
     return True
+
+
+@functools.cache
+def cudss_threading_library() -> str | None:
+    """Path of cuDSS's threading layer (GNU OpenMP) shipped in the nvidia-cudss wheel, or None.
+
+    With it cuDSS runs its host-side analysis (reordering, symbolic factorization) on several
+    threads; without it nvmath-python warns on every solver it creates.
+    """
+    spec = importlib.util.find_spec("nvidia")
+    if spec is None or spec.submodule_search_locations is None:
+        return None
+    for root in spec.submodule_search_locations:
+        for path in sorted(Path(root).glob("cu*/lib/libcudss_mtlayer_gomp.so*")):
+            return str(path)
+    return None
 
 
 def _cupy_view(array: wp.array, cupy_module):
@@ -114,6 +137,8 @@ class CudssSolver:
 
     Attributes:
         factorizations: Numerical factorizations done so far.
+        threading_library: The cuDSS threading layer in use (see
+            :func:`cudss_threading_library`), or None.
 
     Raises:
         DeviceError: The matrix is not on a CUDA device, or cuDSS could not be loaded.
@@ -151,21 +176,29 @@ class CudssSolver:
                 shape=(self.row_count, self.row_count),
                 copy=False,
             )
-            options = nvs.DirectSolverOptions(
-                sparse_system_type=nvs.DirectSolverMatrixType.SYMMETRIC,
-                sparse_system_view=nvs.DirectSolverMatrixViewType.LOWER,
-            )
-            try:
-                self._solver = nvs.DirectSolver(
-                    csr,
-                    _cupy_view(self._rhs, cupy).reshape(-1),
-                    options=options,
-                    execution="cuda",
+            bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
+            threading = cudss_threading_library()
+            # The threading layer is an optimization: if it does not load, run without it.
+            for library in [threading, None] if threading else [None]:
+                options = nvs.DirectSolverOptions(
+                    sparse_system_type=nvs.DirectSolverMatrixType.SYMMETRIC,
+                    sparse_system_view=nvs.DirectSolverMatrixViewType.LOWER,
+                    multithreading_lib=library,
                 )
-                bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
-                self._solver.plan()
-            except (RuntimeError, OSError) as exc:
-                raise DeviceError(f"cuDSS could not be set up on {device}: {exc}") from exc
+                try:
+                    self._solver = nvs.DirectSolver(
+                        csr,
+                        _cupy_view(self._rhs, cupy).reshape(-1),
+                        options=options,
+                        execution="cuda",
+                    )
+                    self._solver.plan()
+                except (RuntimeError, OSError) as exc:
+                    if library is None:
+                        raise DeviceError(f"cuDSS could not be set up on {device}: {exc}") from exc
+                    continue
+                self.threading_library = library
+                break
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Factorize the matrix's current values and solve ``matrix x = rhs``.
