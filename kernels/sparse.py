@@ -5,6 +5,8 @@ blocks' column order, so column indices stay sorted within each row when the blo
 are. With ``start = offsets[r]`` and ``count = offsets[r + 1] - start``, entry ``(i, k)`` of
 block ``start + s`` lands at CSR position ``9 start + 3 count i + 3 s + k``; row ``3 r + i``
 starts at ``9 start + 3 count i``.
+
+Also: copying selected blocks of a BSR matrix out (a submatrix's values).
 """
 
 import warp as wp
@@ -56,3 +58,14 @@ def bsr33_csr_values_kernel(
     for i in range(3):
         for k in range(3):
             csr_values[9 * start + 3 * count * i + 3 * s + k] = block[i, k]
+
+
+@wp.kernel
+def gather_blocks_kernel(
+    block_values: wp.array(dtype=wp.mat33d),
+    block_ids: wp.array(dtype=wp.int32),
+    gathered: wp.array(dtype=wp.mat33d),
+):
+    """One thread per requested block: ``gathered[i] = block_values[block_ids[i]]``."""
+    i = wp.tid()
+    gathered[i] = block_values[block_ids[i]]

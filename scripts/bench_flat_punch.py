@@ -81,6 +81,7 @@ class RunRecord:
     final_force_N: float
     force_N: list[float] = field(default_factory=list)
     newton_iterations_per_step: list[int] = field(default_factory=list)
+    local_iterations: int | None = None
     linear_solver: str = ""
     relative_error: float | None = None
 
@@ -482,6 +483,7 @@ def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
         final_force_N=forces[-1] if forces else float("nan"),
         force_N=forces,
         newton_iterations_per_step=[int(n) for n in result.newton_iterations],
+        local_iterations=int(np.sum(result.local_iterations)),
         linear_solver=str(getattr(result, "linear_solver", "")),
     )
 

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import scipy.sparse
 import warp as wp
 import warp.sparse as wps
 
@@ -20,7 +21,7 @@ from warptissue.fem.elements import element_geometry
 from warptissue.materials import Material
 from warptissue.mesh import TetMesh
 
-__all__ = ["Assembler", "Assembly", "FORMULATIONS", "von_mises"]
+__all__ = ["Assembler", "Assembly", "FORMULATIONS", "gather_bsr_blocks", "von_mises"]
 
 FORMULATIONS = ("mixed", "displacement")
 """``mixed``: TET10 with element mean dilatation (P2/P0); ``displacement``: pure displacement."""
@@ -52,6 +53,39 @@ def von_mises(cauchy_stress_Pa: np.ndarray) -> np.ndarray:
         0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
         + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2)
     )
+
+
+def gather_bsr_blocks(matrix: wps.BsrMatrix, block_ids: wp.array, gathered: wp.array) -> None:
+    """Copy selected 3x3 blocks of a BSR matrix into ``gathered``, in place.
+
+    Args:
+        matrix: 3x3-block float64 BSR matrix.
+        block_ids: Indices into the matrix's blocks, (k,) int32 on the matrix's device.
+        gathered: Output, (k,) mat33d on the matrix's device.
+    """
+    from warptissue.kernels import sparse as ks
+
+    if block_ids.shape[0] == 0:
+        return
+    if gathered.shape[0] != block_ids.shape[0]:
+        raise ValueError(
+            f"gathered holds {gathered.shape[0]} blocks, block_ids asks for {block_ids.shape[0]}"
+        )
+    wp.launch(
+        ks.gather_blocks_kernel,
+        dim=block_ids.shape[0],
+        inputs=[matrix.values, block_ids],
+        outputs=[gathered],
+        device=matrix.device,
+    )
+
+
+def _block_ranges(offsets: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """Indices of all blocks of the given block rows of a BSR pattern, row after row."""
+    starts = offsets[rows]
+    counts = offsets[rows + 1] - starts
+    shift = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    return shift + np.arange(int(counts.sum()))
 
 
 class Assembler:
@@ -140,6 +174,8 @@ class Assembler:
             prune_numerical_zeros=False,
         )
         offsets = np.concatenate([[0], np.cumsum(np.bincount(block_rows, minlength=n))])
+        self._pattern_offsets = offsets
+        self._pattern_columns = block_cols
         nnz = len(unique_keys)
         if not (
             np.array_equal(self.matrix.offsets.numpy()[: n + 1], offsets)
@@ -203,6 +239,58 @@ class Assembler:
             inputs=[self.matrix.offsets, self.matrix.columns, constrained],
             outputs=[self.matrix.values],
             device=self.device,
+        )
+
+    def node_patch(self, nodes: np.ndarray) -> np.ndarray:
+        """The given nodes and every node sharing a tet with one of them.
+
+        Args:
+            nodes: Node indices, (k,).
+
+        Returns:
+            Sorted unique node indices, (P,) int64.
+        """
+        nodes = np.asarray(nodes, dtype=np.int64)
+        neighbours = self._pattern_columns[_block_ranges(self._pattern_offsets, nodes)]
+        return np.union1d(nodes, neighbours)
+
+    def tangent_submatrix(self, nodes: np.ndarray) -> scipy.sparse.csr_matrix:
+        """The last assembled tangent restricted to the rows and columns of ``nodes``.
+
+        Only the needed blocks leave the device.
+
+        Args:
+            nodes: Sorted unique node indices, (P,).
+
+        Returns:
+            Scalar CSR matrix (3P, 3P), N/m; dof ``3 i + c`` is component c of ``nodes[i]``.
+        """
+        nodes = np.asarray(nodes, dtype=np.int64)
+        local = np.full(self.node_count, -1, dtype=np.int64)
+        local[nodes] = np.arange(len(nodes))
+        counts = self._pattern_offsets[nodes + 1] - self._pattern_offsets[nodes]
+        rows = np.repeat(np.arange(len(nodes)), counts)
+        blocks = _block_ranges(self._pattern_offsets, nodes)
+        columns = local[self._pattern_columns[blocks]]
+        inside = columns >= 0
+        rows, blocks, columns = rows[inside], blocks[inside], columns[inside]
+        gathered = wp.empty(len(blocks), dtype=wp.mat33d, device=self.device)
+        gather_bsr_blocks(
+            self.matrix, wp.array(blocks, dtype=wp.int32, device=self.device), gathered
+        )
+        component = np.arange(3)
+        row_dofs = 3 * rows[:, None, None] + component[None, :, None]
+        column_dofs = 3 * columns[:, None, None] + component[None, None, :]
+        shape = (len(blocks), 3, 3)
+        return scipy.sparse.csr_matrix(
+            (
+                gathered.numpy().reshape(-1),
+                (
+                    np.broadcast_to(row_dofs, shape).reshape(-1),
+                    np.broadcast_to(column_dofs, shape).reshape(-1),
+                ),
+            ),
+            shape=(3 * len(nodes), 3 * len(nodes)),
         )
 
     def cauchy_stress(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:

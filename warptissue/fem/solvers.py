@@ -22,6 +22,10 @@ Dirichlet conditions are imposed by elimination: rows and columns of prescribed 
 with 1 on the diagonal, and the first Newton iteration of each load increment carries the
 prescribed increment to the right-hand side (``-K_fp du_p``), so the predictor is the
 linearized solution rather than a jump of the constrained nodes alone.
+
+After each global Newton step, the few nodes that hold most of the residual are relaxed by a
+local Newton solve with all other nodes fixed (nonlinear elimination, see
+:func:`_nonlinear_elimination`); the convergence test stays global.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse.linalg
 import warp as wp
 import warp.sparse as wps
 
@@ -239,11 +244,14 @@ class QuasistaticResult:
         reaction: ``sum(reaction_weights * f_int)`` at each, shape (S,).
         newton_iterations: Newton iterations per requested load (all substeps), shape (S,).
         linear_iterations: Linear-solver iterations per requested load, shape (S,).
+        local_iterations: Local Newton iterations of the nonlinear elimination per requested
+            load, shape (S,).
         completed: Whether every requested load converged.
         message: What happened, in one sentence.
         cutbacks: Increment halvings used.
         linear_solver: The linear solver used.
-        history: One record per attempted increment (load, converged, iterations, reason).
+        history: One record per attempted increment (load, converged, iterations,
+            local_iterations, reason).
     """
 
     loads: np.ndarray
@@ -251,6 +259,7 @@ class QuasistaticResult:
     reaction: np.ndarray
     newton_iterations: np.ndarray
     linear_iterations: np.ndarray
+    local_iterations: np.ndarray
     completed: bool
     message: str
     cutbacks: int = 0
@@ -275,6 +284,7 @@ class _Step:
     iterations: int
     linear_iterations: int
     reason: str
+    local_iterations: int = 0
 
 
 @dataclass
@@ -385,6 +395,103 @@ def _line_search(
     return _Search(alpha, u, None, reason)
 
 
+def _nonlinear_elimination(
+    assembler: Assembler,
+    assembly: Assembly,
+    u: np.ndarray,
+    free: np.ndarray,
+    limit: float,
+    *,
+    seed_count: int = 50,
+    max_iterations: int = 4,
+    ratio: float = 0.3,
+) -> tuple[np.ndarray, Assembly, int]:
+    """Relax the nodes that hold most of the residual, all other nodes fixed.
+
+    The patch is the (up to) ``seed_count`` free nodes with the largest residual (at least
+    1e-3 of the largest) and their neighbours; where it would hold more than a quarter of the
+    nodes the residual is not local and nothing is done. Newton's method on the patch alone
+    (its block of the tangent, a sparse direct solve, backtracking until the energy decreases
+    (Armijo), every J > 0 and the whole free residual norm decreases) runs until the patch's
+    residual norm is below ``ratio`` times the rest's, or the whole residual is below
+    ``limit``, or ``max_iterations``; it stops early where the patch's tangent gives no
+    descent or no step passes.
+
+    Args:
+        assembler: The discretized body.
+        assembly: Residual and tangent at ``u`` (the tangent not yet eliminated).
+        u: Current displacement (N, 3), m.
+        free: 1 on free dofs, 0 on prescribed ones (N, 3).
+        limit: The global convergence limit on the free residual norm, N.
+        seed_count: Most nodes taken by residual size.
+        max_iterations: Local Newton iterations.
+        ratio: Stop when the patch's residual is this fraction of the rest's.
+
+    Returns:
+        (displacement (N, 3), assembly with tangent at it, local iterations taken).
+
+    Notes:
+        Nonlinear elimination (Lanzkron, Rose and Wilkes 1996; Cai and Li 2011, SIAM J. Sci.
+        Comput. 33). At the singular edge of a bonded punch the energy stiffens far beyond
+        its quadratic model: after a global step the residual sits on a few dozen nodes there,
+        and the next global step overshoots them (on the 86 400-tet benchmark the energy
+        minimum along it lay at 0.2-0.6 of the step), costing extra factorizations. Relaxing
+        them locally costs a few assemblies and a small solve; the global convergence test is
+        unchanged, so the converged state is the same.
+    """
+    residual = assembly.residual.numpy()
+    norms = np.sqrt(np.einsum("ij,ij->i", residual * free, residual * free))
+    seeds = np.argsort(norms)[::-1][:seed_count]
+    if norms[seeds[0]] == 0.0:
+        return u, assembly, 0
+    seeds = seeds[norms[seeds] >= 1e-3 * norms[seeds[0]]]
+    patch = assembler.node_patch(seeds)
+    if 4 * len(patch) > assembler.node_count:
+        return u, assembly, 0
+    patch_free = free[patch].reshape(-1) > 0.5
+    energy = assembly.energy_J
+    total = _norm(residual * free)
+    iterations = 0
+    for _ in range(max_iterations):
+        matrix = assembler.tangent_submatrix(patch)[patch_free][:, patch_free]
+        local_residual = (residual[patch] * free[patch]).reshape(-1)[patch_free]
+        try:
+            step = scipy.sparse.linalg.splu(matrix.tocsc()).solve(-local_residual)
+        except RuntimeError:
+            break
+        slope = float(local_residual @ step)
+        if not (np.all(np.isfinite(step)) and slope < 0.0):
+            break
+        patch_step = np.zeros(3 * len(patch))
+        patch_step[patch_free] = step
+        direction = np.zeros_like(u)
+        direction[patch] = patch_step.reshape(-1, 3)
+        alpha, accepted = 1.0, None
+        for _ in range(8):
+            trial = u + alpha * direction
+            check = assembler.assemble(trial, with_tangent=False)
+            if (
+                check.min_jacobian > 0.0
+                and check.energy_J <= energy + 1e-4 * alpha * slope
+                and _norm(check.residual.numpy() * free) < total
+            ):
+                accepted = trial
+                break
+            alpha *= 0.5
+        if accepted is None:
+            break
+        iterations += 1
+        u = accepted
+        assembly = assembler.assemble(u)
+        residual = assembly.residual.numpy()
+        energy = assembly.energy_J
+        total = _norm(residual * free)
+        local = _norm(residual[patch] * free[patch])
+        if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
+            break
+    return u, assembly, iterations
+
+
 def _newton_increment(
     assembler: Assembler,
     solver: LinearSolver,
@@ -396,10 +503,12 @@ def _newton_increment(
     tolerance: float,
     force_floor: float,
     max_iterations: int,
+    nonlinear_elimination: bool,
 ) -> _Step:
     """Newton iterations for one load increment, starting from a converged state."""
     u = u_start.copy()
     linear_total = 0
+    local_total = 0
     dev = assembler.device
     increment_wp = wp.array(prescribed_increment, dtype=wp.vec3d, device=dev)
     k_times_increment = wp.zeros_like(increment_wp)
@@ -416,7 +525,12 @@ def _newton_increment(
         linear_total += linear_iterations
         if not np.all(np.isfinite(du)):
             return _Step(
-                False, u, iteration, linear_total, "the linear solve gave non-finite values"
+                False,
+                u,
+                iteration,
+                linear_total,
+                "the linear solve gave non-finite values",
+                local_total,
             )
         old_norm = _norm(residual * free)
         slope = float(np.sum(residual * free * du))
@@ -425,24 +539,39 @@ def _newton_increment(
         else:
             search = _line_search(assembler, u, du * free, free, assembly.energy_J, slope, old_norm)
         if search.assembly is None:
-            return _Step(False, u, iteration, linear_total, search.reason)
+            return _Step(False, u, iteration, linear_total, search.reason, local_total)
         u, alpha = search.state, search.alpha
         assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
         free_norm = _norm(residual * free)
         reaction_norm = _norm(residual * (1.0 - free))
-        step_norm = _norm(alpha * du * free)
         limit = max(tolerance * reaction_norm, force_floor)
+        if nonlinear_elimination and free_norm > limit:
+            u, assembly, local = _nonlinear_elimination(assembler, assembly, u, free, limit)
+            local_total += local
+            if local:
+                residual = assembly.residual.numpy()
+                free_norm = _norm(residual * free)
+                reaction_norm = _norm(residual * (1.0 - free))
+                limit = max(tolerance * reaction_norm, force_floor)
+        step_norm = _norm(alpha * du * free)
         # A correction at roundoff relative to the increment means the residual sits at its
         # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
         increment_norm = _norm(u - u_start)
         at_roundoff = step_norm <= 1e-10 * increment_norm
         if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
-            return _Step(True, u, iteration, linear_total, "converged")
+            return _Step(True, u, iteration, linear_total, "converged", local_total)
         if not math.isfinite(free_norm):
-            return _Step(False, u, iteration, linear_total, "the residual became non-finite")
+            return _Step(
+                False, u, iteration, linear_total, "the residual became non-finite", local_total
+            )
     return _Step(
-        False, u, max_iterations, linear_total, f"no convergence in {max_iterations} iterations"
+        False,
+        u,
+        max_iterations,
+        linear_total,
+        f"no convergence in {max_iterations} iterations",
+        local_total,
     )
 
 
@@ -460,6 +589,7 @@ def solve_quasistatic(
     progress_label: str = "load steps",
     load_name: str = "load",
     initial_displacement_m: np.ndarray | None = None,
+    nonlinear_elimination: bool = True,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -483,6 +613,9 @@ def solve_quasistatic(
         progress_label: The bar's label.
         load_name: What the load is called in messages (e.g. ``"depth (m)"``).
         initial_displacement_m: Start state (N, 3); zero by default (load 0).
+        nonlinear_elimination: After each global Newton step, relax the nodes that hold most
+            of the residual with the others fixed (:func:`_nonlinear_elimination`). It changes
+            the path to the solution, not the convergence test.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -503,7 +636,8 @@ def solve_quasistatic(
     length = float(np.sum(assembler.tet_volumes)) ** (1.0 / 3.0)
     force_floor = 1e-13 * assembler.material.initial_shear_modulus_Pa * length**2
     load = 0.0
-    reached, states, reactions, newton_counts, linear_counts = [], [], [], [], []
+    reached, states, reactions = [], [], []
+    newton_counts, linear_counts, local_counts = [], [], []
     message = f"converged at all {len(loads)} requested values of {load_name}"
     completed = True
     total_cutbacks = 0
@@ -515,7 +649,7 @@ def solve_quasistatic(
         bar = tqdm(total=len(loads), desc=progress_label, unit="step")
     try:
         for target in loads:
-            step_newton, step_linear, halvings = 0, 0, 0
+            step_newton, step_linear, step_local, halvings = 0, 0, 0, 0
             increment = target - load
             while True:
                 next_load = load + increment
@@ -532,14 +666,17 @@ def solve_quasistatic(
                     tolerance=tolerance,
                     force_floor=force_floor,
                     max_iterations=max_iterations,
+                    nonlinear_elimination=nonlinear_elimination,
                 )
                 step_newton += step.iterations
                 step_linear += step.linear_iterations
+                step_local += step.local_iterations
                 history.append(
                     {
                         "load": next_load,
                         "converged": step.converged,
                         "iterations": step.iterations,
+                        "local_iterations": step.local_iterations,
                         "reason": step.reason,
                     }
                 )
@@ -572,6 +709,7 @@ def solve_quasistatic(
             reactions.append(float(np.sum(weights * internal)))
             newton_counts.append(step_newton)
             linear_counts.append(step_linear)
+            local_counts.append(step_local)
             if bar is not None:
                 bar.update(1)
     finally:
@@ -583,6 +721,7 @@ def solve_quasistatic(
         reaction=np.array(reactions),
         newton_iterations=np.array(newton_counts, dtype=np.int64),
         linear_iterations=np.array(linear_counts, dtype=np.int64),
+        local_iterations=np.array(local_counts, dtype=np.int64),
         completed=completed,
         message=message,
         cutbacks=total_cutbacks,
