@@ -130,3 +130,22 @@ def test_cpu_and_device_agree(device, rng):
     np.testing.assert_allclose(r1, r0, rtol=0, atol=1e-10 * np.abs(r0).max())
     np.testing.assert_allclose(k1, k0, rtol=0, atol=1e-10 * np.abs(k0).max())
     assert e1 == pytest.approx(e0, rel=1e-10)
+
+
+def test_node_patch_and_tangent_submatrix(device, rng):
+    """The patch is the nodes sharing a tet with the seeds (from the mesh's connectivity), and
+    the gathered submatrix equals those rows and columns of the whole assembled tangent."""
+    mesh = _mesh(10)
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device=device)
+    assembly = assembler.assemble(3e-4 * rng.standard_normal((mesh.node_count, 3)))
+    dense = _dense(assembly, mesh.node_count)
+    seeds = np.array([0, 7, mesh.node_count - 1])
+    touching = np.any(np.isin(mesh.tets, seeds), axis=1)
+    expected = np.unique(np.concatenate([seeds, mesh.tets[touching].ravel()]))
+    patch = assembler.node_patch(seeds)
+    np.testing.assert_array_equal(patch, expected)
+    assert len(patch) < mesh.node_count
+    dofs = (3 * patch[:, None] + np.arange(3)).ravel()
+    np.testing.assert_array_equal(
+        assembler.tangent_submatrix(patch).toarray(), dense[np.ix_(dofs, dofs)]
+    )
