@@ -113,7 +113,6 @@ def profile(target_tets: int, device_name: str, repeats: int, bandwidth: float) 
         "mesh_s": mesh_s,
         "assembler_setup_s": assembler_s,
         "analysis_s": analysis_s,
-        "factor_nnz_from_analysis": int(getattr(plan_info, "lu_nnz", -1)),
         "memory_estimates_bytes": estimates,
         "free_device_bytes_after_analysis": free_device_bytes,
         "factorization_fits_device": estimates[1] <= free_device_bytes,
