@@ -85,6 +85,7 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.solver.tolerance == pytest.approx(1e-9)
     assert study.solver.max_newton_iterations == 25
     assert study.solver.max_cutbacks == 8
+    assert study.solver.nonlinear_elimination is True
 
 
 def test_explicit_depth_list_and_disc(tmp_path):
@@ -188,6 +189,13 @@ BAD_INPUTS = [
         "solver.device",
         "'gpu'",
         id="bad-device",
+    ),
+    pytest.param(
+        "[material]",
+        '[solver]\nnonlinear_elimination = "yes"\n[material]',
+        "solver.nonlinear_elimination",
+        "'yes'",
+        id="elimination-not-boolean",
     ),
 ]
 

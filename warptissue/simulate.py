@@ -196,6 +196,7 @@ def run_study(
         tolerance=study.solver.tolerance,
         max_newton_iterations=study.solver.max_newton_iterations,
         max_cutbacks=study.solver.max_cutbacks,
+        nonlinear_elimination=study.solver.nonlinear_elimination,
     )
     solved = time.perf_counter()
 
@@ -229,6 +230,7 @@ def run_study(
             "reaction_force_N": result.reaction_force_N,
             "newton_iterations": newton,
             "linear_iterations": np.asarray(result.linear_iterations, dtype=np.int64),
+            "local_iterations": np.asarray(result.local_iterations, dtype=np.int64),
         },
         "steps_requested": study.protocol.step_count,
         "steps_converged": converged,
