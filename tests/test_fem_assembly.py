@@ -149,3 +149,7 @@ def test_node_patch_and_tangent_submatrix(device, rng):
     np.testing.assert_array_equal(
         assembler.tangent_submatrix(patch).toarray(), dense[np.ix_(dofs, dofs)]
     )
+    with pytest.raises(InputError, match="node indices"):
+        assembler.node_patch([mesh.node_count])
+    with pytest.raises(InputError, match="sorted and unique"):
+        assembler.tangent_submatrix([3, 3])

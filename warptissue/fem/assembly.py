@@ -249,8 +249,11 @@ class Assembler:
 
         Returns:
             Sorted unique node indices, (P,) int64.
+
+        Raises:
+            InputError: A node index is out of range.
         """
-        nodes = np.asarray(nodes, dtype=np.int64)
+        nodes = self._node_indices(nodes)
         neighbours = self._pattern_columns[_block_ranges(self._pattern_offsets, nodes)]
         return np.union1d(nodes, neighbours)
 
@@ -264,8 +267,13 @@ class Assembler:
 
         Returns:
             Scalar CSR matrix (3P, 3P), N/m; dof ``3 i + c`` is component c of ``nodes[i]``.
+
+        Raises:
+            InputError: A node index is out of range, or the indices are not sorted and unique.
         """
-        nodes = np.asarray(nodes, dtype=np.int64)
+        nodes = self._node_indices(nodes)
+        if np.any(np.diff(nodes) <= 0):
+            raise InputError("nodes must be sorted and unique", value=nodes.tolist()[:20])
         local = np.full(self.node_count, -1, dtype=np.int64)
         local[nodes] = np.arange(len(nodes))
         counts = self._pattern_offsets[nodes + 1] - self._pattern_offsets[nodes]
@@ -292,6 +300,16 @@ class Assembler:
             ),
             shape=(3 * len(nodes), 3 * len(nodes)),
         )
+
+    def _node_indices(self, nodes: np.ndarray) -> np.ndarray:
+        nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
+        outside = (nodes < 0) | (nodes >= self.node_count)
+        if np.any(outside):
+            raise InputError(
+                f"node indices must lie in [0, {self.node_count})",
+                value=nodes[outside][:20].tolist(),
+            )
+        return nodes
 
     def cauchy_stress(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:
         """Volume-averaged Cauchy stress per tet (xx, yy, zz, yz, xz, xy), shape (M, 6), Pa."""
