@@ -300,17 +300,24 @@ def test_cli_acquire_against_simulated_rig(tmp_path, capsys):
     assert main(["acquire", "--port", "loop://", "--depth", "4 parsecs", "--out", "x.csv"]) == 2
 
 
-def test_cli_rig_sim_serves_until_ctrl_c(tmp_path):
-    """``warptissue rig-sim`` in its own process: prints its URL, serves, exits on SIGINT."""
+@pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM", "SIGINT-inherited-ignored"])
+def test_cli_rig_sim_serves_until_ctrl_c(tmp_path, stop):
+    """``warptissue rig-sim`` in its own process: prints its URL, serves, and exits cleanly on
+    SIGINT or SIGTERM, also when started with SIGINT ignored (as a non-interactive shell
+    starts a background job)."""
     import signal
     import subprocess
     import sys
+
+    def ignore_sigint() -> None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     process = subprocess.Popen(
         [sys.executable, "-m", "warptissue.cli", "rig-sim", "--tcp", "0", "--time-scale", "inf"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=ignore_sigint if stop.endswith("ignored") else None,
     )
     try:
         url = process.stdout.readline().strip()
@@ -320,7 +327,7 @@ def test_cli_rig_sim_serves_until_ctrl_c(tmp_path):
             result = Recorder(client, tmp_path / "sim.csv", progress=False).record(SHORT_TEST)
         assert result.status == "complete" and result.samples_missing == 0
     finally:
-        process.send_signal(signal.SIGINT)
+        process.send_signal(signal.SIGTERM if stop == "SIGTERM" else signal.SIGINT)
         assert process.wait(timeout=10) == 0
     assert "emitted=" in process.stderr.read()
 

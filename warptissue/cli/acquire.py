@@ -12,8 +12,12 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import signal
 import sys
+import threading
+from collections.abc import Iterator
 from typing import Any
 
 from warptissue.errors import DeviceError, InputError
@@ -238,10 +242,34 @@ def run_rig_sim(args: argparse.Namespace) -> int:
     )
     print(server.url, flush=True)
     try:
-        server.serve_forever()
+        with _interrupted_by(signal.SIGINT, signal.SIGTERM):
+            server.serve_forever()
     except KeyboardInterrupt:
         pass
     finally:
         server.close()
         print(f"rig-sim: {server.counters}", file=sys.stderr)
     return 0
+
+
+@contextlib.contextmanager
+def _interrupted_by(*signals: signal.Signals) -> Iterator[None]:
+    """Turn the given signals into KeyboardInterrupt while inside (main thread only).
+
+    A process started in the background by a non-interactive shell inherits SIGINT ignored,
+    and a pipeline stops its helpers with SIGTERM: the simulated rig should shut down cleanly
+    on either.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = {number: signal.signal(number, interrupt) for number in signals}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
