@@ -441,10 +441,12 @@ def _nonlinear_elimination(
     """
     residual = assembly.residual.numpy()
     norms = np.sqrt(np.einsum("ij,ij->i", residual * free, residual * free))
-    seeds = np.argsort(norms)[::-1][:seed_count]
-    if norms[seeds[0]] == 0.0:
+    count = min(seed_count, len(norms))
+    seeds = np.argpartition(norms, len(norms) - count)[len(norms) - count :]
+    largest = float(norms[seeds].max())
+    if largest == 0.0:
         return u, assembly, 0
-    seeds = seeds[norms[seeds] >= 1e-3 * norms[seeds[0]]]
+    seeds = seeds[norms[seeds] >= 1e-3 * largest]
     patch = assembler.node_patch(seeds)
     if 4 * len(patch) > assembler.node_count:
         return u, assembly, 0
