@@ -17,7 +17,7 @@ from warptissue.fem import (
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem.solvers import _line_search, _pardiso_available
+from warptissue.fem.solvers import _line_search, _nonlinear_elimination, _pardiso_available
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
 from warptissue.mesh import block_mesh, indentation_block, to_tet10
 
@@ -250,3 +250,61 @@ def test_nonlinear_elimination_saves_newton_iterations_and_keeps_the_curve():
     assert relaxed.local_iterations.sum() > 0
     assert relaxed.newton_iterations.sum() < plain.newton_iterations.sum()
     np.testing.assert_allclose(relaxed.reaction_force_N, plain.reaction_force_N, rtol=1e-8)
+
+
+def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
+    """Whether a local step is taken or every trial is refused (here: trials made to look
+    inverted), the returned assembly's residual is that of the returned displacement, not of
+    the last trial, which shares the assembler's arrays."""
+    radius = 1e-3
+    mesh = indentation_block(
+        width_m=0.012,
+        thickness_m=0.006,
+        probe_radius_m=radius,
+        quarter=True,
+        size_near_m=radius / 2.5,
+        size_far_m=3e-3,
+    )
+    problem = IndentationProblem(
+        mesh,
+        NeoHookean(287.5, 575e3),
+        FlatPunch(radius, contact="bonded"),
+        symmetry_planes=("symmetry_x", "symmetry_y"),
+    )
+    conditions = problem.dirichlet_conditions()
+    free = 1.0 - conditions.mask(mesh.node_count)
+    assembler = Assembler(mesh, problem.material, device="cpu")
+    # The state after the first Newton iteration of a step: prescribed depth, free dofs at
+    # the linear prediction, residual concentrated at the punch edge.
+    prescribed = conditions.values(0.1 * radius, mesh.node_count)
+    assembly = assembler.assemble(np.zeros((mesh.node_count, 3)))
+    applied = wp.zeros(mesh.node_count, dtype=wp.vec3d, device="cpu")
+    wp.sparse.bsr_mv(assembly.matrix, wp.array(prescribed, dtype=wp.vec3d, device="cpu"), applied)
+    assembler.eliminate(wp.array(1.0 - free, dtype=wp.vec3d, device="cpu"))
+    step, _ = LinearSolver(method="superlu", device=assembler.device).solve(
+        assembly.matrix, -applied.numpy() * free + prescribed
+    )
+    u = prescribed + step * free
+
+    def inverted_trials(displacement, *, with_tangent=True):
+        result = Assembler.assemble(assembler, displacement, with_tangent=with_tangent)
+        if not with_tangent:
+            result.min_jacobian = -1.0
+        return result
+
+    for refuse in (False, True):
+        start = assembler.assemble(u)
+        if refuse:
+            assembler.assemble = inverted_trials
+        returned, assembly, iterations = _nonlinear_elimination(
+            assembler, start, u, free, limit=0.0
+        )
+        residual = assembly.residual.numpy().copy()
+        if refuse:
+            del assembler.assemble
+            assert iterations == 0
+            np.testing.assert_array_equal(returned, u)
+        else:
+            assert iterations > 0
+        fresh = assembler.assemble(returned, with_tangent=False).residual.numpy()
+        np.testing.assert_array_equal(residual, fresh)

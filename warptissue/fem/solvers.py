@@ -428,7 +428,7 @@ def _nonlinear_elimination(
         ratio: Stop when the patch's residual is this fraction of the rest's.
 
     Returns:
-        (displacement (N, 3), assembly with tangent at it, local iterations taken).
+        (displacement (N, 3), assembly of residual and tangent at it, local iterations taken).
 
     Notes:
         Nonlinear elimination (Lanzkron, Rose and Wilkes 1996; Cai and Li 2011, SIAM J. Sci.
@@ -481,6 +481,8 @@ def _nonlinear_elimination(
                 break
             alpha *= 0.5
         if accepted is None:
+            # The trials overwrote the assembler's residual: assemble at u again.
+            assembly = assembler.assemble(u)
             break
         iterations += 1
         u = accepted
