@@ -17,7 +17,12 @@ from warptissue.fem import (
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem.solvers import _line_search, _nonlinear_elimination, _pardiso_available
+from warptissue.fem.solvers import (
+    _line_search,
+    _newton_increment,
+    _nonlinear_elimination,
+    _pardiso_available,
+)
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
 from warptissue.mesh import block_mesh, indentation_block, to_tet10
 
@@ -217,27 +222,34 @@ def test_fe_agrees_with_the_closed_form_fitting_models(spec):
     np.testing.assert_allclose(stress, closed_form, rtol=5e-3)
 
 
+PUNCH_RADIUS_M = 1e-3
+
+
+def _bonded_punch() -> IndentationProblem:
+    """Quarter block under a bonded flat punch, TET10/P0, K/mu = 1000, 1 728 tets."""
+    mesh = indentation_block(
+        width_m=0.012,
+        thickness_m=0.006,
+        probe_radius_m=PUNCH_RADIUS_M,
+        quarter=True,
+        size_near_m=PUNCH_RADIUS_M / 2.5,
+        size_far_m=3e-3,
+    )
+    return IndentationProblem(
+        mesh,
+        NeoHookean(287.5, 575e3),
+        FlatPunch(PUNCH_RADIUS_M, contact="bonded"),
+        symmetry_planes=("symmetry_x", "symmetry_y"),
+    )
+
+
 def test_nonlinear_elimination_saves_newton_iterations_and_keeps_the_curve():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets): relaxing the residual peaks at
     the punch edge after each global step saves global Newton iterations (factorizations;
     measured 18 -> 12 here), and the converged forces equal those of plain Newton to the
     tolerance."""
-    radius = 1e-3
-    mesh = indentation_block(
-        width_m=0.012,
-        thickness_m=0.006,
-        probe_radius_m=radius,
-        quarter=True,
-        size_near_m=radius / 2.5,
-        size_far_m=3e-3,
-    )
-    problem = IndentationProblem(
-        mesh,
-        NeoHookean(287.5, 575e3),
-        FlatPunch(radius, contact="bonded"),
-        symmetry_planes=("symmetry_x", "symmetry_y"),
-    )
-    depths = radius * np.array([0.05, 0.1, 0.15])
+    problem = _bonded_punch()
+    depths = PUNCH_RADIUS_M * np.array([0.05, 0.1, 0.15])
     results = {
         on: simulate_indentation(
             problem, depths, device="cpu", progress=False, tolerance=1e-8, nonlinear_elimination=on
@@ -256,35 +268,28 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
     """Whether a local step is taken or every trial is refused (here: trials made to look
     inverted), the returned assembly's residual is that of the returned displacement, not of
     the last trial, which shares the assembler's arrays."""
-    radius = 1e-3
-    mesh = indentation_block(
-        width_m=0.012,
-        thickness_m=0.006,
-        probe_radius_m=radius,
-        quarter=True,
-        size_near_m=radius / 2.5,
-        size_far_m=3e-3,
-    )
-    problem = IndentationProblem(
-        mesh,
-        NeoHookean(287.5, 575e3),
-        FlatPunch(radius, contact="bonded"),
-        symmetry_planes=("symmetry_x", "symmetry_y"),
-    )
+    problem = _bonded_punch()
+    mesh = problem.mesh
     conditions = problem.dirichlet_conditions()
-    free = 1.0 - conditions.mask(mesh.node_count)
+    mask = conditions.mask(mesh.node_count)
+    free = 1.0 - mask
     assembler = Assembler(mesh, problem.material, device="cpu")
-    # The state after the first Newton iteration of a step: prescribed depth, free dofs at
-    # the linear prediction, residual concentrated at the punch edge.
-    prescribed = conditions.values(0.1 * radius, mesh.node_count)
-    assembly = assembler.assemble(np.zeros((mesh.node_count, 3)))
-    applied = wp.zeros(mesh.node_count, dtype=wp.vec3d, device="cpu")
-    wp.sparse.bsr_mv(assembly.matrix, wp.array(prescribed, dtype=wp.vec3d, device="cpu"), applied)
-    assembler.eliminate(wp.array(1.0 - free, dtype=wp.vec3d, device="cpu"))
-    step, _ = LinearSolver(method="superlu", device=assembler.device).solve(
-        assembly.matrix, -applied.numpy() * free + prescribed
+    # The state after the first Newton iteration of a step (plain Newton stopped there):
+    # prescribed depth, free dofs at the linear prediction, residual at the punch edge.
+    first = _newton_increment(
+        assembler,
+        LinearSolver(method="superlu", device=assembler.device),
+        np.zeros((mesh.node_count, 3)),
+        conditions.values(0.1 * PUNCH_RADIUS_M, mesh.node_count),
+        free,
+        wp.array(mask, dtype=wp.vec3d, device=assembler.device),
+        tolerance=1e-8,
+        force_floor=0.0,
+        max_iterations=1,
+        nonlinear_elimination=False,
     )
-    u = prescribed + step * free
+    assert not first.converged
+    u = first.displacement
 
     def inverted_trials(displacement, *, with_tangent=True):
         result = Assembler.assemble(assembler, displacement, with_tangent=with_tangent)

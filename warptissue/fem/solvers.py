@@ -440,7 +440,8 @@ def _nonlinear_elimination(
         unchanged, so the converged state is the same.
     """
     residual = assembly.residual.numpy()
-    norms = np.sqrt(np.einsum("ij,ij->i", residual * free, residual * free))
+    free_residual = residual * free
+    norms = np.sqrt(np.einsum("ij,ij->i", free_residual, free_residual))
     count = min(seed_count, len(norms))
     seeds = np.argpartition(norms, len(norms) - count)[len(norms) - count :]
     largest = float(norms[seeds].max())
@@ -452,7 +453,7 @@ def _nonlinear_elimination(
         return u, assembly, 0
     patch_free = free[patch].reshape(-1) > 0.5
     energy = assembly.energy_J
-    total = _norm(residual * free)
+    total = _norm(free_residual)
     iterations = 0
     for _ in range(max_iterations):
         matrix = assembler.tangent_submatrix(patch)[patch_free][:, patch_free]
