@@ -428,8 +428,11 @@ def warptissue_mesh(target_tets: int, element: str = "TET10") -> tuple[Any, floa
     return mesh, size_near_m
 
 
-def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
-    """warptissue TET10 mixed run of the benchmark on one mesh."""
+def run_warptissue(
+    mesh: Any, size_near_m: float, device: str, *, steps: int = STEP_COUNT, progress: bool = False
+) -> RunRecord:
+    """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
+    steps (all 20 by default; fewer make a partial run, ``completed`` False)."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -450,7 +453,11 @@ def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
     started = time.perf_counter()
     cpu_started = time.process_time()
     result = simulate_indentation(
-        problem, depths_m(), device=warp_device, progress=False, tolerance=NEWTON_TOLERANCE
+        problem,
+        depths_m()[:steps],
+        device=warp_device,
+        progress=progress,
+        tolerance=NEWTON_TOLERANCE,
     )
     wp.synchronize_device(warp_device)
     solve_s = time.perf_counter() - started
@@ -469,7 +476,7 @@ def run_warptissue(mesh: Any, size_near_m: float, device: str) -> RunRecord:
         dofs=3 * mesh.node_count,
         size_near_m=size_near_m,
         steps_converged=len(forces),
-        completed=bool(result.completed),
+        completed=bool(result.completed) and steps == STEP_COUNT,
         newton_iterations=newton,
         linear_iterations=int(np.sum(result.linear_iterations)),
         setup_s=setup_s,
@@ -605,8 +612,20 @@ def main(argv: list[str] | None = None) -> int:
         "(a disc of radius 10 a), comma separated integers; level L has size_near = "
         "a / (4 * 2^L) (empty: skip)",
     )
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=STEP_COUNT,
+        help=f"run only the first STEPS of the {STEP_COUNT} load steps on each warptissue mesh "
+        "(a partial curve, reported as not completed)",
+    )
+    parser.add_argument(
+        "--progress", action="store_true", help="show a progress bar over each run's load steps"
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     args = parser.parse_args(argv)
+    if not 1 <= args.steps <= STEP_COUNT:
+        parser.error(f"--steps must be between 1 and {STEP_COUNT}, got {args.steps}")
 
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
@@ -622,7 +641,9 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
             mesh, size_near_m = warptissue_mesh(target)
-            record = run_warptissue(mesh, size_near_m, args.device)
+            record = run_warptissue(
+                mesh, size_near_m, args.device, steps=args.steps, progress=args.progress
+            )
             records.append(record)
             print_table([record])
             sys.stdout.flush()

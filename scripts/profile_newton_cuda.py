@@ -5,8 +5,9 @@ For each mesh size: tangent assembly, residual-only assembly, Dirichlet eliminat
 matrix-vector product, each synchronized and repeated;
 plus the bytes each part must move at least, so that its time can be set against the
 memory-bandwidth floor (``--bandwidth-GBps``, measured device-to-device copy rate).
-Where cuDSS's analysis estimates more device memory for the factorization than is free,
-the record carries that estimate instead of factorization timings.
+Where the factors do not fit in the free device memory, cuDSS runs in its hybrid memory mode
+(factors in host memory; ``hybrid_memory`` in the record); where they fit in neither, the
+record carries cuDSS's refusal instead of factorization timings.
 
 Example:
     python scripts/profile_newton_cuda.py --sizes 10k,100k --out $OUT/profile.json
@@ -53,6 +54,7 @@ def profile(target_tets: int, device_name: str, repeats: int, bandwidth: float) 
     import warp as wp
     import warp.sparse as wps
 
+    from warptissue.errors import DeviceError
     from warptissue.fem import Assembler
     from warptissue.fem.cudss import CudssSolver, bsr33_csr_values
     from warptissue.materials import NeoHookean
@@ -89,15 +91,13 @@ def profile(target_tets: int, device_name: str, repeats: int, bandwidth: float) 
     applied = wp.zeros_like(vector)
     bsr_mv_s = timed(lambda: wps.bsr_mv(k, vector, applied), device, repeats)
     started = time.perf_counter()
-    solver = CudssSolver(assembler.matrix)
+    try:
+        solver = CudssSolver(assembler.matrix)
+    except DeviceError as exc:
+        # Too large for this device and host even in cuDSS's hybrid memory mode.
+        solver, refusal = None, str(exc)
     wp.synchronize_device(device)
     analysis_s = time.perf_counter() - started
-    plan_info = solver._solver.plan_info
-    # cuDSS's estimates after the analysis, bytes: permanent and peak device memory,
-    # permanent and peak host memory, then (hybrid mode) least device and most host memory.
-    # nvmath returns them as a 0-d structured array.
-    estimates = [int(value) for value in np.asarray(plan_info.memory_estimates).item()[:6]]
-    free_device_bytes = int(device.free_memory)
     tets = mesh.tet_count
     # Fewest bytes per part: the tangent assembly reads the element data (tets, shape
     # gradients, quadrature volumes, displacements) and read-modify-writes every BSR block it
@@ -113,22 +113,20 @@ def profile(target_tets: int, device_name: str, repeats: int, bandwidth: float) 
         "mesh_s": mesh_s,
         "assembler_setup_s": assembler_s,
         "analysis_s": analysis_s,
-        "memory_estimates_bytes": estimates,
-        "free_device_bytes_after_analysis": free_device_bytes,
-        "factorization_fits_device": estimates[1] <= free_device_bytes,
         **assembly_parts,
         "eliminate_s": eliminate_s,
-        "bsr_to_csr_s": timed(
-            lambda: bsr33_csr_values(k, solver._block_rows, solver._csr_values), device, repeats
-        ),
         "bsr_mv_s": bsr_mv_s,
         "assemble_tangent_floor_s": bytes_tangent / (bandwidth * 1e9),
         "bsr_to_csr_floor_s": bytes_csr / (bandwidth * 1e9),
     }
-    if not record["factorization_fits_device"]:
-        # The factorization would run out of device memory: report the estimate instead.
-        solver.free()
+    if solver is None:
+        record["cudss_refused"] = refusal
         return record
+    record["memory_estimates_bytes"] = solver.memory_estimates
+    record["hybrid_memory"] = solver.hybrid_memory
+    record["bsr_to_csr_s"] = timed(
+        lambda: bsr33_csr_values(k, solver._block_rows, solver._csr_values), device, repeats
+    )
     record["factorize_and_solve_s"] = timed(lambda: solver.solve(rhs), device, repeats)
     x = solver.solve(rhs)
     values = k.values.numpy()[:blocks]

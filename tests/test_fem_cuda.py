@@ -14,12 +14,15 @@ import scipy.sparse as sp
 import warp as wp
 import warp.sparse as wps
 
-from warptissue.errors import InputError
+from warptissue.errors import DeviceError, InputError
 from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, cudss, simulate_indentation
 from warptissue.fem.cudss import (
+    MEMORY_ESTIMATE_NAMES,
     CudssSolver,
+    available_host_memory_bytes,
     bsr33_csr_pattern,
     bsr33_csr_values,
+    check_memory_estimates,
     cudss_available,
     cudss_threading_library,
 )
@@ -116,6 +119,89 @@ def test_cudss_solves_with_its_threading_layer(rng):
     np.testing.assert_allclose(
         solver.solve(rhs).ravel(), np.linalg.solve(spd, rhs.ravel()), rtol=1e-10, atol=1e-12
     )
+
+
+def _grid_stiffness_bsr(points_per_side: int, device: str):
+    """The SPD 3x3-block matrix kron(L, I3) + kron(I, S) of a 7-point grid Laplacian L on
+    points_per_side^3 nodes (S a fixed SPD 3x3 block), as BSR and as SciPy CSR."""
+    line = sp.diags(
+        [
+            -np.ones(points_per_side - 1),
+            2.0 * np.ones(points_per_side),
+            -np.ones(points_per_side - 1),
+        ],
+        [-1, 0, 1],
+    )
+    eye = sp.identity(points_per_side)
+    laplacian = (
+        sp.kron(sp.kron(line, eye), eye)
+        + sp.kron(sp.kron(eye, line), eye)
+        + sp.kron(eye, sp.kron(eye, line))
+    ).tocoo()
+    coupling = np.array([[2.0, 0.5, 0.1], [0.5, 1.5, 0.2], [0.1, 0.2, 1.0]])
+    blocks = (
+        laplacian.data[:, None, None] * np.eye(3)
+        + (laplacian.row == laplacian.col)[:, None, None] * coupling
+    )
+    node_count = points_per_side**3
+    matrix = wps.bsr_from_triplets(
+        node_count,
+        node_count,
+        wp.array(laplacian.row.astype(np.int32), dtype=wp.int32, device=device),
+        wp.array(laplacian.col.astype(np.int32), dtype=wp.int32, device=device),
+        wp.array(blocks, dtype=wp.mat33d, device=device),
+    )
+    csr = (sp.kron(laplacian, sp.identity(3)) + sp.kron(sp.identity(node_count), coupling)).tocsr()
+    return matrix, csr
+
+
+@needs_cuda
+@pytest.mark.skipif(not cudss_available(), reason="needs nvmath-python with cuDSS")
+def test_cudss_keeps_its_factors_in_host_memory_when_the_device_memory_is_short(rng):
+    """Below cuDSS's estimate of the device memory it needs, the solver plans again in hybrid
+    memory mode and still solves exactly; below the hybrid mode's least device memory it
+    refuses before factorizing."""
+    matrix, csr = _grid_stiffness_bsr(14, "cuda:0")
+    rhs = rng.standard_normal((matrix.nrow, 3))
+    expected = sp.linalg.spsolve(csr.tocsc(), rhs.ravel())
+    on_device = CudssSolver(matrix)
+    assert not on_device.hybrid_memory
+    assert set(on_device.memory_estimates) == set(MEMORY_ESTIMATE_NAMES)
+    np.testing.assert_allclose(on_device.solve(rhs).ravel(), expected, rtol=1e-10, atol=1e-12)
+    peak = on_device.memory_estimates["peak_device_memory_bytes"]
+    least = on_device.memory_estimates["hybrid_min_device_memory_bytes"]
+    assert 0 < least < peak
+    hybrid = CudssSolver(matrix, device_memory_limit_bytes=(least + peak) // 2)
+    assert hybrid.hybrid_memory
+    np.testing.assert_allclose(hybrid.solve(rhs).ravel(), expected, rtol=1e-10, atol=1e-12)
+    with pytest.raises(DeviceError, match="device memory"):
+        CudssSolver(matrix, device_memory_limit_bytes=least // 4)
+
+
+def test_memory_estimates_that_do_not_fit_are_refused_with_the_numbers():
+    estimates = dict.fromkeys(MEMORY_ESTIMATE_NAMES, 0)
+    estimates.update(
+        peak_device_memory_bytes=8 * 2**30,
+        hybrid_min_device_memory_bytes=2 * 2**30,
+        peak_host_memory_bytes=3 * 2**30,
+    )
+    fits = {"rows": 300, "device": "cuda:0", "host_available_bytes": 4 * 2**30}
+    check_memory_estimates(estimates, hybrid=False, device_limit_bytes=8 * 2**30, **fits)
+    check_memory_estimates(estimates, hybrid=True, device_limit_bytes=2 * 2**30, **fits)
+    with pytest.raises(DeviceError, match=r"8\.0 GiB of device memory .* 300-row .* 7\.0 GiB"):
+        check_memory_estimates(estimates, hybrid=False, device_limit_bytes=7 * 2**30, **fits)
+    with pytest.raises(DeviceError, match=r"2\.0 GiB .* even with its factors in host memory"):
+        check_memory_estimates(estimates, hybrid=True, device_limit_bytes=2**30, **fits)
+    with pytest.raises(DeviceError, match=r"3\.0 GiB of host memory .* 2\.5 GiB is available"):
+        check_memory_estimates(
+            estimates,
+            hybrid=True,
+            device_limit_bytes=2 * 2**30,
+            rows=300,
+            device="cuda:0",
+            host_available_bytes=int(2.5 * 2**30),
+        )
+    assert 0 < available_host_memory_bytes()
 
 
 def test_cudss_needs_a_cuda_device():

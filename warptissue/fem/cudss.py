@@ -13,6 +13,10 @@ pivoting; only the lower triangle is read): the eliminated consistent tangent of
 hyperelastic energy is symmetric, and a trial state far from equilibrium can make it
 indefinite, where a Cholesky factorization would fail.
 
+Where the factors would not fit in the free device memory, the solver switches to cuDSS's
+hybrid memory mode (factors in host memory), and refuses with the numbers what fits neither
+way, before the first factorization.
+
 Install: ``pip install 'warptissue[gpu]'`` (nvmath-python with NVIDIA cuDSS for CUDA 13, and
 CuPy for CUDA 13).
 """
@@ -21,6 +25,7 @@ from __future__ import annotations
 
 import functools
 import importlib.util
+import os
 from pathlib import Path
 
 import numpy as np
@@ -30,12 +35,31 @@ import warp.sparse as wps
 from warptissue.errors import DeviceError
 
 __all__ = [
+    "DEVICE_MEMORY_SHARE",
+    "MEMORY_ESTIMATE_NAMES",
     "CudssSolver",
+    "available_host_memory_bytes",
     "bsr33_csr_pattern",
     "bsr33_csr_values",
+    "check_memory_estimates",
     "cudss_available",
     "cudss_threading_library",
 ]
+
+DEVICE_MEMORY_SHARE = 0.9
+"""Share of the free device memory that cuDSS may take by default; the rest stays for the
+Newton loop's own arrays."""
+MEMORY_ESTIMATE_NAMES = (
+    "permanent_device_memory_bytes",
+    "peak_device_memory_bytes",
+    "permanent_host_memory_bytes",
+    "peak_host_memory_bytes",
+    "hybrid_min_device_memory_bytes",
+    "hybrid_max_host_memory_bytes",
+)
+"""cuDSS's memory estimates after the analysis (``CUDSS_DATA_MEMORY_ESTIMATES``), in its
+order. The last is the most host memory the hybrid memory mode may use (nvmath-python names
+that field ``hybrid_max_device_memory``; cuDSS documents it as host memory)."""
 
 
 @functools.cache
@@ -128,23 +152,92 @@ def bsr33_csr_values(matrix: wps.BsrMatrix, block_rows: wp.array, csr_values: wp
     )
 
 
+def available_host_memory_bytes() -> int:
+    """Host memory available to a new allocation, bytes (Linux ``MemAvailable``, else the
+    free physical pages)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return 1024 * int(line.split()[1])
+    except OSError:
+        pass
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def _gib(value_bytes: int) -> str:
+    return f"{value_bytes / 2**30:.1f} GiB"
+
+
+def check_memory_estimates(
+    estimates: dict[str, int],
+    *,
+    hybrid: bool,
+    device_limit_bytes: int,
+    host_available_bytes: int,
+    rows: int,
+    device: str,
+) -> None:
+    """Refuse a factorization that cuDSS's estimates say cannot fit, before it starts.
+
+    Args:
+        estimates: cuDSS's estimates, keyed by :data:`MEMORY_ESTIMATE_NAMES`.
+        hybrid: Whether the analysis ran in hybrid memory mode (factors in host memory).
+        device_limit_bytes: Device memory the factorization may use.
+        host_available_bytes: Host memory available.
+        rows: Rows of the matrix, for the message.
+        device: The device's name, for the message.
+
+    Raises:
+        DeviceError: The device or the host memory is too small; the message quotes what
+            cuDSS needs and what there is.
+    """
+    key = "hybrid_min_device_memory_bytes" if hybrid else "peak_device_memory_bytes"
+    if estimates[key] > device_limit_bytes:
+        where = " even with its factors in host memory" if hybrid else ""
+        raise DeviceError(
+            f"cuDSS needs {_gib(estimates[key])} of device memory to factorize this "
+            f"{rows}-row matrix{where}; {_gib(device_limit_bytes)} is available on {device}"
+        )
+    if estimates["peak_host_memory_bytes"] > host_available_bytes:
+        where = " for its factors (hybrid memory mode)" if hybrid else ""
+        raise DeviceError(
+            f"cuDSS needs {_gib(estimates['peak_host_memory_bytes'])} of host memory{where} to "
+            f"factorize this {rows}-row matrix; {_gib(host_available_bytes)} is available"
+        )
+
+
 class CudssSolver:
     """Repeated direct solves of one BSR sparsity pattern with cuDSS on a CUDA device.
+
+    Where cuDSS's analysis finds that the factors would not fit in the device memory that is
+    free, the solver plans again in cuDSS's hybrid memory mode: the factors live in host
+    memory and stream through the device (slower, but it runs). A factorization that fits
+    neither way is refused with the numbers before it starts.
 
     Args:
         matrix: Square 3x3-block float64 BSR matrix (N x N blocks) on a CUDA device. Its
             pattern (offsets, columns) must stay fixed; its values may change between solves.
+        device_memory_limit_bytes: Device memory the factorization may use, bytes (default:
+            :data:`DEVICE_MEMORY_SHARE` of what is free when the solver is made).
 
     Attributes:
         factorizations: Numerical factorizations done so far.
         threading_library: The cuDSS threading layer in use (see
             :func:`cudss_threading_library`), or None.
+        hybrid_memory: Whether the factors are kept in host memory (hybrid memory mode).
+        memory_estimates: cuDSS's memory estimates after the analysis, bytes, keyed by
+            :data:`MEMORY_ESTIMATE_NAMES`.
 
     Raises:
-        DeviceError: The matrix is not on a CUDA device, or cuDSS could not be loaded.
+        DeviceError: The matrix is not on a CUDA device, cuDSS could not be loaded, or the
+            factorization cannot fit in device and host memory.
+        ValueError: ``device_memory_limit_bytes`` is not positive.
     """
 
-    def __init__(self, matrix: wps.BsrMatrix) -> None:
+    def __init__(
+        self, matrix: wps.BsrMatrix, *, device_memory_limit_bytes: int | None = None
+    ) -> None:
         device = matrix.device
         if not device.is_cuda:
             raise DeviceError(f"cuDSS needs a CUDA device; the matrix is on {device}")
@@ -157,17 +250,22 @@ class CudssSolver:
                 "the cuDSS solver needs nvmath-python, nvidia-cudss-cu13 and cupy-cuda13x "
                 "(pip install 'warptissue[gpu]')"
             ) from exc
+        if device_memory_limit_bytes is not None and device_memory_limit_bytes <= 0:
+            raise ValueError(
+                f"device_memory_limit_bytes must be positive, got {device_memory_limit_bytes}"
+            )
         self.matrix = matrix
         self.device = device
         self.factorizations = 0
         self.row_count = 3 * matrix.nrow
+        self._nvs = nvs
+        self._cupy = cupy
         self._csr_offsets, self._csr_columns, self._block_rows = bsr33_csr_pattern(matrix)
         self._csr_values = wp.zeros(self._csr_columns.shape[0], dtype=wp.float64, device=device)
         self._rhs = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=device)
-        self._cupy = cupy
         self._stream = cupy.cuda.Stream.from_external(device.stream)
         with cupy.cuda.Device(device.ordinal), self._stream:
-            csr = cupyx.scipy.sparse.csr_matrix(
+            self._csr = cupyx.scipy.sparse.csr_matrix(
                 (
                     _cupy_view(self._csr_values, cupy),
                     _cupy_view(self._csr_columns, cupy),
@@ -177,28 +275,66 @@ class CudssSolver:
                 copy=False,
             )
             bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
-            threading = cudss_threading_library()
-            # The threading layer is an optimization: if it does not load, run without it.
-            for library in [threading, None] if threading else [None]:
-                options = nvs.DirectSolverOptions(
-                    sparse_system_type=nvs.DirectSolverMatrixType.SYMMETRIC,
-                    sparse_system_view=nvs.DirectSolverMatrixViewType.LOWER,
-                    multithreading_lib=library,
+            limit = (
+                int(DEVICE_MEMORY_SHARE * device.free_memory)
+                if device_memory_limit_bytes is None
+                else device_memory_limit_bytes
+            )
+            self.hybrid_memory = False
+            self._plan(hybrid_limit_bytes=None)
+            if self.memory_estimates["peak_device_memory"] > limit:
+                # The factors do not fit on the device: plan again, keeping them in host
+                # memory (cuDSS's hybrid memory mode must be chosen before the analysis).
+                self._solver.free()
+                self.hybrid_memory = True
+                self._plan(hybrid_limit_bytes=limit)
+            check_memory_estimates(
+                self.memory_estimates,
+                hybrid=self.hybrid_memory,
+                device_limit_bytes=limit,
+                host_available_bytes=available_host_memory_bytes(),
+                rows=self.row_count,
+                device=str(device),
+            )
+
+    def _plan(self, *, hybrid_limit_bytes: int | None) -> None:
+        """Create the nvmath solver and run cuDSS's analysis, in hybrid memory mode when
+        ``hybrid_limit_bytes`` (the device memory it may use) is given; sets
+        ``memory_estimates`` from cuDSS's estimates after the analysis."""
+        nvs = self._nvs
+        execution = nvs.ExecutionCUDA(
+            device_id=self.device.ordinal,
+            hybrid_memory_mode_options=nvs.HybridMemoryModeOptions(
+                hybrid_memory_mode=hybrid_limit_bytes is not None,
+                hybrid_device_memory_limit=hybrid_limit_bytes,
+            ),
+        )
+        threading = cudss_threading_library()
+        # The threading layer is an optimization: if it does not load, run without it.
+        for library in [threading, None] if threading else [None]:
+            options = nvs.DirectSolverOptions(
+                sparse_system_type=nvs.DirectSolverMatrixType.SYMMETRIC,
+                sparse_system_view=nvs.DirectSolverMatrixViewType.LOWER,
+                multithreading_lib=library,
+            )
+            try:
+                self._solver = nvs.DirectSolver(
+                    self._csr,
+                    _cupy_view(self._rhs, self._cupy).reshape(-1),
+                    options=options,
+                    execution=execution,
                 )
-                try:
-                    self._solver = nvs.DirectSolver(
-                        csr,
-                        _cupy_view(self._rhs, cupy).reshape(-1),
-                        options=options,
-                        execution="cuda",
-                    )
-                    self._solver.plan()
-                except (RuntimeError, OSError) as exc:
-                    if library is None:
-                        raise DeviceError(f"cuDSS could not be set up on {device}: {exc}") from exc
-                    continue
-                self.threading_library = library
-                break
+                self._solver.plan()
+            except (RuntimeError, OSError) as exc:
+                if library is None:
+                    raise DeviceError(f"cuDSS could not be set up on {self.device}: {exc}") from exc
+                continue
+            self.threading_library = library
+            break
+        estimates = np.asarray(self._solver.plan_info.memory_estimates).item()
+        self.memory_estimates = {
+            name: int(value) for name, value in zip(MEMORY_ESTIMATE_NAMES, estimates, strict=False)
+        }
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Factorize the matrix's current values and solve ``matrix x = rhs``.

@@ -716,6 +716,7 @@ def solve_quasistatic(
             linear_counts.append(step_linear)
             local_counts.append(step_local)
             if bar is not None:
+                bar.set_postfix(newton_iterations=step_newton, refresh=False)
                 bar.update(1)
     finally:
         if bar is not None:
