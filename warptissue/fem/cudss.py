@@ -282,7 +282,7 @@ class CudssSolver:
             )
             self.hybrid_memory = False
             self._plan(hybrid_limit_bytes=None)
-            if self.memory_estimates["peak_device_memory"] > limit:
+            if self.memory_estimates["peak_device_memory_bytes"] > limit:
                 # The factors do not fit on the device: plan again, keeping them in host
                 # memory (cuDSS's hybrid memory mode must be chosen before the analysis).
                 self._solver.free()
