@@ -26,6 +26,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -282,7 +283,8 @@ class CudssSolver:
             )
             self.hybrid_memory = False
             self._plan(hybrid_limit_bytes=None)
-            if self.memory_estimates["peak_device_memory_bytes"] > limit:
+            needed = self.memory_estimates["peak_device_memory_bytes"]
+            if needed > limit:
                 # The factors do not fit on the device: plan again, keeping them in host
                 # memory (cuDSS's hybrid memory mode must be chosen before the analysis).
                 self._solver.free()
@@ -296,6 +298,15 @@ class CudssSolver:
                 rows=self.row_count,
                 device=str(device),
             )
+            if self.hybrid_memory:
+                warnings.warn(
+                    f"cuDSS needs {_gib(needed)} of device memory for this {self.row_count}-row "
+                    f"matrix and {_gib(limit)} is available on {device}: its factors go to host "
+                    "memory (hybrid memory mode) and stream through the GPU at every "
+                    "factorization, which is much slower",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
 
     def _plan(self, *, hybrid_limit_bytes: int | None) -> None:
         """Create the nvmath solver and run cuDSS's analysis, in hybrid memory mode when
