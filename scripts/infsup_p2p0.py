@@ -1,0 +1,224 @@
+"""The discrete inf-sup constant of warptissue's TET10 P2/P0 pair, measured on its meshes.
+
+A mixed (or mean-dilatation) element is uniformly stable when
+
+    beta_h^2 = min_p  (p^T B A^-1 B^T p) / (p^T M p)
+
+stays bounded away from zero as the mesh is refined. Here A is the deviatoric stiffness of
+the free displacement DOFs (the tangent at u = 0 without its volumetric part), B the element
+divergences (B[e, 3 a + i] = integral over tet e of dN_a/dx_i) and M the P0 pressure mass
+(the element volumes). beta_h^2 is reported in units of mu, so it is dimensionless. With the
+deviatoric A (weaker than the usual H1 seminorm) this beta_h is an upper bound of the
+textbook one: if it falls with h, so does the textbook one.
+
+The script takes A and B from warptissue itself: two tangent assemblies at bulk moduli K1 and
+K2 differ by (K2 - K1) B^T M^-1 B, which checks the B built here from the element geometry
+(``volumetric_check``, relative, should be roundoff), and A = K(K1) - K1 B^T M^-1 B. The
+pressure Schur complement M^-1/2 B A^-1 B^T M^-1/2 is formed densely (one sparse LU of A,
+one solve per tet), so keep the meshes to a few thousand tets.
+
+Meshes: cubes of n^3 hexahedra split into 6 or 5 tets (bottom fixed, two symmetry planes,
+the rest free), and the flat-punch benchmark's graded quarter block (also the nodes under
+the bonded punch fixed).
+
+What a falling beta_h would cost in practice is locking: a force that grows with K/mu beyond
+the physics. ``--kmu-sizes`` measures that on the benchmark's meshes: the bonded-punch force at
+depth a/40 for K/mu = 100, 1000 and 10 000, against the change that the material itself
+makes, (1 - nu(100)) / (1 - nu(K/mu)) - 1 from Sneddon's F = 4 mu a delta / (1 - nu).
+
+Examples:
+    python scripts/infsup_p2p0.py --cubes 4,6,8 --splits six,five --bench-sizes 500,1500 \\
+        --out scripts/results/infsup_p2p0.json
+    python scripts/infsup_p2p0.py --cubes "" --bench-sizes "" --kmu-sizes 1500,3000,10000
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+SHEAR_MODULUS_PA = 575.0
+SMALL_BULK_RATIO = 10.0
+LARGE_BULK_RATIO = 1000.0
+
+
+def tangent_at_rest(mesh, bulk_modulus_Pa: float) -> sp.csr_matrix:
+    """The mixed TET10 tangent of a neo-Hookean solid at u = 0, as SciPy CSR (3N x 3N)."""
+    import warp as wp
+
+    from warptissue.fem import Assembler
+    from warptissue.materials import NeoHookean
+
+    assembler = Assembler(
+        mesh,
+        NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA, bulk_modulus_Pa=bulk_modulus_Pa),
+        formulation="mixed",
+        device="cpu",
+    )
+    assembler.assemble(wp.zeros(mesh.node_count, dtype=wp.vec3d, device="cpu"))
+    matrix = assembler.matrix
+    offsets = matrix.offsets.numpy()[: matrix.nrow + 1]
+    columns = matrix.columns.numpy()[: offsets[-1]]
+    values = matrix.values.numpy()[: offsets[-1]]
+    size = 3 * matrix.nrow
+    return sp.bsr_matrix((values, columns, offsets), shape=(size, size)).tocsr()
+
+
+def element_divergence(mesh) -> tuple[sp.csr_matrix, np.ndarray]:
+    """B (tet_count x 3N) with B[e, 3 a + i] = int_e dN_a/dx_i dV, and the tet volumes (m^3)."""
+    from warptissue.fem.elements import element_geometry
+
+    geometry = element_geometry(mesh)
+    integrals = np.einsum("tqai,tq->tai", geometry.shape_gradients, geometry.quadrature_volumes)
+    tets, per_tet = mesh.tet_count, 3 * mesh.nodes_per_tet
+    rows = np.repeat(np.arange(tets), per_tet)
+    columns = (3 * mesh.tets[:, :, None] + np.arange(3)).reshape(tets, per_tet).ravel()
+    divergence = sp.csr_matrix(
+        (integrals.reshape(tets, per_tet).ravel(), (rows, columns)),
+        shape=(tets, 3 * mesh.node_count),
+    )
+    return divergence, geometry.tet_volumes
+
+
+def constrained_dofs(mesh, *, punch_radius_m: float | None) -> np.ndarray:
+    """Mask (3N,) of the fixed DOFs: base, symmetry planes, and the punch's nodes if any."""
+    sets = mesh.node_sets
+    fixed = np.zeros((mesh.node_count, 3), dtype=bool)
+    fixed[sets.get("bottom", sets.get("zmin"))] = True
+    fixed[sets.get("symmetry_x", sets.get("xmin")), 0] = True
+    fixed[sets.get("symmetry_y", sets.get("ymin")), 1] = True
+    if punch_radius_m is not None:
+        top = sets["top"]
+        radius = np.hypot(mesh.points[top, 0], mesh.points[top, 1])
+        fixed[top[radius <= punch_radius_m * (1.0 + 1e-9)]] = True
+    return fixed.ravel()
+
+
+def pressure_schur_spectrum(mesh, *, punch_radius_m: float | None) -> dict:
+    """Eigenvalues of M^-1/2 B A^-1 B^T M^-1/2 in units of mu (ascending), with checks."""
+    started = time.perf_counter()
+    small = tangent_at_rest(mesh, SMALL_BULK_RATIO * SHEAR_MODULUS_PA)
+    large = tangent_at_rest(mesh, LARGE_BULK_RATIO * SHEAR_MODULUS_PA)
+    divergence, volumes = element_divergence(mesh)
+    volumetric = divergence.T @ sp.diags(1.0 / volumes) @ divergence
+    bulk_step = (LARGE_BULK_RATIO - SMALL_BULK_RATIO) * SHEAR_MODULUS_PA
+    difference = large - small
+    check = abs(difference - bulk_step * volumetric).max() / abs(difference).max()
+    deviatoric = small - SMALL_BULK_RATIO * SHEAR_MODULUS_PA * volumetric
+    free = ~constrained_dofs(mesh, punch_radius_m=punch_radius_m)
+    factor = spla.splu(deviatoric[free][:, free].tocsc())
+    scaled = (sp.diags(volumes**-0.5) @ divergence)[:, free].T.toarray()
+    schur = np.zeros((mesh.tet_count, mesh.tet_count))
+    for start in range(0, mesh.tet_count, 2000):
+        block = scaled[:, start : start + 2000]
+        schur[:, start : start + 2000] = scaled.T @ factor.solve(block)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (schur + schur.T)) * SHEAR_MODULUS_PA
+    return {
+        "tets": mesh.tet_count,
+        "free_dofs": int(free.sum()),
+        "volumetric_check": float(check),
+        "beta_squared_smallest": [float(v) for v in eigenvalues[:8]],
+        "count_below_1e-8": int(np.sum(eigenvalues < 1e-8)),
+        "beta_squared_smallest_above_1e-8": float(eigenvalues[eigenvalues >= 1e-8][0]),
+        "count_below_1e-2": int(np.sum(eigenvalues < 1e-2)),
+        "largest": float(eigenvalues[-1]),
+        "seconds": time.perf_counter() - started,
+    }
+
+
+def poisson_ratio(bulk_over_shear: float) -> float:
+    """nu = (3 K - 2 mu) / (2 (3 K + mu))."""
+    return (3.0 * bulk_over_shear - 2.0) / (2.0 * (3.0 * bulk_over_shear + 1.0))
+
+
+def bulk_sensitivity(mesh, *, punch_radius_m: float) -> dict:
+    """Bonded-punch force at depth a/40 for K/mu = 100, 1000, 10 000, relative to K/mu = 100,
+    next to the half-space's own change (Sneddon, 1 / (1 - nu))."""
+    from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
+    from warptissue.materials import NeoHookean
+
+    ratios = (100.0, 1000.0, 10000.0)
+    forces = []
+    for ratio in ratios:
+        problem = IndentationProblem(
+            mesh,
+            NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA, bulk_modulus_Pa=ratio * SHEAR_MODULUS_PA),
+            FlatPunch(punch_radius_m, contact="bonded"),
+            base="fixed",
+            symmetry_planes=("symmetry_x", "symmetry_y"),
+            formulation="mixed",
+        )
+        result = simulate_indentation(
+            problem, [punch_radius_m / 40.0], device="cpu", progress=False, tolerance=1e-10
+        )
+        forces.append(float(result.reaction_force_N[-1]))
+    return {
+        "tets": mesh.tet_count,
+        "bulk_over_shear": list(ratios),
+        "force_N": forces,
+        "force_change_from_100": [f / forces[0] - 1.0 for f in forces],
+        "half_space_change_from_100": [
+            (1.0 - poisson_ratio(ratios[0])) / (1.0 - poisson_ratio(r)) - 1.0 for r in ratios
+        ],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cubes", default="4,6,8", help="hexahedra per cube edge, comma separated")
+    parser.add_argument("--splits", default="six,five", help="hexahedron splits: six, five")
+    parser.add_argument(
+        "--bench-sizes", default="500,1500", help="benchmark mesh sizes in tets (empty: none)"
+    )
+    parser.add_argument(
+        "--kmu-sizes",
+        default="",
+        help="benchmark mesh sizes in tets for the K/mu sensitivity of the force (empty: none)",
+    )
+    parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
+    args = parser.parse_args(argv)
+    import warp as wp
+    from bench_flat_punch import PROBE_RADIUS_M, warptissue_mesh
+
+    from warptissue.mesh import block_mesh, to_tet10
+
+    wp.config.quiet = True
+    records = []
+    for split in [s.strip() for s in args.splits.split(",") if s.strip()]:
+        for divisions in [int(s) for s in args.cubes.split(",") if s.strip()]:
+            grid = np.linspace(0.0, 10e-3, divisions + 1)
+            mesh = to_tet10(block_mesh(grid, grid, grid, split=split))
+            record = {"mesh": f"cube {divisions}^3 hexahedra, split {split}"}
+            record.update(pressure_schur_spectrum(mesh, punch_radius_m=None))
+            records.append(record)
+            print(json.dumps(record), flush=True)
+    for size in [int(s) for s in args.bench_sizes.split(",") if s.strip()]:
+        mesh, _ = warptissue_mesh(size)
+        record = {"mesh": f"flat-punch benchmark quarter block, about {size} tets"}
+        record.update(pressure_schur_spectrum(mesh, punch_radius_m=PROBE_RADIUS_M))
+        records.append(record)
+        print(json.dumps(record), flush=True)
+    for size in [int(s) for s in args.kmu_sizes.split(",") if s.strip()]:
+        mesh, _ = warptissue_mesh(size)
+        record = {"mesh": f"flat-punch benchmark quarter block, about {size} tets"}
+        record.update(bulk_sensitivity(mesh, punch_radius_m=PROBE_RADIUS_M))
+        records.append(record)
+        print(json.dumps(record), flush=True)
+    if args.out is not None:
+        from warptissue.io import write_json
+
+        write_json(args.out, {"shear_modulus_Pa": SHEAR_MODULUS_PA, "records": records})
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
