@@ -10,7 +10,8 @@ gradients precomputed per quadrature point on the host. Two formulations share o
   ``dJbar = sum_a g_a . du_a``) the residual is ``int P_dev grad N_a dV + V_e U'(Jbar) g_a``
   and the exact tangent is ``int grad N_a . (A_dev + U'(Jbar) d2J/dF2) . grad N_b dV
   + V_e U''(Jbar) g_a (x) g_b``. The pressure ``U'(Jbar)`` is constant per element, i.e. the
-  P2/P0 pair, which satisfies the inf-sup condition (Boffi, Brezzi and Fortin 2013, Sec. 8.6).
+  P2/P0 pair. In 3D its discrete inf-sup constant is not uniform on these meshes (it falls
+  about like h; ``scripts/infsup_p2p0.py``), although the punch forces show no locking.
 """
 
 import warp as wp
