@@ -193,26 +193,30 @@ def main(argv: list[str] | None = None) -> int:
 
     wp.config.quiet = True
     records = []
+
+    def report(label: str, result: dict) -> None:
+        record = {"mesh": label, **result}
+        records.append(record)
+        print(json.dumps(record), flush=True)
+
     for split in [s.strip() for s in args.splits.split(",") if s.strip()]:
         for divisions in [int(s) for s in args.cubes.split(",") if s.strip()]:
             grid = np.linspace(0.0, 10e-3, divisions + 1)
             mesh = to_tet10(block_mesh(grid, grid, grid, split=split))
-            record = {"mesh": f"cube {divisions}^3 hexahedra, split {split}"}
-            record.update(pressure_schur_spectrum(mesh, punch_radius_m=None))
-            records.append(record)
-            print(json.dumps(record), flush=True)
-    for size in [int(s) for s in args.bench_sizes.split(",") if s.strip()]:
-        mesh, _ = warptissue_mesh(size)
-        record = {"mesh": f"flat-punch benchmark quarter block, about {size} tets"}
-        record.update(pressure_schur_spectrum(mesh, punch_radius_m=PROBE_RADIUS_M))
-        records.append(record)
-        print(json.dumps(record), flush=True)
-    for size in [int(s) for s in args.kmu_sizes.split(",") if s.strip()]:
-        mesh, _ = warptissue_mesh(size)
-        record = {"mesh": f"flat-punch benchmark quarter block, about {size} tets"}
-        record.update(bulk_sensitivity(mesh, punch_radius_m=PROBE_RADIUS_M))
-        records.append(record)
-        print(json.dumps(record), flush=True)
+            report(
+                f"cube {divisions}^3 hexahedra, split {split}",
+                pressure_schur_spectrum(mesh, punch_radius_m=None),
+            )
+    for sizes, study in (
+        (args.bench_sizes, pressure_schur_spectrum),
+        (args.kmu_sizes, bulk_sensitivity),
+    ):
+        for size in [int(s) for s in sizes.split(",") if s.strip()]:
+            mesh, _ = warptissue_mesh(size)
+            report(
+                f"flat-punch benchmark quarter block, about {size} tets",
+                study(mesh, punch_radius_m=PROBE_RADIUS_M),
+            )
     if args.out is not None:
         from warptissue.io import write_json
 
