@@ -21,6 +21,11 @@ Meshes: cubes of n^3 hexahedra split into 6 or 5 tets (bottom fixed, two symmetr
 the rest free), and the flat-punch benchmark's graded quarter block (also the nodes under
 the bonded punch fixed).
 
+``--numpy-cubes`` repeats the cube study with an independent NumPy assembly of the same P2/P0
+element (a cross-check of the numbers above), and with one enriched variant: P2 plus one face
+bubble 27 lambda_i lambda_j lambda_k per face along the face's normal (Bernardi-Raugel style
+enrichment), P0 pressure.
+
 What a falling beta_h would cost in practice is locking: a force that grows with K/mu beyond
 the physics. ``--kmu-sizes`` measures that on the benchmark's meshes: the bonded-punch force at
 depth a/40 for K/mu = 100, 1000 and 10 000, against the change that the material itself
@@ -103,8 +108,36 @@ def constrained_dofs(mesh, *, punch_radius_m: float | None) -> np.ndarray:
     return fixed.ravel()
 
 
+def schur_spectrum(
+    deviatoric: sp.csr_matrix, divergence: sp.csr_matrix, volumes: np.ndarray, free: np.ndarray
+) -> np.ndarray:
+    """Eigenvalues (ascending, units of mu) of M^-1/2 B A^-1 B^T M^-1/2 over the free DOFs."""
+    factor = spla.splu(deviatoric[free][:, free].tocsc())
+    scaled = (sp.diags(volumes**-0.5) @ divergence)[:, free].T.toarray()
+    tets = divergence.shape[0]
+    schur = np.zeros((tets, tets))
+    for start in range(0, tets, 2000):
+        block = scaled[:, start : start + 2000]
+        schur[:, start : start + 2000] = scaled.T @ factor.solve(block)
+    return np.linalg.eigvalsh(0.5 * (schur + schur.T)) * SHEAR_MODULUS_PA
+
+
+def spectrum_record(eigenvalues: np.ndarray, free: np.ndarray, started: float) -> dict:
+    """The low end of a spectrum from :func:`schur_spectrum`, for the JSON."""
+    return {
+        "tets": len(eigenvalues),
+        "free_dofs": int(free.sum()),
+        "beta_squared_smallest": [float(v) for v in eigenvalues[:8]],
+        "count_below_1e-8": int(np.sum(eigenvalues < 1e-8)),
+        "beta_squared_smallest_above_1e-8": float(eigenvalues[eigenvalues >= 1e-8][0]),
+        "count_below_1e-2": int(np.sum(eigenvalues < 1e-2)),
+        "largest": float(eigenvalues[-1]),
+        "seconds": time.perf_counter() - started,
+    }
+
+
 def pressure_schur_spectrum(mesh, *, punch_radius_m: float | None) -> dict:
-    """Eigenvalues of M^-1/2 B A^-1 B^T M^-1/2 in units of mu (ascending), with checks."""
+    """The spectrum for warptissue's TET10 P2/P0 element, with the check of its B."""
     started = time.perf_counter()
     small = tangent_at_rest(mesh, SMALL_BULK_RATIO * SHEAR_MODULUS_PA)
     large = tangent_at_rest(mesh, LARGE_BULK_RATIO * SHEAR_MODULUS_PA)
@@ -115,24 +148,137 @@ def pressure_schur_spectrum(mesh, *, punch_radius_m: float | None) -> dict:
     check = abs(difference - bulk_step * volumetric).max() / abs(difference).max()
     deviatoric = small - SMALL_BULK_RATIO * SHEAR_MODULUS_PA * volumetric
     free = ~constrained_dofs(mesh, punch_radius_m=punch_radius_m)
-    factor = spla.splu(deviatoric[free][:, free].tocsc())
-    scaled = (sp.diags(volumes**-0.5) @ divergence)[:, free].T.toarray()
-    schur = np.zeros((mesh.tet_count, mesh.tet_count))
-    for start in range(0, mesh.tet_count, 2000):
-        block = scaled[:, start : start + 2000]
-        schur[:, start : start + 2000] = scaled.T @ factor.solve(block)
-    eigenvalues = np.linalg.eigvalsh(0.5 * (schur + schur.T)) * SHEAR_MODULUS_PA
-    return {
-        "tets": mesh.tet_count,
-        "free_dofs": int(free.sum()),
-        "volumetric_check": float(check),
-        "beta_squared_smallest": [float(v) for v in eigenvalues[:8]],
-        "count_below_1e-8": int(np.sum(eigenvalues < 1e-8)),
-        "beta_squared_smallest_above_1e-8": float(eigenvalues[eigenvalues >= 1e-8][0]),
-        "count_below_1e-2": int(np.sum(eigenvalues < 1e-2)),
-        "largest": float(eigenvalues[-1]),
-        "seconds": time.perf_counter() - started,
-    }
+    record = {"volumetric_check": float(check)}
+    record.update(
+        spectrum_record(schur_spectrum(deviatoric, divergence, volumes, free), free, started)
+    )
+    return record
+
+
+TET_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+TET_FACES = ((1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2))
+
+
+def tet_quadrature(points_per_direction: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """Collapsed (Duffy) Gauss-Legendre rule on the reference tet: barycentrics (Q, 4) and
+    weights (Q,) summing to 1/6; exact well beyond the degree-4 integrands used here."""
+    x, w = np.polynomial.legendre.leggauss(points_per_direction)
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    u, v, t = np.meshgrid(x, x, x, indexing="ij")
+    wu, wv, wt = np.meshgrid(w, w, w, indexing="ij")
+    local = np.stack([u, v * (1 - u), t * (1 - u) * (1 - v)], axis=-1).reshape(-1, 3)
+    weights = (wu * wv * wt * (1 - u) ** 2 * (1 - v)).ravel()
+    return np.hstack([1.0 - local.sum(1, keepdims=True), local]), weights
+
+
+def p2_gradients_in_barycentrics(barycentrics: np.ndarray, face_bubbles: bool) -> np.ndarray:
+    """d N_a / d lambda_k at each point, (Q, 10 or 14, 4): P2 vertex and edge functions, then
+    (with ``face_bubbles``) the cubic face bubbles 27 lambda_i lambda_j lambda_k."""
+    points = len(barycentrics)
+    gradients = np.zeros((points, 14 if face_bubbles else 10, 4))
+    lam = barycentrics
+    for i in range(4):
+        gradients[:, i, i] = 4.0 * lam[:, i] - 1.0
+    for a, (i, j) in enumerate(TET_EDGES):
+        gradients[:, 4 + a, i] = 4.0 * lam[:, j]
+        gradients[:, 4 + a, j] = 4.0 * lam[:, i]
+    if face_bubbles:
+        for a, (i, j, k) in enumerate(TET_FACES):
+            gradients[:, 10 + a, i] = 27.0 * lam[:, j] * lam[:, k]
+            gradients[:, 10 + a, j] = 27.0 * lam[:, i] * lam[:, k]
+            gradients[:, 10 + a, k] = 27.0 * lam[:, i] * lam[:, j]
+    return gradients
+
+
+def numpy_p2_operators(divisions: int, *, face_bubbles: bool) -> tuple:
+    """An independent NumPy P2 (optionally + one normal face bubble per face) / P0 element
+    on the unit cube of divisions^3 hexahedra split into 6 tets.
+
+    Returns (deviatoric A, divergence B, tet volumes, free DOF mask). A is
+    2 mu int dev eps(u) : dev eps(v) with mu = SHEAR_MODULUS_PA; a face bubble carries one
+    DOF, its amplitude along the face's normal (Bernardi-Raugel style).
+    """
+    from warptissue.mesh import block_mesh
+
+    grid = np.linspace(0.0, 1.0, divisions + 1)
+    corners = block_mesh(grid, grid, grid, split="six")
+    points, tets = corners.points, corners.tets[:, :4]
+    node_count = len(points)
+    edge_keys = np.sort(tets[:, TET_EDGES], axis=2).reshape(-1, 2)
+    edges, edge_of = np.unique(edge_keys, axis=0, return_inverse=True)
+    face_keys = np.sort(tets[:, TET_FACES], axis=2).reshape(-1, 3)
+    faces, face_of = np.unique(face_keys, axis=0, return_inverse=True)
+    edge_of, face_of = edge_of.reshape(-1, 6), face_of.reshape(-1, 4)
+    normals = np.cross(
+        points[faces[:, 1]] - points[faces[:, 0]], points[faces[:, 2]] - points[faces[:, 0]]
+    )
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    p2_nodes = node_count + len(edges)
+    dof_count = 3 * p2_nodes + (len(faces) if face_bubbles else 0)
+    barycentrics, weights = tet_quadrature()
+    reference = p2_gradients_in_barycentrics(barycentrics, face_bubbles)
+    functions = reference.shape[1]
+    element_dofs = 30 + (4 if face_bubbles else 0)
+    rows, columns, values, divergence_values, element_dof_lists = [], [], [], [], []
+    volumes = np.zeros(len(tets))
+    eye = np.eye(3)
+    for tet, corner in enumerate(tets):
+        jacobian = (points[corner[1:]] - points[corner[0]]).T
+        inverse = np.linalg.inv(jacobian)
+        grad_lambda = np.vstack([-inverse.sum(0), inverse])
+        gradients = reference @ grad_lambda
+        w = weights * abs(np.linalg.det(jacobian))
+        volumes[tet] = w.sum()
+        dot = np.einsum("q,qak,qbk->ab", w, gradients, gradients)
+        cross = np.einsum("q,qaj,qbi->abij", w, gradients, gradients)
+        stiffness = (
+            2.0
+            * SHEAR_MODULUS_PA
+            * (0.5 * (dot[:, :, None, None] * eye + cross) - cross.transpose(0, 1, 3, 2) / 3.0)
+        )
+        stiffness = stiffness.transpose(0, 2, 1, 3).reshape(3 * functions, 3 * functions)
+        divergence = np.einsum("q,qai->ai", w, gradients).ravel()
+        to_dofs = np.zeros((3 * functions, element_dofs))
+        to_dofs[:30, :30] = np.eye(30)
+        nodes = np.concatenate([corner, node_count + edge_of[tet]])
+        dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+        if face_bubbles:
+            for k in range(4):
+                to_dofs[30 + 3 * k : 33 + 3 * k, 30 + k] = normals[face_of[tet, k]]
+            dofs = np.concatenate([dofs, 3 * p2_nodes + face_of[tet]])
+        element_dof_lists.append(dofs)
+        rows.append(np.repeat(dofs, element_dofs))
+        columns.append(np.tile(dofs, element_dofs))
+        values.append((to_dofs.T @ stiffness @ to_dofs).ravel())
+        divergence_values.append(to_dofs.T @ divergence)
+    deviatoric = sp.csr_matrix(
+        (np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+        shape=(dof_count, dof_count),
+    )
+    divergence = sp.csr_matrix(
+        (
+            np.concatenate(divergence_values),
+            (np.repeat(np.arange(len(tets)), element_dofs), np.concatenate(element_dof_lists)),
+        ),
+        shape=(len(tets), dof_count),
+    )
+    node_points = np.vstack([points, points[edges].mean(1)])
+    fixed = np.zeros((p2_nodes, 3), dtype=bool)
+    fixed[node_points[:, 2] < 1e-12] = True
+    fixed[node_points[:, 0] < 1e-12, 0] = True
+    fixed[node_points[:, 1] < 1e-12, 1] = True
+    fixed = fixed.ravel()
+    if face_bubbles:
+        centroids = points[faces].mean(1)
+        fixed = np.concatenate([fixed, (centroids < 1e-12).any(axis=1)])
+    return deviatoric, divergence, volumes, ~fixed
+
+
+def numpy_spectrum(divisions: int, *, face_bubbles: bool) -> dict:
+    """The spectrum for the NumPy element of :func:`numpy_p2_operators`."""
+    started = time.perf_counter()
+    deviatoric, divergence, volumes, free = numpy_p2_operators(divisions, face_bubbles=face_bubbles)
+    return spectrum_record(schur_spectrum(deviatoric, divergence, volumes, free), free, started)
 
 
 def poisson_ratio(bulk_over_shear: float) -> float:
@@ -180,6 +326,12 @@ def main(argv: list[str] | None = None) -> int:
         "--bench-sizes", default="500,1500", help="benchmark mesh sizes in tets (empty: none)"
     )
     parser.add_argument(
+        "--numpy-cubes",
+        default="",
+        help="cubes (hexahedra per edge, 6-tet split) for the independent NumPy P2/P0 element "
+        "and its P2 + normal face bubbles / P0 variant (empty: none)",
+    )
+    parser.add_argument(
         "--kmu-sizes",
         default="",
         help="benchmark mesh sizes in tets for the K/mu sensitivity of the force (empty: none)",
@@ -206,6 +358,13 @@ def main(argv: list[str] | None = None) -> int:
             report(
                 f"cube {divisions}^3 hexahedra, split {split}",
                 pressure_schur_spectrum(mesh, punch_radius_m=None),
+            )
+    for divisions in [int(s) for s in args.numpy_cubes.split(",") if s.strip()]:
+        for face_bubbles in (False, True):
+            element = "P2 + normal face bubbles / P0" if face_bubbles else "P2/P0"
+            report(
+                f"cube {divisions}^3 hexahedra, split six, NumPy {element}",
+                numpy_spectrum(divisions, face_bubbles=face_bubbles),
             )
     for sizes, study in (
         (args.bench_sizes, pressure_schur_spectrum),
