@@ -104,17 +104,21 @@ def constrained_dofs(mesh, *, punch_radius_m: float | None) -> np.ndarray:
 
 
 def schur_spectrum(
-    deviatoric: sp.csr_matrix, divergence: sp.csr_matrix, volumes: np.ndarray, free: np.ndarray
+    deviatoric: sp.csr_matrix, divergence: sp.csr_matrix, mass: sp.spmatrix, free: np.ndarray
 ) -> np.ndarray:
-    """Eigenvalues (ascending, units of mu) of M^-1/2 B A^-1 B^T M^-1/2 over the free DOFs."""
+    """Eigenvalues (ascending, units of mu) of B A^-1 B^T p = lambda M p over the free DOFs,
+    for a sparse pressure mass M (diagonal for P0)."""
+    import scipy.linalg
+
     factor = spla.splu(deviatoric[free][:, free].tocsc())
-    scaled = (sp.diags(volumes**-0.5) @ divergence)[:, free].T.toarray()
-    tets = divergence.shape[0]
-    schur = np.zeros((tets, tets))
-    for start in range(0, tets, 2000):
-        block = scaled[:, start : start + 2000]
-        schur[:, start : start + 2000] = scaled.T @ factor.solve(block)
-    return np.linalg.eigvalsh(0.5 * (schur + schur.T)) * SHEAR_MODULUS_PA
+    transposed = divergence[:, free].T.toarray()
+    pressures = divergence.shape[0]
+    schur = np.zeros((pressures, pressures))
+    for start in range(0, pressures, 2000):
+        block = transposed[:, start : start + 2000]
+        schur[:, start : start + 2000] = transposed.T @ factor.solve(block)
+    eigenvalues = scipy.linalg.eigh(0.5 * (schur + schur.T), mass.toarray(), eigvals_only=True)
+    return eigenvalues * SHEAR_MODULUS_PA
 
 
 def spectrum_record(eigenvalues: np.ndarray, free: np.ndarray, started: float) -> dict:
@@ -144,9 +148,8 @@ def pressure_schur_spectrum(mesh, *, punch_radius_m: float | None) -> dict:
     deviatoric = small - SMALL_BULK_RATIO * SHEAR_MODULUS_PA * volumetric
     free = ~constrained_dofs(mesh, punch_radius_m=punch_radius_m)
     record = {"volumetric_check": float(check)}
-    record.update(
-        spectrum_record(schur_spectrum(deviatoric, divergence, volumes, free), free, started)
-    )
+    eigenvalues = schur_spectrum(deviatoric, divergence, sp.diags(volumes), free)
+    record.update(spectrum_record(eigenvalues, free, started))
     return record
 
 
@@ -185,20 +188,54 @@ def p2_gradients_in_barycentrics(barycentrics: np.ndarray, face_bubbles: bool) -
     return gradients
 
 
-def numpy_p2_operators(divisions: int, *, face_bubbles: bool) -> tuple:
-    """An independent NumPy P2 (optionally + one normal face bubble per face) / P0 element
-    on the unit cube of divisions^3 hexahedra split into 6 tets.
+def quarter_block_fixed(node_points: np.ndarray, *, punch_radius_m: float | None) -> np.ndarray:
+    """Fixed components (N, 3) of the quarter blocks used here: the base z = z_min, the
+    symmetry planes x = 0 and y = 0, and (with ``punch_radius_m``) the top nodes under the
+    bonded punch at x = y = 0."""
+    low, high = node_points.min(0), node_points.max(0)
+    tolerance = 1e-9 * float(np.max(high - low))
+    fixed = np.zeros(node_points.shape, dtype=bool)
+    fixed[node_points[:, 2] < low[2] + tolerance] = True
+    fixed[node_points[:, 0] < tolerance, 0] = True
+    fixed[node_points[:, 1] < tolerance, 1] = True
+    if punch_radius_m is not None:
+        radius = np.hypot(node_points[:, 0], node_points[:, 1])
+        fixed[
+            (node_points[:, 2] > high[2] - tolerance) & (radius <= punch_radius_m * (1 + 1e-9))
+        ] = True
+    return fixed
 
-    Returns (deviatoric A, divergence B, tet volumes, free DOF mask). A is
-    2 mu int dev eps(u) : dev eps(v) with mu = SHEAR_MODULUS_PA; a face bubble carries one
-    DOF, its amplitude along the face's normal (Bernardi-Raugel style).
+
+def numpy_mixed_operators(
+    points: np.ndarray,
+    corner_tets: np.ndarray,
+    *,
+    face_bubbles: bool,
+    pressure: str,
+    punch_radius_m: float | None,
+    chunk: int = 2000,
+) -> dict:
+    """An independent NumPy assembly of P2 (optionally + one normal face bubble per face)
+    displacements with P0 or continuous P1 pressures, on any TET4 corner mesh.
+
+    Args:
+        points: Corner node coordinates (N, 3), m (every node used by ``corner_tets``).
+        corner_tets: Corner connectivity (T, 4), positively oriented.
+        face_bubbles: Add 27 lambda_i lambda_j lambda_k n_f per face (one DOF, its amplitude
+            along the face's unit normal n_f; Bernardi-Raugel style enrichment).
+        pressure: ``"p0"`` (one per tet) or ``"p1"`` (continuous, one per corner node).
+        punch_radius_m: Bonded punch radius for :func:`quarter_block_fixed` (None: no punch).
+        chunk: Tets per vectorized batch.
+
+    Returns:
+        ``deviatoric`` A (D x D, 2 mu int dev eps(u) : dev eps(v), mu = SHEAR_MODULUS_PA),
+        ``divergence`` B (P x D, B[q, d] = int psi_q div phi_d), ``pressure_mass`` M (P x P,
+        int psi_q psi_r), ``free`` (D,) mask, ``punch`` (D,) mask of the punch's vertical DOFs
+        (all False without a punch), ``dof_points`` (D, 3) and ``dof_components`` (D,) (-1 for
+        face bubbles), ``tet_volumes`` (T,).
     """
-    from warptissue.mesh import block_mesh
-
-    grid = np.linspace(0.0, 1.0, divisions + 1)
-    corners = block_mesh(grid, grid, grid, split="six")
-    points, tets = corners.points, corners.tets[:, :4]
-    node_count = len(points)
+    tets = np.asarray(corner_tets)
+    node_count, tet_count = len(points), len(tets)
     edge_keys = np.sort(tets[:, TET_EDGES], axis=2).reshape(-1, 2)
     edges, edge_of = np.unique(edge_keys, axis=0, return_inverse=True)
     face_keys = np.sort(tets[:, TET_FACES], axis=2).reshape(-1, 3)
@@ -214,66 +251,130 @@ def numpy_p2_operators(divisions: int, *, face_bubbles: bool) -> tuple:
     reference = p2_gradients_in_barycentrics(barycentrics, face_bubbles)
     functions = reference.shape[1]
     element_dofs = 30 + (4 if face_bubbles else 0)
-    rows, columns, values, divergence_values, element_dof_lists = [], [], [], [], []
-    volumes = np.zeros(len(tets))
+    pressures_per_tet = 1 if pressure == "p0" else 4
     eye = np.eye(3)
-    for tet, corner in enumerate(tets):
-        jacobian = (points[corner[1:]] - points[corner[0]]).T
+    rows, columns, values = [], [], []
+    b_rows, b_columns, b_values = [], [], []
+    volumes = np.zeros(tet_count)
+    for start in range(0, tet_count, chunk):
+        corner = tets[start : start + chunk]
+        batch = len(corner)
+        jacobian = (points[corner[:, 1:]] - points[corner[:, :1]]).transpose(0, 2, 1)
         inverse = np.linalg.inv(jacobian)
-        grad_lambda = np.vstack([-inverse.sum(0), inverse])
-        gradients = reference @ grad_lambda
-        w = weights * abs(np.linalg.det(jacobian))
-        volumes[tet] = w.sum()
-        dot = np.einsum("q,qak,qbk->ab", w, gradients, gradients)
-        cross = np.einsum("q,qaj,qbi->abij", w, gradients, gradients)
+        grad_lambda = np.concatenate([-inverse.sum(1, keepdims=True), inverse], axis=1)
+        gradients = np.einsum("qak,tki->tqai", reference, grad_lambda)
+        w = weights[None, :] * np.abs(np.linalg.det(jacobian))[:, None]
+        volumes[start : start + batch] = w.sum(1)
+        dot = np.einsum("tq,tqak,tqbk->tab", w, gradients, gradients, optimize=True)
+        cross = np.einsum("tq,tqaj,tqbi->tabij", w, gradients, gradients, optimize=True)
         stiffness = (
             2.0
             * SHEAR_MODULUS_PA
-            * (0.5 * (dot[:, :, None, None] * eye + cross) - cross.transpose(0, 1, 3, 2) / 3.0)
+            * (0.5 * (dot[..., None, None] * eye + cross) - cross.transpose(0, 1, 2, 4, 3) / 3.0)
         )
-        stiffness = stiffness.transpose(0, 2, 1, 3).reshape(3 * functions, 3 * functions)
-        divergence = np.einsum("q,qai->ai", w, gradients).ravel()
-        to_dofs = np.zeros((3 * functions, element_dofs))
-        to_dofs[:30, :30] = np.eye(30)
-        nodes = np.concatenate([corner, node_count + edge_of[tet]])
-        dofs = (3 * nodes[:, None] + np.arange(3)).ravel()
+        stiffness = stiffness.transpose(0, 1, 3, 2, 4).reshape(batch, 3 * functions, -1)
+        if pressure == "p0":
+            divergence = np.einsum("tq,tqai->tai", w, gradients)[:, None]
+        else:
+            divergence = np.einsum("tq,qv,tqai->tvai", w, barycentrics, gradients)
+        divergence = divergence.reshape(batch, pressures_per_tet, 3 * functions)
+        nodes = np.concatenate([corner, node_count + edge_of[start : start + batch]], axis=1)
+        dofs = (3 * nodes[:, :, None] + np.arange(3)).reshape(batch, 30)
         if face_bubbles:
+            to_dofs = np.zeros((batch, 3 * functions, element_dofs))
+            to_dofs[:, :30, :30] = np.eye(30)
             for k in range(4):
-                to_dofs[30 + 3 * k : 33 + 3 * k, 30 + k] = normals[face_of[tet, k]]
-            dofs = np.concatenate([dofs, 3 * p2_nodes + face_of[tet]])
-        element_dof_lists.append(dofs)
-        rows.append(np.repeat(dofs, element_dofs))
-        columns.append(np.tile(dofs, element_dofs))
-        values.append((to_dofs.T @ stiffness @ to_dofs).ravel())
-        divergence_values.append(to_dofs.T @ divergence)
+                to_dofs[:, 30 + 3 * k : 33 + 3 * k, 30 + k] = normals[
+                    face_of[start : start + batch, k]
+                ]
+            stiffness = np.einsum("tki,tkl,tlj->tij", to_dofs, stiffness, to_dofs, optimize=True)
+            divergence = np.einsum("tpk,tkj->tpj", divergence, to_dofs)
+            dofs = np.concatenate([dofs, 3 * p2_nodes + face_of[start : start + batch]], axis=1)
+        rows.append(np.repeat(dofs, element_dofs, axis=1).ravel())
+        columns.append(np.tile(dofs, (1, element_dofs)).ravel())
+        values.append(stiffness.ravel())
+        pressure_ids = np.arange(start, start + batch)[:, None] if pressure == "p0" else corner
+        b_rows.append(np.repeat(pressure_ids, element_dofs, axis=1).ravel())
+        b_columns.append(np.tile(dofs, (1, pressures_per_tet)).ravel())
+        b_values.append(divergence.ravel())
     deviatoric = sp.csr_matrix(
         (np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
         shape=(dof_count, dof_count),
     )
+    pressure_count = tet_count if pressure == "p0" else node_count
     divergence = sp.csr_matrix(
-        (
-            np.concatenate(divergence_values),
-            (np.repeat(np.arange(len(tets)), element_dofs), np.concatenate(element_dof_lists)),
-        ),
-        shape=(len(tets), dof_count),
+        (np.concatenate(b_values), (np.concatenate(b_rows), np.concatenate(b_columns))),
+        shape=(pressure_count, dof_count),
     )
+    if pressure == "p0":
+        mass = sp.diags(volumes).tocsr()
+    else:
+        local = (np.ones((4, 4)) + np.eye(4)) / 20.0
+        mass = sp.csr_matrix(
+            (
+                (volumes[:, None, None] * local).ravel(),
+                (np.repeat(tets, 4, axis=1).ravel(), np.tile(tets, (1, 4)).ravel()),
+            ),
+            shape=(node_count, node_count),
+        )
     node_points = np.vstack([points, points[edges].mean(1)])
-    fixed = np.zeros((p2_nodes, 3), dtype=bool)
-    fixed[node_points[:, 2] < 1e-12] = True
-    fixed[node_points[:, 0] < 1e-12, 0] = True
-    fixed[node_points[:, 1] < 1e-12, 1] = True
-    fixed = fixed.ravel()
+    fixed = quarter_block_fixed(node_points, punch_radius_m=punch_radius_m)
+    punch = np.zeros_like(fixed)
+    if punch_radius_m is not None:
+        punch[:, 2] = fixed.all(axis=1) & (node_points[:, 2] > node_points[:, 2].min())
+    dof_points = np.repeat(node_points, 3, axis=0)
+    dof_components = np.tile(np.arange(3), p2_nodes)
+    fixed, punch = fixed.ravel(), punch.ravel()
     if face_bubbles:
-        centroids = points[faces].mean(1)
-        fixed = np.concatenate([fixed, (centroids < 1e-12).any(axis=1)])
-    return deviatoric, divergence, volumes, ~fixed
+        # A face's normal bubble is fixed where every corner of the face has the components
+        # along the face's normal fixed (a face on a symmetry plane, the base or the punch).
+        corner_fixed = quarter_block_fixed(points, punch_radius_m=punch_radius_m)[faces]
+        along_normal = np.abs(normals)[:, None, :] > 1e-9
+        bubble_fixed = np.all(corner_fixed | ~along_normal, axis=(1, 2))
+        fixed = np.concatenate([fixed, bubble_fixed])
+        punch = np.concatenate([punch, np.zeros(len(faces), dtype=bool)])
+        dof_points = np.vstack([dof_points, points[faces].mean(1)])
+        dof_components = np.concatenate([dof_components, np.full(len(faces), -1)])
+    return {
+        "deviatoric": deviatoric,
+        "divergence": divergence,
+        "pressure_mass": mass,
+        "free": ~fixed,
+        "punch": punch,
+        "dof_points": dof_points,
+        "dof_components": dof_components,
+        "tet_volumes": volumes,
+    }
+
+
+def cube_corner_mesh(divisions: int) -> tuple[np.ndarray, np.ndarray]:
+    """The unit cube of divisions^3 hexahedra split into 6 tets: corner points and tets."""
+    from warptissue.mesh import block_mesh
+
+    grid = np.linspace(0.0, 1.0, divisions + 1)
+    corners = block_mesh(grid, grid, grid, split="six")
+    return corners.points, corners.tets[:, :4]
+
+
+def corner_mesh(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The corner (TET4) points and tets of a TET10 mesh, renumbered to its corner nodes."""
+    used, corner_tets = np.unique(mesh.tets[:, :4], return_inverse=True)
+    return mesh.points[used], corner_tets.reshape(-1, 4)
 
 
 def numpy_spectrum(divisions: int, *, face_bubbles: bool) -> dict:
-    """The spectrum for the NumPy element of :func:`numpy_p2_operators`."""
+    """The spectrum for the NumPy P2 (+ face bubbles) / P0 element of
+    :func:`numpy_mixed_operators` on a cube."""
     started = time.perf_counter()
-    deviatoric, divergence, volumes, free = numpy_p2_operators(divisions, face_bubbles=face_bubbles)
-    return spectrum_record(schur_spectrum(deviatoric, divergence, volumes, free), free, started)
+    points, tets = cube_corner_mesh(divisions)
+    operators = numpy_mixed_operators(
+        points, tets, face_bubbles=face_bubbles, pressure="p0", punch_radius_m=None
+    )
+    free = operators["free"]
+    eigenvalues = schur_spectrum(
+        operators["deviatoric"], operators["divergence"], operators["pressure_mass"], free
+    )
+    return spectrum_record(eigenvalues, free, started)
 
 
 def poisson_ratio(bulk_over_shear: float) -> float:
