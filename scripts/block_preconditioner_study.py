@@ -7,10 +7,13 @@ flat-punch targets need (README, Performance). For a saddle-point system
     [ B   -C  ] [p] = [g],     C = M / K,
 
 the block-diagonal preconditioner diag(A_hat^-1, S_hat^-1) with S_hat = (1/mu + 1/K) M_lumped
-gives MINRES an iteration count bounded independently of h and K exactly when the pair is
-uniformly inf-sup stable (beta_h bounded below) and A_hat is a uniform preconditioner of the
-elliptic block A. This script measures that on the small-strain (first Newton iteration)
-systems of:
+and A_hat = A + B^T S_hat^-1 B (the natural norm of Zulehner, SIAM J. Matrix Anal. Appl. 32,
+2011, for saddle problems whose A is coercive only on the kernel of B, as the deviatoric A is)
+gives MINRES an iteration count bounded independently of h and K when the pair is uniformly
+inf-sup stable (beta_h bounded below) and A_hat^-1 is applied by a uniform preconditioner.
+For P0, A_hat is the condensed mean-dilatation tangent at a bulk modulus mu K / (mu + K): an
+ordinary compressible elasticity operator. This script measures iteration counts on the
+small-strain (first Newton iteration) systems of:
 
 - P2/P0: warptissue's TET10 mixed element (its pressure, condensed in warptissue, kept here);
 - P2 + one normal face bubble per face / P0 (Bernardi-Raugel style enrichment);
@@ -23,13 +26,19 @@ pressure mass. The right-hand side is the bonded punch pushed down by a small de
 its Dirichlet values), on the unit cube (n^3 hexahedra, 6-tet split, quarter punch of radius
 0.25 at a corner of the top) and on the flat-punch benchmark's graded quarter blocks.
 
-A_hat is either an exact solve (sparse LU of A: isolates the pressure side) or one V-cycle of
-smoothed-aggregation AMG (pyamg, rigid-body near-null space, 3x3 node blocks; face bubbles
-get their diagonal). MINRES stops at a relative preconditioned residual of 1e-8; the record
-holds the iterations, the true relative residual, and the relative error of u against a sparse
-direct solve of the whole system.
+A_hat^-1 is one of:
+- ``exact``: a sparse LU solve of A_hat (isolates the pressure side);
+- ``amg``: one V-cycle of smoothed-aggregation AMG (pyamg, rigid-body near-null space,
+  3x3 node blocks, two symmetric Gauss-Seidel sweeps; face bubbles get their diagonal);
+- ``pmg-lu`` / ``pmg-amg``: one symmetric two-level p-multigrid cycle, the form a GPU version
+  would take: Chebyshev-Jacobi smoothing (degree 3) on the whole P2 (+ bubble) space, and the
+  Galerkin P1 operator on the same tets (7-8x fewer DOFs) solved by sparse LU or one AMG
+  V-cycle.
+MINRES stops at a relative preconditioned residual of 1e-8; the record holds the iterations,
+the true relative residual, and the relative error of u against a sparse direct solve of the
+whole system.
 
-Needs pyamg for the AMG rows (``pip install pyamg``); without it only the exact rows run.
+Needs pyamg for the ``amg`` and ``pmg-amg`` rows (``pip install pyamg``).
 
 Examples:
     python scripts/block_preconditioner_study.py --cubes 4,6,8 --bench-sizes 800,2000,5000 \\
@@ -116,6 +125,8 @@ def displacement_preconditioner(
     if kind == "exact":
         factor = spla.splu(block)
         return spla.LinearOperator((size, size), matvec=factor.solve, dtype=float), {}
+    if kind.startswith("pmg"):
+        return p_multigrid(operators, block, coarse=kind.removeprefix("pmg-") or "lu")
     import pyamg
 
     nodal = operators["dof_components"] >= 0
@@ -158,6 +169,89 @@ def displacement_preconditioner(
         "amg_levels": len(hierarchy.levels),
         "amg_operator_complexity": float(hierarchy.operator_complexity()),
     }
+    return spla.LinearOperator((size, size), matvec=apply, dtype=float), info
+
+
+def linear_prolongation(operators: dict) -> sp.csr_matrix:
+    """P1 -> P2 (+ bubbles) prolongation over all DOFs (D x 3 N): corners copied, edge
+    midpoints averaged, face bubbles zero (a linear field has no bubble part)."""
+    corners, edges = operators["corner_count"], operators["edges"]
+    dof_count = len(operators["free"])
+    rows = [np.arange(3 * corners)]
+    columns = [np.arange(3 * corners)]
+    values = [np.ones(3 * corners)]
+    for end in range(2):
+        rows.append((3 * (corners + np.arange(len(edges)))[:, None] + np.arange(3)).ravel())
+        columns.append((3 * edges[:, end][:, None] + np.arange(3)).ravel())
+        values.append(np.full(3 * len(edges), 0.5))
+    return sp.csr_matrix(
+        (np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))),
+        shape=(dof_count, 3 * corners),
+    )
+
+
+def chebyshev(
+    matrix: sp.spmatrix,
+    inverse_diagonal: np.ndarray,
+    rhs: np.ndarray,
+    start: np.ndarray,
+    bounds: tuple[float, float],
+    degree: int,
+) -> np.ndarray:
+    """``degree`` steps of Jacobi-preconditioned Chebyshev iteration on the eigenvalue interval
+    ``bounds`` of D^-1 A (Saad, Iterative Methods for Sparse Linear Systems, Alg. 12.1)."""
+    low, high = bounds
+    theta, delta = 0.5 * (high + low), 0.5 * (high - low)
+    sigma = theta / delta
+    rho = 1.0 / sigma
+    x = start.astype(float)
+    residual = rhs - matrix @ x
+    step = inverse_diagonal * residual / theta
+    for k in range(degree):
+        x += step
+        if k == degree - 1:
+            break
+        residual -= matrix @ step
+        rho_next = 1.0 / (2.0 * sigma - rho)
+        step = rho_next * rho * step + 2.0 * rho_next / delta * inverse_diagonal * residual
+        rho = rho_next
+    return x
+
+
+def p_multigrid(
+    operators: dict, block: sp.spmatrix, *, coarse: str, degree: int = 3
+) -> tuple[spla.LinearOperator, dict]:
+    """One symmetric two-level p-multigrid cycle for A_hat: Chebyshev-Jacobi smoothing on P2
+    (+ bubbles), the Galerkin P1 operator P^T A_hat P on the same tets solved by sparse LU
+    (``coarse="lu"``, standing in for a GPU direct solve of the 7-8x smaller system) or by one
+    smoothed-aggregation V-cycle (``coarse="amg"``)."""
+    free = operators["free"]
+    coarse_free = free[: 3 * operators["corner_count"]]
+    prolongation = linear_prolongation(operators)[free][:, coarse_free].tocsr()
+    block = block.tocsr()
+    coarse_matrix = (prolongation.T @ block @ prolongation).tocsc()
+    if coarse == "lu":
+        coarse_solve = spla.splu(coarse_matrix).solve
+    else:
+        import pyamg
+
+        coarse_solve = (
+            pyamg.smoothed_aggregation_solver(coarse_matrix.tocsr(), max_coarse=300)
+            .aspreconditioner(cycle="V")
+            .matvec
+        )
+    inverse_diagonal = 1.0 / block.diagonal()
+    scaled = sp.diags(np.sqrt(inverse_diagonal)) @ block @ sp.diags(np.sqrt(inverse_diagonal))
+    largest = float(spla.eigsh(scaled, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0])
+    bounds = (largest / 8.0, 1.1 * largest)
+
+    def apply(rhs: np.ndarray) -> np.ndarray:
+        x = chebyshev(block, inverse_diagonal, rhs, np.zeros_like(rhs), bounds, degree)
+        x += prolongation @ coarse_solve(prolongation.T @ (rhs - block @ x))
+        return chebyshev(block, inverse_diagonal, rhs, x, bounds, degree)
+
+    size = block.shape[0]
+    info = {"coarse_dofs": int(coarse_free.sum()), "chebyshev_degree": degree}
     return spla.LinearOperator((size, size), matvec=apply, dtype=float), info
 
 
@@ -254,7 +348,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pairs", default=",".join(PAIRS), help="pairs, comma separated")
     parser.add_argument("--ratios", default="10,1000,100000", help="K/mu values, comma separated")
     parser.add_argument(
-        "--preconditioners", default="exact,amg", help="A_hat: exact and/or amg, comma separated"
+        "--preconditioners",
+        default="exact,amg,pmg-lu",
+        help="A_hat: exact, amg, pmg-lu, pmg-amg (comma separated)",
     )
     parser.add_argument(
         "--spectrum-max-tets",

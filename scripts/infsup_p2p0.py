@@ -232,7 +232,9 @@ def numpy_mixed_operators(
         ``divergence`` B (P x D, B[q, d] = int psi_q div phi_d), ``pressure_mass`` M (P x P,
         int psi_q psi_r), ``free`` (D,) mask, ``punch`` (D,) mask of the punch's vertical DOFs
         (all False without a punch), ``dof_points`` (D, 3) and ``dof_components`` (D,) (-1 for
-        face bubbles), ``tet_volumes`` (T,).
+        face bubbles), ``tet_volumes`` (T,), ``corner_count`` N and ``edges`` (E, 2) (the P2
+        nodes are the N corners, then the edges' midpoints; DOF 3 k + i is node k's
+        component i).
     """
     tets = np.asarray(corner_tets)
     node_count, tet_count = len(points), len(tets)
@@ -344,6 +346,8 @@ def numpy_mixed_operators(
         "dof_points": dof_points,
         "dof_components": dof_components,
         "tet_volumes": volumes,
+        "corner_count": node_count,
+        "edges": edges,
     }
 
 
