@@ -76,6 +76,26 @@ RELATIVE_TOLERANCE = 1e-8
 MAX_ITERATIONS = 3000
 
 
+def mesh_shape(points: np.ndarray, tets: np.ndarray) -> dict:
+    """How stretched the tets are: percentiles of each tet's longest / shortest edge and of its
+    radius ratio 3 r_in / r_circ (1 regular). Point smoothers lose their mesh-independence on
+    stretched elements."""
+    from warptissue.mesh.core import TET4_EDGES
+    from warptissue.mesh.quality import radius_ratios
+
+    x = points[tets]
+    lengths = np.linalg.norm(x[:, TET4_EDGES[:, 1]] - x[:, TET4_EDGES[:, 0]], axis=2)
+    stretch = lengths.max(axis=1) / lengths.min(axis=1)
+    quality = radius_ratios(points, tets)
+    return {
+        "edge_ratio_median": float(np.median(stretch)),
+        "edge_ratio_p90": float(np.percentile(stretch, 90)),
+        "edge_ratio_max": float(stretch.max()),
+        "radius_ratio_p01": float(np.percentile(quality, 1)),
+        "radius_ratio_median": float(np.median(quality)),
+    }
+
+
 def saddle_system(operators: dict, bulk_over_shear: float, depth_m: float) -> tuple:
     """The free-DOF saddle-point matrix (symmetric, indefinite) and its right-hand side for
     the punch pushed down by ``depth_m``."""
@@ -117,7 +137,8 @@ def schur_diagonal(operators: dict, bulk_over_shear: float) -> np.ndarray:
 def displacement_preconditioner(
     operators: dict, bulk_over_shear: float, kind: str
 ) -> tuple[spla.LinearOperator, dict]:
-    """A_hat^-1 over the free displacement DOFs: an exact LU solve or one AMG V-cycle."""
+    """A_hat^-1 over the free displacement DOFs: an exact LU solve, one AMG V-cycle, or one
+    two-level p-multigrid cycle (``pmg-lu``, ``pmg-amg``)."""
     free = operators["free"]
     deviatoric = augmented_block(operators, bulk_over_shear).tocsr()
     block = deviatoric[free][:, free].tocsc()
@@ -399,6 +420,7 @@ def main(argv: list[str] | None = None) -> int:
                 "tets": len(tets),
                 "free_displacement_dofs": int(operators["free"].sum()),
                 "pressure_dofs": operators["divergence"].shape[0],
+                **mesh_shape(points, tets),
             }
             if len(tets) <= args.spectrum_max_tets:
                 eigenvalues = schur_spectrum(
