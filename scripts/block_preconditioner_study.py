@@ -364,6 +364,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--cubes", default="4,6,8", help="hexahedra per cube edge (empty: none)")
     parser.add_argument(
+        "--cube-stretch",
+        type=float,
+        default=1.0,
+        help="squash the cubes' height by this factor (uniformly stretched tets, no grading)",
+    )
+    parser.add_argument(
         "--bench-sizes", default="800,2000", help="benchmark mesh sizes in tets (empty: none)"
     )
     parser.add_argument("--pairs", default=",".join(PAIRS), help="pairs, comma separated")
@@ -387,14 +393,12 @@ def main(argv: list[str] | None = None) -> int:
 
     meshes = []
     for divisions in values(args.cubes):
-        meshes.append(
-            (
-                f"cube {divisions}^3 hexahedra, split six",
-                *cube_corner_mesh(int(divisions)),
-                0.25,
-                1e-3,
-            )
-        )
+        points, tets = cube_corner_mesh(int(divisions))
+        points[:, 2] /= args.cube_stretch
+        label = f"cube {divisions}^3 hexahedra, split six"
+        if args.cube_stretch != 1.0:
+            label += f", height / {args.cube_stretch:g}"
+        meshes.append((label, points, tets, 0.25, 1e-3))
     if values(args.bench_sizes):
         from bench_flat_punch import PROBE_RADIUS_M, warptissue_mesh
 
