@@ -135,10 +135,11 @@ def schur_diagonal(operators: dict, bulk_over_shear: float) -> np.ndarray:
 
 
 def displacement_preconditioner(
-    operators: dict, bulk_over_shear: float, kind: str
+    operators: dict, bulk_over_shear: float, kind: str, *, smoothing: tuple[int, float]
 ) -> tuple[spla.LinearOperator, dict]:
     """A_hat^-1 over the free displacement DOFs: an exact LU solve, one AMG V-cycle, or one
-    two-level p-multigrid cycle (``pmg-lu``, ``pmg-amg``)."""
+    two-level p-multigrid cycle (``pmg-lu``, ``pmg-amg``) whose Chebyshev smoother has the
+    degree and lower-bound divisor in ``smoothing``."""
     free = operators["free"]
     deviatoric = augmented_block(operators, bulk_over_shear).tocsr()
     block = deviatoric[free][:, free].tocsc()
@@ -147,7 +148,14 @@ def displacement_preconditioner(
         factor = spla.splu(block)
         return spla.LinearOperator((size, size), matvec=factor.solve, dtype=float), {}
     if kind.startswith("pmg"):
-        return p_multigrid(operators, block, coarse=kind.removeprefix("pmg-") or "lu")
+        degree, lower_divisor = smoothing
+        return p_multigrid(
+            operators,
+            block,
+            coarse=kind.removeprefix("pmg-") or "lu",
+            degree=degree,
+            lower_divisor=lower_divisor,
+        )
     import pyamg
 
     nodal = operators["dof_components"] >= 0
@@ -240,12 +248,14 @@ def chebyshev(
 
 
 def p_multigrid(
-    operators: dict, block: sp.spmatrix, *, coarse: str, degree: int = 3
+    operators: dict, block: sp.spmatrix, *, coarse: str, degree: int, lower_divisor: float
 ) -> tuple[spla.LinearOperator, dict]:
-    """One symmetric two-level p-multigrid cycle for A_hat: Chebyshev-Jacobi smoothing on P2
+    """One symmetric two-level p-multigrid cycle for A_hat: Chebyshev-Jacobi smoothing of
+    ``degree`` on [lambda_max / lower_divisor, 1.1 lambda_max] of D^-1 A_hat over P2
     (+ bubbles), the Galerkin P1 operator P^T A_hat P on the same tets solved by sparse LU
     (``coarse="lu"``, standing in for a GPU direct solve of the 7-8x smaller system) or by one
-    smoothed-aggregation V-cycle (``coarse="amg"``)."""
+    smoothed-aggregation V-cycle (``coarse="amg"``). A GPU version would spend 2 ``degree``
+    products with A_hat per cycle (the first residual is the right-hand side)."""
     free = operators["free"]
     coarse_free = free[: 3 * operators["corner_count"]]
     prolongation = linear_prolongation(operators)[free][:, coarse_free].tocsr()
@@ -264,7 +274,7 @@ def p_multigrid(
     inverse_diagonal = 1.0 / block.diagonal()
     scaled = sp.diags(np.sqrt(inverse_diagonal)) @ block @ sp.diags(np.sqrt(inverse_diagonal))
     largest = float(spla.eigsh(scaled, k=1, which="LA", tol=1e-3, return_eigenvectors=False)[0])
-    bounds = (largest / 8.0, 1.1 * largest)
+    bounds = (largest / lower_divisor, 1.1 * largest)
 
     def apply(rhs: np.ndarray) -> np.ndarray:
         x = chebyshev(block, inverse_diagonal, rhs, np.zeros_like(rhs), bounds, degree)
@@ -272,7 +282,11 @@ def p_multigrid(
         return chebyshev(block, inverse_diagonal, rhs, x, bounds, degree)
 
     size = block.shape[0]
-    info = {"coarse_dofs": int(coarse_free.sum()), "chebyshev_degree": degree}
+    info = {
+        "coarse_dofs": int(coarse_free.sum()),
+        "chebyshev_degree": degree,
+        "chebyshev_lower_divisor": lower_divisor,
+    }
     return spla.LinearOperator((size, size), matvec=apply, dtype=float), info
 
 
@@ -318,7 +332,14 @@ def preconditioned_minres(
     return x, history
 
 
-def block_minres(operators: dict, bulk_over_shear: float, kinds: list[str], depth_m: float) -> list:
+def block_minres(
+    operators: dict,
+    bulk_over_shear: float,
+    kinds: list[str],
+    depth_m: float,
+    *,
+    smoothing: tuple[int, float],
+) -> list:
     """MINRES on the saddle system with diag(A_hat^-1, S_hat^-1), once per kind of A_hat,
     each checked against one sparse direct solve of the whole system."""
     matrix, rhs = saddle_system(operators, bulk_over_shear, depth_m)
@@ -327,7 +348,9 @@ def block_minres(operators: dict, bulk_over_shear: float, kinds: list[str], dept
     records = []
     for kind in kinds:
         started = time.perf_counter()
-        displacement, info = displacement_preconditioner(operators, bulk_over_shear, kind)
+        displacement, info = displacement_preconditioner(
+            operators, bulk_over_shear, kind, smoothing=smoothing
+        )
         size_u = displacement.shape[0]
 
         def apply(vector: np.ndarray, displacement=displacement, size_u=size_u) -> np.ndarray:
@@ -378,6 +401,15 @@ def main(argv: list[str] | None = None) -> int:
         "--preconditioners",
         default="exact,amg,pmg-lu",
         help="A_hat: exact, amg, pmg-lu, pmg-amg (comma separated)",
+    )
+    parser.add_argument(
+        "--chebyshev-degree", type=int, default=3, help="pmg: Chebyshev smoothing steps"
+    )
+    parser.add_argument(
+        "--chebyshev-lower-divisor",
+        type=float,
+        default=8.0,
+        help="pmg: smooth the eigenvalues of D^-1 A_hat above lambda_max / this",
     )
     parser.add_argument(
         "--spectrum-max-tets",
@@ -437,7 +469,11 @@ def main(argv: list[str] | None = None) -> int:
                 common["schur_largest"] = float(eigenvalues[-1])
             for ratio in values(args.ratios):
                 for result in block_minres(
-                    operators, float(ratio), values(args.preconditioners), depth_m
+                    operators,
+                    float(ratio),
+                    values(args.preconditioners),
+                    depth_m,
+                    smoothing=(args.chebyshev_degree, args.chebyshev_lower_divisor),
                 ):
                     records.append({**common, **result})
                     print(json.dumps(records[-1]), flush=True)
