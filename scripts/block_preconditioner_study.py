@@ -31,9 +31,9 @@ A_hat^-1 is one of:
 - ``amg``: one V-cycle of smoothed-aggregation AMG (pyamg, rigid-body near-null space,
   3x3 node blocks, two symmetric Gauss-Seidel sweeps; face bubbles get their diagonal);
 - ``pmg-lu`` / ``pmg-amg``: one symmetric two-level p-multigrid cycle, the form a GPU version
-  would take: Chebyshev-Jacobi smoothing (degree 3) on the whole P2 (+ bubble) space, and the
-  Galerkin P1 operator on the same tets (7-8x fewer DOFs) solved by sparse LU or one AMG
-  V-cycle.
+  would take: Chebyshev-Jacobi smoothing (degree 3 unless ``--chebyshev-degree``) on the
+  whole P2 (+ bubble) space, and the Galerkin P1 operator on the same tets (7-8x fewer DOFs)
+  solved by sparse LU or one AMG V-cycle.
 MINRES stops at a relative preconditioned residual of 1e-8; the record holds the iterations,
 the true relative residual, and the relative error of u against a sparse direct solve of the
 whole system.
@@ -80,11 +80,9 @@ def mesh_shape(points: np.ndarray, tets: np.ndarray) -> dict:
     """How stretched the tets are: percentiles of each tet's longest / shortest edge and of its
     radius ratio 3 r_in / r_circ (1 regular). Point smoothers lose their mesh-independence on
     stretched elements."""
-    from warptissue.mesh.core import TET4_EDGES
-    from warptissue.mesh.quality import radius_ratios
+    from warptissue.mesh.quality import edge_lengths, radius_ratios
 
-    x = points[tets]
-    lengths = np.linalg.norm(x[:, TET4_EDGES[:, 1]] - x[:, TET4_EDGES[:, 0]], axis=2)
+    lengths = edge_lengths(points, tets)
     stretch = lengths.max(axis=1) / lengths.min(axis=1)
     quality = radius_ratios(points, tets)
     return {
@@ -223,18 +221,22 @@ def chebyshev(
     matrix: sp.spmatrix,
     inverse_diagonal: np.ndarray,
     rhs: np.ndarray,
-    start: np.ndarray,
+    start: np.ndarray | None,
     bounds: tuple[float, float],
     degree: int,
 ) -> np.ndarray:
     """``degree`` steps of Jacobi-preconditioned Chebyshev iteration on the eigenvalue interval
-    ``bounds`` of D^-1 A (Saad, Iterative Methods for Sparse Linear Systems, Alg. 12.1)."""
+    ``bounds`` of D^-1 A (Saad, Iterative Methods for Sparse Linear Systems, Alg. 12.1), from
+    ``start`` (None: zero, whose residual is ``rhs`` without a product)."""
     low, high = bounds
     theta, delta = 0.5 * (high + low), 0.5 * (high - low)
     sigma = theta / delta
     rho = 1.0 / sigma
-    x = start.astype(float)
-    residual = rhs - matrix @ x
+    if start is None:
+        x, residual = np.zeros_like(rhs), rhs.copy()
+    else:
+        x = start.astype(float)
+        residual = rhs - matrix @ x
     step = inverse_diagonal * residual / theta
     for k in range(degree):
         x += step
@@ -277,7 +279,7 @@ def p_multigrid(
     bounds = (largest / lower_divisor, 1.1 * largest)
 
     def apply(rhs: np.ndarray) -> np.ndarray:
-        x = chebyshev(block, inverse_diagonal, rhs, np.zeros_like(rhs), bounds, degree)
+        x = chebyshev(block, inverse_diagonal, rhs, None, bounds, degree)
         x += prolongation @ coarse_solve(prolongation.T @ (rhs - block @ x))
         return chebyshev(block, inverse_diagonal, rhs, x, bounds, degree)
 

@@ -6,6 +6,7 @@ from warptissue.mesh import TetMesh, block_mesh, indentation_disc, to_tet10
 from warptissue.mesh.quality import (
     check_mesh,
     dihedral_angles,
+    edge_lengths,
     fix_orientation,
     radius_ratios,
     tet10_jacobian_determinants,
@@ -18,6 +19,15 @@ def test_regular_tet_is_perfect():
     tets = np.array([[0, 1, 2, 3]])
     assert radius_ratios(REGULAR, tets)[0] == pytest.approx(1.0)
     np.testing.assert_allclose(np.degrees(dihedral_angles(REGULAR, tets)), 70.528779, atol=1e-5)
+
+
+def test_edge_lengths_of_the_unit_corner_tet():
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    # Edges (0,1), (1,2), (0,2), (0,3), (1,3), (2,3): the legs are 1, the others sqrt(2).
+    np.testing.assert_allclose(
+        edge_lengths(points, np.array([[0, 1, 2, 3]]))[0],
+        [1.0, np.sqrt(2.0), 1.0, 1.0, np.sqrt(2.0), np.sqrt(2.0)],
+    )
 
 
 def test_radius_ratio_matches_spheres_solved_directly(rng):

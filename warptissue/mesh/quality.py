@@ -21,6 +21,7 @@ __all__ = [
     "MeshQuality",
     "check_mesh",
     "dihedral_angles",
+    "edge_lengths",
     "fix_orientation",
     "radius_ratios",
     "tet10_jacobian_determinants",
@@ -113,8 +114,8 @@ def check_mesh(
     if mesh.tet_count == 0:
         raise MeshError("the mesh has no tetrahedra")
     volumes = mesh.volumes()
-    edge_lengths = _edge_lengths(mesh.points, mesh.corner_tets)
-    longest = edge_lengths.max(axis=1)
+    lengths = edge_lengths(mesh.points, mesh.corner_tets)
+    longest = lengths.max(axis=1)
     degenerate = np.abs(volumes) <= degenerate_tolerance * longest**3
     inverted = (volumes < 0) & ~degenerate
     bad = np.flatnonzero(degenerate | inverted)
@@ -133,7 +134,7 @@ def check_mesh(
         corners = mesh.points[mesh.tets[:, :4]]
         midpoints = 0.5 * (corners[:, TET4_EDGES[:, 0]] + corners[:, TET4_EDGES[:, 1]])
         offset = np.linalg.norm(mesh.points[mesh.tets[:, 4:]] - midpoints, axis=2)
-        curved = np.flatnonzero((offset > 1e-12 * edge_lengths).any(axis=1))
+        curved = np.flatnonzero((offset > 1e-12 * lengths).any(axis=1))
         determinants = tet10_jacobian_determinants(mesh.points, mesh.tets[curved])
         scaled_jacobian[curved] = determinants.min(axis=1) / (6.0 * volumes[curved])
         bad_jacobian = np.flatnonzero(scaled_jacobian <= 0)
@@ -156,7 +157,7 @@ def check_mesh(
             "elements)",
             element=first,
         )
-    ratios = _radius_ratios(mesh.points, mesh.corner_tets, edge_lengths)
+    ratios = _radius_ratios(mesh.points, mesh.corner_tets, lengths)
     dihedral = dihedral_angles(mesh.points, mesh.corner_tets)
     return MeshQuality(
         element_type=mesh.element_type,
@@ -165,8 +166,8 @@ def check_mesh(
         total_volume_m3=float(volumes.sum()),
         min_volume_m3=float(volumes.min()),
         max_volume_m3=float(volumes.max()),
-        min_edge_m=float(edge_lengths.min()),
-        max_edge_m=float(edge_lengths.max()),
+        min_edge_m=float(lengths.min()),
+        max_edge_m=float(lengths.max()),
         min_radius_ratio=float(ratios.min()),
         mean_radius_ratio=float(ratios.mean()),
         min_dihedral_deg=float(np.degrees(dihedral.min())),
@@ -222,7 +223,7 @@ def radius_ratios(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
         opposite edge lengths p = a a', q = b b', r = c c':
         r_circ = sqrt((p + q + r)(p + q - r)(p - q + r)(-p + q + r)) / (24 |V|).
     """
-    return _radius_ratios(points, tets, _edge_lengths(points, tets))
+    return _radius_ratios(points, tets, edge_lengths(points, tets))
 
 
 def _radius_ratios(points: np.ndarray, tets: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -317,7 +318,15 @@ def _det3(u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
     )
 
 
-def _edge_lengths(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """Lengths of the six corner edges in :data:`TET4_EDGES` order, shape (M, 6)."""
+def edge_lengths(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Lengths of each tet's six corner edges.
+
+    Args:
+        points: Node coordinates, shape (N, 3), metres.
+        tets: Corner connectivity, shape (M, 4) (extra columns are ignored).
+
+    Returns:
+        Edge lengths in :data:`TET4_EDGES` order, shape (M, 6), metres.
+    """
     x = points[tets[:, :4]]
     return np.linalg.norm(x[:, TET4_EDGES[:, 1]] - x[:, TET4_EDGES[:, 0]], axis=2)
