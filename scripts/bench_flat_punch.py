@@ -406,8 +406,11 @@ def _relative_check(dx, x, f, xtol, ftol, dof1=None, dof0=None, items=None):
 # --------------------------------------------------------------------------- warptissue
 
 
-def warptissue_mesh(target_tets: int, element: str = "TET10") -> tuple[Any, float]:
-    """An indentation-block mesh with about ``target_tets`` tets, and its near size."""
+def warptissue_mesh(
+    target_tets: int, element: str = "TET10", *, mesher: str = "extruded"
+) -> tuple[Any, float]:
+    """An indentation-block mesh with about ``target_tets`` tets, and its near size
+    (``mesher``: see :func:`warptissue.mesh.indentation_block`)."""
     from warptissue.mesh import indentation_block
 
     size_near_m = PROBE_RADIUS_M / 4.0
@@ -420,6 +423,7 @@ def warptissue_mesh(target_tets: int, element: str = "TET10") -> tuple[Any, floa
             element=element,
             size_near_m=size_near_m,
             size_far_m=min(10.0 * size_near_m, 0.25 * THICKNESS_M),
+            mesher=mesher,
         )
         ratio = mesh.tet_count / target_tets
         if abs(ratio - 1.0) < 0.15:
@@ -622,6 +626,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--progress", action="store_true", help="show a progress bar over each run's load steps"
     )
+    parser.add_argument(
+        "--mesher",
+        default="extruded",
+        choices=("extruded", "delaunay"),
+        help="warptissue meshes: layered prisms, or TetGen's quality tets inside the same "
+        "graded surface",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     args = parser.parse_args(argv)
     if not 1 <= args.steps <= STEP_COUNT:
@@ -640,7 +651,7 @@ def main(argv: list[str] | None = None) -> int:
         notes["warptissue_warmup_s"] = time.perf_counter() - started
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
-            mesh, size_near_m = warptissue_mesh(target)
+            mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
             record = run_warptissue(
                 mesh, size_near_m, args.device, steps=args.steps, progress=args.progress
             )
@@ -698,6 +709,7 @@ def main(argv: list[str] | None = None) -> int:
             "final_depth_m": FINAL_DEPTH_M,
             "steps": STEP_COUNT,
             "newton_tolerance": NEWTON_TOLERANCE,
+            "warptissue_mesher": args.mesher,
             "sneddon_force_N": sneddon_force_N(FINAL_DEPTH_M),
         },
         "machine": machine_description(),

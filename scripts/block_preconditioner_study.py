@@ -397,6 +397,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--bench-sizes", default="800,2000", help="benchmark mesh sizes in tets (empty: none)"
     )
+    parser.add_argument(
+        "--bench-mesher",
+        default="extruded",
+        choices=("extruded", "delaunay"),
+        help="benchmark meshes: layered prisms, or TetGen's quality tets in the same surface",
+    )
     parser.add_argument("--pairs", default=",".join(PAIRS), help="pairs, comma separated")
     parser.add_argument("--ratios", default="10,1000,100000", help="K/mu values, comma separated")
     parser.add_argument(
@@ -437,10 +443,11 @@ def main(argv: list[str] | None = None) -> int:
         from bench_flat_punch import PROBE_RADIUS_M, warptissue_mesh
 
         for size in values(args.bench_sizes):
-            mesh, _ = warptissue_mesh(int(size))
+            mesh, _ = warptissue_mesh(int(size), mesher=args.bench_mesher)
             meshes.append(
                 (
-                    f"flat-punch benchmark quarter block, {mesh.tet_count} tets",
+                    f"flat-punch benchmark quarter block, {args.bench_mesher}, "
+                    f"{mesh.tet_count} tets",
                     *corner_mesh(mesh),
                     PROBE_RADIUS_M,
                     PROBE_RADIUS_M / 40.0,

@@ -387,3 +387,88 @@ def test_extrusion_rejects_bad_input():
         extrude_triangles(square, [[0, 1, 2]], np.array([0.0, 0.0]))
     with pytest.raises(MeshError, match="outside"):
         extrude_triangles(square, [[0, 1, 3]], np.array([0.0, 1.0]))
+
+
+@pytest.mark.parametrize("kind", ["block", "disc"])
+@pytest.mark.parametrize("quarter", [True, False])
+def test_delaunay_specimen_fills_the_same_surface_with_the_same_sets(kind, quarter):
+    extruded = specimen(kind, quarter=quarter)
+    mesh = specimen(kind, quarter=quarter, mesher="delaunay")
+    p = mesh.points
+    assert np.all(mesh.volumes() > 0)
+    counts = face_counts(mesh.tets)
+    assert counts.max() == 2
+    # The same polyhedron: the volume, and the named surfaces tile the whole boundary once.
+    assert mesh.volumes().sum() == pytest.approx(extruded.volumes().sum(), rel=1e-12)
+    surfaces = [f for name, f in mesh.face_sets.items() if name != "probe"]
+    assert (counts == 1).sum() == sum(len(f) for f in surfaces)
+    for name, f in mesh.face_sets.items():
+        assert triangle_areas(p, f).sum() == pytest.approx(
+            triangle_areas(extruded.points, extruded.face_sets[name]).sum(), rel=1e-12
+        ), name
+        assert np.array_equal(np.unique(f), np.sort(mesh.node_set(name))), name
+    assert set(mesh.node_sets) == set(extruded.node_sets)
+    # Each set lies in its surface.
+    assert np.all(p[mesh.node_set("top"), 2] == THICKNESS)
+    assert np.all(p[mesh.node_set("bottom"), 2] == 0.0)
+    assert len(mesh.node_set("top")) == np.count_nonzero(p[:, 2] == THICKNESS)
+    if quarter:
+        assert np.all(p[mesh.node_set("symmetry_x"), 0] == 0.0)
+        assert np.all(p[mesh.node_set("symmetry_y"), 1] == 0.0)
+    radius = np.hypot(p[:, 0], p[:, 1])
+    if kind == "block":
+        assert np.allclose(np.abs(p[mesh.node_set("side"), :2]).max(axis=1), WIDTH / 2)
+    else:
+        # Steiner points sit on the flat facets of the inscribed polygonal prism.
+        rim = np.intersect1d(extruded.node_set("side"), extruded.node_set("top"))
+        angles = np.sort(np.arctan2(extruded.points[rim, 1], extruded.points[rim, 0]))
+        widest_facet = np.diff(
+            angles if quarter else np.append(angles, angles[0] + 2 * np.pi)
+        ).max()
+        inscribed = RADIUS * np.cos(0.5 * widest_facet)
+        side_radius = radius[mesh.node_set("side")]
+        assert side_radius.max() <= RADIUS * (1 + 1e-12)
+        assert side_radius.min() >= 0.999 * inscribed
+    # The probe: top nodes with r <= a, bounded by the extruded mesh's ring of nodes at r = a
+    # (TetGen keeps every input vertex).
+    top = mesh.node_set("top")
+    probe = mesh.node_set("probe")
+    assert np.array_equal(np.sort(probe), np.sort(top[radius[top] <= PROBE * (1 + 1e-12)]))
+
+    def ring(points, nodes):
+        on_ring = np.abs(np.hypot(points[nodes, 0], points[nodes, 1]) - PROBE) <= 1e-12 * PROBE
+        return points[np.sort(nodes[on_ring])]
+
+    expected = ring(extruded.points, extruded.node_set("probe"))
+    found = ring(p, probe)
+    assert len(found) >= len(expected)
+    assert {tuple(x) for x in expected} <= {tuple(x) for x in found}
+
+
+def test_delaunay_specimen_tets_are_isotropic():
+    from warptissue.mesh import edge_lengths, radius_ratios
+
+    shapes = {}
+    for mesher in ("extruded", "delaunay"):
+        mesh = specimen("block", mesher=mesher)
+        lengths = edge_lengths(mesh.points, mesh.tets)
+        edge_ratio = lengths.max(axis=1) / lengths.min(axis=1)
+        shapes[mesher] = (
+            np.percentile(edge_ratio, 90),
+            np.percentile(radius_ratios(mesh.points, mesh.tets), 10),
+        )
+    # 90th percentile of the longest / shortest edge, 10th of the radius ratio (1 = regular).
+    assert shapes["delaunay"][0] < 2.5 < shapes["extruded"][0]
+    assert shapes["delaunay"][1] > 0.45 > shapes["extruded"][1]
+
+
+def test_delaunay_disc_curved_side_puts_every_side_node_on_the_cylinder():
+    mesh = specimen("disc", element="TET10", curved_side=True, mesher="delaunay")
+    side = mesh.node_set("side")
+    np.testing.assert_allclose(np.hypot(*mesh.points[side, :2].T), RADIUS, rtol=1e-12)
+    assert check_mesh(mesh).min_scaled_jacobian > 0
+
+
+def test_unknown_mesher_is_rejected():
+    with pytest.raises(InputError, match="mesher"):
+        specimen("block", mesher="octree")

@@ -95,3 +95,48 @@ def test_non_manifold_and_malformed_surfaces_are_rejected():
         check_closed_surface(BOX_VERTICES, flat)
     with pytest.raises(InputError, match="quality"):
         tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, quality=0.9)
+
+
+def test_surface_sets_become_face_and_node_sets_of_the_filled_mesh():
+    # Box triangles come in pairs, one pair per side: bottom, top, y = 0, x = 2, y = 1, x = 0.
+    sides = {"bottom": (2, 0.0), "top": (2, 0.03), "front": (1, 0.0), "right": (0, 0.02)}
+    sets = {name: np.array([2 * k, 2 * k + 1]) for k, name in enumerate(sides)}
+    mesh = tetrahedralize_surface(
+        BOX_VERTICES, BOX_TRIANGLES, max_volume_m3=2e-8, surface_sets=sets
+    )
+    boundary = {tuple(f) for f in np.sort(mesh.face_sets["surface"], axis=1)}
+    named = []
+    for name, (axis, value) in sides.items():
+        faces = mesh.face_sets[name]
+        assert len(faces) > 2  # TetGen split the input pair
+        assert np.all(mesh.points[faces, axis] == value), name
+        np.testing.assert_array_equal(mesh.node_sets[name], np.unique(faces))
+        named += [tuple(f) for f in np.sort(faces, axis=1)]
+        area = (
+            0.5
+            * np.linalg.norm(
+                np.cross(
+                    *(mesh.points[faces[:, 1:]] - mesh.points[faces[:, :1]]).transpose(1, 0, 2)
+                ),
+                axis=1,
+            ).sum()
+        )
+        expected = np.prod(np.delete(BOX_VERTICES.max(0), axis))
+        assert area == pytest.approx(expected, rel=1e-12), name
+    assert len(set(named)) == len(named) and set(named) <= boundary
+    # The named faces keep the outward orientation of "surface".
+    for name, (axis, value) in sides.items():
+        x = mesh.points[mesh.face_sets[name]]
+        normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])[:, axis]
+        assert np.all(normal > 0 if value > 0 else normal < 0), name
+
+
+def test_surface_sets_must_index_distinct_existing_triangles():
+    with pytest.raises(InputError, match="triangle 1 is in surface sets 'a' and 'b'"):
+        tetrahedralize_surface(
+            BOX_VERTICES, BOX_TRIANGLES, surface_sets={"a": np.array([0, 1]), "b": np.array([1])}
+        )
+    with pytest.raises(InputError, match="indexes triangle 12, outside"):
+        tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, surface_sets={"a": np.array([12])})
+    with pytest.raises(InputError, match="1-D array of triangle indices"):
+        tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, surface_sets={"a": np.array([0.5])})

@@ -83,6 +83,7 @@ def build_mesh(study: Study) -> Any:
         "size_near_m": specimen.size_near_m,
         "size_far_m": specimen.size_far_m,
         "growth": specimen.growth,
+        "mesher": specimen.mesher,
     }
     if specimen.shape == "block":
         return indentation_block(width_m=specimen.width_m, **common)

@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from warptissue.errors import InputError
+from warptissue.mesh.generators import MESHERS
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -72,6 +73,9 @@ class Specimen:
         size_near_m: Target element edge length under the probe, m.
         size_far_m: Target element edge length far from the probe, m.
         growth: Size ratio of neighbouring cells along the grading, outward and downward.
+        mesher: ``"extruded"`` (layers of split prisms) or ``"delaunay"`` (TetGen's quality
+            tets inside the same graded surface); see
+            :func:`warptissue.mesh.indentation_block`.
     """
 
     shape: str
@@ -83,6 +87,7 @@ class Specimen:
     size_near_m: float
     size_far_m: float
     growth: float
+    mesher: str = "extruded"
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[specimen]`` table, with every default filled in."""
@@ -98,6 +103,7 @@ class Specimen:
             size_near_m=self.size_near_m,
             size_far_m=self.size_far_m,
             growth=self.growth,
+            mesher=self.mesher,
         )
         return table
 
@@ -414,6 +420,7 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
     growth = table.number("growth", default=1.2)
     if growth < 1.0:
         raise table.error("growth", "must be at least 1", growth)
+    mesher = table.string("mesher", default="extruded", choices=MESHERS)
     table.finish()
     return Specimen(
         shape=shape,
@@ -425,6 +432,7 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
         size_near_m=size_near_m,
         size_far_m=size_far_m,
         growth=growth,
+        mesher=mesher,
     )
 
 

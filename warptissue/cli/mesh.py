@@ -38,6 +38,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         generate.add_argument("--growth", type=float, default=1.2)
         generate.add_argument("--layer-max-m", type=float, default=None)
         generate.add_argument("--element", choices=("TET10", "TET4"), default="TET10")
+        generate.add_argument(
+            "--mesher",
+            choices=("extruded", "delaunay"),
+            default="extruded",
+            help="layers of split prisms, or TetGen's quality tets inside the same surface",
+        )
         generate.add_argument("--full", action="store_true", help="full model, not a quarter")
         generate.add_argument("--out", type=Path, required=True, help=".vtu or .msh file")
         generate.add_argument("--json", type=Path, help="write the quality summary here")
@@ -66,6 +72,7 @@ def _generate(args: argparse.Namespace) -> int:
         "size_far_m": args.size_far_m,
         "growth": args.growth,
         "layer_max_m": args.layer_max_m,
+        "mesher": args.mesher,
     }
     if args.shape == "block":
         mesh = indentation_block(width_m=args.width_m, **common)

@@ -24,7 +24,11 @@ __all__ = [
     "hex_to_tets",
     "indentation_block",
     "indentation_disc",
+    "MESHERS",
 ]
+
+MESHERS = ("extruded", "delaunay")
+"""How :func:`indentation_block` and :func:`indentation_disc` fill the specimen."""
 
 # Hexahedron corners: 0 (0,0,0), 1 (1,0,0), 2 (1,1,0), 3 (0,1,0), 4 (0,0,1), 5 (1,0,1),
 # 6 (1,1,1), 7 (0,1,1).
@@ -388,6 +392,7 @@ def indentation_block(
     size_far_m: float,
     growth: float = 1.2,
     layer_max_m: float | None = None,
+    mesher: str = "extruded",
 ) -> TetMesh:
     """A square block for indentation, graded toward the probe at its top centre.
 
@@ -398,6 +403,12 @@ def indentation_block(
     radial rays out to the block's sides. Sizes start at ``size_near_m`` under and around the
     probe and grow by ``growth`` per cell outward and downward, up to ``size_far_m``. Layers
     of triangular prisms are split into three tets each (see :func:`extrude_triangles`).
+
+    With ``mesher="delaunay"`` TetGen refills that mesh's boundary surface with quality tets
+    (radius-edge ratio <= 1.4, dihedral angles aimed above 12 degrees): the same graded sizes
+    on the surface, but near-isotropic tets inside, where the layered mesh has cells stretched
+    by the independent grading in the plane and in depth. The probe ring, the sets and the
+    outline are kept; the tet count at the same sizes is somewhat lower.
 
     Node and face sets: ``top`` (z = thickness), ``bottom`` (z = 0), ``side`` (the lateral
     outer faces), ``symmetry_x`` (x = 0) and ``symmetry_y`` (y = 0) when ``quarter``, and
@@ -414,6 +425,8 @@ def indentation_block(
         growth: Size ratio of neighbouring cells along the grading (>= 1).
         layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
             times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
+        mesher: ``"extruded"`` (layers of split prisms) or ``"delaunay"`` (TetGen inside the
+            extruded mesh's surface).
 
     Returns:
         A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
@@ -432,6 +445,7 @@ def indentation_block(
         growth=growth,
         layer_max_m=layer_max_m,
         curved_side=False,
+        mesher=mesher,
     )
 
 
@@ -447,6 +461,7 @@ def indentation_disc(
     growth: float = 1.2,
     layer_max_m: float | None = None,
     curved_side: bool = False,
+    mesher: str = "extruded",
 ) -> TetMesh:
     """A cylindrical disc specimen for indentation, graded toward the probe at its top centre.
 
@@ -468,6 +483,8 @@ def indentation_disc(
         curved_side: For TET10 only: move the mid-edge nodes of the edges on the cylinder onto
             it (curved, isoparametric side faces). By default every TET10 is straight-sided,
             and the side is the inscribed polygonal prism.
+        mesher: ``"extruded"`` or ``"delaunay"`` (see :func:`indentation_block`). With
+            ``curved_side`` the Delaunay mesh's side nodes also move onto the cylinder.
 
     Returns:
         A positively oriented, conforming mesh.
@@ -485,6 +502,7 @@ def indentation_disc(
         growth=growth,
         layer_max_m=layer_max_m,
         curved_side=curved_side,
+        mesher=mesher,
     )
 
 
@@ -514,11 +532,14 @@ def _indentation_specimen(
     growth: float,
     layer_max_m: float | None,
     curved_side: bool,
+    mesher: str,
 ) -> TetMesh:
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
     _require_positive(probe_radius_m=probe_radius_m, size_near_m=size_near_m, size_far_m=size_far_m)
     if element not in ("TET4", "TET10"):
         raise InputError("element must be 'TET4' or 'TET10'", column="element", value=element)
+    if mesher not in MESHERS:
+        raise InputError(f"mesher must be one of {MESHERS}", column="mesher", value=mesher)
     if probe_radius_m >= half_extent_m:
         raise InputError(
             f"probe_radius_m must be smaller than the specimen's half-width ({half_extent_m} m)",
@@ -582,12 +603,56 @@ def _indentation_specimen(
     face_sets["side"] = np.concatenate([faces[m[faces].all(axis=1)] for m in side_columns])
     node_sets = {name: np.flatnonzero(mask).astype(np.int32) for name, mask in masks.items()}
     mesh = TetMesh(points=points, tets=tets, node_sets=node_sets, face_sets=face_sets)
+    if mesher == "delaunay":
+        mesh = _delaunay_refill(mesh)
+        if curved_side and outer == "circle":
+            # TetGen's Steiner points on the side lie on its flat facets: onto the cylinder.
+            _project_to_cylinder(mesh, mesh.node_sets["side"], half_extent_m)
+    side = np.zeros(mesh.node_count, dtype=bool)
+    side[mesh.node_sets["side"]] = True
     if element == "TET4":
         return mesh
     mesh = to_tet10(mesh)
     if curved_side and outer == "circle":
-        _project_midnodes_to_cylinder(mesh, masks["side"], half_extent_m)
+        _project_midnodes_to_cylinder(mesh, side, half_extent_m)
     return mesh
+
+
+_DELAUNAY_RADIUS_EDGE_RATIO = 1.4
+_DELAUNAY_MIN_DIHEDRAL_DEG = 12.0
+
+
+def _delaunay_refill(extruded: TetMesh) -> TetMesh:
+    """TetGen quality tets inside the boundary surface of an extruded specimen, with its
+    named face and node sets carried over (``top`` holds the ``probe`` faces too)."""
+    from warptissue.mesh.surface import tetrahedralize_surface
+
+    faces = boundary_faces(extruded.tets)
+    keys = {tuple(face): index for index, face in enumerate(np.sort(faces, axis=1))}
+    groups = {}
+    for name in ("probe", "top", "bottom", "side", "symmetry_x", "symmetry_y"):
+        if name not in extruded.face_sets:
+            continue
+        indices = np.array([keys[tuple(f)] for f in np.sort(extruded.face_sets[name], axis=1)])
+        groups[name] = indices if name != "top" else np.setdiff1d(indices, groups["probe"])
+    used, surface_triangles = np.unique(faces, return_inverse=True)
+    mesh = tetrahedralize_surface(
+        extruded.points[used],
+        surface_triangles.reshape(-1, 3),
+        quality=_DELAUNAY_RADIUS_EDGE_RATIO,
+        min_dihedral_deg=_DELAUNAY_MIN_DIHEDRAL_DEG,
+        surface_sets=groups,
+    )
+    mesh.face_sets["top"] = np.concatenate([mesh.face_sets["top"], mesh.face_sets["probe"]])
+    mesh.node_sets["top"] = np.unique(mesh.face_sets["top"]).astype(np.int32)
+    del mesh.face_sets["surface"], mesh.node_sets["surface"]
+    return mesh
+
+
+def _project_to_cylinder(mesh: TetMesh, nodes: np.ndarray, radius_m: float) -> None:
+    """Move ``nodes`` radially (in x, y) onto the cylinder r = radius."""
+    xy = mesh.points[nodes, :2]
+    mesh.points[nodes, :2] = xy * (radius_m / np.hypot(xy[:, 0], xy[:, 1]))[:, None]
 
 
 def _ogrid_quarter(
@@ -694,6 +759,4 @@ def _project_midnodes_to_cylinder(mesh: TetMesh, side: np.ndarray, radius_m: flo
     """Move mid-edge nodes of edges with both corners on the cylinder r = radius onto it."""
     corners = mesh.tets[:, TET4_EDGES.ravel()].reshape(-1, 6, 2)
     on_side = side[corners].all(axis=2)
-    mids = np.unique(mesh.tets[:, 4:][on_side])
-    xy = mesh.points[mids, :2]
-    mesh.points[mids, :2] = xy * (radius_m / np.hypot(xy[:, 0], xy[:, 1]))[:, None]
+    _project_to_cylinder(mesh, np.unique(mesh.tets[:, 4:][on_side]), radius_m)

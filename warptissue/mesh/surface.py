@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
 from warptissue.errors import InputError, MeshError
@@ -69,8 +71,12 @@ def tetrahedralize_surface(
     max_volume_m3: float | None = None,
     quality: float | None = 1.5,
     min_dihedral_deg: float = 10.0,
+    surface_sets: Mapping[str, np.ndarray] | None = None,
 ) -> TetMesh:
     """Fill a closed triangle surface with tetrahedra (TetGen, constrained Delaunay).
+
+    TetGen may split the input triangles (Steiner points on the surface), but it keeps every
+    input vertex and, with ``surface_sets``, every edge between two named groups.
 
     Args:
         vertices_m: Surface vertices, shape (V, 3), metres.
@@ -81,19 +87,26 @@ def tetrahedralize_surface(
         min_dihedral_deg: Dihedral angle TetGen tries to keep every tet above, degrees (a
             target, not a guarantee: slivers can remain next to the input surface). Used
             only with ``quality``.
+        surface_sets: Named, disjoint groups of input triangles (indices into
+            ``triangles``). Each becomes a face set of the boundary faces that fill its
+            triangles and a node set of their nodes (a boundary condition's target).
 
     Returns:
         A positively oriented TET4 mesh. Input vertices keep their indices (TetGen appends
-        any Steiner points after them). Node set and face set ``"surface"`` hold the boundary.
+        any Steiner points after them). Node set and face set ``"surface"`` hold the boundary,
+        and each of ``surface_sets`` has its own.
 
     Raises:
         InputError: The surface is not closed or is malformed (:func:`check_closed_surface`),
-            or an option is out of range.
+            an option is out of range, or a surface set indexes a triangle that does not
+            exist or that another set already holds (the message names both).
         MeshError: TetGen fails (for example on a self-intersecting surface).
     """
     import tetgen
 
     check_closed_surface(vertices_m, triangles)
+    set_names = list(surface_sets or {})
+    markers = _surface_markers(len(triangles), surface_sets or {})
     options: dict[str, object] = {"quality": quality is not None}
     if quality is not None:
         if not quality > 1.0:
@@ -108,9 +121,10 @@ def tetrahedralize_surface(
     generator = tetgen.TetGen(
         np.ascontiguousarray(vertices_m, dtype=np.float64),
         np.ascontiguousarray(triangles, dtype=np.int32),
+        markers,
     )
     try:
-        nodes, tets, *_ = generator.tetrahedralize(**options)
+        nodes, tets, _, face_markers = generator.tetrahedralize(**options)
     except RuntimeError as exc:
         raise MeshError(f"TetGen failed: {exc}") from exc
     if len(tets) == 0:
@@ -119,4 +133,46 @@ def tetrahedralize_surface(
     faces = boundary_faces(mesh.tets)
     mesh.node_sets["surface"] = np.unique(faces).astype(np.int32)
     mesh.face_sets["surface"] = faces
+    if set_names:
+        # TetGen's boundary faces carry their input triangle's marker; match them to the
+        # outward-oriented boundary faces by their sorted corners.
+        marker_of = dict(
+            zip(map(tuple, np.sort(generator.trifaces, axis=1)), face_markers, strict=True)
+        )
+        face_marker = np.array([marker_of[tuple(face)] for face in np.sort(faces, axis=1)])
+        for marker, name in enumerate(set_names, start=1):
+            named = faces[face_marker == marker]
+            mesh.face_sets[name] = named
+            mesh.node_sets[name] = np.unique(named).astype(np.int32)
     return mesh
+
+
+def _surface_markers(triangle_count: int, surface_sets: Mapping[str, np.ndarray]) -> np.ndarray:
+    """TetGen facet markers: 1, 2, ... for the named sets in order, 0 elsewhere."""
+    markers = np.zeros(triangle_count, dtype=np.int32)
+    owner: dict[int, str] = {}
+    for marker, (name, indices) in enumerate(surface_sets.items(), start=1):
+        indices = np.asarray(indices)
+        if not np.issubdtype(indices.dtype, np.integer) or indices.ndim != 1:
+            raise InputError(
+                f"surface set {name!r} must be a 1-D array of triangle indices",
+                value=str(indices.dtype),
+            )
+        outside = indices[(indices < 0) | (indices >= triangle_count)]
+        if outside.size:
+            raise InputError(
+                f"surface set {name!r} indexes triangle {int(outside[0])}, outside "
+                f"[0, {triangle_count})",
+                value=int(outside[0]),
+            )
+        taken = indices[markers[indices] != 0]
+        if taken.size:
+            triangle = int(taken[0])
+            raise InputError(
+                f"triangle {triangle} is in surface sets {owner[int(markers[triangle])]!r} and "
+                f"{name!r}; the sets must be disjoint",
+                value=triangle,
+            )
+        markers[indices] = marker
+        owner[marker] = name
+    return markers
