@@ -27,6 +27,21 @@ def test_generate_check_and_convert(tmp_path, capsys):
     assert main(["mesh", "check", str(tmp_path / "disc.vtu")]) == 0
 
 
+def test_generate_delaunay_block(tmp_path):
+    arguments = [
+        "mesh", "block", "--width-m", "0.01", "--thickness-m", "0.004",
+        "--probe-radius-m", "0.002", "--size-near-m", "0.0008", "--size-far-m", "0.002",
+        "--element", "TET4",
+    ]  # fmt: skip
+    for mesher in ("extruded", "delaunay"):
+        out = tmp_path / f"{mesher}.vtu"
+        assert main([*arguments, "--mesher", mesher, "--out", str(out)]) == 0
+    extruded, delaunay = (read_mesh(tmp_path / f"{m}.vtu") for m in ("extruded", "delaunay"))
+    assert np.isclose(delaunay.volumes().sum(), extruded.volumes().sum(), rtol=1e-12)
+    assert not np.array_equal(delaunay.points, extruded.points)
+    assert set(delaunay.node_sets) == set(extruded.node_sets)
+
+
 def test_errors_are_one_line_with_exit_codes(tmp_path, capsys):
     assert main(["mesh", "check", str(tmp_path / "missing.vtu")]) == 2
     assert "missing.vtu" in capsys.readouterr().err

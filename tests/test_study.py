@@ -77,6 +77,7 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.specimen.size_near_m == pytest.approx(0.001 / 4)
     assert study.specimen.size_far_m == pytest.approx(0.01 / 4)
     assert study.specimen.growth == pytest.approx(1.2)
+    assert study.specimen.mesher == "extruded"
     assert study.indenter.contact == "bonded"
     assert study.boundary.base == "fixed"
     assert study.solver.device == "auto"
@@ -175,6 +176,13 @@ BAD_INPUTS = [
         "specimen.growth",
         "0.8",
         id="shrinking-growth",
+    ),
+    pytest.param(
+        "width_m = 0.02",
+        'width_m = 0.02\nmesher = "octree"',
+        "specimen.mesher",
+        "'octree'",
+        id="unknown-mesher",
     ),
     pytest.param(
         "width_m = 0.02",
