@@ -5,6 +5,7 @@ One refinement factor f scales both element sizes (size_near = 0.5 mm / f, size_
 10k tets and f = 6.5 about 1M.
 
     python scripts/bench_mesh.py --factors 1 2 4 6.5 --out runs/bench_mesh.json
+    python scripts/bench_mesh.py --mesher delaunay --factors 1 2 4 8
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--factors", type=float, nargs="+", default=[1.0, 2.0, 4.0, 6.5])
     parser.add_argument("--element", choices=("TET4", "TET10"), default="TET10")
+    parser.add_argument("--mesher", choices=("extruded", "delaunay"), default="extruded")
     parser.add_argument("--out", type=Path, help="JSON file for the results")
     args = parser.parse_args()
 
@@ -38,6 +40,7 @@ def main() -> None:
             element=args.element,
             size_near_m=0.0005 / factor,
             size_far_m=0.004 / factor,
+            mesher=args.mesher,
         )
         generated = time.perf_counter()
         quality = check_mesh(mesh)
@@ -48,6 +51,7 @@ def main() -> None:
         row = {
             "refinement_factor": factor,
             "element": args.element,
+            "mesher": args.mesher,
             "tet_count": mesh.tet_count,
             "node_count": mesh.node_count,
             "generate_s": generated - start,
