@@ -131,6 +131,12 @@ def test_surface_sets_become_face_and_node_sets_of_the_filled_mesh():
         assert np.all(normal > 0 if value > 0 else normal < 0), name
 
 
+def test_an_empty_surface_set_gives_empty_sets():
+    mesh = tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, surface_sets={"none": []})
+    assert mesh.face_sets["none"].shape == (0, 3)
+    assert mesh.node_sets["none"].size == 0
+
+
 def test_surface_sets_must_index_distinct_existing_triangles():
     with pytest.raises(InputError, match="triangle 1 is in surface sets 'a' and 'b'"):
         tetrahedralize_surface(

@@ -153,6 +153,8 @@ def _surface_markers(triangle_count: int, surface_sets: Mapping[str, np.ndarray]
     owner: dict[int, str] = {}
     for marker, (name, indices) in enumerate(surface_sets.items(), start=1):
         indices = np.asarray(indices)
+        if indices.size == 0:
+            indices = indices.astype(np.int64)
         if not np.issubdtype(indices.dtype, np.integer) or indices.ndim != 1:
             raise InputError(
                 f"surface set {name!r} must be a 1-D array of triangle indices",
