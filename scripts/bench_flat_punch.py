@@ -83,6 +83,7 @@ class RunRecord:
     newton_iterations_per_step: list[int] = field(default_factory=list)
     local_iterations: int | None = None
     linear_solver: str = ""
+    predictor: str = ""
     relative_error: float | None = None
 
 
@@ -433,10 +434,17 @@ def warptissue_mesh(
 
 
 def run_warptissue(
-    mesh: Any, size_near_m: float, device: str, *, steps: int = STEP_COUNT, progress: bool = False
+    mesh: Any,
+    size_near_m: float,
+    device: str,
+    *,
+    steps: int = STEP_COUNT,
+    progress: bool = False,
+    predictor: str = "linearized",
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
-    steps (all 20 by default; fewer make a partial run, ``completed`` False)."""
+    steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
+    from ``predictor`` (see :func:`warptissue.fem.solve_quasistatic`)."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -462,6 +470,7 @@ def run_warptissue(
         device=warp_device,
         progress=progress,
         tolerance=NEWTON_TOLERANCE,
+        predictor=predictor,
     )
     wp.synchronize_device(warp_device)
     solve_s = time.perf_counter() - started
@@ -496,6 +505,7 @@ def run_warptissue(
         newton_iterations_per_step=[int(n) for n in result.newton_iterations],
         local_iterations=int(np.sum(result.local_iterations)),
         linear_solver=str(getattr(result, "linear_solver", "")),
+        predictor=predictor,
     )
 
 
@@ -577,7 +587,8 @@ def machine_description() -> dict[str, Any]:
 
 def print_table(records: list[RunRecord]) -> None:
     header = (
-        f"{'code':<10} {'device':<7} {'cells':>8} {'dofs':>9} {'newton':>6} {'linear':>7} "
+        f"{'code':<10} {'predictor':<12} {'device':<7} {'cells':>8} {'dofs':>9} {'newton':>6} "
+        f"{'linear':>7} "
         f"{'s/step':>8} {'total_s':>8} {'cpu_s':>8} {'s/newton':>8} {'RSS_MiB':>8} {'GPU_MiB':>8} "
         f"{'F_final_N':>11} {'error':>7}"
     )
@@ -587,7 +598,8 @@ def print_table(records: list[RunRecord]) -> None:
         linear = f"{r.linear_iterations:7d}" if r.linear_iterations is not None else f"{'-':>7}"
         error = f"{100 * r.relative_error:6.2f}%" if r.relative_error is not None else f"{'-':>7}"
         print(
-            f"{r.code[:10]:<10} {r.device:<7} {r.cells:8d} {r.dofs:9d} {r.newton_iterations:6d} "
+            f"{r.code[:10]:<10} {r.predictor or '-':<12} {r.device:<7} {r.cells:8d} "
+            f"{r.dofs:9d} {r.newton_iterations:6d} "
             f"{linear} {r.seconds_per_step:8.3f} {r.solve_s:8.2f} {r.solve_cpu_s:8.2f} "
             f"{r.seconds_per_newton_iteration:8.3f} {r.peak_host_rss_MiB:8.0f} {gpu} "
             f"{r.final_force_N:11.5e} {error}"
@@ -633,10 +645,20 @@ def main(argv: list[str] | None = None) -> int:
         help="warptissue meshes: layered prisms, or TetGen's quality tets inside the same "
         "graded surface",
     )
+    parser.add_argument(
+        "--predictors",
+        default="linearized",
+        help="start of each load step's Newton iterations, comma separated, from "
+        "linearized, extrapolated: each mesh runs once per predictor",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     args = parser.parse_args(argv)
     if not 1 <= args.steps <= STEP_COUNT:
         parser.error(f"--steps must be between 1 and {STEP_COUNT}, got {args.steps}")
+    predictors = [p.strip() for p in args.predictors.split(",") if p.strip()]
+    unknown = sorted(set(predictors) - {"linearized", "extrapolated"})
+    if unknown or not predictors:
+        parser.error(f"--predictors takes linearized and/or extrapolated, got {args.predictors!r}")
 
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
@@ -652,12 +674,18 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
             mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
-            record = run_warptissue(
-                mesh, size_near_m, args.device, steps=args.steps, progress=args.progress
-            )
-            records.append(record)
-            print_table([record])
-            sys.stdout.flush()
+            for predictor in predictors:
+                record = run_warptissue(
+                    mesh,
+                    size_near_m,
+                    args.device,
+                    steps=args.steps,
+                    progress=args.progress,
+                    predictor=predictor,
+                )
+                records.append(record)
+                print_table([record])
+                sys.stdout.flush()
     for level in [int(s) for s in args.felupe_levels.split(",") if s.strip()]:
         size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
         record = run_felupe(size_near_m, 10.0 * size_near_m)
@@ -673,7 +701,11 @@ def main(argv: list[str] | None = None) -> int:
 
     references = {}
     for code in ("warptissue", "felupe", "felupe-axisymmetric-disc"):
-        runs = [r for r in records if r.code == code and r.completed]
+        runs = [
+            r
+            for r in records
+            if r.code == code and r.completed and r.predictor in ("", predictors[0])
+        ]
         extrapolated = richardson(
             [r.cells for r in runs],
             [r.final_force_N for r in runs],

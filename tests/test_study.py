@@ -87,6 +87,7 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.solver.max_newton_iterations == 25
     assert study.solver.max_cutbacks == 8
     assert study.solver.nonlinear_elimination is True
+    assert study.solver.predictor == "linearized"
 
 
 def test_explicit_depth_list_and_disc(tmp_path):
@@ -205,6 +206,13 @@ BAD_INPUTS = [
         "'yes'",
         id="elimination-not-boolean",
     ),
+    pytest.param(
+        "[material]",
+        '[solver]\npredictor = "parabolic"\n[material]',
+        "solver.predictor",
+        "'parabolic'",
+        id="unknown-predictor",
+    ),
 ]
 
 
@@ -247,3 +255,24 @@ def test_study_from_dict_rejects_non_table():
     record["specimen"] = 3
     with pytest.raises(InputError, match="specimen: must be a table"):
         study_from_dict(record)
+
+
+def test_solver_choices_are_the_solvers_own():
+    """The study module keeps its own copies of the solver's choices (so that reading a study
+    does not start Warp): they must not drift apart."""
+    from warptissue import study
+    from warptissue.fem import assembly, solvers
+
+    assert study.LINEAR_SOLVERS == solvers.LINEAR_SOLVERS
+    assert study.PREDICTORS == solvers.PREDICTORS
+    assert study.FORMULATIONS == assembly.FORMULATIONS
+
+
+def test_extrapolated_predictor_is_read_and_written(tmp_path):
+    path = write(
+        tmp_path,
+        MINIMAL.replace("[material]", '[solver]\npredictor = "extrapolated"\n[material]', 1),
+    )
+    study = load_study(path)
+    assert study.solver.predictor == "extrapolated"
+    assert study.to_dict()["solver"]["predictor"] == "extrapolated"

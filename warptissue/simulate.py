@@ -198,6 +198,7 @@ def run_study(
         max_newton_iterations=study.solver.max_newton_iterations,
         max_cutbacks=study.solver.max_cutbacks,
         nonlinear_elimination=study.solver.nonlinear_elimination,
+        predictor=study.solver.predictor,
     )
     solved = time.perf_counter()
 

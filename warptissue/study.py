@@ -54,6 +54,7 @@ CONTACT_KINDS: tuple[str, ...] = ("bonded", "frictionless")
 BASE_KINDS: tuple[str, ...] = ("fixed", "sliding")
 FORMULATIONS: tuple[str, ...] = ("mixed", "displacement")
 LINEAR_SOLVERS: tuple[str, ...] = ("auto", "pardiso", "superlu", "cudss", "cg")
+PREDICTORS: tuple[str, ...] = ("linearized", "extrapolated")
 DEVICE_PATTERN = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 _MISSING = object()
@@ -189,6 +190,9 @@ class Solver:
             stops early.
         nonlinear_elimination: Relax the nodes that hold most of the residual after each
             global Newton step (fewer factorizations at a punch edge; same converged curve).
+        predictor: Start of each load step's Newton iterations: ``"linearized"`` or
+            ``"extrapolated"`` (see :func:`warptissue.fem.solve_quasistatic`; same converged
+            curve).
     """
 
     device: str
@@ -198,6 +202,7 @@ class Solver:
     max_newton_iterations: int
     max_cutbacks: int
     nonlinear_elimination: bool = True
+    predictor: str = "linearized"
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[solver]`` table."""
@@ -209,6 +214,7 @@ class Solver:
             "max_newton_iterations": self.max_newton_iterations,
             "max_cutbacks": self.max_cutbacks,
             "nonlinear_elimination": self.nonlinear_elimination,
+            "predictor": self.predictor,
         }
 
 
@@ -511,6 +517,7 @@ def _read_solver(table: _Table) -> Solver:
     max_newton_iterations = table.integer("max_newton_iterations", default=25)
     max_cutbacks = table.integer("max_cutbacks", default=8, minimum=0)
     nonlinear_elimination = table.boolean("nonlinear_elimination", default=True)
+    predictor = table.string("predictor", default="linearized", choices=PREDICTORS)
     table.finish()
     return Solver(
         device=device,
@@ -520,6 +527,7 @@ def _read_solver(table: _Table) -> Solver:
         max_newton_iterations=max_newton_iterations,
         max_cutbacks=max_cutbacks,
         nonlinear_elimination=nonlinear_elimination,
+        predictor=predictor,
     )
 
 

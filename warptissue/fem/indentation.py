@@ -257,6 +257,7 @@ def simulate_indentation(
     strict: bool = False,
     assembler: Assembler | None = None,
     nonlinear_elimination: bool = True,
+    predictor: str = "linearized",
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -277,6 +278,9 @@ def simulate_indentation(
         nonlinear_elimination: Relax the nodes that hold most of the residual after each
             global Newton step (see :func:`warptissue.fem.solve_quasistatic`); fewer
             factorizations at the punch edge, same converged curve.
+        predictor: ``"linearized"`` or ``"extrapolated"`` (each depth's Newton iterations
+            start from the last two converged states extrapolated linearly; see
+            :func:`warptissue.fem.solve_quasistatic`); same converged curve.
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -311,6 +315,7 @@ def simulate_indentation(
         progress_label="indentation depths",
         load_name="depth (m)",
         nonlinear_elimination=nonlinear_elimination,
+        predictor=predictor,
     )
     if len(path.loads):
         stress = assembler.cauchy_stress(path.displacement_m[-1])
