@@ -175,9 +175,11 @@ def eliminate_dirichlet_kernel(
     offsets: wp.array(dtype=wp.int32),
     columns: wp.array(dtype=wp.int32),
     constrained: wp.array(dtype=wp.vec3d),
+    damping: wp.float64,
     matrix_values: wp.array(dtype=wp.mat33d),
 ):
-    """Zero the rows and columns of constrained dofs and put 1 on their diagonal.
+    """Zero the rows and columns of constrained dofs and put 1 on their diagonal; add
+    ``damping |K_ii|`` to the diagonal of the free dofs (Levenberg-Marquardt, 0 for none).
 
     ``constrained[n][i]`` is 1 where component i of node n is prescribed, else 0.
     """
@@ -193,6 +195,8 @@ def eliminate_dirichlet_kernel(
                     block[i, k] = wp.float64(0.0)
                     if row == col and i == k:
                         block[i, k] = wp.float64(1.0)
+                elif row == col and i == k:
+                    block[i, k] = block[i, k] + damping * wp.abs(block[i, k])
         matrix_values[idx] = block
 
 

@@ -153,3 +153,39 @@ def test_node_patch_and_tangent_submatrix(device, rng):
         assembler.node_patch([mesh.node_count])
     with pytest.raises(InputError, match="sorted and unique"):
         assembler.tangent_submatrix([3, 3])
+
+
+@pytest.mark.parametrize("damping", [0.0, 0.5])
+def test_eliminate_zeroes_prescribed_dofs_and_damps_the_free_diagonal(device, damping, rng):
+    """Against the same operations on the dense tangent: rows and columns of prescribed dofs
+    zeroed with 1 on the diagonal; each free diagonal entry K_ii -> K_ii + damping |K_ii|;
+    every other entry untouched."""
+    import warp as wp
+
+    mesh = _mesh(10)
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device=device)
+    assembly = assembler.assemble(3e-4 * rng.standard_normal((mesh.node_count, 3)))
+    tangent = _dense(assembly, mesh.node_count)
+    mask = (rng.random((mesh.node_count, 3)) < 0.3).astype(np.float64)
+    prescribed = mask.reshape(-1) > 0.5
+    expected = tangent.copy()
+    free_diagonal = np.flatnonzero(~prescribed)
+    expected[free_diagonal, free_diagonal] += damping * np.abs(
+        tangent[free_diagonal, free_diagonal]
+    )
+    expected[prescribed, :] = 0.0
+    expected[:, prescribed] = 0.0
+    expected[np.flatnonzero(prescribed), np.flatnonzero(prescribed)] = 1.0
+    assembler.eliminate(wp.array(mask, dtype=wp.vec3d, device=assembler.device), damping=damping)
+    np.testing.assert_array_equal(_dense(assembly, mesh.node_count), expected)
+
+
+@pytest.mark.parametrize("damping", [-0.1, float("nan")])
+def test_eliminate_refuses_a_negative_or_nan_damping(damping):
+    import warp as wp
+
+    mesh = _mesh(10)
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device="cpu")
+    assembler.assemble(np.zeros((mesh.node_count, 3)))
+    with pytest.raises(InputError, match="damping"):
+        assembler.eliminate(wp.zeros(mesh.node_count, dtype=wp.vec3d), damping=damping)

@@ -18,8 +18,10 @@ from warptissue.fem import (
     solve_quasistatic,
 )
 from warptissue.fem.solvers import (
+    DAMPING_START,
     _line_search,
     _newton_increment,
+    _next_damping,
     _nonlinear_elimination,
     _pardiso_available,
 )
@@ -392,3 +394,40 @@ def test_unknown_predictor_is_refused():
     with pytest.raises(InputError, match="predictor") as error:
         solve_quasistatic(assembler, _compression_conditions(mesh), [1e-4], predictor="quadratic")
     assert "quadratic" in str(error.value)
+
+
+def test_damping_saves_newton_iterations_on_a_large_depth_increment():
+    """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets) pressed to 0.3 a in one step: with
+    the adaptive Levenberg-Marquardt damping the line search no longer cuts step after step
+    (measured 16 -> 9 Newton iterations), and the converged force is the same."""
+    problem = _bonded_punch()
+    depths = [0.3 * PUNCH_RADIUS_M]
+    results = {
+        on: simulate_indentation(
+            problem, depths, device="cpu", progress=False, tolerance=1e-8, damping=on
+        )
+        for on in (False, True)
+    }
+    plain, damped = results[False], results[True]
+    assert plain.completed and damped.completed
+    assert damped.newton_iterations.sum() < plain.newton_iterations.sum()
+    np.testing.assert_allclose(damped.reaction_force_N, plain.reaction_force_N, rtol=1e-8)
+
+
+def test_damping_rises_on_cut_steps_and_falls_back_to_zero_after_full_ones():
+    factor = 0.0
+    factor = _next_damping(factor, 1.0)
+    assert factor == 0.0  # full steps: no damping
+    factor = _next_damping(factor, 0.5)
+    assert factor == 0.0  # a mild cut: unchanged
+    factor = _next_damping(factor, 0.01)
+    assert factor == DAMPING_START
+    factor = _next_damping(factor, 0.1)
+    assert factor == 4.0 * DAMPING_START
+    factor = _next_damping(factor, 0.5)
+    assert factor == 4.0 * DAMPING_START
+    history = []
+    while factor > 0.0:
+        factor = _next_damping(factor, 1.0)
+        history.append(factor)
+    assert history == [DAMPING_START, DAMPING_START / 4.0, DAMPING_START / 16.0, 0.0]

@@ -73,6 +73,7 @@ def test_api_writes_curve_json_and_fields(api_run):
     assert summary["force_curve"]["reaction_force_N"] == pytest.approx([r[2] for r in rows])
     assert summary["study"]["solver"]["nonlinear_elimination"] is True
     assert summary["study"]["solver"]["predictor"] == "linearized"
+    assert summary["study"]["solver"]["damping"] is True
     assert len(summary["force_curve"]["local_iterations"]) == 3
     assert summary["mesh"]["tet_count"] > 0
     assert summary["mesh"]["displacement_dof_count"] == 3 * summary["mesh"]["node_count"]

@@ -88,6 +88,7 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.solver.max_cutbacks == 8
     assert study.solver.nonlinear_elimination is True
     assert study.solver.predictor == "linearized"
+    assert study.solver.damping is True
 
 
 def test_explicit_depth_list_and_disc(tmp_path):
@@ -212,6 +213,13 @@ BAD_INPUTS = [
         "solver.predictor",
         "'parabolic'",
         id="unknown-predictor",
+    ),
+    pytest.param(
+        "[material]",
+        "[solver]\ndamping = 1\n[material]",
+        "solver.damping",
+        "1",
+        id="damping-not-boolean",
     ),
 ]
 

@@ -199,6 +199,7 @@ def run_study(
         max_cutbacks=study.solver.max_cutbacks,
         nonlinear_elimination=study.solver.nonlinear_elimination,
         predictor=study.solver.predictor,
+        damping=study.solver.damping,
     )
     solved = time.perf_counter()
 

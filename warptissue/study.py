@@ -193,6 +193,8 @@ class Solver:
         predictor: Start of each load step's Newton iterations: ``"linearized"`` or
             ``"extrapolated"`` (see :func:`warptissue.fem.solve_quasistatic`; same converged
             curve).
+        damping: Damp the tangent (Levenberg-Marquardt) after a Newton step that the line
+            search cut short (same converged curve).
     """
 
     device: str
@@ -203,6 +205,7 @@ class Solver:
     max_cutbacks: int
     nonlinear_elimination: bool = True
     predictor: str = "linearized"
+    damping: bool = True
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[solver]`` table."""
@@ -215,6 +218,7 @@ class Solver:
             "max_cutbacks": self.max_cutbacks,
             "nonlinear_elimination": self.nonlinear_elimination,
             "predictor": self.predictor,
+            "damping": self.damping,
         }
 
 
@@ -518,6 +522,7 @@ def _read_solver(table: _Table) -> Solver:
     max_cutbacks = table.integer("max_cutbacks", default=8, minimum=0)
     nonlinear_elimination = table.boolean("nonlinear_elimination", default=True)
     predictor = table.string("predictor", default="linearized", choices=PREDICTORS)
+    damping = table.boolean("damping", default=True)
     table.finish()
     return Solver(
         device=device,
@@ -528,6 +533,7 @@ def _read_solver(table: _Table) -> Solver:
         max_cutbacks=max_cutbacks,
         nonlinear_elimination=nonlinear_elimination,
         predictor=predictor,
+        damping=damping,
     )
 
 

@@ -7,6 +7,7 @@ precomputed element-block to BSR-block map, so the topology is never rebuilt.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -234,18 +235,26 @@ class Assembler:
             min_jacobian=float(self._min_jacobian.numpy()[0]),
         )
 
-    def eliminate(self, constrained: wp.array) -> None:
-        """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal.
+    def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
+        """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
+        in place; optionally damp the free dofs' diagonal.
 
         Args:
             constrained: Warp vec3d array (N,), 1.0 where a component is prescribed.
+            damping: Levenberg-Marquardt factor lambda >= 0: each free diagonal entry K_ii
+                becomes ``K_ii + lambda |K_ii|`` (0: the tangent unchanged).
+
+        Raises:
+            InputError: A negative or non-finite ``damping``.
         """
         from warptissue.kernels import fem as kf
 
+        if not (math.isfinite(damping) and damping >= 0.0):
+            raise InputError("damping must be finite and >= 0", value=damping)
         wp.launch(
             kf.eliminate_dirichlet_kernel,
             dim=self.node_count,
-            inputs=[self.matrix.offsets, self.matrix.columns, constrained],
+            inputs=[self.matrix.offsets, self.matrix.columns, constrained, wp.float64(damping)],
             outputs=[self.matrix.values],
             device=self.device,
         )

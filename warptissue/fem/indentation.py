@@ -258,6 +258,7 @@ def simulate_indentation(
     assembler: Assembler | None = None,
     nonlinear_elimination: bool = True,
     predictor: str = "linearized",
+    damping: bool = True,
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -281,6 +282,10 @@ def simulate_indentation(
         predictor: ``"linearized"`` or ``"extrapolated"`` (each depth's Newton iterations
             start from the last two converged states extrapolated linearly; see
             :func:`warptissue.fem.solve_quasistatic`); same converged curve.
+        damping: Levenberg-Marquardt damping of the tangent after a Newton step that the
+            line search cut short (see :func:`warptissue.fem.solve_quasistatic`); fewer
+            iterations for large depth increments at a finely meshed punch edge, same
+            converged curve.
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -316,6 +321,7 @@ def simulate_indentation(
         load_name="depth (m)",
         nonlinear_elimination=nonlinear_elimination,
         predictor=predictor,
+        damping=damping,
     )
     if len(path.loads):
         stress = assembler.cauchy_stress(path.displacement_m[-1])

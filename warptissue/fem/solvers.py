@@ -503,6 +503,33 @@ def _nonlinear_elimination(
     return u, assembly, iterations
 
 
+DAMPING_START = 1.0
+"""Levenberg-Marquardt factor lambda set when the line search first cuts a step below
+:data:`DAMPING_CUT` (each free diagonal entry K_ii of the tangent becomes K_ii + lambda |K_ii|);
+multiplied by 4 at each further cut, divided by 4 after each full step and dropped to 0 below
+``DAMPING_START / 8``."""
+DAMPING_CUT = 0.25
+
+
+def _next_damping(factor: float, alpha: float) -> float:
+    """The damping factor for the next Newton iteration, after a step of length ``alpha``.
+
+    Notes:
+        Levenberg (1944), Marquardt (1963), with Marquardt's scaling by the diagonal; the
+        update follows the line search instead of a trust-region ratio. At a finely meshed
+        punch edge a large load increment leaves the tangent of the predictor state a poor
+        model: undamped, the line search cut many Newton steps there to 0.002-0.05 of their
+        length. Damped, the steps shorten and turn toward the scaled steepest descent, and
+        are taken whole; with the factor dropped again after full steps, the quadratic
+        convergence near the solution is kept. The converged state is the same.
+    """
+    if alpha < DAMPING_CUT:
+        return max(4.0 * factor, DAMPING_START)
+    if alpha >= 1.0:
+        return factor / 4.0 if factor > DAMPING_START / 8.0 else 0.0
+    return factor
+
+
 def _newton_increment(
     assembler: Assembler,
     solver: LinearSolver,
@@ -516,12 +543,16 @@ def _newton_increment(
     max_iterations: int,
     nonlinear_elimination: bool,
     free_guess: np.ndarray | None = None,
+    damping: bool = False,
 ) -> _Step:
     """Newton iterations for one load increment, starting from a converged state.
 
     ``free_guess`` (N, 3), m: a predicted change of the free dofs over the increment. Where
     the state it gives (with the prescribed increment applied) has no inverted element, the
     iterations start there; otherwise, and without a guess, from the linearized predictor.
+
+    ``damping``: adaptive Levenberg-Marquardt damping of the tangent's free diagonal (see
+    :data:`DAMPING_START`); off, every iteration solves with the plain tangent.
     """
     u = u_start.copy()
     linear_total = 0
@@ -538,6 +569,7 @@ def _newton_increment(
     if linearized:
         assembly = assembler.assemble(u)
     residual = assembly.residual.numpy()
+    factor = 0.0
     for iteration in range(1, max_iterations + 1):
         first = iteration == 1 and linearized
         if first:
@@ -545,7 +577,7 @@ def _newton_increment(
             rhs = -(residual + k_times_increment.numpy()) * free + prescribed_increment
         else:
             rhs = -residual * free
-        assembler.eliminate(constrained_wp)
+        assembler.eliminate(constrained_wp, damping=factor)
         du, linear_iterations = solver.solve(assembly.matrix, rhs)
         linear_total += linear_iterations
         if not np.all(np.isfinite(du)):
@@ -569,6 +601,8 @@ def _newton_increment(
                 False, u, iteration, linear_total, search.reason, local_total, not linearized
             )
         u, alpha = search.state, search.alpha
+        if damping and not first:
+            factor = _next_damping(factor, alpha)
         assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
         free_norm = _norm(residual * free)
@@ -620,6 +654,7 @@ def solve_quasistatic(
     initial_displacement_m: np.ndarray | None = None,
     nonlinear_elimination: bool = True,
     predictor: str = "linearized",
+    damping: bool = True,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -652,6 +687,10 @@ def solve_quasistatic(
             converged states; where that state inverts an element, or Newton fails from it,
             the increment runs again from the linearized predictor before any cutback). It
             changes the path to the solution, not the convergence test.
+        damping: Where the line search cuts a Newton step below a quarter of its length,
+            damp the next iterations' tangent (Levenberg-Marquardt, :func:`_next_damping`)
+            until steps are taken whole again. It changes the path to the solution, not the
+            convergence test.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -717,6 +756,7 @@ def solve_quasistatic(
                     max_iterations=max_iterations,
                     nonlinear_elimination=nonlinear_elimination,
                     free_guess=free_guess,
+                    damping=damping,
                 )
                 step_newton += step.iterations
                 step_linear += step.linear_iterations
