@@ -84,6 +84,7 @@ class RunRecord:
     local_iterations: int | None = None
     linear_solver: str = ""
     predictor: str = ""
+    damping: bool | None = None
     relative_error: float | None = None
 
 
@@ -441,10 +442,12 @@ def run_warptissue(
     steps: int = STEP_COUNT,
     progress: bool = False,
     predictor: str = "linearized",
+    damping: bool = True,
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
     steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
-    from ``predictor`` (see :func:`warptissue.fem.solve_quasistatic`)."""
+    from ``predictor``, with or without ``damping`` (see
+    :func:`warptissue.fem.solve_quasistatic`)."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -471,6 +474,7 @@ def run_warptissue(
         progress=progress,
         tolerance=NEWTON_TOLERANCE,
         predictor=predictor,
+        damping=damping,
     )
     wp.synchronize_device(warp_device)
     solve_s = time.perf_counter() - started
@@ -506,6 +510,7 @@ def run_warptissue(
         local_iterations=int(np.sum(result.local_iterations)),
         linear_solver=str(getattr(result, "linear_solver", "")),
         predictor=predictor,
+        damping=damping,
     )
 
 
@@ -587,8 +592,8 @@ def machine_description() -> dict[str, Any]:
 
 def print_table(records: list[RunRecord]) -> None:
     header = (
-        f"{'code':<10} {'predictor':<12} {'device':<7} {'cells':>8} {'dofs':>9} {'newton':>6} "
-        f"{'linear':>7} "
+        f"{'code':<10} {'predictor':<12} {'damp':<4} {'device':<7} {'cells':>8} {'dofs':>9} "
+        f"{'newton':>6} {'linear':>7} "
         f"{'s/step':>8} {'total_s':>8} {'cpu_s':>8} {'s/newton':>8} {'RSS_MiB':>8} {'GPU_MiB':>8} "
         f"{'F_final_N':>11} {'error':>7}"
     )
@@ -597,8 +602,9 @@ def print_table(records: list[RunRecord]) -> None:
         gpu = f"{r.peak_gpu_MiB:8.0f}" if r.peak_gpu_MiB is not None else f"{'-':>8}"
         linear = f"{r.linear_iterations:7d}" if r.linear_iterations is not None else f"{'-':>7}"
         error = f"{100 * r.relative_error:6.2f}%" if r.relative_error is not None else f"{'-':>7}"
+        damp = {None: "-", True: "on", False: "off"}[r.damping]
         print(
-            f"{r.code[:10]:<10} {r.predictor or '-':<12} {r.device:<7} {r.cells:8d} "
+            f"{r.code[:10]:<10} {r.predictor or '-':<12} {damp:<4} {r.device:<7} {r.cells:8d} "
             f"{r.dofs:9d} {r.newton_iterations:6d} "
             f"{linear} {r.seconds_per_step:8.3f} {r.solve_s:8.2f} {r.solve_cpu_s:8.2f} "
             f"{r.seconds_per_newton_iteration:8.3f} {r.peak_host_rss_MiB:8.0f} {gpu} "
@@ -651,6 +657,12 @@ def main(argv: list[str] | None = None) -> int:
         help="start of each load step's Newton iterations, comma separated, from "
         "linearized, extrapolated: each mesh runs once per predictor",
     )
+    parser.add_argument(
+        "--damping",
+        default="on",
+        help="Levenberg-Marquardt damping after cut Newton steps: on, off, or on,off (each "
+        "mesh runs once per setting)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     args = parser.parse_args(argv)
     if not 1 <= args.steps <= STEP_COUNT:
@@ -659,6 +671,10 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(predictors) - {"linearized", "extrapolated"})
     if unknown or not predictors:
         parser.error(f"--predictors takes linearized and/or extrapolated, got {args.predictors!r}")
+    settings = {"on": True, "off": False}
+    dampings = [d.strip() for d in args.damping.split(",") if d.strip()]
+    if not dampings or any(d not in settings for d in dampings):
+        parser.error(f"--damping takes on and/or off, got {args.damping!r}")
 
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
@@ -675,17 +691,19 @@ def main(argv: list[str] | None = None) -> int:
             target = SIZE_TARGETS.get(size) or parse_count(size)
             mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
             for predictor in predictors:
-                record = run_warptissue(
-                    mesh,
-                    size_near_m,
-                    args.device,
-                    steps=args.steps,
-                    progress=args.progress,
-                    predictor=predictor,
-                )
-                records.append(record)
-                print_table([record])
-                sys.stdout.flush()
+                for damping in dampings:
+                    record = run_warptissue(
+                        mesh,
+                        size_near_m,
+                        args.device,
+                        steps=args.steps,
+                        progress=args.progress,
+                        predictor=predictor,
+                        damping=settings[damping],
+                    )
+                    records.append(record)
+                    print_table([record])
+                    sys.stdout.flush()
     for level in [int(s) for s in args.felupe_levels.split(",") if s.strip()]:
         size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
         record = run_felupe(size_near_m, 10.0 * size_near_m)
@@ -704,7 +722,10 @@ def main(argv: list[str] | None = None) -> int:
         runs = [
             r
             for r in records
-            if r.code == code and r.completed and r.predictor in ("", predictors[0])
+            if r.code == code
+            and r.completed
+            and r.predictor in ("", predictors[0])
+            and r.damping in (None, settings[dampings[0]])
         ]
         extrapolated = richardson(
             [r.cells for r in runs],
