@@ -588,7 +588,7 @@ def _newton_increment(
                 linear_total,
                 "the linear solve gave non-finite values",
                 local_total,
-                not linearized,
+                from_guess=not linearized,
             )
         old_norm = _norm(residual * free)
         slope = float(np.sum(residual * free * du))
@@ -598,7 +598,13 @@ def _newton_increment(
             search = _line_search(assembler, u, du * free, free, assembly.energy_J, slope, old_norm)
         if search.assembly is None:
             return _Step(
-                False, u, iteration, linear_total, search.reason, local_total, not linearized
+                False,
+                u,
+                iteration,
+                linear_total,
+                search.reason,
+                local_total,
+                from_guess=not linearized,
             )
         u, alpha = search.state, search.alpha
         if damping and not first:
@@ -622,10 +628,24 @@ def _newton_increment(
         increment_norm = _norm(u - u_start)
         at_roundoff = step_norm <= 1e-10 * increment_norm
         if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
-            return _Step(True, u, iteration, linear_total, "converged", local_total, not linearized)
+            return _Step(
+                True,
+                u,
+                iteration,
+                linear_total,
+                "converged",
+                local_total,
+                from_guess=not linearized,
+            )
         if not math.isfinite(free_norm):
             return _Step(
-                False, u, iteration, linear_total, "the residual became non-finite", local_total
+                False,
+                u,
+                iteration,
+                linear_total,
+                "the residual became non-finite",
+                local_total,
+                from_guess=not linearized,
             )
     return _Step(
         False,
@@ -634,7 +654,7 @@ def _newton_increment(
         linear_total,
         f"no convergence in {max_iterations} iterations",
         local_total,
-        not linearized,
+        from_guess=not linearized,
     )
 
 
