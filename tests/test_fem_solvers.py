@@ -245,19 +245,24 @@ def _bonded_punch() -> IndentationProblem:
     )
 
 
+def _bonded_punch_runs(depths, option: str, values) -> dict:
+    """The bonded punch pressed through ``depths`` once per value of one solver option."""
+    problem = _bonded_punch()
+    return {
+        value: simulate_indentation(
+            problem, depths, device="cpu", progress=False, tolerance=1e-8, **{option: value}
+        )
+        for value in values
+    }
+
+
 def test_nonlinear_elimination_saves_newton_iterations_and_keeps_the_curve():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets): relaxing the residual peaks at
     the punch edge after each global step saves global Newton iterations (factorizations;
     measured 18 -> 12 here), and the converged forces equal those of plain Newton to the
     tolerance."""
-    problem = _bonded_punch()
     depths = PUNCH_RADIUS_M * np.array([0.05, 0.1, 0.15])
-    results = {
-        on: simulate_indentation(
-            problem, depths, device="cpu", progress=False, tolerance=1e-8, nonlinear_elimination=on
-        )
-        for on in (False, True)
-    }
+    results = _bonded_punch_runs(depths, "nonlinear_elimination", (False, True))
     plain, relaxed = results[False], results[True]
     assert plain.completed and relaxed.completed
     assert plain.local_iterations.sum() == 0
@@ -345,14 +350,9 @@ def test_extrapolated_predictor_keeps_the_punch_curve():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets): the same converged forces from
     either predictor. (At a finely meshed punch edge the extrapolation costs iterations:
     README "Performance".)"""
-    problem = _bonded_punch()
     depths = PUNCH_RADIUS_M * np.array([0.05, 0.1, 0.15, 0.2])
-    forces = [
-        simulate_indentation(
-            problem, depths, device="cpu", progress=False, tolerance=1e-8, predictor=predictor
-        ).reaction_force_N
-        for predictor in ("linearized", "extrapolated")
-    ]
+    runs = _bonded_punch_runs(depths, "predictor", ("linearized", "extrapolated"))
+    forces = [run.reaction_force_N for run in runs.values()]
     assert len(forces[0]) == len(forces[1]) == len(depths)
     np.testing.assert_allclose(forces[1], forces[0], rtol=1e-7)
 
@@ -400,14 +400,8 @@ def test_damping_saves_newton_iterations_on_a_large_depth_increment():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets) pressed to 0.3 a in one step: with
     the adaptive Levenberg-Marquardt damping the line search no longer cuts step after step
     (measured 16 -> 9 Newton iterations), and the converged force is the same."""
-    problem = _bonded_punch()
     depths = [0.3 * PUNCH_RADIUS_M]
-    results = {
-        on: simulate_indentation(
-            problem, depths, device="cpu", progress=False, tolerance=1e-8, damping=on
-        )
-        for on in (False, True)
-    }
+    results = _bonded_punch_runs(depths, "damping", (False, True))
     plain, damped = results[False], results[True]
     assert plain.completed and damped.completed
     assert damped.newton_iterations.sum() < plain.newton_iterations.sum()

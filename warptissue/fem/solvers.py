@@ -569,6 +569,12 @@ def _newton_increment(
     if linearized:
         assembly = assembler.assemble(u)
     residual = assembly.residual.numpy()
+
+    def outcome(converged: bool, iteration: int, reason: str) -> _Step:
+        return _Step(
+            converged, u, iteration, linear_total, reason, local_total, from_guess=not linearized
+        )
+
     factor = 0.0
     for iteration in range(1, max_iterations + 1):
         first = iteration == 1 and linearized
@@ -581,15 +587,7 @@ def _newton_increment(
         du, linear_iterations = solver.solve(assembly.matrix, rhs)
         linear_total += linear_iterations
         if not np.all(np.isfinite(du)):
-            return _Step(
-                False,
-                u,
-                iteration,
-                linear_total,
-                "the linear solve gave non-finite values",
-                local_total,
-                from_guess=not linearized,
-            )
+            return outcome(False, iteration, "the linear solve gave non-finite values")
         old_norm = _norm(residual * free)
         slope = float(np.sum(residual * free * du))
         if first:
@@ -597,15 +595,7 @@ def _newton_increment(
         else:
             search = _line_search(assembler, u, du * free, free, assembly.energy_J, slope, old_norm)
         if search.assembly is None:
-            return _Step(
-                False,
-                u,
-                iteration,
-                linear_total,
-                search.reason,
-                local_total,
-                from_guess=not linearized,
-            )
+            return outcome(False, iteration, search.reason)
         u, alpha = search.state, search.alpha
         if damping and not first:
             factor = _next_damping(factor, alpha)
@@ -628,34 +618,10 @@ def _newton_increment(
         increment_norm = _norm(u - u_start)
         at_roundoff = step_norm <= 1e-10 * increment_norm
         if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
-            return _Step(
-                True,
-                u,
-                iteration,
-                linear_total,
-                "converged",
-                local_total,
-                from_guess=not linearized,
-            )
+            return outcome(True, iteration, "converged")
         if not math.isfinite(free_norm):
-            return _Step(
-                False,
-                u,
-                iteration,
-                linear_total,
-                "the residual became non-finite",
-                local_total,
-                from_guess=not linearized,
-            )
-    return _Step(
-        False,
-        u,
-        max_iterations,
-        linear_total,
-        f"no convergence in {max_iterations} iterations",
-        local_total,
-        from_guess=not linearized,
-    )
+            return outcome(False, iteration, "the residual became non-finite")
+    return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
 
 
 def solve_quasistatic(
