@@ -24,9 +24,8 @@ from warptissue.mesh import TetMesh
 
 __all__ = ["Assembler", "Assembly", "FORMULATIONS", "gather_bsr_blocks", "von_mises"]
 
-FORMULATIONS = ("mixed", "displacement", "nodal")
-"""``mixed``: TET10 with element mean dilatation (P2/P0); ``displacement``: pure displacement;
-``nodal``: TET4 with nodally averaged dilatation (Bonet and Burton 1998)."""
+FORMULATIONS = ("mixed", "displacement")
+"""``mixed``: TET10 with element mean dilatation (P2/P0); ``displacement``: pure displacement."""
 
 
 @dataclass
@@ -96,8 +95,7 @@ class Assembler:
     Args:
         mesh: TET4 or TET10 mesh (metres).
         material: Any :mod:`warptissue.materials` material.
-        formulation: ``"mixed"`` (TET10 only: element mean dilatation, locking free),
-            ``"nodal"`` (TET4 only: nodally averaged dilatation, locking free) or
+        formulation: ``"mixed"`` (TET10 only: element mean dilatation, locking free) or
             ``"displacement"``.
         device: Warp device; None for Warp's default.
 
@@ -128,13 +126,6 @@ class Assembler:
                 column="formulation",
                 value=formulation,
             )
-        if formulation == "nodal" and mesh.nodes_per_tet != 4:
-            raise InputError(
-                "the nodal (nodally averaged dilatation) formulation needs TET4 elements; "
-                "for TET10 use formulation='mixed'",
-                column="formulation",
-                value=formulation,
-            )
         if mesh.tet_count == 0:
             raise InputError("the mesh has no elements")
         self.device = resolve_device(device)
@@ -151,7 +142,6 @@ class Assembler:
             geometry.quadrature_volumes, dtype=wp.float64, device=dev
         )
         self._build_pattern(mesh.tets)
-        self._build_nodal_arrays(mesh)
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._energy = wp.zeros(1, dtype=wp.float64, device=dev)
@@ -166,11 +156,6 @@ class Assembler:
         self._params = material.device_params()
 
     def _build_pattern(self, tets: np.ndarray) -> None:
-        """The tangent's BSR pattern and each element block's place in it.
-
-        Node pairs that share a tet (the one-ring); for the nodal formulation, pairs with a
-        common neighbour (the two-ring), and the one-ring kept as the slots of ``w_na``.
-        """
         npe = tets.shape[1]
         n = self.node_count
         rows = np.repeat(tets, npe, axis=1).astype(np.int64)  # (M, npe*npe): a-major
@@ -183,40 +168,19 @@ class Assembler:
         first = np.empty(len(keys), dtype=bool)
         first[0] = True
         np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
-        ring_keys = sorted_keys[first]
-        slot = np.empty(len(keys), dtype=np.int32)
-        slot[order] = np.cumsum(first) - 1
-        slot = slot.reshape(rows.shape)
-        dev = self.device
-        if self.formulation == "nodal":
-            ring_rows, ring_cols = ring_keys // n, ring_keys % n
-            adjacency = scipy.sparse.csr_matrix(
-                (np.ones(len(ring_keys), dtype=np.int32), (ring_rows, ring_cols)), shape=(n, n)
-            )
-            two_ring = (adjacency @ adjacency).tocoo()
-            unique_keys = np.sort(two_ring.row.astype(np.int64) * n + two_ring.col)
-            block_index = np.searchsorted(unique_keys, keys).astype(np.int32).reshape(rows.shape)
-            ring_offsets = np.concatenate([[0], np.cumsum(np.bincount(ring_rows, minlength=n))])
-            self._ring_offsets = wp.array(ring_offsets, dtype=wp.int32, device=dev)
-            self._ring_columns = wp.array(ring_cols, dtype=wp.int32, device=dev)
-            self._ring_rows = wp.array(ring_rows, dtype=wp.int32, device=dev)
-            self._ring_slot = wp.array(slot, dtype=wp.int32, device=dev)
-        else:
-            unique_keys, block_index = ring_keys, slot
-            self._ring_offsets = wp.zeros(0, dtype=wp.int32, device=dev)
-            self._ring_columns = wp.zeros(0, dtype=wp.int32, device=dev)
-            self._ring_rows = wp.zeros(0, dtype=wp.int32, device=dev)
-            self._ring_slot = wp.zeros((0, 0), dtype=wp.int32, device=dev)
-        self._block_index_host = block_index
-        self._block_index = wp.array(block_index, dtype=wp.int32, device=dev)
+        unique_keys = sorted_keys[first]
+        block_index = np.empty(len(keys), dtype=np.int32)
+        block_index[order] = np.cumsum(first) - 1
+        self._block_index_host = block_index.reshape(rows.shape)
+        self._block_index = wp.array(self._block_index_host, dtype=wp.int32, device=self.device)
         block_rows = (unique_keys // n).astype(np.int32)
         block_cols = (unique_keys % n).astype(np.int32)
-        self.matrix = wps.bsr_zeros(n, n, block_type=wp.mat33d, device=dev)
+        self.matrix = wps.bsr_zeros(n, n, block_type=wp.mat33d, device=self.device)
         wps.bsr_set_from_triplets(
             self.matrix,
-            wp.array(block_rows, dtype=wp.int32, device=dev),
-            wp.array(block_cols, dtype=wp.int32, device=dev),
-            wp.zeros(len(unique_keys), dtype=wp.mat33d, device=dev),
+            wp.array(block_rows, dtype=wp.int32, device=self.device),
+            wp.array(block_cols, dtype=wp.int32, device=self.device),
+            wp.zeros(len(unique_keys), dtype=wp.mat33d, device=self.device),
             prune_numerical_zeros=False,
         )
         offsets = np.concatenate([[0], np.cumsum(np.bincount(block_rows, minlength=n))])
@@ -229,26 +193,6 @@ class Assembler:
         ):
             raise RuntimeError("warp.sparse reordered the sparsity pattern unexpectedly")
         self.block_count = nnz
-
-    def _build_nodal_arrays(self, mesh: TetMesh) -> None:
-        """Nodal volumes V_n (m^3) and the per-assembly nodal arrays (empty unless nodal)."""
-        dev = self.device
-        nodal = self.formulation == "nodal"
-        node_count = self.node_count if nodal else 0
-        reference = np.zeros(0)
-        if nodal:
-            reference = np.bincount(
-                mesh.tets.reshape(-1),
-                weights=np.repeat(0.25 * self.tet_volumes, 4),
-                minlength=node_count,
-            )
-        self._nodal_reference_volume = wp.array(reference, dtype=wp.float64, device=dev)
-        self._nodal_deformed_volume = wp.zeros(node_count, dtype=wp.float64, device=dev)
-        self._nodal_pressure = wp.zeros(node_count, dtype=wp.float64, device=dev)
-        self._nodal_stiffness = wp.zeros(node_count, dtype=wp.float64, device=dev)
-        self._volume_gradients = wp.zeros(
-            self._ring_columns.shape[0], dtype=wp.vec3d, device=dev
-        )
 
     def assemble(
         self, displacement_m: np.ndarray | wp.array, *, with_tangent: bool = True
@@ -272,96 +216,23 @@ class Assembler:
         self._min_jacobian.fill_(np.inf)
         if with_tangent:
             self.matrix.values.zero_()
-            self._volume_gradients.zero_()
-        self._nodal_pressures(u)
         wp.launch(
             kf.assemble_elements_kernel,
             dim=self.tet_count,
             inputs=[
                 *self._element_inputs(u),
                 self._block_index,
-                self._formulation_code,
-                self._nodal_pressure,
-                self._ring_slot,
+                int(self.formulation == "mixed"),
                 int(with_tangent),
             ],
-            outputs=[
-                self._residual,
-                self.matrix.values,
-                self._energy,
-                self._min_jacobian,
-                self._volume_gradients,
-            ],
+            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
             device=self.device,
         )
-        if with_tangent:
-            self._nodal_dilatation_tangent()
         return Assembly(
             residual=self._residual,
             matrix=self.matrix if with_tangent else None,
             energy_J=float(self._energy.numpy()[0]),
             min_jacobian=float(self._min_jacobian.numpy()[0]),
-        )
-
-    @property
-    def _formulation_code(self) -> int:
-        from warptissue.kernels import fem as kf
-
-        codes = {
-            "displacement": kf.FORMULATION_DISPLACEMENT,
-            "mixed": kf.FORMULATION_MEAN_DILATATION,
-            "nodal": kf.FORMULATION_NODAL,
-        }
-        return int(codes[self.formulation])
-
-    def _nodal_pressures(self, displacement: wp.array) -> None:
-        """Nodal formulation: nodal pressures p_n and stiffnesses U''_n / V_n; V_n U(Jbar_n)
-        into the energy and Jbar_n into the smallest Jacobian. Nothing for the others."""
-        from warptissue.kernels import fem as kf
-
-        if self.formulation != "nodal":
-            return
-        self._nodal_deformed_volume.zero_()
-        wp.launch(
-            kf.nodal_deformed_volume_kernel,
-            dim=self.tet_count,
-            inputs=[self._tets, self._shape_gradients, self._quadrature_volumes, displacement],
-            outputs=[self._nodal_deformed_volume],
-            device=self.device,
-        )
-        wp.launch(
-            kf.nodal_pressure_kernel,
-            dim=self.node_count,
-            inputs=[self._params, self._nodal_reference_volume, self._nodal_deformed_volume],
-            outputs=[
-                self._nodal_pressure,
-                self._nodal_stiffness,
-                self._energy,
-                self._min_jacobian,
-            ],
-            device=self.device,
-        )
-
-    def _nodal_dilatation_tangent(self) -> None:
-        """Nodal formulation: add the nodes' rank-one volumetric terms to ``self.matrix``."""
-        from warptissue.kernels import fem as kf
-
-        if self.formulation != "nodal":
-            return
-        wp.launch(
-            kf.nodal_dilatation_tangent_kernel,
-            dim=self._ring_columns.shape[0],
-            inputs=[
-                self._ring_offsets,
-                self._ring_columns,
-                self._ring_rows,
-                self._volume_gradients,
-                self._nodal_stiffness,
-                self.matrix.offsets,
-                self.matrix.columns,
-            ],
-            outputs=[self.matrix.values],
-            device=self.device,
         )
 
     def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
@@ -464,11 +335,10 @@ class Assembler:
 
         u = self._as_device_displacement(displacement_m)
         stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
-        self._nodal_pressures(u)
         wp.launch(
             kf.cauchy_stress_kernel,
             dim=self.tet_count,
-            inputs=[*self._element_inputs(u), self._formulation_code, self._nodal_pressure],
+            inputs=[*self._element_inputs(u), int(self.formulation == "mixed")],
             outputs=[stress],
             device=self.device,
         )
