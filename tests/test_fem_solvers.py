@@ -388,6 +388,45 @@ def test_an_extrapolation_that_inverts_an_element_falls_back_to_the_linearized_p
     np.testing.assert_array_equal(runs[0].displacement, runs[1].displacement)
 
 
+def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_one(
+    monkeypatch,
+):
+    """Where Newton fails from the extrapolated state (forced here: one iteration allowed from
+    a guess), the increment runs again from the linearized predictor, with no cutback. From
+    the same converged state that retry is the linearized run's own step, so the path equals
+    the linearized predictor's to the last bit, at one extra iteration per retried step."""
+    import warptissue.fem.solvers as solvers
+
+    newton_increment = solvers._newton_increment
+
+    def one_iteration_from_a_guess(*args, free_guess=None, max_iterations, **kwargs):
+        if free_guess is not None:
+            max_iterations = 1
+        return newton_increment(
+            *args, free_guess=free_guess, max_iterations=max_iterations, **kwargs
+        )
+
+    mesh = _cube()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+    conditions = _compression_conditions(mesh)
+    loads = SIDE_M * np.linspace(0.05, 0.3, 6)
+    linearized = solve_quasistatic(assembler, conditions, loads, predictor="linearized")
+    monkeypatch.setattr(solvers, "_newton_increment", one_iteration_from_a_guess)
+    retried = solve_quasistatic(assembler, conditions, loads, predictor="extrapolated")
+    assert linearized.completed and retried.completed
+    assert retried.cutbacks == linearized.cutbacks == 0
+    attempts = [(entry["load"], entry["converged"]) for entry in retried.history]
+    expected = [(loads[0], True)]
+    for load in loads[1:]:
+        expected += [(load, False), (load, True)]
+    assert [load for load, _ in attempts] == pytest.approx([load for load, _ in expected])
+    assert [converged for _, converged in attempts] == [c for _, c in expected]
+    np.testing.assert_array_equal(retried.displacement_m, linearized.displacement_m)
+    np.testing.assert_array_equal(
+        retried.newton_iterations, linearized.newton_iterations + [0, 1, 1, 1, 1, 1]
+    )
+
+
 def test_unknown_predictor_is_refused():
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
