@@ -25,6 +25,7 @@ Examples:
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import platform
@@ -85,6 +86,7 @@ class RunRecord:
     linear_solver: str = ""
     predictor: str = ""
     damping: bool | None = None
+    newton_tolerance: float | None = None
     relative_error: float | None = None
 
 
@@ -443,11 +445,12 @@ def run_warptissue(
     progress: bool = False,
     predictor: str = "linearized",
     damping: bool = True,
+    tolerance: float = NEWTON_TOLERANCE,
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
     steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
-    from ``predictor``, with or without ``damping`` (see
-    :func:`warptissue.fem.solve_quasistatic`)."""
+    from ``predictor``, with or without ``damping``, converged to the Newton ``tolerance``
+    (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`)."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -472,7 +475,7 @@ def run_warptissue(
         depths_m()[:steps],
         device=warp_device,
         progress=progress,
-        tolerance=NEWTON_TOLERANCE,
+        tolerance=tolerance,
         predictor=predictor,
         damping=damping,
     )
@@ -511,6 +514,7 @@ def run_warptissue(
         linear_solver=str(getattr(result, "linear_solver", "")),
         predictor=predictor,
         damping=damping,
+        newton_tolerance=tolerance,
     )
 
 
@@ -592,8 +596,8 @@ def machine_description() -> dict[str, Any]:
 
 def print_table(records: list[RunRecord]) -> None:
     header = (
-        f"{'code':<10} {'predictor':<12} {'damp':<4} {'device':<7} {'cells':>8} {'dofs':>9} "
-        f"{'newton':>6} {'linear':>7} "
+        f"{'code':<10} {'predictor':<12} {'damp':<4} {'tol':>7} {'device':<7} {'cells':>8} "
+        f"{'dofs':>9} {'newton':>6} {'linear':>7} "
         f"{'s/step':>8} {'total_s':>8} {'cpu_s':>8} {'s/newton':>8} {'RSS_MiB':>8} {'GPU_MiB':>8} "
         f"{'F_final_N':>11} {'error':>7}"
     )
@@ -603,9 +607,10 @@ def print_table(records: list[RunRecord]) -> None:
         linear = f"{r.linear_iterations:7d}" if r.linear_iterations is not None else f"{'-':>7}"
         error = f"{100 * r.relative_error:6.2f}%" if r.relative_error is not None else f"{'-':>7}"
         damp = {None: "-", True: "on", False: "off"}[r.damping]
+        tol = f"{r.newton_tolerance:7.0e}" if r.newton_tolerance is not None else f"{'-':>7}"
         print(
-            f"{r.code[:10]:<10} {r.predictor or '-':<12} {damp:<4} {r.device:<7} {r.cells:8d} "
-            f"{r.dofs:9d} {r.newton_iterations:6d} "
+            f"{r.code[:10]:<10} {r.predictor or '-':<12} {damp:<4} {tol} {r.device:<7} "
+            f"{r.cells:8d} {r.dofs:9d} {r.newton_iterations:6d} "
             f"{linear} {r.seconds_per_step:8.3f} {r.solve_s:8.2f} {r.solve_cpu_s:8.2f} "
             f"{r.seconds_per_newton_iteration:8.3f} {r.peak_host_rss_MiB:8.0f} {gpu} "
             f"{r.final_force_N:11.5e} {error}"
@@ -663,6 +668,13 @@ def main(argv: list[str] | None = None) -> int:
         help="Levenberg-Marquardt damping after cut Newton steps: on, off, or on,off (each "
         "mesh runs once per setting)",
     )
+    parser.add_argument(
+        "--tolerances",
+        default=f"{NEWTON_TOLERANCE:g}",
+        help="warptissue Newton tolerances (free-dof residual over reaction), comma separated: "
+        "each mesh runs once per tolerance; the first is the one the reference and the "
+        f"equal-accuracy comparison use (FElupe always runs at {NEWTON_TOLERANCE:g})",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     args = parser.parse_args(argv)
     if not 1 <= args.steps <= STEP_COUNT:
@@ -671,6 +683,12 @@ def main(argv: list[str] | None = None) -> int:
     unknown = sorted(set(predictors) - {"linearized", "extrapolated"})
     if unknown or not predictors:
         parser.error(f"--predictors takes linearized and/or extrapolated, got {args.predictors!r}")
+    try:
+        tolerances = [float(t) for t in args.tolerances.split(",") if t.strip()]
+    except ValueError:
+        parser.error(f"--tolerances takes numbers, got {args.tolerances!r}")
+    if not tolerances or any(not 0.0 < t < 1.0 for t in tolerances):
+        parser.error(f"--tolerances must lie in (0, 1), got {args.tolerances!r}")
     settings = {"on": True, "off": False}
     dampings = [d.strip() for d in args.damping.split(",") if d.strip()]
     if not dampings or any(d not in settings for d in dampings):
@@ -690,20 +708,22 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
             mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
-            for predictor in predictors:
-                for damping in dampings:
-                    record = run_warptissue(
-                        mesh,
-                        size_near_m,
-                        args.device,
-                        steps=args.steps,
-                        progress=args.progress,
-                        predictor=predictor,
-                        damping=settings[damping],
-                    )
-                    records.append(record)
-                    print_table([record])
-                    sys.stdout.flush()
+            for predictor, damping, tolerance in itertools.product(
+                predictors, dampings, tolerances
+            ):
+                record = run_warptissue(
+                    mesh,
+                    size_near_m,
+                    args.device,
+                    steps=args.steps,
+                    progress=args.progress,
+                    predictor=predictor,
+                    damping=settings[damping],
+                    tolerance=tolerance,
+                )
+                records.append(record)
+                print_table([record])
+                sys.stdout.flush()
     for level in [int(s) for s in args.felupe_levels.split(",") if s.strip()]:
         size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
         record = run_felupe(size_near_m, 10.0 * size_near_m)
@@ -726,6 +746,7 @@ def main(argv: list[str] | None = None) -> int:
             and r.completed
             and r.predictor in ("", predictors[0])
             and r.damping in (None, settings[dampings[0]])
+            and r.newton_tolerance in (None, tolerances[0])
         ]
         extrapolated = richardson(
             [r.cells for r in runs],
@@ -762,6 +783,7 @@ def main(argv: list[str] | None = None) -> int:
             "final_depth_m": FINAL_DEPTH_M,
             "steps": STEP_COUNT,
             "newton_tolerance": NEWTON_TOLERANCE,
+            "warptissue_newton_tolerances": tolerances,
             "warptissue_mesher": args.mesher,
             "sneddon_force_N": sneddon_force_N(FINAL_DEPTH_M),
         },
