@@ -90,6 +90,11 @@ class RunRecord:
     relative_error: float | None = None
 
 
+def comma_separated(text: str) -> list[str]:
+    """The non-empty, stripped items of a comma-separated option."""
+    return [item.strip() for item in text.split(",") if item.strip()]
+
+
 def parse_count(text: str) -> int:
     """``"1.2k"`` -> 1200, ``"1m"`` -> 1000000, ``"5000"`` -> 5000."""
     scale = {"k": 1_000, "m": 1_000_000}.get(text[-1:].lower(), 1)
@@ -679,24 +684,25 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not 1 <= args.steps <= STEP_COUNT:
         parser.error(f"--steps must be between 1 and {STEP_COUNT}, got {args.steps}")
-    predictors = [p.strip() for p in args.predictors.split(",") if p.strip()]
-    unknown = sorted(set(predictors) - {"linearized", "extrapolated"})
-    if unknown or not predictors:
-        parser.error(f"--predictors takes linearized and/or extrapolated, got {args.predictors!r}")
+    from warptissue.study import PREDICTORS
+
+    predictors = comma_separated(args.predictors)
+    if not predictors or not set(predictors) <= set(PREDICTORS):
+        parser.error(f"--predictors takes {' and/or '.join(PREDICTORS)}, got {args.predictors!r}")
     try:
-        tolerances = [float(t) for t in args.tolerances.split(",") if t.strip()]
+        tolerances = [float(t) for t in comma_separated(args.tolerances)]
     except ValueError:
         parser.error(f"--tolerances takes numbers, got {args.tolerances!r}")
     if not tolerances or any(not 0.0 < t < 1.0 for t in tolerances):
         parser.error(f"--tolerances must lie in (0, 1), got {args.tolerances!r}")
     settings = {"on": True, "off": False}
-    dampings = [d.strip() for d in args.damping.split(",") if d.strip()]
+    dampings = comma_separated(args.damping)
     if not dampings or any(d not in settings for d in dampings):
         parser.error(f"--damping takes on and/or off, got {args.damping!r}")
 
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
-    sizes = [s.strip().lower() for s in args.sizes.split(",") if s.strip()]
+    sizes = [size.lower() for size in comma_separated(args.sizes)]
     if sizes:
         import warp as wp
 
@@ -724,14 +730,14 @@ def main(argv: list[str] | None = None) -> int:
                 records.append(record)
                 print_table([record])
                 sys.stdout.flush()
-    for level in [int(s) for s in args.felupe_levels.split(",") if s.strip()]:
+    for level in [int(s) for s in comma_separated(args.felupe_levels)]:
         size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
         record = run_felupe(size_near_m, 10.0 * size_near_m)
         records.append(record)
         print_table([record])
         sys.stdout.flush()
 
-    for level in [int(s) for s in args.felupe_axisymmetric_levels.split(",") if s.strip()]:
+    for level in [int(s) for s in comma_separated(args.felupe_axisymmetric_levels)]:
         record = run_felupe_axisymmetric_disc(0.25 * PROBE_RADIUS_M / 2**level)
         records.append(record)
         print_table([record])

@@ -322,15 +322,20 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
         np.testing.assert_array_equal(residual, fresh)
 
 
+def _six_step_compression() -> tuple[Assembler, DirichletConditions, np.ndarray]:
+    """The cube compressed between frictionless plates in six equal steps to stretch 0.7:
+    its assembler (neo-Hookean, mu = 200 Pa, K/mu = 500), plate conditions and loads (m)."""
+    mesh = _cube()
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+    return assembler, _compression_conditions(mesh), SIDE_M * np.linspace(0.05, 0.3, 6)
+
+
 def test_extrapolated_predictor_saves_newton_iterations_on_a_smooth_path():
     """Homogeneous compression of a cube in six equal steps to stretch 0.7: starting each step
     after the first from the last two converged states extrapolated linearly saves Newton
     iterations against the linearized predictor (measured 24 -> 19), and the converged states
     agree to the tolerance."""
-    mesh = _cube()
-    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    conditions = _compression_conditions(mesh)
-    loads = SIDE_M * np.linspace(0.05, 0.3, 6)
+    assembler, conditions, loads = _six_step_compression()
     paths = {
         predictor: solve_quasistatic(assembler, conditions, loads, predictor=predictor)
         for predictor in ("linearized", "extrapolated")
@@ -406,10 +411,7 @@ def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_
             *args, free_guess=free_guess, max_iterations=max_iterations, **kwargs
         )
 
-    mesh = _cube()
-    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    conditions = _compression_conditions(mesh)
-    loads = SIDE_M * np.linspace(0.05, 0.3, 6)
+    assembler, conditions, loads = _six_step_compression()
     linearized = solve_quasistatic(assembler, conditions, loads, predictor="linearized")
     monkeypatch.setattr(solvers, "_newton_increment", one_iteration_from_a_guess)
     retried = solve_quasistatic(assembler, conditions, loads, predictor="extrapolated")
