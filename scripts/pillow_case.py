@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warptissue.calibration import (
+from warptissue.acquisition.calibration import (
     CALIBRATION_MODELS,
     evaluate_calibrations,
     fit_calibrations,

@@ -29,14 +29,14 @@ from warptissue.acquisition import (
     RigServer,
     SimulatedRig,
 )
-from warptissue.conditioning import prepare_record
-from warptissue.io import read_experiment_csv, to_jsonable
-from warptissue.rig_dynamics import (
+from warptissue.acquisition.conditioning import prepare_record
+from warptissue.acquisition.rig_dynamics import (
     SEED001_RIG,
     fit_rig_dynamics,
     measure_frequency_response,
     plot_frequency_response,
 )
+from warptissue.io import read_experiment_csv, to_jsonable
 from warptissue.viscoelastic import StandardLinearSolid, fit_relaxation
 
 TRUE = (40.0, 20.0, 2.0)

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from warptissue.calibration import (
+from warptissue.acquisition.calibration import (
     CALIBRATION_MODELS,
     CalibrationData,
     evaluate_calibrations,

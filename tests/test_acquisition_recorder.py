@@ -26,7 +26,7 @@ from warptissue.acquisition import (
     SimulatedRig,
     load_force_calibration,
 )
-from warptissue.conditioning import prepare_record
+from warptissue.acquisition.conditioning import prepare_record
 from warptissue.io import read_experiment_csv
 
 TRUE_SLS = (40.0, 20.0, 2.0)
@@ -387,12 +387,12 @@ def test_other_calibration_models_go_to_warptissue_calibration(tmp_path, monkeyp
     path = tmp_path / "wcfm.json"
     path.write_text(json.dumps({"model": "WCFM_SVM", "singles": []}))
     loaded = []
-    stub = types.ModuleType("warptissue.calibration")
+    stub = types.ModuleType("warptissue.acquisition.calibration")
     stub.ForceCalibration = type(
         "ForceCalibration", (), {"load": classmethod(lambda cls, p: loaded.append(p) or "cal")}
     )
-    monkeypatch.setitem(sys.modules, "warptissue.calibration", stub)
+    monkeypatch.setitem(sys.modules, "warptissue.acquisition.calibration", stub)
     assert load_force_calibration(path) == "cal" and loaded == [path]
-    monkeypatch.setitem(sys.modules, "warptissue.calibration", None)  # not installed
-    with pytest.raises(Exception, match="needs warptissue.calibration"):
+    monkeypatch.setitem(sys.modules, "warptissue.acquisition.calibration", None)  # not installed
+    with pytest.raises(Exception, match="needs warptissue.acquisition.calibration"):
         load_force_calibration(path)

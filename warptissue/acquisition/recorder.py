@@ -54,7 +54,7 @@ __all__ = [
 
 
 class ForceCorrection(Protocol):
-    """What the recorder needs from a force calibration (``warptissue.calibration``)."""
+    """What the recorder needs from a force calibration (``warptissue.acquisition.calibration``)."""
 
     def correct(self, raw_signal: np.ndarray) -> np.ndarray:
         """Corrected force (N) for raw transducer force (N), shape (n,)."""
@@ -76,7 +76,7 @@ def _read_calibration_json(file: Path) -> Any:
 class PolynomialForceCalibration:
     """A minimal force calibration: ``force_N = sum_i c_i * raw_N**i``.
 
-    The acquisition side's stand-in for ``warptissue.calibration.ForceCalibration`` (same
+    The acquisition side's stand-in for ``warptissue.acquisition.calibration.ForceCalibration`` (same
     ``load``/``correct`` interface), used when that module is not installed. File format::
 
         {"model": "polynomial", "coefficients": [c0, c1, c2, ...], "input": "force_N"}
@@ -131,22 +131,22 @@ def load_force_calibration(path: str | Path) -> ForceCorrection:
 
     A minimal polynomial file (``{"model": "polynomial", "coefficients": [...]}``) is read
     by :class:`PolynomialForceCalibration`; any other model (WCFM_SVM and the rest) by
-    ``warptissue.calibration.ForceCalibration.load``. The recorder passes ``correct()`` the
+    ``warptissue.acquisition.calibration.ForceCalibration.load``. The recorder passes ``correct()`` the
     raw transducer force in newtons, so train a calibration against that signal.
 
     Raises:
         InputError: Missing or unreadable file, or a model that needs
-            ``warptissue.calibration`` when it is not installed.
+            ``warptissue.acquisition.calibration`` when it is not installed.
     """
     file = Path(path)
     data = _read_calibration_json(file)
     if isinstance(data, dict) and data.get("model") == "polynomial" and "coefficients" in data:
         return PolynomialForceCalibration.load(file)
     try:
-        from warptissue.calibration import ForceCalibration
+        from warptissue.acquisition.calibration import ForceCalibration
     except ImportError:
         raise InputError(
-            "this calibration model needs warptissue.calibration, which is not installed",
+            "this calibration model needs warptissue.acquisition.calibration, which is not installed",
             path=file,
             column="model",
             value=data.get("model") if isinstance(data, dict) else None,

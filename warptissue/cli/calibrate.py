@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue calibrate-sensor``."""
     import numpy as np
 
-    from warptissue.calibration import (
+    from warptissue.acquisition.calibration import (
         CALIBRATION_MODELS,
         evaluate_calibrations,
         fit_calibrations,
@@ -98,7 +98,7 @@ def _plot(path: Path, test, calibrations) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from warptissue.calibration import sample_readings
+    from warptissue.acquisition.calibration import sample_readings
     from warptissue.io import atomic_path
 
     _, actual, readings = sample_readings(test)

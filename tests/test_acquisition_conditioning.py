@@ -7,8 +7,7 @@ import pytest
 from _sls_reference import ReferenceSLS
 
 from warptissue.acquisition import PhysiologicalDisturbance
-from warptissue.acquisition.simulator import trapezoid_position
-from warptissue.conditioning import (
+from warptissue.acquisition.conditioning import (
     detect_contact,
     estimate_rate_Hz,
     prepare_record,
@@ -17,6 +16,7 @@ from warptissue.conditioning import (
     suppress_physiological,
     trim_ramp,
 )
+from warptissue.acquisition.simulator import trapezoid_position
 from warptissue.errors import InputError
 
 RATE = 1000.0

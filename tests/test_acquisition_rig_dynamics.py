@@ -8,14 +8,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from warptissue.errors import InputError
-from warptissue.rig_dynamics import (
+from warptissue.acquisition.rig_dynamics import (
     SEED001_RIG,
     RigDynamics,
     fit_rig_dynamics,
     measure_frequency_response,
     plot_frequency_response,
 )
+from warptissue.errors import InputError
 
 UNDAMPED = replace(SEED001_RIG, link_damping_N_m_s_per_rad=0.0, contact_damping_N_m_s_per_rad=0.0)
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from warptissue.calibration import (
+from warptissue.acquisition.calibration import (
     CALIBRATION_MODELS,
     CalibrationData,
     ForceCalibration,
