@@ -1,7 +1,7 @@
 """NVIDIA Newton imports warptissue scenes (runs only where Newton is installed).
 
 Set ``WARPTISSUE_NEWTON_PYTHON`` to an interpreter that has ``newton`` (1.8) and warptissue
-installed (``scripts/newton_import_check.sh`` builds one in ``.venv-newton``), or install
+installed (``scripts/tools/newton_import_check.sh`` builds one in ``.venv-newton``), or install
 Newton into the test environment; otherwise the test is skipped.
 """
 
@@ -31,11 +31,11 @@ def _newton_python() -> str | None:
 @pytest.mark.skipif(
     _newton_python() is None,
     reason="NVIDIA Newton is not installed here; set WARPTISSUE_NEWTON_PYTHON to a Python with "
-    "newton 1.8 (scripts/newton_import_check.sh builds one)",
+    "newton 1.8 (scripts/tools/newton_import_check.sh builds one)",
 )
 @pytest.mark.parametrize("scene", [None, "scenes/liver_organ.usda"])
 def test_newton_imports_soft_body(scene):
-    command = [_newton_python(), str(ROOT / "scripts" / "newton_import_check.py")]
+    command = [_newton_python(), str(ROOT / "scripts" / "tools" / "newton_import_check.py")]
     if scene is not None:
         command += ["--scene", str(ROOT / scene)]
     completed = subprocess.run(command, capture_output=True, text=True, timeout=300, cwd=ROOT)

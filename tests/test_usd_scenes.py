@@ -39,7 +39,7 @@ def test_scene_validates_and_is_small(scene):
 
 def test_scenes_match_the_generator(tmp_path):
     spec = importlib.util.spec_from_file_location(
-        "make_scenes", ROOT / "scripts" / "make_scenes.py"
+        "make_scenes", ROOT / "scripts" / "tools" / "make_scenes.py"
     )
     make_scenes = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(make_scenes)

@@ -18,8 +18,10 @@ liver, seed 000) and K / mu = 1000.
   its runs.
 
 Examples:
-    python scripts/bench_flat_punch.py --sizes 10k,20k --felupe-levels 1,2,3 --out bench.json
-    python scripts/bench_flat_punch.py --device cuda --sizes 10k,100k,1m --out $OUT/bench.json
+    python scripts/benchmarks/bench_flat_punch.py --sizes 10k,20k --felupe-levels 1,2,3 \\
+        --out bench.json
+    python scripts/benchmarks/bench_flat_punch.py --device cuda --sizes 10k,100k,1m \\
+        --out $OUT/bench.json
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Generate the USD scenes that ship in ``scenes/`` (run from the repository root).
 
-    python scripts/make_scenes.py [--out scenes]
+    python scripts/tools/make_scenes.py [--out scenes]
 
 Every scene is written by :func:`warptissue.usd.write_simulation_usd` (a root ``NAME.usda``
 and its ``NAME.asset.usda``), validated with :func:`warptissue.usd.validate_stage`, and kept
@@ -318,7 +318,7 @@ def liver_organ(out: Path) -> Path:
         material=liver_material(),
         provenance={
             **LIVER_PROVENANCE,
-            "geometry": "procedural: deformed superellipsoid (scripts/make_scenes.py "
+            "geometry": "procedural: deformed superellipsoid (scripts/tools/make_scenes.py "
             "organ_surface), tetrahedralized with TetGen (PyPI tetgen)",
         },
         density_kg_per_m3=1060.0,

@@ -1,6 +1,6 @@
 """Benchmark: write a 100k-tet simulation result with 20 time samples as USD.
 
-    python scripts/bench_usd.py [--cells 26 26 25] [--steps 20]
+    python scripts/benchmarks/bench_usd.py [--cells 26 26 25] [--steps 20]
 
 Prints the tet count, the write time of write_simulation_usd (asset .usda + results .usdc +
 root), the size of each layer, and the time to open the stage and read every time sample of

@@ -16,7 +16,7 @@ Runs, on the CPU:
 7. timings of one ~20k-tet TET10 problem: assembly, and one linear solve with PARDISO and SuperLU.
 
 Usage:
-    python scripts/verify_flat_punch.py --out runs/verify_flat_punch.json [--quick]
+    python scripts/examples/verify_flat_punch.py --out runs/verify_flat_punch.json [--quick]
 """
 
 from __future__ import annotations

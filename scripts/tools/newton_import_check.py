@@ -1,7 +1,7 @@
 """Load a warptissue USD scene with NVIDIA Newton's importer and check the soft body.
 
 Run inside an environment that has ``newton`` (1.8) and this project installed; see
-``scripts/newton_import_check.sh``, which builds one. The script writes a small specimen
+``scripts/tools/newton_import_check.sh``, which builds one. The script writes a small specimen
 scene with :func:`warptissue.usd.write_simulation_usd` (or takes ``--scene``), imports it with
 ``newton.ModelBuilder.add_usd`` and checks that Newton found one soft body with the tets of
 the TetMesh, the Lame parameters of the small-strain E and nu, and the mass of the density.

@@ -7,7 +7,7 @@ Gaussian noise, refits the 8 parameters jointly to the near-step and 20 mm/min c
 perturbed start (LM through warptissue.fit, then Nelder-Mead on the seed's cost, the sum of
 the RMS errors), and predicts the 100 mm/min curve.
 
-Run: python scripts/wiechert_table1_refit.py [--noise-N 0.005] [--seed 0]
+Run: python scripts/examples/wiechert_table1_refit.py [--noise-N 0.005] [--seed 0]
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ One refinement factor f scales both element sizes (size_near = 0.5 mm / f, size_
 4 mm / f) of a quarter 40 x 40 x 20 mm block under a 2.5 mm radius probe; f = 1 gives about
 10k tets and f = 6.5 about 1M.
 
-    python scripts/bench_mesh.py --factors 1 2 4 6.5 --out runs/bench_mesh.json
-    python scripts/bench_mesh.py --mesher delaunay --factors 1 2 4 8
+    python scripts/benchmarks/bench_mesh.py --factors 1 2 4 6.5 --out runs/bench_mesh.json
+    python scripts/benchmarks/bench_mesh.py --mesher delaunay --factors 1 2 4 8
 """
 
 from __future__ import annotations

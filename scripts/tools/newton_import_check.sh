@@ -3,14 +3,14 @@
 # importer (ModelBuilder.add_usd) finds each warptissue scene's soft body with the right
 # tetrahedra, E, nu and density.
 #
-#   scripts/newton_import_check.sh            # venv in .venv-newton (ignored by git)
-#   NEWTON_VENV=/tmp/nv scripts/newton_import_check.sh
+#   scripts/tools/newton_import_check.sh            # venv in .venv-newton (ignored by git)
+#   NEWTON_VENV=/tmp/nv scripts/tools/newton_import_check.sh
 #
 # Newton 1.8 needs usd-core < 26.9; warptissue accepts usd-core >= 25.5, < 27, so both
 # co-install. Newton's own dependency is only warp-lang; its USD importer needs usd-core and
 # newton-usd-schemas (the "importers" extra also pulls mesh tools this check does not use).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 venv="${NEWTON_VENV:-.venv-newton}"
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
@@ -19,10 +19,10 @@ if [ ! -x "$venv/bin/python" ]; then
         'newton-usd-schemas>=0.6' -e .
 fi
 status=0
-"$venv/bin/python" scripts/newton_import_check.py 2>/dev/null | tail -n 1 || status=1
+"$venv/bin/python" scripts/tools/newton_import_check.py 2>/dev/null | tail -n 1 || status=1
 for scene in scenes/*.usda; do
     case "$scene" in *.asset.usda) continue ;; esac
-    "$venv/bin/python" scripts/newton_import_check.py --scene "$scene" 2>/dev/null | tail -n 1 \
+    "$venv/bin/python" scripts/tools/newton_import_check.py --scene "$scene" 2>/dev/null | tail -n 1 \
         || status=1
 done
 exit "$status"

@@ -4,7 +4,7 @@ Prints, per problem and method, the final sum of squares, the trial steps, the r
 evaluations (finite-difference Jacobians, as scipy's "lm" without jac) and the status, next
 to scipy.optimize.least_squares(method="lm"), and the wall time of the whole table.
 
-Usage: python scripts/fit_engine_benchmark.py
+Usage: python scripts/benchmarks/bench_fit_engine.py
 """
 
 from __future__ import annotations
