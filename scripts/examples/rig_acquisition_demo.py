@@ -5,7 +5,7 @@ the records, fits a standard linear solid (warptissue.viscoelastic.fit_relaxatio
 reports the rig model's flat band, bandwidth and a fit to a simulated sine sweep. Prints a
 JSON summary.
 
-    python scripts/rig_acquisition_demo.py [--out runs/rig-demo]
+    python scripts/examples/rig_acquisition_demo.py [--out runs/rig-demo]
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ marker noise; 249 training and 50 test markers. For each set: the homogeneous li
 Sensor: 76 samples of 5 readings from a synthetic sensor (nonlinear gain, temperature drift,
 noise), 70 / 6 split, the eight models of Table 1.
 
-Usage: python scripts/pillow_case.py [--out runs/pillow] [--noise-m 2e-5] [--sets ABCDEF]
+Usage: python scripts/examples/pillow_case.py [--out runs/pillow] [--noise-m 2e-5] [--sets ABCDEF]
 (about 1-2 minutes per load set on a 2-core x86_64 CPU).
 """
 

@@ -13,7 +13,7 @@ held out. Reported:
 
 ``--inputs mean`` gives every model the mean of a sample's readings instead of the readings.
 
-    python scripts/sensor_correction_study.py --sessions 30 --out runs/sensor_study
+    python scripts/benchmarks/bench_sensor_correction.py --sessions 30 --out runs/sensor_study
 """
 
 from __future__ import annotations
