@@ -297,3 +297,86 @@ def test_a_jacobian_failure_mid_fit_returns_the_best_point_with_status_minus_3()
 def test_a_jacobian_failure_at_x0_raises():
     with pytest.raises(ConvergenceError):
         least_squares(rosenbrock, [-1.2, 1.0], jac=lambda x: np.full((2, 2), np.inf))
+
+
+def _line_data(rng, slope, noise):
+    t = np.linspace(0.0, 1.0, 40)
+    return t, slope * t + 3.0 + noise * rng.standard_normal(t.size)
+
+
+def test_a_well_determined_fit_is_identified(rng):
+    t, y = _line_data(rng, 2.0, 0.01)
+    result = fit_curve(lambda p: p[0] * t + p[1], [1.0, 0.0], y, parameter_names=("a", "b"))
+    assert result.identified
+    assert result.identifiability == []
+    summary = result.to_dict()
+    assert summary["identified"] is True
+    assert summary["identifiability"] == [] and summary["warnings"] == []
+    assert "warning:" not in result.summary()
+
+
+def test_a_parameter_pinned_at_a_bound_is_not_identified(rng):
+    t, y = _line_data(rng, -2.0, 0.01)  # the data want a negative slope; the bound says >= 0
+    result = fit_curve(
+        lambda p: p[0] * t + p[1],
+        [1.0, 0.0],
+        y,
+        bounds=([0.0, -np.inf], [np.inf, np.inf]),
+        parameter_names=("slope_N_per_m", "offset_N"),
+        parameter_units=("N/m", "N"),
+    )
+    assert result.success  # the engine converged, and yet:
+    assert not result.identified
+    (message,) = result.identifiability
+    assert message.startswith("slope_N_per_m = 0 N/m is pinned at its lower bound")
+    assert "warning: slope_N_per_m = 0 N/m is pinned" in result.summary()
+    assert json.loads(json.dumps(result.to_dict()))["identified"] is False
+
+
+def test_a_standard_error_larger_than_the_value_is_reported(rng):
+    t, y = _line_data(rng, 0.0, 0.5)  # no slope in the data, only noise
+    result = fit_curve(lambda p: p[0] * t + p[1], [1.0, 0.0], y, parameter_names=("a", "b"))
+    assert result.standard_errors[0] > abs(result.x[0])
+    (message,) = result.identifiability
+    assert message.startswith("a = ") and "larger than its value" in message
+    assert "np.float64" not in message
+
+
+def test_a_singular_covariance_is_reported():
+    t = np.linspace(0.0, 1.0, 20)
+    result = fit_curve(lambda p: p[0] * p[1] * t, [1.0, 1.0], 3.0 * t)
+    assert result.covariance is None
+    assert "singular" in result.identifiability[0]
+    assert not result.to_dict()["identified"]
+
+
+def test_too_few_data_for_the_parameters_is_reported():
+    result = fit_curve(lambda p: p[0] + p[1] * np.array([0.0, 1.0]), [0.0, 0.0], [1.0, 2.0])
+    assert result.identifiability == [
+        "only 2 residuals for 2 parameters: the covariance is undefined and the parameters "
+        "are not identified"
+    ]
+
+
+def test_a_parameter_within_one_standard_error_of_a_non_zero_bound_is_reported():
+    t = np.linspace(0.0, 1.0, 40)
+    y = 1.2 * t + 1.0 + 0.5 * (-1.0) ** np.arange(t.size)  # slope 1.2 +- 0.28
+    result = fit_curve(
+        lambda p: p[0] * t + p[1],
+        [2.0, 1.0],
+        y,
+        bounds=([1.0, -np.inf], [np.inf, np.inf]),
+        parameter_names=("a", "b"),
+    )
+    assert result.x[0] > 1.0
+    (message,) = result.identifiability
+    assert "within one standard error" in message and "lower bound 1:" in message
+
+
+def test_caller_warnings_follow_the_identifiability_warnings(rng):
+    t, y = _line_data(rng, 2.0, 0.01)
+    result = fit_curve(lambda p: p[0] * t + p[1], [1.0, 0.0], y)
+    result.warnings.append("the force is negative")
+    assert result.identified
+    assert result.to_dict()["warnings"] == ["the force is negative"]
+    assert result.summary().endswith("warning: the force is negative")

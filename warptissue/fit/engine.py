@@ -553,6 +553,8 @@ def least_squares(
         rmse=float(np.sqrt(np.mean(residuals**2))),
         history=history,
         method=method,
+        lower_bounds=lower,
+        upper_bounds=upper,
     )
 
 

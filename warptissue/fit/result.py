@@ -6,6 +6,12 @@ the parameters, the final residuals and Jacobian, an integer ``status`` with a m
 :data:`STATUS_MESSAGES`, the iteration history, and the statistics of the fit (covariance,
 standard errors, correlation, R², RMSE). It never holds NaN: quantities that are undefined
 (R² of a bare residual function, the covariance of a rank-deficient Jacobian) are None.
+
+Every result checks its own identifiability (:attr:`FitResult.identifiability`): a fit can
+converge (``success``) and still not determine its parameters. The check is generic, so every
+fit of the package (relaxation, punch, hyperelastic, field) reports it the same way, in its
+summary (``warning:`` lines), its JSON (``identified``, ``identifiability``, ``warnings``) and
+the command line (a ``warning:`` line on stderr; the exit status stays 0).
 """
 
 from __future__ import annotations
@@ -16,7 +22,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["STATUS_MESSAGES", "FitResult", "IterationRecord", "RejectStep"]
+__all__ = [
+    "STANDARD_ERROR_BOUND_FACTOR",
+    "STATUS_MESSAGES",
+    "FitResult",
+    "IterationRecord",
+    "RejectStep",
+]
 
 
 STATUS_MESSAGES: Mapping[int, str] = {
@@ -32,6 +44,18 @@ STATUS_MESSAGES: Mapping[int, str] = {
     4: "Both `ftol` and `xtol` termination conditions are satisfied.",
 }
 """Integer status of a fit and its message. ``success`` is ``status > 0``."""
+
+
+STANDARD_ERROR_BOUND_FACTOR = 1.0
+"""A parameter whose standard error exceeds this multiple of its |value| is not identified."""
+
+_BOUND_RTOL = 1e-9
+"""Relative distance to a bound below which a parameter counts as pinned at it."""
+
+
+def _number(value: float) -> str:
+    """A plain number for messages (never a NumPy repr)."""
+    return f"{float(value):.4g}"
 
 
 class RejectStep(Exception):  # noqa: N818 (a signal, not an error)
@@ -115,6 +139,12 @@ class FitResult:
         method: "lm" or "salm".
         fitted: Model predictions at ``x``, shape (m,), from :func:`fit_curve`; else None.
         objective: "absolute" or "relative" from :func:`fit_curve`; else None.
+        lower_bounds: The lower bounds of the fit, shape (n,) (``-inf`` for none), or None
+            when unknown (then no bound check).
+        upper_bounds: The upper bounds, shape (n,) (``inf`` for none), or None.
+        warnings: Further warnings a caller adds (plausibility of the data or of the
+            result: sign, magnitude, units); :attr:`all_warnings` lists them after the
+            identifiability warnings.
     """
 
     x: np.ndarray
@@ -138,11 +168,86 @@ class FitResult:
     method: str = "lm"
     fitted: np.ndarray | None = None
     objective: str | None = None
+    lower_bounds: np.ndarray | None = None
+    upper_bounds: np.ndarray | None = None
+    warnings: list[str] = field(default_factory=list)
 
     @property
     def parameters(self) -> dict[str, float]:
         """Parameter name to fitted value."""
         return {name: float(v) for name, v in zip(self.parameter_names, self.x, strict=True)}
+
+    @property
+    def identifiability(self) -> list[str]:
+        """Warnings about parameters that the data do not determine; empty when identified.
+
+        One generic check for every fit. A parameter is reported (one line each, naming the
+        parameter, its value and unit) when:
+
+        - it is pinned at a finite bound (within a relative 1e-9): the optimum lies outside
+          the allowed range, or the data do not move the parameter;
+        - its standard error exceeds :data:`STANDARD_ERROR_BOUND_FACTOR` times |value|: the
+          data are consistent with a value of zero or of the opposite sign;
+        - it lies within one standard error of a non-zero finite bound.
+
+        For the fit as a whole, a line is added when the covariance is unavailable: no more
+        residuals than parameters, or a rank-deficient Jacobian (a singular J^T J: some
+        combination of parameters leaves the residuals unchanged).
+
+        Returns:
+            The warning messages (without a "warning:" prefix), in parameter order; empty
+            for an identified fit.
+        """
+        messages: list[str] = []
+        m, n = self.residuals.size, self.x.size
+        errors = self.standard_errors
+        if errors is None:
+            if m <= n:
+                messages.append(
+                    f"only {m} residuals for {n} parameters: the covariance is undefined and "
+                    "the parameters are not identified"
+                )
+            else:
+                messages.append(
+                    "the covariance is singular (rank-deficient Jacobian): some combination "
+                    "of the parameters does not change the fit, so they are not identified"
+                )
+        for j, name in enumerate(self.parameter_names):
+            value = float(self.x[j])
+            unit = f" {self.parameter_units[j]}" if self.parameter_units[j] else ""
+            error = None if errors is None else float(errors[j])
+            pinned = None
+            for side, bounds in (("lower", self.lower_bounds), ("upper", self.upper_bounds)):
+                if bounds is None or not np.isfinite(bounds[j]):
+                    continue
+                bound = float(bounds[j])
+                if abs(value - bound) <= _BOUND_RTOL * max(abs(bound), abs(value)):
+                    pinned = f"{name} = {_number(value)}{unit} is pinned at its {side} bound"
+                    break
+                if error is not None and bound != 0.0 and abs(value - bound) < error:
+                    pinned = (
+                        f"{name} = {_number(value)}{unit} lies within one standard error "
+                        f"({_number(error)}{unit}) of its {side} bound {_number(bound)}"
+                    )
+            if pinned is not None:
+                messages.append(pinned + ": it is not identified by the data")
+            elif error is not None and error > STANDARD_ERROR_BOUND_FACTOR * abs(value):
+                messages.append(
+                    f"{name} = {_number(value)}{unit} has a standard error of "
+                    f"{_number(error)}{unit}, larger than its value: it is not identified "
+                    "by the data"
+                )
+        return messages
+
+    @property
+    def identified(self) -> bool:
+        """True when :attr:`identifiability` has nothing to report."""
+        return not self.identifiability
+
+    @property
+    def all_warnings(self) -> list[str]:
+        """The identifiability warnings followed by the caller's :attr:`warnings`."""
+        return self.identifiability + list(self.warnings)
 
     def to_dict(self, *, include_history: bool = False) -> dict[str, Any]:
         """A JSON-compatible summary.
@@ -153,7 +258,9 @@ class FitResult:
         Returns:
             ``{"parameters": {name: {"value", "unit", "standard_error"}}, "r_squared", "rmse",
             "cost", "iterations", "nfev", "njev", "status", "success", "message", "method",
-            "objective", "correlation", "software"}`` (and ``"history"`` when asked).
+            "objective", "correlation", "identified", "identifiability", "warnings",
+            "software"}`` (and ``"history"`` when asked). ``identifiability`` lists the
+            messages of :attr:`identifiability`; ``warnings`` lists :attr:`all_warnings`.
         """
         from warptissue.io import software_versions
 
@@ -180,6 +287,9 @@ class FitResult:
             "method": self.method,
             "objective": self.objective,
             "correlation": None if self.correlation is None else self.correlation.tolist(),
+            "identified": self.identified,
+            "identifiability": self.identifiability,
+            "warnings": self.all_warnings,
             "software": software_versions(),
         }
         if include_history:
@@ -187,7 +297,10 @@ class FitResult:
         return summary
 
     def summary(self) -> str:
-        """A human-readable table of the parameters and the fit statistics."""
+        """A human-readable table of the parameters and the fit statistics.
+
+        The table ends with one ``warning: ...`` line per entry of :attr:`all_warnings`.
+        """
         errors = self.standard_errors
         width = max(len(name) for name in self.parameter_names)
         lines = [f"{'parameter':<{width}}  {'value':>14}  {'std. error':>12}  unit"]
@@ -201,4 +314,5 @@ class FitResult:
             f"R^2 = {r2}, RMSE = {self.rmse:.6g}, cost = {self.cost:.6g}, "
             f"iterations = {self.iterations}, status = {self.status}: {self.message}"
         )
+        lines.extend(f"warning: {message}" for message in self.all_warnings)
         return "\n".join(lines)
