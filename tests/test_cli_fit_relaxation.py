@@ -11,7 +11,7 @@ from warptissue.cli import main
 from warptissue.cli.fit_relaxation import parse_model
 from warptissue.errors import InputError
 from warptissue.io import write_csv
-from warptissue.punch import flat_punch_force_N
+from warptissue.fit.punch import flat_punch_force_N
 from warptissue.viscoelastic import PronySeries
 
 

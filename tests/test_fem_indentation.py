@@ -15,7 +15,7 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
 from warptissue.materials import NeoHookean
 from warptissue.mesh import indentation_block
-from warptissue.punch import hayes_kappa
+from warptissue.fit.punch import hayes_kappa
 
 RADIUS_M = 1e-3
 SHEAR_MODULUS_PA = 200.0
@@ -57,7 +57,7 @@ def layer_stiffness(thickness_m: float, material: NeoHookean) -> float:
 
     Sneddon's half-space value 2 a E / (1 - nu^2) (8 mu a at nu = 1/2) times the finite-layer
     factor kappa(a/h, nu) of Hayes et al. (1972) for a frictionless punch on a layer of
-    infinite extent, which ``warptissue.punch.hayes_kappa`` computes from the integral
+    infinite extent, which ``warptissue.fit.punch.hayes_kappa`` computes from the integral
     equation (checked against its half-space, thin-layer and squeeze-flow limits in
     ``tests/test_punch.py``).
     """

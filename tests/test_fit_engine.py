@@ -15,7 +15,7 @@ import scipy.optimize
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fit import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
-from warptissue.fit.problems import (
+from fit_problems import (
     PROBLEMS,
     freudenstein_roth,
     meyer,

@@ -9,7 +9,7 @@ import pytest
 from scipy.integrate import quad
 
 from warptissue.errors import InputError
-from warptissue.punch import (
+from warptissue.fit.punch import (
     flat_punch_force_N,
     flat_punch_modulus_Pa,
     flat_punch_modulus_printed_Pa,
@@ -118,7 +118,7 @@ def test_bad_contact_input(kwargs):
 
 
 def test_fit_punch_modulus_sphere_and_layer(rng):
-    from warptissue.punch import fit_punch_modulus
+    from warptissue.fit.punch import fit_punch_modulus
 
     depth = np.linspace(1e-5, 1e-3, 30)
     force = hertz_force_N(depth, radius_m=2e-3, youngs_modulus_Pa=8e3, poissons_ratio=0.49)

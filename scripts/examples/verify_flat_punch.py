@@ -5,7 +5,7 @@ Runs, on the CPU:
 1. mesh convergence of the small-depth punch stiffness (TET10 mean dilatation, frictionless and
    bonded punch, thickness h = 4a, block width 8h, K/mu = 1000), with the observed order and a
    Richardson extrapolation, against Sneddon's 8 mu a times the finite-layer factor of Hayes et
-   al. (1972) that ``warptissue.punch.hayes_kappa`` computes (layer of infinite extent bonded
+   al. (1972) that ``warptissue.fit.punch.hayes_kappa`` computes (layer of infinite extent bonded
    to a rigid base, frictionless punch), and against Shull's (2002) fitted factor;
 2. the effect of the block's finite width (4h, 8h, 16h);
 3. the stiffness for h/a = 2, 4, 8 against the same factors, and an extrapolation of the FE
@@ -36,7 +36,7 @@ from warptissue.fem import (
 from warptissue.io import write_json
 from warptissue.materials import NeoHookean
 from warptissue.mesh import indentation_block
-from warptissue.punch import hayes_kappa
+from warptissue.fit.punch import hayes_kappa
 
 RADIUS_M = 1e-3
 SHEAR_MODULUS_PA = 200.0

@@ -151,7 +151,7 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
     import numpy as np
 
     from warptissue.io import read_experiment_csv
-    from warptissue.punch import fit_punch_modulus
+    from warptissue.fit.punch import fit_punch_modulus
     from warptissue.report import write_fit_outputs
 
     record = read_experiment_csv(

@@ -2,7 +2,8 @@
 
 J. J. More, B. S. Garbow and K. E. Hillstrom, "Testing unconstrained optimization
 software", ACM Trans. Math. Software 7 (1981) 17-41: residuals, standard starting points and
-published minima. The engine's tests and ``scripts/fit_engine_benchmark.py`` use them.
+published minima. The engine's tests (tests/test_fit_engine.py) and
+``scripts/benchmarks/bench_fit_engine.py`` use them.
 """
 
 from __future__ import annotations
