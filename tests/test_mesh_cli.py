@@ -1,6 +1,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from warptissue.cli import main
 from warptissue.mesh import read_mesh
@@ -61,4 +62,36 @@ def test_errors_are_one_line_with_exit_codes(tmp_path, capsys):
     )  # fmt: skip
     assert status == 2
     assert "probe_radius_m" in capsys.readouterr().err
+    assert not (tmp_path / "b.vtu").exists()
+
+
+BLOCK = [
+    "mesh", "block", "--thickness-m", "0.004", "--probe-radius-m", "0.002",
+    "--size-near-m", "0.0008", "--size-far-m", "0.002", "--element", "TET4",
+]  # fmt: skip
+
+
+def test_lengths_take_unit_suffixes(tmp_path):
+    """``--width-m 10mm`` is 0.01 m, as ``acquire`` reads its quantities; plain numbers stay
+    metres."""
+    assert main([*BLOCK, "--width-m", "10mm", "--out", str(tmp_path / "mm.vtu")]) == 0
+    assert main([*BLOCK, "--width-m", "0.01", "--out", str(tmp_path / "m.vtu")]) == 0
+    in_mm, in_m = read_mesh(tmp_path / "mm.vtu"), read_mesh(tmp_path / "m.vtu")
+    np.testing.assert_array_equal(in_mm.points, in_m.points)
+    np.testing.assert_array_equal(in_mm.tets, in_m.tets)
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [("10xx", "unknown unit"), ("-0.01", "must be positive"), ("=-1mm", "must be positive"), ("0", "must be positive"),
+     ("nan", "not a finite number"), ("wide", "not a length")],
+)  # fmt: skip
+def test_bad_lengths_are_one_line_usage_errors(tmp_path, capsys, value, message):
+    with pytest.raises(SystemExit) as exit_info:
+        width = ["--width-m" + value] if value.startswith("=") else ["--width-m", value]
+        main([*BLOCK, *width, "--out", str(tmp_path / "b.vtu")])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument --width-m: {message}" in err
+    assert "Traceback" not in err
     assert not (tmp_path / "b.vtu").exists()

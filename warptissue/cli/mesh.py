@@ -12,6 +12,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from warptissue.cli._args import positive_length_m, positive_number
+
 __all__ = ["register"]
 
 
@@ -25,18 +27,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     for shape in ("block", "disc"):
         generate = actions.add_parser(shape, help=f"graded indentation {shape} (O-grid)")
         if shape == "block":
-            generate.add_argument("--width-m", type=float, required=True, help="full width")
+            generate.add_argument(
+                "--width-m", type=positive_length_m, required=True, help="full width"
+            )
         else:
-            generate.add_argument("--radius-m", type=float, required=True, help="disc radius")
+            generate.add_argument(
+                "--radius-m", type=positive_length_m, required=True, help="disc radius"
+            )
             generate.add_argument(
                 "--curved-side", action="store_true", help="TET10 mid nodes on the cylinder"
             )
-        generate.add_argument("--thickness-m", type=float, required=True)
-        generate.add_argument("--probe-radius-m", type=float, required=True)
-        generate.add_argument("--size-near-m", type=float, required=True)
-        generate.add_argument("--size-far-m", type=float, required=True)
-        generate.add_argument("--growth", type=float, default=1.2)
-        generate.add_argument("--layer-max-m", type=float, default=None)
+        generate.add_argument("--thickness-m", type=positive_length_m, required=True)
+        generate.add_argument("--probe-radius-m", type=positive_length_m, required=True)
+        generate.add_argument("--size-near-m", type=positive_length_m, required=True)
+        generate.add_argument("--size-far-m", type=positive_length_m, required=True)
+        generate.add_argument("--growth", type=positive_number, default=1.2)
+        generate.add_argument("--layer-max-m", type=positive_length_m, default=None)
         generate.add_argument("--element", choices=("TET10", "TET4"), default="TET10")
         generate.add_argument(
             "--mesher",
