@@ -1,4 +1,7 @@
 import json
+import shlex
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -83,8 +86,8 @@ def test_lengths_take_unit_suffixes(tmp_path):
 
 @pytest.mark.parametrize(
     ("value", "message"),
-    [("10xx", "unknown unit"), ("-0.01", "must be positive"), ("=-1mm", "must be positive"), ("0", "must be positive"),
-     ("nan", "not a finite number"), ("wide", "not a length")],
+    [("10xx", "unknown unit"), ("-0.01", "must be positive"), ("=-1mm", "must be positive"),
+     ("0", "must be positive"), ("nan", "not a finite number"), ("wide", "not a length")],
 )  # fmt: skip
 def test_bad_lengths_are_one_line_usage_errors(tmp_path, capsys, value, message):
     with pytest.raises(SystemExit) as exit_info:
@@ -95,3 +98,25 @@ def test_bad_lengths_are_one_line_usage_errors(tmp_path, capsys, value, message)
     assert f"argument --width-m: {message}" in err
     assert "Traceback" not in err
     assert not (tmp_path / "b.vtu").exists()
+
+
+def test_a_closed_pipe_ends_the_command_quietly(tmp_path):
+    """``warptissue mesh check ... | head -1``: the reader closes the pipe before the command
+    writes; the command stops with 141 (as SIGPIPE ends Unix tools), no traceback."""
+    out = tmp_path / "b.vtu"
+    assert main([*BLOCK, "--width-m", "0.01", "--out", str(out)]) == 0
+    command = [sys.executable, "-m", "warptissue.cli", "mesh", "check", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()  # the reader is gone before the first line
+    stderr = process.stderr.read().decode()
+    assert process.wait(timeout=120) == 141
+    assert stderr == ""
+    shell = subprocess.run(
+        ["bash", "-c", f"set -o pipefail; {shlex.join(command)} | head -1"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert shell.stdout.startswith("  ")  # the first line of the quality table
+    assert shell.stdout.count("\n") == 1
+    assert shell.returncode in (0, 141) and "Traceback" not in shell.stderr

@@ -7,19 +7,30 @@ Each command lives in its own module under ``warptissue.cli`` and exposes
 import their heavy dependencies inside the handler, so that ``warptissue --help`` stays fast.
 
 Errors derived from :class:`warptissue.errors.WarpTissueError` become one-line messages on
-stderr and the error's exit code, never a traceback.
+stderr and the error's exit code, never a traceback. Ctrl-C exits with 130; a reader that
+closes the pipe early (``warptissue mesh check organ.vtu | head -1``) ends the command quietly
+with 141, as ``SIGPIPE`` ends Unix tools (:data:`EXIT_STATUSES`).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Sequence
 
 from warptissue.errors import WarpTissueError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["EXIT_STATUSES", "build_parser", "main"]
+
+EXIT_STATUSES: dict[int, str] = {
+    0: "success",
+    130: "interrupted (Ctrl-C)",
+    141: "the reader of standard output closed it early (a broken pipe, as in `| head`)",
+}
+"""Exit statuses that do not come from an error class of :mod:`warptissue.errors` (argparse's
+usage errors exit with 2, as :class:`~warptissue.errors.InputError` does)."""
 
 COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.fit_uniaxial",
@@ -61,6 +72,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         status = args.handler(args)
+        sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
+    except BrokenPipeError:
+        _silence_stdout()
+        return 141
     except WarpTissueError as exc:
         print(f"warptissue: error: {exc}", file=sys.stderr)
         return exc.exit_code
@@ -68,6 +83,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("warptissue: interrupted", file=sys.stderr)
         return 130
     return 0 if status is None else int(status)
+
+
+def _silence_stdout() -> None:
+    """Point standard output at the null device, so that the interpreter's final flush of
+    what is still buffered for a closed pipe does not fail again (Python's recipe for
+    ``SIGPIPE``)."""
+    try:
+        descriptor = sys.stdout.fileno()
+    except (OSError, ValueError):  # not a file (a caller's capture): nothing will flush to it
+        return
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, descriptor)
+    finally:
+        os.close(devnull)
 
 
 if __name__ == "__main__":
