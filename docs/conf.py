@@ -1,0 +1,67 @@
+"""Sphinx configuration for the warptissue documentation (MyST Markdown pages)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+DOCS = Path(__file__).resolve().parent
+sys.path.insert(0, str(DOCS / "_ext"))
+
+from warptissue import __version__  # noqa: E402
+
+project = "warptissue"
+author = "the warptissue developers"
+copyright = "the warptissue developers"  # noqa: A001
+release = __version__
+version = __version__
+
+extensions = [
+    "myst_parser",
+    "sphinx.ext.autodoc",
+    "sphinx.ext.napoleon",
+    "sphinx.ext.viewcode",
+    "warptissue_cli",
+]
+
+source_suffix = {".md": "markdown"}
+root_doc = "index"
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
+
+myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]
+myst_heading_anchors = 3
+
+napoleon_google_docstring = True
+napoleon_numpy_docstring = False
+napoleon_use_rtype = False
+napoleon_use_ivar = True
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
+autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": True}
+
+html_theme = "alabaster"
+html_title = f"warptissue {__version__}"
+html_static_path: list[str] = []
+
+# Ambiguous short names in the Attributes sections of dataclasses (``node_count`` on both
+# ``TetMesh`` and ``MeshQuality``) are not worth a failed build.
+suppress_warnings = ["ref.python"]
+
+_ABSOLUTE_VALUE = re.compile(r"(?<!\\)\|")
+
+
+def _escape_bars(app, what, name, obj, options, lines: list[str]) -> None:  # noqa: ARG001
+    """Read ``|x|`` in docstrings as an absolute value, not a reST substitution.
+
+    The Google docstrings write norms and magnitudes as ``|x|``; reST would take them for
+    substitution references. Lines of grid tables (``+---``, ``| cell``) are kept.
+    """
+    for i, line in enumerate(lines):
+        if not line.lstrip().startswith(("+-", "+=", "| ")):
+            lines[i] = _ABSOLUTE_VALUE.sub(r"\\|", line)
+
+
+def setup(app) -> None:
+    """Connect the docstring hook."""
+    app.connect("autodoc-process-docstring", _escape_bars)
