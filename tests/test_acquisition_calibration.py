@@ -1,4 +1,4 @@
-"""Force-sensor correction (seed 002, WCFM_SVM and its baselines)."""
+"""Force-sensor correction (Tong et al., WCFM_SVM and its baselines)."""
 
 from __future__ import annotations
 
@@ -182,7 +182,8 @@ def test_every_model_corrects_the_nonlinear_sensor(sensor_fits):
 
 
 def test_wcfm_svm_against_the_single_models_on_306_held_out_samples(sensor_fits):
-    """Issue 4 (b), as the data show it (scripts/sensor_correction_study.py, 30 sessions):
+    """Issue 4 (b), as the data show it (30 sessions of
+    scripts/benchmarks/bench_sensor_correction.py):
     WCFM_SVM clearly beats the BP network and comes within 15 % of the best single model,
     but it does not beat every single model (the polynomial in the mean reading is better on
     this sensor; see the README). A broken combination (e.g. one trusting the worst model)
@@ -244,8 +245,29 @@ def test_calibration_json_round_trip(tmp_path, sensor_fits):
     (tmp_path / "old.json").write_text(json.dumps(content))
     assert ForceCalibration.load(tmp_path / "old.json").readings == 1
     (tmp_path / "bad.json").write_text('{"format": "something else"}')
-    with pytest.raises(InputError, match="not a warptissue.force_calibration"):
+    with pytest.raises(InputError, match='not a force calibration: expected "format"'):
         ForceCalibration.load(tmp_path / "bad.json")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("{", r"bad.json:1: not JSON"),
+        ("[1, 2]", r"bad.json: not a force calibration"),
+        ('{"format": "warptissue.force_calibration", "version": 1}', r"key 'model' missing"),
+        ('{"model": "polynomial", "coefficients": []}', r'key "coefficients".*\(got \[\]\)'),
+        ('{"model": "polynomial", "coefficients": [1, "x"]}', r"finite numbers"),
+        ('{"model": "polynomial", "coefficients": [1, NaN]}', r"finite numbers"),
+    ],
+)
+def test_malformed_calibration_files_get_one_line_naming_file_and_key(tmp_path, text, message):
+    path = tmp_path / "bad.json"
+    path.write_text(text)
+    with pytest.raises(InputError, match=message) as info:
+        ForceCalibration.load(path)
+    assert "\n" not in str(info.value) and "Error(" not in str(info.value)
+    with pytest.raises(InputError, match="cannot read calibration"):
+        ForceCalibration.load(tmp_path / "missing.json")
 
 
 def test_calibration_csv_errors_name_line_and_column(tmp_path):
@@ -281,14 +303,15 @@ def test_cli_calibrate_sensor(tmp_path, capsys):
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
-def test_recorder_loads_the_calibration_file(tmp_path, sensor_fits):
-    """The acquisition recorder's loader applies our JSON exactly; it passes one raw reading
-    at a time, which stands for all of a sample's readings."""
-    recorder = pytest.importorskip("warptissue.acquisition.recorder")
+def test_a_saved_file_corrects_one_reading_at_a_time_as_the_recorder_applies_it(
+    tmp_path, sensor_fits
+):
+    """The recorder loads the file and corrects one raw reading at a time, which stands for
+    all of a sample's readings: the same numbers as the fitted model on the whole stream."""
     _, six, _, fits = sensor_fits
     for name in ("polynomial", "WCFM_SVM"):
-        path = fits[name].save(tmp_path / f"{name}.json")
-        loaded = recorder.load_force_calibration(path)
-        np.testing.assert_array_equal(
-            loaded.correct(six.signal_V), fits[name].correct(six.signal_V)
+        loaded = ForceCalibration.load(fits[name].save(tmp_path / f"{name}.json"))
+        one_at_a_time = [loaded.correct(np.array([v]))[0] for v in six.signal_V]
+        np.testing.assert_allclose(
+            one_at_a_time, fits[name].correct(six.signal_V), rtol=1e-12, atol=1e-9
         )

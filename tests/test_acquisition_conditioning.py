@@ -72,8 +72,8 @@ def test_offset_under_breathing_uses_the_periodic_terms():
     assert periodic == pytest.approx(2e-3, abs=1e-9)
 
 
-def test_trim_ramp_keeps_the_constant_speed_part_like_seed_004(rng):
-    """Seed 004 keeps the first 3.6 mm of a 4 mm ramp: the kept part is at constant speed,
+def test_trim_ramp_keeps_the_constant_speed_part_like_takacs_et_al(rng):
+    """Takacs et al. keep the first 3.6 mm of a 4 mm ramp: the kept part is at constant speed,
     the deceleration is cut."""
     time, position, _ = approach_record(rng, surface_m=0.2e-3)
     keep = trim_ramp(position, contact_position_m=0.2e-3, keep_depth_m=3.6e-3)

@@ -16,15 +16,14 @@ from _sls_reference import ReferenceSLS, fit_reference_sls
 
 from warptissue.acquisition import (
     FaultPlan,
+    ForceCalibration,
     PhysiologicalDisturbance,
-    PolynomialForceCalibration,
     RampHold,
     Recorder,
     RigClient,
     RigConfig,
     RigServer,
     SimulatedRig,
-    load_force_calibration,
 )
 from warptissue.acquisition.conditioning import prepare_record
 from warptissue.io import read_experiment_csv
@@ -228,10 +227,14 @@ def test_ctrl_c_stops_the_rig_and_saves_what_arrived(tmp_path, monkeypatch):
 
 
 def test_calibration_is_applied_and_raw_force_kept(tmp_path):
-    calibration = PolynomialForceCalibration((1e-3, 1.1, -0.5))
-    calibration_path = calibration.save(tmp_path / "calibration.json")
-    loaded = load_force_calibration(calibration_path)
-    assert loaded == calibration
+    """A hand-written polynomial file, read by the one calibration class; saved in its full
+    format, it corrects exactly the same."""
+    calibration_path = tmp_path / "calibration.json"
+    calibration_path.write_text('{"model": "polynomial", "coefficients": [1e-3, 1.1, -0.5]}')
+    loaded = ForceCalibration.load(calibration_path)
+    resaved = ForceCalibration.load(loaded.save(tmp_path / "full.json"))
+    probe = np.linspace(-0.1, 0.3, 7)
+    np.testing.assert_array_equal(resaved.correct(probe), loaded.correct(probe))
     rig = SimulatedRig(ReferenceSLS(*TRUE_SLS), RigConfig(time_scale=50.0))
     path = tmp_path / "calibrated.csv"
     with RigServer(rig, transport="tcp") as server:
@@ -241,6 +244,7 @@ def test_calibration_is_applied_and_raw_force_kept(tmp_path):
     np.testing.assert_allclose(raw, data["force_mN"] * 1e-3, rtol=1e-12)
     np.testing.assert_allclose(data["force_N"], 1e-3 + 1.1 * raw - 0.5 * raw**2, rtol=1e-12)
     assert result.status == "complete"
+    assert data.metadata["calibration"] == {"model": "polynomial"}
 
 
 def test_existing_output_is_not_overwritten(tmp_path):
@@ -378,21 +382,3 @@ def test_real_sigint_stops_cleanly_without_losing_a_sample(tmp_path):
     assert counts["samples_missing"] == 0
     assert read_experiment_csv(path).sample_count == counts["samples_received"] > 100
     assert signal.getsignal(signal.SIGINT) is handler_before  # restored
-
-
-def test_other_calibration_models_go_to_warptissue_calibration(tmp_path, monkeypatch):
-    import sys
-    import types
-
-    path = tmp_path / "wcfm.json"
-    path.write_text(json.dumps({"model": "WCFM_SVM", "singles": []}))
-    loaded = []
-    stub = types.ModuleType("warptissue.acquisition.calibration")
-    stub.ForceCalibration = type(
-        "ForceCalibration", (), {"load": classmethod(lambda cls, p: loaded.append(p) or "cal")}
-    )
-    monkeypatch.setitem(sys.modules, "warptissue.acquisition.calibration", stub)
-    assert load_force_calibration(path) == "cal" and loaded == [path]
-    monkeypatch.setitem(sys.modules, "warptissue.acquisition.calibration", None)  # not installed
-    with pytest.raises(Exception, match="needs warptissue.acquisition.calibration"):
-        load_force_calibration(path)

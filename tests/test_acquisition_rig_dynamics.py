@@ -1,4 +1,4 @@
-"""Seed 001 Eq. 1: the rig's two-mass model, checked against its equations of motion."""
+"""Kim et al. Eq. 1: the rig's two-mass model, checked against its equations of motion."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from warptissue.acquisition.rig_dynamics import (
-    SEED001_RIG,
+    KIM_RIG,
     RigDynamics,
     fit_rig_dynamics,
     measure_frequency_response,
@@ -17,11 +17,11 @@ from warptissue.acquisition.rig_dynamics import (
 )
 from warptissue.errors import InputError
 
-UNDAMPED = replace(SEED001_RIG, link_damping_N_m_s_per_rad=0.0, contact_damping_N_m_s_per_rad=0.0)
+UNDAMPED = replace(KIM_RIG, link_damping_N_m_s_per_rad=0.0, contact_damping_N_m_s_per_rad=0.0)
 
 
 def printed_eq1(s, Jm, Jl, kl, kc, N):
-    """Seed 001 Eq. 1 exactly as printed."""
+    """Kim et al. Eq. 1 exactly as printed."""
     return kl * kc / (Jm * Jl * s**4 + (Jm * kc + Jl * kl + N**2 * Jm * kl) * s**2 + kl * kc)
 
 
@@ -48,17 +48,17 @@ def test_transfer_function_matches_time_integration(frequency_Hz):
     step = 1.0 / (200.0 * frequency_Hz)
     time = np.arange(0.0, max(1.0, 60.0 / frequency_Hz), step)
     force_in = np.sin(2 * np.pi * frequency_Hz * time)
-    force_out = SEED001_RIG.simulate(time, force_in)
+    force_out = KIM_RIG.simulate(time, force_in)
     steady = time > time[-1] / 2
     measured = measure_frequency_response(
         time[steady], force_in[steady], force_out[steady], frequency_Hz
     )
-    expected = complex(SEED001_RIG.frequency_response(frequency_Hz))
+    expected = complex(KIM_RIG.frequency_response(frequency_Hz))
     assert abs(measured / expected - 1) < 2e-3
 
 
-def test_seed001_conclusion_flat_below_30_Hz_far_above_5_Hz_stimuli():
-    rig = SEED001_RIG
+def test_kim_et_al_conclusion_flat_below_30_Hz_far_above_5_Hz_stimuli():
+    rig = KIM_RIG
     flat = rig.flat_band_Hz()
     assert 30.0 <= flat <= 35.0
     # The definition holds on either side of the reported edge.
@@ -78,7 +78,7 @@ def test_seed001_conclusion_flat_below_30_Hz_far_above_5_Hz_stimuli():
 def test_fit_recovers_parameters_from_simulated_sine_sweep(rng, tmp_path):
     """Sine-by-sine sweep 5-400 Hz simulated by time integration, 0.5 % output noise, fit
     from a start 40 % off: the free parameters come back within 3 %."""
-    truth = SEED001_RIG
+    truth = KIM_RIG
     frequencies = np.geomspace(5.0, 400.0, 24)
     measured = []
     for frequency in frequencies:
@@ -114,9 +114,9 @@ def test_fit_recovers_parameters_from_simulated_sine_sweep(rng, tmp_path):
 
 def test_invalid_parameters_and_inputs_are_rejected():
     with pytest.raises(InputError, match="link_inertia"):
-        replace(SEED001_RIG, link_inertia_kg_m2=-1.0)
+        replace(KIM_RIG, link_inertia_kg_m2=-1.0)
     with pytest.raises(InputError):
-        fit_rig_dynamics([1.0, 2.0], [1.0], initial=SEED001_RIG)
+        fit_rig_dynamics([1.0, 2.0], [1.0], initial=KIM_RIG)
     with pytest.raises(InputError, match="unknown"):
-        fit_rig_dynamics([1.0, 2.0], [1.0, 1.0], initial=SEED001_RIG, free=("mass",))
-    assert isinstance(SEED001_RIG, RigDynamics)
+        fit_rig_dynamics([1.0, 2.0], [1.0, 1.0], initial=KIM_RIG, free=("mass",))
+    assert isinstance(KIM_RIG, RigDynamics)

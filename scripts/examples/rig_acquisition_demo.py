@@ -31,7 +31,7 @@ from warptissue.acquisition import (
 )
 from warptissue.acquisition.conditioning import prepare_record
 from warptissue.acquisition.rig_dynamics import (
-    SEED001_RIG,
+    KIM_RIG,
     fit_rig_dynamics,
     measure_frequency_response,
     plot_frequency_response,
@@ -100,7 +100,7 @@ def main() -> None:
             worst[label] = max(worst.get(label, 0.0), float(np.max(np.abs(error))))
     summary["in_vivo_worst_error_percent"] = worst
 
-    rig = SEED001_RIG
+    rig = KIM_RIG
     summary["rig_model"] = rig.to_dict()
     summary["rig_model"]["max_deviation_0_to_5_Hz"] = float(
         np.max(np.abs(rig.frequency_response(np.linspace(0.01, 5.0, 500)) - 1))

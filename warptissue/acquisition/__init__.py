@@ -4,18 +4,20 @@ the recorder.
 The protocol is specified in ``docs/rig-protocol.md`` (and implemented in
 :mod:`warptissue.acquisition.protocol`); :class:`RigClient` speaks it over any pyserial URL;
 :class:`SimulatedRig` with :class:`RigServer` answers it over a pty or a loopback socket;
-:class:`Recorder` runs a test and writes the experiment CSV and its JSON sidecar.
+:class:`Recorder` runs a test and writes the experiment CSV and its JSON sidecar, applying a
+:class:`ForceCalibration` when given one. Submodules beside them: ``conditioning`` (prepare a
+record for fitting), ``rig_dynamics`` (the rig's own frequency response, Kim et al.) and
+``calibration`` (force-sensor correction, Tong et al.).
 """
 
+from warptissue.acquisition.calibration import ForceCalibration
 from warptissue.acquisition.driver import CommandRefused, LinkCounters, LinkLost, RigClient
 from warptissue.acquisition.protocol import ProtocolError, parse_line, parse_quantity
 from warptissue.acquisition.recorder import (
-    PolynomialForceCalibration,
     RampHold,
     Recorder,
     RecordingResult,
     Sine,
-    load_force_calibration,
 )
 from warptissue.acquisition.simulator import (
     FaultPlan,
@@ -30,11 +32,11 @@ from warptissue.acquisition.simulator import (
 __all__ = [
     "CommandRefused",
     "FaultPlan",
+    "ForceCalibration",
     "ForceCurveTissue",
     "LinkCounters",
     "LinkLost",
     "PhysiologicalDisturbance",
-    "PolynomialForceCalibration",
     "ProtocolError",
     "RampHold",
     "RecordingResult",
@@ -45,7 +47,6 @@ __all__ = [
     "RigServer",
     "SimulatedRig",
     "Sine",
-    "load_force_calibration",
     "parse_line",
     "parse_quantity",
 ]

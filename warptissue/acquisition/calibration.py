@@ -1,6 +1,6 @@
 """Force-sensor correction: single forecasting models and their weighted SVM combination.
 
-Seed 002 (Tong et al.) corrects the readings of a force sensor with a weighted combination
+Tong et al. (Tong et al.) corrects the readings of a force sensor with a weighted combination
 forecasting model, WCFM_SVM: single models map the sensor signal to force (a polynomial,
 a back-propagation network, an SVR and a least-squares SVM); their predictions, each
 multiplied by a weight from the inverse summed relative error (Eq. 1), are the inputs of an
@@ -59,7 +59,7 @@ __all__ = [
 SINGLE_MODELS: tuple[str, ...] = ("polynomial", "bp", "svm", "lssvm")
 COMBINED_MODELS: tuple[str, ...] = ("CFM_SVM", "CFM_LSSVM", "WCFM_LSSVM", "WCFM_SVM")
 CALIBRATION_MODELS: tuple[str, ...] = SINGLE_MODELS + COMBINED_MODELS
-"""Every model name :func:`fit_calibration` accepts (Table 1 of seed 002)."""
+"""Every model name :func:`fit_calibration` accepts (Table 1 of Tong et al.)."""
 
 COMBINER_KERNEL = "linear"
 """Kernel of the combining SVR/LSSVM: a weighted linear blend of the single forecasts."""
@@ -308,7 +308,7 @@ def _cross_validate(
 
 
 def combination_weights(predictions: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """Seed 002 Eq. 1: w_i = (1 / E_i) / sum_k (1 / E_k).
+    """Tong et al. Eq. 1: w_i = (1 / E_i) / sum_k (1 / E_k).
 
     Args:
         predictions: Predictions of the m single models, shape (m, n).
@@ -428,21 +428,55 @@ class ForceCalibration:
         return Path(path)
 
     @classmethod
-    def load(cls, path: str | Path) -> ForceCalibration:
-        """Read a calibration written by :meth:`save`.
+    def polynomial(cls, coefficients: Sequence[float]) -> ForceCalibration:
+        """A polynomial correction ``force_N = sum_i c_i * raw**i`` of the raw reading.
+
+        Args:
+            coefficients: c0 (N), c1 (N per raw unit), c2, ...: at least one, all finite.
 
         Raises:
-            InputError: The file is missing, not JSON, or not a force calibration.
+            InputError: No coefficients, or a non-finite one.
+        """
+        values = np.asarray(coefficients, dtype=np.float64).ravel()
+        if values.size == 0 or not np.all(np.isfinite(values)):
+            raise InputError(
+                "polynomial coefficients must be a non-empty list of finite numbers",
+                value=[float(c) for c in values],
+            )
+        return cls(
+            model="polynomial",
+            signal_offset_V=0.0,
+            signal_scale_V=1.0,
+            force_offset_N=0.0,
+            force_scale_N=1.0,
+            singles=[{"kind": "polynomial", "coefficients": values}],
+            weights=np.empty(0),
+        )
+
+    @classmethod
+    def load(cls, path: str | Path) -> ForceCalibration:
+        """Read a calibration written by :meth:`save`, or a hand-written polynomial file
+        ``{"model": "polynomial", "coefficients": [c0, c1, ...]}`` (see :meth:`polynomial`).
+
+        Raises:
+            InputError: The file is missing, not JSON, or not a force calibration (the key
+                at fault named).
         """
         path = Path(path)
         try:
             data = json.loads(path.read_text(encoding="utf-8"))
         except OSError as exc:
-            raise InputError(f"cannot read calibration: {exc.strerror}", path=path) from exc
+            raise InputError(f"cannot read calibration: {exc.strerror}", path=path) from None
         except json.JSONDecodeError as exc:
-            raise InputError(f"not JSON: {exc.msg}", path=path, line=exc.lineno) from exc
+            raise InputError(f"not JSON: {exc.msg}", path=path, line=exc.lineno) from None
+        if isinstance(data, dict) and "format" not in data and data.get("model") == "polynomial":
+            return cls._load_polynomial(path, data)
         if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise InputError(f"not a {FORMAT} file", path=path, column="format")
+            raise InputError(
+                f'not a force calibration: expected "format": "{FORMAT}", or '
+                '"model": "polynomial" with "coefficients"',
+                path=path,
+            )
         if data.get("version") != FORMAT_VERSION:
             raise InputError(
                 "unsupported calibration version",
@@ -463,8 +497,30 @@ class ForceCalibration:
                 readings=int(data["input"].get("readings", 1)),
                 metadata=dict(data.get("metadata") or {}),
             )
-        except (KeyError, TypeError, ValueError) as exc:
-            raise InputError(f"malformed calibration: {exc!r}", path=path) from exc
+        except KeyError as exc:
+            raise InputError(
+                f"malformed calibration: key {exc.args[0]!r} missing", path=path
+            ) from None
+        except (TypeError, ValueError, AttributeError) as exc:
+            raise InputError(f"malformed calibration: {exc}", path=path) from None
+
+    @classmethod
+    def _load_polynomial(cls, path: Path, data: dict[str, Any]) -> ForceCalibration:
+        coefficients = data.get("coefficients")
+        if (
+            not isinstance(coefficients, list)
+            or not coefficients
+            or not all(
+                isinstance(c, int | float) and not isinstance(c, bool) and np.isfinite(c)
+                for c in coefficients
+            )
+        ):
+            raise InputError(
+                'key "coefficients": must be a non-empty list of finite numbers',
+                path=path,
+                value=coefficients,
+            )
+        return cls.polynomial(coefficients)
 
 
 @dataclass(frozen=True)
@@ -566,7 +622,7 @@ def evaluate_calibrations(
 
 
 def calibration_metrics(actual_N: np.ndarray, corrected_N: np.ndarray) -> dict[str, float]:
-    """Seed 002's error measures of corrected against actual forces.
+    """Tong et al.'s error measures of corrected against actual forces.
 
     e_MAE = 1/n sum |x - x^|; e_MSE = 1/n sqrt(sum (x - x^)^2) (as the paper defines it: not
     the usual mean square, which is also returned as ``mean_square_N2``); e_MAPE = 1/n sum
@@ -605,7 +661,7 @@ def fit_calibrations(
     seed: int = 0,
     progress: bool = False,
 ) -> dict[str, ForceCalibration]:
-    """Fit several force corrections (seed 002, Eq. 1 and Table 1) sharing the single models.
+    """Fit several force corrections (Tong et al., Eq. 1 and Table 1) sharing the single models.
 
     Each sample (one applied force, its k readings) is one training example. The single
     models (``polynomial``: a polynomial in the mean reading; ``bp``: a one-hidden-layer
@@ -751,7 +807,7 @@ def synthetic_sensor(
     emi_V: float = 0.02,
     temperature_coefficient_per_K: float = 5e-4,
 ) -> CalibrationData:
-    """A synthetic calibration session of a 3 kg load cell (seed 002's set-up, simulated).
+    """A synthetic calibration session of a 3 kg load cell (Tong et al.'s set-up, simulated).
 
     ``samples`` weights, uniform on 2-100 % of 3000 g, are applied one after another in
     random order, 60 s each; the sensor is read ``readings`` times, 1 s apart, from 10 s after

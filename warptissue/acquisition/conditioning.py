@@ -21,8 +21,8 @@ Steps (each also usable on its own), in the order :func:`prepare_record` runs th
    it is an approximation that holds while the filter leaves the ramp's spectrum alone.
    :func:`estimate_rate_Hz` finds the rates when they are not known.
 5. A detected contact (approach through air) clips the depth at zero.
-6. :func:`trim_ramp` (ramp fits, seed 004): keep the loading ramp up to a depth, cutting the
-   probe's deceleration (seed 004 keeps the first 3.6 mm of a 4 mm ramp).
+6. :func:`trim_ramp` (ramp fits, Takacs et al.): keep the loading ramp up to a depth, cutting the
+   probe's deceleration (Takacs et al. keep the first 3.6 mm of a 4 mm ramp).
 
 :func:`prepare_record` returns a :class:`ConditionedRecord` with the raw columns beside the
 result.
@@ -213,7 +213,7 @@ def trim_ramp(
 ) -> np.ndarray:
     """Mask of the loading ramp from contact to ``keep_depth_m`` below it.
 
-    Seed 004 keeps the first 3.6 mm of a 4 mm ramp, dropping the end where the indenter
+    Takacs et al. keep the first 3.6 mm of a 4 mm ramp, dropping the end where the indenter
     decelerates (and overshoots); the start, where it accelerates, happens in air when the
     probe starts above the specimen.
 
@@ -386,7 +386,7 @@ def suppress_physiological(
 
 
 def select_window(time_s: np.ndarray, *, start_s: float, stop_s: float) -> np.ndarray:
-    """Mask of a breath-hold window ``start_s <= t <= stop_s`` (seed 001 held the breath
+    """Mask of a breath-hold window ``start_s <= t <= stop_s`` (Kim et al. held the breath
     during each indentation)."""
     t = np.asarray(time_s, dtype=np.float64)
     if not stop_s > start_s:
@@ -482,7 +482,7 @@ def prepare_record(
             where the probe rests on the organ before the ramp). The depth is then
             ``position - contact`` unclipped, so that a notch filter's ringing stays linear;
             a detected contact (probe approaching through air) clips the depth at zero.
-        keep_depth_m: Keep only the loading ramp to this depth (seed 004: 3.6 mm);
+        keep_depth_m: Keep only the loading ramp to this depth (Takacs et al.: 3.6 mm);
             None keeps the whole record (ramp and hold) for relaxation fits.
         window_s: Keep only ``(start, stop)`` (a breath-hold window), applied last.
         threshold_sigma: Contact threshold in baseline noise standard deviations.

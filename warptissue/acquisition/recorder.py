@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import csv
 import datetime
-import json
-import math
 import os
 import signal
 import threading
@@ -44,114 +42,21 @@ from warptissue.io import software_versions, write_json
 
 __all__ = [
     "ForceCorrection",
-    "PolynomialForceCalibration",
     "RampHold",
     "RecordingResult",
     "Recorder",
     "Sine",
-    "load_force_calibration",
 ]
 
 
 class ForceCorrection(Protocol):
-    """What the recorder needs from a force calibration (``warptissue.acquisition.calibration``)."""
+    """What the recorder needs from a force calibration: a
+    :class:`warptissue.acquisition.calibration.ForceCalibration`, or any object with this
+    ``correct``."""
 
     def correct(self, raw_signal: np.ndarray) -> np.ndarray:
         """Corrected force (N) for raw transducer force (N), shape (n,)."""
         ...
-
-
-def _read_calibration_json(file: Path) -> Any:
-    """The parsed JSON of a calibration file; InputError if missing or not JSON."""
-    try:
-        data = json.loads(file.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise InputError("calibration file not found", path=file) from None
-    except json.JSONDecodeError as exc:
-        raise InputError(f"not JSON: {exc.msg}", path=file, line=exc.lineno) from None
-    return data
-
-
-@dataclass(frozen=True)
-class PolynomialForceCalibration:
-    """A minimal force calibration: ``force_N = sum_i c_i * raw_N**i``.
-
-    The acquisition side's stand-in for ``warptissue.acquisition.calibration.ForceCalibration`` (same
-    ``load``/``correct`` interface), used when that module is not installed. File format::
-
-        {"model": "polynomial", "coefficients": [c0, c1, c2, ...], "input": "force_N"}
-
-    Attributes:
-        coefficients: c0 (N), c1 (-), c2 (1/N), ...
-    """
-
-    coefficients: tuple[float, ...]
-
-    @classmethod
-    def load(cls, path: str | Path) -> PolynomialForceCalibration:
-        """Read the JSON file.
-
-        Raises:
-            InputError: Missing file, bad JSON, wrong model or coefficients (named).
-        """
-        file = Path(path)
-        data = _read_calibration_json(file)
-        if not isinstance(data, dict) or data.get("model") != "polynomial":
-            raise InputError(
-                "expected a polynomial calibration", path=file, column="model", value=data
-            )
-        coefficients = data.get("coefficients")
-        if (
-            not isinstance(coefficients, list)
-            or not coefficients
-            or not all(isinstance(c, int | float) and math.isfinite(c) for c in coefficients)
-        ):
-            raise InputError(
-                "coefficients must be a non-empty list of finite numbers",
-                path=file,
-                column="coefficients",
-                value=coefficients,
-            )
-        return cls(tuple(float(c) for c in coefficients))
-
-    def save(self, path: str | Path) -> Path:
-        """Write the JSON file (atomically)."""
-        return write_json(
-            path, {"model": "polynomial", "coefficients": self.coefficients, "input": "force_N"}
-        )
-
-    def correct(self, raw_signal: np.ndarray) -> np.ndarray:
-        """Corrected force (N), shape (n,)."""
-        raw = np.asarray(raw_signal, dtype=np.float64)
-        return np.polynomial.polynomial.polyval(raw, self.coefficients)
-
-
-def load_force_calibration(path: str | Path) -> ForceCorrection:
-    """Load a force calibration file.
-
-    A minimal polynomial file (``{"model": "polynomial", "coefficients": [...]}``) is read
-    by :class:`PolynomialForceCalibration`; any other model (WCFM_SVM and the rest) by
-    ``warptissue.acquisition.calibration.ForceCalibration.load``. The recorder passes ``correct()`` the
-    raw transducer force in newtons, so train a calibration against that signal.
-
-    Raises:
-        InputError: Missing or unreadable file, or a model that needs
-            ``warptissue.acquisition.calibration`` when it is not installed.
-    """
-    file = Path(path)
-    data = _read_calibration_json(file)
-    if isinstance(data, dict) and data.get("model") == "polynomial" and "coefficients" in data:
-        return PolynomialForceCalibration.load(file)
-    try:
-        from warptissue.acquisition.calibration import ForceCalibration
-    except ImportError:
-        raise InputError(
-            "this calibration model needs warptissue.acquisition.calibration, which is not installed",
-            path=file,
-            column="model",
-            value=data.get("model") if isinstance(data, dict) else None,
-        ) from None
-    return ForceCalibration.load(file)
 
 
 @dataclass(frozen=True)
@@ -383,7 +288,7 @@ class Recorder:
             "started_utc": _utc_now(),
             "calibration": None
             if self.calibration is None
-            else {"model": type(self.calibration).__name__},
+            else {"model": getattr(self.calibration, "model", type(self.calibration).__name__)},
         }
         state = _RunState()
         self.csv_path.parent.mkdir(parents=True, exist_ok=True)

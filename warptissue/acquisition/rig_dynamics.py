@@ -1,10 +1,10 @@
-"""The indenter's own dynamics: seed 001's two-mass lumped model and its frequency response.
+"""The indenter's own dynamics: Kim et al.'s two-mass lumped model and its frequency response.
 
 A motor (inertia ``J_m``) drives a link (inertia ``J_l``) through a transmission of ratio
 ``N`` whose stiffness ``k_l`` sits on the motor side; the link touches the specimen (or, in the
-calibration of seed 001 Fig. 2a, an external force transducer) through a contact stiffness
+calibration of Kim et al. Fig. 2a, an external force transducer) through a contact stiffness
 ``k_c``. The force at the contact ``F_h`` follows the motor force referred to the link
-``F_e = N tau`` through seed 001 Eq. 1,
+``F_e = N tau`` through Kim et al. Eq. 1,
 
     G(s) = F_h / F_e = k_l k_c / (J_m J_l s^4 + (J_m k_c + J_l k_l + N^2 J_m k_l) s^2 + k_l k_c),
 
@@ -37,7 +37,7 @@ from warptissue.errors import InputError
 
 __all__ = [
     "PARAMETER_UNITS",
-    "SEED001_RIG",
+    "KIM_RIG",
     "RigDynamics",
     "RigDynamicsFit",
     "fit_rig_dynamics",
@@ -58,7 +58,7 @@ PARAMETER_UNITS: dict[str, str] = {
 
 @dataclass(frozen=True)
 class RigDynamics:
-    """Two-mass lumped model of the indenter in contact (seed 001 Fig. 2b, Eq. 1).
+    """Two-mass lumped model of the indenter in contact (Kim et al. Fig. 2b, Eq. 1).
 
     Generalized coordinates are the motor angle ``theta_m`` and the link angle ``theta_l``;
     for a linear stage read the link "angle" as the probe position and its inertia as the
@@ -79,7 +79,7 @@ class RigDynamics:
             J_m theta_m'' = tau - k_l (theta_m - N theta_l) - c_l (theta_m' - N theta_l')
             J_l theta_l'' = N [k_l (theta_m - N theta_l) + c_l (...)'] - k_c theta_l - c_c theta_l'
 
-        Eliminating ``theta_m`` gives ``k_c theta_l / (N tau)`` = seed 001 Eq. 1 (with
+        Eliminating ``theta_m`` gives ``k_c theta_l / (N tau)`` = Kim et al. Eq. 1 (with
         ``k -> k + c s``). Eq. 1 is printed correctly; its ``N^2 J_m k_l`` term places the
         transmission stiffness on the motor side of the ratio.
     """
@@ -216,7 +216,7 @@ class RigDynamics:
         }
 
 
-SEED001_RIG = RigDynamics(
+KIM_RIG = RigDynamics(
     motor_inertia_kg_m2=1.0e-5,
     link_inertia_kg_m2=2.0e-3,
     link_stiffness_N_m_per_rad=80.0,
@@ -225,7 +225,7 @@ SEED001_RIG = RigDynamics(
     link_damping_N_m_s_per_rad=0.004,
     contact_damping_N_m_s_per_rad=0.4,
 )
-"""Representative parameters of seed 001's probe in its frequency-response test (Fig. 2a,
+"""Representative parameters of Kim et al.'s probe in its frequency-response test (Fig. 2a,
 against an external force transducer). The seed does not print them (its ref. [11] does);
 these are chosen to reproduce its conclusion: flat below about 30 Hz, first structural
 resonance near 200 Hz, far above the 0-5 Hz stimuli."""
@@ -390,7 +390,7 @@ def plot_frequency_response(
     *,
     frequency_Hz: np.ndarray | None = None,
     measured: np.ndarray | None = None,
-    title: str = "Rig frequency response (seed 001 Eq. 1)",
+    title: str = "Rig frequency response (Kim et al. Eq. 1)",
 ) -> Path:
     """Bode plot (PNG, atomic) of the model, with measured points and the flat band shaded.
 

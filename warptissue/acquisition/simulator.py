@@ -1,12 +1,12 @@
 """A simulated indentation rig that speaks the line protocol over a pty or a loopback socket.
 
-The rig follows seed 000's bench (a motor on a linear guide, a force transducer, 41.5 mm of
-travel, at most 8 mm/s, 0.7 mN force resolution) and streams at up to 1 kHz like seed 001's
+The rig follows Ahn & Kim's bench (a motor on a linear guide, a force transducer, 41.5 mm of
+travel, at most 8 mm/s, 0.7 mN force resolution) and streams at up to 1 kHz like Kim et al.'s
 probe. The specimen is any object with ``force_N(time_s, displacement_m) -> force_N`` (for
 example ``warptissue.viscoelastic.StandardLinearSolid`` or :class:`ForceCurveTissue`); the
 displacement it receives is the indentation depth below the specimen surface (zero in air).
 Sensor effects: Gaussian noise, an offset, a linear drift, quantization to the transducer
-resolution, and optional physiological disturbance (respiration and heartbeat, seed 001
+resolution, and optional physiological disturbance (respiration and heartbeat, Kim et al.
 Fig. 2d). Faults can be injected on the link to test the driver and recorder.
 
 Time runs ``time_scale`` times faster than the wall clock (``math.inf``: as fast as the link
@@ -91,10 +91,10 @@ class ForceCurveTissue:
 
 @dataclass(frozen=True)
 class PhysiologicalDisturbance:
-    """Respiration and heartbeat forces added to the transducer signal, as in seed 001
+    """Respiration and heartbeat forces added to the transducer signal, as in Kim et al.
     Fig. 2(d) (large peaks from respiration, small ones from the heart beat).
 
-    Seed 001 gives the picture, not the numbers; the defaults are those of an anaesthetised,
+    Kim et al. give the picture, not the numbers; the defaults are those of an anaesthetised,
     ventilated pig: 15 breaths/min (0.25 Hz) and 84 beats/min (1.4 Hz), with peaks of a few
     millinewtons, the respiration peak about four times the cardiac one. Each waveform is a
     zero-mean peaked pulse train, ``amplitude * (((1 - cos(2 pi f t)) / 2) ** 2 - 3/8)``, whose
@@ -218,11 +218,11 @@ class RigConfig:
     Attributes:
         surface_position_m: Axis position of the specimen surface (m); the probe is in air
             above it. The axis starts at 0, positive toward the specimen.
-        travel_m: Axis travel (m) (seed 000: 41.5 mm).
-        max_speed_m_per_s: Highest speed (m/s) (seed 000: 8 mm/s).
+        travel_m: Axis travel (m) (Ahn & Kim: 41.5 mm).
+        max_speed_m_per_s: Highest speed (m/s) (Ahn & Kim: 8 mm/s).
         acceleration_m_per_s2: Acceleration and deceleration of moves (m/s^2); ramps are
-            trapezoidal, which is why seed 004 trims their ends.
-        force_resolution_N: Transducer quantum (N) (seed 000: 0.7 mN).
+            trapezoidal, which is why Takacs et al. trim their ends.
+        force_resolution_N: Transducer quantum (N) (Ahn & Kim: 0.7 mN).
         force_noise_N: Standard deviation of the transducer noise (N).
         force_offset_N: Transducer offset before ``ZERO`` (N).
         force_drift_N_per_s: Linear transducer drift (N/s of rig time).

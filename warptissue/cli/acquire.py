@@ -100,8 +100,7 @@ def _positive(value: float, name: str) -> float:
 
 def run_acquire(args: argparse.Namespace) -> int:
     """Handler of ``warptissue acquire``."""
-    from warptissue.acquisition import RampHold, Recorder, RigClient, Sine
-    from warptissue.acquisition.recorder import load_force_calibration
+    from warptissue.acquisition import ForceCalibration, RampHold, Recorder, RigClient, Sine
 
     if args.protocol == "ramp-hold":
         test: RampHold | Sine = RampHold(
@@ -124,7 +123,7 @@ def run_acquire(args: argparse.Namespace) -> int:
         if not sep or not key:
             raise InputError("--meta takes KEY=VALUE", value=item)
         metadata[key] = value
-    calibration = None if args.calibration is None else load_force_calibration(args.calibration)
+    calibration = None if args.calibration is None else ForceCalibration.load(args.calibration)
     if calibration is not None:
         metadata["calibration_file"] = args.calibration
     start_m = None if args.start is None else _quantity(args, "start", "length")
@@ -202,12 +201,8 @@ def _tissue(args: argparse.Namespace):
         if args.force_curve is None:
             raise InputError("--tissue curve needs --force-curve CSV")
         return ForceCurveTissue.from_csv(args.force_curve)
-    try:
-        from warptissue.viscoelastic import StandardLinearSolid
-    except ImportError:
-        raise InputError(
-            "--tissue sls needs warptissue.viscoelastic (not installed); use --tissue curve"
-        ) from None
+    from warptissue.viscoelastic import StandardLinearSolid
+
     return StandardLinearSolid(
         parse_quantity(args.instantaneous_stiffness, "stiffness", name="--instantaneous-stiffness"),
         parse_quantity(args.equilibrium_stiffness, "stiffness", name="--equilibrium-stiffness"),

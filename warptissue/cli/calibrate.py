@@ -1,4 +1,4 @@
-"""``warptissue calibrate-sensor``: fit a force-sensor correction (seed 002, WCFM_SVM).
+"""``warptissue calibrate-sensor``: fit a force-sensor correction (Tong et al., WCFM_SVM).
 
 Reads calibration readings (``sample,force_N,signal_V``; ``sample`` groups repeated readings
 of one applied force), holds out ``--test-samples`` samples (the paper: 70 / 6), fits the
@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add ``warptissue calibrate-sensor``."""
     parser = subparsers.add_parser(
         "calibrate-sensor",
-        help="fit a force-sensor correction (WCFM_SVM and the baselines of seed 002)",
+        help="fit a force-sensor correction (WCFM_SVM and the baselines of Tong et al.)",
         description=__doc__.split("\n\n", 1)[1],
     )
     parser.add_argument("data", type=Path, help="CSV: [sample,]force_N,signal_V")
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
             f"{name:<11} {metrics['mae_N']:9.4f} {metrics['mse_paper_N']:9.4f} "
             f"{metrics['mape_percent']:9.4f}"
         )
-    print("MSE* = 1/n sqrt(sum e^2), as seed 002 defines it")
+    print("MSE* = 1/n sqrt(sum e^2), as Tong et al. define it")
     print(
         f"wrote {args.out / 'calibration.json'} ({args.model}, test samples: "
         f"{len(np.unique(test.sample))})"
@@ -115,7 +115,7 @@ def _plot(path: Path, test, calibrations) -> None:
         )
     axis.set_xlabel("test sample (by increasing force)")
     axis.set_ylabel("absolute error (N)")
-    axis.set_title("Force correction on held-out samples (seed 002, Figure 3)")
+    axis.set_title("Force correction on held-out samples (Tong et al., Figure 3)")
     axis.legend(ncol=2, fontsize=8)
     with atomic_path(path) as temporary:
         figure.savefig(temporary, dpi=120)
