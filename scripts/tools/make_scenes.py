@@ -7,7 +7,8 @@ and its ``NAME.asset.usda``), validated with :func:`warptissue.usd.validate_stag
 coarse so that each file stays well under 1 MB. The scenes are generated, not hand-edited:
 change this script and re-run it.
 
-Material values come from the seed papers where they give them; where they do not (bulk
+Material values come from the papers the methods follow (docs/references.md) where they give
+them; where they do not (bulk
 moduli, densities, the pillow's modulus) the value is an assumption and the scene's
 provenance says so.
 """
@@ -21,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from warptissue.mesh import TetMesh, block_mesh, graded_coordinates
-from warptissue.usd import Indenter, validate_stage, write_simulation_usd
+from warptissue.indenter import Indenter
+from warptissue.mesh import TetMesh, block_mesh, graded_coordinates, tetrahedralize_surface
+from warptissue.usd import validate_stage, write_simulation_usd
 
 NEARLY_INCOMPRESSIBLE_NU = 0.49
-"""Poisson's ratio assumed where a seed gives no bulk modulus."""
+"""Poisson's ratio assumed where a paper gives no bulk modulus."""
 
 
 def bulk_modulus_for(shear_modulus_Pa: float, poissons_ratio: float) -> float:
@@ -72,7 +74,7 @@ def specimen_sets(mesh: TetMesh, *, probe_radius_m: float | None = None) -> TetM
 
 
 def liver_material() -> dict:
-    """Seed 000: C10 = 287.5 Pa (Table 2), Prony experiment 1 (Table 1)."""
+    """Ahn & Kim: C10 = 287.5 Pa (Table 2), Prony experiment 1 (Table 1)."""
     c10 = 287.5
     return {
         "model": "neo_hookean",
@@ -84,13 +86,13 @@ def liver_material() -> dict:
 
 
 LIVER_PROVENANCE = {
-    "source": "seed 000 (Ahn & Kim): C10 Table 2 mean; Prony g, tau Table 1 experiment 1",
+    "source": "Ahn & Kim: C10 Table 2 mean; Prony g, tau Table 1 experiment 1",
     "assumptions": "bulk modulus from nu = 0.49; density 1060 kg/m^3",
 }
 
 
 def beef_liver_material() -> dict:
-    """Seed 004 linear Wiechert (Table I) as a continuum on the 20 x 20 x 20 mm cube.
+    """Takacs et al.'s linear Wiechert (Table I) as a continuum on the 20 x 20 x 20 mm cube.
 
     A spring k [N/m] on a cube of area A and height L acts as Young's modulus k L / A;
     the Wiechert relaxation G(t) / G0 = (k0 + k1 e^(-t/tau1) + k2 e^(-t/tau2)) / (k0 + k1 + k2),
@@ -109,7 +111,7 @@ def beef_liver_material() -> dict:
 
 
 BEEF_PROVENANCE = {
-    "source": "seed 004 (Takacs et al.) Table I linear Wiechert, mapped to E = k L / A",
+    "source": "Takacs et al.: Table I linear Wiechert, mapped to E = k L / A",
     "assumptions": "nu = 0.49; density 1060 kg/m^3; small-strain continuum equivalent",
 }
 
@@ -154,32 +156,8 @@ def organ_surface(*, theta_count: int = 18, phi_count: int = 36) -> tuple[np.nda
     return vertices, np.asarray(triangles, dtype=np.int32)
 
 
-def tetrahedralize(
-    vertices_m: np.ndarray, triangles: np.ndarray, *, max_volume_m3: float
-) -> TetMesh:
-    """Tetrahedralize a closed surface with TetGen (PyPI ``tetgen``), boundary preserved.
-
-    A stand-in for ``warptissue.mesh.tetrahedralize_surface`` (branch mesh), which this
-    branch does not have yet.
-    """
-    import tetgen
-
-    generator = tetgen.TetGen(
-        np.asarray(vertices_m, dtype=np.float64), np.asarray(triangles, dtype=np.int32)
-    )
-    nodes, tets, *_ = generator.tetrahedralize(
-        quality=True, minratio=1.5, maxvolume=max_volume_m3, nobisect=True, quiet=True
-    )
-    tets = np.asarray(tets, dtype=np.int32)[:, :4].copy()
-    mesh = TetMesh(points=nodes, tets=tets)
-    flipped = mesh.volumes() < 0
-    tets[flipped] = tets[flipped][:, [0, 2, 1, 3]]
-    surface = np.unique(np.asarray(triangles).ravel())
-    return TetMesh(points=nodes, tets=tets, node_sets={"surface": surface.astype(np.int32)})
-
-
 def liver_slab(out: Path) -> Path:
-    """Seeds 000/001: a porcine liver slab under a 2 mm diameter flat probe."""
+    """Ahn & Kim, Kim et al.: a porcine liver slab under a 2 mm diameter flat probe."""
     mesh = block_mesh(
         centred_coordinates(0.040, 4, ratio=4.0, core_m=1.0e-3),
         centred_coordinates(0.040, 4, ratio=4.0, core_m=1.0e-3),
@@ -206,14 +184,16 @@ def _brain_material() -> dict:
 
 
 BRAIN_PROVENANCE = {
-    "source": "seed 003: reduced polynomial N = 2, C10 = 600.553 Pa, C20 = 4097.45 Pa",
+    "source": "the needle-indentation study: reduced polynomial N = 2, C10 = 600.553 Pa, "
+    "C20 = 4097.45 Pa",
     "assumptions": "bulk modulus from nu = 0.49; density 1000 kg/m^3",
     "specimen": "70 x 80 x 80 mm phantom block (box mold), full model",
 }
 
 
 def brain_phantom(out: Path, *, indentation: bool) -> Path:
-    """Seed 003: the 70 x 80 x 80 mm phantom, plate compression or 5 mm circle indentation."""
+    """The needle-indentation study's 70 x 80 x 80 mm phantom: plate compression, or 5 mm
+    circle indentation."""
     if indentation:
         x = centred_coordinates(0.070, 4, ratio=4.0, core_m=2.5e-3)
         y = centred_coordinates(0.080, 4, ratio=4.0, core_m=2.5e-3)
@@ -247,7 +227,7 @@ def brain_phantom(out: Path, *, indentation: bool) -> Path:
 
 
 def memory_pillow(out: Path) -> Path:
-    """Seed 002: the 50 x 30 x 10 cm memory pillow, hexahedra split into five tets.
+    """Tong et al.: the 50 x 30 x 10 cm memory pillow, hexahedra split into five tets.
 
     The 23 x 13 surface grid matches the paper's marker grid; the force acts at marker 150
     (row 7, column 12), the centre of the top face.
@@ -263,9 +243,9 @@ def memory_pillow(out: Path) -> Path:
         specimen_sets(mesh),
         material={"model": "linear_elastic", "youngs_modulus_Pa": 20.0e3, "poissons_ratio": 0.3},
         provenance={
-            "source": "seed 002 (Tong et al.): geometry, 23 x 13 marker grid, five-tet split",
+            "source": "Tong et al.: geometry, 23 x 13 marker grid, five-tet split",
             "assumptions": "E = 20 kPa, nu = 0.3, density 50 kg/m^3 are placeholders "
-            "(polyurethane foam), not values from the seed; the probe radius (5 mm) too",
+            "(polyurethane foam), not values from the paper; the probe radius (5 mm) too",
         },
         density_kg_per_m3=50.0,
         indenter=Indenter("flat_punch", radius_m=5.0e-3),
@@ -273,7 +253,7 @@ def memory_pillow(out: Path) -> Path:
 
 
 def beef_liver_cube(out: Path) -> Path:
-    """Seed 004: a 20 mm beef liver cube under uniform compression."""
+    """Takacs et al.: a 20 mm beef liver cube under uniform compression."""
     grid = np.linspace(-0.01, 0.01, 5)
     mesh = specimen_sets(block_mesh(grid, grid, np.linspace(0, 0.02, 5)))
     return write_simulation_usd(
@@ -287,7 +267,7 @@ def beef_liver_cube(out: Path) -> Path:
 
 
 def beef_liver_strip(out: Path) -> Path:
-    """Seed 004: a 25 x 25 x 200 mm strip under a line indenter across its long axis."""
+    """Takacs et al.: a 25 x 25 x 200 mm strip under a line indenter across its long axis."""
     mesh = block_mesh(
         centred_coordinates(0.200, 8, ratio=6.0),
         np.linspace(-0.0125, 0.0125, 5),
@@ -309,7 +289,7 @@ def beef_liver_strip(out: Path) -> Path:
 def liver_organ(out: Path) -> Path:
     """An organ-shaped liver volume: procedural surface, TetGen volume mesh."""
     vertices, triangles = organ_surface()
-    mesh = tetrahedralize(vertices, triangles, max_volume_m3=2.0e-6)
+    mesh = tetrahedralize_surface(vertices, triangles, max_volume_m3=2.0e-6)
     near_axis = np.hypot(mesh.points[:, 0], mesh.points[:, 1]) < 0.01
     top_z = float(mesh.points[near_axis, 2].max())
     return write_simulation_usd(
@@ -319,7 +299,7 @@ def liver_organ(out: Path) -> Path:
         provenance={
             **LIVER_PROVENANCE,
             "geometry": "procedural: deformed superellipsoid (scripts/tools/make_scenes.py "
-            "organ_surface), tetrahedralized with TetGen (PyPI tetgen)",
+            "organ_surface), tetrahedralized with TetGen (warptissue.mesh.tetrahedralize_surface)",
         },
         density_kg_per_m3=1060.0,
         indenter=Indenter("flat_punch", radius_m=1.0e-3, z_m=top_z),
