@@ -7,7 +7,10 @@ Gaussian noise, refits the 8 parameters jointly to the near-step and 20 mm/min c
 perturbed start (LM through warptissue.fit, then Nelder-Mead on the seed's cost, the sum of
 the RMS errors), and predicts the 100 mm/min curve.
 
-Run: python scripts/examples/wiechert_table1_refit.py [--noise-N 0.005] [--seed 0]
+Run: python scripts/examples/wiechert_table1_refit.py [--noise-N 0.005] [--seed 0] [--quick]
+
+``--quick`` stops after the LM stage (a few seconds; Nelder-Mead takes about two minutes on a
+2-core CPU).
 """
 
 from __future__ import annotations
@@ -36,13 +39,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--noise-N", type=float, default=0.005)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--quick", action="store_true", help="LM only, no Nelder-Mead stage")
     args = parser.parse_args()
     rng = np.random.default_rng(args.seed)
     near_step, _ = record(750, 60.0, 4e-3, args.noise_N, rng)
     slow, _ = record(20, 0.0, 3.6e-3, args.noise_N, rng)
     fast, fast_clean = record(100, 0.0, 3.6e-3, args.noise_N, rng)
     start = TABLE_I.to_vector() * [1.3, 0.7, 1.5, 0.7, 1.4, 0.8, 1.15, 0.5]
-    for optimizer, p0 in (("lm", start), ("nelder-mead", None)):
+    stages = (("lm", start),) if args.quick else (("lm", start), ("nelder-mead", None))
+    for optimizer, p0 in stages:
         began = time.perf_counter()
         result = fit_wiechert_joint(
             [near_step, slow],
