@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from warptissue.cli import main
-from warptissue.uniaxial import HomogeneousTest, ReducedPolynomial
+from warptissue.fit.hyperelastic import HomogeneousTest
+from warptissue.materials import ReducedPolynomial
 
 AREA_M2, HEIGHT_M = 0.070 * 0.080, 0.080
 
@@ -88,7 +89,6 @@ def test_missing_column_names_the_file(tmp_path, capsys):
 
 
 def test_usd_writes_the_best_model_as_a_material_layer(compression_csv, tmp_path, capsys):
-    from warptissue.materials import ReducedPolynomial as ReducedPolynomialMaterial
     from warptissue.usd import read_material_usd, validate_stage
 
     out, usd = tmp_path / "out", tmp_path / "tissue.usda"
@@ -108,7 +108,7 @@ def test_usd_writes_the_best_model_as_a_material_layer(compression_csv, tmp_path
     c20 = fit["parameters"]["C20_Pa"]["value"]
     back = read_material_usd(usd)
     # The best model (by R^2) with K = 500 mu0 = 500 * 2 C10, values exact to float64.
-    assert ReducedPolynomialMaterial((c10, c20), 500.0 * 2.0 * c10).to_dict() == back["material"]
+    assert ReducedPolynomial((c10, c20), 500.0 * 2.0 * c10).to_dict() == back["material"]
     assert back["material"]["C10_Pa"] == c10
     assert back["material"]["C20_Pa"] == c20
 

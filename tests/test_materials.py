@@ -1,5 +1,6 @@
 """Materials: derivatives by finite differences, stress-free reference, small-strain limit,
-frame invariance, and serialization."""
+frame invariance, serialization, fit parameters, and the homogeneous closed forms (against
+numerical derivatives of the energy and the needle-indentation study's printed Eq. 3)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ import pytest
 
 from warptissue.errors import InputError
 from warptissue.materials import (
+    HOMOGENEOUS_MODES,
     CompressibleNeoHookean,
+    HyperelasticMaterial,
     LinearElastic,
     MooneyRivlin,
     NeoHookean,
@@ -17,6 +20,7 @@ from warptissue.materials import (
     Yeoh,
     evaluate_material,
     material_from_dict,
+    principal_stretches,
 )
 
 # Bulk moduli of about 10 shear moduli, so that the deviatoric parts are not masked by U(J).
@@ -143,7 +147,7 @@ def test_dictionary_round_trip_and_parameter_vector(name):
     data = material.to_dict()
     assert data["model"] == material.model_name
     assert material_from_dict(data) == material
-    vector = material.parameter_vector()
+    vector = material.parameter_vector
     assert len(vector) == len(material.parameter_names)
     assert material.with_parameters(vector) == material
 
@@ -203,3 +207,172 @@ def test_ogden_term_counts_must_match():
 def test_evaluate_rejects_inverted_gradients():
     with pytest.raises(InputError, match="det F"):
         evaluate_material(NeoHookean(1.0, 10.0), -np.eye(3), device="cpu")
+
+
+# Homogeneous closed forms (incompressible) of the hyperelastic models.
+CLOSED_FORMS = {
+    name: material.with_bulk_modulus(None)
+    for name, material in MATERIALS.items()
+    if isinstance(material, HyperelasticMaterial)
+}
+LOADED_DIRECTIONS = {"uniaxial": 1.0, "equibiaxial": 2.0, "planar": 1.0}
+STRETCHES = np.array([0.45, 0.7, 0.93, 1.08, 1.4, 2.2])
+
+
+def energy_along_path(model, stretch, mode):
+    return model.energy_density_Pa(principal_stretches(np.atleast_1d(stretch), mode))
+
+
+@pytest.mark.parametrize("mode", HOMOGENEOUS_MODES)
+@pytest.mark.parametrize("name", sorted(CLOSED_FORMS))
+def test_nominal_stress_is_the_derivative_of_the_energy(name, mode):
+    model = CLOSED_FORMS[name]
+    h = 1e-5 * STRETCHES
+    numeric = (
+        energy_along_path(model, STRETCHES + h, mode)
+        - energy_along_path(model, STRETCHES - h, mode)
+    ) / (2.0 * h * LOADED_DIRECTIONS[mode])
+    analytic = model.nominal_stress_Pa(STRETCHES, mode)
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-6)
+
+
+def test_uniaxial_stress_matches_the_printed_equation_3():
+    lam = STRETCHES
+    i1 = lam**2 + 2.0 / lam
+    c10, c20, c01, mu, alpha = 600.553, 4097.45, -250.0, 800.0, -4.5
+    printed = {
+        "nh": 2.0 * c10 * (lam - lam**-2),
+        "rp2": 2.0 * (lam - lam**-2) * (c10 + 2.0 * c20 * (i1 - 3.0)),
+        "mr": 2.0 * (1.0 - lam**-3) * (c10 * lam + c01),
+        "ogden": 2.0 * mu / alpha * (lam ** (alpha - 1.0) - lam ** (-0.5 * alpha - 1.0)),
+    }
+    ours = {
+        "nh": NeoHookean(c10),
+        "rp2": ReducedPolynomial((c10, c20)),
+        "mr": MooneyRivlin(c10, c01),
+        "ogden": Ogden((mu,), (alpha,)),
+    }
+    for key, model in ours.items():
+        np.testing.assert_allclose(
+            model.nominal_stress_Pa(lam, "uniaxial"), printed[key], rtol=1e-12
+        )
+
+
+@pytest.mark.parametrize("mode", HOMOGENEOUS_MODES)
+@pytest.mark.parametrize("name", sorted(CLOSED_FORMS))
+def test_parameter_gradient_matches_finite_differences(name, mode):
+    model = CLOSED_FORMS[name]
+    p = model.parameter_vector
+    analytic = model.nominal_stress_gradient(STRETCHES, mode)
+    scale = np.abs(model.nominal_stress_Pa(STRETCHES, mode)).max()
+    for k in range(p.size):
+        h = 1e-6 * max(abs(p[k]), 1.0)
+        up, down = p.copy(), p.copy()
+        up[k] += h
+        down[k] -= h
+        numeric = (
+            model.with_parameters(up).nominal_stress_Pa(STRETCHES, mode)
+            - model.with_parameters(down).nominal_stress_Pa(STRETCHES, mode)
+        ) / (2.0 * h)
+        # rounding of the difference quotient: a few eps * |S| / h
+        rounding = 10.0 * np.finfo(np.float64).eps * scale / h
+        np.testing.assert_allclose(analytic[:, k], numeric, rtol=1e-6, atol=max(1e-9, rounding))
+
+
+def test_with_bulk_modulus_makes_the_fe_material():
+    material = MooneyRivlin(100.0, 50.0).with_bulk_modulus(1e5)
+    assert material == MooneyRivlin(100.0, 50.0, 1e5)
+    assert material.C10_Pa == 100.0 and material.bulk_modulus_Pa == 1e5
+
+
+def test_to_dict_uses_the_flat_material_keys():
+    assert ReducedPolynomial((600.553, 4097.45)).to_dict() == {
+        "model": "reduced_polynomial",
+        "C10_Pa": 600.553,
+        "C20_Pa": 4097.45,
+    }
+    assert Ogden((10.0,), (-2.0,)).to_dict() == {"model": "ogden", "mu1_Pa": 10.0, "alpha1": -2.0}
+    assert MooneyRivlin(1.0, 2.0).to_dict() == {
+        "model": "mooney_rivlin",
+        "C10_Pa": 1.0,
+        "C01_Pa": 2.0,
+    }
+
+
+@pytest.mark.parametrize("mode", HOMOGENEOUS_MODES)
+@pytest.mark.parametrize("name", sorted(CLOSED_FORMS))
+def test_closed_forms_match_the_fe_kernel_at_isochoric_states(name, mode):
+    """The same object in the Warp kernel: at J = 1 the volumetric term is stress free, and the
+    nominal stress of the incompressible test is P_11 - P_33 l_3 / l_1 (the pressure that
+    frees face 3; face 2 is free or held as the mode says)."""
+    material = MATERIALS[name]
+    stretches = principal_stretches(STRETCHES, mode)
+    result = evaluate_material(
+        material, np.stack([np.diag(s) for s in stretches]), device="cpu"
+    ).first_piola_Pa
+    kernel = result[:, 0, 0] - result[:, 2, 2] * stretches[:, 2] / stretches[:, 0]
+    closed_form = CLOSED_FORMS[name].nominal_stress_Pa(STRETCHES, mode)
+    np.testing.assert_allclose(kernel, closed_form, rtol=1e-9, atol=1e-9 * np.abs(kernel).max())
+
+
+def test_incompressible_models_have_no_bulk_modulus_and_the_fe_refuses_them():
+    model = NeoHookean(150.0)
+    assert model.incompressible and model.D1_per_Pa == 0.0
+    assert model.to_dict() == {"model": "neo_hookean", "C10_Pa": 150.0}
+    assert model.small_strain_equivalent() == (900.0, 0.5)
+    with pytest.raises(InputError, match="bulk modulus") as error:
+        evaluate_material(model, np.eye(3), device="cpu")
+    assert error.value.column == "bulk_modulus_Pa"
+    assert model.with_bulk_modulus(3000.0) == MATERIALS["neo_hookean"]
+
+
+def test_a_model_with_a_bulk_modulus_needs_a_positive_initial_shear_modulus():
+    """Fits explore unstable trial points (incompressible); the FE material must be stable at
+    rest."""
+    assert NeoHookean(-10.0).initial_shear_modulus_Pa == -20.0
+    assert MooneyRivlin(-200.0, 100.0).C10_Pa == -200.0
+    with pytest.raises(InputError) as error:
+        NeoHookean(-10.0).with_bulk_modulus(1e4)
+    assert error.value.column == "C10_Pa"
+    with pytest.raises(InputError, match="C10_Pa \\+ C01_Pa"):
+        MooneyRivlin(-200.0, 100.0, 1e4)
+    with pytest.raises(InputError, match="sum of mu_i"):
+        Ogden((-5.0,), (2.0,), 1e4)
+
+
+def test_fit_parameters_exclude_the_bulk_modulus_and_keep_it():
+    material = MATERIALS["ogden_3"]
+    assert material.parameter_names == (
+        "mu1_Pa", "alpha1", "mu2_Pa", "alpha2", "mu3_Pa", "alpha3"
+    )  # fmt: skip
+    assert material.parameter_units == ("Pa", "", "Pa", "", "Pa", "")
+    changed = material.with_parameters(2.0 * material.parameter_vector)
+    assert changed.bulk_modulus_Pa == material.bulk_modulus_Pa
+    assert changed.mu_Pa == (500.0, -60.0, 10.0) and changed.alpha == (6.0, -4.0, 16.0)
+    lower, upper = material.parameter_bounds
+    assert np.all(lower == -np.inf) and np.all(upper == np.inf)
+    lower, upper = MATERIALS["linear_elastic"].parameter_bounds
+    np.testing.assert_array_equal(lower, [0.0, -1.0])
+    np.testing.assert_array_equal(upper, [np.inf, 0.5])
+    assert MATERIALS["compressible_neo_hookean"].parameter_names == (
+        "shear_modulus_Pa", "bulk_modulus_Pa"
+    )  # fmt: skip
+    with pytest.raises(InputError, match="expected 6 parameters"):
+        material.with_parameters([1.0, 2.0])
+
+
+def test_start_parameters_solve_the_linear_models_exactly():
+    truth = ReducedPolynomial((600.553, 4097.45))
+    stretch = np.linspace(0.85, 1.0, 20)
+
+    def design(model):
+        return model.nominal_stress_gradient(stretch, "uniaxial")
+
+    data = truth.nominal_stress_Pa(stretch, "uniaxial")
+    start = ReducedPolynomial((1.0, 1.0)).start_parameters(design, data)
+    np.testing.assert_allclose(start, truth.parameter_vector, rtol=1e-9)
+    ogden = Ogden((300.0,), (5.0,))
+    start = Ogden((1.0,), (2.0,)).start_parameters(
+        design, ogden.nominal_stress_Pa(stretch, "uniaxial")
+    )
+    np.testing.assert_allclose(start, [300.0, 5.0], rtol=1e-9)  # alpha = 5 is on the grid

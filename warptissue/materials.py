@@ -1,32 +1,74 @@
-"""Hyperelastic and linear elastic materials: parameters, validation, serialization.
+"""Constitutive models: one class per model for the FE, the homogeneous tests and the fits.
 
 Each model is a small frozen dataclass in SI units with Abaqus conventions (C10, C01, Ci0,
-mu_i, alpha_i, D1 = 2/K). ``material.device_params()`` packs it into the
-``warptissue.kernels.materials.MaterialParams`` struct that the FE kernels read, and
-:func:`evaluate_material` evaluates energy, stress and tangent for a batch of deformation
-gradients on any Warp device.
+mu_i, alpha_i, D1 = 2/K), in the manner of FElupe's ``ConstitutiveMaterial``: the same object
+
+- runs in the FE: ``material.device_params()`` packs it into the
+  ``warptissue.kernels.materials.MaterialParams`` struct that the FE kernels read, and
+  :func:`evaluate_material` evaluates energy, stress and tangent for a batch of deformation
+  gradients on any Warp device;
+- gives the incompressible closed forms of the homogeneous tests of a materials lab (the four
+  :class:`HyperelasticMaterial` models): nominal stress in uniaxial, equibiaxial and planar
+  tension or compression, its gradient with respect to the parameters, the energy, and the
+  log-strain Hessian of the Drucker stability check;
+- is fitted: ``parameter_names`` (units in the names), ``parameter_units``,
+  ``parameter_vector`` / ``with_parameters`` (vector <-> model), ``parameter_bounds`` and, for
+  the hyperelastic models, ``start_parameters`` (least-squares start values). The fitting and
+  the test records are in :mod:`warptissue.fit.hyperelastic`;
+- is serialized: ``to_dict()`` / :func:`material_from_dict` with flat keys (``C10_Pa``,
+  ``mu1_Pa``, ``alpha1``, ``bulk_modulus_Pa``, ...), as study files and USD layers store them.
+
+The four Abaqus hyperelastic models (:class:`NeoHookean`, :class:`MooneyRivlin`,
+:class:`ReducedPolynomial` with :func:`Yeoh`, :class:`Ogden`) take an optional bulk modulus:
+without one (``bulk_modulus_Pa=None``, D1 = 0 as in Abaqus) the model is incompressible, which
+is what the homogeneous closed forms and their fits use; the FE needs a bulk modulus
+(``with_bulk_modulus``). The volumetric term is not a fit parameter of these models: their
+``parameter_names`` are the isochoric parameters only, and ``with_parameters`` keeps the bulk
+modulus. A model with a bulk modulus must have a positive initial shear modulus (the FE
+tangent at rest is indefinite otherwise); an incompressible one may have any, as the trial
+points of a fit do (the Drucker check in :mod:`warptissue.fit.hyperelastic` reports it).
 
 Notes:
-    Energies (seed 003, Eq. 2; Abaqus Theory Manual 4.6.1), with isochoric invariants
-    ``I1b = J^(-2/3) tr C``, ``I2b = J^(-4/3) (tr^2 C - tr C^2) / 2`` and
+    Energies (the needle-indentation study, Eq. 2; Abaqus Theory Manual 4.6.1), with
+    isochoric invariants ``I1b = J^(-2/3) tr C``, ``I2b = J^(-4/3) (tr^2 C - tr C^2) / 2`` and
     ``U(J) = (J - 1)^2 / D1``:
 
     - ``NeoHookean``: ``W = C10 (I1b - 3) + U``, ``mu0 = 2 C10``.
     - ``MooneyRivlin``: ``W = C10 (I1b - 3) + C01 (I2b - 3) + U``, ``mu0 = 2 (C10 + C01)``.
     - ``ReducedPolynomial``: ``W = sum_i Ci0 (I1b - 3)^i + U``, ``mu0 = 2 C10``; Yeoh is N = 3.
-      Seed 003 prints higher-order volumetric terms ``K_i/2 (J - 1)^(2i)``; only ``D1`` is used
-      here, as for nearly incompressible fits in Abaqus.
+      The study prints higher-order volumetric terms ``K_i/2 (J - 1)^(2i)``; only ``D1`` is
+      used here, as for nearly incompressible fits in Abaqus.
     - ``Ogden``: ``W = sum_i 2 mu_i / alpha_i^2 (l1b^alpha_i + l2b^alpha_i + l3b^alpha_i - 3)
       + U``, ``mu0 = sum_i mu_i``.
     - ``CompressibleNeoHookean``: ``W = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2`` with
       ``lambda = K - 2 mu / 3``.
     - ``LinearElastic``: small strain, ``W = mu eps:eps + lambda/2 (tr eps)^2``.
+
+    Homogeneous tests (incompressible, principal stretches l1, l2, l3 with l1 l2 l3 = 1):
+    uniaxial (l, l^-1/2, l^-1/2), equibiaxial (l, l, l^-2), planar (l, 1, l^-1). Invariant
+    models W(I1, I2), with W1 = dW/dI1 and W2 = dW/dI2, give the nominal stress (force per
+    reference area) along the loading direction (free lateral faces)::
+
+        uniaxial     S = 2 (l - l^-2) (W1 + W2 / l) = 2 (1 - l^-3) (l W1 + W2)
+        equibiaxial  S = 2 (l - l^-5) (W1 + l^2 W2)
+        planar       S = 2 (l - l^-3) (W1 + W2)
+
+    The study's Eq. 3 (uniaxial) agrees for neo-Hookean, RP2 and Mooney-Rivlin. Ogden gives::
+
+        S = sum 2 mu_i / alpha_i (l^(a_i - 1) - l^(-k a_i - 1)),  k = 1/2, 2, 1
+
+    for uniaxial, equibiaxial and planar; k = 1/2 is the study's Eq. 3. Each formula is the
+    derivative of the energy along the path: S = dW/dl / (number of loaded directions), which
+    the tests check by numerical differentiation. Stresses are signed (tension positive).
 """
 
 from __future__ import annotations
 
+import abc
+import dataclasses
+import itertools
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any, ClassVar
 
@@ -37,7 +79,9 @@ from warptissue.device import resolve_device
 from warptissue.errors import InputError
 
 __all__ = [
+    "HOMOGENEOUS_MODES",
     "CompressibleNeoHookean",
+    "HyperelasticMaterial",
     "LinearElastic",
     "Material",
     "MaterialEvaluation",
@@ -48,10 +92,15 @@ __all__ = [
     "Yeoh",
     "evaluate_material",
     "material_from_dict",
+    "principal_log_strains",
+    "principal_stretches",
 ]
 
 MAX_TERMS = 6
 """Most polynomial (Ci0) or Ogden terms a material may have."""
+
+HOMOGENEOUS_MODES: tuple[str, ...] = ("uniaxial", "equibiaxial", "planar")
+"""Deformation modes of the homogeneous closed forms."""
 
 
 def _check_finite(name: str, value: float) -> float:
@@ -80,6 +129,40 @@ def _check_terms(name: str, values: Any) -> tuple[float, ...]:
     return tuple(_check_finite(f"{name}[{i}]", v) for i, v in enumerate(items))
 
 
+def _check_mode(mode: str) -> str:
+    if mode not in HOMOGENEOUS_MODES:
+        raise InputError("mode must be uniaxial, equibiaxial or planar", value=mode)
+    return mode
+
+
+def principal_log_strains(stretch: np.ndarray, mode: str) -> np.ndarray:
+    """The three principal logarithmic strains of an incompressible homogeneous test.
+
+    Args:
+        stretch: Stretch of the loading direction, shape (m,), > 0.
+        mode: "uniaxial", "equibiaxial" or "planar".
+
+    Returns:
+        Principal log strains, shape (m, 3), summing to zero.
+    """
+    e = np.log(np.asarray(stretch, dtype=np.float64))
+    e2 = {"uniaxial": -0.5 * e, "equibiaxial": e, "planar": np.zeros_like(e)}[_check_mode(mode)]
+    return np.stack([e, e2, -e - e2], axis=-1)
+
+
+def principal_stretches(stretch: np.ndarray, mode: str) -> np.ndarray:
+    """The three principal stretches of an incompressible homogeneous test.
+
+    Args:
+        stretch: Stretch of the loading direction, shape (m,), > 0.
+        mode: "uniaxial", "equibiaxial" or "planar".
+
+    Returns:
+        Principal stretches, shape (m, 3), with product 1.
+    """
+    return np.exp(principal_log_strains(stretch, mode))
+
+
 class Material:
     """Common behaviour of the material dataclasses.
 
@@ -88,6 +171,8 @@ class Material:
     """
 
     model_name: ClassVar[str]
+    _bounds: ClassVar[Mapping[str, tuple[float, float]]] = {}
+    _fixed_keys: ClassVar[tuple[str, ...]] = ()
 
     @property
     def initial_shear_modulus_Pa(self) -> float:
@@ -96,21 +181,27 @@ class Material:
 
     @property
     def bulk_modulus(self) -> float:
-        """Bulk modulus at zero strain, Pa.
+        """Bulk modulus at zero strain, Pa; ``inf`` for an incompressible model.
 
         The ``bulk_modulus_Pa`` field of the models that take one; a model without that field
         (LinearElastic) overrides this property.
         """
-        return self.bulk_modulus_Pa
+        value = self.bulk_modulus_Pa
+        return math.inf if value is None else value
 
     @property
     def D1_per_Pa(self) -> float:  # noqa: N802 (Abaqus name)
-        """Abaqus volumetric compliance D1 = 2 / K, 1/Pa."""
+        """Abaqus volumetric compliance D1 = 2 / K, 1/Pa (0 when incompressible)."""
         return 2.0 / self.bulk_modulus
 
     def small_strain_equivalent(self) -> tuple[float, float]:
-        """Young's modulus (Pa) and Poisson's ratio of the linearized material."""
+        """Young's modulus (Pa) and Poisson's ratio of the linearized material.
+
+        An incompressible model gives ``(3 mu0, 0.5)``.
+        """
         mu, k = self.initial_shear_modulus_Pa, self.bulk_modulus
+        if math.isinf(k):
+            return 3.0 * mu, 0.5
         return 9.0 * k * mu / (3.0 * k + mu), (3.0 * k - 2.0 * mu) / (2.0 * (3.0 * k + mu))
 
     def _flat_parameters(self) -> dict[str, float]:
@@ -122,29 +213,68 @@ class Material:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
-        """Names of the scalar parameters, with units (``C10_Pa``, ``alpha1``, ...)."""
-        return tuple(self._flat_parameters())
+        """Names of the fit parameters, with units (``C10_Pa``, ``alpha1``, ...).
 
+        Every scalar parameter of ``to_dict`` except the bulk modulus of the hyperelastic
+        models (held fixed by :meth:`with_parameters`).
+        """
+        return tuple(key for key in self._flat_parameters() if key not in self._fixed_keys)
+
+    @property
+    def parameter_units(self) -> tuple[str, ...]:
+        """SI unit of each entry of :attr:`parameter_vector` ("Pa" or "" for dimensionless)."""
+        return tuple("Pa" if name.endswith("_Pa") else "" for name in self.parameter_names)
+
+    @property
     def parameter_vector(self) -> np.ndarray:
-        """The scalar parameters in ``parameter_names`` order, shape (n,)."""
-        return np.array(list(self._flat_parameters().values()), dtype=np.float64)
+        """The fit parameters in :attr:`parameter_names` order, shape (n,)."""
+        flat = self._flat_parameters()
+        return np.array([flat[name] for name in self.parameter_names], dtype=np.float64)
+
+    @property
+    def parameter_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) bounds of the fit parameters, each shape (n,); +-inf where free.
+
+        The box of admissible values; constraints that are not a box (alpha_i != 0,
+        K > 2 mu / 3) are checked on construction.
+        """
+        box = [self._bounds.get(name, (-math.inf, math.inf)) for name in self.parameter_names]
+        return (
+            np.array([low for low, _ in box], dtype=np.float64),
+            np.array([high for _, high in box], dtype=np.float64),
+        )
 
     def with_parameters(self, values: np.ndarray) -> Material:
-        """A copy with new scalar parameters (``parameter_names`` order); validated."""
+        """A copy with new fit parameters (:attr:`parameter_names` order); validated."""
         values = np.asarray(values, dtype=np.float64).ravel()
         names = self.parameter_names
         if values.shape != (len(names),):
             raise InputError(f"expected {len(names)} parameters {names}", value=values.tolist())
-        return self._from_flat(dict(zip(names, values.tolist(), strict=True)))
+        return self._from_flat(
+            {**self._flat_parameters(), **dict(zip(names, values.tolist(), strict=True))}
+        )
 
     def to_dict(self) -> dict[str, Any]:
-        """``{"model": name, <parameter>_<unit>: value, ...}``, as read by material_from_dict."""
+        """``{"model": name, <parameter>_<unit>: value, ...}``, as read by material_from_dict.
+
+        An incompressible model has no ``bulk_modulus_Pa`` key.
+        """
         return {"model": self.model_name, **self._flat_parameters()}
 
     def device_params(self) -> Any:
-        """The ``MaterialParams`` Warp struct of this material."""
+        """The ``MaterialParams`` Warp struct of this material.
+
+        Raises:
+            InputError: The model is incompressible (no bulk modulus).
+        """
         from warptissue.kernels import materials as km
 
+        if math.isinf(self.bulk_modulus):
+            raise InputError(
+                f"the FE needs a bulk modulus; this {self.model_name} model is incompressible "
+                "(give bulk_modulus_Pa, or use with_bulk_modulus)",
+                column="bulk_modulus_Pa",
+            )
         params = km.MaterialParams()
         params.model = int(self._device_model)
         params.polynomial_terms = 0
@@ -166,26 +296,171 @@ class Material:
         """Set the model-specific struct fields."""
 
 
+def _optional_bulk_modulus(value: float | None) -> float | None:
+    return None if value is None else _check_positive("bulk_modulus_Pa", value)
+
+
+class HyperelasticMaterial(Material, abc.ABC):
+    """Base of the Abaqus hyperelastic models: FE material and incompressible closed forms.
+
+    Subclasses are frozen dataclasses whose last field is ``bulk_modulus_Pa`` (None:
+    incompressible). They provide the energy at J = 1, the signed nominal stress of each
+    homogeneous mode and its gradient with respect to :attr:`parameter_vector`, the
+    log-strain Hessian used by the Drucker check, and least-squares start values.
+    """
+
+    bulk_modulus_Pa: float | None
+    _fixed_keys: ClassVar[tuple[str, ...]] = ("bulk_modulus_Pa",)
+
+    @property
+    def incompressible(self) -> bool:
+        """True without a bulk modulus (D1 = 0)."""
+        return self.bulk_modulus_Pa is None
+
+    def with_bulk_modulus(self, bulk_modulus_Pa: float | None) -> HyperelasticMaterial:
+        """A copy with bulk modulus K (Pa, > 0; None: incompressible); validated."""
+        return dataclasses.replace(self, bulk_modulus_Pa=bulk_modulus_Pa)
+
+    @abc.abstractmethod
+    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:
+        """Strain energy per reference volume at J = 1, from principal stretches (..., 3)."""
+
+    @abc.abstractmethod
+    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:
+        """Signed nominal stress along the loading direction, shape (m,), Pa.
+
+        Args:
+            stretch: Stretch of the loading direction, shape (m,) or scalar, > 0.
+            mode: One of :data:`HOMOGENEOUS_MODES`.
+        """
+
+    @abc.abstractmethod
+    def nominal_stress_gradient(self, stretch: np.ndarray, mode: str) -> np.ndarray:
+        """d nominal stress / d :attr:`parameter_vector`, shape (m, n)."""
+
+    @abc.abstractmethod
+    def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
+        """Hessian of W(exp e1, exp e2, exp e3) in the principal log strains, (m, 3, 3), Pa.
+
+        Any extension of W off the incompressible plane e1 + e2 + e3 = 0 serves, since only
+        its restriction to that plane is used (the plane is linear in e).
+
+        Args:
+            log_strains: Principal logarithmic strains, shape (m, 3), summing to zero.
+        """
+
+    @abc.abstractmethod
+    def start_parameters(
+        self, design: Callable[[HyperelasticMaterial], np.ndarray], data: np.ndarray
+    ) -> np.ndarray:
+        """Least-squares start values of :attr:`parameter_vector` for a fit.
+
+        Args:
+            design: Maps a model of this kind to the Jacobian of the (weighted) predictions
+                with respect to its parameter vector, shape (m, n).
+            data: The (weighted) data the predictions are fitted to, shape (m,).
+
+        Returns:
+            The start vector, shape (n,).
+
+        Raises:
+            InputError: No start point gives finite predictions.
+        """
+
+    def log_strain_hessian(self, e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
+        """Hessian of W~(e1, e2) = W(exp e1, exp e2, exp(-e1 - e2)), shape (m, 2, 2), Pa."""
+        e1 = np.atleast_1d(np.asarray(e1, dtype=np.float64))
+        e2 = np.atleast_1d(np.asarray(e2, dtype=np.float64))
+        ambient = self.principal_log_strain_hessian(np.stack([e1, e2, -e1 - e2], axis=-1))
+        basis = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, -1.0]])
+        return basis.T @ ambient @ basis
+
+
+class _InvariantModel(HyperelasticMaterial):
+    """Models W(I1, I2) that are linear in their parameters."""
+
+    @abc.abstractmethod
+    def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Per parameter k: (dW1/dp_k, dW2/dp_k, d2W/dI1^2 / p_k, ...) as arrays (m, n).
+
+        Returns (a, b, a11, a12, a22, w) with W1 = a @ p, W2 = b @ p, W11 = a11 @ p,
+        W12 = a12 @ p, W22 = a22 @ p and W = w @ p; each of shape (..., n).
+        """
+
+    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:
+        squares = np.asarray(stretches, dtype=np.float64) ** 2
+        i1 = squares.sum(axis=-1)
+        i2 = (1.0 / squares).sum(axis=-1)
+        return self._basis(i1, i2)[5] @ self.parameter_vector
+
+    def nominal_stress_gradient(self, stretch: np.ndarray, mode: str) -> np.ndarray:
+        lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
+        squares = principal_stretches(lam, mode) ** 2
+        i1 = squares.sum(axis=-1)
+        i2 = (1.0 / squares).sum(axis=-1)
+        a, b = self._basis(i1, i2)[:2]
+        if mode == "uniaxial":
+            factor_1, factor_2 = 2.0 * (lam - lam**-2), 2.0 * (1.0 - lam**-3)
+        elif mode == "equibiaxial":
+            factor_1 = 2.0 * (lam - lam**-5)
+            factor_2 = factor_1 * lam**2
+        else:
+            factor_1 = factor_2 = 2.0 * (lam - lam**-3)
+        return factor_1[:, None] * a + factor_2[:, None] * b
+
+    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:
+        lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
+        return self.nominal_stress_gradient(lam, mode) @ self.parameter_vector
+
+    def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
+        strains = np.atleast_2d(np.asarray(log_strains, dtype=np.float64))
+        squares = np.exp(2.0 * strains)
+        inverse_squares = 1.0 / squares
+        i1, i2 = squares.sum(axis=-1), inverse_squares.sum(axis=-1)
+        grad_i1, grad_i2 = 2.0 * squares, -2.0 * inverse_squares
+        a, b, a11, a12, a22, _ = self._basis(i1, i2)
+        p = self.parameter_vector
+        w1, w2, w11, w12, w22 = a @ p, b @ p, a11 @ p, a12 @ p, a22 @ p
+
+        def outer(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+            return u[:, :, None] * v[:, None, :]
+
+        diagonal = 4.0 * (w1[:, None] * squares + w2[:, None] * inverse_squares)
+        return (
+            w11[:, None, None] * outer(grad_i1, grad_i1)
+            + w12[:, None, None] * (outer(grad_i1, grad_i2) + outer(grad_i2, grad_i1))
+            + w22[:, None, None] * outer(grad_i2, grad_i2)
+            + diagonal[:, :, None] * np.eye(3)
+        )
+
+    def start_parameters(
+        self, design: Callable[[HyperelasticMaterial], np.ndarray], data: np.ndarray
+    ) -> np.ndarray:
+        """Linear least squares: the predictions are linear in the parameters."""
+        start, *_ = np.linalg.lstsq(design(self), data, rcond=None)
+        return start
+
+
 @dataclass(frozen=True)
-class ReducedPolynomial(Material):
+class ReducedPolynomial(_InvariantModel):
     """Reduced polynomial ``W = sum_i Ci0 (I1b - 3)^i + (J - 1)^2 / D1``.
 
     Args:
-        C_Pa: ``(C10, C20, ..., CN0)``, Pa, 1 <= N <= 6; ``C10 > 0``.
-        bulk_modulus_Pa: K = 2 / D1, Pa.
+        C_Pa: ``(C10, C20, ..., CN0)``, Pa, 1 <= N <= 6. One term is neo-Hookean; three are
+            Yeoh. With a bulk modulus, ``C10 > 0``.
+        bulk_modulus_Pa: K = 2 / D1, Pa, > 0; None: incompressible.
     """
 
     C_Pa: tuple[float, ...]
-    bulk_modulus_Pa: float
+    bulk_modulus_Pa: float | None = None
 
     model_name: ClassVar[str] = "reduced_polynomial"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "C_Pa", _check_terms("C_Pa", self.C_Pa))
-        _check_positive("C10_Pa", self.C_Pa[0])
-        object.__setattr__(
-            self, "bulk_modulus_Pa", _check_positive("bulk_modulus_Pa", self.bulk_modulus_Pa)
-        )
+        if self.bulk_modulus_Pa is not None:
+            _check_positive("C10_Pa", self.C_Pa[0])
+        object.__setattr__(self, "bulk_modulus_Pa", _optional_bulk_modulus(self.bulk_modulus_Pa))
 
     @property
     def order(self) -> int:
@@ -198,47 +473,68 @@ class ReducedPolynomial(Material):
 
     def _flat_parameters(self) -> dict[str, float]:
         out = {f"C{i + 1}0_Pa": c for i, c in enumerate(self.C_Pa)}
-        out["bulk_modulus_Pa"] = self.bulk_modulus_Pa
-        return out
+        return _with_bulk(out, self.bulk_modulus_Pa)
 
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> ReducedPolynomial:
         order = sum(1 for key in values if key != "bulk_modulus_Pa")
-        return cls(tuple(values[f"C{i + 1}0_Pa"] for i in range(order)), values["bulk_modulus_Pa"])
+        return cls(
+            tuple(values[f"C{i + 1}0_Pa"] for i in range(order)), values.get("bulk_modulus_Pa")
+        )
+
+    def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
+        x = np.asarray(i1) - 3.0
+        powers = np.arange(1, self.order + 1)
+        zero = np.zeros(x.shape + (self.order,))
+        w = x[..., None] ** powers
+        a = powers * x[..., None] ** (powers - 1)
+        a11 = powers * (powers - 1) * x[..., None] ** np.maximum(powers - 2, 0)
+        return a, zero, a11, zero, zero, w
 
     def _fill_device_params(self, params: Any, km: Any) -> None:
         params.polynomial_terms = self.order
         params.c_i0 = km.vec6d(*self.C_Pa, *([0.0] * (MAX_TERMS - self.order)))
 
 
+def _with_bulk(values: dict[str, float], bulk_modulus_Pa: float | None) -> dict[str, float]:
+    """``values`` plus ``bulk_modulus_Pa`` when the model has one."""
+    if bulk_modulus_Pa is not None:
+        values["bulk_modulus_Pa"] = bulk_modulus_Pa
+    return values
+
+
 @dataclass(frozen=True)
-class NeoHookean(Material):
-    """Nearly incompressible neo-Hookean ``W = C10 (I1b - 3) + (J - 1)^2 / D1``.
+class NeoHookean(_InvariantModel):
+    """Neo-Hookean ``W = C10 (I1b - 3) + (J - 1)^2 / D1``, initial shear modulus 2 C10.
 
     Args:
-        C10_Pa: Pa, > 0 (initial shear modulus 2 C10).
-        bulk_modulus_Pa: K = 2 / D1, Pa, > 0.
+        C10_Pa: Pa; > 0 with a bulk modulus.
+        bulk_modulus_Pa: K = 2 / D1, Pa, > 0; None: incompressible.
     """
 
     C10_Pa: float
-    bulk_modulus_Pa: float
+    bulk_modulus_Pa: float | None = None
 
     model_name: ClassVar[str] = "neo_hookean"
 
     def __post_init__(self) -> None:
-        for f in fields(self):
-            object.__setattr__(self, f.name, _check_positive(f.name, getattr(self, f.name)))
+        check = _check_finite if self.bulk_modulus_Pa is None else _check_positive
+        object.__setattr__(self, "C10_Pa", check("C10_Pa", self.C10_Pa))
+        object.__setattr__(self, "bulk_modulus_Pa", _optional_bulk_modulus(self.bulk_modulus_Pa))
 
     @property
     def initial_shear_modulus_Pa(self) -> float:
         return 2.0 * self.C10_Pa
 
     def _flat_parameters(self) -> dict[str, float]:
-        return {"C10_Pa": self.C10_Pa, "bulk_modulus_Pa": self.bulk_modulus_Pa}
+        return _with_bulk({"C10_Pa": self.C10_Pa}, self.bulk_modulus_Pa)
 
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> NeoHookean:
-        return cls(values["C10_Pa"], values["bulk_modulus_Pa"])
+        return cls(values["C10_Pa"], values.get("bulk_modulus_Pa"))
+
+    def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
+        return ReducedPolynomial((self.C10_Pa,))._basis(i1, i2)
 
     def _fill_device_params(self, params: Any, km: Any) -> None:
         params.polynomial_terms = 1
@@ -246,28 +542,27 @@ class NeoHookean(Material):
 
 
 @dataclass(frozen=True)
-class MooneyRivlin(Material):
+class MooneyRivlin(_InvariantModel):
     """Mooney-Rivlin ``W = C10 (I1b - 3) + C01 (I2b - 3) + (J - 1)^2 / D1``.
 
     Args:
-        C10_Pa: Pa (may be negative, as fits sometimes give; seed 003 Table 1).
-        C01_Pa: Pa.
-        bulk_modulus_Pa: Pa, > 0. ``C10 + C01`` must be positive.
+        C10_Pa: Pa (may be negative, as fits sometimes give; the needle-indentation study,
+            Table 1).
+        C01_Pa: Pa. With a bulk modulus, ``C10 + C01`` must be positive.
+        bulk_modulus_Pa: K = 2 / D1, Pa, > 0; None: incompressible.
     """
 
     C10_Pa: float
     C01_Pa: float
-    bulk_modulus_Pa: float
+    bulk_modulus_Pa: float | None = None
 
     model_name: ClassVar[str] = "mooney_rivlin"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "C10_Pa", _check_finite("C10_Pa", self.C10_Pa))
         object.__setattr__(self, "C01_Pa", _check_finite("C01_Pa", self.C01_Pa))
-        object.__setattr__(
-            self, "bulk_modulus_Pa", _check_positive("bulk_modulus_Pa", self.bulk_modulus_Pa)
-        )
-        if self.C10_Pa + self.C01_Pa <= 0.0:
+        object.__setattr__(self, "bulk_modulus_Pa", _optional_bulk_modulus(self.bulk_modulus_Pa))
+        if self.bulk_modulus_Pa is not None and self.C10_Pa + self.C01_Pa <= 0.0:
             raise InputError(
                 "C10_Pa + C01_Pa must be positive (initial shear modulus 2 (C10 + C01))",
                 column="C01_Pa",
@@ -279,15 +574,19 @@ class MooneyRivlin(Material):
         return 2.0 * (self.C10_Pa + self.C01_Pa)
 
     def _flat_parameters(self) -> dict[str, float]:
-        return {
-            "C10_Pa": self.C10_Pa,
-            "C01_Pa": self.C01_Pa,
-            "bulk_modulus_Pa": self.bulk_modulus_Pa,
-        }
+        return _with_bulk({"C10_Pa": self.C10_Pa, "C01_Pa": self.C01_Pa}, self.bulk_modulus_Pa)
 
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> MooneyRivlin:
-        return cls(values["C10_Pa"], values["C01_Pa"], values["bulk_modulus_Pa"])
+        return cls(values["C10_Pa"], values["C01_Pa"], values.get("bulk_modulus_Pa"))
+
+    def _basis(self, i1: np.ndarray, i2: np.ndarray) -> tuple[np.ndarray, ...]:
+        ones = np.ones(np.shape(i1))
+        zeros = np.zeros(np.shape(i1) + (2,))
+        a = np.stack([ones, 0.0 * ones], axis=-1)
+        b = np.stack([0.0 * ones, ones], axis=-1)
+        w = np.stack([np.asarray(i1) - 3.0, np.asarray(i2) - 3.0], axis=-1)
+        return a, b, zeros, zeros, zeros, w
 
     def _fill_device_params(self, params: Any, km: Any) -> None:
         params.polynomial_terms = 1
@@ -296,32 +595,40 @@ class MooneyRivlin(Material):
 
 
 def Yeoh(  # noqa: N802 (a constructor named like the model)
-    C10_Pa: float, C20_Pa: float, C30_Pa: float, bulk_modulus_Pa: float
+    C10_Pa: float, C20_Pa: float, C30_Pa: float, bulk_modulus_Pa: float | None = None
 ) -> ReducedPolynomial:
     """Yeoh: the reduced polynomial of order 3.
 
     Args:
         C10_Pa, C20_Pa, C30_Pa: Pa.
-        bulk_modulus_Pa: Pa.
+        bulk_modulus_Pa: Pa; None: incompressible.
     """
     return ReducedPolynomial((C10_Pa, C20_Pa, C30_Pa), bulk_modulus_Pa)
 
 
+_OGDEN_K = {"uniaxial": 0.5, "equibiaxial": 2.0, "planar": 1.0}
+"""Ogden nominal stress exponent k of each mode (module Notes)."""
+
+_OGDEN_START_ALPHAS = (-12.0, -8.0, -5.0, -3.0, -2.0, -1.0, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 20.0)
+"""The grid of alpha values that :meth:`Ogden.start_parameters` tries."""
+
+
 @dataclass(frozen=True)
-class Ogden(Material):
+class Ogden(HyperelasticMaterial):
     """Ogden ``W = sum_i 2 mu_i / alpha_i^2 (l1b^alpha_i + l2b^alpha_i + l3b^alpha_i - 3)``.
 
-    Plus ``(J - 1)^2 / D1``; ``lb`` are isochoric principal stretches (Abaqus convention).
+    Plus ``(J - 1)^2 / D1``; ``lb`` are isochoric principal stretches (Abaqus convention);
+    mu0 = sum mu_i. The parameter vector is (mu1, alpha1, mu2, alpha2, ...).
 
     Args:
-        mu_Pa: ``(mu_1, ..., mu_N)``, Pa, 1 <= N <= 6, with ``sum mu_i > 0``.
+        mu_Pa: ``(mu_1, ..., mu_N)``, Pa, 1 <= N <= 6; with a bulk modulus ``sum mu_i > 0``.
         alpha: ``(alpha_1, ..., alpha_N)``, nonzero.
-        bulk_modulus_Pa: Pa, > 0.
+        bulk_modulus_Pa: K = 2 / D1, Pa, > 0; None: incompressible.
     """
 
     mu_Pa: tuple[float, ...]
     alpha: tuple[float, ...]
-    bulk_modulus_Pa: float
+    bulk_modulus_Pa: float | None = None
 
     model_name: ClassVar[str] = "ogden"
     _device_model: ClassVar[int] = 1
@@ -338,15 +645,13 @@ class Ogden(Material):
         for i, a in enumerate(self.alpha):
             if a == 0.0:
                 raise InputError("must be nonzero", column=f"alpha{i + 1}", value=a)
-        if sum(self.mu_Pa) <= 0.0:
+        if self.bulk_modulus_Pa is not None and sum(self.mu_Pa) <= 0.0:
             raise InputError(
                 "sum of mu_i must be positive (initial shear modulus)",
                 column="mu_Pa",
                 value=self.mu_Pa,
             )
-        object.__setattr__(
-            self, "bulk_modulus_Pa", _check_positive("bulk_modulus_Pa", self.bulk_modulus_Pa)
-        )
+        object.__setattr__(self, "bulk_modulus_Pa", _optional_bulk_modulus(self.bulk_modulus_Pa))
 
     @property
     def order(self) -> int:
@@ -362,8 +667,7 @@ class Ogden(Material):
         for i, (mu, a) in enumerate(zip(self.mu_Pa, self.alpha, strict=True)):
             out[f"mu{i + 1}_Pa"] = mu
             out[f"alpha{i + 1}"] = a
-        out["bulk_modulus_Pa"] = self.bulk_modulus_Pa
-        return out
+        return _with_bulk(out, self.bulk_modulus_Pa)
 
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> Ogden:
@@ -371,8 +675,63 @@ class Ogden(Material):
         return cls(
             tuple(values[f"mu{i + 1}_Pa"] for i in range(order)),
             tuple(values[f"alpha{i + 1}"] for i in range(order)),
-            values["bulk_modulus_Pa"],
+            values.get("bulk_modulus_Pa"),
         )
+
+    def energy_density_Pa(self, stretches: np.ndarray) -> np.ndarray:
+        lam = np.asarray(stretches, dtype=np.float64)
+        return sum(
+            2.0 * mu / a**2 * (np.sum(lam**a, axis=-1) - 3.0)
+            for mu, a in zip(self.mu_Pa, self.alpha, strict=True)
+        )
+
+    def nominal_stress_Pa(self, stretch: np.ndarray, mode: str) -> np.ndarray:
+        lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
+        k = _OGDEN_K[_check_mode(mode)]
+        return sum(
+            2.0 * mu / a * (lam ** (a - 1.0) - lam ** (-k * a - 1.0))
+            for mu, a in zip(self.mu_Pa, self.alpha, strict=True)
+        )
+
+    def nominal_stress_gradient(self, stretch: np.ndarray, mode: str) -> np.ndarray:
+        lam = np.atleast_1d(np.asarray(stretch, dtype=np.float64))
+        k = _OGDEN_K[_check_mode(mode)]
+        log_lam = np.log(lam)
+        columns = []
+        for mu, a in zip(self.mu_Pa, self.alpha, strict=True):
+            up, down = lam ** (a - 1.0), lam ** (-k * a - 1.0)
+            columns.append(2.0 / a * (up - down))
+            columns.append(
+                -2.0 * mu / a**2 * (up - down) + 2.0 * mu / a * log_lam * (up + k * down)
+            )
+        return np.column_stack(columns)
+
+    def principal_log_strain_hessian(self, log_strains: np.ndarray) -> np.ndarray:
+        strains = np.atleast_2d(np.asarray(log_strains, dtype=np.float64))
+        curvature = sum(
+            2.0 * mu * np.exp(a * strains) for mu, a in zip(self.mu_Pa, self.alpha, strict=True)
+        )
+        return curvature[:, :, None] * np.eye(3)
+
+    def start_parameters(
+        self, design: Callable[[HyperelasticMaterial], np.ndarray], data: np.ndarray
+    ) -> np.ndarray:
+        """The best (mu, alpha) on a grid of alphas, with mu solved linearly for each (the
+        model is linear in mu at fixed alpha)."""
+        best, best_cost = None, math.inf
+        for alphas in itertools.combinations(_OGDEN_START_ALPHAS, self.order):
+            trial = Ogden((1.0,) * self.order, alphas)
+            with np.errstate(over="ignore", invalid="ignore"):
+                gradient = design(trial)[:, 0::2]
+            if not np.all(np.isfinite(gradient)):
+                continue
+            mu, *_ = np.linalg.lstsq(gradient, data, rcond=None)
+            cost = float(np.sum((gradient @ mu - data) ** 2))
+            if cost < best_cost:
+                best, best_cost = np.ravel(np.column_stack([mu, alphas])), cost
+        if best is None:
+            raise InputError("no Ogden starting point gives finite stresses for these data")
+        return best
 
     def _fill_device_params(self, params: Any, km: Any) -> None:
         pad = [0.0] * (MAX_TERMS - self.order)
@@ -395,6 +754,10 @@ class CompressibleNeoHookean(Material):
 
     model_name: ClassVar[str] = "compressible_neo_hookean"
     _device_model: ClassVar[int] = 2
+    _bounds: ClassVar[Mapping[str, tuple[float, float]]] = {
+        "shear_modulus_Pa": (0.0, math.inf),
+        "bulk_modulus_Pa": (0.0, math.inf),
+    }
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -432,6 +795,10 @@ class LinearElastic(Material):
 
     model_name: ClassVar[str] = "linear_elastic"
     _device_model: ClassVar[int] = 3
+    _bounds: ClassVar[Mapping[str, tuple[float, float]]] = {
+        "youngs_modulus_Pa": (0.0, math.inf),
+        "poissons_ratio": (-1.0, 0.5),
+    }
 
     def __post_init__(self) -> None:
         object.__setattr__(

@@ -88,9 +88,9 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from warptissue.errors import InputError
+    from warptissue.fit.hyperelastic import HomogeneousTest, fit_hyperelastic, model_from_name
     from warptissue.io import read_experiment_csv
     from warptissue.report import comparison_table, write_comparison, write_fit_outputs
-    from warptissue.uniaxial import HomogeneousTest, fit_hyperelastic, model_from_name
 
     names = ALL_MODELS if args.model == "all" else tuple(args.model.split(","))
     if args.usd is not None:
@@ -188,7 +188,7 @@ def _write_best_usd(args: argparse.Namespace, row: dict[str, Any], fit: Any) -> 
     }
     return write_material_usd(
         args.usd,
-        model.to_material(bulk_modulus_Pa),
+        model.with_bulk_modulus(bulk_modulus_Pa),
         provenance=provenance,
         density_kg_per_m3=args.density_kg_per_m3,
     )

@@ -1,8 +1,9 @@
-"""Tests of warptissue.uniaxial: closed-form stresses, fits and Drucker stability.
+"""Homogeneous hyperelastic tests: the closed-form stresses of warptissue.materials, and the
+fits and Drucker stability of warptissue.fit.hyperelastic.
 
 Independent references: numerical differentiation of each strain energy (stress = dW/dl per
-loaded direction; Hessian of W in log strains), seed 003's printed Eq. 3, and seed 003's
-RP2 parameters (C10 = 600.553 Pa, C20 = 4097.45 Pa) recovered from synthetic data of its
+loaded direction; Hessian of W in log strains), the needle-indentation study's printed Eq. 3,
+and its RP2 parameters (C10 = 600.553 Pa, C20 = 4097.45 Pa) recovered from synthetic data of its
 compression test (70 x 80 x 80 mm block, 80 mm tall, compressed by 12.7 mm at 0.4 mm/s).
 """
 
@@ -12,89 +13,32 @@ import numpy as np
 import pytest
 
 from warptissue.errors import InputError
-from warptissue.uniaxial import (
+from warptissue.fit.hyperelastic import (
     STABILITY_MODES,
     HomogeneousTest,
+    drucker_stability,
+    fit_hyperelastic,
+    model_from_name,
+)
+from warptissue.materials import (
     MooneyRivlin,
     NeoHookean,
     Ogden,
     ReducedPolynomial,
-    drucker_stability,
-    fit_hyperelastic,
-    model_from_name,
+    Yeoh,
     principal_stretches,
-    yeoh,
 )
 
 MODELS = {
     "neo_hookean": NeoHookean(350.0),
     "mooney_rivlin": MooneyRivlin(-400.0, 900.0),
-    "yeoh": yeoh(500.0, -120.0, 60.0),
+    "yeoh": Yeoh(500.0, -120.0, 60.0),
     "ogden_2": Ogden((300.0, -40.0), (2.5, -3.0)),
 }
-MODES = ("uniaxial", "equibiaxial", "planar")
-LOADED_DIRECTIONS = {"uniaxial": 1.0, "equibiaxial": 2.0, "planar": 1.0}
 STRETCHES = np.array([0.45, 0.7, 0.93, 1.08, 1.4, 2.2])
 
-SEED_C10_PA, SEED_C20_PA = 600.553, 4097.45
-SEED_HEIGHT_M, SEED_AREA_M2, SEED_DEPTH_M = 0.080, 0.070 * 0.080, 0.0127
-
-
-def energy_along_path(model, stretch, mode):
-    return model.energy_density_Pa(principal_stretches(np.atleast_1d(stretch), mode))
-
-
-@pytest.mark.parametrize("mode", MODES)
-@pytest.mark.parametrize("name", sorted(MODELS))
-def test_nominal_stress_is_the_derivative_of_the_energy(name, mode):
-    model = MODELS[name]
-    h = 1e-5 * STRETCHES
-    numeric = (
-        energy_along_path(model, STRETCHES + h, mode)
-        - energy_along_path(model, STRETCHES - h, mode)
-    ) / (2.0 * h * LOADED_DIRECTIONS[mode])
-    analytic = model.nominal_stress_Pa(STRETCHES, mode)
-    np.testing.assert_allclose(analytic, numeric, rtol=1e-6)
-
-
-def test_uniaxial_stress_matches_seed_003_equation_3():
-    lam = STRETCHES
-    i1 = lam**2 + 2.0 / lam
-    c10, c20, c01, mu, alpha = 600.553, 4097.45, -250.0, 800.0, -4.5
-    printed = {
-        "nh": 2.0 * c10 * (lam - lam**-2),
-        "rp2": 2.0 * (lam - lam**-2) * (c10 + 2.0 * c20 * (i1 - 3.0)),
-        "mr": 2.0 * (1.0 - lam**-3) * (c10 * lam + c01),
-        "ogden": 2.0 * mu / alpha * (lam ** (alpha - 1.0) - lam ** (-0.5 * alpha - 1.0)),
-    }
-    ours = {
-        "nh": NeoHookean(c10),
-        "rp2": ReducedPolynomial((c10, c20)),
-        "mr": MooneyRivlin(c10, c01),
-        "ogden": Ogden((mu,), (alpha,)),
-    }
-    for key, model in ours.items():
-        np.testing.assert_allclose(
-            model.nominal_stress_Pa(lam, "uniaxial"), printed[key], rtol=1e-12
-        )
-
-
-@pytest.mark.parametrize("mode", MODES)
-@pytest.mark.parametrize("name", sorted(MODELS))
-def test_parameter_gradient_matches_finite_differences(name, mode):
-    model = MODELS[name]
-    p = model.parameter_vector
-    analytic = model.nominal_stress_gradient(STRETCHES, mode)
-    for k in range(p.size):
-        h = 1e-6 * max(abs(p[k]), 1.0)
-        up, down = p.copy(), p.copy()
-        up[k] += h
-        down[k] -= h
-        numeric = (
-            model.with_parameters(up).nominal_stress_Pa(STRETCHES, mode)
-            - model.with_parameters(down).nominal_stress_Pa(STRETCHES, mode)
-        ) / (2.0 * h)
-        np.testing.assert_allclose(analytic[:, k], numeric, rtol=1e-6, atol=1e-9)
+STUDY_C10_PA, STUDY_C20_PA = 600.553, 4097.45
+STUDY_HEIGHT_M, STUDY_AREA_M2, STUDY_DEPTH_M = 0.080, 0.070 * 0.080, 0.0127
 
 
 def numeric_log_strain_hessian(model, e1, e2, h=1e-4):
@@ -136,60 +80,64 @@ def test_hessian_along_the_uniaxial_path_is_the_true_stress_tangent(name):
     np.testing.assert_allclose(hessian @ direction @ direction, tangent, rtol=1e-6)
 
 
-def seed_003_compression_test(rng, noise_N=0.02):
-    """Seed 003's test: 0.4 mm/s to 12.7 mm, sampled at 50 Hz, force noise 0.02 N (the
-    sensor's resolution)."""
-    displacement_m = np.arange(0.0, SEED_DEPTH_M + 1e-12, 0.4e-3 / 50.0)
-    truth = ReducedPolynomial((SEED_C10_PA, SEED_C20_PA))
+def needle_study_compression_test(rng, noise_N=0.02):
+    """The needle-indentation study's test: 0.4 mm/s to 12.7 mm, sampled at 50 Hz, force
+    noise 0.02 N (the sensor's resolution)."""
+    displacement_m = np.arange(0.0, STUDY_DEPTH_M + 1e-12, 0.4e-3 / 50.0)
+    truth = ReducedPolynomial((STUDY_C10_PA, STUDY_C20_PA))
     clean = HomogeneousTest.from_force_displacement(
         displacement_m,
         np.zeros_like(displacement_m),
-        area_m2=SEED_AREA_M2,
-        height_m=SEED_HEIGHT_M,
+        area_m2=STUDY_AREA_M2,
+        height_m=STUDY_HEIGHT_M,
         loading="compression",
     )
-    force_N = clean.predicted_stress_Pa(truth) * SEED_AREA_M2
+    force_N = clean.predicted_stress_Pa(truth) * STUDY_AREA_M2
     force_N = force_N + rng.normal(0.0, noise_N, force_N.size)
     return HomogeneousTest.from_force_displacement(
-        displacement_m, force_N, area_m2=SEED_AREA_M2, height_m=SEED_HEIGHT_M, loading="compression"
+        displacement_m,
+        force_N,
+        area_m2=STUDY_AREA_M2,
+        height_m=STUDY_HEIGHT_M,
+        loading="compression",
     )
 
 
-def test_seed_geometry():
-    assert SEED_DEPTH_M / SEED_HEIGHT_M == pytest.approx(0.15875)
-    stretch = 1.0 - SEED_DEPTH_M / SEED_HEIGHT_M
-    stress = -ReducedPolynomial((SEED_C10_PA, SEED_C20_PA)).nominal_stress_Pa(stretch, "uniaxial")
+def test_needle_study_geometry():
+    assert STUDY_DEPTH_M / STUDY_HEIGHT_M == pytest.approx(0.15875)
+    stretch = 1.0 - STUDY_DEPTH_M / STUDY_HEIGHT_M
+    stress = -ReducedPolynomial((STUDY_C10_PA, STUDY_C20_PA)).nominal_stress_Pa(stretch, "uniaxial")
     # about 1.5 kPa, 8.3 N on the 70 x 80 mm face: well above the 0.02 N resolution
-    assert stress[0] * SEED_AREA_M2 == pytest.approx(8.3, abs=0.1)
+    assert stress[0] * STUDY_AREA_M2 == pytest.approx(8.3, abs=0.1)
 
 
 @pytest.mark.parametrize(
     ("objective", "method"), [("absolute", "lm"), ("relative", "lm"), ("absolute", "salm")]
 )
-def test_seed_003_rp2_parameters_are_recovered(rng, objective, method):
-    test = seed_003_compression_test(rng)
+def test_needle_study_rp2_parameters_are_recovered(rng, objective, method):
+    test = needle_study_compression_test(rng)
     fit = fit_hyperelastic("reduced_polynomial:2", test, objective=objective, method=method)
     assert fit.result.success
-    np.testing.assert_allclose(fit.model.C_Pa, (SEED_C10_PA, SEED_C20_PA), rtol=0.01)
+    np.testing.assert_allclose(fit.model.C_Pa, (STUDY_C10_PA, STUDY_C20_PA), rtol=0.01)
     assert fit.result.r_squared > 0.999
     assert fit.stability.stable_everywhere
     # the reported standard errors cover the truth
-    errors = np.abs(np.array(fit.model.C_Pa) - (SEED_C10_PA, SEED_C20_PA))
+    errors = np.abs(np.array(fit.model.C_Pa) - (STUDY_C10_PA, STUDY_C20_PA))
     assert np.all(errors < 5.0 * fit.result.standard_errors)
     if objective == "relative":
         assert fit.min_strain == 0.05 and fit.result.fitted.size < test.nominal_strain.size
 
 
 def test_four_models_ranked_by_r_squared_and_mooney_rivlin_stability(rng):
-    test = seed_003_compression_test(rng)
+    test = needle_study_compression_test(rng)
     fits = {name: fit_hyperelastic(name, test) for name in (
         "neo_hookean", "mooney_rivlin", "reduced_polynomial:2", "ogden:1")}  # fmt: skip
     ranking = sorted(fits, key=lambda n: fits[n].result.r_squared, reverse=True)
     assert ranking[0] == "reduced_polynomial:2"  # the model that generated the data
-    assert ranking[-1] == "neo_hookean"  # cannot stiffen: seed 003's worst fit too
+    assert ranking[-1] == "neo_hookean"  # cannot stiffen: the study's worst fit too
     assert all(0.0 < fits[n].result.r_squared < 1.0 for n in fits)
     mooney = fits["mooney_rivlin"]
-    # Seed 003: Mooney-Rivlin fits well with a negative C10 and is stable only for small
+    # The study: Mooney-Rivlin fits well with a negative C10 and is stable only for small
     # strains (< 0.05).
     assert mooney.model.C10_Pa < 0.0 < mooney.model.C01_Pa
     assert mooney.result.r_squared > 0.99
@@ -287,7 +235,7 @@ def test_invalid_tests(kwargs, match):
 
 
 def test_relative_objective_without_a_window_rejects_zero_stress(rng):
-    test = seed_003_compression_test(rng, noise_N=0.0)
+    test = needle_study_compression_test(rng, noise_N=0.0)
     with pytest.raises(InputError, match="non-zero"):
         fit_hyperelastic("neo_hookean", test, objective="relative", min_strain=0.0)
 
@@ -305,13 +253,6 @@ def test_model_names_and_orders():
     assert model_from_name("ogden:2").parameter_units == ("Pa", "", "Pa", "")
     assert MooneyRivlin(100.0, 50.0).initial_shear_modulus_Pa == 300.0
     assert Ogden((100.0, 20.0), (2.0, -2.0)).initial_shear_modulus_Pa == 120.0
-
-
-def test_to_material_builds_the_fe_dataclass():
-    materials = pytest.importorskip("warptissue.materials")
-    material = MooneyRivlin(100.0, 50.0).to_material(1e5)
-    assert isinstance(material, materials.MooneyRivlin)
-    assert material.C10_Pa == 100.0 and material.bulk_modulus_Pa == 1e5
 
 
 def test_mooney_rivlin_limits_match_the_closed_form_criterion():
@@ -337,17 +278,3 @@ def test_mooney_rivlin_limits_match_the_closed_form_criterion():
         first = int(np.flatnonzero(values <= 0.0)[0])
         root = scipy.optimize.brentq(e2, grid[first - 1], grid[first], args=(mode, sign))
         assert entry.unstable_from_strain == pytest.approx(root, rel=1e-6), entry.mode
-
-
-def test_to_dict_uses_the_flat_material_keys():
-    assert ReducedPolynomial((600.553, 4097.45)).to_dict() == {
-        "model": "reduced_polynomial",
-        "C10_Pa": 600.553,
-        "C20_Pa": 4097.45,
-    }
-    assert Ogden((10.0,), (-2.0,)).to_dict() == {"model": "ogden", "mu1_Pa": 10.0, "alpha1": -2.0}
-    assert MooneyRivlin(1.0, 2.0).to_dict() == {
-        "model": "mooney_rivlin",
-        "C10_Pa": 1.0,
-        "C01_Pa": 2.0,
-    }

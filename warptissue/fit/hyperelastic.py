@@ -1,0 +1,549 @@
+"""Homogeneous hyperelastic tests: records, fits and Drucker stability.
+
+The incompressible, isotropic hyperelastic models of :mod:`warptissue.materials` (Abaqus
+conventions; their closed forms are documented there) under the homogeneous tests of a
+materials lab: uniaxial tension and compression, equibiaxial tension and planar tension (pure
+shear). Measured force and displacement become nominal stress and strain
+(:class:`HomogeneousTest`); the models are fitted with :func:`warptissue.fit.fit_curve` with
+an absolute (the needle-indentation study, Eq. 4) or relative (Eq. 5) objective
+(:func:`fit_hyperelastic`); and every fitted model gets a Drucker stability check over the six
+standard modes (:func:`drucker_stability`), as Abaqus's material evaluation reports it.
+
+Sign convention: a :class:`HomogeneousTest` holds MAGNITUDES, positive in the loading
+direction: ``nominal_strain = d / H0`` and ``nominal_stress_Pa = F / A0`` are both positive
+for a specimen compressed by d under a compressive force F. The mechanics underneath is
+signed (tension positive): the stretch is 1 - strain in compression and 1 + strain otherwise,
+and the model's signed nominal stress is compared with the measured magnitude times the
+loading's sign.
+
+Notes:
+    Drucker stability (Abaqus Theory Manual, hyperelastic stability): an incompressible
+    material is stable when d tau : d eps > 0 for every logarithmic strain increment with
+    trace zero (tau = Kirchhoff stress = Cauchy stress at J = 1). With the principal log
+    strains (e1, e2, -e1 - e2) and W~(e1, e2) = W(exp e1, exp e2, exp(-e1 - e2)), one has
+    tau_i - tau_3 = dW~/de_i, so d tau : d eps = de^T H de with H the 2 x 2 Hessian of W~:
+    stable iff H is positive definite, checked at each state of the six modes (uniaxial,
+    equibiaxial, planar; tension and compression). Along a uniaxial path the criterion
+    contains the familiar one, d(true stress)/d(log strain) > 0 (H in the path direction
+    (1, -1/2)), but it is stronger: it also checks the lateral directions. Non-finite values
+    (overflow of l^alpha) count as unstable.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import InputError
+from warptissue.fit.engine import fit_curve
+from warptissue.fit.result import FitResult, RejectStep
+from warptissue.materials import (
+    HyperelasticMaterial,
+    MooneyRivlin,
+    NeoHookean,
+    Ogden,
+    ReducedPolynomial,
+    Yeoh,
+    principal_log_strains,
+)
+
+__all__ = [
+    "LOADINGS",
+    "MODEL_NAMES",
+    "STABILITY_MODES",
+    "HomogeneousTest",
+    "HyperelasticFit",
+    "StabilityReport",
+    "StableRange",
+    "drucker_stability",
+    "fit_hyperelastic",
+    "model_from_name",
+    "model_label",
+]
+
+LOADINGS: dict[str, tuple[str, float]] = {
+    "tension": ("uniaxial", 1.0),
+    "compression": ("uniaxial", -1.0),
+    "equibiaxial": ("equibiaxial", 1.0),
+    "planar": ("planar", 1.0),
+}
+"""Loading name -> (deformation mode, sign of the stretch change)."""
+
+STABILITY_MODES: tuple[str, ...] = (
+    "uniaxial_tension",
+    "uniaxial_compression",
+    "equibiaxial_tension",
+    "equibiaxial_compression",
+    "planar_tension",
+    "planar_compression",
+)
+"""The six modes of the Drucker stability check."""
+
+MODEL_NAMES: tuple[str, ...] = (
+    "neo_hookean",
+    "mooney_rivlin",
+    "reduced_polynomial",
+    "yeoh",
+    "ogden",
+)
+"""Names accepted by :func:`model_from_name` (``reduced_polynomial:N``, ``ogden:N``)."""
+
+
+def model_from_name(spec: str) -> HyperelasticMaterial:
+    """An incompressible model with placeholder parameters from a name such as
+    ``reduced_polynomial:2``.
+
+    Accepted: ``neo_hookean``, ``mooney_rivlin``, ``reduced_polynomial:N`` (default N = 2),
+    ``yeoh``, ``ogden:N`` (default N = 1).
+
+    Raises:
+        InputError: An unknown name or a bad order.
+    """
+    kind, _, order_text = spec.strip().lower().partition(":")
+    if kind not in MODEL_NAMES:
+        raise InputError(f"unknown model; choose from {', '.join(MODEL_NAMES)}", value=spec)
+    if order_text and kind not in ("reduced_polynomial", "ogden"):
+        raise InputError(f"model {kind!r} takes no order", value=spec)
+    default_order = {"reduced_polynomial": 2, "ogden": 1}.get(kind, 1)
+    try:
+        order = int(order_text) if order_text else default_order
+    except ValueError:
+        raise InputError("the model order must be an integer", value=spec) from None
+    if not 1 <= order <= 6:
+        raise InputError("the model order must be between 1 and 6", value=spec)
+    if kind == "neo_hookean":
+        return NeoHookean(1.0)
+    if kind == "mooney_rivlin":
+        return MooneyRivlin(1.0, 1.0)
+    if kind == "reduced_polynomial":
+        return ReducedPolynomial((1.0,) * order)
+    if kind == "yeoh":
+        return Yeoh(1.0, 1.0, 1.0)
+    return Ogden((1.0,) * order, tuple(2.0 * (i + 1) for i in range(order)))
+
+
+def model_label(model: HyperelasticMaterial) -> str:
+    """Short label: ``neo_hookean``, ``reduced_polynomial:2``, ``ogden:3``, ..."""
+    if isinstance(model, ReducedPolynomial | Ogden):
+        return f"{model.model_name}:{model.order}"
+    return model.model_name
+
+
+@dataclass(frozen=True)
+class HomogeneousTest:
+    """A homogeneous test record as nominal strain and nominal stress magnitudes.
+
+    Attributes:
+        loading: "tension", "compression", "equibiaxial" (tension) or "planar" (tension).
+        nominal_strain: d / H0, positive in the loading direction, shape (m,).
+        nominal_stress_Pa: F / A0, positive in the loading direction, shape (m,).
+        name: A label for reports.
+    """
+
+    loading: str
+    nominal_strain: np.ndarray
+    nominal_stress_Pa: np.ndarray
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if self.loading not in LOADINGS:
+            raise InputError(f"loading must be one of {tuple(LOADINGS)}", value=self.loading)
+        strain = np.asarray(self.nominal_strain, dtype=np.float64).reshape(-1)
+        stress = np.asarray(self.nominal_stress_Pa, dtype=np.float64).reshape(-1)
+        if strain.size == 0 or strain.shape != stress.shape:
+            raise InputError(
+                "nominal strain and stress must be non-empty and of equal length",
+                value=(strain.size, stress.size),
+            )
+        if not (np.all(np.isfinite(strain)) and np.all(np.isfinite(stress))):
+            raise InputError("nominal strain and stress must be finite")
+        if self.loading == "compression" and np.any(strain >= 1.0):
+            index = int(np.flatnonzero(strain >= 1.0)[0])
+            raise InputError(
+                f"compressive strain must stay below 1 (index {index})", value=strain[index]
+            )
+        if np.any(strain <= -1.0) or np.median(strain) < 0.0:
+            raise InputError(
+                "strains are magnitudes, positive in the loading direction (see the sign "
+                "convention of warptissue.fit.hyperelastic); got mostly negative or <= -1 values",
+                value=float(np.median(strain)),
+            )
+        object.__setattr__(self, "nominal_strain", strain)
+        object.__setattr__(self, "nominal_stress_Pa", stress)
+
+    @classmethod
+    def from_force_displacement(
+        cls,
+        displacement_m: np.ndarray,
+        force_N: np.ndarray,
+        *,
+        area_m2: float,
+        height_m: float,
+        loading: str,
+        name: str = "",
+    ) -> HomogeneousTest:
+        """Nominal stress F / A0 and nominal strain d / H0 from a force-displacement record.
+
+        Args:
+            displacement_m: Platen displacement, positive in the loading direction, (m,).
+            force_N: Force, positive in the loading direction (compressive force positive for
+                a compression test), shape (m,).
+            area_m2: Undeformed loaded area A0 (> 0).
+            height_m: Undeformed gauge length H0 (> 0).
+            loading: See :data:`LOADINGS`.
+            name: A label for reports.
+
+        Raises:
+            InputError: Non-positive geometry, or invalid data (see the class).
+        """
+        for label, value in (("area_m2", area_m2), ("height_m", height_m)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise InputError(f"{label} must be positive", column=label, value=value)
+        strain = np.asarray(displacement_m, dtype=np.float64) / height_m
+        stress = np.asarray(force_N, dtype=np.float64) / area_m2
+        return cls(loading, strain, stress, name)
+
+    @property
+    def mode(self) -> str:
+        """The deformation mode: uniaxial, equibiaxial or planar."""
+        return LOADINGS[self.loading][0]
+
+    @property
+    def sign(self) -> float:
+        """-1 for compression, +1 otherwise."""
+        return LOADINGS[self.loading][1]
+
+    @property
+    def stretch(self) -> np.ndarray:
+        """Stretch of the loading direction, 1 + sign * strain, shape (m,)."""
+        return 1.0 + self.sign * self.nominal_strain
+
+    def window(self, min_strain: float) -> HomogeneousTest:
+        """The points with nominal strain above ``min_strain`` (all points when it is 0)."""
+        keep = (
+            self.nominal_strain > min_strain
+            if min_strain > 0.0
+            else np.ones(self.nominal_strain.size, bool)
+        )
+        if not np.any(keep):
+            raise InputError(
+                f"no data above the strain window's lower end in test {self.name!r}",
+                value=min_strain,
+            )
+        return HomogeneousTest(
+            self.loading, self.nominal_strain[keep], self.nominal_stress_Pa[keep], self.name
+        )
+
+    def predicted_stress_Pa(self, model: HyperelasticMaterial) -> np.ndarray:
+        """Model nominal stress magnitude in the loading direction, shape (m,)."""
+        return self.sign * model.nominal_stress_Pa(self.stretch, self.mode)
+
+
+@dataclass(frozen=True)
+class StableRange:
+    """Drucker stability along one mode.
+
+    Attributes:
+        mode: One of :data:`STABILITY_MODES`.
+        unstable_from_strain: Nominal strain magnitude where the material first becomes
+            unstable, or None when it is stable over the whole checked range.
+        checked_up_to_strain: Upper end of the checked range of nominal strain magnitude.
+    """
+
+    mode: str
+    unstable_from_strain: float | None
+    checked_up_to_strain: float
+
+    @property
+    def stable(self) -> bool:
+        """Stable over the whole checked range."""
+        return self.unstable_from_strain is None
+
+
+@dataclass(frozen=True)
+class StabilityReport:
+    """Drucker stability over the six modes."""
+
+    ranges: tuple[StableRange, ...]
+
+    def __getitem__(self, mode: str) -> StableRange:
+        for entry in self.ranges:
+            if entry.mode == mode:
+                return entry
+        raise KeyError(mode)
+
+    @property
+    def stable_everywhere(self) -> bool:
+        """Stable in every mode over the checked ranges."""
+        return all(entry.stable for entry in self.ranges)
+
+    @property
+    def stable_up_to_strain(self) -> float | None:
+        """Smallest strain at which any mode becomes unstable, or None if none does."""
+        limits = [e.unstable_from_strain for e in self.ranges if not e.stable]
+        return min(limits) if limits else None
+
+    def to_dict(self) -> dict[str, Any]:
+        """{mode: {"unstable_from_strain", "checked_up_to_strain"}, "stable_up_to_strain"}."""
+        summary: dict[str, Any] = {
+            e.mode: {
+                "unstable_from_strain": e.unstable_from_strain,
+                "checked_up_to_strain": e.checked_up_to_strain,
+            }
+            for e in self.ranges
+        }
+        summary["stable_up_to_strain"] = self.stable_up_to_strain
+        return summary
+
+
+def _is_stable(model: HyperelasticMaterial, mode: str, stretch: np.ndarray) -> np.ndarray:
+    """Positive definiteness of the Hessian on the plane of trace-free log strains.
+
+    The plane is parametrized by eliminating, point by point, the principal direction k of
+    SMALLEST ambient curvature G_kk (basis e_i - e_k, e_j - e_k). Eliminating a stiff
+    direction instead would bury the soft one under rounding: for Ogden with
+    G = diag(c), det = c_i c_j + c_k (c_i + c_j) is then formed as (c_i + c_k)(c_j + c_k)
+    - c_k^2, which cancels when c_k >> c_i, c_j.
+    """
+    strains = principal_log_strains(stretch, mode)
+    with np.errstate(over="ignore", invalid="ignore"):
+        ambient = model.principal_log_strain_hessian(strains)
+        order = np.argsort(np.diagonal(ambient, axis1=1, axis2=2), axis=1)
+        k, i, j = order[:, 0], order[:, 1], order[:, 2]
+        rows = np.arange(strains.shape[0])
+
+        def g(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return ambient[rows, a, b]
+
+        h11 = g(i, i) - 2.0 * g(i, k) + g(k, k)
+        h22 = g(j, j) - 2.0 * g(j, k) + g(k, k)
+        h12 = g(i, j) - g(i, k) - g(j, k) + g(k, k)
+        determinant = h11 * h22 - h12 * h12
+        rounding = 16.0 * np.finfo(np.float64).eps * (np.abs(h11 * h22) + h12 * h12)
+        stable = (h11 > 0.0) & (determinant > rounding)
+    return stable & np.isfinite(determinant)
+
+
+def drucker_stability(
+    model: HyperelasticMaterial,
+    *,
+    max_tension_strain: float = 10.0,
+    max_compression_strain: float = 0.95,
+    samples: int = 2000,
+) -> StabilityReport:
+    """Drucker stability of an incompressible model over the six standard modes.
+
+    Scans the nominal strain magnitude from 0 to the maximum of each mode (log-spaced
+    samples plus 0) and refines the first unstable point by bisection to 1e-9 relative.
+
+    Args:
+        model: The fitted model.
+        max_tension_strain: Largest nominal strain checked in tension (Abaqus checks to 10).
+        max_compression_strain: Largest nominal strain magnitude checked in compression (< 1).
+        samples: Samples per mode before bisection.
+
+    Returns:
+        The :class:`StabilityReport` (criterion in the module Notes).
+    """
+    if not 0.0 < max_compression_strain < 1.0 or not max_tension_strain > 0.0:
+        raise InputError(
+            "need max_tension_strain > 0 and 0 < max_compression_strain < 1",
+            value=(max_tension_strain, max_compression_strain),
+        )
+    ranges = []
+    for mode_name in STABILITY_MODES:
+        mode, _, direction = mode_name.partition("_")
+        sign = 1.0 if direction == "tension" else -1.0
+        limit = max_tension_strain if sign > 0.0 else max_compression_strain
+        strains = np.concatenate([[0.0], np.geomspace(1e-6 * limit, limit, samples)])
+        stable = _is_stable(model, mode, 1.0 + sign * strains)
+        if np.all(stable):
+            ranges.append(StableRange(mode_name, None, limit))
+            continue
+        first = int(np.argmin(stable))
+        if first == 0:
+            ranges.append(StableRange(mode_name, 0.0, limit))
+            continue
+        low, high = strains[first - 1], strains[first]
+        while high - low > 1e-9 * high:
+            middle = 0.5 * (low + high)
+            if _is_stable(model, mode, np.array([1.0 + sign * middle]))[0]:
+                low = middle
+            else:
+                high = middle
+        ranges.append(StableRange(mode_name, float(high), limit))
+    return StabilityReport(tuple(ranges))
+
+
+@dataclass
+class HyperelasticFit:
+    """A fitted homogeneous hyperelastic model.
+
+    Attributes:
+        model: The model with the fitted parameters.
+        result: The engine's result (parameters, statistics, R² over the fitted window).
+        tests: The tests that were fitted, full records (not windowed).
+        objective: "absolute" or "relative".
+        min_strain: Lower end of the strain window.
+        stability: The Drucker check of the fitted model.
+    """
+
+    model: HyperelasticMaterial
+    result: FitResult
+    tests: tuple[HomogeneousTest, ...]
+    objective: str
+    min_strain: float
+    stability: StabilityReport
+
+    @property
+    def label(self) -> str:
+        """Model label, e.g. ``reduced_polynomial:2``."""
+        return model_label(self.model)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-compatible: the model, the fit, the window and the stability check."""
+        return {
+            "model": self.model.to_dict(),
+            "initial_shear_modulus_Pa": self.model.initial_shear_modulus_Pa,
+            "objective": self.objective,
+            "min_strain": self.min_strain,
+            "loadings": [t.loading for t in self.tests],
+            "fit": self.result.to_dict(),
+            "stability": self.stability.to_dict(),
+        }
+
+    def comparison_row(self) -> dict[str, Any]:
+        """One row of a model-comparison table (the needle-indentation study, Table 1, plus the
+        stable range)."""
+        mode_names = {f"{t.mode}_{'compression' if t.sign < 0 else 'tension'}" for t in self.tests}
+        tested = [self.stability[m].unstable_from_strain for m in sorted(mode_names)]
+        unstable = [value for value in tested if value is not None]
+        return {
+            "model": self.label,
+            "objective": self.objective,
+            "r_squared": self.result.r_squared,
+            "rmse_Pa": self.result.rmse,
+            "status": self.result.status,
+            "unstable_from_strain_tested_modes": min(unstable) if unstable else None,
+            "stable_up_to_strain_all_modes": self.stability.stable_up_to_strain,
+        }
+
+
+def fit_hyperelastic(
+    model: str | HyperelasticMaterial,
+    tests: HomogeneousTest | Sequence[HomogeneousTest],
+    *,
+    objective: str = "absolute",
+    min_strain: float | None = None,
+    method: str = "lm",
+    bounds: tuple[Any, Any] | None = None,
+    progress: bool = False,
+) -> HyperelasticFit:
+    """Fit an incompressible hyperelastic model to one or several homogeneous tests.
+
+    Starting values: given a model instance, its parameters; given a name, the linear
+    least-squares solution for the invariant models (they are linear in their
+    parameters), and for Ogden the best of a grid of alphas with mu solved linearly. The
+    engine then runs with analytic Jacobians.
+
+    Args:
+        model: A name (see :func:`model_from_name`) or a :mod:`warptissue.materials`
+            hyperelastic model (its parameters are the starting point; its bulk modulus, if
+            any, is dropped: the closed forms are incompressible).
+        tests: One test or several (a joint fit; residuals are concatenated).
+        objective: "absolute" (the needle-indentation study, Eq. 4) or "relative" (Eq. 5).
+        min_strain: Fit only points with nominal strain above this; default 0.05 for the
+            relative objective (as the needle-indentation study) and 0 (all points) for the
+            absolute one.
+        method: "lm" or "salm".
+        bounds: (lower, upper) parameter bounds in the order of the model's parameter
+            vector, scalars or arrays; default the model's ``parameter_bounds`` (none for
+            these models).
+        progress: Show the engine's progress bar.
+
+    Returns:
+        The :class:`HyperelasticFit` with its Drucker stability check.
+
+    Raises:
+        InputError: Bad model name, objective or data (e.g. zero stress in the window of a
+            relative fit).
+    """
+    template = model_from_name(model) if isinstance(model, str) else model
+    if not isinstance(template, HyperelasticMaterial):
+        raise InputError(
+            "model must be a name or a warptissue.materials hyperelastic model", value=model
+        )
+    template = template.with_bulk_modulus(None)
+    if bounds is None:
+        bounds = template.parameter_bounds
+    test_list = (tests,) if isinstance(tests, HomogeneousTest) else tuple(tests)
+    if not test_list:
+        raise InputError("at least one test is needed")
+    if objective not in ("absolute", "relative"):
+        raise InputError("objective must be 'absolute' or 'relative'", value=objective)
+    window = (0.05 if objective == "relative" else 0.0) if min_strain is None else min_strain
+    if not (math.isfinite(window) and window >= 0.0):
+        raise InputError("min_strain must be >= 0", value=min_strain)
+    fitted_tests = [t.window(window) for t in test_list]
+    data = np.concatenate([t.nominal_stress_Pa for t in fitted_tests])
+    divisors = data.copy() if objective == "relative" else np.ones_like(data)
+    if objective == "relative" and np.any(data == 0.0):
+        raise InputError("the relative objective needs non-zero stresses in the strain window")
+
+    def model_at(p: np.ndarray) -> HyperelasticMaterial:
+        try:
+            return template.with_parameters(p)
+        except InputError as exc:
+            raise RejectStep(str(exc)) from exc
+
+    def predictions(p: np.ndarray) -> np.ndarray:
+        candidate = model_at(p)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return np.concatenate([t.predicted_stress_Pa(candidate) for t in fitted_tests])
+
+    def gradient(candidate: HyperelasticMaterial) -> np.ndarray:
+        return np.concatenate(
+            [t.sign * candidate.nominal_stress_gradient(t.stretch, t.mode) for t in fitted_tests]
+        )
+
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        return gradient(model_at(p))
+
+    if isinstance(model, str):
+        start = template.start_parameters(
+            lambda candidate: gradient(candidate) / divisors[:, None], data / divisors
+        )
+    else:
+        start = template.parameter_vector
+    lower = np.broadcast_to(np.asarray(bounds[0], dtype=np.float64), start.shape)
+    upper = np.broadcast_to(np.asarray(bounds[1], dtype=np.float64), start.shape)
+    start = np.clip(start, lower, upper)
+    result = fit_curve(
+        predictions,
+        start,
+        data,
+        objective=objective,
+        jac=jacobian,
+        bounds=bounds,
+        method=method,
+        parameter_names=template.parameter_names,
+        parameter_units=template.parameter_units,
+        progress=progress,
+        max_iterations=500,
+        ftol=1e-12,
+        xtol=1e-12,
+        gtol=1e-10,
+    )
+    fitted = template.with_parameters(result.x)
+    return HyperelasticFit(
+        model=fitted,
+        result=result,
+        tests=test_list,
+        objective=objective,
+        min_strain=window,
+        stability=drucker_stability(fitted),
+    )
