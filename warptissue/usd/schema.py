@@ -55,10 +55,10 @@ DEFORMABLE_BODY_API = "PhysicsDeformableBodyAPI"
 PLUGIN_DIRECTORY = Path(__file__).resolve().parent / "plugin"
 """Folder holding ``plugInfo.json`` and ``generatedSchema.usda``."""
 
-# ``Material.to_dict()`` (fe-core) is flat, with units in the keys: ``C10_Pa``, ``C01_Pa``,
-# ``C20_Pa``, ..., ``mu1_Pa``, ``alpha1``, ..., ``bulk_modulus_Pa``. The tuple form of the
-# constructors (``C_Pa``, ``mu_Pa``, ``alpha``) is accepted too. USD attribute names drop the unit
-# (the schema documents it). Keys not recognised are written verbatim under
+# ``warptissue.materials.Material.to_dict()`` is flat, with units in the keys: ``C10_Pa``,
+# ``C01_Pa``, ``C20_Pa``, ..., ``mu1_Pa``, ``alpha1``, ..., ``bulk_modulus_Pa``. The tuple form
+# of the constructors (``C_Pa``, ``mu_Pa``, ``alpha``) is accepted too. USD attribute names drop
+# the unit (the schema documents it). Keys not recognised are written verbatim under
 # ``tissue:hyperelastic:`` so that nothing the material reports is lost.
 _SCALAR_KEYS: dict[str, str] = {
     "shear_modulus_Pa": "shearModulus",
@@ -191,9 +191,10 @@ def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
     than an object with ``small_strain_equivalent()``.
 
     Args:
-        record: ``{"model": name, ...}`` with the fe-core keys (``C10_Pa``, ``C01_Pa``,
-            ``C20_Pa``, ``mu1_Pa``, ``alpha1``, ``shear_modulus_Pa``, ``bulk_modulus_Pa``,
-            ``youngs_modulus_Pa``, ``poissons_ratio``; or the tuples ``C_Pa``, ``mu_Pa``).
+        record: ``{"model": name, ...}`` with the ``warptissue.materials`` keys (``C10_Pa``,
+            ``C01_Pa``, ``C20_Pa``, ``mu1_Pa``, ``alpha1``, ``shear_modulus_Pa``,
+            ``bulk_modulus_Pa``, ``youngs_modulus_Pa``, ``poissons_ratio``; or the tuples
+            ``C_Pa``, ``mu_Pa``).
 
     Returns:
         ``(E_Pa, nu)``. Without a bulk modulus the model is incompressible and nu = 0.5.
@@ -298,7 +299,7 @@ def record_from_attributes(model: str, values: Mapping[str, Any]) -> dict[str, A
             namespace to its value (float or sequence of floats).
 
     Returns:
-        A dictionary with the fe-core keys (``C10_Pa``, ``mu1_Pa``, ``alpha1``,
+        A dictionary with the ``warptissue.materials`` keys (``C10_Pa``, ``mu1_Pa``, ``alpha1``,
         ``bulk_modulus_Pa``, ``prony_g``, ...), as ``warptissue.materials.material_from_dict``
         reads it.
     """
