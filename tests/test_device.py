@@ -1,7 +1,9 @@
+import os
+
 import pytest
 import warp as wp
 
-from warptissue.device import resolve_device
+from warptissue.device import available_host_memory_bytes, resolve_device
 from warptissue.errors import DeviceError
 
 
@@ -21,3 +23,8 @@ def test_cuda_without_gpu_is_a_device_error():
 def test_unknown_device_lists_available():
     with pytest.raises(DeviceError, match="available: .*cpu"):
         resolve_device("tpu")
+
+
+def test_available_host_memory_is_positive_and_below_the_total():
+    available = available_host_memory_bytes()
+    assert 0 < available <= os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")

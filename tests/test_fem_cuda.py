@@ -19,7 +19,6 @@ from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, cudss, s
 from warptissue.fem.cudss import (
     MEMORY_ESTIMATE_NAMES,
     CudssSolver,
-    available_host_memory_bytes,
     bsr33_csr_pattern,
     bsr33_csr_values,
     check_memory_estimates,
@@ -202,7 +201,6 @@ def test_memory_estimates_that_do_not_fit_are_refused_with_the_numbers():
             device="cuda:0",
             host_available_bytes=int(2.5 * 2**30),
         )
-    assert 0 < available_host_memory_bytes()
 
 
 def test_cudss_needs_a_cuda_device():

@@ -1,12 +1,20 @@
-"""Choosing the Warp device that host wrappers launch on."""
+"""Choosing the Warp device that host wrappers launch on, and the host memory available.
+
+Warp is imported on first use, so that code that only asks for the memory (the mesh
+generators) does not load it.
+"""
 
 from __future__ import annotations
 
-import warp as wp
+import os
+from typing import TYPE_CHECKING
 
 from warptissue.errors import DeviceError
 
-__all__ = ["quiet_warp", "resolve_device"]
+if TYPE_CHECKING:
+    import warp as wp
+
+__all__ = ["available_host_memory_bytes", "quiet_warp", "resolve_device"]
 
 
 def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
@@ -22,6 +30,8 @@ def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
     Raises:
         DeviceError: The device does not exist on this machine.
     """
+    import warp as wp
+
     wp.init()
     if isinstance(device, wp.Device):
         return device
@@ -41,7 +51,22 @@ def quiet_warp() -> None:
 
     Warp 1.19 replaced ``wp.config.quiet`` with log levels; both are handled.
     """
+    import warp as wp
+
     if hasattr(wp, "LOG_WARNING"):
         wp.config.log_level = wp.LOG_WARNING
     else:
         wp.config.quiet = True
+
+
+def available_host_memory_bytes() -> int:
+    """Host memory available to a new allocation, bytes (Linux ``MemAvailable``, else the
+    free physical pages)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return 1024 * int(line.split()[1])
+    except OSError:
+        pass
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import functools
 import importlib.util
-import os
 import warnings
 from pathlib import Path
 
@@ -33,13 +32,13 @@ import numpy as np
 import warp as wp
 import warp.sparse as wps
 
+from warptissue.device import available_host_memory_bytes
 from warptissue.errors import DeviceError
 
 __all__ = [
     "DEVICE_MEMORY_SHARE",
     "MEMORY_ESTIMATE_NAMES",
     "CudssSolver",
-    "available_host_memory_bytes",
     "bsr33_csr_pattern",
     "bsr33_csr_values",
     "check_memory_estimates",
@@ -151,19 +150,6 @@ def bsr33_csr_values(matrix: wps.BsrMatrix, block_rows: wp.array, csr_values: wp
         outputs=[csr_values],
         device=matrix.device,
     )
-
-
-def available_host_memory_bytes() -> int:
-    """Host memory available to a new allocation, bytes (Linux ``MemAvailable``, else the
-    free physical pages)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as meminfo:
-            for line in meminfo:
-                if line.startswith("MemAvailable:"):
-                    return 1024 * int(line.split()[1])
-    except OSError:
-        pass
-    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
 
 
 def _gib(value_bytes: int) -> str:

@@ -30,12 +30,14 @@ from warptissue.mesh.quality import (
     radius_ratios,
     tet10_jacobian_determinants,
 )
+from warptissue.mesh.size import MeshSizeEstimate, estimate_indentation_mesh
 from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
     "MeshQuality",
+    "MeshSizeEstimate",
     "NODE_SET_PREFIX",
     "TET10_SWAP_1_2",
     "TET_REGION_KEY",
@@ -48,6 +50,7 @@ __all__ = [
     "check_mesh",
     "dihedral_angles",
     "edge_lengths",
+    "estimate_indentation_mesh",
     "fix_orientation",
     "extrude_triangles",
     "graded_coordinates",

@@ -13,6 +13,7 @@ from warptissue.mesh.core import (
     signed_volumes,
     to_tet10,
 )
+from warptissue.mesh.size import estimate_indentation_mesh
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
@@ -552,6 +553,20 @@ def _indentation_specimen(
             column="size_far_m",
             value=size_far_m,
         )
+    if not (np.isfinite(growth) and growth >= 1.0):
+        raise InputError("growth must be a finite number >= 1", column="growth", value=growth)
+    estimate_indentation_mesh(
+        shape="disc" if outer == "circle" else "block",
+        half_extent_m=half_extent_m,
+        thickness_m=thickness_m,
+        probe_radius_m=probe_radius_m,
+        quarter=quarter,
+        element=element,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+        layer_max_m=layer_max_m,
+    ).require_fits()
     points_2d, triangles = _ogrid_quarter(
         outer=outer,
         half_extent_m=half_extent_m,
@@ -672,7 +687,7 @@ def _ogrid_quarter(
         boundary nodes lie on their curves to rounding.
     """
     a = probe_radius_m
-    n = max(2, int(np.ceil(0.25 * np.pi * a / size_near_m)))
+    n = _ogrid_division(probe_radius_m, size_near_m)
     c = _INNER_SQUARE_FRACTION * a
     step = np.arange(n + 1) / n
     # The central square: (n + 1)^2 nodes, (i, j) -> i + (n + 1) j.
@@ -687,15 +702,13 @@ def _ogrid_quarter(
     direction = np.column_stack([np.cos(angle), np.sin(angle)])
     direction[-1] = (0.0, 1.0)
     # Rings from the square to the probe edge (uniform), then out to the outer boundary.
-    inner_count = max(1, int(round((a - c) / (0.25 * np.pi * a / n))))
+    inner_count, outer_fraction = _ogrid_rings(
+        half_extent_m, probe_radius_m, size_near_m, size_far_m, growth=growth
+    )
     if outer == "circle":
         reach = np.full(len(t), half_extent_m)
     else:
         reach = half_extent_m / np.maximum(np.abs(direction[:, 0]), np.abs(direction[:, 1]))
-    outer_fraction = _radial_spacing(
-        a, half_extent_m, size_near_m, size_far_m, growth=growth, angle_step=angle[1]
-    )
-    outer_fraction = outer_fraction[1:] / outer_fraction[-1]
     inner_fraction = np.arange(1, inner_count + 1) / inner_count
     start = square[boundary_index]
     arc = a * direction
@@ -716,6 +729,36 @@ def _ogrid_quarter(
 
     quads = np.vstack([_grid_quads(square_index), _grid_quads(ring_index)])
     return points, _split_quads(points, quads)
+
+
+def _ogrid_division(probe_radius_m: float, size_near_m: float) -> int:
+    """Cells along each side of the O-grid's central square (a quarter of the probe ring has
+    twice as many)."""
+    return max(2, int(np.ceil(0.25 * np.pi * probe_radius_m / size_near_m)))
+
+
+def _ogrid_rings(
+    half_extent_m: float,
+    probe_radius_m: float,
+    size_near_m: float,
+    size_far_m: float,
+    *,
+    growth: float,
+) -> tuple[int, np.ndarray]:
+    """The O-grid's rings outside its central square.
+
+    Returns:
+        ``(inner_count, outer_fraction)``: the number of uniform rings from the square to the
+        probe ring, and the increasing positions in (0, 1] of the rings from the probe ring to
+        the outer boundary (1 is the boundary).
+    """
+    a = probe_radius_m
+    n = _ogrid_division(probe_radius_m, size_near_m)
+    inner_count = max(1, int(round((1.0 - _INNER_SQUARE_FRACTION) * a / (0.25 * np.pi * a / n))))
+    outer_fraction = _radial_spacing(
+        a, half_extent_m, size_near_m, size_far_m, growth=growth, angle_step=0.25 * np.pi / n
+    )
+    return inner_count, outer_fraction[1:] / outer_fraction[-1]
 
 
 def _grid_quads(node_index: np.ndarray) -> np.ndarray:
