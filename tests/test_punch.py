@@ -134,3 +134,41 @@ def test_fit_punch_modulus_sphere_and_layer(rng):
     assert layer.parameters["youngs_modulus_Pa"] == pytest.approx(8e3, rel=1e-9)
     with pytest.raises(InputError, match="geometry"):
         fit_punch_modulus(depth, force, radius_m=1e-3, poissons_ratio=0.3, geometry="cone")
+
+
+def test_a_layer_much_thinner_than_the_punch_is_refused_not_fitted_negative():
+    from warptissue.fit.punch import HAYES_MAX_RADIUS_OVER_THICKNESS, fit_punch_modulus
+
+    # a/h = 50: the discretized Hayes factor used to come out negative (E < 0, R^2 = 1).
+    depth = np.linspace(1e-6, 1e-5, 10)
+    force = flat_punch_force_N(depth, radius_m=5e-3, youngs_modulus_Pa=3e4, poissons_ratio=0.5)
+    with pytest.raises(InputError, match="beyond the range of the finite-thickness"):
+        fit_punch_modulus(depth, force, radius_m=5e-3, poissons_ratio=0.5, thickness_m=1e-4)
+    with pytest.raises(InputError, match="a/h = 30"):
+        hayes_kappa(30.0, 0.5)
+    assert hayes_kappa(HAYES_MAX_RADIUS_OVER_THICKNESS, 0.5) > 1.0
+
+
+def test_fit_punch_modulus_never_returns_a_negative_modulus():
+    from warptissue.fit.punch import fit_punch_modulus
+
+    depth = np.linspace(1e-5, 1e-4, 10)
+    pulling = -flat_punch_force_N(depth, radius_m=1e-3, youngs_modulus_Pa=3e4, poissons_ratio=0.5)
+    result = fit_punch_modulus(depth, pulling, radius_m=1e-3, poissons_ratio=0.5)
+    assert result.parameters["youngs_modulus_Pa"] >= 0.0
+    assert not result.identified
+    assert "pinned at its lower bound" in result.identifiability[0]
+
+
+def test_fit_punch_modulus_warns_beyond_small_strain_and_implausible_moduli():
+    from warptissue.fit.punch import fit_punch_modulus
+
+    depth = np.linspace(1e-5, 1e-3, 20)
+    kwargs = {"radius_m": 1e-3, "poissons_ratio": 0.3}
+    force = flat_punch_force_N(depth, youngs_modulus_Pa=8e3, **kwargs) * hayes_kappa(0.5, 0.3)
+    layer = fit_punch_modulus(depth, force, thickness_m=2e-3, **kwargs)
+    assert any("0.5 of the layer thickness" in w for w in layer.warnings)
+    shallow = fit_punch_modulus(depth[:4], force[:4], thickness_m=2e-3, **kwargs)
+    assert shallow.warnings == []
+    huge = fit_punch_modulus(depth, 1e6 * force, **kwargs)  # kN written as N, say
+    assert any("outside the plausible range of soft tissue" in w for w in huge.warnings)

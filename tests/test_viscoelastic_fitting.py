@@ -111,7 +111,9 @@ def test_linear_wiechert_joint_fit_lm_and_nelder_mead(rng):
             result.method
         )
         assert result.record_rmse_N == pytest.approx([2e-3, 2e-3], rel=0.15)
-    assert nm.seed_cost_N <= lm.seed_cost_N * (1 + 1e-3)  # NM minimizes the seed's cost
+    assert nm.sum_of_record_rmse_N <= lm.sum_of_record_rmse_N * (
+        1 + 1e-3
+    )  # NM minimizes the seed's cost
 
 
 def test_nonlinear_wiechert_table_i_refit_predicts_100_mm_per_min(rng):
@@ -140,14 +142,57 @@ def test_nonlinear_wiechert_table_i_refit_predicts_100_mm_per_min(rng):
 
 def test_fit_relaxation_input_errors():
     time = np.linspace(0, 1, 10)
+    depth = 1e-3 * time
     with pytest.raises(InputError, match="model"):
-        fit_relaxation(time, time, time, model="maxwell")
+        fit_relaxation(time, depth, time, model="maxwell")
     with pytest.raises(InputError, match="p0"):
-        fit_relaxation(time, time, time, model="sls", p0=[1.0, 2.0])
+        fit_relaxation(time, depth, time, model="sls", p0=[1.0, 2.0])
     with pytest.raises(InputError, match="force_N"):
-        fit_relaxation(time, time, time[:-1])
+        fit_relaxation(time, depth, time[:-1])
     with pytest.raises(InputError, match="opposite signs"):
-        fit_relaxation(time, time, -time)
+        fit_relaxation(time, depth, -time)
+    with pytest.raises(InputError, match="opposite signs"):  # also with a given start
+        fit_relaxation(time, depth, -time, p0=[2.0, 1.0, 1.0])
+
+
+def _ramp_hold(scale_depth=1.0, scale_force=1.0):
+    time = np.arange(0.0, 30.0, 0.05)
+    depth = 2e-3 * np.minimum(time / 0.5, 1.0)
+    force = PronySeries(5.0, (6.0, 4.0), (0.8, 15.0)).force_N(time, depth)
+    return time, scale_depth * depth, scale_force * force
+
+
+def test_an_all_zero_force_is_refused_not_fitted():
+    time, depth, _ = _ramp_hold()
+    with pytest.raises(InputError, match="force is zero throughout"):
+        fit_relaxation(time, depth, np.zeros_like(time))
+
+
+def test_displacements_in_millimetres_are_refused():
+    time, depth, force = _ramp_hold(scale_depth=1e3)  # 2 mm written as 2 "m"
+    with pytest.raises(InputError, match="millimetres"):
+        fit_relaxation(time, depth, force)
+
+
+def test_a_probe_starting_above_the_surface_is_warned_about():
+    time, depth, force = _ramp_hold()
+    air = 0.5e-3  # the probe travels 0.5 mm through air before it touches
+    shifted = PronySeries(5.0, (6.0, 4.0), (0.8, 15.0)).force_N(time, np.clip(depth - air, 0, None))
+    result = fit_relaxation(time, depth, shifted, model="prony", terms=2)
+    assert any("above the surface" in w for w in result.warnings)
+    clean = fit_relaxation(time, depth, force, model="prony", terms=2)
+    assert clean.warnings == [] and clean.identified
+
+
+def test_a_large_force_and_a_negative_r_squared_are_warned_about():
+    time, depth, force = _ramp_hold(scale_force=1e4)  # 30 mN peak, written as 300 N
+    result = fit_relaxation(time, depth, force)
+    assert any("millinewtons" in w for w in result.warnings)
+    stiff = fit_relaxation(time, depth, 1e2 * force)
+    assert any("N/m, outside the plausible range" in w for w in stiff.warnings)
+    bad = fit_relaxation(time, depth, force[::-1].copy(), p0=[1.0, 0.5, 1.0])
+    assert bad.r_squared < 0.0
+    assert any("R^2 = " in w and "< 0" in w for w in bad.warnings)
 
 
 def test_single_record_nonlinear_wiechert_and_model_round_trip(rng):

@@ -71,7 +71,7 @@ def main() -> None:
             print(f"  {name:<14} {value:12.5g}   (Table I {true:g})")
         print(
             f"  fit RMSE near-step {result.record_rmse_N[0]:.5f} N, 20 mm/min "
-            f"{result.record_rmse_N[1]:.5f} N; seed cost (sum) {result.seed_cost_N:.5f} N"
+            f"{result.record_rmse_N[1]:.5f} N; seed cost (sum) {result.sum_of_record_rmse_N:.5f} N"
         )
         print(
             f"  100 mm/min prediction RMSE: {rmse_data:.5f} N against the noisy data, "

@@ -75,7 +75,7 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import STATUS_MESSAGES, FitResult, IterationRecord, RejectStep
 
-__all__ = ["fit_curve", "least_squares"]
+__all__ = ["covariance_from_jacobian", "fit_curve", "least_squares"]
 
 _EPS = float(np.finfo(np.float64).eps)
 _METHODS = ("lm", "salm")
@@ -264,10 +264,20 @@ def _finite_difference_jacobian(
     return jacobian
 
 
-def _covariance(
+def covariance_from_jacobian(
     jacobian: np.ndarray, cost: float
 ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-    """(J^T J)^-1 * SSR / (m - n), its standard errors and correlation, or Nones."""
+    """(J^T J)^-1 * SSR / (m - n), its standard errors and correlation, or Nones.
+
+    Args:
+        jacobian: d residuals / d x, shape (m, n).
+        cost: 0.5 * sum(residuals**2).
+
+    Returns:
+        (covariance (n, n), standard errors (n,), correlation (n, n)); all None when
+        m <= n or J is rank deficient (smallest singular value below m * eps of the
+        largest); the correlation alone is None when a standard error is zero.
+    """
     m, n = jacobian.shape
     if m <= n:
         return None, None, None
@@ -531,7 +541,7 @@ def least_squares(
         except ConvergenceError:
             status = -3
     covariance, errors, correlation = (
-        _covariance(jacobian, cost) if jacobian_is_current else (None, None, None)
+        covariance_from_jacobian(jacobian, cost) if jacobian_is_current else (None, None, None)
     )
     return FitResult(
         x=x,

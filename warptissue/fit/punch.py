@@ -12,12 +12,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from warptissue.errors import InputError
+from warptissue.errors import ConvergenceError, InputError
 
 if TYPE_CHECKING:
     from warptissue.fit import FitResult
 
 __all__ = [
+    "HAYES_MAX_RADIUS_OVER_THICKNESS",
+    "SMALL_STRAIN_DEPTH_OVER_THICKNESS",
     "flat_punch_force_N",
     "flat_punch_modulus_Pa",
     "flat_punch_modulus_printed_Pa",
@@ -28,6 +30,17 @@ __all__ = [
     "hertz_modulus_Pa",
     "plane_strain_modulus_Pa",
 ]
+
+
+HAYES_MAX_RADIUS_OVER_THICKNESS = 16.0
+"""Largest a/h for which :func:`hayes_kappa` is computed (and verified: the thin-layer limits
+of the tests reach a/h = 16). Beyond it the Nystrom discretization no longer resolves the
+kernel (at a/h = 30-50 it returns wrong, even negative, values) and the layer is so thin that
+the linear theory needs depths far below the layer thickness."""
+
+SMALL_STRAIN_DEPTH_OVER_THICKNESS = 0.1
+"""Depth over layer thickness above which :func:`fit_punch_modulus` warns: Hayes et al.'s
+factor is a small-strain (linear elastic) result."""
 
 
 def _check(radius_m: float, poissons_ratio: float) -> None:
@@ -139,6 +152,11 @@ def hayes_kappa(
     Returns:
         kappa >= 1.
 
+    Raises:
+        InputError: a/h negative, not finite, or above :data:`HAYES_MAX_RADIUS_OVER_THICKNESS`
+            (a layer much thinner than the punch radius: the factor is not computed there).
+        ConvergenceError: The discretization returned kappa < 1 (never within the range).
+
     Notes:
         Computed, not tabulated: with the contact pressure written as an Abel transform of
         phi(t), the mixed boundary-value problem reduces to the Fredholm equation
@@ -157,6 +175,13 @@ def hayes_kappa(
     if not (math.isfinite(ratio) and ratio >= 0.0):
         raise InputError(
             "must be finite and non-negative", column="radius_over_thickness", value=ratio
+        )
+    if ratio > HAYES_MAX_RADIUS_OVER_THICKNESS:
+        raise InputError(
+            f"radius/thickness a/h = {ratio:.4g} is beyond the range of the finite-thickness "
+            f"(Hayes) correction, a/h <= {HAYES_MAX_RADIUS_OVER_THICKNESS:g}: the layer is much "
+            "thinner than the punch radius; use a smaller punch or a thicker layer",
+            column="thickness_m",
         )
     if ratio == 0.0:
         return 1.0
@@ -179,7 +204,13 @@ def hayes_kappa(
     f = CubicSpline(z_grid, f_grid, bc_type=((1, 0.0), (2, 0.0)))
     kernel = f(ratio * np.abs(x[:, None] - x[None, :])) + f(ratio * (x[:, None] + x[None, :]))
     phi = np.linalg.solve(np.eye(x.size) - ratio / math.pi * kernel * w[None, :], np.ones(x.size))
-    return float(phi @ w)
+    kappa = float(phi @ w)
+    if not kappa >= 1.0:
+        raise ConvergenceError(
+            f"the Hayes factor at a/h = {ratio:.4g}, nu = {poissons_ratio:.4g} came out "
+            f"{kappa:.4g} < 1 (not resolved by {int(node_count)} nodes)"
+        )
+    return kappa
 
 
 def flat_punch_modulus_printed_Pa(
@@ -271,9 +302,18 @@ def fit_punch_modulus(
         method: "lm" or "salm".
 
     Returns:
-        A :class:`warptissue.fit.FitResult` with the one parameter ``youngs_modulus_Pa``.
+        A :class:`warptissue.fit.FitResult` with the one parameter ``youngs_modulus_Pa``,
+        bounded below by 0 (a curve that falls with depth pins it there, which the result's
+        identifiability check reports). Its ``warnings`` say when the deepest point exceeds
+        :data:`SMALL_STRAIN_DEPTH_OVER_THICKNESS` of the layer thickness and when the modulus
+        is implausible for soft tissue (:func:`warptissue.fit.plausibility.modulus_warnings`).
+
+    Raises:
+        InputError: Bad data or options, or a layer outside the range of the Hayes
+            correction (:data:`HAYES_MAX_RADIUS_OVER_THICKNESS`).
     """
     from warptissue.fit import fit_curve
+    from warptissue.fit.plausibility import modulus_warnings
 
     depth = _depth(depth_m)
     force = np.asarray(force_N, dtype=np.float64)
@@ -290,12 +330,23 @@ def fit_punch_modulus(
     else:
         raise InputError("geometry must be 'flat' or 'sphere'", column="geometry", value=geometry)
     start = float(unit_force @ force / (unit_force @ unit_force))
-    return fit_curve(
+    result = fit_curve(
         lambda p: p[0] * unit_force,
         [start if start > 0 else 1.0],
         force,
         jac=lambda p: unit_force[:, None],
+        bounds=(0.0, np.inf),
         method=method,
         parameter_names=("youngs_modulus_Pa",),
         parameter_units=("Pa",),
     )
+    if thickness_m is not None and geometry == "flat":
+        strain = float(np.max(depth)) / thickness_m
+        if strain > SMALL_STRAIN_DEPTH_OVER_THICKNESS:
+            result.warnings.append(
+                f"the deepest point is {strain:.3g} of the layer thickness (above "
+                f"{SMALL_STRAIN_DEPTH_OVER_THICKNESS:g}): the finite-thickness correction is a "
+                "small-strain result; fit a shallower part of the curve"
+            )
+    result.warnings.extend(modulus_warnings(result.parameters["youngs_modulus_Pa"]))
+    return result

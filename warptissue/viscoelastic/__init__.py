@@ -11,6 +11,7 @@ from warptissue.viscoelastic.fitting import (
     RelaxationRecord,
     fit_qlv,
     fit_relaxation,
+    fit_relaxation_joint,
     fit_wiechert_joint,
     model_from_result,
 )
@@ -38,6 +39,7 @@ __all__ = [
     "RelaxationRecord",
     "fit_qlv",
     "fit_relaxation",
+    "fit_relaxation_joint",
     "fit_wiechert_joint",
     "model_from_result",
     "LinearWiechert",

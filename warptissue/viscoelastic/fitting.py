@@ -3,7 +3,8 @@
 Every least-squares fit here goes through the project's one engine
 (:func:`warptissue.fit.fit_curve` / :func:`warptissue.fit.least_squares`, Levenberg-Marquardt
 or the self-adapting LM). The joint Wiechert fit can also use Nelder-Mead
-(``scipy.optimize.minimize``) on seed 004's cost, the sum of the RMS errors of the curves.
+(``scipy.optimize.minimize``) on Takacs et al.'s cost, the sum of the RMS errors of the
+curves.
 Models are simulated on the measured displacement history, ramp included, never on an
 idealized step.
 """
@@ -17,8 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit import FitResult, RejectStep, fit_curve, least_squares
+from warptissue.fit import FitResult, RejectStep, fit_curve
+from warptissue.fit.engine import covariance_from_jacobian
 from warptissue.fit.metrics import r_squared, rmse
+from warptissue.fit.plausibility import (
+    check_indentation_record,
+    fit_quality_warnings,
+    stiffness_warnings,
+)
 from warptissue.viscoelastic._hereditary import validate_history
 from warptissue.viscoelastic.linear import (
     PronySeries,
@@ -33,6 +40,7 @@ __all__ = [
     "RelaxationRecord",
     "fit_qlv",
     "fit_relaxation",
+    "fit_relaxation_joint",
     "fit_wiechert_joint",
     "model_from_result",
 ]
@@ -57,11 +65,23 @@ _NONLINEAR_UNITS = ("N/m", "N/m", "N/m", "N s/m", "N s/m", "1/m", "1/m", "1/m")
 
 @dataclass(frozen=True)
 class RelaxationRecord:
-    """One measured test: sampled time, displacement and force (SI, shape (n,) each)."""
+    """One measured test: sampled time, displacement and force (SI, shape (n,) each).
+
+    Attributes:
+        time_s: Strictly increasing sample times, shape (n,).
+        displacement_m: Indentation depth, shape (n,), positive into the specimen.
+        force_N: Force, shape (n,), positive when the probe pushes in.
+        source: Where the record came from (a file name), named in errors and warnings.
+        conditioned: The record went through contact detection and trimming
+            (:mod:`warptissue.acquisition.conditioning`); the fits then skip the "probe
+            above the surface" warning.
+    """
 
     time_s: np.ndarray
     displacement_m: np.ndarray
     force_N: np.ndarray
+    source: str | None = None
+    conditioned: bool = False
 
     def __post_init__(self) -> None:
         time, displacement = validate_history(
@@ -69,27 +89,33 @@ class RelaxationRecord:
         )
         _, force = validate_history(time, self.force_N, name="force_N")
         if time.size < 3:
-            raise InputError("a record needs at least 3 samples", value=time.size)
+            raise InputError("a record needs at least 3 samples", path=self.source, value=time.size)
         object.__setattr__(self, "time_s", time)
         object.__setattr__(self, "displacement_m", displacement)
         object.__setattr__(self, "force_N", force)
 
+    def plausibility_warnings(self) -> list[str]:
+        """:func:`warptissue.fit.plausibility.check_indentation_record` on this record.
+
+        Raises:
+            InputError: A record that cannot be an indentation in SI units.
+        """
+        messages = check_indentation_record(
+            self.displacement_m, self.force_N, path=self.source, conditioned=self.conditioned
+        )
+        return [f"{self.source}: {m}" if self.source else m for m in messages]
+
 
 def _initial_prony(record: RelaxationRecord, terms: int) -> np.ndarray:
-    """Data-based start: (k_inf, k_1..k_N, tau_1..tau_N) from the peak and the tail."""
+    """Data-based start: (k_inf, k_1..k_N, tau_1..tau_N) from the peak and the tail.
+
+    The record must have passed :meth:`RelaxationRecord.plausibility_warnings` (non-zero
+    force and displacement of one sign).
+    """
     time, x, force = record.time_s, record.displacement_m, record.force_N
     peak = int(np.argmax(np.abs(force)))
     x_peak = x[peak] if abs(x[peak]) > 0 else np.max(np.abs(x))
     x_end = x[-1] if abs(x[-1]) > 0 else x_peak
-    if not (abs(x_peak) > 0 and abs(x_end) > 0):
-        raise InputError("the displacement is zero throughout; nothing to fit")
-    if force[peak] * x_peak < 0.0:
-        raise InputError(
-            "force and displacement have opposite signs at the force peak; use one sign "
-            "convention for both (positive when the probe pushes in)",
-            column="force_N",
-            value=float(force[peak]),
-        )
     k_end = max(force[-1] / x_end, 1e-12 * abs(force[peak] / x_peak))
     k_peak = max(force[peak] / x_peak, 1.5 * k_end)
     start = time[peak] - time[0]
@@ -128,73 +154,144 @@ def fit_relaxation(
     p0: Sequence[float] | None = None,
     method: str = "lm",
     objective: str = "absolute",
+    relative_floor: float | None = None,
     max_iterations: int = 200,
     progress: bool = False,
 ) -> FitResult:
     """Fit a lumped viscoelastic model to one measured test (ramp-and-hold or any history).
 
     The model is driven by the measured displacement history (linear between samples), so
-    the finite ramp of a real ramp-and-hold test is part of the fit.
+    the finite ramp of a real ramp-and-hold test is part of the fit. One record of
+    :func:`fit_relaxation_joint`; see there for the arguments and the result.
+    """
+    return fit_relaxation_joint(
+        [RelaxationRecord(time_s, displacement_m, force_N)],
+        model=model,
+        terms=terms,
+        p0=p0,
+        method=method,
+        objective=objective,
+        relative_floor=relative_floor,
+        max_iterations=max_iterations,
+        progress=progress,
+    )
+
+
+def fit_relaxation_joint(
+    records: Sequence[RelaxationRecord],
+    *,
+    model: str = "sls",
+    terms: int = 2,
+    p0: Sequence[float] | None = None,
+    method: str = "lm",
+    objective: str = "absolute",
+    relative_floor: float | None = None,
+    max_iterations: int = 200,
+    progress: bool = False,
+) -> FitResult:
+    """Fit one lumped viscoelastic model to one or several tests at once.
+
+    Takacs et al. fit a near-step relaxation and a constant-rate ramp together, so that the
+    fast and the slow time scales are both constrained, and validate on a third rate
+    (predict it with ``result.fitted_model.force_N``). Each model is driven by each record's
+    measured displacement history. The residuals of record i are weighted by
+    1 / sqrt(n_i), so that every test weighs as its mean square error whatever its sampling
+    rate and length (for one record this changes nothing).
 
     Args:
-        time_s: Strictly increasing sample times, shape (n,).
-        displacement_m: Displacement, shape (n,).
-        force_N: Measured force, shape (n,).
+        records: The tests (:class:`RelaxationRecord`, or (time_s, displacement_m, force_N)
+            tuples).
         model: "sls" (parameters instantaneous_stiffness_N_per_m,
             equilibrium_stiffness_N_per_m, relaxation_time_s), "prony" (``terms`` terms:
             equilibrium_stiffness_N_per_m, k1..kN_N_per_m, tau1..tauN_s), "wiechert"
             (k0, k1, k2, b1, b2) or "wiechert-nonlinear" (K0, K1, K2, b1, b2, kappa0..2).
         terms: Number of Prony terms (model "prony").
-        p0: Initial parameters in the order above; default from the data (the nonlinear
-            Wiechert model starts from its linear fit with kappa = 0). All parameters are
-            bounded below by 0 (kappa_j >= 0: progressive springs; a negative kappa makes
-            the spring force fall with stretch beyond 1/|kappa|).
+        p0: Initial parameters in the order above; default from the longest record (the
+            nonlinear Wiechert model starts from its linear fit with kappa = 0). All
+            parameters are bounded below by 0 (kappa_j >= 0: progressive springs; a negative
+            kappa makes the spring force fall with stretch beyond 1/|kappa|).
         method: "lm" or "salm" (:func:`warptissue.fit.least_squares`).
         objective: "absolute" or "relative".
+        relative_floor: Smallest |force| (N) used as the divisor of the relative objective
+            (:func:`warptissue.fit.fit_curve`); needed for records that start at zero force.
         max_iterations: Iteration limit of the engine.
         progress: Show a progress bar.
 
     Returns:
-        The :class:`warptissue.fit.FitResult`; its extra attribute ``fitted_model`` holds the
-        fitted model object (:func:`model_from_result` builds it again from any result).
+        The :class:`warptissue.fit.FitResult` (``fitted`` and ``r_squared``/``rmse`` over
+        all samples, unweighted), with the extra attributes ``fitted_model`` (the model
+        object; :func:`model_from_result` builds it again from any result),
+        ``record_rmse_N`` and ``record_r_squared`` (one per record). Its ``warnings`` hold
+        the plausibility warnings of the data and of the fitted stiffness
+        (:mod:`warptissue.fit.plausibility`).
 
     Raises:
-        InputError: Bad data, model name or initial parameters.
+        InputError: Bad data (implausible for an indentation: zero force, opposite signs,
+            depths beyond 0.1 m), model name or initial parameters.
     """
-    record = RelaxationRecord(time_s, displacement_m, force_N)
+    checked = [r if isinstance(r, RelaxationRecord) else RelaxationRecord(*r) for r in records]
+    if not checked:
+        raise InputError("at least one record is needed", column="records")
     if model not in RELAXATION_MODELS:
         raise InputError(f"model must be one of {RELAXATION_MODELS}", column="model", value=model)
     if model == "prony" and int(terms) < 1:
         raise InputError("terms must be >= 1", column="terms", value=terms)
-    names, units, start, build = _model_setup(record, model, int(terms), p0, method)
+    data_warnings = [m for r in checked for m in r.plausibility_warnings()]
+    names, units, start, build = _model_setup(checked, model, int(terms), p0, method)
     start = np.asarray(start, dtype=np.float64)
     if start.size != len(names):
         raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
     is_kappa = np.array([n.startswith("kappa") for n in names])
     start = np.where((start == 0.0) & ~is_kappa, 1e-300, start)
+    weights = np.concatenate(
+        [np.full(r.time_s.size, 1.0 / math.sqrt(r.time_s.size)) for r in checked]
+    )
 
     def predict(p: np.ndarray) -> np.ndarray:
-        return build(p).force_N(record.time_s, record.displacement_m)
+        body = build(p)
+        return np.concatenate([body.force_N(r.time_s, r.displacement_m) for r in checked])
 
     result = fit_curve(
         _refusing(predict),
         start,
-        record.force_N,
+        np.concatenate([r.force_N for r in checked]),
         objective=objective,
+        weights=weights,
+        relative_floor=relative_floor,
         bounds=(0.0, np.inf),
         method=method,
         parameter_names=names,
         parameter_units=units,
-        x_scale=_scales(names, start, record),
+        x_scale=_scales(names, start, checked),
         max_iterations=max_iterations,
         progress=progress,
     )
     result.fitted_model = build(result.x)
+    _record_statistics(result, checked)
+    result.warnings.extend(data_warnings)
+    result.warnings.extend(fit_quality_warnings(result))
+    result.warnings.extend(stiffness_warnings(result.parameters, result.parameter_units))
     return result
 
 
-def _scales(names: Sequence[str], start: np.ndarray, record: RelaxationRecord) -> np.ndarray:
-    depth = max(float(np.max(np.abs(record.displacement_m))), 1e-12)
+def _record_statistics(result: FitResult, records: Sequence[RelaxationRecord]) -> None:
+    """Set ``record_rmse_N`` and ``record_r_squared`` (None for constant data) per record."""
+    result.record_rmse_N, result.record_r_squared = [], []
+    offset = 0
+    for r in records:
+        fitted = result.fitted[offset : offset + r.time_s.size]
+        offset += r.time_s.size
+        result.record_rmse_N.append(rmse(r.force_N, fitted))
+        try:
+            result.record_r_squared.append(r_squared(r.force_N, fitted))
+        except InputError:
+            result.record_r_squared.append(None)
+
+
+def _scales(
+    names: Sequence[str], start: np.ndarray, records: Sequence[RelaxationRecord]
+) -> np.ndarray:
+    depth = max(max(float(np.max(np.abs(r.displacement_m))) for r in records), 1e-12)
     return np.array(
         [
             max(abs(v), 1.0 / depth) if n.startswith("kappa") else max(abs(v), 1e-12)
@@ -204,9 +301,17 @@ def _scales(names: Sequence[str], start: np.ndarray, record: RelaxationRecord) -
 
 
 def _model_setup(
-    record: RelaxationRecord, model: str, terms: int, p0: Sequence[float] | None, method: str
+    records: Sequence[RelaxationRecord],
+    model: str,
+    terms: int,
+    p0: Sequence[float] | None,
+    method: str,
 ) -> tuple[tuple[str, ...], tuple[str, ...], np.ndarray, Callable[[np.ndarray], object]]:
-    """Names, units, initial values and builder of each model of :func:`fit_relaxation`."""
+    """Names, units, initial values and builder of each model of :func:`fit_relaxation_joint`.
+
+    The default initial values come from the longest record (its hold shows the relaxation).
+    """
+    record = max(records, key=lambda r: r.time_s[-1] - r.time_s[0])
     if model == "sls":
         names = (
             "instantaneous_stiffness_N_per_m",
@@ -237,9 +342,7 @@ def _model_setup(
             p0 = (k[0], k[1], k[2], k[1] * k[3], k[2] * k[4])
         return _WIECHERT_NAMES, _WIECHERT_UNITS, np.asarray(p0), lambda p: LinearWiechert(*p)
     if p0 is None:
-        linear = fit_relaxation(
-            record.time_s, record.displacement_m, record.force_N, model="wiechert", method=method
-        )
+        linear = fit_relaxation_joint(records, model="wiechert", method=method)
         p0 = np.concatenate([linear.x, np.zeros(3)])
     return _NONLINEAR_NAMES, _NONLINEAR_UNITS, np.asarray(p0), NonlinearWiechert.from_vector
 
@@ -288,6 +391,7 @@ def fit_qlv(
         :class:`QuasiLinearViscoelastic`.
     """
     record = RelaxationRecord(time_s, displacement_m, force_N)
+    data_warnings = record.plausibility_warnings()
     n = int(terms)
     if n < 1:
         raise InputError("terms must be >= 1", column="terms", value=terms)
@@ -332,6 +436,8 @@ def fit_qlv(
         max_iterations=max_iterations,
     )
     result.fitted_model = build(result.x)
+    result.warnings.extend(data_warnings)
+    result.warnings.extend(fit_quality_warnings(result))
     return result
 
 
@@ -344,25 +450,27 @@ def fit_wiechert_joint(
     max_iterations: int = 200,
     progress: bool = False,
 ) -> FitResult:
-    """Fit one Wiechert model to several tests at once (seed 004, Section VI).
+    """Fit one Wiechert model to several tests at once (Takacs et al., Section VI).
 
     Args:
         records: The tests, e.g. a near-step relaxation and a constant-rate ramp.
         p0: Initial parameters: (k0, k1, k2, b1, b2) for "linear", (K0, K1, K2, b1, b2,
             kappa0, kappa1, kappa2) for "nonlinear".
         model: "linear" or "nonlinear".
-        optimizer: "lm" (through :func:`warptissue.fit.least_squares`; residuals of each
-            record divided by sqrt(its sample count), so that each test weighs as its mean
-            square error) or "nelder-mead" (``scipy.optimize.minimize`` on the seed's cost,
-            the sum of the RMS errors of the records; K_j, b_j in log scale). Every
-            parameter is bounded below by 0 (kappa_j >= 0, progressive springs).
+        optimizer: "lm" (:func:`fit_relaxation_joint`: residuals of each record divided by
+            sqrt(its sample count), so that each test weighs as its mean square error) or
+            "nelder-mead" (``scipy.optimize.minimize`` on Takacs et al.'s cost, the sum of
+            the RMS errors of the records; K_j, b_j in log scale). Every parameter is
+            bounded below by 0 (kappa_j >= 0, progressive springs).
         max_iterations: Iteration limit (for Nelder-Mead: 400 per parameter at most).
         progress: Progress bar (LM only).
 
     Returns:
         A FitResult with the stacked residuals (per-record RMS weighting as above), ``rmse``
-        of all samples, and the extra attributes ``fitted_model``, ``record_rmse_N`` (one RMSE
-        per record) and ``seed_cost_N`` (their sum). For Nelder-Mead the covariance is None.
+        of all samples, and the extra attributes ``fitted_model``, ``record_rmse_N`` and
+        ``record_r_squared`` (one per record) and ``sum_of_record_rmse_N`` (Takacs et al.'s
+        cost). For Nelder-Mead the covariance comes from the Jacobian of the stacked
+        residuals at the optimum (as for LM).
     """
     if model not in ("linear", "nonlinear"):
         raise InputError("model must be 'linear' or 'nonlinear'", column="model", value=model)
@@ -373,6 +481,16 @@ def fit_wiechert_joint(
     checked = [r if isinstance(r, RelaxationRecord) else RelaxationRecord(*r) for r in records]
     if not checked:
         raise InputError("at least one record is needed", column="records")
+    if optimizer == "lm":
+        result = fit_relaxation_joint(
+            checked,
+            model="wiechert" if model == "linear" else "wiechert-nonlinear",
+            p0=p0,
+            max_iterations=max_iterations,
+            progress=progress,
+        )
+        result.sum_of_record_rmse_N = float(sum(result.record_rmse_N))
+        return result
     names, units, build = (
         (_WIECHERT_NAMES, _WIECHERT_UNITS, lambda p: LinearWiechert(*p))
         if model == "linear"
@@ -381,6 +499,7 @@ def fit_wiechert_joint(
     start = np.asarray(p0, dtype=np.float64)
     if start.size != len(names):
         raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
+    data_warnings = [m for r in checked for m in r.plausibility_warnings()]
     positive = np.array([not n.startswith("kappa") for n in names])
     weights = [1.0 / math.sqrt(r.time_s.size) for r in checked]
 
@@ -391,33 +510,20 @@ def fit_wiechert_joint(
     def stacked(p: np.ndarray) -> np.ndarray:
         return np.concatenate([w * e for w, e in zip(weights, record_errors(p), strict=True)])
 
-    guarded = _refusing(stacked)
     depth = max(float(np.max(np.abs(r.displacement_m))) for r in checked)
     scale = np.where(positive, np.abs(start), np.maximum(np.abs(start), 1.0 / depth))
-    if optimizer == "lm":
-        result = least_squares(
-            guarded,
-            start,
-            bounds=(0.0, np.inf),
-            x_scale=scale,
-            max_iterations=max_iterations,
-            progress=progress,
-            parameter_names=names,
-            parameter_units=units,
-        )
-    else:
-        result = _nelder_mead(
-            guarded, record_errors, start, positive, scale, names, units, max_iterations
-        )
-    errors = record_errors(result.x)
-    result.record_rmse_N = [float(np.sqrt(np.mean(e**2))) for e in errors]
-    result.seed_cost_N = float(sum(result.record_rmse_N))
+    result = _nelder_mead(
+        _refusing(stacked), record_errors, start, positive, scale, names, units, max_iterations
+    )
     all_force = np.concatenate([r.force_N for r in checked])
-    fitted = all_force + np.concatenate(errors)
-    result.fitted = fitted
-    result.rmse = rmse(all_force, fitted)
-    result.r_squared = r_squared(all_force, fitted)
+    result.fitted = all_force + np.concatenate(record_errors(result.x))
+    result.rmse = rmse(all_force, result.fitted)
+    result.r_squared = r_squared(all_force, result.fitted)
     result.fitted_model = build(result.x)
+    _record_statistics(result, checked)
+    result.sum_of_record_rmse_N = float(sum(result.record_rmse_N))
+    result.warnings.extend(data_warnings)
+    result.warnings.extend(fit_quality_warnings(result))
     return result
 
 
@@ -431,7 +537,7 @@ def _nelder_mead(
     units: tuple[str, ...],
     max_iterations: int,
 ) -> FitResult:
-    """Nelder-Mead on the seed's sum-of-RMSE cost, wrapped as a FitResult."""
+    """Nelder-Mead on Takacs et al.'s sum-of-RMSE cost, wrapped as a FitResult."""
     from scipy.optimize import minimize
 
     def to_parameters(z: np.ndarray) -> np.ndarray:
@@ -461,11 +567,13 @@ def _nelder_mead(
         [(residual(x + h * np.eye(x.size)[j]) - residuals) / h for j, h in enumerate(steps)]
     )
     status = 2 if outcome.success else 0
+    final_cost = 0.5 * float(residuals @ residuals)
+    covariance, errors, correlation = covariance_from_jacobian(jacobian, final_cost)
     return FitResult(
         x=x,
         parameter_names=names,
         parameter_units=units,
-        cost=0.5 * float(residuals @ residuals),
+        cost=final_cost,
         residuals=residuals,
         jacobian=jacobian,
         success=status > 0,
@@ -474,10 +582,12 @@ def _nelder_mead(
         iterations=int(outcome.nit),
         nfev=int(outcome.nfev),
         njev=1,
-        covariance=None,
-        standard_errors=None,
-        correlation=None,
+        covariance=covariance,
+        standard_errors=errors,
+        correlation=correlation,
         r_squared=None,
         rmse=float(np.sqrt(np.mean(residuals**2))),
         method="nelder-mead",
+        lower_bounds=np.zeros(x.size),
+        upper_bounds=np.full(x.size, np.inf),
     )
