@@ -4,8 +4,9 @@ The directive ``warptissue-cli`` walks the argument parser that the ``warptissue
 itself uses and renders, for every command and ``fit`` subcommand, a section with its one-line
 summary (the parser's ``help``) and its full ``--help`` text as a literal block. The
 ``warptissue-exit-statuses`` directive renders the exit statuses from the error classes of
-:mod:`warptissue.errors`. Nothing on the CLI page is written by hand, so it cannot drift from
-the code.
+:mod:`warptissue.errors` and ``warptissue.cli.EXIT_STATUSES``. Nothing on the CLI page is
+written by hand, so it cannot drift from the code; pages that use the directives are read
+again on every build (the parsers are code, not a source file Sphinx could watch).
 """
 
 from __future__ import annotations
@@ -20,12 +21,6 @@ from sphinx.application import Sphinx
 
 HELP_WIDTH = 92
 """Terminal width the help texts are formatted for."""
-
-EXTRA_EXIT_STATUSES = {
-    0: "success",
-    130: "interrupted (Ctrl-C)",
-}
-"""Exit statuses that do not come from an error class."""
 
 
 def _subcommands(
@@ -62,6 +57,19 @@ def _help_text(parser: argparse.ArgumentParser) -> str:
             os.environ["COLUMNS"] = previous
 
 
+def _note_generated(directive: Directive) -> None:
+    """Remember the page, so that every build reads it again."""
+    env = directive.state.document.settings.env
+    if not hasattr(env, "warptissue_generated_docs"):
+        env.warptissue_generated_docs = set()
+    env.warptissue_generated_docs.add(env.docname)
+
+
+def _always_outdated(app: Sphinx, env, added, changed, removed) -> list[str]:  # noqa: ARG001
+    """``env-get-outdated``: the pages with generated content."""
+    return sorted(getattr(env, "warptissue_generated_docs", set()) - set(removed))
+
+
 class CliDirective(Directive):
     """``warptissue-cli``: one section per command, with its summary and ``--help``."""
 
@@ -70,6 +78,7 @@ class CliDirective(Directive):
     def run(self) -> list[nodes.Node]:
         from warptissue.cli import build_parser
 
+        _note_generated(self)
         parser = build_parser()
         parser.prog = "warptissue"
         document = self.state.document
@@ -101,8 +110,10 @@ class ExitStatusDirective(Directive):
 
     def run(self) -> list[nodes.Node]:
         from warptissue import errors
+        from warptissue.cli import EXIT_STATUSES
 
-        rows: dict[int, list[str]] = {k: [v] for k, v in EXTRA_EXIT_STATUSES.items()}
+        _note_generated(self)
+        rows: dict[int, list[str]] = {k: [v] for k, v in EXIT_STATUSES.items()}
         for name in errors.__all__:
             cls = getattr(errors, name)
             if isinstance(cls, type) and issubclass(cls, errors.WarpTissueError):
@@ -136,4 +147,5 @@ def setup(app: Sphinx) -> dict[str, object]:
     """Register the directives."""
     app.add_directive("warptissue-cli", CliDirective)
     app.add_directive("warptissue-exit-statuses", ExitStatusDirective)
+    app.connect("env-get-outdated", _always_outdated)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
