@@ -69,3 +69,79 @@ def test_comparison_table_text_and_json(tmp_path):
     paths = write_comparison(tmp_path, "comparison", rows)
     assert json.loads(paths["json"].read_text())["models"][1]["stable_up_to_strain"] is None
     assert paths["txt"].read_text().strip() == text
+
+
+def test_axis_labels_carry_units_not_column_names():
+    from warptissue.report import axis_label
+
+    assert axis_label("time_s") == "time (s)"
+    assert axis_label("measured_force_N") == "force (N)"
+    assert axis_label("displacement_m") == "displacement (m)"
+    assert axis_label("fitted_nominal_stress_Pa") == "nominal stress (Pa)"
+    assert axis_label("k1_N_per_m") == "k1 (N/m)"
+    assert axis_label("nominal_strain") == "nominal strain (-)"
+
+
+def _captured_figures(monkeypatch):
+    from matplotlib.figure import Figure
+
+    figures = []
+    original = Figure.savefig
+
+    def capture(self, *args, **kwargs):
+        figures.append(self)
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", capture)
+    return figures
+
+
+def test_plot_shows_units_parameters_log_time_and_decimates(tmp_path, monkeypatch):
+    figures = _captured_figures(monkeypatch)
+    time = np.linspace(0.0, 100.0, 50_001)
+    force = 1.0 + np.exp(-time / 3.0)
+    result = fit_curve(
+        lambda p: p[0] + p[1] * np.exp(-time / 3.0),
+        [0.5, 0.5],
+        force,
+        parameter_names=("equilibrium_force_N", "relaxing_force_N"),
+        parameter_units=("N", "N"),
+    )
+    write_fit_outputs(
+        tmp_path,
+        "relax",
+        result,
+        {"time_s": time, "measured_force_N": force, "fitted_force_N": result.fitted},
+        log_x=True,
+    )
+    curves, residuals = figures[0].axes
+    assert residuals.get_xlabel() == "time (s)"
+    assert curves.get_ylabel() == "force (N)"
+    assert curves.get_xscale() == "log"
+    legend = "\n".join(t.get_text() for t in curves.get_legend().get_texts())
+    assert "equilibrium force = 1 N" in legend and "relaxing force = 1 N" in legend
+    for line in curves.get_lines():
+        assert 0 < len(line.get_xdata()) <= 4001
+        assert np.all(np.asarray(line.get_xdata()) > 0.0)
+
+
+def test_plot_of_several_records_has_one_colour_per_record(tmp_path, monkeypatch):
+    figures = _captured_figures(monkeypatch)
+    x, y, result = linear_fit()
+    plot_fit(
+        tmp_path / "joint.png",
+        np.concatenate([x, x]),
+        np.concatenate([y, y]),
+        np.concatenate([result.fitted, result.fitted]),
+        xlabel="time (s)",
+        ylabel="force (N)",
+        groups=np.repeat([0, 1], x.size),
+        group_names=("ramp.csv", "step.csv"),
+    )
+    texts = [t.get_text() for t in figures[0].axes[0].get_legend().get_texts()]
+    assert texts == [
+        "ramp.csv: measured",
+        "ramp.csv: fitted",
+        "step.csv: measured",
+        "step.csv: fitted",
+    ]

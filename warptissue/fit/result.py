@@ -296,10 +296,12 @@ class FitResult:
             summary["history"] = [record.to_dict() for record in self.history]
         return summary
 
-    def summary(self) -> str:
+    def summary(self, *, warnings: bool = True) -> str:
         """A human-readable table of the parameters and the fit statistics.
 
-        The table ends with one ``warning: ...`` line per entry of :attr:`all_warnings`.
+        Args:
+            warnings: End the table with one ``warning: ...`` line per entry of
+                :attr:`all_warnings` (the command line prints them on stderr instead).
         """
         errors = self.standard_errors
         width = max(len(name) for name in self.parameter_names)
@@ -314,5 +316,6 @@ class FitResult:
             f"R^2 = {r2}, RMSE = {self.rmse:.6g}, cost = {self.cost:.6g}, "
             f"iterations = {self.iterations}, status = {self.status}: {self.message}"
         )
-        lines.extend(f"warning: {message}" for message in self.all_warnings)
+        if warnings:
+            lines.extend(f"warning: {message}" for message in self.all_warnings)
         return "\n".join(lines)
