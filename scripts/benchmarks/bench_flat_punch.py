@@ -3,7 +3,7 @@
 The problem (issue 2): a quarter of a 20 mm x 20 mm x 10 mm block (symmetry planes x = 0 and
 y = 0, fixed base), a bonded rigid flat punch of radius a = 1 mm pressed to a / 2 in 20 load
 steps, nearly incompressible neo-Hookean tissue with mu = 575 Pa (C10 = 287.5 Pa, porcine
-liver, seed 000) and K / mu = 1000.
+liver, Ahn & Kim) and K / mu = 1000.
 
 - warptissue: TET10 mixed formulation on meshes from about 10k to about 1M tets
   (``--sizes``), on the CPU or CUDA (``--device``).

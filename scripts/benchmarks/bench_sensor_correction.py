@@ -1,4 +1,4 @@
-"""Seed 002, Table 1 on synthetic sensors: does WCFM_SVM beat every single model?
+"""Tong et al., Table 1 on synthetic sensors: does WCFM_SVM beat every single model?
 
 For each of ``--sessions`` simulated calibration sessions (``synthetic_sensor``, a seed
 each) of ``--session-samples`` samples x 5 readings, 70 random samples train all eight
@@ -83,7 +83,7 @@ def main() -> None:
     first = results[0]["table1"]
     print(
         f"\nTable 1, session seed {args.first_seed}: 70 training / 6 held-out samples "
-        f"(inputs: {args.inputs}; MSE* = 1/n sqrt(sum e^2) as seed 002 defines it)"
+        f"(inputs: {args.inputs}; MSE* = 1/n sqrt(sum e^2) as Tong et al. define it)"
     )
     print(f"{'model':<11} {'MAE (N)':>9} {'MSE* (N)':>9} {'MAPE (%)':>9} {'max (N)':>9}")
     for name in CALIBRATION_MODELS:

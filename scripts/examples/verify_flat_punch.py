@@ -33,10 +33,10 @@ from warptissue.fem import (
     LinearSolver,
     simulate_indentation,
 )
+from warptissue.fit.punch import hayes_kappa
 from warptissue.io import write_json
 from warptissue.materials import NeoHookean
 from warptissue.mesh import indentation_block
-from warptissue.fit.punch import hayes_kappa
 
 RADIUS_M = 1e-3
 SHEAR_MODULUS_PA = 200.0

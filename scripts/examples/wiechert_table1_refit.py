@@ -1,10 +1,10 @@
-"""Seed 004 Table I reproduction: simulate, refit jointly, validate on a held-out rate.
+"""Takacs et al., Table I reproduction: simulate, refit jointly, validate on a held-out rate.
 
 Simulates the nonlinear Wiechert model with Table I's parameters (20 x 20 mm beef liver
 sample, 4 mm) at 62.5 Hz: a near-step (750 mm/min) relaxation held 60 s, and constant-rate
-ramps at 20 and 100 mm/min of which the first 3.6 mm are kept (as the seed does). Adds
+ramps at 20 and 100 mm/min of which the first 3.6 mm are kept (as the paper does). Adds
 Gaussian noise, refits the 8 parameters jointly to the near-step and 20 mm/min curves from a
-perturbed start (LM through warptissue.fit, then Nelder-Mead on the seed's cost, the sum of
+perturbed start (LM through warptissue.fit, then Nelder-Mead on the paper's cost, the sum of
 the RMS errors), and predicts the 100 mm/min curve.
 
 Run: python scripts/examples/wiechert_table1_refit.py [--noise-N 0.005] [--seed 0] [--quick]
@@ -71,7 +71,8 @@ def main() -> None:
             print(f"  {name:<14} {value:12.5g}   (Table I {true:g})")
         print(
             f"  fit RMSE near-step {result.record_rmse_N[0]:.5f} N, 20 mm/min "
-            f"{result.record_rmse_N[1]:.5f} N; seed cost (sum) {result.sum_of_record_rmse_N:.5f} N"
+            f"{result.record_rmse_N[1]:.5f} N; the paper's cost (sum of RMSEs) "
+            f"{result.sum_of_record_rmse_N:.5f} N"
         )
         print(
             f"  100 mm/min prediction RMSE: {rmse_data:.5f} N against the noisy data, "
