@@ -8,6 +8,14 @@ skipped without one.
 
 from __future__ import annotations
 
+import ctypes
+import shutil
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -15,7 +23,13 @@ import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import DeviceError, InputError
-from warptissue.fem import FlatPunch, IndentationProblem, LinearSolver, cudss, simulate_indentation
+from warptissue.fem import (
+    IndentationProblem,
+    LinearSolver,
+    NewtonOptions,
+    cudss,
+    simulate_indentation,
+)
 from warptissue.fem.cudss import (
     MEMORY_ESTIMATE_NAMES,
     CudssSolver,
@@ -25,6 +39,7 @@ from warptissue.fem.cudss import (
     cudss_available,
     cudss_threading_library,
 )
+from warptissue.indenter import Indenter
 from warptissue.materials import NeoHookean
 from warptissue.mesh import TetMesh, block_mesh, to_tet10
 
@@ -34,7 +49,7 @@ RELATIVE_TOLERANCE = {"cudss": 1e-8, "cg": 1e-7}
 """CG stops at a relative linear residual of 1e-12: on the CPU its curve differs from the
 direct solver's by 3e-8, so the CUDA CG run is held to 1e-7."""
 needs_cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
-CUDA_SOLVERS = (["cudss"] if cudss_available() else []) + ["cg"]
+CUDA_SOLVERS = (["cudss"] if cudss_available(warn=False) else []) + ["cg"]
 
 
 def _random_bsr(rng: np.random.Generator, device: str, block_rows: int = 7):
@@ -74,30 +89,143 @@ def test_bsr33_to_csr_matches_the_dense_matrix(device, rng):
     )
 
 
-def test_threading_layer_is_found_in_the_nvidia_namespace(tmp_path, monkeypatch):
-    """The finder looks in every ``nvidia`` package folder for the wheel's cu*/lib layout."""
-    library = tmp_path / "site" / "nvidia" / "cu13" / "lib" / "libcudss_mtlayer_gomp.so.0"
-    library.parent.mkdir(parents=True)
-    library.write_bytes(b"")
-    empty = tmp_path / "other" / "nvidia"
-    empty.mkdir(parents=True)
+def _fake_site_packages(root: Path, files: dict[str, list[str]]) -> Path:
+    """A site-packages folder with empty files at ``nvidia/<component>/lib/<name>``."""
+    for component, names in files.items():
+        folder = root / "nvidia" / component / "lib"
+        folder.mkdir(parents=True)
+        for name in names:
+            (folder / name).write_bytes(b"")
+    return root
 
-    class Spec:
-        submodule_search_locations = [str(empty), str(library.parents[2])]
 
-    monkeypatch.setattr(cudss.importlib.util, "find_spec", lambda name: Spec())
+def test_wheel_libraries_are_found_in_every_site_packages(tmp_path, monkeypatch):
+    """The CUDA 13 wheels' ``nvidia/cu13/lib`` and older ``nvidia/<name>/lib`` folders, in
+    every root: also where another environment's ``nvidia`` package comes first."""
+    other = _fake_site_packages(tmp_path / "other", {"cuda_runtime": ["libcudart.so.12"]})
+    (tmp_path / "empty" / "nvidia").mkdir(parents=True)
+    wheels = ["libcublas.so.13", "libcublasLt.so.13", "libcudss.so.0", "libcudss.so.0.7.1"]
+    mine = _fake_site_packages(
+        tmp_path / "venv", {"cu13": [*wheels, "libcudss_mtlayer_gomp.so.0", "libcudss.txt"]}
+    )
+    folders = cudss.nvidia_library_dirs([other, tmp_path / "empty", mine, mine])
+    assert folders == [other / "nvidia/cuda_runtime/lib", mine / "nvidia/cu13/lib"]
+    lib = mine / "nvidia/cu13/lib"
+    assert cudss.find_nvidia_library("cudss", folders) == lib / "libcudss.so.0"
+    assert cudss.find_nvidia_library("cublas", folders) == lib / "libcublas.so.13"
+    assert cudss.find_nvidia_library("cublasLt", folders) == lib / "libcublasLt.so.13"
+    assert cudss.find_nvidia_library("cusparse", folders) is None
+    monkeypatch.setattr(cudss, "nvidia_library_dirs", lambda: folders)
     cudss_threading_library.cache_clear()
     try:
-        assert cudss_threading_library() == str(library)
-        Spec.submodule_search_locations = [str(empty)]
+        assert cudss_threading_library() == str(lib / "libcudss_mtlayer_gomp.so.0")
+        monkeypatch.setattr(cudss, "nvidia_library_dirs", lambda: folders[:1])
         cudss_threading_library.cache_clear()
         assert cudss_threading_library() is None
     finally:
         cudss_threading_library.cache_clear()
 
 
+def _compile_library(path: Path, source: str, *, needs: Path | None = None) -> None:
+    command = [shutil.which("cc"), "-shared", "-fPIC", f"-Wl,-soname,{path.name}"]
+    command += ["-x", "c", "-", "-o", str(path)]
+    if needs is not None:  # linked by soname, with no run path: the loader must find it
+        command += [f"-L{needs.parent}", f"-l:{needs.name}"]
+    subprocess.run(command, input=source, text=True, check=True, capture_output=True)
+
+
+@pytest.mark.skipif(shutil.which("cc") is None, reason="needs a C compiler to build libraries")
+def test_load_global_finds_the_dependencies_in_the_wheels(tmp_path):
+    """A library whose dependency sits in another wheel folder, not on LD_LIBRARY_PATH: the
+    plain load fails; load_global loads the dependency first, then the library."""
+    site = _fake_site_packages(tmp_path, {"cu13": [], "cudss": []})
+    dependency = site / "nvidia/cu13/lib" / f"libwtdep{tmp_path.name[-8:]}.so.13"
+    library = site / "nvidia/cudss/lib" / "libwtcudss.so.0"
+    _compile_library(dependency, "int wt_dep(void) { return 41; }")
+    _compile_library(
+        library, "int wt_dep(void); int wt_main(void) { return wt_dep() + 1; }", needs=dependency
+    )
+    with pytest.raises(OSError, match=f"{dependency.name}: cannot open shared object file"):
+        ctypes.CDLL(str(library))
+    folders = cudss.nvidia_library_dirs([site])
+    assert cudss.load_global(library, folders) == [dependency, library]
+    assert ctypes.CDLL(str(library)).wt_main() == 42
+    # A dependency found nowhere: the dynamic linker's message.
+    nowhere = tmp_path / f"libwtnowhere{tmp_path.name[-8:]}.so.1"
+    _compile_library(nowhere, "int wt_gone(void) { return 0; }")
+    broken = site / "nvidia/cudss/lib" / "libwtbroken.so.0"
+    _compile_library(
+        broken, "int wt_gone(void); int wt_b(void) { return wt_gone(); }", needs=nowhere
+    )
+    nowhere.unlink()
+    with pytest.raises(OSError, match=f"{nowhere.name}: cannot open shared object file"):
+        cudss.load_global(broken, folders)
+
+
+@pytest.fixture
+def fresh_cudss_probe(monkeypatch):
+    """cuDSS's probe and its once-per-process warning, reset for one test."""
+    monkeypatch.setattr(cudss, "_warned_unavailable", [])
+    cached = (cudss.cudss_unavailable_reason, cudss.preload_cudss)
+    for function in cached:
+        function.cache_clear()
+    yield
+    for function in cached:
+        function.cache_clear()
+
+
+def test_missing_cudss_is_said_once_with_the_fix(monkeypatch, fresh_cudss_probe):
+    """On a CUDA machine without cuDSS, "auto" falls back to CG with one warning naming the
+    reason and the install command, not silently."""
+    monkeypatch.setattr(cudss, "cudss_unavailable_reason", lambda: "nvmath-python not installed")
+    monkeypatch.setattr(cudss.wp, "is_cuda_available", lambda: True)
+    cuda = SimpleNamespace(is_cuda=True, is_cpu=False)
+    with pytest.warns(RuntimeWarning) as caught:
+        assert LinearSolver(method="auto", device=cuda).method == "cg"
+    assert len(caught) == 1
+    message = str(caught[0].message)
+    assert "nvmath-python not installed" in message
+    assert "pip install 'warptissue[gpu]'" in message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a second solver says nothing more
+        assert LinearSolver(method="auto", device=cuda).method == "cg"
+        assert not cudss_available()
+
+
+def test_no_warning_without_a_gpu_or_when_asked_not_to(monkeypatch, fresh_cudss_probe):
+    monkeypatch.setattr(cudss, "cudss_unavailable_reason", lambda: "CuPy not installed")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        monkeypatch.setattr(cudss.wp, "is_cuda_available", lambda: False)
+        assert not cudss_available()
+        monkeypatch.setattr(cudss.wp, "is_cuda_available", lambda: True)
+        assert not cudss_available(warn=False)
+
+
+def test_the_reason_names_what_failed(tmp_path, monkeypatch, fresh_cudss_probe):
+    """nvmath-python installed but cuDSS not in the wheels: the reason says where it looked
+    and what nvmath-python said."""
+    folders = [_fake_site_packages(tmp_path, {"cu13": ["libcublas.so.13"]}) / "nvidia/cu13/lib"]
+    monkeypatch.setattr(cudss, "nvidia_library_dirs", lambda: folders)
+    monkeypatch.setattr(cudss.importlib.util, "find_spec", lambda name: object())
+
+    def get_property(kind):
+        raise RuntimeError("libcudss.so.0: cannot open shared object file")
+
+    bindings = SimpleNamespace(cudss=SimpleNamespace(get_property=get_property))
+    monkeypatch.setitem(sys.modules, "nvmath", SimpleNamespace(bindings=bindings))
+    monkeypatch.setitem(sys.modules, "nvmath.bindings", bindings)
+    monkeypatch.setitem(sys.modules, "nvmath.bindings.cudss", bindings.cudss)
+    reason = cudss.cudss_unavailable_reason()
+    assert f"libcudss.so was not found in the NVIDIA wheels' folders ({folders[0]})" in reason
+    assert "RuntimeError: libcudss.so.0: cannot open shared object file" in reason
+    cudss.cudss_unavailable_reason.cache_clear()
+    monkeypatch.setattr(cudss.importlib.util, "find_spec", lambda name: None)
+    assert cudss.cudss_unavailable_reason() == "nvmath-python and CuPy not installed"
+
+
 @needs_cuda
-@pytest.mark.skipif(not cudss_available(), reason="needs nvmath-python with cuDSS")
+@pytest.mark.skipif(not cudss_available(warn=False), reason="needs nvmath-python with cuDSS")
 def test_cudss_solves_with_its_threading_layer(rng):
     """A symmetric positive definite system solved by cuDSS equals NumPy's solution; the
     solver runs with the wheel's threading layer where that is installed."""
@@ -155,7 +283,7 @@ def _grid_stiffness_bsr(points_per_side: int, device: str):
 
 
 @needs_cuda
-@pytest.mark.skipif(not cudss_available(), reason="needs nvmath-python with cuDSS")
+@pytest.mark.skipif(not cudss_available(warn=False), reason="needs nvmath-python with cuDSS")
 def test_cudss_keeps_its_factors_in_host_memory_when_the_device_memory_is_short(rng):
     """Below cuDSS's estimate of the device memory it needs, the solver plans again in hybrid
     memory mode and still solves exactly; below the hybrid mode's least device memory it
@@ -221,7 +349,7 @@ def _bonded_punch_problem() -> IndentationProblem:
     return IndentationProblem(
         mesh,
         NeoHookean(C10_Pa=287.5, bulk_modulus_Pa=1000.0 * 575.0),
-        FlatPunch(0.4e-3, contact="bonded"),
+        Indenter("flat_punch", radius_m=0.4e-3, contact="bonded"),
     )
 
 
@@ -230,7 +358,11 @@ def cpu_reference():
     problem = _bonded_punch_problem()
     depths = np.array([2e-5, 5e-5, 1e-4])
     result = simulate_indentation(
-        problem, depths, device="cpu", progress=False, tolerance=NEWTON_TOLERANCE
+        problem,
+        depths,
+        device="cpu",
+        progress=False,
+        options=NewtonOptions(tolerance=NEWTON_TOLERANCE),
     )
     assert result.completed
     return problem, depths, result
@@ -245,8 +377,7 @@ def test_cuda_equals_cpu(cpu_reference, linear_solver):
         depths,
         device="cuda:0",
         progress=False,
-        linear_solver=linear_solver,
-        tolerance=NEWTON_TOLERANCE,
+        options=NewtonOptions(linear_solver=linear_solver, tolerance=NEWTON_TOLERANCE),
     )
     assert result.completed, result.message
     assert result.linear_solver == linear_solver

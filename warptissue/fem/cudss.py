@@ -18,14 +18,26 @@ hybrid memory mode (factors in host memory), and refuses with the numbers what f
 way, before the first factorization.
 
 Install: ``pip install 'warptissue[gpu]'`` (nvmath-python with NVIDIA cuDSS for CUDA 13, and
-CuPy for CUDA 13).
+CuPy for CUDA 13). The libraries of those wheels are found without ``LD_LIBRARY_PATH``: before
+nvmath-python looks for cuDSS, :func:`preload_cudss` finds ``libcudss.so`` in every
+``nvidia/*/lib`` folder of the installed wheels (:func:`nvidia_library_dirs`) and loads it,
+with the cuBLAS it needs, into the process's global symbol scope (:func:`load_global`), where
+nvmath-python looks first. Where cuDSS still does not load, :func:`cudss_available` says why,
+once, on the first solve that would have used it (the ``"auto"`` linear solver then runs CG,
+often 10-30 times slower).
 """
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import importlib.util
+import os
+import re
+import site
+import sys
 import warnings
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +48,7 @@ from warptissue.device import available_host_memory_bytes
 from warptissue.errors import DeviceError
 
 __all__ = [
+    "CUDSS_INSTALL_HINT",
     "DEVICE_MEMORY_SHARE",
     "MEMORY_ESTIMATE_NAMES",
     "CudssSolver",
@@ -44,6 +57,11 @@ __all__ = [
     "check_memory_estimates",
     "cudss_available",
     "cudss_threading_library",
+    "cudss_unavailable_reason",
+    "find_nvidia_library",
+    "load_global",
+    "nvidia_library_dirs",
+    "preload_cudss",
 ]
 
 DEVICE_MEMORY_SHARE = 0.9
@@ -62,18 +80,175 @@ order. The last is the most host memory the hybrid memory mode may use (nvmath-p
 that field ``hybrid_max_device_memory``; cuDSS documents it as host memory)."""
 
 
+CUDSS_INSTALL_HINT = "pip install 'warptissue[gpu]'"
+"""How to install cuDSS with its Python bindings (nvmath-python, nvidia-cudss-cu13, CuPy)."""
+
+
+def nvidia_library_dirs(roots: Iterable[str | Path] | None = None) -> list[Path]:
+    """Folders of shared libraries that NVIDIA's pip wheels install.
+
+    The wheels put their libraries in ``nvidia/<component>/lib`` under a site-packages folder:
+    ``nvidia/cu13/lib`` for the CUDA 13 wheels (cuDSS, cuBLAS, the runtime),
+    ``nvidia/cudss/lib`` or ``nvidia/cublas/lib`` for older ones. Every root is searched, not
+    only the first ``nvidia`` package Python would import: in a virtual environment beside
+    another environment's ``nvidia`` package, the wheels of the one Python imports from may
+    sit in the other folder.
+
+    Args:
+        roots: Folders to search (site-packages folders). Default: every entry of
+            ``sys.path``, the site-packages folders, and the parents of the ``nvidia``
+            namespace package's folders.
+
+    Returns:
+        Existing ``nvidia/*/lib`` folders, each once, in the roots' order.
+    """
+    if roots is None:
+        roots = [*sys.path, *site.getsitepackages(), site.getusersitepackages()]
+        spec = importlib.util.find_spec("nvidia")
+        if spec is not None and spec.submodule_search_locations is not None:
+            roots += [Path(folder).parent for folder in spec.submodule_search_locations]
+    found: dict[Path, None] = {}
+    for root in roots:
+        for folder in sorted(Path(root or ".").glob("nvidia/*/lib")):
+            if folder.is_dir():
+                found.setdefault(folder.resolve(), None)
+    return list(found)
+
+
+def find_nvidia_library(name: str, folders: Iterable[Path]) -> Path | None:
+    """The shared library ``lib<name>.so`` or ``lib<name>.so.<version>`` in ``folders``.
+
+    Args:
+        name: The library's name without ``lib`` and the suffix (``"cudss"``, ``"cublasLt"``).
+        folders: Where to look, in order (see :func:`nvidia_library_dirs`).
+
+    Returns:
+        The first match (of a folder, the shortest name: the soname rather than the full
+        version), or None.
+    """
+    pattern = re.compile(rf"lib{re.escape(name)}\.so(\.\d+)*")
+    for folder in folders:
+        matches = [path for path in folder.iterdir() if pattern.fullmatch(path.name)]
+        if matches:
+            return min(matches, key=lambda path: (len(path.name), path.name))
+    return None
+
+
+_MISSING_LIBRARY = re.compile(r"([^\s:/]+\.so[.\d]*): cannot open shared object file")
+
+
+def load_global(path: Path, folders: Sequence[Path]) -> list[Path]:
+    """Load a shared library into the process's global symbol scope, with the dependencies
+    that the dynamic linker cannot find on its own taken from ``folders``.
+
+    A library loaded this way is found by name afterwards without ``LD_LIBRARY_PATH``: by the
+    dynamic linker for the libraries that need it, and by nvmath-python, which looks a
+    symbol up in the global scope before it searches for the library itself.
+
+    Args:
+        path: The library.
+        folders: Where to find its dependencies (see :func:`nvidia_library_dirs`).
+
+    Returns:
+        The libraries loaded, dependencies first.
+
+    Raises:
+        OSError: The library or a dependency cannot be loaded; the dynamic linker's message.
+    """
+    loaded: list[Path] = []
+    for _ in range(32):  # each round resolves one missing dependency
+        try:
+            ctypes.CDLL(str(path), mode=os.RTLD_GLOBAL)
+        except OSError as exc:
+            missing = _MISSING_LIBRARY.search(str(exc))
+            dependency = None if missing is None else _find_file(missing.group(1), folders)
+            if dependency is None or dependency == path or dependency in loaded:
+                raise
+            loaded += load_global(dependency, folders)
+            continue
+        return [*loaded, path]
+    raise OSError(f"{path}: too many missing dependencies")
+
+
+def _find_file(file_name: str, folders: Iterable[Path]) -> Path | None:
+    for folder in folders:
+        if (folder / file_name).is_file():
+            return folder / file_name
+    return None
+
+
 @functools.cache
-def cudss_available() -> bool:
-    """Whether nvmath-python and CuPy import and the cuDSS library loads."""
-    if any(importlib.util.find_spec(name) is None for name in ("nvmath", "cupy")):
-        return False
+def preload_cudss() -> tuple[list[Path], str | None]:
+    """Load cuDSS from the installed NVIDIA wheels, once per process.
+
+    Finds ``libcudss.so`` under :func:`nvidia_library_dirs` and loads it (with cuBLAS and
+    whatever else it needs from the same wheels) into the global symbol scope, so that
+    nvmath-python uses it without ``LD_LIBRARY_PATH``.
+
+    Returns:
+        (the libraries loaded, the reason cuDSS could not be loaded from the wheels or None).
+    """
+    folders = nvidia_library_dirs()
+    library = find_nvidia_library("cudss", folders)
+    if library is None:
+        searched = ", ".join(str(folder) for folder in folders) or "no nvidia/*/lib folder"
+        return [], f"libcudss.so was not found in the NVIDIA wheels' folders ({searched})"
+    try:
+        return load_global(library, folders), None
+    except OSError as exc:
+        return [], f"{library} did not load: {exc}"
+
+
+@functools.cache
+def cudss_unavailable_reason() -> str | None:
+    """Why cuDSS cannot be used in this process, in one line, or None where it loads.
+
+    Checks that nvmath-python and CuPy are installed, loads cuDSS from the NVIDIA wheels
+    (:func:`preload_cudss`), then asks nvmath-python for cuDSS's version.
+    """
+    missing = [name for name in ("nvmath", "cupy") if importlib.util.find_spec(name) is None]
+    if missing:
+        names = {"nvmath": "nvmath-python", "cupy": "CuPy"}
+        return f"{' and '.join(names[name] for name in missing)} not installed"
+    _, preload_problem = preload_cudss()
     try:
         from nvmath.bindings import cudss
 
         cudss.get_property(0)
-    except Exception:  # any failure to import or load the library means "not available"
-        return False
-    return True
+    except Exception as exc:  # any failure to import or load the library: say which
+        problem = f"{type(exc).__name__}: {exc}".strip().splitlines()[0]
+        return problem if preload_problem is None else f"{preload_problem}; {problem}"
+    return None
+
+
+_warned_unavailable: list[str] = []
+"""The reason already warned about (once per process)."""
+
+
+def cudss_available(*, warn: bool = True) -> bool:
+    """Whether nvmath-python and CuPy import and the cuDSS library loads.
+
+    Where it does not and a CUDA device is present, warns once per process (a
+    ``RuntimeWarning`` naming the reason and the fix): the FE's ``linear_solver = "auto"``
+    then runs Warp's conjugate gradients on the GPU, often 10-30 times slower (a 8 828-tet
+    force curve took 88 s instead of 3.2 s on an H100).
+
+    Args:
+        warn: Warn as above (False for a silent probe, e.g. a test's skip condition).
+    """
+    reason = cudss_unavailable_reason()
+    if reason is None:
+        return True
+    if warn and not _warned_unavailable and wp.is_cuda_available():
+        _warned_unavailable.append(reason)
+        warnings.warn(
+            f"cuDSS, the GPU's direct solver, is not available ({reason}); the FE runs Warp's "
+            "conjugate gradients on the GPU instead, often 10-30x slower. "
+            f"Fix: {CUDSS_INSTALL_HINT}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    return False
 
 
 @functools.cache
@@ -83,13 +258,8 @@ def cudss_threading_library() -> str | None:
     With it cuDSS runs its host-side analysis (reordering, symbolic factorization) on several
     threads; without it nvmath-python warns on every solver it creates.
     """
-    spec = importlib.util.find_spec("nvidia")
-    if spec is None or spec.submodule_search_locations is None:
-        return None
-    for root in spec.submodule_search_locations:
-        for path in sorted(Path(root).glob("cu*/lib/libcudss_mtlayer_gomp.so*")):
-            return str(path)
-    return None
+    library = find_nvidia_library("cudss_mtlayer_gomp", nvidia_library_dirs())
+    return None if library is None else str(library)
 
 
 def _cupy_view(array: wp.array, cupy_module):
@@ -228,6 +398,7 @@ class CudssSolver:
         device = matrix.device
         if not device.is_cuda:
             raise DeviceError(f"cuDSS needs a CUDA device; the matrix is on {device}")
+        preload_cudss()  # before nvmath-python looks for the library itself
         try:
             import cupy
             import cupyx.scipy.sparse
@@ -235,7 +406,7 @@ class CudssSolver:
         except ImportError as exc:
             raise DeviceError(
                 "the cuDSS solver needs nvmath-python, nvidia-cudss-cu13 and cupy-cuda13x "
-                "(pip install 'warptissue[gpu]')"
+                f"({CUDSS_INSTALL_HINT})"
             ) from exc
         if device_memory_limit_bytes is not None and device_memory_limit_bytes <= 0:
             raise ValueError(
