@@ -9,7 +9,13 @@ import pytest
 import scipy.sparse as sp
 import warp as wp
 
-from warptissue.fem import Assembler, DirichletConditions, LinearSolver, solve_quasistatic
+from warptissue.fem import (
+    Assembler,
+    DirichletConditions,
+    LinearSolver,
+    NewtonOptions,
+    solve_quasistatic,
+)
 from warptissue.fem.direct import CPU_DIRECT_METHODS, CpuDirectSolver, bsr33_scalar_pattern
 from warptissue.fem.solvers import _pardiso_available
 from warptissue.materials import NeoHookean
@@ -136,7 +142,12 @@ def test_newton_path_analyses_once(monkeypatch):
     monkeypatch.setattr(CpuDirectSolver, "_pardiso", recording)
     mesh = _mesh()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    path = solve_quasistatic(assembler, _conditions(mesh), [1e-3, 2e-3], linear_solver="pardiso")
+    path = solve_quasistatic(
+        assembler,
+        _conditions(mesh),
+        [1e-3, 2e-3],
+        options=NewtonOptions(linear_solver="pardiso"),
+    )
     assert path.completed, path.message
     newton = int(path.newton_iterations.sum())
     assert newton >= 4

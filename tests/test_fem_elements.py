@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 
 from warptissue.errors import MeshError
-from warptissue.fem import Assembler, DirichletConditions, element_geometry, solve_quasistatic
+from warptissue.fem import (
+    Assembler,
+    DirichletConditions,
+    NewtonOptions,
+    element_geometry,
+    solve_quasistatic,
+)
 from warptissue.fem.elements import (
     quadrature_rule,
     shape_function_derivatives,
@@ -101,7 +107,9 @@ def test_patch_test_reproduces_affine_displacement(npe, formulation, material, r
     components = np.tile(np.arange(3), len(boundary))
     conditions = DirichletConditions(nodes, components, affine[boundary].ravel())
     assembler = Assembler(mesh, material, formulation=formulation, device="cpu")
-    path = solve_quasistatic(assembler, conditions, [0.5, 1.0], linear_solver="superlu")
+    path = solve_quasistatic(
+        assembler, conditions, [0.5, 1.0], options=NewtonOptions(linear_solver="superlu")
+    )
     assert path.completed, path.message
     interior = np.setdiff1d(np.arange(mesh.node_count), boundary)
     assert len(interior) > 0

@@ -2,8 +2,8 @@
 finite-layer factor of Hayes et al. (1972), insensitivity to the bulk modulus, locking of
 displacement TET4, large bonded depths with a clean stop, and CPU/device agreement.
 
-The heavier mesh-convergence study is ``scripts/verify_flat_punch.py`` (README "Finite
-elements").
+The heavier mesh-convergence study is ``scripts/examples/verify_flat_punch.py`` (docs/fe.md,
+"Verification").
 """
 
 from __future__ import annotations
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
+from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+from warptissue.fit.punch import hayes_kappa
+from warptissue.indenter import Indenter
 from warptissue.materials import NeoHookean
 from warptissue.mesh import indentation_block
-from warptissue.fit.punch import hayes_kappa
 
 RADIUS_M = 1e-3
 SHEAR_MODULUS_PA = 200.0
@@ -39,14 +40,16 @@ def _block(
     )
 
 
+def _punch(contact: str = "bonded") -> Indenter:
+    return Indenter("flat_punch", radius_m=RADIUS_M, contact=contact)
+
+
 def _material(bulk_over_shear: float) -> NeoHookean:
     return NeoHookean(SHEAR_MODULUS_PA / 2.0, bulk_over_shear * SHEAR_MODULUS_PA)
 
 
 def _stiffness(mesh, material, *, contact="bonded", formulation="mixed", depth=2e-3 * RADIUS_M):
-    problem = IndentationProblem(
-        mesh, material, FlatPunch(RADIUS_M, contact=contact), formulation=formulation
-    )
+    problem = IndentationProblem(mesh, material, _punch(contact), formulation=formulation)
     result = simulate_indentation(problem, [depth], device="cpu", progress=False)
     assert result.completed, result.message
     return result.reaction_force_N[0] / depth
@@ -69,7 +72,7 @@ def layer_stiffness(thickness_m: float, material: NeoHookean) -> float:
 def test_small_depth_stiffness_matches_sneddon_with_the_layer_factor():
     """A block 8 times wider than thick stands for the infinite layer (16 times changes the
     stiffness by 0.04 %); at this mesh the FE is 0.7 % below the computed factor and its
-    Richardson extrapolation 0.36 % below (scripts/verify_flat_punch.py). A bonded punch
+    Richardson extrapolation 0.36 % below (scripts/examples/verify_flat_punch.py). A bonded punch
     is stiffer than a frictionless one, slightly at nu = 1/2."""
     thickness = 4.0 * RADIUS_M
     mesh = _block(thickness_over_radius=4.0, near=0.25, width_over_thickness=8.0)
@@ -101,13 +104,13 @@ def test_displacement_tet4_locks_but_mixed_tet10_does_not():
 
 def test_bonded_punch_reaches_half_the_radius_and_stops_cleanly_beyond():
     """Half the radius in two steps; then a jump to 3 a that two halvings cannot rescue stops
-    with a message and keeps the curve (scripts/verify_flat_punch.py reaches 2 a in steps of
-    0.05 a)."""
+    with a message and keeps the curve (scripts/examples/verify_flat_punch.py reaches 2 a in
+    steps of 0.05 a)."""
     mesh = _block(near=1.0)
-    problem = IndentationProblem(mesh, _material(1000.0), FlatPunch(RADIUS_M))
+    problem = IndentationProblem(mesh, _material(1000.0), _punch())
     depths = RADIUS_M * np.array([0.25, 0.5, 3.0])
-    options = {"device": "cpu", "progress": False, "max_cutbacks": 2, "max_newton_iterations": 12}
-    result = simulate_indentation(problem, depths, **options)
+    options = NewtonOptions(max_cutbacks=2, max_newton_iterations=12)
+    result = simulate_indentation(problem, depths, device="cpu", progress=False, options=options)
     assert not result.completed
     np.testing.assert_allclose(result.depths_m, depths[:2])
     assert result.displacement_m.shape == (2, mesh.node_count, 3)
@@ -119,9 +122,11 @@ def test_bonded_punch_reaches_half_the_radius_and_stops_cleanly_beyond():
     punch = problem.punch_nodes
     np.testing.assert_allclose(result.displacement_m[1, punch, 2], -0.5 * RADIUS_M)
     np.testing.assert_allclose(result.displacement_m[1, punch, :2], 0.0, atol=1e-15)
-    options["max_cutbacks"] = 0
+    options = NewtonOptions(max_cutbacks=0, max_newton_iterations=12)
     with pytest.raises(ConvergenceError) as error:
-        simulate_indentation(problem, depths[2:], strict=True, **options)
+        simulate_indentation(
+            problem, depths[2:], device="cpu", progress=False, options=options, strict=True
+        )
     assert len(error.value.partial_result.depths_m) == 0
 
 
@@ -133,10 +138,8 @@ def _prescribed(conditions) -> dict:
 def test_boundary_conditions():
     mesh = _block()
     material = _material(1000.0)
-    bonded = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
-    frictionless = IndentationProblem(
-        mesh, material, FlatPunch(RADIUS_M, contact="frictionless"), base="sliding"
-    )
+    bonded = IndentationProblem(mesh, material, _punch())
+    frictionless = IndentationProblem(mesh, material, _punch("frictionless"), base="sliding")
     punch = bonded.punch_nodes
     assert np.array_equal(np.sort(punch), np.sort(mesh.node_sets["probe"]))
     assert bonded.symmetry_factor == 4
@@ -169,7 +172,7 @@ def test_full_model_with_sliding_base_matches_quarter_model():
         size_far_m=4 * RADIUS_M / 3,
     )
     material = _material(1000.0)
-    punch = FlatPunch(RADIUS_M, contact="frictionless")
+    punch = _punch("frictionless")
     forces = []
     for mesh, planes in ((quarter, ("symmetry_x", "symmetry_y")), (full, ())):
         problem = IndentationProblem(mesh, material, punch, base="sliding", symmetry_planes=planes)
@@ -183,26 +186,33 @@ def test_bad_inputs_are_named():
     mesh = _block(near=1.0)
     material = _material(100.0)
     with pytest.raises(InputError, match="radius"):
-        FlatPunch(-1.0)
+        Indenter("flat_punch", radius_m=-1.0)
     with pytest.raises(InputError, match="contact"):
-        FlatPunch(RADIUS_M, contact="glued")
+        _punch("glued")
+    with pytest.raises(InputError, match="simulate only 'flat_punch'"):
+        IndentationProblem(mesh, material, Indenter("platen", length_m=RADIUS_M))
+    with pytest.raises(InputError, match="on the axis"):
+        IndentationProblem(mesh, material, Indenter("flat_punch", radius_m=RADIUS_M, x_m=1e-4))
+    with pytest.raises(InputError, match="off the indented surface"):
+        IndentationProblem(mesh, material, Indenter("flat_punch", radius_m=RADIUS_M, z_m=0.0))
     with pytest.raises(InputError, match="node set 'symmetry_z'"):
-        IndentationProblem(mesh, material, FlatPunch(RADIUS_M), symmetry_planes=("symmetry_z",))
+        IndentationProblem(mesh, material, _punch(), symmetry_planes=("symmetry_z",))
     with pytest.raises(InputError, match="base"):
-        IndentationProblem(mesh, material, FlatPunch(RADIUS_M), base="floating")
+        IndentationProblem(mesh, material, _punch(), base="floating")
     with pytest.raises(InputError, match="TET10"):
-        IndentationProblem(_block(near=1.0, element="TET4"), material, FlatPunch(RADIUS_M))
-    problem = IndentationProblem(mesh, material, FlatPunch(RADIUS_M))
+        IndentationProblem(_block(near=1.0, element="TET4"), material, _punch())
+    problem = IndentationProblem(mesh, material, _punch())
     with pytest.raises(InputError, match="increasing"):
         simulate_indentation(problem, [2e-4, 1e-4], device="cpu", progress=False)
 
 
 def test_cpu_and_device_agree(device):
     mesh = _block(near=1.0)
-    problem = IndentationProblem(mesh, _material(1000.0), FlatPunch(RADIUS_M))
+    problem = IndentationProblem(mesh, _material(1000.0), _punch())
     depths = RADIUS_M * np.array([0.05, 0.1])
-    cpu = simulate_indentation(problem, depths, device="cpu", progress=False, tolerance=1e-11)
-    other = simulate_indentation(problem, depths, device=device, progress=False, tolerance=1e-11)
+    options = NewtonOptions(tolerance=1e-11)
+    cpu = simulate_indentation(problem, depths, device="cpu", progress=False, options=options)
+    other = simulate_indentation(problem, depths, device=device, progress=False, options=options)
     np.testing.assert_allclose(other.reaction_force_N, cpu.reaction_force_N, rtol=1e-8)
     np.testing.assert_allclose(
         other.cauchy_stress_Pa,

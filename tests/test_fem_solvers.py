@@ -11,9 +11,9 @@ from warptissue.errors import InputError
 from warptissue.fem import (
     Assembler,
     DirichletConditions,
-    FlatPunch,
     IndentationProblem,
     LinearSolver,
+    NewtonOptions,
     simulate_indentation,
     solve_quasistatic,
 )
@@ -25,6 +25,7 @@ from warptissue.fem.solvers import (
     _nonlinear_elimination,
     _pardiso_available,
 )
+from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
 from warptissue.mesh import block_mesh, indentation_block, to_tet10
 
@@ -62,7 +63,7 @@ def _nominal_stress(material, stretches, *, linear_solver="auto"):
         _compression_conditions(mesh),
         SIDE_M * (1.0 - stretches),
         reaction_weights=weights,
-        linear_solver=linear_solver,
+        options=NewtonOptions(linear_solver=linear_solver),
     )
     assert path.completed, path.message
     return path.reaction / SIDE_M**2, path
@@ -133,12 +134,19 @@ def test_cutback_recovers_and_reports(rng):
     assembler = Assembler(mesh, material, device="cpu")
     conditions = _compression_conditions(mesh)
     target = [SIDE_M * 0.2, SIDE_M * 0.7]
-    path = solve_quasistatic(assembler, conditions, target, max_iterations=4)
+    path = solve_quasistatic(
+        assembler, conditions, target, options=NewtonOptions(max_newton_iterations=4)
+    )
     assert path.completed and path.cutbacks > 0
     # The residual of homogeneous compression is spread over the whole cube: the nonlinear
     # elimination's patch would hold more than a quarter of the nodes, so it stays out.
     assert path.local_iterations.sum() == 0
-    stopped = solve_quasistatic(assembler, conditions, target, max_iterations=4, max_cutbacks=0)
+    stopped = solve_quasistatic(
+        assembler,
+        conditions,
+        target,
+        options=NewtonOptions(max_newton_iterations=4, max_cutbacks=0),
+    )
     assert not stopped.completed
     assert len(stopped.loads) == 1 and stopped.loads[0] == target[0]
     assert "cutbacks" in stopped.message and "kept" in stopped.message
@@ -240,7 +248,7 @@ def _bonded_punch() -> IndentationProblem:
     return IndentationProblem(
         mesh,
         NeoHookean(287.5, 575e3),
-        FlatPunch(PUNCH_RADIUS_M, contact="bonded"),
+        Indenter("flat_punch", radius_m=PUNCH_RADIUS_M, contact="bonded"),
         symmetry_planes=("symmetry_x", "symmetry_y"),
     )
 
@@ -250,7 +258,11 @@ def _bonded_punch_runs(depths, option: str, values) -> dict:
     problem = _bonded_punch()
     return {
         value: simulate_indentation(
-            problem, depths, device="cpu", progress=False, tolerance=1e-8, **{option: value}
+            problem,
+            depths,
+            device="cpu",
+            progress=False,
+            options=NewtonOptions(tolerance=1e-8, **{option: value}),
         )
         for value in values
     }
@@ -337,7 +349,9 @@ def test_extrapolated_predictor_saves_newton_iterations_on_a_smooth_path():
     agree to the tolerance."""
     assembler, conditions, loads = _six_step_compression()
     paths = {
-        predictor: solve_quasistatic(assembler, conditions, loads, predictor=predictor)
+        predictor: solve_quasistatic(
+            assembler, conditions, loads, options=NewtonOptions(predictor=predictor)
+        )
         for predictor in ("linearized", "extrapolated")
     }
     linearized, extrapolated = paths["linearized"], paths["extrapolated"]
@@ -412,9 +426,13 @@ def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_
         )
 
     assembler, conditions, loads = _six_step_compression()
-    linearized = solve_quasistatic(assembler, conditions, loads, predictor="linearized")
+    linearized = solve_quasistatic(
+        assembler, conditions, loads, options=NewtonOptions(predictor="linearized")
+    )
     monkeypatch.setattr(solvers, "_newton_increment", one_iteration_from_a_guess)
-    retried = solve_quasistatic(assembler, conditions, loads, predictor="extrapolated")
+    retried = solve_quasistatic(
+        assembler, conditions, loads, options=NewtonOptions(predictor="extrapolated")
+    )
     assert linearized.completed and retried.completed
     assert retried.cutbacks == linearized.cutbacks == 0
     attempts = [(entry["load"], entry["converged"]) for entry in retried.history]
@@ -429,12 +447,67 @@ def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_
     )
 
 
-def test_unknown_predictor_is_refused():
+def test_newton_options_refuse_bad_values_by_name():
+    for key, value in (
+        ("predictor", "quadratic"),
+        ("linear_solver", "lu"),
+        ("tolerance", 0.0),
+        ("tolerance", 2.0),
+        ("tolerance", "1e-9"),
+        ("max_newton_iterations", 0),
+        ("max_newton_iterations", 2.5),
+        ("max_cutbacks", -1),
+        ("damping", "yes"),
+        ("nonlinear_elimination", 1),
+    ):
+        with pytest.raises(InputError) as error:
+            NewtonOptions(**{key: value})
+        assert error.value.column == key and repr(value) in str(error.value)
+
+
+def test_solvers_take_one_options_object():
+    """The defaults equal an explicit NewtonOptions(); loose keyword options are gone."""
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    with pytest.raises(InputError, match="predictor") as error:
-        solve_quasistatic(assembler, _compression_conditions(mesh), [1e-4], predictor="quadratic")
-    assert "quadratic" in str(error.value)
+    conditions = _compression_conditions(mesh)
+    default = solve_quasistatic(assembler, conditions, [1e-4])
+    explicit = solve_quasistatic(assembler, conditions, [1e-4], options=NewtonOptions())
+    np.testing.assert_array_equal(default.displacement_m, explicit.displacement_m)
+    with pytest.raises(TypeError):
+        solve_quasistatic(assembler, conditions, [1e-4], predictor="linearized")
+    with pytest.raises(InputError, match="NewtonOptions"):
+        solve_quasistatic(assembler, conditions, [1e-4], options={"predictor": "linearized"})
+    assert NewtonOptions(max_cutbacks=2).to_dict() == dict(
+        NewtonOptions().to_dict(), max_cutbacks=2
+    )
+
+
+def test_ctrl_c_keeps_the_converged_steps(monkeypatch):
+    """KeyboardInterrupt in the third load step: SolveInterrupted (a KeyboardInterrupt)
+    carries the two converged steps, equal to those of an uninterrupted run."""
+    import warptissue.fem.solvers as solvers
+
+    assembler, conditions, loads = _six_step_compression()
+    full = solve_quasistatic(assembler, conditions, loads)
+    newton_increment = solvers._newton_increment
+    calls = []
+
+    def interrupted_in_step_three(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return newton_increment(*args, **kwargs)
+
+    monkeypatch.setattr(solvers, "_newton_increment", interrupted_in_step_three)
+    with pytest.raises(KeyboardInterrupt) as error:
+        solve_quasistatic(assembler, conditions, loads)
+    assert isinstance(error.value, solvers.SolveInterrupted)
+    partial = error.value.partial_result
+    assert not partial.completed and partial.message == "interrupted"
+    np.testing.assert_array_equal(partial.loads, loads[:2])
+    np.testing.assert_array_equal(partial.displacement_m, full.displacement_m[:2])
+    np.testing.assert_array_equal(partial.reaction, full.reaction[:2])
+    assert "2 converged steps are kept" in str(error.value)
 
 
 def test_damping_saves_newton_iterations_on_a_large_depth_increment():

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import tomli_w
 
 from warptissue.errors import InputError
+from warptissue.fem.solvers import NewtonOptions
 from warptissue.study import SCHEMA_VERSION, load_study, study_from_dict
 
 REPOSITORY = Path(__file__).resolve().parents[1]
@@ -82,13 +86,15 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.boundary.base == "fixed"
     assert study.solver.device == "auto"
     assert study.solver.formulation == "mixed"
-    assert study.solver.linear_solver == "auto"
-    assert study.solver.tolerance == pytest.approx(1e-9)
-    assert study.solver.max_newton_iterations == 25
-    assert study.solver.max_cutbacks == 8
-    assert study.solver.nonlinear_elimination is True
-    assert study.solver.predictor == "linearized"
-    assert study.solver.damping is True
+    assert study.solver.options == NewtonOptions()
+    options = study.solver.options
+    assert options.linear_solver == "auto"
+    assert options.tolerance == pytest.approx(1e-9)
+    assert options.max_newton_iterations == 25
+    assert options.max_cutbacks == 8
+    assert options.nonlinear_elimination is True
+    assert options.predictor == "linearized"
+    assert options.damping is True
 
 
 def test_explicit_depth_list_and_disc(tmp_path):
@@ -265,15 +271,40 @@ def test_study_from_dict_rejects_non_table():
         study_from_dict(record)
 
 
-def test_solver_choices_are_the_solvers_own():
-    """The study module keeps its own copies of the solver's choices (so that reading a study
-    does not start Warp): they must not drift apart."""
-    from warptissue import study
-    from warptissue.fem import assembly, solvers
+def test_reading_a_study_does_not_start_warp():
+    """The [solver] table reads into the solver's own NewtonOptions; importing the solver's
+    modules must not initialize Warp (which takes seconds and prints a banner)."""
+    code = (
+        "import warp._src.context as context\n"
+        "from warptissue.study import load_study\n"
+        f"study = load_study({str(SCENE)!r})\n"
+        "assert type(study.solver.options).__name__ == 'NewtonOptions'\n"
+        "print(context.runtime is None)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
 
-    assert study.LINEAR_SOLVERS == solvers.LINEAR_SOLVERS
-    assert study.PREDICTORS == solvers.PREDICTORS
-    assert study.FORMULATIONS == assembly.FORMULATIONS
+
+def test_solver_table_keys_are_the_options_names(tmp_path):
+    """Every NewtonOptions field is a [solver] key of the same name, read and echoed."""
+    values = {
+        "linear_solver": "superlu",
+        "tolerance": 1e-8,
+        "max_newton_iterations": 12,
+        "max_cutbacks": 3,
+        "nonlinear_elimination": False,
+        "predictor": "extrapolated",
+        "damping": False,
+    }
+    assert set(values) == set(NewtonOptions.keys())
+    record = load_study(SCENE).to_dict()
+    record["solver"].update(values)
+    study = study_from_dict(record)
+    assert study.solver.options == NewtonOptions(**values)
+    assert study.to_dict()["solver"] == dict(values, device="auto", formulation="mixed")
+    path = write(tmp_path, tomli_w.dumps(study.to_dict()))
+    assert load_study(path).solver == study.solver
 
 
 def test_extrapolated_predictor_is_read_and_written(tmp_path):
@@ -282,5 +313,78 @@ def test_extrapolated_predictor_is_read_and_written(tmp_path):
         MINIMAL.replace("[material]", '[solver]\npredictor = "extrapolated"\n[material]', 1),
     )
     study = load_study(path)
-    assert study.solver.predictor == "extrapolated"
+    assert study.solver.options.predictor == "extrapolated"
     assert study.to_dict()["solver"]["predictor"] == "extrapolated"
+
+
+def test_a_typo_in_a_required_material_key_is_named_with_the_close_match(tmp_path):
+    """``C10_pa`` was reported as a missing ``C10_Pa``, without naming the key written."""
+    text = MINIMAL.replace("C10_Pa = 287.5", "C10_pa = 287.5")
+    with pytest.raises(InputError) as caught:
+        load_study(write(tmp_path, text))
+    message = str(caught.value)
+    assert "material.C10_pa" in message and "did you mean 'C10_Pa'?" in message
+    assert caught.value.line == line_of(text, "C10_pa")
+
+
+TYPOS = [
+    pytest.param("radius_m = 0.001", "radius_mm = 0.001", "indenter.radius_mm", "radius_m"),
+    pytest.param("steps = 4", "steps = 4\nstep = 2", "protocol.step", "steps"),
+    pytest.param("[material]", "[solvr]\ndamping = false\n[material]", "solvr", "solver"),
+    pytest.param(
+        "[material]",
+        "[solver]\nmax_newton_iteration = 5\n[material]",
+        "solver.max_newton_iteration",
+        "max_newton_iterations",
+    ),
+    pytest.param("width_m = 0.02", "width_m = 0.02\nGrowth = 1.3", "specimen.Growth", "growth"),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "key_path", "meant"), TYPOS)
+def test_unknown_keys_are_named_with_a_suggestion(tmp_path, old, new, key_path, meant):
+    text = MINIMAL.replace(old, new, 1)
+    with pytest.raises(InputError) as caught:
+        load_study(write(tmp_path, text))
+    message = str(caught.value)
+    assert key_path in message and f"did you mean {meant!r}?" in message
+    key = key_path.rpartition(".")[2]
+    fragment = f"[{key}]" if "." not in key_path else f"{key} ="
+    assert caught.value.line == line_of(text, fragment)
+
+
+def test_a_close_choice_is_suggested(tmp_path):
+    text = MINIMAL.replace("[material]", '[solver]\nformulation = "mixd"\n[material]', 1)
+    with pytest.raises(InputError, match="did you mean 'mixed'"):
+        load_study(write(tmp_path, text))
+
+
+def test_a_length_with_a_unit_asks_for_si_metres(tmp_path):
+    text = MINIMAL.replace("radius_m = 0.001", 'radius_m = "1 mm"')
+    with pytest.raises(InputError, match="number in metres") as caught:
+        load_study(write(tmp_path, text))
+    assert caught.value.line == line_of(text, "radius_m =")
+
+
+def test_numpy_values_are_read_and_printed_as_plain_numbers():
+    """A study built by a script from NumPy values: read as numbers, and errors print the
+    value as a number, never as ``np.float64(...)``."""
+    record = load_study(SCENE).to_dict()
+    record["protocol"] = {"max_depth_m": np.float64(4e-4), "steps": np.int64(4)}
+    record["specimen"]["growth"] = np.float32(1.25)
+    study = study_from_dict(record)
+    assert study.protocol.depths_m == pytest.approx([1e-4, 2e-4, 3e-4, 4e-4])
+    assert type(study.to_dict()["protocol"]["depths_m"][0]) is float
+    for table, key, value in (
+        ("material", "C10_Pa", np.float64(-1.19)),
+        ("indenter", "radius_m", np.float64(-1.19)),
+        ("solver", "max_cutbacks", np.int64(-1)),
+        ("specimen", "thickness_m", np.array([1.19])),
+    ):
+        bad = load_study(SCENE).to_dict()
+        bad[table][key] = value
+        with pytest.raises(InputError) as caught:
+            study_from_dict(bad)
+        message = str(caught.value)
+        assert f"{table}.{key}" in message and "np." not in message and "array(" not in message
+        assert str(value.tolist()) in message

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from warptissue.errors import InputError, MeshError
+from warptissue.indenter import Indenter
 from warptissue.mesh import TetMesh, block_mesh, graded_coordinates, to_tet10
 from warptissue.usd import (
-    Indenter,
     read_material_field_usd,
     read_material_usd,
     read_tetmesh_usd,
@@ -485,3 +485,23 @@ def test_indenter_validation():
         Indenter("flat_punch")
     with pytest.raises(InputError, match="length_m"):
         Indenter("line", radius_m=1e-3)
+    with pytest.raises(InputError, match="x_m"):
+        Indenter("flat_punch", radius_m=1e-3, x_m=float("nan"))
+    with pytest.raises(InputError, match="unknown indenter key") as caught:
+        Indenter.from_dict({"kind": "flat_punch", "radius_mm": 1.0})
+    assert caught.value.column == "radius_mm"
+
+
+def test_one_indenter_type_from_the_study_to_usd():
+    """The study's [indenter] table, the FE problem and the USD writer share one type, and
+    to_dict/from_dict round-trip it (the study's table is exactly kind, radius_m, contact)."""
+    import warptissue.study
+    import warptissue.usd.writer
+    from warptissue.fem import IndentationProblem
+
+    assert warptissue.study.Indenter is Indenter is warptissue.usd.writer.Indenter
+    assert "indenter" in IndentationProblem.__dataclass_fields__
+    probe = Indenter("flat_punch", radius_m=1e-3, contact="frictionless")
+    assert probe.to_dict() == {"kind": "flat_punch", "radius_m": 1e-3, "contact": "frictionless"}
+    line = Indenter("line", radius_m=5e-4, length_m=0.03, z_m=0.01)
+    assert Indenter.from_dict(line.to_dict()) == line

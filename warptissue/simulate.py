@@ -100,13 +100,12 @@ def build_problem(study: Study, mesh: Any) -> Any:
     Returns:
         A :class:`warptissue.fem.IndentationProblem`.
     """
-    from warptissue.fem import FlatPunch, IndentationProblem
+    from warptissue.fem import IndentationProblem
 
-    punch = FlatPunch(study.indenter.radius_m, contact=study.indenter.contact)
     return IndentationProblem(
         mesh,
         study.material,
-        punch,
+        study.indenter,
         base=study.boundary.base,
         symmetry_planes=("symmetry_x", "symmetry_y") if study.specimen.quarter else (),
         formulation=study.solver.formulation,
@@ -193,13 +192,7 @@ def run_study(
         np.asarray(study.protocol.depths_m, dtype=np.float64),
         device=warp_device,
         progress=progress,
-        linear_solver=study.solver.linear_solver,
-        tolerance=study.solver.tolerance,
-        max_newton_iterations=study.solver.max_newton_iterations,
-        max_cutbacks=study.solver.max_cutbacks,
-        nonlinear_elimination=study.solver.nonlinear_elimination,
-        predictor=study.solver.predictor,
-        damping=study.solver.damping,
+        options=study.solver.options,
     )
     solved = time.perf_counter()
 

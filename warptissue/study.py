@@ -21,21 +21,25 @@ Example:
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
 import tomllib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from warptissue.errors import InputError
+from warptissue.indenter import CONTACTS, SIMULATED_KINDS, Indenter
 from warptissue.mesh.generators import MESHERS
+
+if TYPE_CHECKING:
+    from warptissue.fem.solvers import NewtonOptions
 
 __all__ = [
     "SCHEMA_VERSION",
     "Boundary",
-    "Indenter",
     "Protocol",
     "Solver",
     "Specimen",
@@ -49,12 +53,7 @@ SCHEMA_VERSION: int = 1
 
 SPECIMEN_SHAPES: tuple[str, ...] = ("block", "disc")
 ELEMENT_TYPES: tuple[str, ...] = ("TET10", "TET4")
-INDENTER_KINDS: tuple[str, ...] = ("flat_punch",)
-CONTACT_KINDS: tuple[str, ...] = ("bonded", "frictionless")
 BASE_KINDS: tuple[str, ...] = ("fixed", "sliding")
-FORMULATIONS: tuple[str, ...] = ("mixed", "displacement")
-LINEAR_SOLVERS: tuple[str, ...] = ("auto", "pardiso", "superlu", "cudss", "cg")
-PREDICTORS: tuple[str, ...] = ("linearized", "extrapolated")
 DEVICE_PATTERN = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 _MISSING = object()
@@ -110,26 +109,6 @@ class Specimen:
 
 
 @dataclass(frozen=True)
-class Indenter:
-    """The indenter.
-
-    Attributes:
-        kind: ``"flat_punch"`` (a rigid flat-ended cylinder).
-        radius_m: Probe radius, m.
-        contact: ``"bonded"`` (nodes under the probe move with it in x, y and z) or
-            ``"frictionless"`` (only z is prescribed under the probe).
-    """
-
-    kind: str
-    radius_m: float
-    contact: str
-
-    def to_dict(self) -> dict[str, Any]:
-        """The ``[indenter]`` table."""
-        return {"kind": self.kind, "radius_m": self.radius_m, "contact": self.contact}
-
-
-@dataclass(frozen=True)
 class Protocol:
     """The loading protocol: the probe depths of the load steps.
 
@@ -173,53 +152,29 @@ class Boundary:
 
 @dataclass(frozen=True)
 class Solver:
-    """Solver settings.
+    """Solver settings: the ``[solver]`` table.
+
+    The table is flat: ``device``, ``formulation`` and the keys of
+    :class:`warptissue.fem.NewtonOptions` under the same names (``linear_solver``,
+    ``tolerance``, ``max_newton_iterations``, ``max_cutbacks``, ``nonlinear_elimination``,
+    ``predictor``, ``damping``), each with its default there.
 
     Attributes:
         device: ``"auto"`` (a GPU where present, else the CPU), ``"cpu"``, ``"cuda"`` or
             ``"cuda:N"``.
         formulation: ``"mixed"`` (locking-free for nearly incompressible material) or
             ``"displacement"`` (pure displacement; locks when nearly incompressible).
-        linear_solver: ``"auto"`` (PARDISO where pypardiso is installed, else SuperLU, on the
-            CPU; cuDSS on CUDA where installed, else conjugate gradients), ``"pardiso"``,
-            ``"superlu"``, ``"cudss"`` or ``"cg"``.
-        tolerance: Newton convergence tolerance on the residual force norm relative to the
-            reaction force norm (dimensionless).
-        max_newton_iterations: Newton iterations allowed per load step before a cutback.
-        max_cutbacks: Number of times a failed load step may be halved before the run
-            stops early.
-        nonlinear_elimination: Relax the nodes that hold most of the residual after each
-            global Newton step (fewer factorizations at a punch edge; same converged curve).
-        predictor: Start of each load step's Newton iterations: ``"linearized"`` or
-            ``"extrapolated"`` (see :func:`warptissue.fem.solve_quasistatic`; same converged
-            curve).
-        damping: Damp the tangent (Levenberg-Marquardt) after a Newton step that the line
-            search cut short (same converged curve).
+        options: The Newton solver's settings, passed as they are to
+            :func:`warptissue.fem.simulate_indentation`.
     """
 
     device: str
     formulation: str
-    linear_solver: str
-    tolerance: float
-    max_newton_iterations: int
-    max_cutbacks: int
-    nonlinear_elimination: bool = True
-    predictor: str = "linearized"
-    damping: bool = True
+    options: NewtonOptions
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``[solver]`` table."""
-        return {
-            "device": self.device,
-            "formulation": self.formulation,
-            "linear_solver": self.linear_solver,
-            "tolerance": self.tolerance,
-            "max_newton_iterations": self.max_newton_iterations,
-            "max_cutbacks": self.max_cutbacks,
-            "nonlinear_elimination": self.nonlinear_elimination,
-            "predictor": self.predictor,
-            "damping": self.damping,
-        }
+        """The ``[solver]`` table (flat: device, formulation, then the Newton options)."""
+        return {"device": self.device, "formulation": self.formulation, **self.options.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -307,12 +262,38 @@ class _Source:
         )
 
 
+_UNIT_WORDS = {"_m": "metres", "_Pa": "pascals", "_s": "seconds", "_N": "newtons"}
+"""Unit suffixes of key names, for the hint of a "must be a number" error."""
+
+
+def _plain(value: Any) -> Any:
+    """NumPy scalars and arrays as Python numbers and lists (checks and messages alike)."""
+    if type(value).__module__ == "numpy":
+        return value.tolist()
+    return value
+
+
+def _closest(word: str, candidates: Sequence[str]) -> str | None:
+    """The candidate closest to ``word`` (case-insensitive), if one is close."""
+    lowered = {candidate.lower(): candidate for candidate in candidates if candidate != word}
+    match = difflib.get_close_matches(word.lower(), list(lowered), n=1, cutoff=0.6)
+    return lowered[match[0]] if match else None
+
+
+def _number_problem(key: str) -> str:
+    """ "must be a number", with the unit its key names (SI units, no unit strings)."""
+    for suffix, word in _UNIT_WORDS.items():
+        if key.endswith(suffix):
+            return f"must be a number in {word} (SI units, without a unit: 1 mm is 0.001)"
+    return "must be a number"
+
+
 class _Table:
     """Typed, key-path-aware access to one TOML table; rejects keys nobody asked for."""
 
     def __init__(self, data: Any, prefix: str, source: _Source) -> None:
         if not isinstance(data, Mapping):
-            raise source.error(prefix, f"must be a table, not {type(data).__name__}", data)
+            raise source.error(prefix, f"must be a table, not {type(data).__name__}", _plain(data))
         self.data = data
         self.prefix = prefix
         self.source = source
@@ -322,7 +303,7 @@ class _Table:
         return f"{self.prefix}.{key}" if self.prefix else key
 
     def error(self, key: str, problem: str, value: Any = None) -> InputError:
-        return self.source.error(self.key_path(key), problem, value)
+        return self.source.error(self.key_path(key), problem, _plain(value))
 
     def has(self, key: str) -> bool:
         return key in self.data
@@ -331,9 +312,18 @@ class _Table:
         self.used.add(key)
         if key not in self.data:
             if default is _MISSING:
-                raise self.error(key, "required key is missing")
+                raise self.missing(key)
             return default
-        return self.data[key]
+        return _plain(self.data[key])
+
+    def missing(self, key: str) -> InputError:
+        """The error for a missing required key: a close unknown key is named as the typo."""
+        typo = _closest(key, [k for k in self.data if k not in self.used])
+        if typo is not None:
+            return self.error(
+                typo, f"unknown key; did you mean {key!r}? ({key!r} is required)", None
+            )
+        return self.error(key, "required key is missing")
 
     def table(self, key: str) -> _Table:
         return _Table(self.raw(key), self.key_path(key), self.source)
@@ -343,7 +333,7 @@ class _Table:
         if value is default and default is not _MISSING:
             return value
         if isinstance(value, bool) or not isinstance(value, int | float):
-            raise self.error(key, "must be a number", value)
+            raise self.error(key, _number_problem(key), value)
         if not math.isfinite(value):
             raise self.error(key, "must be a finite number", value)
         if positive and value <= 0:
@@ -361,34 +351,68 @@ class _Table:
     def boolean(self, key: str, *, default: Any = _MISSING) -> bool:
         value = self.raw(key, default)
         if not isinstance(value, bool):
-            raise self.error(key, "must be true or false", value)
+            raise self.error(key, "must be true or false (without quotes)", value)
         return value
 
     def string(self, key: str, *, default: Any = _MISSING, choices: Sequence[str] = ()) -> str:
         value = self.raw(key, default)
         if not isinstance(value, str):
-            raise self.error(key, "must be a string", value)
+            raise self.error(key, "must be a string (in quotes)", value)
         if choices and value not in choices:
-            raise self.error(key, f"must be one of {', '.join(map(repr, choices))}", value)
+            close = _closest(value, choices)
+            hint = f" (did you mean {close!r}?)" if close else ""
+            raise self.error(key, f"must be one of {', '.join(map(repr, choices))}{hint}", value)
         return value
 
     def number_list(self, key: str) -> tuple[float, ...]:
         values = self.raw(key)
-        if not isinstance(values, list) or not values:
+        if not isinstance(values, list | tuple) or not values:
             raise self.error(key, "must be a non-empty list of numbers", values)
+        values = [_plain(value) for value in values]
         for value in values:
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise self.error(key, "must contain only numbers", value)
+                raise self.error(key, f"must contain only numbers ({_number_problem(key)})", value)
             if not math.isfinite(value):
                 raise self.error(key, "must contain only finite numbers", value)
         return tuple(float(v) for v in values)
+
+    def present(self, keys: Sequence[str]) -> dict[str, Any]:
+        """The values of those of ``keys`` that are given (all of ``keys`` count as known)."""
+        for key in keys:
+            self.raw(key, None)
+        return {key: _plain(self.data[key]) for key in keys if key in self.data}
+
+    def build(self, constructor: Callable[..., Any], values: Mapping[str, Any]) -> Any:
+        """``constructor(values)``, its InputError placed at the file, line and key path.
+
+        An error about a key the table lacks names a close key of the table as its typo.
+        """
+        try:
+            return constructor(values)
+        except InputError as exc:
+            key = exc.column or ""
+            if key and key not in self.data:
+                typo = _closest(key, list(self.data))
+                if typo is not None:
+                    raise self.error(
+                        typo, f"unknown key; did you mean {key!r}? ({exc.message})", None
+                    ) from exc
+            raise (
+                self.error(key, exc.message, exc.value)
+                if key
+                else self.source.error(self.prefix, exc.message, _plain(exc.value))
+            ) from exc
 
     def finish(self, *, also_known: Sequence[str] = ()) -> None:
         """Reject any key that was not read (``also_known`` are listed as valid too)."""
         unknown = [key for key in self.data if key not in self.used]
         if unknown:
-            known = ", ".join(sorted(self.used | set(also_known)))
-            raise self.error(unknown[0], f"unknown key (known keys here: {known})", None)
+            known = sorted(self.used | set(also_known))
+            close = _closest(unknown[0], known)
+            hint = f"did you mean {close!r}? " if close else ""
+            raise self.error(
+                unknown[0], f"unknown key ({hint}known keys here: {', '.join(known)})", None
+            )
 
 
 def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
@@ -447,11 +471,13 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
 
 
 def _read_indenter(table: _Table) -> Indenter:
-    kind = table.string("kind", choices=INDENTER_KINDS)
+    kind = table.string("kind", choices=SIMULATED_KINDS)
     radius_m = table.number("radius_m")
-    contact = table.string("contact", default="bonded", choices=CONTACT_KINDS)
+    contact = table.string("contact", default="bonded", choices=CONTACTS)
     table.finish()
-    return Indenter(kind=kind, radius_m=radius_m, contact=contact)
+    return table.build(
+        lambda values: Indenter(**values), {"kind": kind, "radius_m": radius_m, "contact": contact}
+    )
 
 
 def _read_protocol(table: _Table, thickness_m: float) -> Protocol:
@@ -488,19 +514,8 @@ def _read_protocol(table: _Table, thickness_m: float) -> Protocol:
 def _read_material(table: _Table) -> Any:
     from warptissue.materials import material_from_dict
 
-    for key in table.data:
-        table.raw(key)
-    try:
-        return material_from_dict(dict(table.data))
-    except InputError as exc:
-        key = exc.column or ""
-        key_path = table.key_path(key) if key else table.prefix
-        raise InputError(
-            f"{key_path}: {exc.message}",
-            path=table.source.path,
-            line=table.source.line(key_path),
-            value=exc.value,
-        ) from exc
+    values = table.present(list(table.data))
+    return table.build(material_from_dict, values)
 
 
 def _read_boundary(table: _Table) -> Boundary:
@@ -510,31 +525,19 @@ def _read_boundary(table: _Table) -> Boundary:
 
 
 def _read_solver(table: _Table) -> Solver:
+    # The solver's own modules: importing them does not start Warp (test_study checks).
+    from warptissue.fem.assembly import FORMULATIONS
+    from warptissue.fem.solvers import NewtonOptions
+
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):
         raise table.error("device", "must be 'auto', 'cpu', 'cuda' or 'cuda:N'", device)
     formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
-    linear_solver = table.string("linear_solver", default="auto", choices=LINEAR_SOLVERS)
-    tolerance = table.number("tolerance", default=1.0e-9)
-    if tolerance >= 1.0:
-        raise table.error("tolerance", "must be less than 1", tolerance)
-    max_newton_iterations = table.integer("max_newton_iterations", default=25)
-    max_cutbacks = table.integer("max_cutbacks", default=8, minimum=0)
-    nonlinear_elimination = table.boolean("nonlinear_elimination", default=True)
-    predictor = table.string("predictor", default="linearized", choices=PREDICTORS)
-    damping = table.boolean("damping", default=True)
-    table.finish()
-    return Solver(
-        device=device,
-        formulation=formulation,
-        linear_solver=linear_solver,
-        tolerance=tolerance,
-        max_newton_iterations=max_newton_iterations,
-        max_cutbacks=max_cutbacks,
-        nonlinear_elimination=nonlinear_elimination,
-        predictor=predictor,
-        damping=damping,
+    options = table.build(
+        lambda values: NewtonOptions(**values), table.present(NewtonOptions.keys())
     )
+    table.finish()
+    return Solver(device=device, formulation=formulation, options=options)
 
 
 def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study:

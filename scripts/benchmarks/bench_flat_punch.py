@@ -461,7 +461,8 @@ def run_warptissue(
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import FlatPunch, IndentationProblem, simulate_indentation
+    from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+    from warptissue.indenter import Indenter
     from warptissue.materials import NeoHookean
 
     warp_device = resolve_device(device)
@@ -469,7 +470,7 @@ def run_warptissue(
     problem = IndentationProblem(
         mesh,
         NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA, bulk_modulus_Pa=BULK_MODULUS_PA),
-        FlatPunch(PROBE_RADIUS_M, contact="bonded"),
+        Indenter("flat_punch", radius_m=PROBE_RADIUS_M, contact="bonded"),
         base="fixed",
         symmetry_planes=("symmetry_x", "symmetry_y"),
         formulation="mixed",
@@ -482,9 +483,7 @@ def run_warptissue(
         depths_m()[:steps],
         device=warp_device,
         progress=progress,
-        tolerance=tolerance,
-        predictor=predictor,
-        damping=damping,
+        options=NewtonOptions(tolerance=tolerance, predictor=predictor, damping=damping),
     )
     wp.synchronize_device(warp_device)
     solve_s = time.perf_counter() - started
@@ -686,7 +685,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not 1 <= args.steps <= STEP_COUNT:
         parser.error(f"--steps must be between 1 and {STEP_COUNT}, got {args.steps}")
-    from warptissue.study import PREDICTORS
+    from warptissue.fem.solvers import PREDICTORS
 
     predictors = comma_separated(args.predictors)
     if not predictors or not set(predictors) <= set(PREDICTORS):

@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from warptissue.indenter import Indenter
 from warptissue.mesh import TetMesh, block_mesh
-from warptissue.usd import Indenter, validate_stage, write_simulation_usd
+from warptissue.usd import validate_stage, write_simulation_usd
 
 
 def main() -> None:

@@ -28,12 +28,13 @@ import numpy as np
 
 from warptissue.fem import (
     Assembler,
-    FlatPunch,
     IndentationProblem,
     LinearSolver,
+    NewtonOptions,
     simulate_indentation,
 )
 from warptissue.fit.punch import hayes_kappa
+from warptissue.indenter import Indenter
 from warptissue.io import write_json
 from warptissue.materials import NeoHookean
 from warptissue.mesh import indentation_block
@@ -70,7 +71,7 @@ def normalized_stiffness(mesh, bulk_over_shear=1000.0, formulation="mixed", cont
     problem = IndentationProblem(
         mesh,
         material(bulk_over_shear),
-        FlatPunch(RADIUS_M, contact=contact),
+        Indenter("flat_punch", radius_m=RADIUS_M, contact=contact),
         formulation=formulation,
     )
     result = simulate_indentation(problem, [DEPTH_M], device="cpu", progress=False)
@@ -199,10 +200,14 @@ def main() -> None:
     reach = []
     for near in (0.5, 0.25):
         mesh = block(4.0, near)
-        problem = IndentationProblem(mesh, material(1000.0), FlatPunch(RADIUS_M))
+        problem = IndentationProblem(
+            mesh, material(1000.0), Indenter("flat_punch", radius_m=RADIUS_M)
+        )
         depths = RADIUS_M * np.arange(0.05, 2.001, 0.05)
         start = time.perf_counter()
-        result = simulate_indentation(problem, depths, device="cpu", progress=False, max_cutbacks=3)
+        result = simulate_indentation(
+            problem, depths, device="cpu", progress=False, options=NewtonOptions(max_cutbacks=3)
+        )
         reach.append(
             {
                 "size_near_over_a": near,
@@ -228,7 +233,9 @@ def main() -> None:
         rhs = np.random.default_rng(0).standard_normal((mesh.node_count, 3))
         import warp as wp
 
-        problem = IndentationProblem(mesh, material(1000.0), FlatPunch(RADIUS_M))
+        problem = IndentationProblem(
+            mesh, material(1000.0), Indenter("flat_punch", radius_m=RADIUS_M)
+        )
         mask = problem.dirichlet_conditions().mask(mesh.node_count)
         assembler.eliminate(wp.array(mask, dtype=wp.vec3d, device=assembler.device))
         solves = {}

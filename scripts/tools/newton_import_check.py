@@ -22,8 +22,9 @@ import numpy as np
 
 
 def _write_specimen(folder: Path) -> tuple[Path, dict]:
+    from warptissue.indenter import Indenter
     from warptissue.mesh import block_mesh
-    from warptissue.usd import Indenter, write_simulation_usd
+    from warptissue.usd import write_simulation_usd
 
     mesh = block_mesh(np.linspace(0, 0.02, 4), np.linspace(0, 0.02, 4), np.linspace(0, 0.01, 3))
     material = {"model": "neo_hookean", "C10_Pa": 287.5, "bulk_modulus_Pa": 1.0e5}

@@ -1,14 +1,15 @@
 """Tetrahedral hyperelastic finite elements on Warp: assembly, Newton, flat-punch indentation.
 
-Public API (CONVENTIONS.md): :class:`FlatPunch`, :class:`IndentationProblem`,
-:func:`simulate_indentation` -> :class:`IndentationResult`; lower level: :class:`Assembler`,
-:class:`DirichletConditions`, :func:`solve_quasistatic`, :class:`LinearSolver`.
+Public API (CONVENTIONS.md): :class:`IndentationProblem` (a mesh, a material and a
+:class:`warptissue.indenter.Indenter`), :func:`simulate_indentation` ->
+:class:`IndentationResult`, with the Newton solver's settings in one :class:`NewtonOptions`;
+lower level: :class:`Assembler`, :class:`DirichletConditions`, :func:`solve_quasistatic`,
+:class:`LinearSolver`.
 """
 
 from warptissue.fem.assembly import FORMULATIONS, Assembler, Assembly, von_mises
 from warptissue.fem.elements import ElementGeometry, element_geometry
 from warptissue.fem.indentation import (
-    FlatPunch,
     IndentationProblem,
     IndentationResult,
     simulate_indentation,
@@ -17,7 +18,9 @@ from warptissue.fem.solvers import (
     LINEAR_SOLVERS,
     DirichletConditions,
     LinearSolver,
+    NewtonOptions,
     QuasistaticResult,
+    SolveInterrupted,
     solve_quasistatic,
 )
 
@@ -28,11 +31,12 @@ __all__ = [
     "Assembly",
     "DirichletConditions",
     "ElementGeometry",
-    "FlatPunch",
     "IndentationProblem",
     "IndentationResult",
     "LinearSolver",
+    "NewtonOptions",
     "QuasistaticResult",
+    "SolveInterrupted",
     "element_geometry",
     "simulate_indentation",
     "solve_quasistatic",

@@ -4,8 +4,8 @@ Coordinates (CONVENTIONS.md): the punch is centred on x = y = 0 on the top surfa
 in -z; the base is z = 0. Quarter models keep x >= 0, y >= 0 with symmetry planes
 "symmetry_x" (x = 0) and "symmetry_y" (y = 0).
 
-- Bonded punch (seed 003): every node of the punch surface with r <= a gets
-  ``(ux, uy, uz) = (0, 0, -depth)``.
+- Bonded punch (as in the needle-indentation study): every node of the punch surface with
+  r <= a gets ``(ux, uy, uz) = (0, 0, -depth)``.
 - Frictionless punch: only ``uz = -depth`` on those nodes.
 - Symmetry planes: the normal displacement component is zero on each named node set.
 - Base ``"fixed"``: all components zero on "bottom"; ``"sliding"``: ``uz = 0`` on "bottom",
@@ -24,51 +24,20 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
-from warptissue.fem.solvers import DirichletConditions, solve_quasistatic
+from warptissue.fem.solvers import (
+    DirichletConditions,
+    NewtonOptions,
+    QuasistaticResult,
+    SolveInterrupted,
+    solve_quasistatic,
+)
+from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material
 from warptissue.mesh import TetMesh
 
-__all__ = ["FlatPunch", "IndentationProblem", "IndentationResult", "simulate_indentation"]
+__all__ = ["IndentationProblem", "IndentationResult", "simulate_indentation"]
 
-CONTACTS = ("bonded", "frictionless")
 BASES = ("fixed", "sliding")
-
-
-@dataclass(frozen=True)
-class FlatPunch:
-    """A rigid flat cylindrical punch centred on x = y = 0.
-
-    Args:
-        radius_m: Punch radius a, m.
-        contact: ``"bonded"`` (no slip under the punch, seed 003) or ``"frictionless"``.
-        surface: Node set of the indented surface.
-    """
-
-    radius_m: float
-    contact: str = field(default="bonded", kw_only=True)
-    surface: str = field(default="top", kw_only=True)
-
-    def __post_init__(self) -> None:
-        if not (isinstance(self.radius_m, (int, float)) and np.isfinite(self.radius_m)) or not (
-            self.radius_m > 0
-        ):
-            raise InputError(
-                "punch radius must be a positive number", column="radius_m", value=self.radius_m
-            )
-        object.__setattr__(self, "radius_m", float(self.radius_m))
-        if self.contact not in CONTACTS:
-            raise InputError(
-                f"contact must be one of {CONTACTS}", column="contact", value=self.contact
-            )
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{"type": "flat_punch", "radius_m", "contact", "surface"}``."""
-        return {
-            "type": "flat_punch",
-            "radius_m": self.radius_m,
-            "contact": self.contact,
-            "surface": self.surface,
-        }
 
 
 def _plane_component(mesh: TetMesh, name: str) -> int:
@@ -95,20 +64,42 @@ class IndentationProblem:
         mesh: TET10 (``formulation="mixed"``) or TET4/TET10 (``"displacement"``), metres, with
             node sets for the punch surface, "bottom" and the symmetry planes.
         material: A :mod:`warptissue.materials` material.
-        punch: The :class:`FlatPunch`.
+        indenter: The probe, a :class:`warptissue.indenter.Indenter` of kind ``"flat_punch"``
+            on the axis (``x_m = y_m = 0``); its ``contact`` sets the conditions under it.
         base: ``"fixed"`` or ``"sliding"``.
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
+        surface: Node set of the indented surface.
     """
 
     mesh: TetMesh
     material: Material
-    punch: FlatPunch
+    indenter: Indenter
     base: str = field(default="fixed", kw_only=True)
     symmetry_planes: tuple[str, ...] = field(default=("symmetry_x", "symmetry_y"), kw_only=True)
     formulation: str = field(default="mixed", kw_only=True)
+    surface: str = field(default="top", kw_only=True)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.indenter, Indenter):
+            raise InputError(
+                "the indenter must be a warptissue.indenter.Indenter",
+                column="indenter",
+                value=type(self.indenter).__name__,
+            )
+        if self.indenter.kind not in SIMULATED_KINDS:
+            raise InputError(
+                f"the finite elements simulate only {', '.join(map(repr, SIMULATED_KINDS))} "
+                "indenters",
+                column="kind",
+                value=self.indenter.kind,
+            )
+        if self.indenter.x_m != 0.0 or self.indenter.y_m != 0.0:
+            raise InputError(
+                "the finite elements need the punch on the axis x = y = 0",
+                column="x_m" if self.indenter.x_m != 0.0 else "y_m",
+                value=self.indenter.x_m if self.indenter.x_m != 0.0 else self.indenter.y_m,
+            )
         if self.base not in BASES:
             raise InputError(f"base must be one of {BASES}", column="base", value=self.base)
         if self.formulation not in FORMULATIONS:
@@ -126,7 +117,7 @@ class IndentationProblem:
                 value=self.formulation,
             )
         object.__setattr__(self, "symmetry_planes", tuple(self.symmetry_planes))
-        for name in (self.punch.surface, "bottom", *self.symmetry_planes):
+        for name in (self.surface, "bottom", *self.symmetry_planes):
             if name not in self.mesh.node_sets:
                 raise InputError(
                     f"the mesh has no node set {name!r} (it has {sorted(self.mesh.node_sets)})",
@@ -134,10 +125,18 @@ class IndentationProblem:
                 )
         if self.punch_nodes.size == 0:
             raise InputError(
-                f"no node of {self.punch.surface!r} lies within the punch radius "
-                f"{self.punch.radius_m} m of the axis x = y = 0",
+                f"no node of {self.surface!r} lies within the punch radius "
+                f"{self.indenter.radius_m} m of the axis x = y = 0",
                 column="radius_m",
             )
+        if self.indenter.z_m is not None:
+            top = float(self.mesh.points[self.punch_nodes, 2].max())
+            if abs(self.indenter.z_m - top) > 1e-9 * float(np.ptp(self.mesh.points[:, 2])):
+                raise InputError(
+                    f"the punch's contact point z_m is off the indented surface (z = {top:g} m)",
+                    column="z_m",
+                    value=self.indenter.z_m,
+                )
 
     @property
     def symmetry_factor(self) -> int:
@@ -147,9 +146,9 @@ class IndentationProblem:
     @property
     def punch_nodes(self) -> np.ndarray:
         """Nodes of the punch surface with r <= radius (1e-9 relative tolerance)."""
-        nodes = self.mesh.node_set(self.punch.surface)
+        nodes = self.mesh.node_set(self.surface)
         xy = self.mesh.points[nodes, :2]
-        radius = self.punch.radius_m
+        radius = self.indenter.radius_m
         inside = np.einsum("ij,ij->i", xy, xy) <= (radius * (1.0 + 1e-9)) ** 2
         return nodes[inside].astype(np.int64)
 
@@ -157,7 +156,7 @@ class IndentationProblem:
         """Prescribed dofs with ``u = depth * values_per_load`` (load = depth in metres)."""
         parts = []
         punch = self.punch_nodes
-        punch_components = (2,) if self.punch.contact == "frictionless" else (0, 1, 2)
+        punch_components = (2,) if self.indenter.contact == "frictionless" else (0, 1, 2)
         for comp in punch_components:
             parts.append(_fixed(punch, comp, -1.0 if comp == 2 else 0.0))
         planes = {}
@@ -169,7 +168,7 @@ class IndentationProblem:
         base_components = (0, 1, 2) if self.base == "fixed" else (2,)
         for comp in base_components:
             parts.append(_fixed(bottom, comp, 0.0))
-        if self.base == "sliding" and self.punch.contact == "frictionless":
+        if self.base == "sliding" and self.indenter.contact == "frictionless":
             parts.extend(self._rigid_body_pins(bottom, planes))
         return DirichletConditions.combine(*parts)
 
@@ -250,15 +249,9 @@ def simulate_indentation(
     *,
     device: str | None = None,
     progress: bool = True,
-    linear_solver: str = "auto",
-    tolerance: float = 1e-9,
-    max_newton_iterations: int = 25,
-    max_cutbacks: int = 8,
+    options: NewtonOptions | None = None,
     strict: bool = False,
     assembler: Assembler | None = None,
-    nonlinear_elimination: bool = True,
-    predictor: str = "linearized",
-    damping: bool = True,
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -267,29 +260,22 @@ def simulate_indentation(
         depths_m: Increasing positive depths, shape (S,), m.
         device: Warp device (``"cpu"``, ``"cuda:0"``); None for Warp's default.
         progress: Show a tqdm progress bar over the depths.
-        linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (see
-            :class:`warptissue.fem.solvers.LinearSolver`).
-        tolerance: Newton tolerance on the free-dof residual relative to the reaction forces.
-        max_newton_iterations: Per increment.
-        max_cutbacks: Increment halvings allowed per depth before stopping.
+        options: The Newton solver's settings (linear solver, tolerance, iterations,
+            cutbacks, predictor, nonlinear elimination, damping), a
+            :class:`warptissue.fem.NewtonOptions`; None: the defaults. See
+            :func:`warptissue.fem.solve_quasistatic`.
         strict: Raise :class:`ConvergenceError` (carrying the partial result) instead of
             returning an incomplete one.
         assembler: Reuse an :class:`Assembler` built for this mesh, material and formulation
             (for repeated solves in a fit); built when None.
-        nonlinear_elimination: Relax the nodes that hold most of the residual after each
-            global Newton step (see :func:`warptissue.fem.solve_quasistatic`); fewer
-            factorizations at the punch edge, same converged curve.
-        predictor: ``"linearized"`` or ``"extrapolated"`` (each depth's Newton iterations
-            start from the last two converged states extrapolated linearly; see
-            :func:`warptissue.fem.solve_quasistatic`); same converged curve.
-        damping: Levenberg-Marquardt damping of the tangent after a Newton step that the
-            line search cut short (see :func:`warptissue.fem.solve_quasistatic`); fewer
-            iterations for large depth increments at a finely meshed punch edge, same
-            converged curve.
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
         out; the curve up to there is kept).
+
+    Raises:
+        SolveInterrupted: Ctrl-C; its ``partial_result`` is the :class:`IndentationResult` of
+            the depths that converged before it.
     """
     depths = np.atleast_1d(np.asarray(depths_m, dtype=np.float64))
     if depths.ndim != 1 or depths.size == 0 or not np.all(np.isfinite(depths)):
@@ -307,27 +293,35 @@ def simulate_indentation(
         assembler.set_material(problem.material)
     weights = np.zeros((mesh.node_count, 3))
     weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
-    path = solve_quasistatic(
-        assembler,
-        problem.dirichlet_conditions(),
-        depths,
-        reaction_weights=weights,
-        linear_solver=linear_solver,
-        tolerance=tolerance,
-        max_iterations=max_newton_iterations,
-        max_cutbacks=max_cutbacks,
-        progress=progress,
-        progress_label="indentation depths",
-        load_name="depth (m)",
-        nonlinear_elimination=nonlinear_elimination,
-        predictor=predictor,
-        damping=damping,
-    )
+    try:
+        path = solve_quasistatic(
+            assembler,
+            problem.dirichlet_conditions(),
+            depths,
+            reaction_weights=weights,
+            options=options,
+            progress=progress,
+            progress_label="indentation depths",
+            load_name="depth (m)",
+        )
+    except SolveInterrupted as interrupted:
+        partial = _indentation_result(problem, assembler, interrupted.partial_result)
+        raise SolveInterrupted(interrupted.message, partial_result=partial) from interrupted
+    result = _indentation_result(problem, assembler, path)
+    if strict and not result.completed:
+        raise ConvergenceError(result.message, partial_result=result)
+    return result
+
+
+def _indentation_result(
+    problem: IndentationProblem, assembler: Assembler, path: QuasistaticResult
+) -> IndentationResult:
+    """The indentation result of a load path: the curve, the fields at its last state."""
     if len(path.loads):
         stress = assembler.cauchy_stress(path.displacement_m[-1])
     else:
         stress = np.zeros((0, 6))
-    result = IndentationResult(
+    return IndentationResult(
         depths_m=path.loads,
         reaction_force_N=path.reaction,
         newton_iterations=path.newton_iterations,
@@ -340,10 +334,7 @@ def simulate_indentation(
         message=path.message,
         cutbacks=path.cutbacks,
         formulation=problem.formulation,
-        element_type=mesh.element_type,
+        element_type=problem.mesh.element_type,
         symmetry_factor=problem.symmetry_factor,
         linear_solver=path.linear_solver,
     )
-    if strict and not result.completed:
-        raise ConvergenceError(result.message, partial_result=result)
-    return result

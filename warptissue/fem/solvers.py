@@ -34,7 +34,8 @@ local Newton solve with all other nodes fixed (nonlinear elimination, see
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 import scipy.sparse.linalg
@@ -51,12 +52,87 @@ __all__ = [
     "PREDICTORS",
     "DirichletConditions",
     "LinearSolver",
+    "NewtonOptions",
     "QuasistaticResult",
+    "SolveInterrupted",
     "solve_quasistatic",
 ]
 
 LINEAR_SOLVERS = ("auto", "pardiso", "superlu", "cudss", "cg")
 PREDICTORS = ("linearized", "extrapolated")
+
+
+@dataclass(frozen=True, kw_only=True)
+class NewtonOptions:
+    """Settings of the load-stepping Newton solver: one object from the study to the solver.
+
+    A study's ``[solver]`` table carries these keys under the same names
+    (:func:`warptissue.study.load_study`), and :func:`warptissue.fem.simulate_indentation` and
+    :func:`solve_quasistatic` take the object as ``options=``. Only ``tolerance``,
+    ``max_newton_iterations`` and ``max_cutbacks`` change the converged result; the other
+    settings change the path to it (and its cost), not the convergence test.
+
+    Args:
+        linear_solver: ``"auto"`` (PARDISO where pypardiso imports, else SuperLU, on the CPU;
+            cuDSS on CUDA where it loads, else conjugate gradients), ``"pardiso"``,
+            ``"superlu"``, ``"cudss"`` or ``"cg"`` (see :class:`LinearSolver`).
+        tolerance: Converged when the free-dof residual norm is at most ``tolerance`` times
+            the reaction-force norm (dimensionless, in (0, 1)).
+        max_newton_iterations: Newton iterations per load increment before a cutback (>= 1).
+        max_cutbacks: Halvings of a failed increment allowed per requested load before the
+            run stops early, keeping what converged (>= 0).
+        nonlinear_elimination: After each global Newton step, relax the nodes that hold most
+            of the residual with the others fixed (fewer factorizations at a punch edge).
+        predictor: Start of each increment: ``"linearized"`` (the tangent's response to the
+            prescribed increment) or ``"extrapolated"`` (the last two converged states
+            extrapolated linearly in the load).
+        damping: Levenberg-Marquardt damping of the tangent after a Newton step that the line
+            search cut below a quarter of its length.
+
+    Raises:
+        InputError: A value of the wrong type or out of range (``column`` names the key).
+    """
+
+    linear_solver: str = "auto"
+    tolerance: float = 1.0e-9
+    max_newton_iterations: int = 25
+    max_cutbacks: int = 8
+    nonlinear_elimination: bool = True
+    predictor: str = "linearized"
+    damping: bool = True
+
+    def __post_init__(self) -> None:
+        choices = {"linear_solver": LINEAR_SOLVERS, "predictor": PREDICTORS}
+        for key, allowed in choices.items():
+            value = getattr(self, key)
+            if value not in allowed:
+                raise InputError(
+                    f"must be one of {', '.join(map(repr, allowed))}", column=key, value=value
+                )
+        tolerance = self.tolerance
+        if isinstance(tolerance, bool) or not isinstance(tolerance, int | float):
+            raise InputError("must be a number", column="tolerance", value=tolerance)
+        if not 0.0 < tolerance < 1.0:
+            raise InputError("must lie between 0 and 1", column="tolerance", value=tolerance)
+        object.__setattr__(self, "tolerance", float(tolerance))
+        for key, minimum in (("max_newton_iterations", 1), ("max_cutbacks", 0)):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise InputError("must be an integer", column=key, value=value)
+            if value < minimum:
+                raise InputError(f"must be at least {minimum}", column=key, value=value)
+        for key in ("nonlinear_elimination", "damping"):
+            if not isinstance(getattr(self, key), bool):
+                raise InputError("must be true or false", column=key, value=getattr(self, key))
+
+    @classmethod
+    def keys(cls) -> tuple[str, ...]:
+        """The option names, in the order of the ``[solver]`` table."""
+        return tuple(f.name for f in fields(cls))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The options by name (the Newton part of a study's ``[solver]`` table)."""
+        return {key: getattr(self, key) for key in self.keys()}
 
 
 def _pardiso_available() -> bool:
@@ -624,23 +700,47 @@ def _newton_increment(
     return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
 
 
+class SolveInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a solve, carrying the load steps that converged before it.
+
+    A :class:`KeyboardInterrupt`, so that code that does not look for it stops as usual.
+
+    Args:
+        message: What was interrupted, and how many steps are kept.
+        partial_result: The result of the converged steps (``completed=False``): a
+            :class:`QuasistaticResult` from :func:`solve_quasistatic`, an
+            :class:`warptissue.fem.IndentationResult` from
+            :func:`warptissue.fem.simulate_indentation`.
+    """
+
+    def __init__(self, message: str, *, partial_result: Any) -> None:
+        super().__init__(message)
+        self.message = message
+        self.partial_result = partial_result
+
+
+def _checked_options(options: NewtonOptions | None) -> NewtonOptions:
+    """The options, or the defaults for None; anything else is refused."""
+    if options is None:
+        return NewtonOptions()
+    if not isinstance(options, NewtonOptions):
+        raise InputError(
+            "options must be a warptissue.fem.NewtonOptions", value=type(options).__name__
+        )
+    return options
+
+
 def solve_quasistatic(
     assembler: Assembler,
     conditions: DirichletConditions,
     loads: np.ndarray,
     *,
     reaction_weights: np.ndarray | None = None,
-    linear_solver: str = "auto",
-    tolerance: float = 1e-9,
-    max_iterations: int = 25,
-    max_cutbacks: int = 8,
+    options: NewtonOptions | None = None,
     progress: bool = False,
     progress_label: str = "load steps",
     load_name: str = "load",
     initial_displacement_m: np.ndarray | None = None,
-    nonlinear_elimination: bool = True,
-    predictor: str = "linearized",
-    damping: bool = True,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -655,46 +755,41 @@ def solve_quasistatic(
         loads: Increasing (or any) sequence of load factors, shape (S,).
         reaction_weights: Weights (N, 3) of the internal forces summed into ``reaction``
             (None: zeros).
-        linear_solver: See :class:`LinearSolver`.
-        tolerance: Converged when ``|f_int free| <= tolerance * |f_int prescribed|`` (or below
-            a roundoff floor ``1e-13 mu0 L^2``).
-        max_iterations: Newton iterations per increment.
-        max_cutbacks: Halvings allowed per requested load.
+        options: The Newton solver's settings (:class:`NewtonOptions`; None: the defaults).
+            Converged when ``|f_int free| <= options.tolerance * |f_int prescribed|`` (or
+            below a roundoff floor ``1e-13 mu0 L^2``). ``options.predictor``:
+            ``"linearized"`` starts each increment from the converged state plus the
+            tangent's response to the prescribed increment; ``"extrapolated"`` (after the
+            first increment) from the free dofs extrapolated linearly in the load from the
+            last two converged states, and where that state inverts an element, or Newton
+            fails from it, the increment runs again from the linearized predictor before any
+            cutback. ``options.nonlinear_elimination`` relaxes, after each global Newton step,
+            the nodes that hold most of the residual with the others fixed
+            (:func:`_nonlinear_elimination`). ``options.damping``: where the line search cuts
+            a Newton step below a quarter of its length, the next iterations' tangent is
+            damped (Levenberg-Marquardt, :func:`_next_damping`) until steps are taken whole
+            again. These three change the path to the solution, not the convergence test.
         progress: Show a tqdm bar over the requested loads.
         progress_label: The bar's label.
         load_name: What the load is called in messages (e.g. ``"depth (m)"``).
         initial_displacement_m: Start state (N, 3); zero by default (load 0).
-        nonlinear_elimination: After each global Newton step, relax the nodes that hold most
-            of the residual with the others fixed (:func:`_nonlinear_elimination`). It changes
-            the path to the solution, not the convergence test.
-        predictor: Start of each increment: ``"linearized"`` (the converged state plus the
-            tangent's response to the prescribed increment) or ``"extrapolated"`` (after the
-            first increment, the free dofs extrapolated linearly in the load from the last two
-            converged states; where that state inverts an element, or Newton fails from it,
-            the increment runs again from the linearized predictor before any cutback). It
-            changes the path to the solution, not the convergence test.
-        damping: Where the line search cuts a Newton step below a quarter of its length,
-            damp the next iterations' tangent (Levenberg-Marquardt, :func:`_next_damping`)
-            until steps are taken whole again. It changes the path to the solution, not the
-            convergence test.
 
     Returns:
         A :class:`QuasistaticResult`.
 
     Raises:
-        InputError: Non-finite loads, mis-shaped weights, or an unknown linear solver or
-            predictor.
+        InputError: Non-finite loads, mis-shaped weights, or options that are not a
+            :class:`NewtonOptions`.
     """
     loads = np.atleast_1d(np.asarray(loads, dtype=np.float64))
     if loads.ndim != 1 or not np.all(np.isfinite(loads)):
         raise InputError("loads must be a finite 1-D sequence", value=loads)
-    if predictor not in PREDICTORS:
-        raise InputError(f"predictor must be one of {PREDICTORS}", value=predictor)
+    options = _checked_options(options)
     n = assembler.node_count
     weights = np.zeros((n, 3)) if reaction_weights is None else np.asarray(reaction_weights)
     if weights.shape != (n, 3):
         raise InputError(f"reaction_weights must have shape ({n}, 3)", value=weights.shape)
-    solver = LinearSolver(method=linear_solver, device=assembler.device)
+    solver = LinearSolver(method=options.linear_solver, device=assembler.device)
     mask = conditions.mask(n)
     free = 1.0 - mask
     constrained_wp = wp.array(mask, dtype=wp.vec3d, device=assembler.device)
@@ -712,6 +807,22 @@ def solve_quasistatic(
     total_cutbacks = 0
     history: list[dict] = []
     bar = None
+
+    def outcome(completed: bool, message: str, count: int) -> QuasistaticResult:
+        return QuasistaticResult(
+            loads=np.array(reached[:count]),
+            displacement_m=np.array(states[:count]).reshape(count, n, 3),
+            reaction=np.array(reactions[:count]),
+            newton_iterations=np.array(newton_counts[:count], dtype=np.int64),
+            linear_iterations=np.array(linear_counts[:count], dtype=np.int64),
+            local_iterations=np.array(local_counts[:count], dtype=np.int64),
+            completed=completed,
+            message=message,
+            cutbacks=total_cutbacks,
+            linear_solver=solver.method,
+            history=history,
+        )
+
     if progress:
         from tqdm.auto import tqdm
 
@@ -727,7 +838,11 @@ def solve_quasistatic(
                     next_load = target
                 prescribed = conditions.values(next_load, n) - conditions.values(load, n)
                 free_guess = None
-                if predictor == "extrapolated" and previous is not None and not retry_linearized:
+                if (
+                    options.predictor == "extrapolated"
+                    and previous is not None
+                    and not retry_linearized
+                ):
                     free_guess = (u - previous[1]) * ((next_load - load) / (load - previous[0]))
                 retry_linearized = False
                 step = _newton_increment(
@@ -737,12 +852,12 @@ def solve_quasistatic(
                     prescribed,
                     free,
                     constrained_wp,
-                    tolerance=tolerance,
+                    tolerance=options.tolerance,
                     force_floor=force_floor,
-                    max_iterations=max_iterations,
-                    nonlinear_elimination=nonlinear_elimination,
+                    max_iterations=options.max_newton_iterations,
+                    nonlinear_elimination=options.nonlinear_elimination,
                     free_guess=free_guess,
-                    damping=damping,
+                    damping=options.damping,
                 )
                 step_newton += step.iterations
                 step_linear += step.linear_iterations
@@ -773,11 +888,11 @@ def solve_quasistatic(
                     continue
                 halvings += 1
                 total_cutbacks += 1
-                if halvings > max_cutbacks:
+                if halvings > options.max_cutbacks:
                     completed = False
                     message = (
                         f"stopped at {load_name} {load:.6g} on the way to {target:.6g}: "
-                        f"Newton failed ({step.reason}) after {max_cutbacks} cutbacks "
+                        f"Newton failed ({step.reason}) after {options.max_cutbacks} cutbacks "
                         f"(last increment "
                         f"{increment:.3g}); the {len(reached)} converged steps are kept"
                     )
@@ -795,19 +910,15 @@ def solve_quasistatic(
             if bar is not None:
                 bar.set_postfix(newton_iterations=step_newton, refresh=False)
                 bar.update(1)
+    except KeyboardInterrupt as exc:
+        # The lists grow in step; the last one appended bounds the consistent prefix.
+        count = len(local_counts)
+        raise SolveInterrupted(
+            f"interrupted on the way to {load_name} {loads[min(count, len(loads) - 1)]:.6g}; "
+            f"the {count} converged steps are kept",
+            partial_result=outcome(False, "interrupted", count),
+        ) from exc
     finally:
         if bar is not None:
             bar.close()
-    return QuasistaticResult(
-        loads=np.array(reached),
-        displacement_m=np.array(states).reshape(len(states), n, 3),
-        reaction=np.array(reactions),
-        newton_iterations=np.array(newton_counts, dtype=np.int64),
-        linear_iterations=np.array(linear_counts, dtype=np.int64),
-        local_iterations=np.array(local_counts, dtype=np.int64),
-        completed=completed,
-        message=message,
-        cutbacks=total_cutbacks,
-        linear_solver=solver.method,
-        history=history,
-    )
+    return outcome(completed, message, len(reached))

@@ -16,14 +16,12 @@ from warptissue.usd.reader import (  # noqa: E402
 )
 from warptissue.usd.validation import validate_stage  # noqa: E402
 from warptissue.usd.writer import (  # noqa: E402
-    Indenter,
     UsdScenePaths,
     write_material_usd,
     write_simulation_usd,
 )
 
 __all__ = [
-    "Indenter",
     "UsdScenePaths",
     "read_material_field_usd",
     "read_material_usd",

@@ -20,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
+from warptissue.indenter import Indenter
 from warptissue.mesh import TetMesh
-from warptissue.usd.writer import Indenter, UsdScenePaths, write_simulation_usd
+from warptissue.usd.writer import UsdScenePaths, write_simulation_usd
 
 __all__ = ["export_result_dir", "export_study", "read_fields_vtu"]
 
@@ -89,6 +90,20 @@ def _read_summary(result_dir: Path) -> dict[str, Any]:
         ) from None
 
 
+def _read_indenter(spec: Any, path: Path) -> Indenter | None:
+    """The indenter ``result.json`` echoes in ``study.indenter`` (None where it has none)."""
+    if not spec:
+        return None
+    if not isinstance(spec, Mapping):
+        raise InputError("study.indenter must be a table", path=path, value=spec)
+    try:
+        return Indenter.from_dict(spec)
+    except InputError as exc:
+        raise InputError(
+            f"study.indenter.{exc.column}: {exc.message}", path=path, value=exc.value
+        ) from None
+
+
 def export_result_dir(
     result_dir: str | Path,
     usd_path: str | Path,
@@ -136,12 +151,7 @@ def export_result_dir(
             "completed": summary.get("completed"),
             "message": summary.get("message"),
         }
-    indenter_spec = study.get("indenter") or {}
-    indenter = (
-        Indenter("flat_punch", radius_m=float(indenter_spec["radius_m"]))
-        if indenter_spec.get("kind") == "flat_punch"
-        else None
-    )
+    indenter = _read_indenter(study.get("indenter"), result_dir / "result.json")
     info: dict[str, Any] = {
         "result_dir": str(result_dir.resolve()),
         "study_file": str(study.get("path", "")),
@@ -184,5 +194,5 @@ def export_study(
         material=study.material,
         provenance={"study_file": str(Path(study_path).resolve()), "study_name": study.name},
         density_kg_per_m3=density_kg_per_m3,
-        indenter=Indenter("flat_punch", radius_m=study.indenter.radius_m),
+        indenter=study.indenter,
     )

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError, MeshError
+from warptissue.indenter import Indenter
 from warptissue.io import atomic_path, software_versions, to_jsonable
 from warptissue.mesh import TetMesh
 from warptissue.usd.schema import (
@@ -43,7 +44,6 @@ __all__ = [
     "MATERIAL_FIELD_PRIMVARS",
     "NODE_SET_FAMILY",
     "REGION_FAMILY",
-    "Indenter",
     "UsdScenePaths",
     "material_field_problems",
     "write_material_usd",
@@ -68,39 +68,6 @@ VOLUME = "/World/Specimen/Volume"
 SURFACE = "/World/Specimen/Surface"
 MATERIAL = "/World/Materials/Tissue"
 INDENTER = "/World/Indenter"
-
-_INDENTER_KINDS = ("flat_punch", "line", "platen")
-
-
-@dataclass(frozen=True)
-class Indenter:
-    """A rigid indenter drawn as a USD primitive, its contact point at ``(x_m, y_m, z_m)``.
-
-    Attributes:
-        kind: ``"flat_punch"`` (a ``Cylinder`` along z of radius ``radius_m``), ``"line"`` (a
-            ``Cylinder`` along y of tip radius ``radius_m`` and length ``length_m``) or
-            ``"platen"`` (a thin ``Cube`` of side ``length_m``).
-        radius_m: Punch radius or line tip radius, metres.
-        length_m: Line length or platen side, metres.
-        x_m: Contact point x, metres.
-        y_m: Contact point y, metres.
-        z_m: Contact point z (the specimen's top surface), metres; None uses the mesh's top.
-    """
-
-    kind: str
-    radius_m: float = 0.0
-    length_m: float = 0.0
-    x_m: float = 0.0
-    y_m: float = 0.0
-    z_m: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.kind not in _INDENTER_KINDS:
-            raise InputError(f"indenter kind must be one of {_INDENTER_KINDS}", value=self.kind)
-        if self.kind in ("flat_punch", "line") and not self.radius_m > 0:
-            raise InputError(f"a {self.kind} indenter needs radius_m > 0", value=self.radius_m)
-        if self.kind in ("line", "platen") and not self.length_m > 0:
-            raise InputError(f"a {self.kind} indenter needs length_m > 0", value=self.length_m)
 
 
 @dataclass(frozen=True)
