@@ -212,3 +212,17 @@ def test_code_blocks_finds_fences_and_languages(tmp_path: Path) -> None:
     page.write_text("```python\nx = 1\n")
     with pytest.raises(AssertionError, match="never closed"):
         code_blocks(page)
+
+
+def test_readme_links_point_to_files() -> None:
+    """The README's relative links (to the docs pages) name files that exist.
+
+    Sphinx checks the links between the docs pages (``-W`` in ``.ci/run``); the README is
+    read on the repository's front page, outside the docs build.
+    """
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    relative = [t for t in targets if "://" not in t]
+    assert relative, "the README links to the docs pages"
+    missing = [t for t in relative if not (ROOT / t).exists()]
+    assert not missing, f"README.md links to missing files: {missing}"
