@@ -607,8 +607,8 @@ def fit_curve(
         weights: Positive weights, shape (m,) (default 1).
         jac: d model / d p, ``jac(p) -> (m, n)``, or None for finite differences. The engine
             applies the weights and the relative scaling itself.
-        bounds, method, x_scale, max_iterations, ftol, xtol, gtol, callback, progress,
-        options: As in :func:`least_squares`.
+        bounds, method, x_scale, max_iterations, ftol, xtol, gtol, callback, progress, options: As
+            in :func:`least_squares`.
         parameter_names, parameter_units: Names and SI units for the result.
         relative_floor: Smallest |y| used as a divisor for the relative objective, in the
             units of ``y``; None raises on near-zero data instead.
