@@ -10,8 +10,8 @@ import pytest
 from warptissue.cli import main
 from warptissue.cli.fit_relaxation import parse_model
 from warptissue.errors import InputError
-from warptissue.io import write_csv
 from warptissue.fit.punch import flat_punch_force_N
+from warptissue.io import write_csv
 from warptissue.viscoelastic import PronySeries
 
 
@@ -58,7 +58,7 @@ def test_relaxation_cli_sls_summary(relaxation_csv, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "relaxation_time_s" in text
     saved = json.loads((tmp_path / "liver_sls.json").read_text())
-    assert "seed001_eq4_printed_form" in saved["metadata"]
+    assert "kim_et_al_eq4_printed_form" in saved["metadata"]
 
 
 def test_relaxation_cli_errors_are_one_line(relaxation_csv, tmp_path, capsys):
@@ -107,3 +107,160 @@ def test_parse_model():
     for bad in ("prony:0", "sls:2", "kelvin"):
         with pytest.raises(InputError):
             parse_model(bad)
+
+
+TRUTH = PronySeries(5.0, (6.0, 4.0), (0.8, 15.0))
+
+
+def _record(path, *, rate_m_per_s=4e-3, depth_m=2e-3, air_m=0.0, offset_N=0.0, rng=None):
+    """A ramp-and-hold written as the rig records it: the axis position from the start.
+
+    The probe rests for 1 s, then moves at ``rate_m_per_s`` through ``air_m`` of air and
+    ``depth_m`` into the specimen, and holds. ``offset_N`` is the transducer's offset.
+    """
+    time = np.arange(0.0, 40.0, 0.01)
+    position = np.clip((time - 1.0) * rate_m_per_s, 0.0, air_m + depth_m)
+    depth = np.clip(position - air_m, 0.0, None)
+    force = TRUTH.force_N(time, depth) + offset_N
+    if rng is not None:
+        force = force + rng.normal(0.0, 1e-4, time.size)
+    write_csv(path, {"time_s": time, "displacement_m": position, "force_N": force})
+    return path
+
+
+def _fit_json(capsys, argv):
+    status = main(["fit", *argv, "--json"])
+    captured = capsys.readouterr()
+    return status, json.loads(captured.out) if status == 0 else None, captured.err
+
+
+def _stiffness(printed):
+    return {k: v["value"] for k, v in printed["fit"]["parameters"].items()}
+
+
+def test_a_probe_above_the_surface_is_conditioned_by_contact_auto(tmp_path, capsys, rng):
+    path = _record(tmp_path / "air.csv", air_m=0.5e-3, offset_N=5e-3, rng=rng)
+    out = ["--model", "prony:2", "--out", str(tmp_path / "o")]
+    status, raw, err = _fit_json(capsys, ["relaxation", str(path), *out])
+    assert status == 0
+    assert "warptissue: warning:" in err and "above the surface" in err
+    assert any("above the surface" in w for w in raw["fit"]["warnings"])
+    status, conditioned, err = _fit_json(
+        capsys, ["relaxation", str(path), *out, "--contact", "auto"]
+    )
+    assert status == 0 and "above the surface" not in err
+    fitted = _stiffness(conditioned)
+    assert fitted["equilibrium_stiffness_N_per_m"] == pytest.approx(5.0, rel=0.02)
+    assert fitted["k1_N_per_m"] + fitted["k2_N_per_m"] == pytest.approx(10.0, rel=0.02)
+    contact = conditioned["fit"]  # the JSON of the result file keeps the conditioning
+    saved = json.loads((tmp_path / "o" / "air_prony2.json").read_text())
+    assert saved["metadata"]["conditioning"][0]["contact"]["position_m"] == pytest.approx(
+        0.5e-3, abs=2e-5
+    )
+    assert contact["identified"] is True
+    # Without the offset removal the 5 mN offset stays in the force.
+    status, kept, _ = _fit_json(
+        capsys, ["relaxation", str(path), *out, "--contact", "auto", "--offset", "none"]
+    )
+    assert _stiffness(kept)["equilibrium_stiffness_N_per_m"] > 5.5
+
+
+def test_relaxation_keep_depth_and_window_trim_the_record(tmp_path, capsys):
+    path = _record(tmp_path / "ramp.csv")
+    out = ["--out", str(tmp_path / "o")]
+    status, _, _ = _fit_json(capsys, ["relaxation", str(path), *out, "--window", "0:20"])
+    assert status == 0
+    saved = json.loads((tmp_path / "o" / "ramp_sls.json").read_text())
+    assert saved["metadata"]["records"][0]["samples"] == 2001
+    status, _, _ = _fit_json(
+        capsys, ["relaxation", str(path), *out, "--contact", "0mm", "--keep-depth", "1mm"]
+    )
+    assert status == 0
+    saved = json.loads((tmp_path / "o" / "ramp_sls.json").read_text())
+    assert saved["metadata"]["conditioning"][0]["steps"][-1].startswith("kept the ramp")
+
+
+def test_the_relative_objective_works_on_a_record_that_starts_at_zero_force(tmp_path, capsys):
+    path = _record(tmp_path / "zero_start.csv")
+    argv = ["relaxation", str(path), "--model", "prony:2", "--objective", "relative"]
+    status, printed, err = _fit_json(capsys, [*argv, "--out", str(tmp_path / "o")])
+    assert status == 0, err
+    fitted = _stiffness(printed)
+    assert fitted["equilibrium_stiffness_N_per_m"] == pytest.approx(5.0, rel=1e-3)
+    saved = json.loads((tmp_path / "o" / "zero_start_prony2.json").read_text())
+    peak = max(float(v) for v in np.loadtxt(path, delimiter=",", skiprows=1)[:, 2])
+    assert saved["metadata"]["relative_floor_N"] == pytest.approx(0.01 * peak, rel=1e-12)
+    status, _, err = _fit_json(capsys, [*argv, "--relative-floor", "1mN", "--out", str(tmp_path)])
+    assert status == 0, err
+
+
+def test_joint_fit_of_two_rates_predicts_a_third(tmp_path, capsys, rng):
+    step = _record(tmp_path / "step.csv", rate_m_per_s=20e-3, rng=rng)
+    ramp = _record(tmp_path / "ramp.csv", rate_m_per_s=0.5e-3, rng=rng)
+    third = _record(tmp_path / "third.csv", rate_m_per_s=2e-3, rng=rng)
+    out = tmp_path / "o"
+    argv = ["relaxation", str(step), str(ramp), "--model", "prony:2", "--predict", str(third)]
+    status, printed, err = _fit_json(capsys, [*argv, "--out", str(out)])
+    assert status == 0, err
+    assert [r["data_file"] for r in printed["records"]] == [str(step), str(ramp)]
+    assert all(r["r_squared"] > 0.999 for r in printed["records"])
+    (prediction,) = printed["predictions"]
+    assert prediction["r_squared"] > 0.999 and prediction["rmse_N"] < 3e-4
+    for name in ("step_joint_prony2.json", "step_joint_prony2.png", "third_prony2_prediction.csv"):
+        assert (out / name).stat().st_size > 0
+    with (out / "third_prony2_prediction.csv").open() as f:
+        header = f.readline().strip().split(",")
+    assert header == ["time_s", "displacement_m", "measured_force_N", "predicted_force_N"]
+    assert printed["model"]["equilibrium_stiffness_N_per_m"] == pytest.approx(5.0, rel=0.01)
+    main(["fit", *argv, "--out", str(out)])
+    assert "prediction of " in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("transform", "message"),
+    [
+        (lambda x, f: (x, 0.0 * f), "force is zero throughout"),
+        (lambda x, f: (1e3 * x, f), "is the column in millimetres"),
+        (lambda x, f: (x, -f), "opposite signs"),
+    ],
+)
+def test_implausible_relaxation_data_is_refused_with_exit_2(tmp_path, capsys, transform, message):
+    time = np.arange(0.0, 30.0, 0.05)
+    x = 2e-3 * np.minimum(time / 0.5, 1.0)
+    depth, force = transform(x, TRUTH.force_N(time, x))
+    path = tmp_path / "odd.csv"
+    write_csv(path, {"time_s": time, "displacement_m": depth, "force_N": force})
+    for extra in ([], ["--p0", "10,5,1"]):
+        assert main(["fit", "relaxation", str(path), "--out", str(tmp_path), *extra]) == 2
+        error = capsys.readouterr().err
+        assert error.count("\n") == 1 and message in error and "odd.csv" in error
+
+
+def test_punch_modulus_takes_units_and_refuses_a_thin_layer(tmp_path, capsys):
+    depth = np.linspace(0.0, 1e-4, 21)
+    force = np.concatenate(
+        [
+            [0.0],
+            flat_punch_force_N(depth[1:], radius_m=5e-3, youngs_modulus_Pa=3e4, poissons_ratio=0.5),
+        ]
+    )
+    path = tmp_path / "thin.csv"
+    write_csv(path, {"displacement_m": depth, "force_N": force})
+    argv = ["fit", "punch-modulus", str(path), "--radius-m", "5mm", "--out", str(tmp_path)]
+    assert main([*argv, "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["radius_m"] == pytest.approx(5e-3)
+    assert printed["fit"]["parameters"]["youngs_modulus_Pa"]["value"] == pytest.approx(3e4)
+    assert main([*argv, "--thickness-m", "0.1mm"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "thin.csv" in error and "a/h = 50" in error
+    assert main([*argv, "--thickness-m", "1mm"]) == 0  # a/h = 5: the deepest point is 0.1 h
+    with pytest.raises(SystemExit) as refused:  # argparse's usage error
+        main([*argv, "--radius-m", "0mm"])
+    assert refused.value.code == 2 and "must be positive" in capsys.readouterr().err
+
+
+def test_errors_name_options_not_columns(capsys, relaxation_csv):
+    assert main(["fit", "relaxation", str(relaxation_csv), "--model", "maxwell"]) == 2
+    error = capsys.readouterr().err
+    assert "--model" in error and "column" not in error

@@ -1,11 +1,21 @@
 """``warptissue fit relaxation`` and ``warptissue fit punch-modulus``.
 
 ``relaxation`` fits a lumped viscoelastic model (standard linear solid, Prony series of N
-terms, linear or nonlinear Wiechert body) to a ``time_s,displacement_m,force_N`` record,
-driven by the measured displacement history (a real ramp, not an ideal step), and writes
-``STEM_MODEL.json``, ``.csv`` and ``.png``. ``punch-modulus`` fits Young's modulus to a
-``displacement_m,force_N`` curve with Sneddon's flat punch (optionally corrected for a layer
-of finite thickness, Hayes et al. 1972) or Hertz's sphere.
+terms, linear or nonlinear Wiechert body) to one or several ``time_s,displacement_m,force_N``
+records at once (a joint fit: Takacs et al. fit a near-step and a ramp together), driven by
+each measured displacement history (a real ramp, not an ideal step), and writes
+``STEM_MODEL.json``, ``.csv`` and ``.png``. ``--predict`` validates the fitted model on
+another record (a third rate) and writes the predicted against the measured force.
+``punch-modulus`` fits Young's modulus to a ``displacement_m,force_N`` curve with Sneddon's
+flat punch (optionally corrected for a layer of finite thickness, Hayes et al. 1972) or
+Hertz's sphere.
+
+Both can condition a raw record first (``--contact``, ``--offset``, ``--keep-depth``,
+``--window``): detect the contact point of a probe that starts above the surface, remove the
+force offset measured before contact, and trim. Implausible data (zero force, opposite signs,
+depths beyond 0.1 m) end with exit status 2; implausible or unidentified results print
+``warptissue: warning: ...`` lines on stderr and list them under ``warnings`` in the JSON
+(exit status 0).
 """
 
 from __future__ import annotations
@@ -13,15 +23,23 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from warptissue.cli._args import length_m, positive_length_m, quantity
 from warptissue.errors import InputError
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from warptissue.fit import FitResult
+    from warptissue.io import ExperimentData
 
 __all__ = ["parse_model", "register_fit"]
+
+RELATIVE_FLOOR_SHARE = 0.01
+"""``--relative-floor auto``: the floor is this share of the largest |force| of the records."""
 
 
 def parse_model(text: str) -> tuple[str, int]:
@@ -30,25 +48,98 @@ def parse_model(text: str) -> tuple[str, int]:
     known = ("sls", "prony", "wiechert", "wiechert-nonlinear")
     if name not in known or (count and name != "prony"):
         raise InputError(
-            f"unknown model; use one of sls, prony:N, {', '.join(known[2:])}",
-            column="--model",
-            value=text,
+            f"--model: unknown model {text!r}; use one of sls, prony:N, {', '.join(known[2:])}"
         )
     if not count:
         return name, 2
     if not count.isdigit() or int(count) < 1:
-        raise InputError("prony:N needs a positive integer N", column="--model", value=text)
+        raise InputError(f"--model: prony:N needs a positive integer N (got {text!r})")
     return name, int(count)
+
+
+def _contact(text: str) -> str | float:
+    """``--contact``: "none", "auto" or an axis position (m, units allowed)."""
+    if text in ("none", "auto"):
+        return text
+    try:
+        return length_m(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(
+            f"use none, auto or a position such as 1.5mm; {exc}"
+        ) from None
+
+
+def _window(text: str) -> tuple[float, float]:
+    """``--window START:STOP`` in seconds (units allowed)."""
+    start, sep, stop = text.partition(":")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"use START:STOP in seconds, e.g. 0:30 (got {text!r})")
+    seconds = quantity("time", nonnegative=True)
+    first, last = seconds(start), seconds(stop)
+    if not last > first:
+        raise argparse.ArgumentTypeError(f"the window must end after it starts (got {text!r})")
+    return first, last
+
+
+def _relative_floor(text: str) -> str | float:
+    """``--relative-floor``: "auto" or a force (N, units allowed)."""
+    return "auto" if text == "auto" else quantity("force", positive=True)(text)
+
+
+def _add_conditioning(parser: argparse.ArgumentParser) -> None:
+    """The conditioning options shared by both fits."""
+    group = parser.add_argument_group(
+        "conditioning (warptissue.acquisition.conditioning)",
+        "Applied to every record before the fit. The default uses each record as it is.",
+    )
+    group.add_argument(
+        "--contact",
+        type=_contact,
+        default="none",
+        metavar="none|auto|POSITION",
+        help="contact point: none (default: displacement_m is already the depth), auto "
+        "(detect where the force leaves the pre-contact baseline; needs at least 10 samples "
+        "before the probe moves) or the axis position at contact (m, e.g. 1.5mm); depths "
+        "are then measured from the contact and clipped at zero",
+    )
+    group.add_argument(
+        "--offset",
+        choices=("auto", "none"),
+        default="auto",
+        help="with --contact: subtract the force offset (and drift) measured where the probe "
+        "carries no load (auto, default) or keep the force as recorded (none)",
+    )
+    group.add_argument(
+        "--keep-depth",
+        type=positive_length_m,
+        default=None,
+        metavar="DEPTH",
+        help="keep only the loading ramp down to this depth below contact (m, e.g. 3.6mm; "
+        "Takacs et al. keep 3.6 mm of a 4 mm ramp)",
+    )
+    group.add_argument(
+        "--window",
+        type=_window,
+        default=None,
+        metavar="START:STOP",
+        help="keep only the samples with START <= time_s <= STOP (s)",
+    )
 
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
     """Add ``warptissue fit relaxation`` and ``warptissue fit punch-modulus``."""
     relaxation = subparsers.add_parser(
         "relaxation",
-        help="fit a lumped viscoelastic model (SLS, Prony, Wiechert) to a relaxation record",
+        help="fit a lumped viscoelastic model (SLS, Prony, Wiechert) to one or several "
+        "relaxation records",
         description=__doc__.split("\n\n", 1)[1],
     )
-    relaxation.add_argument("data", type=Path, help="CSV with time_s,displacement_m,force_N")
+    relaxation.add_argument(
+        "data",
+        type=Path,
+        nargs="+",
+        help="CSV file(s) with time_s,displacement_m,force_N; several files are fitted jointly",
+    )
     relaxation.add_argument(
         "--model", default="sls", help="sls (default), prony:N, wiechert, wiechert-nonlinear"
     )
@@ -59,7 +150,31 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         "(default: from the data; recommended for wiechert-nonlinear)",
     )
     relaxation.add_argument("--method", choices=("lm", "salm"), default="lm")
-    relaxation.add_argument("--objective", choices=("absolute", "relative"), default="absolute")
+    relaxation.add_argument(
+        "--objective",
+        choices=("absolute", "relative"),
+        default="absolute",
+        help="absolute: force residuals (N); relative: residuals divided by the measured force",
+    )
+    relaxation.add_argument(
+        "--relative-floor",
+        type=_relative_floor,
+        default="auto",
+        metavar="auto|FORCE",
+        help="relative objective: smallest |force| used as a divisor, so that a record that "
+        f"starts at zero force can be fitted (N, e.g. 1mN; auto: {RELATIVE_FLOOR_SHARE:g} of "
+        "the largest |force|)",
+    )
+    relaxation.add_argument(
+        "--predict",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="CSV",
+        help="predict this record (same columns, same conditioning) with the fitted model and "
+        "write STEM_prediction.csv/.png with R^2 and RMSE; may be repeated",
+    )
+    _add_conditioning(relaxation)
     relaxation.add_argument("--out", type=Path, default=None, help="output folder")
     relaxation.add_argument("--json", action="store_true", help="print the result as JSON")
     relaxation.set_defaults(handler=run_relaxation)
@@ -69,23 +184,119 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         help="Young's modulus from a force-depth curve (Sneddon flat punch or Hertz sphere)",
     )
     punch.add_argument("data", type=Path, help="CSV with displacement_m,force_N")
-    punch.add_argument("--radius-m", type=float, required=True, help="punch or sphere radius")
+    punch.add_argument(
+        "--radius-m",
+        type=positive_length_m,
+        required=True,
+        help="punch or sphere radius (m, or with a unit: 1mm)",
+    )
     punch.add_argument("--poissons-ratio", type=float, default=0.5)
     punch.add_argument("--geometry", choices=("flat", "sphere"), default="flat")
     punch.add_argument(
-        "--thickness-m", type=float, default=None, help="layer thickness (flat punch, Hayes)"
+        "--thickness-m",
+        type=positive_length_m,
+        default=None,
+        help="layer thickness for the flat punch's Hayes correction (m, or 10mm); "
+        "radius/thickness at most 16",
     )
+    _add_conditioning(punch)
     punch.add_argument("--out", type=Path, default=None, help="output folder")
     punch.add_argument("--json", action="store_true", help="print the result as JSON")
     punch.set_defaults(handler=run_punch_modulus)
 
 
+@dataclass
+class _Record:
+    """A record ready for fitting, and what conditioning did to it."""
+
+    path: Path
+    time_s: np.ndarray
+    displacement_m: np.ndarray
+    force_N: np.ndarray
+    conditioned: bool
+    conditioning: dict[str, Any] = field(default_factory=dict)
+
+
+def _named(exc: InputError, path: Path) -> InputError:
+    """``exc`` with ``path`` as its file when it names none."""
+    if exc.path is not None:
+        return exc
+    return InputError(exc.message, path=path, line=exc.line, column=exc.column, value=exc.value)
+
+
+def _condition(
+    data: ExperimentData, path: Path, args: argparse.Namespace, *, has_time: bool
+) -> _Record:
+    """Apply ``--contact/--offset/--keep-depth/--window`` to one record."""
+    import numpy as np
+
+    from warptissue.acquisition.conditioning import prepare_record, select_window, trim_ramp
+
+    x, f = data["displacement_m"], data["force_N"]
+    t = data["time_s"] if has_time else np.arange(x.size, dtype=np.float64)
+    if args.window is not None and not has_time:
+        raise InputError("--window needs a time_s column", path=path)
+    try:
+        if args.contact == "none":
+            kept = np.ones(x.size, dtype=bool)
+            if args.keep_depth is not None:
+                kept &= trim_ramp(x, contact_position_m=0.0, keep_depth_m=args.keep_depth)
+            if args.window is not None:
+                kept &= select_window(t, start_s=args.window[0], stop_s=args.window[1])
+            summary = {"contact": "none"} if kept.all() else {"samples_kept": int(kept.sum())}
+            if not kept.any():
+                raise InputError("no sample left after --keep-depth/--window")
+            return _Record(path, t[kept], x[kept], f[kept], False, summary)
+        prepared = prepare_record(
+            {"time_s": t, "displacement_m": x, "force_N": f},
+            contact_position_m=None if args.contact == "auto" else args.contact,
+            keep_depth_m=args.keep_depth,
+            window_s=args.window,
+        )
+    except InputError as exc:
+        raise _named(exc, path) from None
+    force = prepared.force_N if args.offset == "auto" else f[prepared.kept]
+    summary = prepared.summary()
+    summary["offset"] = args.offset
+    if args.offset == "none":
+        summary["force_offset_N"] = summary["force_drift_N_per_s"] = 0.0
+    if not prepared.kept.any():
+        raise InputError("no sample left after the conditioning", path=path)
+    return _Record(
+        path,
+        prepared.time_s,
+        np.clip(prepared.displacement_m, 0.0, None),
+        force,
+        True,
+        summary,
+    )
+
+
+def _read(path: Path, args: argparse.Namespace, *, required: tuple[str, ...]) -> _Record:
+    """Read, validate and condition one record."""
+    from warptissue.io import read_experiment_csv
+
+    data = read_experiment_csv(path, required=required, monotonic="time_s")
+    return _condition(data, path, args, has_time="time_s" in data.columns)
+
+
+def _print_warnings(messages: list[str]) -> None:
+    for message in messages:
+        print(f"warptissue: warning: {message}", file=sys.stderr)
+
+
 def _finish(
-    args: argparse.Namespace, result: FitResult, files: dict[str, Path], extra: dict[str, Any]
+    args: argparse.Namespace,
+    result: FitResult,
+    files: dict[str, Path],
+    extra: dict[str, Any],
+    lines: list[str] | None = None,
 ) -> int:
-    """Print the summary (or JSON) and warn on an unsuccessful fit."""
+    """Print the summary (or JSON) and the warnings; exit status 0."""
+    messages = list(result.all_warnings)
     if not result.success:
-        print(f"warptissue: warning: {result.message}", file=sys.stderr)
+        messages.insert(0, f"the fit did not converge: {result.message}")
+    _print_warnings(messages)
     if args.json:
         print(
             json.dumps(
@@ -95,16 +306,89 @@ def _finish(
             )
         )
     else:
-        print(result.summary())
+        print(result.summary(warnings=False))
+        for line in lines or []:
+            print(line)
         print(f"outputs in {files['json'].parent}")
     return 0
 
 
+def _floor(args: argparse.Namespace, records: list[_Record]) -> float | None:
+    """The relative objective's floor (N), or None for the absolute objective."""
+    import numpy as np
+
+    if args.objective != "relative":
+        return None
+    if args.relative_floor != "auto":
+        return float(args.relative_floor)
+    peak = max(float(np.max(np.abs(r.force_N))) for r in records)
+    return RELATIVE_FLOOR_SHARE * peak if peak > 0 else None
+
+
+def _predict(
+    args: argparse.Namespace, result: FitResult, out_dir: Path, label: str
+) -> tuple[list[dict[str, Any]], dict[str, Path], list[str]]:
+    """Predict every ``--predict`` record; write its CSV and PNG; R^2 and RMSE."""
+    from warptissue.fit.metrics import r_squared, rmse
+    from warptissue.io import write_csv
+    from warptissue.report import plot_fit
+
+    reports, files, lines = [], {}, []
+    for path in args.predict:
+        record = _read(path, args, required=("time_s", "displacement_m", "force_N"))
+        predicted = result.fitted_model.force_N(record.time_s, record.displacement_m)
+        name = f"{path.stem}_{label}_prediction"
+        csv_path = write_csv(
+            out_dir / f"{name}.csv",
+            {
+                "time_s": record.time_s,
+                "displacement_m": record.displacement_m,
+                "measured_force_N": record.force_N,
+                "predicted_force_N": predicted,
+            },
+        )
+        try:
+            r2 = r_squared(record.force_N, predicted)
+        except InputError:
+            r2 = None
+        error = rmse(record.force_N, predicted)
+        png_path = plot_fit(
+            out_dir / f"{name}.png",
+            record.time_s,
+            record.force_N,
+            predicted,
+            xlabel="time (s)",
+            ylabel="force (N)",
+            title=f"{path.name} predicted by the {args.model} fit, R^2 = "
+            + ("n/a" if r2 is None else f"{r2:.4f}"),
+            fitted_label="predicted",
+            log_x=True,
+        )
+        files[f"prediction_csv:{path.name}"] = csv_path
+        files[f"prediction_png:{path.name}"] = png_path
+        reports.append(
+            {
+                "data_file": str(path),
+                "r_squared": r2,
+                "rmse_N": error,
+                "conditioning": record.conditioning,
+                "csv": str(csv_path),
+                "png": str(png_path),
+            }
+        )
+        lines.append(
+            f"prediction of {path}: R^2 = {'n/a' if r2 is None else f'{r2:.6f}'}, "
+            f"RMSE = {error:.6g} N"
+        )
+    return reports, files, lines
+
+
 def run_relaxation(args: argparse.Namespace) -> int:
     """Fit, write JSON + CSV + PNG, print a summary (or JSON); return the exit status."""
-    from warptissue.io import read_experiment_csv
+    import numpy as np
+
     from warptissue.report import write_fit_outputs
-    from warptissue.viscoelastic import fit_relaxation
+    from warptissue.viscoelastic import RelaxationRecord, fit_relaxation_joint
 
     model, terms = parse_model(args.model)
     p0 = None
@@ -112,53 +396,85 @@ def run_relaxation(args: argparse.Namespace) -> int:
         try:
             p0 = [float(v) for v in args.p0.split(",")]
         except ValueError:
-            raise InputError("--p0 needs comma-separated numbers", value=args.p0) from None
-    record = read_experiment_csv(args.data)
-    result = fit_relaxation(
-        record["time_s"],
-        record["displacement_m"],
-        record["force_N"],
+            raise InputError(f"--p0 needs comma-separated numbers (got {args.p0!r})") from None
+    records = [
+        _read(path, args, required=("time_s", "displacement_m", "force_N")) for path in args.data
+    ]
+    floor = _floor(args, records)
+    result = fit_relaxation_joint(
+        [
+            RelaxationRecord(
+                r.time_s, r.displacement_m, r.force_N, source=str(r.path), conditioned=r.conditioned
+            )
+            for r in records
+        ],
         model=model,
         terms=terms,
         p0=p0,
         method=args.method,
         objective=args.objective,
+        relative_floor=floor,
     )
     label = f"{model}{terms}" if model == "prony" else model
-    details = {"data_file": str(args.data), "model": result.fitted_model.to_dict()}
+    stem = args.data[0].stem + ("_joint" if len(records) > 1 else "")
+    details: dict[str, Any] = {
+        "data_files": [str(p) for p in args.data],
+        "model": result.fitted_model.to_dict(),
+        "objective": args.objective,
+        "relative_floor_N": floor,
+        "conditioning": [r.conditioning for r in records],
+        "records": [
+            {"data_file": str(r.path), "rmse_N": e, "r_squared": q, "samples": int(r.time_s.size)}
+            for r, e, q in zip(records, result.record_rmse_N, result.record_r_squared, strict=True)
+        ],
+    }
     if model == "sls":
-        details["seed001_eq4_printed_form"] = result.fitted_model.to_printed()
-    out_dir = args.out if args.out is not None else Path(f"{args.data.stem}_relaxation_fit")
+        details["kim_et_al_eq4_printed_form"] = result.fitted_model.to_printed()
+    out_dir = args.out if args.out is not None else Path(f"{stem}_relaxation_fit")
+    columns: dict[str, Any] = {
+        "time_s": np.concatenate([r.time_s for r in records]),
+        "measured_force_N": np.concatenate([r.force_N for r in records]),
+        "fitted_force_N": result.fitted,
+        "displacement_m": np.concatenate([r.displacement_m for r in records]),
+    }
+    if len(records) > 1:
+        columns["record"] = np.repeat(np.arange(len(records)), [r.time_s.size for r in records])
+    predictions, prediction_files, lines = _predict(args, result, out_dir, label)
+    if predictions:
+        details["predictions"] = predictions
     files = write_fit_outputs(
         out_dir,
-        f"{args.data.stem}_{label}",
+        f"{stem}_{label}",
         result,
-        {
-            "time_s": record["time_s"],
-            "measured_force_N": record["force_N"],
-            "fitted_force_N": result.fitted,
-            "displacement_m": record["displacement_m"],
-        },
+        columns,
         metadata=details,
         title=f"{args.model} fit, R^2 = "
         + ("n/a" if result.r_squared is None else f"{result.r_squared:.4f}"),
+        log_x=True,
+        group_column="record" if len(records) > 1 else None,
+        group_names=[r.path.name for r in records],
     )
-    return _finish(args, result, files, {"model": details["model"]})
+    files.update(prediction_files)
+    extra = {"model": details["model"], "records": details["records"]}
+    if predictions:
+        extra["predictions"] = predictions
+    return _finish(args, result, files, extra, lines)
 
 
 def run_punch_modulus(args: argparse.Namespace) -> int:
     """Fit E to a force-depth curve, write JSON + CSV + PNG; return the exit status."""
     import numpy as np
 
-    from warptissue.io import read_experiment_csv
+    from warptissue.fit.plausibility import check_indentation_record
     from warptissue.fit.punch import fit_punch_modulus
     from warptissue.report import write_fit_outputs
 
-    record = read_experiment_csv(
-        args.data, required=("displacement_m", "force_N"), monotonic="time_s"
+    record = _read(args.data, args, required=("displacement_m", "force_N"))
+    depth = np.abs(record.displacement_m)
+    force = np.abs(record.force_N)
+    data_warnings = check_indentation_record(
+        depth, force, path=args.data, conditioned=record.conditioned
     )
-    depth = np.abs(record["displacement_m"])
-    force = np.abs(record["force_N"])
     loaded = depth > 0.0
     if np.count_nonzero(loaded) < 2:
         raise InputError(
@@ -166,14 +482,18 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
             path=args.data,
             column="displacement_m",
         )
-    result = fit_punch_modulus(
-        depth[loaded],
-        force[loaded],
-        radius_m=args.radius_m,
-        poissons_ratio=args.poissons_ratio,
-        geometry=args.geometry,
-        thickness_m=args.thickness_m,
-    )
+    try:
+        result = fit_punch_modulus(
+            depth[loaded],
+            force[loaded],
+            radius_m=args.radius_m,
+            poissons_ratio=args.poissons_ratio,
+            geometry=args.geometry,
+            thickness_m=args.thickness_m,
+        )
+    except InputError as exc:
+        raise _named(exc, args.data) from None
+    result.warnings.extend(f"{args.data}: {m}" for m in data_warnings)
     out_dir = args.out if args.out is not None else Path(f"{args.data.stem}_punch_fit")
     details = {
         "data_file": str(args.data),
@@ -184,6 +504,7 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
         "formula": "Sneddon F = 2 a E delta kappa / (1 - nu^2)"
         if args.geometry == "flat"
         else "Hertz F = 4/3 E / (1 - nu^2) sqrt(R) delta^1.5",
+        "conditioning": record.conditioning,
     }
     files = write_fit_outputs(
         out_dir,

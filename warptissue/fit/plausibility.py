@@ -117,7 +117,8 @@ def check_indentation_record(
         )
     if not conditioned:
         depth = np.abs(x)
-        unloaded = np.abs(f) <= 0.02 * peak_force
+        rise = np.abs(f - np.median(f[:5]))  # from the first level: an offset is no load
+        unloaded = rise <= 0.02 * float(np.max(rise))
         loaded = np.flatnonzero(~unloaded)
         free_depth = float(np.max(depth[: loaded[0]])) if loaded.size and loaded[0] > 0 else 0.0
         if free_depth > 0.05 * deepest:
