@@ -17,6 +17,9 @@ liver, Ahn & Kim) and K / mu = 1000.
   accuracy: for an error target, the time each code needs is interpolated (log-log) between
   its runs.
 
+``--markdown RESULTS...`` runs nothing and prints the runs of earlier ``--out`` files as the
+Markdown tables of docs/performance.md.
+
 Examples:
     python scripts/benchmarks/bench_flat_punch.py --sizes 10k,20k --felupe-levels 1,2,3 \\
         --out bench.json
@@ -48,6 +51,9 @@ BULK_MODULUS_PA = 1000.0 * SHEAR_MODULUS_PA
 FINAL_DEPTH_M = 0.5 * PROBE_RADIUS_M
 STEP_COUNT = 20
 NEWTON_TOLERANCE = 1.0e-8
+REFERENCE_FORCE_N = 2.460e-3
+"""The converged force at a / 2: Richardson extrapolation of the three finest FElupe block runs
+(``scripts/results/bench_flat_punch_2core_cpu.json``, ``references.felupe``), rounded."""
 SIZE_TARGETS = {
     "10k": 10_000,
     "20k": 20_000,
@@ -623,6 +629,95 @@ def print_table(records: list[RunRecord]) -> None:
         )
 
 
+def _grouped(value: float) -> str:
+    """An integer with thin groups of three digits, as the docs print counts (``8 828``)."""
+    return f"{int(round(value)):,}".replace(",", " ")
+
+
+def _seconds(value: float) -> str:
+    return f"{value:.3g}" if value < 10 else f"{value:.1f}"
+
+
+def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
+    """A Markdown table of the runs recorded in results files written by ``--out``.
+
+    One row per run, in file order. Runs recorded before an option existed get the value
+    that the code had then (predictor "linearized", damping "off", the problem's
+    tolerance). ``only`` keeps the runs whose column has the given value (``"damping=on"``).
+    The predictor, damping and tolerance columns appear only where the runs differ in them,
+    the steps column only where a run stopped early, the GPU memory column only where a run
+    recorded it. The force error is taken against :data:`REFERENCE_FORCE_N`.
+    """
+    runs = []
+    for path in paths:
+        report = json.loads(Path(path).read_text())
+        problem = report.get("problem", {})
+        defaults = {
+            "mesher": problem.get("warptissue_mesher", "extruded"),
+            "predictor": "linearized",
+            "damping": "off",
+            "tolerance": f"{problem.get('newton_tolerance', NEWTON_TOLERANCE):g}",
+        }
+        for run in report["runs"]:
+            row = defaults | {k: v for k, v in run.items() if v is not None}
+            if isinstance(row["damping"], bool):
+                row["damping"] = "on" if row["damping"] else "off"
+            if "newton_tolerance" in run and run["newton_tolerance"] is not None:
+                row["tolerance"] = f"{run['newton_tolerance']:g}"
+            if row["code"] != "warptissue":
+                row.update(mesher="O-grid", predictor="-", damping="-", tolerance="-")
+            runs.append(row)
+    for condition in only:
+        key, _, value = condition.partition("=")
+        runs = [r for r in runs if str(r.get(key)) == value]
+    if not runs:
+        raise ValueError(f"no run in {[str(p) for p in paths]} matches {list(only)}")
+    names = {"warptissue": "warptissue TET10 mixed", "felupe": "FElupe Q1/P0 hex"}
+    columns: list[tuple[str, Any]] = []
+    if len({r["code"] for r in runs}) > 1:
+        columns.append(("code", lambda r: names.get(r["code"], r["code"])))
+    columns.append(("mesh", lambda r: r["mesher"]))
+    for key in ("predictor", "damping", "tolerance"):
+        if len({r[key] for r in runs if r["code"] == "warptissue"}) > 1:
+            columns.append((key, lambda r, key=key: r[key]))
+    columns += [
+        ("cells", lambda r: _grouped(r["cells"])),
+        ("DOFs", lambda r: _grouped(r["dofs"])),
+        ("near size (um)", lambda r: _grouped(1e6 * r["size_near_m"])),
+    ]
+    if not all(r["completed"] for r in runs):
+        columns.append(("load steps", lambda r: f"{r['steps_converged']} of {STEP_COUNT}"))
+    columns += [
+        ("Newton its", lambda r: str(r["newton_iterations"])),
+        ("total s (wall)", lambda r: _seconds(r["solve_s"])),
+        ("CPU s", lambda r: _seconds(r["solve_cpu_s"])),
+        ("s / Newton it", lambda r: f"{r['seconds_per_newton_iteration']:.3g}"),
+    ]
+    if any(r.get("peak_gpu_MiB") for r in runs):
+        columns.append(("peak GPU MiB", lambda r: _grouped(r.get("peak_gpu_MiB", 0)) or "-"))
+    columns += [
+        (
+            "final force (mN)",
+            lambda r: f"{1e3 * r['final_force_N']:.4f}" if r["completed"] else "-",
+        ),
+        (
+            "vs 2.460 mN",
+            lambda r: (
+                f"{100 * (r['final_force_N'] / REFERENCE_FORCE_N - 1):+.1f} %"
+                if r["completed"]
+                else "-"
+            ),
+        ),
+    ]
+    text_columns = {"code", "mesh", "predictor", "damping", "tolerance"}
+    lines = [
+        "| " + " | ".join(title for title, _ in columns) + " |",
+        "|" + "|".join("---" if t in text_columns else "---:" for t, _ in columns) + "|",
+    ]
+    lines += ["| " + " | ".join(cell(r) for _, cell in columns) + " |" for r in runs]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="cpu", help="warptissue device: cpu, cuda, cuda:N")
@@ -682,7 +777,29 @@ def main(argv: list[str] | None = None) -> int:
         f"equal-accuracy comparison use (FElupe always runs at {NEWTON_TOLERANCE:g})",
     )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
+    parser.add_argument(
+        "--markdown",
+        type=Path,
+        nargs="+",
+        metavar="RESULTS",
+        help="run nothing: print the runs of these --out files as a Markdown table (the "
+        "tables of docs/performance.md)",
+    )
+    parser.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="COLUMN=VALUE",
+        help="with --markdown: only the runs with this value (damping=on, tolerance=1e-08, "
+        "mesher=delaunay, ...); may be repeated",
+    )
     args = parser.parse_args(argv)
+    if args.markdown:
+        try:
+            print(markdown_table(args.markdown, only=args.only))
+        except (OSError, ValueError, KeyError) as exc:
+            parser.error(f"--markdown: {exc}")
+        return 0
     if not 1 <= args.steps <= STEP_COUNT:
         parser.error(f"--steps must be between 1 and {STEP_COUNT}, got {args.steps}")
     from warptissue.fem.solvers import PREDICTORS
