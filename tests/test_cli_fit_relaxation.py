@@ -264,3 +264,23 @@ def test_errors_name_options_not_columns(capsys, relaxation_csv):
     assert main(["fit", "relaxation", str(relaxation_csv), "--model", "maxwell"]) == 2
     error = capsys.readouterr().err
     assert "--model" in error and "column" not in error
+
+
+def test_the_shipped_example_records_fit_back_to_their_sidecar_model(tmp_path, capsys):
+    from pathlib import Path
+
+    data = Path(__file__).resolve().parents[1] / "scenes" / "data"
+    hold, slow, medium = (data / f"liver_ramp_{n}.csv" for n in ("hold", "slow", "medium"))
+    truth = json.loads(hold.with_suffix(".json").read_text())["model"]
+    argv = ["relaxation", str(hold), str(slow), "--model", "prony:2", "--contact", "auto"]
+    status, printed, err = _fit_json(
+        capsys, [*argv, "--predict", str(medium), "--out", str(tmp_path)]
+    )
+    assert status == 0 and err == ""
+    model = printed["model"]
+    assert model["equilibrium_stiffness_N_per_m"] == pytest.approx(
+        truth["equilibrium_stiffness_N_per_m"], rel=0.01
+    )
+    assert model["g"] == pytest.approx(truth["g"], rel=0.01)
+    assert model["relaxation_times_s"] == pytest.approx(truth["relaxation_times_s"], rel=0.01)
+    assert printed["predictions"][0]["r_squared"] > 0.999
