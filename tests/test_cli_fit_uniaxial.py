@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -68,8 +69,10 @@ def test_relative_objective_uses_the_default_window(compression_csv, tmp_path, c
 @pytest.mark.parametrize(
     ("arguments", "message"),
     [
-        (["--model", "foam"], "unknown model"),
-        (["--area-m2", "-1"], "area_m2"),
+        (["--model", "foam"], "--model: unknown model"),
+        (["--model", "neo_hookean,,yeoh"], "--model has an empty entry"),
+        (["--min-strain", "-1"], "--min-strain must be"),
+        (["--min-strain", "nan"], "--min-strain must be"),
     ],
 )
 def test_errors_are_one_line_with_exit_code_2(compression_csv, capsys, arguments, message):
@@ -78,6 +81,46 @@ def test_errors_are_one_line_with_exit_code_2(compression_csv, capsys, arguments
     error = capsys.readouterr().err.strip()
     assert status == 2
     assert message in error and len(error.splitlines()) == 1
+    assert "column 'min_strain'" not in error and "np.float64" not in error
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("--area-m2", "-1", "argument --area-m2: must be positive"),
+        ("--area-m2", "nan", "argument --area-m2: not a finite number"),
+        ("--height-m", "0", "argument --height-m: must be positive"),
+        ("--height-m", "tall", "argument --height-m: not a length"),
+        ("--bulk-modulus-ratio", "-5", "argument --bulk-modulus-ratio: must be positive"),
+    ],
+)
+def test_bad_options_are_usage_errors_naming_the_option(
+    compression_csv, capsys, option, value, message
+):
+    """Before: '--area-m2 -1' was reported as "column 'area_m2'" after reading the file."""
+    arguments = {"--area-m2": str(AREA_M2), "--height-m": str(HEIGHT_M), option: value}
+    with pytest.raises(SystemExit) as exit_info:
+        main(
+            ["fit", "uniaxial", str(compression_csv), *(x for kv in arguments.items() for x in kv)]
+        )
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err
+    assert message in error and "Traceback" not in error and "column" not in error
+
+
+def test_height_takes_a_unit(compression_csv, tmp_path, capsys):
+    """``acquire`` takes lengths with units; so does --height-m (80mm = 0.08 m)."""
+    out = tmp_path / "out"
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", "80mm", "--model", "neo_hookean", "--out", str(out),
+        ]
+    )  # fmt: skip
+    assert status == 0
+    assert json.loads((out / "block_neo_hookean.json").read_text())["metadata"]["height_m"] == (
+        pytest.approx(0.08, rel=1e-12)
+    )
 
 
 def test_missing_column_names_the_file(tmp_path, capsys):
@@ -123,3 +166,161 @@ def test_usd_must_be_usda(compression_csv, tmp_path):
     )  # fmt: skip
     assert status == 2
     assert not (tmp_path / "o").exists()
+
+
+def _write_record(path, displacement_m, force_N):
+    lines = ["displacement_m,force_N"] + [
+        f"{float(d)!r},{float(f)!r}" for d, f in zip(displacement_m, force_N, strict=True)
+    ]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_a_flattened_specimen_names_the_file_the_column_and_the_row(
+    compression_csv, capsys, tmp_path
+):
+    """Before: 'compressive strain must stay below 1 (index 32) (got np.float64(1.0))'."""
+    status = main(
+        ["fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2), "--height-m", "0.01"]
+    )
+    error = capsys.readouterr().err.strip()
+    assert status == 2 and len(error.splitlines()) == 1
+    assert "block.csv" in error and "'displacement_m'" in error and "data row 158" in error
+    assert "np.float64" not in error and "height" in error
+
+
+@pytest.mark.parametrize(
+    ("sign_d", "sign_f", "column"), [(1.0, -1.0, "force_N"), (-1.0, -1.0, "displacement_m")]
+)
+def test_negative_records_are_refused(compression_csv, tmp_path, capsys, sign_d, sign_f, column):
+    """Before: compressive forces written negative fitted negative parameters with R^2 =
+    0.9999 and exit 0."""
+    columns = np.loadtxt(compression_csv, delimiter=",", skiprows=1)
+    path = _write_record(tmp_path / "negative.csv", sign_d * columns[:, 1], sign_f * columns[:, 2])
+    status = main(["fit", "uniaxial", str(path), "--area-m2", str(AREA_M2), "--height-m", "0.08"])
+    error = capsys.readouterr().err.strip()
+    assert status == 2 and len(error.splitlines()) == 1
+    assert "negative.csv" in error and f"'{column}'" in error and "flip the sign" in error
+
+
+def test_an_all_zero_force_is_refused(tmp_path, capsys):
+    path = _write_record(tmp_path / "zero.csv", np.linspace(0.0, 0.01, 20), np.zeros(20))
+    status = main(["fit", "uniaxial", str(path), "--area-m2", "0.0056", "--height-m", "0.08"])
+    assert status == 2
+    assert "nothing to fit" in capsys.readouterr().err
+
+
+def test_table_and_json_give_each_parameter_with_unit_and_standard_error(
+    compression_csv, tmp_path, capsys
+):
+    base = ["fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2)]
+    base += ["--height-m", str(HEIGHT_M), "--model", "reduced_polynomial:2,ogden:1"]
+    assert main([*base, "--out", str(tmp_path / "a")]) == 0
+    table = capsys.readouterr().out
+    assert re.search(r"C10_Pa = 59\d\.\d+ \+- [\d.]+ Pa, C20_Pa = 41\d\d\.\d+ \+- [\d.]+ Pa", table)
+    assert "alpha1 = " in table and "identified" in table
+    assert main([*base, "--out", str(tmp_path / "b"), "--json"]) == 0
+    rows = {row["model"]: row for row in json.loads(capsys.readouterr().out)["models"]}
+    c10 = rows["reduced_polynomial:2"]["parameters"]["C10_Pa"]
+    assert c10["unit"] == "Pa" and c10["value"] == pytest.approx(600.553, rel=0.02)
+    assert 0.0 < c10["standard_error"] < 10.0
+    assert rows["ogden:1"]["parameters"]["alpha1"]["unit"] == ""
+    assert rows["reduced_polynomial:2"]["identified"] is True
+    saved = json.loads((tmp_path / "b" / "block_comparison.json").read_text())["models"]
+    assert saved == list(rows.values())
+
+
+def test_parameters_that_are_not_identified_are_flagged(compression_csv, tmp_path, capsys):
+    """ogden:2 collapses onto ogden:1 on these data (alpha1 = alpha2): singular covariance."""
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", str(HEIGHT_M), "--model", "ogden:2", "--out", str(tmp_path / "o"),
+            "--json",
+        ]
+    )  # fmt: skip
+    captured = capsys.readouterr()
+    assert status == 0
+    (row,) = json.loads(captured.out)["models"]
+    assert row["identified"] is False and any("not identified" in w for w in row["warnings"])
+    assert "warptissue: warning: ogden:2:" in captured.err and "not identified" in captured.err
+
+
+def test_model_names_are_normalized_and_fitted_once(compression_csv, tmp_path, capsys):
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", str(HEIGHT_M), "--model", "NEO_HOOKEAN, neo_hookean,reduced_polynomial",
+            "--out", str(tmp_path / "o"), "--json",
+        ]
+    )  # fmt: skip
+    assert status == 0
+    rows = json.loads(capsys.readouterr().out)["models"]
+    assert sorted(row["model"] for row in rows) == ["neo_hookean", "reduced_polynomial:2"]
+    assert (tmp_path / "o" / "block_reduced_polynomial_2.png").exists()
+
+
+def test_plots_have_units_parameters_and_at_most_2000_points(tmp_path, capsys, monkeypatch):
+    """A 5 000-point record: fitted on all points, plotted on 2 000, axes in words and units,
+    the fitted parameters in the title."""
+    import warptissue.report
+
+    calls = []
+    real_plot = warptissue.report.plot_fit
+
+    def spy(path, x, measured, fitted, **kwargs):
+        calls.append((np.asarray(x), np.asarray(measured), kwargs))
+        return real_plot(path, x, measured, fitted, **kwargs)
+
+    monkeypatch.setattr(warptissue.report, "plot_fit", spy)
+    displacement_m = np.linspace(0.0, 0.0127, 5000)
+    test = HomogeneousTest("compression", displacement_m / HEIGHT_M, np.zeros(5000))
+    force_N = test.predicted_stress_Pa(ReducedPolynomial((600.553, 4097.45))) * AREA_M2
+    path = _write_record(tmp_path / "long.csv", displacement_m, force_N)
+    out = tmp_path / "o"
+    status = main(
+        [
+            "fit", "uniaxial", str(path), "--area-m2", str(AREA_M2), "--height-m", str(HEIGHT_M),
+            "--model", "reduced_polynomial:2", "--out", str(out),
+        ]
+    )  # fmt: skip
+    assert status == 0
+    ((x, measured, kwargs),) = calls
+    assert x.size == 2000 and x[0] == 0.0 and x[-1] == pytest.approx(0.0127 / HEIGHT_M)
+    assert kwargs["xlabel"] == "nominal strain"
+    assert kwargs["ylabel"] == "nominal stress (kPa)"
+    assert measured.max() == pytest.approx(1.49, abs=0.01)  # kPa
+    assert re.search(r"C10 = 600\.55\d* \+- .+ Pa, C20 = 4097\.4\d* \+- .+ Pa", kwargs["title"])
+    result = json.loads((out / "long_reduced_polynomial_2.json").read_text())
+    assert result["metadata"]["loadings"] == ["compression"]
+    assert np.loadtxt(out / "long_reduced_polynomial_2.csv", delimiter=",", skiprows=1).shape[
+        0
+    ] == (5000)
+
+
+def test_the_shipped_example_is_the_generated_one_and_fits_back(tmp_path, capsys):
+    """scenes/data/phantom_uniaxial.csv is what scripts/tools/make_uniaxial_example.py makes,
+    and the documented command recovers the study's RP2 parameters from it."""
+    import runpy
+    from pathlib import Path
+
+    from warptissue.io import write_csv
+
+    root = Path(__file__).resolve().parents[1]
+    shipped = root / "scenes" / "data" / "phantom_uniaxial.csv"
+    script = runpy.run_path(str(root / "scripts" / "tools" / "make_uniaxial_example.py"))
+    generated = write_csv(tmp_path / "generated.csv", script["make_record"]())
+    assert generated.read_text() == shipped.read_text()
+    out = tmp_path / "out"
+    status = main(
+        [
+            "fit", "uniaxial", str(shipped), "--area-m2", "0.0056", "--height-m", "0.08",
+            "--model", "reduced_polynomial:2", "--out", str(out), "--json",
+        ]
+    )  # fmt: skip
+    assert status == 0
+    (row,) = json.loads(capsys.readouterr().out)["models"]
+    parameters = row["parameters"]
+    for name, truth in (("C10_Pa", 600.553), ("C20_Pa", 4097.45)):
+        assert abs(parameters[name]["value"] - truth) < 3.0 * parameters[name]["standard_error"]
+    assert row["identified"] is True

@@ -278,3 +278,27 @@ def test_mooney_rivlin_limits_match_the_closed_form_criterion():
         first = int(np.flatnonzero(values <= 0.0)[0])
         root = scipy.optimize.brentq(e2, grid[first - 1], grid[first], args=(mode, sign))
         assert entry.unstable_from_strain == pytest.approx(root, rel=1e-6), entry.mode
+
+
+def test_records_name_the_file_and_column_of_a_sign_error():
+    displacement_m = np.linspace(0.0, 0.01, 11)
+    force_N = -np.linspace(0.0, 5.0, 11)
+    with pytest.raises(InputError, match="flip the sign") as error:
+        HomogeneousTest.from_force_displacement(
+            displacement_m,
+            force_N,
+            area_m2=0.0056,
+            height_m=0.08,
+            loading="compression",
+            path="run.csv",
+        )
+    assert error.value.column == "force_N" and str(error.value.path) == "run.csv"
+    with pytest.raises(InputError, match="magnitudes") as error:
+        HomogeneousTest("tension", displacement_m, force_N)
+    assert error.value.column == "nominal_stress_Pa"
+
+
+def test_an_all_zero_stress_is_not_fitted():
+    test = HomogeneousTest("compression", np.linspace(0.0, 0.1, 11), np.zeros(11))
+    with pytest.raises(InputError, match="nothing to fit"):
+        fit_hyperelastic("neo_hookean", test)

@@ -4,21 +4,27 @@ Reads a CSV with ``displacement_m,force_N`` (``time_s`` optional; when present i
 increase), converts it to nominal strain d / H0 and nominal stress F / A0 (magnitudes,
 positive in the loading direction: for ``--loading compression`` a shortening and a
 compressive force are positive), fits each model, and writes per model ``NAME.json``,
-``NAME.csv`` and ``NAME.png`` plus a comparison table ranked by R² with each model's Drucker
-stable range (``STEM_comparison.txt`` and ``.json``). With ``--usd PATH`` the best model by
-R² is also written as a USD material layer (nearly incompressible: bulk modulus
-K = --bulk-modulus-ratio x the initial shear modulus).
+``NAME.csv`` and ``NAME.png`` plus a comparison table ranked by R² with each model's fitted
+parameters (value, unit, standard error), whether they are identified, and its Drucker
+stable range (``STEM_comparison.txt`` and ``.json``). A parameter the data do not determine
+(standard error larger than its value, pinned at a bound, singular covariance) is flagged
+with a ``warning:`` line on stderr and ``"identified": false``; the exit status stays 0.
+With ``--usd PATH`` the best model by R² is also written as a USD material layer (nearly
+incompressible: bulk modulus K = --bulk-modulus-ratio x the initial shear modulus).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any
 
-__all__ = ["ALL_MODELS", "register_fit"]
+from warptissue.cli._args import positive_length_m, positive_number
+
+__all__ = ["ALL_MODELS", "MAX_PLOT_POINTS", "register_fit"]
 
 ALL_MODELS: tuple[str, ...] = (
     "neo_hookean",
@@ -30,6 +36,9 @@ ALL_MODELS: tuple[str, ...] = (
 )
 """The models fitted by ``--model all``."""
 
+MAX_PLOT_POINTS = 2000
+"""Most measured points a plot shows (evenly spaced); the fit and the CSV use all of them."""
+
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
     """Add ``warptissue fit uniaxial``."""
@@ -39,8 +48,18 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__.split("\n\n", 1)[1],
     )
     parser.add_argument("data", type=Path, help="CSV with displacement_m,force_N [,time_s]")
-    parser.add_argument("--area-m2", type=float, required=True, help="undeformed area A0, m^2")
-    parser.add_argument("--height-m", type=float, required=True, help="undeformed height H0, m")
+    parser.add_argument(
+        "--area-m2",
+        type=positive_number,
+        required=True,
+        help="undeformed loaded area A0, m^2 (70 x 80 mm is 0.0056)",
+    )
+    parser.add_argument(
+        "--height-m",
+        type=positive_length_m,
+        required=True,
+        help="undeformed height (gauge length) H0: metres, or with a unit (80mm)",
+    )
     parser.add_argument(
         "--model",
         default="all",
@@ -70,12 +89,15 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--bulk-modulus-ratio",
-        type=float,
+        type=positive_number,
         default=1000.0,
-        help="K / mu0 of the --usd material (default 1000, nu about 0.4995)",
+        help="K / mu0 of the --usd material, > 1 (default 1000, nu about 0.4995)",
     )
     parser.add_argument(
-        "--density-kg-per-m3", type=float, default=1000.0, help="density of the --usd material"
+        "--density-kg-per-m3",
+        type=positive_number,
+        default=1000.0,
+        help="density of the --usd material",
     )
     parser.add_argument(
         "--json", action="store_true", help="print the comparison as JSON instead of a table"
@@ -83,23 +105,52 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+def _model_names(text: str) -> tuple[str, ...]:
+    """The ``--model`` list: canonical labels (``reduced_polynomial`` -> ``:2``), in order,
+    each once.
+
+    Raises:
+        InputError: An empty entry or an unknown model, naming ``--model``.
+    """
+    from warptissue.errors import InputError
+    from warptissue.fit.hyperelastic import model_from_name, model_label
+
+    if text.strip().lower() == "all":
+        return ALL_MODELS
+    names: list[str] = []
+    for entry in text.split(","):
+        spec = entry.strip().lower()
+        if not spec:
+            raise InputError("--model has an empty entry", value=text)
+        try:
+            model = model_from_name(spec)
+        except InputError as exc:
+            raise InputError(f"--model: {exc.message}", value=entry) from None
+        label = "yeoh" if spec == "yeoh" else model_label(model)
+        if label not in names:
+            names.append(label)
+    return tuple(names)
+
+
 def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the comparison; return the exit status."""
     import numpy as np
 
     from warptissue.errors import InputError
-    from warptissue.fit.hyperelastic import HomogeneousTest, fit_hyperelastic, model_from_name
-    from warptissue.io import read_experiment_csv
-    from warptissue.report import comparison_table, write_comparison, write_fit_outputs
+    from warptissue.fit.hyperelastic import HomogeneousTest, fit_hyperelastic
+    from warptissue.io import atomic_path, read_experiment_csv, write_json
+    from warptissue.report import comparison_table
 
-    names = ALL_MODELS if args.model == "all" else tuple(args.model.split(","))
+    names = _model_names(args.model)
+    if args.min_strain is not None and not (
+        math.isfinite(args.min_strain) and 0.0 <= args.min_strain < 1.0
+    ):
+        raise InputError("--min-strain must be a nominal strain in [0, 1)", value=args.min_strain)
     if args.usd is not None:
         if args.usd.suffix != ".usda":
             raise InputError("--usd must name a .usda file", path=args.usd)
-        if not (np.isfinite(args.bulk_modulus_ratio) and args.bulk_modulus_ratio > 1.0):
+        if not args.bulk_modulus_ratio > 1.0:
             raise InputError("--bulk-modulus-ratio must be > 1", value=args.bulk_modulus_ratio)
-    for name in names:
-        model_from_name(name)
     record = read_experiment_csv(
         args.data, required=("displacement_m", "force_N"), monotonic="time_s"
     )
@@ -110,6 +161,7 @@ def run(args: argparse.Namespace) -> int:
         height_m=args.height_m,
         loading=args.loading,
         name=args.data.stem,
+        path=args.data,
     )
     out_dir = args.out if args.out is not None else Path(f"{args.data.stem}_uniaxial_fit")
     rows, files, fits = [], {}, {}
@@ -117,54 +169,133 @@ def run(args: argparse.Namespace) -> int:
         fit = fit_hyperelastic(
             name, test, objective=args.objective, min_strain=args.min_strain, method=args.method
         )
-        fitted_stress = test.predicted_stress_Pa(fit.model)
-        window = fit.min_strain
-        in_window = test.nominal_strain > window if window > 0.0 else np.ones_like(fitted_stress)
-        label = name.replace(":", "_")
-        r_squared = "n/a" if fit.result.r_squared is None else f"{fit.result.r_squared:.4f}"
-        details = fit.to_dict()
-        details.pop("fit")
-        details.update(
+        summary = fit.result.to_dict()
+        files[name] = _write_model_outputs(args, out_dir, name, fit, summary, record)
+        rows.append(
             {
-                "data_file": str(args.data),
-                "area_m2": args.area_m2,
-                "height_m": args.height_m,
-                "loading": args.loading,
-                "sign_convention": "strain and stress are magnitudes, positive in the "
-                "loading direction",
+                **fit.comparison_row(),
+                "model": name,
+                "identified": summary["identified"],
+                "parameters": summary["parameters"],
+                "warnings": summary["warnings"],
             }
         )
-        files[name] = write_fit_outputs(
-            out_dir,
-            f"{args.data.stem}_{label}",
-            fit.result,
-            {
-                "nominal_strain": test.nominal_strain,
-                "measured_nominal_stress_Pa": test.nominal_stress_Pa,
-                "fitted_nominal_stress_Pa": fitted_stress,
-                "displacement_m": record["displacement_m"],
-                "measured_force_N": record["force_N"],
-                "fitted_force_N": fitted_stress * args.area_m2,
-                "in_fit_window": in_window.astype(np.float64),
-            },
-            metadata=details,
-            title=f"{name} ({args.objective}), R^2 = {r_squared}",
-        )
-        rows.append({**fit.comparison_row(), "model": name})
         fits[name] = fit
         if not fit.result.success:
             print(f"warptissue: warning: {name}: {fit.result.message}", file=sys.stderr)
+        for message in summary["warnings"]:
+            print(f"warptissue: warning: {name}: {message}", file=sys.stderr)
     rows.sort(key=lambda row: -np.inf if row["r_squared"] is None else -row["r_squared"])
-    files["comparison"] = write_comparison(out_dir, f"{args.data.stem}_comparison", rows)
+    table = comparison_table([_table_row(row) for row in rows])
+    stem = f"{args.data.stem}_comparison"
+    with atomic_path(out_dir / f"{stem}.txt") as temporary:
+        temporary.write_text(table + "\n", encoding="utf-8")
+    files["comparison"] = {
+        "txt": out_dir / f"{stem}.txt",
+        "json": write_json(out_dir / f"{stem}.json", {"models": rows}),
+    }
     if args.usd is not None:
         files["usd"] = {"material": _write_best_usd(args, rows[0], fits[rows[0]["model"]])}
     if args.json:
         listing = {label: {k: str(v) for k, v in paths.items()} for label, paths in files.items()}
         print(json.dumps({"models": rows, "files": listing}, indent=2))
     else:
-        print(comparison_table(rows))
+        print(table)
         print(f"outputs in {out_dir}")
     return 0
+
+
+def _format_parameter(name: str, entry: dict[str, Any], *, short: bool = False) -> str:
+    """``C10_Pa = 600.9 +- 0.42 Pa`` (``short``: ``C10 = 600.9 +- 0.42 Pa``)."""
+    unit = entry["unit"]
+    label = name.removesuffix(f"_{unit}") if short and unit else name
+    error = entry["standard_error"]
+    spread = "" if error is None else f" +- {error:.2g}"
+    return f"{label} = {entry['value']:.6g}{spread}{' ' + unit if unit else ''}"
+
+
+def _table_row(row: dict[str, Any]) -> dict[str, Any]:
+    """A comparison row for the text table: identified as yes/no, parameters as text."""
+    table = {key: value for key, value in row.items() if key not in ("parameters", "warnings")}
+    table["identified"] = "yes" if row["identified"] else "no"
+    table["parameters"] = ", ".join(
+        _format_parameter(name, entry) for name, entry in row["parameters"].items()
+    )
+    return table
+
+
+def _write_model_outputs(
+    args: argparse.Namespace,
+    out_dir: Path,
+    name: str,
+    fit: Any,
+    summary: dict[str, Any],
+    record: Any,
+) -> dict[str, Path]:
+    """Write one model's JSON (fit result and metadata), CSV (every point) and PNG plot (at
+    most :data:`MAX_PLOT_POINTS` points; axes with units; parameters in the title)."""
+    import numpy as np
+
+    from warptissue.io import write_csv, write_json
+    from warptissue.report import plot_fit
+
+    test = fit.tests[0]
+    base = out_dir / f"{args.data.stem}_{name.replace(':', '_')}"
+    fitted_stress = test.predicted_stress_Pa(fit.model)
+    in_window = test.nominal_strain > fit.min_strain if fit.min_strain > 0.0 else None
+    metadata = fit.to_dict()
+    metadata.pop("fit")
+    metadata.update(
+        {
+            "data_file": str(args.data),
+            "area_m2": args.area_m2,
+            "height_m": args.height_m,
+            "loading": args.loading,
+            "sign_convention": "strain and stress are magnitudes, positive in the "
+            "loading direction",
+        }
+    )
+    csv_path = write_csv(
+        base.with_suffix(".csv"),
+        {
+            "nominal_strain": test.nominal_strain,
+            "measured_nominal_stress_Pa": test.nominal_stress_Pa,
+            "fitted_nominal_stress_Pa": fitted_stress,
+            "displacement_m": record["displacement_m"],
+            "measured_force_N": record["force_N"],
+            "fitted_force_N": fitted_stress * args.area_m2,
+            "in_fit_window": np.ones(fitted_stress.size) if in_window is None else in_window * 1.0,
+        },
+    )
+    json_path = write_json(base.with_suffix(".json"), {**summary, "metadata": metadata})
+    shown = _plot_indices(test.nominal_strain.size)
+    scale, unit = (1e-3, "kPa") if np.max(np.abs(test.nominal_stress_Pa)) >= 1e3 else (1.0, "Pa")
+    r_squared = "n/a" if summary["r_squared"] is None else f"{summary['r_squared']:.5f}"
+    parameters = [
+        _format_parameter(key, entry, short=True) for key, entry in summary["parameters"].items()
+    ]
+    lines = [", ".join(parameters[i : i + 2]) for i in range(0, len(parameters), 2)]
+    if not summary["identified"]:
+        lines.append("parameters not identified (see the warnings)")
+    png_path = plot_fit(
+        base.with_suffix(".png"),
+        test.nominal_strain[shown],
+        scale * test.nominal_stress_Pa[shown],
+        scale * fitted_stress[shown],
+        xlabel="nominal strain",
+        ylabel=f"nominal stress ({unit})",
+        title="\n".join([f"{name} ({args.objective} objective), R² = {r_squared}", *lines]),
+    )
+    return {"json": json_path, "csv": csv_path, "png": png_path}
+
+
+def _plot_indices(size: int) -> Any:
+    """Indices of at most :data:`MAX_PLOT_POINTS` evenly spaced points of ``size``, ends kept."""
+    import numpy as np
+
+    if size <= MAX_PLOT_POINTS:
+        return np.arange(size)
+    return np.unique(np.linspace(0, size - 1, MAX_PLOT_POINTS).round().astype(np.int64))
 
 
 def _write_best_usd(args: argparse.Namespace, row: dict[str, Any], fit: Any) -> Path:
@@ -183,6 +314,7 @@ def _write_best_usd(args: argparse.Namespace, row: dict[str, Any], fit: Any) -> 
             "r_squared": row["r_squared"],
             "rmse_Pa": row["rmse_Pa"],
             "status": row["status"],
+            "identified": row["identified"],
             "bulk_modulus_ratio": args.bulk_modulus_ratio,
         },
     }

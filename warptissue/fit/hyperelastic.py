@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -133,6 +134,49 @@ def model_label(model: HyperelasticMaterial) -> str:
     return model.model_name
 
 
+def _check_magnitudes(
+    strain: np.ndarray,
+    stress: np.ndarray,
+    loading: str,
+    *,
+    path: str | Path | None = None,
+    strain_column: str = "nominal_strain",
+    stress_column: str = "nominal_stress_Pa",
+) -> None:
+    """Refuse strains and stresses that are not magnitudes in the loading direction.
+
+    Raises:
+        InputError: A compressive strain of 1 or more (the specimen flattened), strains of
+            -1 or less or mostly negative, or mostly negative stresses; naming ``path``, the
+            column and the 1-based data row.
+    """
+    if loading == "compression" and np.any(strain >= 1.0):
+        row = int(np.flatnonzero(strain >= 1.0)[0])
+        raise InputError(
+            f"the compressive nominal strain must stay below 1 but reaches "
+            f"{float(strain[row]):.4g} at data row {row + 1}: check the specimen height and "
+            "that the displacement is in metres",
+            path=path,
+            column=strain_column,
+        )
+    if np.any(strain <= -1.0) or np.median(strain) < 0.0:
+        raise InputError(
+            "strains are magnitudes, positive in the loading direction (see the sign "
+            "convention of warptissue.fit.hyperelastic); got mostly negative or <= -1 values "
+            f"(median nominal strain {float(np.median(strain)):.4g}): flip the sign",
+            path=path,
+            column=strain_column,
+        )
+    if np.median(stress) < 0.0:
+        raise InputError(
+            "stresses are magnitudes, positive in the loading direction (a compressive force "
+            "is positive in a compression test); got mostly negative values (median nominal "
+            f"stress {float(np.median(stress)):.4g} Pa): flip the sign",
+            path=path,
+            column=stress_column,
+        )
+
+
 @dataclass(frozen=True)
 class HomogeneousTest:
     """A homogeneous test record as nominal strain and nominal stress magnitudes.
@@ -161,17 +205,7 @@ class HomogeneousTest:
             )
         if not (np.all(np.isfinite(strain)) and np.all(np.isfinite(stress))):
             raise InputError("nominal strain and stress must be finite")
-        if self.loading == "compression" and np.any(strain >= 1.0):
-            index = int(np.flatnonzero(strain >= 1.0)[0])
-            raise InputError(
-                f"compressive strain must stay below 1 (index {index})", value=strain[index]
-            )
-        if np.any(strain <= -1.0) or np.median(strain) < 0.0:
-            raise InputError(
-                "strains are magnitudes, positive in the loading direction (see the sign "
-                "convention of warptissue.fit.hyperelastic); got mostly negative or <= -1 values",
-                value=float(np.median(strain)),
-            )
+        _check_magnitudes(strain, stress, self.loading)
         object.__setattr__(self, "nominal_strain", strain)
         object.__setattr__(self, "nominal_stress_Pa", stress)
 
@@ -185,6 +219,7 @@ class HomogeneousTest:
         height_m: float,
         loading: str,
         name: str = "",
+        path: str | Path | None = None,
     ) -> HomogeneousTest:
         """Nominal stress F / A0 and nominal strain d / H0 from a force-displacement record.
 
@@ -196,15 +231,26 @@ class HomogeneousTest:
             height_m: Undeformed gauge length H0 (> 0).
             loading: See :data:`LOADINGS`.
             name: A label for reports.
+            path: The file the record came from, named in error messages.
 
         Raises:
-            InputError: Non-positive geometry, or invalid data (see the class).
+            InputError: Non-positive geometry, or invalid data (see the class); data errors
+                name ``path`` and the column (``displacement_m`` or ``force_N``).
         """
         for label, value in (("area_m2", area_m2), ("height_m", height_m)):
             if not (math.isfinite(value) and value > 0.0):
-                raise InputError(f"{label} must be positive", column=label, value=value)
+                raise InputError(f"{label} must be positive", column=label, value=float(value))
         strain = np.asarray(displacement_m, dtype=np.float64) / height_m
         stress = np.asarray(force_N, dtype=np.float64) / area_m2
+        if loading in LOADINGS and strain.shape == stress.shape:
+            _check_magnitudes(
+                strain,
+                stress,
+                loading,
+                path=path,
+                strain_column="displacement_m",
+                stress_column="force_N",
+            )
         return cls(loading, strain, stress, name)
 
     @property
@@ -491,6 +537,8 @@ def fit_hyperelastic(
     fitted_tests = [t.window(window) for t in test_list]
     data = np.concatenate([t.nominal_stress_Pa for t in fitted_tests])
     divisors = data.copy() if objective == "relative" else np.ones_like(data)
+    if not np.any(data):
+        raise InputError("the stress is zero throughout the strain window: nothing to fit")
     if objective == "relative" and np.any(data == 0.0):
         raise InputError("the relative objective needs non-zero stresses in the strain window")
 
