@@ -120,3 +120,27 @@ def test_a_closed_pipe_ends_the_command_quietly(tmp_path):
     assert shell.stdout.startswith("  ")  # the first line of the quality table
     assert shell.stdout.count("\n") == 1
     assert shell.returncode in (0, 141) and "Traceback" not in shell.stderr
+
+
+def test_outputs_the_system_refuses_are_one_line_errors(tmp_path, capsys):
+    """``--json`` or ``--out`` into a folder or below a file: exit 2 naming the path, no
+    traceback, nothing left behind."""
+    mesh = tmp_path / "b.vtu"
+    assert main([*BLOCK, "--width-m", "0.01", "--out", str(mesh)]) == 0
+    capsys.readouterr()
+    folder = tmp_path / "folder.json"
+    folder.mkdir()
+    cases = [
+        ["mesh", "check", str(mesh), "--json", str(folder)],
+        ["mesh", "check", str(mesh), "--json", str(mesh / "q.json")],
+        ["mesh", "convert", str(mesh), str(tmp_path / "b.vtu" / "c.vtu")],
+        [*BLOCK, "--width-m", "0.01", "--out", str(folder.with_suffix(".vtu")), "--json",
+         str(folder)],
+    ]  # fmt: skip
+    (tmp_path / "folder.vtu").mkdir()
+    for arguments in cases:
+        assert main(arguments) == 2, arguments
+        err = capsys.readouterr().err
+        assert err.startswith("warptissue: error: cannot use ") and err.count("\n") == 1, err
+        assert str(tmp_path) in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.vtu", "folder.json", "folder.vtu"]

@@ -7,9 +7,10 @@ Each command lives in its own module under ``warptissue.cli`` and exposes
 import their heavy dependencies inside the handler, so that ``warptissue --help`` stays fast.
 
 Errors derived from :class:`warptissue.errors.WarpTissueError` become one-line messages on
-stderr and the error's exit code, never a traceback. Ctrl-C exits with 130; a reader that
-closes the pipe early (``warptissue mesh check organ.vtu | head -1``) ends the command quietly
-with 141, as ``SIGPIPE`` ends Unix tools (:data:`EXIT_STATUSES`).
+stderr and the error's exit code, never a traceback; so do the system's errors about a path
+(``--json`` into a folder, no permission, a full disk: exit 2). Ctrl-C exits with 130; a
+reader that closes the pipe early (``warptissue mesh check organ.vtu | head -1``) ends the
+command quietly with 141, as ``SIGPIPE`` ends Unix tools (:data:`EXIT_STATUSES`).
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ __all__ = ["EXIT_STATUSES", "build_parser", "main"]
 
 EXIT_STATUSES: dict[int, str] = {
     0: "success",
+    2: "a file or folder the system cannot read or write (a folder given as a file, a path "
+    "below a file, no permission, a full disk)",
     130: "interrupted (Ctrl-C)",
     141: "the reader of standard output closed it early (a broken pipe, as in `| head`)",
 }
@@ -79,10 +82,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except WarpTissueError as exc:
         print(f"warptissue: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:  # a path the system refuses: a folder, a file below a file, ...
+        print(f"warptissue: error: {_describe_os_error(exc)}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("warptissue: interrupted", file=sys.stderr)
         return 130
     return 0 if status is None else int(status)
+
+
+def _describe_os_error(error: OSError) -> str:
+    """One line for a file-system error: the path it is about and the system's reason."""
+    reason = error.strerror or str(error)
+    path = error.filename2 if error.filename2 is not None else error.filename
+    return reason if path is None else f"cannot use {str(path)!r}: {reason}"
 
 
 def _silence_stdout() -> None:
