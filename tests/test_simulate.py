@@ -5,11 +5,11 @@ steps) is run through the Python API and through the CLI. The force is checked a
 Sneddon's flat-punch solution for an incompressible half-space, F = 8 mu a delta, times a
 finite-size factor: for this block (10 a wide and thick, bonded to a rigid base) an
 axisymmetric FElupe Q1/P0 reference of the round counterpart converges to 1.09 at small depth
-(scripts/bench_flat_punch.py --felupe-axisymmetric-levels), and the laterally infinite layer
-gives 1.126 (``warptissue.punch.hayes_kappa(0.1, 0.4995)``, test_fem_indentation.py). The
-loose window (1.0, 1.3) catches locking (TET4-like forces are several times too high), a
-wrong symmetry factor (x4 or x1/4) and a sign error, without depending on this coarse mesh's
-1-2 % discretization error.
+(scripts/benchmarks/bench_flat_punch.py --felupe-axisymmetric-levels), and the laterally
+infinite layer gives 1.126 (``warptissue.fit.punch.hayes_kappa(0.1, 0.4995)``,
+test_fem_indentation.py). The loose window (1.0, 1.3) catches locking (TET4-like forces are
+several times too high), a wrong symmetry factor (x4 or x1/4) and a sign error, without
+depending on this coarse mesh's 1-2 % discretization error.
 """
 
 from __future__ import annotations
@@ -61,16 +61,19 @@ def test_api_writes_curve_json_and_fields(api_run):
     assert outputs.completed and outputs.exit_code == 0
     header, rows = read_csv(outputs.out_dir / "force_curve.csv")
     assert header == list(FORCE_CURVE_COLUMNS)
-    assert [int(r[0]) for r in rows] == [1, 2, 3]
-    assert [r[1] for r in rows] == pytest.approx(DEPTHS_M)
-    assert all(r[3] >= 1 for r in rows)
+    assert header[:3] == ["time_s", "displacement_m", "force_N"]
+    assert [int(r[3]) for r in rows] == [0, 1, 2, 3]
+    assert [r[0] for r in rows] == [0.0, 1.0, 2.0, 3.0]
+    assert [r[1] for r in rows] == pytest.approx([0.0, *DEPTHS_M])
+    assert rows[0][2] == 0.0 and all(r[4] >= 1 for r in rows[1:])
 
     summary = json.loads((outputs.out_dir / "result.json").read_text())
     assert summary["completed"] is True
     assert summary["steps_converged"] == summary["steps_requested"] == 3
     assert summary["study"]["material"]["C10_Pa"] == pytest.approx(287.5)
     assert summary["study"]["specimen"]["element"] == "TET10"
-    assert summary["force_curve"]["reaction_force_N"] == pytest.approx([r[2] for r in rows])
+    assert summary["force_curve"]["reaction_force_N"] == pytest.approx([r[2] for r in rows[1:]])
+    assert summary["status"] == "completed"
     assert summary["study"]["solver"]["nonlinear_elimination"] is True
     assert summary["study"]["solver"]["predictor"] == "linearized"
     assert summary["study"]["solver"]["damping"] is True
@@ -155,9 +158,10 @@ def test_early_stop_keeps_partial_curve_and_exits_nonzero(tiny_record, tmp_path,
     error = capsys.readouterr().err.strip().splitlines()
     assert len(error) == 1 and error[0].startswith("warptissue: error: stopped early")
     header, rows = read_csv(out_dir / "force_curve.csv")
-    assert [r[1] for r in rows] == pytest.approx([2.0e-5, 5.0e-5])
+    assert [r[1] for r in rows] == pytest.approx([0.0, 2.0e-5, 5.0e-5])
     summary = json.loads((out_dir / "result.json").read_text())
     assert summary["completed"] is False and summary["steps_converged"] == 2
+    assert summary["status"] == "stopped_early"
     assert summary["steps_requested"] == 3
     assert (out_dir / "fields.vtu").is_file()
 
@@ -217,3 +221,178 @@ def test_cli_usd_scene_validates_and_reads_back(tiny_record, tmp_path):
     mesh = read_tetmesh_usd(scene)
     corners = next(c.data for c in fields.cells if c.type.startswith("tetra"))[:, :4]
     np.testing.assert_array_equal(mesh.tets, corners)
+
+
+def _study_file(tiny_record, tmp_path, depths=DEPTHS_M[:1]) -> Path:
+    record = dict(tiny_record)
+    record["protocol"] = {"depths_m": list(depths)}
+    path = tmp_path / "tiny.toml"
+    path.write_text(tomli_w.dumps(record))
+    return path
+
+
+def test_cli_usd_takes_an_optional_path(tiny_record, tmp_path):
+    """``--usd run.usda`` (as the README wrote it) writes the scene there; ``--usd`` alone
+    writes scene.usda in the output folder (test above); a path that is not .usda is refused
+    before the run."""
+    from warptissue.usd import validate_stage
+
+    study_path = _study_file(tiny_record, tmp_path)
+    out_dir = tmp_path / "out"
+    scene = tmp_path / "scenes" / "run.usda"
+    assert (
+        main(["simulate", str(study_path), "--out", str(out_dir), "--quiet", "--usd", str(scene)])
+        == 0
+    )
+    assert validate_stage(scene) == []
+    assert (tmp_path / "scenes" / "run.asset.usda").is_file()
+    assert not (out_dir / "scene.usda").exists()
+    bad = ["simulate", str(study_path), "--out", str(tmp_path / "bad"), "--usd", "run.usd"]
+    assert main(bad) == 2
+    assert not (tmp_path / "bad").exists()
+
+
+def test_ctrl_c_keeps_the_converged_steps_and_exits_130(tiny_record, tmp_path, capsys, monkeypatch):
+    """KeyboardInterrupt in the third load step: force_curve.csv and result.json hold the two
+    converged steps with status "interrupted", and the exit status is 130."""
+    import warptissue.fem.solvers as solvers
+
+    newton_increment = solvers._newton_increment
+    calls = []
+
+    def interrupted_in_step_three(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return newton_increment(*args, **kwargs)
+
+    monkeypatch.setattr(solvers, "_newton_increment", interrupted_in_step_three)
+    study_path = _study_file(tiny_record, tmp_path, DEPTHS_M)
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 130
+    error = capsys.readouterr().err.strip().splitlines()
+    assert error == [f"warptissue: interrupted: 2 converged load steps written to {out_dir}"]
+    header, rows = read_csv(out_dir / "force_curve.csv")
+    assert [r[1] for r in rows] == pytest.approx([0.0, *DEPTHS_M[:2]])
+    summary = json.loads((out_dir / "result.json").read_text())
+    assert summary["status"] == "interrupted" and summary["completed"] is False
+    assert summary["steps_converged"] == 2 and "interrupted" in summary["message"]
+    assert (out_dir / "fields.vtu").is_file()
+
+
+def test_force_curve_is_an_indentation_record_for_the_next_commands(api_run, tmp_path, capsys):
+    """simulate's force_curve.csv reads as an indentation record: `fit punch-modulus` fits it
+    (E near 3 mu = 1725 Pa times the finite-size factor of test_force_is_positive...), and
+    the rig simulator's force-curve tissue interpolates it."""
+    from warptissue.acquisition.simulator import ForceCurveTissue
+    from warptissue.io import read_experiment_csv
+
+    study, outputs = api_run
+    curve = outputs.out_dir / "force_curve.csv"
+    record = read_experiment_csv(curve)
+    np.testing.assert_array_equal(record["force_N"][1:], outputs.result.reaction_force_N)
+    tissue = ForceCurveTissue.from_csv(curve)
+    depth = DEPTHS_M[1]
+    assert tissue.force_N(np.zeros(1), np.array([depth]))[0] == pytest.approx(
+        outputs.result.reaction_force_N[1]
+    )
+    radius = study.indenter.radius_m
+    status = main(
+        [
+            "fit",
+            "punch-modulus",
+            str(curve),
+            "--radius-m",
+            str(radius),
+            "--out",
+            str(tmp_path / "fit"),
+            "--json",
+        ]
+    )
+    assert status == 0
+    fitted = json.loads(capsys.readouterr().out)
+    youngs = fitted["fit"]["parameters"]["youngs_modulus_Pa"]["value"]
+    assert 1.0 < youngs / (3.0 * 2.0 * study.material.C10_Pa) < 1.3
+
+
+def test_first_run_says_once_that_kernels_compile(tiny_record, tmp_path, capsys, monkeypatch):
+    import warptissue.simulate as simulate
+
+    monkeypatch.setattr(simulate, "kernels_need_compiling", lambda device: True)
+    study_path = _study_file(tiny_record, tmp_path)
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--json"]) == 0
+    error = capsys.readouterr().err
+    assert error.count("compiling Warp kernels (first run only, about a minute)...") == 1
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 0
+    assert "compiling" not in capsys.readouterr().err
+
+
+def test_the_kernel_cache_check_sees_a_cold_cache(api_run, tmp_path, monkeypatch):
+    """Warm after a run; cold where Warp's kernel cache is an empty folder."""
+    import warp as wp
+
+    from warptissue.simulate import kernels_need_compiling
+
+    cpu = wp.get_device("cpu")
+    assert kernels_need_compiling(cpu) is False
+    monkeypatch.setattr(wp.config, "kernel_cache_dir", str(tmp_path))
+    assert kernels_need_compiling(cpu) is True
+
+
+def test_a_mesh_too_large_for_the_memory_is_refused_before_it_is_made(
+    tiny_record, tmp_path, capsys, monkeypatch
+):
+    """Memory enough to generate the mesh but not to solve on it: refused up front, exit 3,
+    with the tet and node counts and the GiB needed and available; nothing is written."""
+    import warptissue.mesh.size as size
+    from warptissue.simulate import estimate_mesh
+
+    study_path = _study_file(tiny_record, tmp_path)
+    estimate = estimate_mesh(study_from_dict(tiny_record))
+    assert estimate.mesh_bytes < estimate.solve_bytes
+    available = (estimate.mesh_bytes + estimate.solve_bytes) // 2
+    monkeypatch.setattr(size, "available_host_memory_bytes", lambda: available)
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 3
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1
+    assert f"{estimate.tet_count:,} TET10 tets" in error[0] and "GiB" in error[0]
+    assert "solve" in error[0]
+    assert not (out_dir / "result.json").exists()
+
+
+def test_estimate_counts_the_study_mesh(api_run):
+    study, outputs = api_run
+    from warptissue.simulate import estimate_mesh
+
+    estimate = estimate_mesh(study)
+    assert estimate.tet_count == outputs.summary["mesh"]["tet_count"]
+    assert estimate.node_count == outputs.summary["mesh"]["node_count"]
+
+
+def test_bad_output_folders_are_refused_in_one_line(tiny_record, tmp_path, capsys):
+    study_path = _study_file(tiny_record, tmp_path)
+    a_file = tmp_path / "taken"
+    a_file.write_text("")
+    assert main(["simulate", str(study_path), "--out", str(a_file), "--quiet"]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "output folder is a file" in error[0]
+    below_a_file = a_file / "out"
+    assert main(["simulate", str(study_path), "--out", str(below_a_file), "--quiet"]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "cannot write to the output folder" in error[0]
+
+
+def test_a_rerun_leaves_no_step_fields_of_the_earlier_run(tiny_record, tmp_path):
+    """fields_NNN.vtu of an earlier run with --vtu-every-step would be taken by `export` as
+    this run's deformed shapes: they are removed."""
+    study_path = _study_file(tiny_record, tmp_path, DEPTHS_M)
+    out_dir = tmp_path / "out"
+    assert (
+        main(["simulate", str(study_path), "--out", str(out_dir), "--quiet", "--vtu-every-step"])
+        == 0
+    )
+    assert (out_dir / "fields_003.vtu").is_file()
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 0
+    assert not list(out_dir.glob("fields_*.vtu"))

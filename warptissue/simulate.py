@@ -4,21 +4,36 @@
 mesh, the material and the indentation problem from a :class:`~warptissue.study.Study`, runs
 the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (atomically)
 
-- ``force_curve.csv``: ``step,depth_m,reaction_force_N,newton_iterations``, one row per
-  converged load step;
+- ``force_curve.csv``: ``time_s,displacement_m,force_N,step,newton_iterations``, a row for the
+  undeformed state (step 0) and one per converged load step. ``displacement_m`` is the probe
+  depth (positive into the specimen) and ``force_N`` the reaction force (positive pushing
+  in), so that the file reads as an indentation record
+  (:func:`warptissue.io.read_experiment_csv`: ``warptissue fit punch-modulus``,
+  ``warptissue acquire rig-sim --tissue curve --force-curve``). The simulation is
+  quasi-static (rate-independent): ``time_s`` is a pseudo-time, the load-step number;
 - ``result.json``: the study echoed back with every default, the force curve, iterations,
-  completion status and message, mesh statistics, timings and software versions;
+  ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message, mesh
+  statistics, timings and software versions;
 - ``fields.vtu``: the mesh with nodal displacement (point data ``displacement_m``) and per-tet
   Cauchy stress (cell data ``cauchy_stress_Pa``, Voigt order xx, yy, zz, yz, xz, xy) and von
   Mises stress (``von_mises_Pa``) at the last converged load step;
 - ``fields_NNN.vtu`` (only when asked): the displacement of every converged load step NNN.
+  Those of an earlier run in the same folder are removed first.
 
-A run that stops early (the load-step cutback is exhausted) still writes all of this for the
-steps that converged, and reports ``completed = False`` with the solver's message.
+A run that stops early (the load-step cutback is exhausted) or is interrupted (Ctrl-C) still
+writes all of this for the steps that converged: the first returns ``completed = False``
+with the solver's message, the second raises :class:`warptissue.fem.SolveInterrupted`
+carrying the :class:`SimulationOutputs`.
+
+Before meshing, a study whose mesh would not fit in memory is refused with the estimate
+(:func:`warptissue.mesh.estimate_indentation_mesh`), and the first run on a machine says
+once, on standard error, that Warp is compiling its kernels.
 """
 
 from __future__ import annotations
 
+import re
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -26,14 +41,33 @@ from typing import Any
 
 import numpy as np
 
-from warptissue.errors import ConvergenceError
+from warptissue.errors import ConvergenceError, InputError
 from warptissue.io import software_versions, write_csv, write_json
 from warptissue.study import Study
 
-__all__ = ["SimulationOutputs", "build_mesh", "build_problem", "run_study"]
+__all__ = [
+    "FORCE_CURVE_COLUMNS",
+    "SimulationOutputs",
+    "build_mesh",
+    "build_problem",
+    "estimate_mesh",
+    "kernels_need_compiling",
+    "run_study",
+]
 
-FORCE_CURVE_COLUMNS: tuple[str, ...] = ("step", "depth_m", "reaction_force_N", "newton_iterations")
-"""Columns of ``force_curve.csv``."""
+FORCE_CURVE_COLUMNS: tuple[str, ...] = (
+    "time_s",
+    "displacement_m",
+    "force_N",
+    "step",
+    "newton_iterations",
+)
+"""Columns of ``force_curve.csv``: an indentation record's three first, then the solver's."""
+INTERRUPTED_EXIT_CODE = 130
+"""Exit status of an interrupted run (Ctrl-C), as the shell gives a process ended by SIGINT."""
+COMPILE_NOTICE = "compiling Warp kernels (first run only, about a minute)..."
+"""Said once on standard error before a run whose kernels are not in Warp's cache."""
+_STEP_FIELDS = re.compile(r"^fields_\d{3,}\.vtu$")
 
 
 @dataclass(frozen=True)
@@ -41,7 +75,8 @@ class SimulationOutputs:
     """What :func:`run_study` computed and wrote.
 
     Attributes:
-        completed: True when every load step converged.
+        status: ``"completed"`` (every load step converged), ``"stopped_early"`` (the
+            cutbacks ran out) or ``"interrupted"`` (Ctrl-C).
         message: The solver's one-line status message.
         result: The :class:`warptissue.fem.IndentationResult`.
         summary: The content of ``result.json``.
@@ -50,7 +85,7 @@ class SimulationOutputs:
             to the path written.
     """
 
-    completed: bool
+    status: str
     message: str
     result: Any
     summary: dict[str, Any]
@@ -58,9 +93,16 @@ class SimulationOutputs:
     files: dict[str, Path] = field(default_factory=dict)
 
     @property
+    def completed(self) -> bool:
+        """True when every load step converged."""
+        return self.status == "completed"
+
+    @property
     def exit_code(self) -> int:
-        """0 when complete, else the convergence-error exit status (4)."""
-        return 0 if self.completed else ConvergenceError.exit_code
+        """0 when complete, 4 (convergence) when stopped early, 130 when interrupted."""
+        return {"completed": 0, "interrupted": INTERRUPTED_EXIT_CODE}.get(
+            self.status, ConvergenceError.exit_code
+        )
 
 
 def build_mesh(study: Study) -> Any:
@@ -88,6 +130,32 @@ def build_mesh(study: Study) -> Any:
     if specimen.shape == "block":
         return indentation_block(width_m=specimen.width_m, **common)
     return indentation_disc(radius_m=specimen.radius_m, **common)
+
+
+def estimate_mesh(study: Study) -> Any:
+    """The size of the study's mesh and the memory it takes, before it is generated.
+
+    Args:
+        study: The study.
+
+    Returns:
+        A :class:`warptissue.mesh.MeshSizeEstimate` (tets, nodes, bytes to generate and to
+        solve on the CPU).
+    """
+    from warptissue.mesh import estimate_indentation_mesh
+
+    specimen = study.specimen
+    return estimate_indentation_mesh(
+        shape=specimen.shape,
+        half_extent_m=specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m,
+        thickness_m=specimen.thickness_m,
+        probe_radius_m=study.indenter.radius_m,
+        quarter=specimen.quarter,
+        element=specimen.element,
+        size_near_m=specimen.size_near_m,
+        size_far_m=specimen.size_far_m,
+        growth=specimen.growth,
+    )
 
 
 def build_problem(study: Study, mesh: Any) -> Any:
@@ -118,6 +186,57 @@ def _mesh_statistics(mesh: Any) -> dict[str, Any]:
 
     quality = check_mesh(mesh)
     return {**asdict(quality), "displacement_dof_count": 3 * mesh.node_count}
+
+
+def _prepare_out_dir(out_path: Path) -> None:
+    """Create the output folder, or refuse one that is a file or cannot be written, before
+    any work; remove the per-step fields of an earlier run (they would mix with this one's)."""
+    if out_path.exists() and not out_path.is_dir():
+        raise InputError("the output folder is a file", path=out_path)
+    try:
+        out_path.mkdir(parents=True, exist_ok=True)
+        probe = out_path / ".warptissue-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise InputError(
+            f"cannot write to the output folder: {exc.strerror}", path=out_path
+        ) from None
+    for stale in out_path.iterdir():
+        if _STEP_FIELDS.match(stale.name) and stale.is_file():
+            stale.unlink()
+
+
+def kernels_need_compiling(device: Any) -> bool:
+    """Whether the project's Warp kernels are missing from Warp's kernel cache for a device.
+
+    Args:
+        device: An initialized Warp device.
+
+    Returns:
+        True when a kernel module of :mod:`warptissue.kernels` that a simulation launches has
+        no compiled binary for ``device`` in ``warp.config.kernel_cache_dir`` (so the first
+        launch compiles it, about a minute on the CPU).
+    """
+    import os
+
+    import warp as wp
+
+    import warptissue.kernels.fem
+    import warptissue.kernels.sparse
+
+    for kernels in (warptissue.kernels.fem, warptissue.kernels.sparse):
+        module = wp.get_module(kernels.__name__)
+        # Warp launches on the CPU with one thread per block (its kernel cache key).
+        block_dim = 1 if device.is_cpu else module.options["block_dim"]
+        binary = os.path.join(
+            wp.config.kernel_cache_dir,
+            module.get_module_identifier(block_dim),
+            module._get_compile_output_name(device, block_dim=block_dim),
+        )
+        if not os.path.exists(binary):
+            return True
+    return False
 
 
 def _write_fields(out_dir: Path, mesh: Any, result: Any, *, every_step: bool) -> dict[str, Path]:
@@ -156,6 +275,7 @@ def run_study(
     device: str | None = None,
     progress: bool = True,
     vtu_every_step: bool = False,
+    announce: bool = True,
 ) -> SimulationOutputs:
     """Run a study's indentation simulation and write its outputs.
 
@@ -166,48 +286,68 @@ def run_study(
             ``solver.device`` (``"auto"``: a GPU where present, else the CPU).
         progress: Show a progress bar over the load steps.
         vtu_every_step: Also write ``fields_NNN.vtu`` with the displacement of every step.
+        announce: Say on standard error, once, that Warp compiles its kernels where they are
+            not in its cache yet (the first run on a machine; about a minute).
 
     Returns:
-        The outputs. ``completed`` is False when the run stopped early; the files then hold
-        the load steps that converged.
+        The outputs. ``status`` is ``"stopped_early"`` when the cutbacks ran out; the files
+        then hold the load steps that converged.
 
     Raises:
-        InputError: The study cannot be meshed or set up.
-        MeshError: The generated mesh is invalid.
+        InputError: The study cannot be meshed or set up, or the output folder cannot be
+            written.
+        MeshError: The mesh would not fit in memory (refused before it is made, with the
+            estimate), or the generated mesh is invalid.
         DeviceError: The device does not exist.
+        SolveInterrupted: Ctrl-C during the load steps, after the outputs of the converged
+            steps were written (``status`` ``"interrupted"``); its ``partial_result`` is the
+            :class:`SimulationOutputs`.
     """
     from warptissue.device import resolve_device
-    from warptissue.fem import simulate_indentation
+    from warptissue.fem import SolveInterrupted, simulate_indentation
 
     out_path = Path(out_dir)
+    _prepare_out_dir(out_path)
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
+    estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     started = time.perf_counter()
     mesh = build_mesh(study)
     mesh_statistics = _mesh_statistics(mesh)
     problem = build_problem(study, mesh)
     meshed = time.perf_counter()
-    result = simulate_indentation(
-        problem,
-        np.asarray(study.protocol.depths_m, dtype=np.float64),
-        device=warp_device,
-        progress=progress,
-        options=study.solver.options,
-    )
+    if announce and kernels_need_compiling(warp_device):
+        print(f"warptissue: {COMPILE_NOTICE}", file=sys.stderr, flush=True)
+    interrupted = None
+    try:
+        result = simulate_indentation(
+            problem,
+            np.asarray(study.protocol.depths_m, dtype=np.float64),
+            device=warp_device,
+            progress=progress,
+            options=study.solver.options,
+        )
+        status = "completed" if result.completed else "stopped_early"
+    except SolveInterrupted as exc:
+        interrupted, result, status = exc, exc.partial_result, "interrupted"
     solved = time.perf_counter()
+    message = interrupted.message if interrupted is not None else str(result.message)
 
     converged = len(result.depths_m)
     steps = np.arange(1, converged + 1, dtype=np.int64)
     newton = np.asarray(result.newton_iterations, dtype=np.int64)
+    depths = np.asarray(result.depths_m, dtype=np.float64)
+    forces = np.asarray(result.reaction_force_N, dtype=np.float64)
     files: dict[str, Path] = {
         "result": out_path / "result.json",
         "force_curve": write_csv(
             out_path / "force_curve.csv",
             {
-                "step": steps,
-                "depth_m": np.asarray(result.depths_m, dtype=np.float64),
-                "reaction_force_N": np.asarray(result.reaction_force_N, dtype=np.float64),
-                "newton_iterations": newton,
+                "time_s": np.arange(converged + 1, dtype=np.float64),
+                "displacement_m": np.concatenate([[0.0], depths]),
+                "force_N": np.concatenate([[0.0], forces]),
+                "step": np.arange(converged + 1, dtype=np.int64),
+                "newton_iterations": np.concatenate([[0], newton]).astype(np.int64),
             },
         ),
     }
@@ -215,15 +355,16 @@ def run_study(
     written = time.perf_counter()
     summary = {
         "study": {"path": study.path, **study.to_dict()},
-        "completed": bool(result.completed),
-        "message": str(result.message),
+        "status": status,
+        "completed": status == "completed",
+        "message": message,
         "device": str(warp_device),
         "linear_solver": str(result.linear_solver),
         "cutbacks": int(result.cutbacks),
         "force_curve": {
             "step": steps,
-            "depth_m": result.depths_m,
-            "reaction_force_N": result.reaction_force_N,
+            "depth_m": depths,
+            "reaction_force_N": forces,
             "newton_iterations": newton,
             "linear_iterations": np.asarray(result.linear_iterations, dtype=np.int64),
             "local_iterations": np.asarray(result.local_iterations, dtype=np.int64),
@@ -241,11 +382,14 @@ def run_study(
         "software": software_versions(),
     }
     write_json(files["result"], summary)
-    return SimulationOutputs(
-        completed=bool(result.completed),
-        message=str(result.message),
+    outputs = SimulationOutputs(
+        status=status,
+        message=message,
         result=result,
         summary=summary,
         out_dir=out_path,
         files=files,
     )
+    if interrupted is not None:
+        raise SolveInterrupted(message, partial_result=outputs) from interrupted
+    return outputs

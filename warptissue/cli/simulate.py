@@ -20,9 +20,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run the indentation simulation a study file describes",
         description=(
             "Run the indentation simulation described by a study TOML file and write "
-            "force_curve.csv, result.json and fields.vtu to the output folder. Exit status: "
-            "0 complete, 2 bad input, 3 bad mesh, 4 stopped early (partial outputs are "
-            "written), 5 device missing."
+            "force_curve.csv (time_s,displacement_m,force_N,step,newton_iterations: an "
+            "indentation record that 'fit punch-modulus' and 'acquire rig-sim --force-curve' "
+            "read), result.json and fields.vtu to the output folder. Exit status: 0 complete, "
+            "2 bad input, 3 bad mesh or a mesh too large for the memory (refused before it "
+            "is made), 4 stopped early, 5 device missing, 130 interrupted (Ctrl-C); after 4 "
+            "and 130 the outputs hold the load steps that converged."
         ),
     )
     parser.add_argument("study", type=Path, metavar="STUDY.toml", help="the study file")
@@ -48,9 +51,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--usd",
-        action="store_true",
+        nargs="?",
+        type=Path,
+        const=True,
+        default=None,
+        metavar="PATH.usda",
         help="also write the mesh, material, deformed shapes and force curve as a layered USD "
-        "scene (scene.usda over scene.asset.usda and scene.results.usdc)",
+        "scene: PATH.usda over PATH.asset.usda and PATH.results.usdc (default without a "
+        "path: scene.usda in the output folder)",
     )
     parser.set_defaults(handler=run)
 
@@ -58,28 +66,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue simulate``; returns the exit status."""
     from warptissue.device import quiet_warp
+    from warptissue.errors import InputError
+    from warptissue.fem import SolveInterrupted
     from warptissue.simulate import run_study
     from warptissue.study import load_study
 
     quiet_warp()
     study = load_study(args.study)
     out_dir = args.out if args.out is not None else Path("runs") / study.name
-    outputs = run_study(
-        study,
-        out_dir=out_dir,
-        device=args.device,
-        progress=not (args.quiet or args.json),
-        vtu_every_step=args.vtu_every_step,
-    )
-    if args.usd:
+    usd_path = out_dir / "scene.usda" if args.usd is True else args.usd
+    if usd_path is not None and usd_path.suffix != ".usda":
+        raise InputError("--usd takes the root layer's path, a .usda file", path=usd_path)
+    try:
+        outputs = run_study(
+            study,
+            out_dir=out_dir,
+            device=args.device,
+            progress=not (args.quiet or args.json),
+            vtu_every_step=args.vtu_every_step,
+            announce=not args.quiet,
+        )
+    except SolveInterrupted as interrupted:
+        outputs = interrupted.partial_result
+        print(
+            f"warptissue: interrupted: {outputs.summary['steps_converged']} converged load "
+            f"steps written to {outputs.out_dir}",
+            file=sys.stderr,
+        )
+        return outputs.exit_code
+    if usd_path is not None:
         from warptissue.usd.export import export_result_dir
 
-        outputs.files["usd"] = export_result_dir(out_dir, out_dir / "scene.usda").root
+        outputs.files["usd"] = export_result_dir(out_dir, usd_path).root
     if args.json:
         sys.stdout.write(outputs.files["result"].read_text(encoding="utf-8"))
     elif not args.quiet:
         _print_summary(outputs)
-    if not outputs.completed:
+    if outputs.status == "stopped_early":
         print(f"warptissue: error: stopped early: {outputs.message}", file=sys.stderr)
     return outputs.exit_code
 
