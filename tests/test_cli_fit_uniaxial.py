@@ -324,3 +324,43 @@ def test_the_shipped_example_is_the_generated_one_and_fits_back(tmp_path, capsys
     for name, truth in (("C10_Pa", 600.553), ("C20_Pa", 4097.45)):
         assert abs(parameters[name]["value"] - truth) < 3.0 * parameters[name]["standard_error"]
     assert row["identified"] is True
+
+
+def test_out_must_be_a_folder_that_can_be_made(compression_csv, tmp_path, capsys):
+    """Before: a FileExistsError traceback."""
+    blocker = tmp_path / "taken"
+    blocker.write_text("")
+    base = ["fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2)]
+    base += ["--height-m", str(HEIGHT_M), "--model", "neo_hookean"]
+    assert main([*base, "--out", str(blocker)]) == 2
+    assert "--out must name a folder" in capsys.readouterr().err
+    assert main([*base, "--out", str(blocker / "inside")]) == 2
+    error = capsys.readouterr().err
+    assert "--out: cannot create the folder" in error and len(error.strip().splitlines()) == 1
+
+
+def test_a_window_above_the_data_names_the_option(compression_csv, capsys):
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", str(HEIGHT_M), "--min-strain", "0.5",
+        ]
+    )  # fmt: skip
+    error = capsys.readouterr().err
+    assert status == 2 and "--min-strain 0.5 leaves no data" in error and "0.1588" in error
+
+
+def test_a_model_unstable_inside_the_tested_range_is_warned(compression_csv, tmp_path, capsys):
+    """Mooney-Rivlin fits these data with C10 < 0 and is unstable from about 0.04 in
+    compression, inside the record (to 0.159): a warning line, exit status 0."""
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", str(AREA_M2),
+            "--height-m", str(HEIGHT_M), "--model", "mooney_rivlin,reduced_polynomial:2",
+            "--out", str(tmp_path / "o"),
+        ]
+    )  # fmt: skip
+    error = capsys.readouterr().err
+    assert status == 0
+    assert "mooney_rivlin: the fitted model is not Drucker-stable in uniaxial compression" in error
+    assert "reduced_polynomial:2:" not in error

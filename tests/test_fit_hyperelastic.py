@@ -147,6 +147,11 @@ def test_four_models_ranked_by_r_squared_and_mooney_rivlin_stability(rng):
     assert mooney.comparison_row()["unstable_from_strain_tested_modes"] == compression
     assert fits["neo_hookean"].stability.stable_everywhere
     assert fits["reduced_polynomial:2"].stability.stable_everywhere
+    # unstable inside the tested range: said in the result's warnings
+    (warning,) = mooney.result.warnings
+    assert "not Drucker-stable in uniaxial compression" in warning
+    assert warning in mooney.to_dict()["fit"]["warnings"]
+    assert fits["reduced_polynomial:2"].result.warnings == []
 
 
 def test_reported_stability_limits_are_where_the_numeric_hessian_loses_definiteness():

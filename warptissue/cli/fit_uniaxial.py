@@ -163,7 +163,14 @@ def run(args: argparse.Namespace) -> int:
         name=args.data.stem,
         path=args.data,
     )
-    out_dir = args.out if args.out is not None else Path(f"{args.data.stem}_uniaxial_fit")
+    largest_strain = float(np.max(test.nominal_strain))
+    if args.min_strain is not None and args.min_strain >= largest_strain:
+        raise InputError(
+            f"--min-strain {args.min_strain:g} leaves no data: the record's largest nominal "
+            f"strain is {largest_strain:.4g}",
+            path=args.data,
+        )
+    out_dir = _output_folder(args)
     rows, files, fits = [], {}, {}
     for name in names:
         fit = fit_hyperelastic(
@@ -203,6 +210,24 @@ def run(args: argparse.Namespace) -> int:
         print(table)
         print(f"outputs in {out_dir}")
     return 0
+
+
+def _output_folder(args: argparse.Namespace) -> Path:
+    """The ``--out`` folder (default ``STEM_uniaxial_fit``), created.
+
+    Raises:
+        InputError: It exists and is not a folder, or it cannot be created.
+    """
+    from warptissue.errors import InputError
+
+    folder = args.out if args.out is not None else Path(f"{args.data.stem}_uniaxial_fit")
+    if folder.exists() and not folder.is_dir():
+        raise InputError("--out must name a folder, not a file", path=folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder ({exc.strerror})", path=folder) from None
+    return folder
 
 
 def _format_parameter(name: str, entry: dict[str, Any], *, short: bool = False) -> str:

@@ -517,6 +517,9 @@ def fit_hyperelastic(
     Raises:
         InputError: Bad model name, objective or data (e.g. zero stress in the window of a
             relative fit).
+
+    A fitted model that is Drucker-unstable inside the strain range of a test gets a message
+    in ``result.warnings``.
     """
     template = model_from_name(model) if isinstance(model, str) else model
     if not isinstance(template, HyperelasticMaterial):
@@ -587,11 +590,32 @@ def fit_hyperelastic(
         gtol=1e-10,
     )
     fitted = template.with_parameters(result.x)
+    stability = drucker_stability(fitted)
+    result.warnings.extend(_instability_warnings(stability, test_list))
     return HyperelasticFit(
         model=fitted,
         result=result,
         tests=test_list,
         objective=objective,
         min_strain=window,
-        stability=drucker_stability(fitted),
+        stability=stability,
     )
+
+
+def _instability_warnings(
+    stability: StabilityReport, tests: Sequence[HomogeneousTest]
+) -> list[str]:
+    """A message per tested mode where the fitted model is Drucker-unstable inside the range
+    of nominal strain that the test covers."""
+    messages = []
+    for test in tests:
+        mode = f"{test.mode}_{'compression' if test.sign < 0 else 'tension'}"
+        limit = stability[mode].unstable_from_strain
+        largest = float(np.max(test.nominal_strain))
+        if limit is not None and limit < largest:
+            messages.append(
+                f"the fitted model is not Drucker-stable in {mode.replace('_', ' ')} beyond "
+                f"nominal strain {limit:.3g}, inside the tested range (up to {largest:.3g}): "
+                "do not use it there"
+            )
+    return list(dict.fromkeys(messages))
