@@ -1,0 +1,72 @@
+"""The benchmark tables of docs/performance.md are what the benchmark prints from the results
+files the page names, and the reference force the tables use is the one those files hold."""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = ROOT / "docs" / "performance.md"
+BENCHMARK = "scripts/benchmarks/bench_flat_punch.py"
+
+
+def generated_tables() -> list[tuple[str, str]]:
+    """(command, the table printed under it) for every ``--markdown`` bash block of the page."""
+    found = re.findall(
+        r"```bash\n(python " + re.escape(BENCHMARK) + r" --markdown [^\n]*)\n```\n\n"
+        r"((?:\|[^\n]*\n)+)",
+        PAGE.read_text(encoding="utf-8"),
+    )
+    return [(command, table.strip()) for command, table in found]
+
+
+def test_the_page_has_generated_tables():
+    assert len(generated_tables()) >= 4
+
+
+@pytest.mark.parametrize("command, table", generated_tables(), ids=lambda x: str(x)[:40])
+def test_a_performance_table_is_the_benchmarks_output(command, table):
+    arguments = shlex.split(command)[2:]
+    completed = subprocess.run(
+        [sys.executable, str(ROOT / BENCHMARK), *arguments],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
+    assert completed.returncode == 0, completed.stderr
+    assert completed.stdout.strip() == table
+
+
+def test_the_reference_force_is_the_felupe_extrapolation():
+    """The tables' "vs 2.460 mN" column: the Richardson extrapolation of FElupe's runs."""
+    results = json.loads((ROOT / "scripts/results/bench_flat_punch_2core_cpu.json").read_text())
+    assert results["references"]["felupe"]["force_N"] == pytest.approx(2.460e-3, abs=5e-7)
+    source = (ROOT / BENCHMARK).read_text()
+    assert "REFERENCE_FORCE_N = 2.460e-3" in source
+
+
+def test_the_markdown_option_refuses_a_filter_that_keeps_nothing():
+    completed = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / BENCHMARK),
+            "--markdown",
+            "scripts/results/bench_flat_punch_2core_cpu.json",
+            "--only",
+            "damping=on",
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
+    assert completed.returncode == 2
+    assert "no run in" in completed.stderr and "Traceback" not in completed.stderr
