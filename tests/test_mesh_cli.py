@@ -2,6 +2,7 @@ import json
 import shlex
 import subprocess
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -144,3 +145,17 @@ def test_outputs_the_system_refuses_are_one_line_errors(tmp_path, capsys):
         assert err.startswith("warptissue: error: cannot use ") and err.count("\n") == 1, err
         assert str(tmp_path) in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["b.vtu", "folder.json", "folder.vtu"]
+
+
+def test_python_warnings_print_as_one_warning_line(tmp_path, capsys, monkeypatch):
+    """A warning raised under a command (cuDSS missing, say) reads as the commands' own
+    ``warptissue: warning:`` lines, without the source file and line."""
+    from warptissue.cli import mesh as mesh_cli
+
+    def check_with_a_warning(args):
+        warnings.warn("cuDSS is not available\n(reason)", RuntimeWarning, stacklevel=1)
+        return 0
+
+    monkeypatch.setattr(mesh_cli, "_check", check_with_a_warning)
+    assert main(["mesh", "check", str(tmp_path / "any.vtu")]) == 0
+    assert capsys.readouterr().err == "warptissue: warning: cuDSS is not available (reason)\n"

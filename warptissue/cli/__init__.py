@@ -8,7 +8,9 @@ import their heavy dependencies inside the handler, so that ``warptissue --help`
 
 Errors derived from :class:`warptissue.errors.WarpTissueError` become one-line messages on
 stderr and the error's exit code, never a traceback; so do the system's errors about a path
-(``--json`` into a folder, no permission, a full disk: exit 2). Ctrl-C exits with 130; a
+(``--json`` into a folder, no permission, a full disk: exit 2). Python warnings raised under a
+command (cuDSS not available, a factorization in host memory) print as the commands' own
+``warptissue: warning: ...`` lines. Ctrl-C exits with 130; a
 reader that closes the pipe early (``warptissue mesh check organ.vtu | head -1``) ends the
 command quietly with 141, as ``SIGPIPE`` ends Unix tools (:data:`EXIT_STATUSES`).
 """
@@ -19,6 +21,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 from warptissue.errors import WarpTissueError
@@ -74,7 +77,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        status = args.handler(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            status = args.handler(args)
         sys.stdout.flush()  # a closed pipe shows here, not at the interpreter's exit
     except BrokenPipeError:
         _silence_stdout()
@@ -89,6 +94,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("warptissue: interrupted", file=sys.stderr)
         return 130
     return 0 if status is None else int(status)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Print a Python warning raised under a command as the commands' own warning lines:
+    ``warptissue: warning: ...`` on stderr, one line, no source location."""
+    text = " ".join(str(message).split())
+    print(f"warptissue: warning: {text}", file=sys.stderr if file is None else file)
 
 
 def _describe_os_error(error: OSError) -> str:
