@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import datetime
+import math
 import os
 import signal
 import threading
@@ -59,6 +60,17 @@ class ForceCorrection(Protocol):
         ...
 
 
+def _check_finite(test: Any, *, positive: tuple[str, ...], nonnegative: tuple[str, ...]) -> None:
+    """InputError naming the first field of ``test`` that is not finite with its sign."""
+    for name in positive + nonnegative:
+        value = getattr(test, name)
+        if not (math.isfinite(value) and (value > 0 if name in positive else value >= 0)):
+            sign = "positive" if name in positive else "zero or more"
+            raise InputError(
+                f"{type(test).__name__}: {name} must be finite and {sign}", value=float(value)
+            )
+
+
 @dataclass(frozen=True)
 class RampHold:
     """Ramp-and-hold: dwell at rest, indent ``depth_m`` at ``speed_m_per_s``, hold."""
@@ -69,6 +81,11 @@ class RampHold:
     dwell_s: float = 0.0
 
     name = "ramp-hold"
+
+    def __post_init__(self) -> None:
+        _check_finite(
+            self, positive=("depth_m", "speed_m_per_s"), nonnegative=("hold_s", "dwell_s")
+        )
 
     def duration_s(self) -> float:
         """Nominal duration (s), ignoring acceleration."""
@@ -104,6 +121,9 @@ class Sine:
 
     name = "sine"
 
+    def __post_init__(self) -> None:
+        _check_finite(self, positive=("amplitude_m", "frequency_Hz", "cycles"), nonnegative=())
+
     def duration_s(self) -> float:
         """Duration (s)."""
         return self.cycles / self.frequency_Hz
@@ -133,7 +153,8 @@ class RecordingResult:
         sidecar_path: Its JSON sidecar.
         status: ``complete``, ``stopped`` (a STOP from elsewhere), ``fault`` (the rig ended
             the motion with FAULT), ``interrupted`` (Ctrl-C), ``link_lost`` (the port could
-            not be reopened), ``stalled`` (the rig stopped answering) or ``refused``.
+            not be reopened) or ``stalled`` (the rig stopped answering). A test the rig
+            refuses raises instead, and writes nothing.
         samples_sent: Samples the rig reports it emitted (None if it never said).
         samples_received: Valid samples received (saved, one row each).
         samples_missing: Sequence numbers never received (gaps and a lost tail).
@@ -206,10 +227,19 @@ class Recorder:
         self.sidecar_path = self.csv_path.with_suffix(".json")
         if self.csv_path.suffix != ".csv":
             raise InputError("the output must be a .csv file", path=self.csv_path)
-        if not overwrite and self.csv_path.exists():
-            raise InputError(
-                "output exists; choose another name or pass --overwrite", path=self.csv_path
-            )
+        if self.csv_path.is_dir():
+            raise InputError("the output is a folder; give a .csv file", path=self.csv_path)
+        for existing in (self.csv_path, self.sidecar_path):
+            if not overwrite and existing.exists():
+                raise InputError(
+                    "output exists; choose another name or pass --overwrite", path=existing
+                )
+        folder = self.csv_path.absolute().parent
+        while not folder.exists():
+            folder = folder.parent
+        if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+            reason = "not a folder" if not folder.is_dir() else "permission denied"
+            raise InputError(f"cannot write the output: {folder}: {reason}", path=self.csv_path)
         self.rate_Hz = rate_Hz
         self.calibration = calibration
         self.metadata = dict(metadata or {})
@@ -272,16 +302,14 @@ class Recorder:
 
         Raises:
             KeyboardInterrupt: Re-raised after a clean stop.
-            DeviceError: The rig could not be configured, or refused the test (the sidecar
-                then says ``"status": "refused"`` and the CSV holds only its header).
+            DeviceError: The rig could not be configured, or refused the test
+                (:class:`~warptissue.acquisition.CommandRefused`); nothing is written then.
+            InputError: The output could not be opened once the rig had started (the rig
+                is stopped first).
         """
-        from tqdm import tqdm
-
         client = self.client
         client.configure(length_unit="mm", force_unit="mN", rate_Hz=self.rate_Hz)
         identity = client.identify()
-        length_scale = wire.LENGTH_UNITS[client.length_unit]
-        force_scale = wire.FORCE_UNITS[client.force_unit]
         extra = {
             "rig": identity,
             "protocol": test.to_dict(),
@@ -290,10 +318,40 @@ class Recorder:
             if self.calibration is None
             else {"model": getattr(self.calibration, "model", type(self.calibration).__name__)},
         }
+        self._interrupt_requested = False
+        previous_handler = self._catch_ctrl_c()
+        try:
+            test.start(client)  # a refusal raises here, before any file is written
+            handle = self._open_output()
+            return self._record(test, handle, extra)
+        finally:
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
+
+    def _open_output(self) -> IO[str]:
+        """Open the CSV for appending rows; the rig is moving: stop it if that fails."""
+        try:
+            self.csv_path.parent.mkdir(parents=True, exist_ok=True)
+            mode = "w" if self.overwrite else "x"
+            return open(self.csv_path, mode, newline="", encoding="utf-8", buffering=1)
+        except OSError as exc:
+            try:
+                self.client.stop()
+            except DeviceError:
+                pass
+            raise InputError(
+                f"cannot write the output: {exc.strerror}; the rig was stopped",
+                path=self.csv_path,
+            ) from None
+
+    def _record(self, test: RampHold | Sine, handle: IO[str], extra: dict[str, Any]):
+        """Save the started test's samples to ``handle`` until the rig says it is done."""
+        from tqdm import tqdm
+
+        client = self.client
+        length_scale = wire.LENGTH_UNITS[client.length_unit]
+        force_scale = wire.FORCE_UNITS[client.force_unit]
         state = _RunState()
-        self.csv_path.parent.mkdir(parents=True, exist_ok=True)
-        mode = "w" if self.overwrite else "x"
-        handle: IO[str] = open(self.csv_path, mode, newline="", encoding="utf-8", buffering=1)
         writer = csv.writer(handle)
         writer.writerow(self._columns())
         self._sync(handle)
@@ -347,12 +405,8 @@ class Recorder:
             rows.append(row)
             bar.update(1)
 
-        status = "refused"
-        self._interrupt_requested = False
-        previous_handler = self._catch_ctrl_c()
+        status = "link_lost"
         try:
-            test.start(client)
-            status = "link_lost"
             status = self._stream(keep, save, rows, state)
         except KeyboardInterrupt:
             status = "interrupted"
@@ -367,8 +421,6 @@ class Recorder:
                 pass
             raise
         finally:
-            if previous_handler is not None:
-                signal.signal(signal.SIGINT, previous_handler)
             bar.close()
             save()
             handle.close()

@@ -73,13 +73,36 @@ class ForceCurveTissue:
 
     @classmethod
     def from_csv(cls, path: str | Path) -> ForceCurveTissue:
-        """Read a CSV with columns ``displacement_m`` and ``force_N`` (validated)."""
+        """Read any CSV with columns ``displacement_m`` (depth, increasing, zero or more) and
+        ``force_N`` (compression positive), other columns ignored: ``warptissue simulate``'s
+        ``force_curve.csv``, or a measured loading curve.
+
+        Raises:
+            InputError: Missing file or column, a bad number, a depth that does not increase
+                or is negative, or forces that are all negative (file, line, column named).
+        """
         from warptissue.io import read_experiment_csv
 
         record = read_experiment_csv(
             path, required=("displacement_m", "force_N"), monotonic="displacement_m"
         )
-        return cls(record["displacement_m"], record["force_N"])
+        depth, force = record["displacement_m"], record["force_N"]
+        if depth[0] < 0:
+            raise InputError(
+                "the depth must be zero or more (zero at the surface)",
+                path=path,
+                line=2,
+                column="displacement_m",
+                value=float(depth[0]),
+            )
+        if force.max() <= 0 < -force.min():
+            raise InputError(
+                "every force is negative: give the compressive force as positive",
+                path=path,
+                column="force_N",
+                value=float(force.min()),
+            )
+        return cls(depth, force)
 
     def force_N(self, time_s: np.ndarray, displacement_m: np.ndarray) -> np.ndarray:
         """Interpolated force at each depth; ``time_s`` is unused (rate-independent)."""
@@ -637,9 +660,18 @@ class RigServer:
             os.set_blocking(self._master, False)
             self.url = os.ttyname(self._slave)
         else:
+            if not 0 <= port <= 65535:
+                raise InputError("the TCP port must be 0 (any free one) to 65535", value=port)
             self._listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
             self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-            self._listener.bind(("127.0.0.1", port))
+            try:
+                self._listener.bind(("127.0.0.1", port))
+            except OSError as exc:
+                self._listener.close()
+                raise InputError(
+                    f"cannot listen on 127.0.0.1:{port}: {exc.strerror}; choose another port "
+                    "(0: any free one)"
+                ) from None
             self._listener.listen(1)
             self._listener.setblocking(False)
             self.url = f"socket://127.0.0.1:{self._listener.getsockname()[1]}"

@@ -18,9 +18,12 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from warptissue.errors import DeviceError, InputError
+
+if TYPE_CHECKING:
+    from warptissue.acquisition import CommandRefused
 
 __all__ = ["register"]
 
@@ -83,40 +86,77 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.set_defaults(handler=run_rig_sim)
 
 
-def _quantity(args: argparse.Namespace, name: str, kind: str) -> float:
+def _quantity(args: argparse.Namespace, name: str, kind: str, *, sign: str = "any") -> float:
+    """The option ``--name`` (a quantity with a unit) in SI units.
+
+    Args:
+        args: The parsed options.
+        name: The option's attribute name (``stall_timeout`` for ``--stall-timeout``).
+        kind: The kind of quantity (see :func:`~warptissue.acquisition.parse_quantity`).
+        sign: ``"positive"``, ``"nonnegative"`` or ``"any"``.
+
+    Raises:
+        InputError: Missing, without a valid unit, or of the wrong sign (the option named).
+    """
     from warptissue.acquisition.protocol import parse_quantity
 
+    option = f"--{name.replace('_', '-')}"
     text = getattr(args, name)
     if text is None:
-        raise InputError(f"--{name.replace('_', '-')} is required for this protocol")
-    return parse_quantity(text, kind, name=f"--{name.replace('_', '-')}")
-
-
-def _positive(value: float, name: str) -> float:
-    if not value > 0:
-        raise InputError(f"{name} must be positive", value=value)
+        raise InputError(f"{option} is required for this protocol")
+    value = parse_quantity(text, kind, name=option)
+    if (sign == "positive" and not value > 0) or (sign == "nonnegative" and value < 0):
+        raise InputError(
+            f"{option} must be {'positive' if sign == 'positive' else 'zero or more'}", value=text
+        )
     return value
+
+
+def _test(args: argparse.Namespace):
+    """The RampHold or Sine the options describe."""
+    from warptissue.acquisition import RampHold, Sine
+
+    if args.protocol == "ramp-hold":
+        return RampHold(
+            depth_m=_quantity(args, "depth", "length", sign="positive"),
+            speed_m_per_s=_quantity(args, "speed", "speed", sign="positive"),
+            hold_s=_quantity(args, "hold", "time", sign="nonnegative"),
+            dwell_s=_quantity(args, "dwell", "time", sign="nonnegative"),
+        )
+    if args.cycles is None or not (math.isfinite(args.cycles) and args.cycles > 0):
+        raise InputError("--cycles must be a finite positive number", value=args.cycles)
+    return Sine(
+        amplitude_m=_quantity(args, "amplitude", "length", sign="positive"),
+        frequency_Hz=_quantity(args, "frequency", "frequency", sign="positive"),
+        cycles=args.cycles,
+    )
+
+
+def _refusal_as_input_error(refusal: CommandRefused) -> InputError:
+    """A test the rig refuses as out of range or a bad argument: the user's input, said so
+    with what to change."""
+    hint = ""
+    if refusal.reply.command == "SINE":
+        hint = (
+            "; a sine swings +-amplitude about the present position: start inside the "
+            "travel with --start, e.g. --start 1mm"
+        )
+    elif refusal.reply.command in ("RAMP", "MOVE"):
+        hint = "; check --start, --depth and --speed against the rig's travel and top speed"
+    return InputError(f"{refusal}{hint}")
 
 
 def run_acquire(args: argparse.Namespace) -> int:
     """Handler of ``warptissue acquire``."""
-    from warptissue.acquisition import ForceCalibration, RampHold, Recorder, RigClient, Sine
+    from warptissue.acquisition import CommandRefused, ForceCalibration, Recorder, RigClient
+    from warptissue.acquisition.protocol import ErrorCode
 
-    if args.protocol == "ramp-hold":
-        test: RampHold | Sine = RampHold(
-            depth_m=_positive(_quantity(args, "depth", "length"), "--depth"),
-            speed_m_per_s=_positive(_quantity(args, "speed", "speed"), "--speed"),
-            hold_s=_quantity(args, "hold", "time"),
-            dwell_s=_quantity(args, "dwell", "time"),
-        )
-    else:
-        if args.cycles is None or not args.cycles > 0:
-            raise InputError("--cycles must be a positive number", value=args.cycles)
-        test = Sine(
-            amplitude_m=_positive(_quantity(args, "amplitude", "length"), "--amplitude"),
-            frequency_Hz=_positive(_quantity(args, "frequency", "frequency"), "--frequency"),
-            cycles=args.cycles,
-        )
+    test = _test(args)
+    rate_Hz = _quantity(args, "rate", "frequency", sign="positive")
+    if not 1.0 <= rate_Hz <= 1000.0:
+        raise InputError("--rate must be between 1Hz and 1000Hz", value=args.rate)
+    if args.reconnect_attempts < 0:
+        raise InputError("--reconnect-attempts must be zero or more", value=args.reconnect_attempts)
     metadata: dict[str, Any] = {}
     for item in args.meta:
         key, sep, value = item.partition("=")
@@ -127,25 +167,32 @@ def run_acquire(args: argparse.Namespace) -> int:
     if calibration is not None:
         metadata["calibration_file"] = args.calibration
     start_m = None if args.start is None else _quantity(args, "start", "length")
+    stall_timeout_s = _quantity(args, "stall_timeout", "time", sign="positive")
+    give_up_s = _quantity(args, "give_up", "time", sign="positive")
     client = RigClient(args.port, reconnect_attempts=args.reconnect_attempts)
     with client:
-        if start_m is not None:
-            client.move_to(start_m)
-            client.wait_until_done(timeout_s=60.0)
-        if args.zero:
-            client.zero_force()
-        recorder = Recorder(
+        recorder = Recorder(  # checks the output before the rig moves
             client,
             args.out,
-            rate_Hz=_quantity(args, "rate", "frequency"),
+            rate_Hz=rate_Hz,
             calibration=calibration,
             metadata=metadata,
             overwrite=args.overwrite,
             progress=not args.no_progress,
-            stall_timeout_s=_quantity(args, "stall_timeout", "time"),
-            give_up_s=_quantity(args, "give_up", "time"),
+            stall_timeout_s=stall_timeout_s,
+            give_up_s=give_up_s,
         )
-        result = recorder.record(test)
+        try:
+            if start_m is not None:
+                client.move_to(start_m)
+                client.wait_until_done(timeout_s=60.0)
+            if args.zero:
+                client.zero_force()
+            result = recorder.record(test)
+        except CommandRefused as refusal:
+            if refusal.reply.code in (ErrorCode.BAD_ARGUMENT, ErrorCode.OUT_OF_RANGE):
+                raise _refusal_as_input_error(refusal) from None
+            raise
     counts = {
         "status": result.status,
         "samples sent": result.samples_sent,
@@ -190,30 +237,31 @@ def _disturbance(args: argparse.Namespace):
             raise InputError(f"--{name} takes AMPLITUDE@RATE, e.g. 8mN@0.25Hz", value=text)
         values[f"{name}_amplitude_N"] = parse_quantity(amplitude, "force", name=f"--{name}")
         values[f"{name}_Hz"] = parse_quantity(rate, "frequency", name=f"--{name}")
+        if values[f"{name}_amplitude_N"] < 0 or not values[f"{name}_Hz"] > 0:
+            raise InputError(
+                f"--{name}: the amplitude must be zero or more and the rate positive", value=text
+            )
     return PhysiologicalDisturbance(**values)
 
 
 def _tissue(args: argparse.Namespace):
     from warptissue.acquisition import ForceCurveTissue
-    from warptissue.acquisition.protocol import parse_quantity
+    from warptissue.viscoelastic import StandardLinearSolid
 
     if args.tissue == "curve":
         if args.force_curve is None:
             raise InputError("--tissue curve needs --force-curve CSV")
         return ForceCurveTissue.from_csv(args.force_curve)
-    from warptissue.viscoelastic import StandardLinearSolid
-
     return StandardLinearSolid(
-        parse_quantity(args.instantaneous_stiffness, "stiffness", name="--instantaneous-stiffness"),
-        parse_quantity(args.equilibrium_stiffness, "stiffness", name="--equilibrium-stiffness"),
-        parse_quantity(args.relaxation_time, "time", name="--relaxation-time"),
+        _quantity(args, "instantaneous_stiffness", "stiffness", sign="positive"),
+        _quantity(args, "equilibrium_stiffness", "stiffness", sign="nonnegative"),
+        _quantity(args, "relaxation_time", "time", sign="positive"),
     )
 
 
 def run_rig_sim(args: argparse.Namespace) -> int:
     """Handler of ``warptissue rig-sim``."""
     from warptissue.acquisition import FaultPlan, RigConfig, RigServer, SimulatedRig
-    from warptissue.acquisition.protocol import parse_quantity
 
     try:
         time_scale = math.inf if args.time_scale == "inf" else float(args.time_scale)
@@ -221,19 +269,29 @@ def run_rig_sim(args: argparse.Namespace) -> int:
         raise InputError("--time-scale: not a number", value=args.time_scale) from None
     if not time_scale > 0:
         raise InputError("--time-scale must be positive", value=args.time_scale)
+    surface_m = _quantity(args, "surface", "length", sign="nonnegative")
+    travel_m = RigConfig.travel_m
+    if surface_m >= travel_m:
+        raise InputError(
+            f"--surface is beyond the rig's travel ({travel_m * 1e3:g} mm): the probe would "
+            "never touch the specimen",
+            value=args.surface,
+        )
     config = RigConfig(
-        surface_position_m=parse_quantity(args.surface, "length", name="--surface"),
-        force_noise_N=parse_quantity(args.noise, "force", name="--noise"),
-        force_offset_N=parse_quantity(args.offset, "force", name="--offset"),
+        surface_position_m=surface_m,
+        force_noise_N=_quantity(args, "noise", "force", sign="nonnegative"),
+        force_offset_N=_quantity(args, "offset", "force"),
         disturbance=_disturbance(args),
         time_scale=time_scale,
         seed=args.seed,
     )
+    tissue = _tissue(args)
+    faults = FaultPlan.parse(args.faults)
     server = RigServer(
-        SimulatedRig(_tissue(args), config),
+        SimulatedRig(tissue, config),
         transport="tcp" if args.tcp is not None else "pty",
         port=args.tcp or 0,
-        faults=FaultPlan.parse(args.faults),
+        faults=faults,
     )
     print(server.url, flush=True)
     try:
