@@ -1,3 +1,5 @@
+import numpy as np
+
 from warptissue.errors import ConvergenceError, InputError, MeshError, WarpTissueError
 
 
@@ -13,3 +15,17 @@ def test_mesh_and_convergence_errors_carry_context():
     partial = {"force_N": [0.0, 1.0]}
     assert ConvergenceError("cutback exhausted", partial_result=partial).partial_result is partial
     assert len({InputError.exit_code, MeshError.exit_code, ConvergenceError.exit_code}) == 3
+
+
+def test_numpy_scalars_show_as_plain_numbers():
+    error = InputError("must be positive", column="force_N", value=np.float64(-1.19))
+    assert str(error) == "column 'force_N': must be positive (got -1.19)"
+    assert type(error.value) is float
+    assert InputError("bad", value=np.int64(3)).value == 3
+    assert "array" in str(InputError("bad", value=np.array([1.0, 2.0])))
+
+
+def test_an_option_is_named_as_an_option():
+    error = InputError("must be >= 1", column="growth", value=0.5)
+    assert str(error.for_option("--growth")) == "option --growth: must be >= 1 (got 0.5)"
+    assert str(error) == "column 'growth': must be >= 1 (got 0.5)"

@@ -159,3 +159,12 @@ def test_python_warnings_print_as_one_warning_line(tmp_path, capsys, monkeypatch
     monkeypatch.setattr(mesh_cli, "_check", check_with_a_warning)
     assert main(["mesh", "check", str(tmp_path / "any.vtu")]) == 0
     assert capsys.readouterr().err == "warptissue: warning: cuDSS is not available (reason)\n"
+
+
+def test_errors_name_the_option_not_a_column(tmp_path, capsys):
+    status = main(
+        [*BLOCK, "--width-m", "0.01", "--growth", "0.5", "--out", str(tmp_path / "b.vtu")]
+    )
+    assert status == 2
+    err = capsys.readouterr().err
+    assert err.startswith("warptissue: error: option --growth: ") and "column" not in err

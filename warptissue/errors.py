@@ -34,12 +34,16 @@ class InputError(WarpTissueError, ValueError):
     The message names where the problem is (file, line, column or key) and the offending
     value, so that a user can fix it without a traceback.
 
+    A NumPy scalar value is shown as the plain number (``1.19``, not ``np.float64(1.19)``).
+
     Args:
         message: What is wrong, in one sentence.
         path: The file the value came from, if any.
         line: 1-based line number in ``path``, if known.
         column: Column or key name, if known.
         value: The offending value, if any.
+        option: The command-line option the value came from (``"--growth"``), if any; it is
+            named instead of ``column``.
     """
 
     exit_code = 2
@@ -52,23 +56,41 @@ class InputError(WarpTissueError, ValueError):
         line: int | None = None,
         column: str | None = None,
         value: Any = None,
+        option: str | None = None,
     ) -> None:
         self.message = message
         self.path = None if path is None else Path(path)
         self.line = line
         self.column = column
-        self.value = value
+        self.value = _plain(value)
+        self.option = option
         where = []
         if path is not None:
             where.append(str(path) + (f":{line}" if line is not None else ""))
         elif line is not None:
             where.append(f"line {line}")
-        if column is not None:
+        if option is not None:
+            where.append(f"option {option}")
+        elif column is not None:
             where.append(f"column {column!r}")
         text = message if not where else f"{', '.join(where)}: {message}"
-        if value is not None:
-            text += f" (got {value!r})"
+        if self.value is not None:
+            text += f" (got {self.value!r})"
         super().__init__(text)
+
+    def for_option(self, option: str) -> InputError:
+        """The same error, naming the command-line option ``option`` instead of the column."""
+        return InputError(
+            self.message, path=self.path, line=self.line, column=self.column, value=self.value,
+            option=option,
+        )  # fmt: skip
+
+
+def _plain(value: Any) -> Any:
+    """A NumPy scalar as the Python number it holds; anything else unchanged."""
+    if type(value).__module__ == "numpy" and getattr(value, "ndim", None) == 0:
+        return value.item()
+    return value
 
 
 class MeshError(WarpTissueError, ValueError):

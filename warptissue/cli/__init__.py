@@ -24,7 +24,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-from warptissue.errors import WarpTissueError
+from warptissue.errors import InputError, WarpTissueError
 
 __all__ = ["EXIT_STATUSES", "build_parser", "main"]
 
@@ -85,7 +85,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         _silence_stdout()
         return 141
     except WarpTissueError as exc:
-        print(f"warptissue: error: {exc}", file=sys.stderr)
+        option = _option_of(parser, args, exc)
+        message = exc if option is None else exc.for_option(option)
+        print(f"warptissue: error: {message}", file=sys.stderr)
         return exc.exit_code
     except OSError as exc:  # a path the system refuses: a folder, a file below a file, ...
         print(f"warptissue: error: {_describe_os_error(exc)}", file=sys.stderr)
@@ -94,6 +96,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("warptissue: interrupted", file=sys.stderr)
         return 130
     return 0 if status is None else int(status)
+
+
+def _option_of(
+    parser: argparse.ArgumentParser, args: argparse.Namespace, error: WarpTissueError
+) -> str | None:
+    """The option of the command that ran that an :class:`InputError` without a file is
+    about, when its ``column`` is that option's name (``size_near_m`` -> ``--size-near-m``);
+    else None."""
+    column = getattr(error, "column", None)
+    if not isinstance(error, InputError) or error.path is not None or not column:
+        return None
+    option = "--" + column.replace("_", "-")
+    current: argparse.ArgumentParser | None = parser
+    while current is not None:
+        if option in current._option_string_actions:
+            return option
+        subparsers = [a for a in current._actions if isinstance(a, argparse._SubParsersAction)]
+        chosen = getattr(args, subparsers[0].dest, None) if subparsers else None
+        current = subparsers[0].choices.get(chosen) if chosen is not None else None
+    return None
 
 
 def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
