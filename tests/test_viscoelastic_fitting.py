@@ -1,4 +1,4 @@
-"""Fits through warptissue.fit recover the seeds' parameters from synthetic records."""
+"""Fits through warptissue.fit recover the papers' parameters from synthetic records."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def test_sls_recovers_seed001_kelvin_parameters(method, rng):
 
 
 @pytest.mark.parametrize("row", SEED000_TABLE1)
-def test_prony_recovers_seed000_table1_from_real_ramp(row, rng):
+def test_prony_recovers_ahn_kim_table1_from_real_ramp(row, rng):
     tau1, tau2, g1, g2 = row
     truth = PronySeries.from_normalized(50.0, (g1, g2), (tau1, tau2))
     time, x = ramp_and_hold(0.5, 4e-3, 300.0, 0.05)  # finite 0.5 s ramp, 300 s hold
@@ -64,7 +64,7 @@ def test_prony_recovers_seed000_table1_from_real_ramp(row, rng):
     assert result.r_squared > 0.999
 
 
-def test_qlv_recovers_seed000_table1_and_elastic_response(rng):
+def test_qlv_recovers_ahn_kim_table1_and_elastic_response(rng):
     tau1, tau2, g1, g2 = SEED000_TABLE1[0]
     truth = QuasiLinearViscoelastic(
         (g1, g2),
@@ -113,11 +113,11 @@ def test_linear_wiechert_joint_fit_lm_and_nelder_mead(rng):
         assert result.record_rmse_N == pytest.approx([2e-3, 2e-3], rel=0.15)
     assert nm.sum_of_record_rmse_N <= lm.sum_of_record_rmse_N * (
         1 + 1e-3
-    )  # NM minimizes the seed's cost
+    )  # NM minimizes Takacs et al.'s cost
 
 
 def test_nonlinear_wiechert_table_i_refit_predicts_100_mm_per_min(rng):
-    # Seed 004: 20 x 20 mm sample, 4 mm; fit near-step (750 mm/min) + 20 mm/min, predict 100.
+    # Takacs et al.: 20 x 20 mm sample, 4 mm; fit near-step (750 mm/min) + 20 mm/min, predict 100.
     noise_N = 5e-3
 
     def record(rate_mm_per_min, hold_s, keep_to_m):
@@ -130,7 +130,7 @@ def test_nonlinear_wiechert_table_i_refit_predicts_100_mm_per_min(rng):
         return RelaxationRecord(time, x, force + rng.normal(0.0, noise_N, time.size))
 
     near_step = record(750, 40.0, 4e-3)
-    slow = record(20, 0.0, 3.6e-3)  # the seed keeps the first 3.6 mm of the ramps
+    slow = record(20, 0.0, 3.6e-3)  # Takacs et al. keep the first 3.6 mm of the ramps
     validation = record(100, 0.0, 3.6e-3)
     start = TABLE_I_NONLINEAR.to_vector() * [1.3, 0.7, 1.5, 0.7, 1.4, 0.8, 1.15, 0.5]
     result = fit_wiechert_joint([near_step, slow], start, model="nonlinear")

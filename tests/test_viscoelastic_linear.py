@@ -62,8 +62,8 @@ def test_step_at_first_sample_gives_relaxation_function():
     np.testing.assert_allclose(force, 2e-3 * prony.relaxation_N_per_m(time), rtol=1e-13)
 
 
-def test_prony_normalized_round_trip_seed000_table1():
-    # Seed 000 Table 1, experiment 1; Eq. 6 (g_i = k_i / G0), Eq. 5 with the sign fixed.
+def test_prony_normalized_round_trip_ahn_kim_table1():
+    # Ahn & Kim Table 1, experiment 1; Eq. 6 (g_i = k_i / G0), Eq. 5 with the sign fixed.
     prony = PronySeries.from_normalized(100.0, (0.348, 0.358), (1.376, 49.369))
     assert prony.instantaneous_stiffness_N_per_m == pytest.approx(100.0)
     assert prony.g == pytest.approx((0.348, 0.358))
@@ -74,7 +74,7 @@ def test_prony_normalized_round_trip_seed000_table1():
 
 
 def test_from_printed_reproduces_eq4_and_warns():
-    k1, k2, b = 8.0, 7.0, 130.0  # seed 001: 0.008 N/mm, 0.007 N/mm, 0.130 s N/mm in SI
+    k1, k2, b = 8.0, 7.0, 130.0  # Kim et al.: 0.008 N/mm, 0.007 N/mm, 0.130 s N/mm in SI
     with pytest.warns(NotARelaxationWarning):
         sls = StandardLinearSolid.from_printed(k1, k2, b)
     t = np.linspace(0, 0.5, 11)
@@ -137,3 +137,19 @@ def test_bad_parameters_are_rejected():
         PronySeries(1.0, (1.0,), (1.0, 2.0))
     with pytest.raises(InputError):
         PronySeries.from_normalized(1.0, (0.7, 0.6), (1.0, 2.0))
+
+
+def test_parameter_errors_name_the_parameter_and_print_plain_numbers():
+    from warptissue.fit.punch import flat_punch_modulus_Pa
+    from warptissue.viscoelastic import LinearWiechert
+
+    for build in (
+        lambda: StandardLinearSolid(np.float64(-1.0), 5.0, 1.0),
+        lambda: LinearWiechert(1.0, 2.0, 3.0, 4.0, np.float64(-5.0)),
+        lambda: flat_punch_modulus_Pa(0.01, 1e-4, radius_m=np.float64(-1e-3), poissons_ratio=0.3),
+    ):
+        with pytest.raises(InputError) as error:
+            build()
+        text = str(error.value)
+        assert "np.float64" not in text and "column" not in text
+        assert "(got -" in text

@@ -1,4 +1,4 @@
-"""Seed 001's Blatz law and parallel nonlinear springs against closed forms."""
+"""Kim et al.'s Blatz law and parallel nonlinear springs against closed forms."""
 
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def test_parallel_springs_linear_branch_step_matches_closed_form():
     np.testing.assert_allclose(force, expected, rtol=1e-6)
 
 
-def test_parallel_springs_seed001_liver_relaxes_to_static_spring():
+def test_parallel_springs_kim_et_al_liver_relaxes_to_static_spring():
     liver = ParallelNonlinearSprings(
         0.0020, 1.6797, ((0.0250, 2.2355, 0.0070), (0.080, 2.1838, 0.0005))
     )

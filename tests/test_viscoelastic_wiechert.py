@@ -17,7 +17,7 @@ from warptissue.viscoelastic import (
     quadratic_profile,
 )
 
-LINEAR_TABLE_I = LinearWiechert(4.86, 57.81, 53.32, 9987.0, 10464.0)  # seed 004 Table I
+LINEAR_TABLE_I = LinearWiechert(4.86, 57.81, 53.32, 9987.0, 10464.0)  # Takacs et al. Table I
 NONLINEAR_TABLE_I = NonlinearWiechert(2.03, 0.438, 0.102, 5073.0, 39.24, 909.9, 1522.0, 81.18)
 
 

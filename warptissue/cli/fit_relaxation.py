@@ -81,6 +81,17 @@ def _window(text: str) -> tuple[float, float]:
     return first, last
 
 
+def _poissons_ratio(text: str) -> float:
+    """``--poissons-ratio``: a number in (-1, 0.5]."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number (got {text!r})") from None
+    if not -1.0 < value <= 0.5:
+        raise argparse.ArgumentTypeError(f"must lie in (-1, 0.5] (got {text!r})")
+    return value
+
+
 def _relative_floor(text: str) -> str | float:
     """``--relative-floor``: "auto" or a force (N, units allowed)."""
     return "auto" if text == "auto" else quantity("force", positive=True)(text)
@@ -190,7 +201,12 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         required=True,
         help="punch or sphere radius (m, or with a unit: 1mm)",
     )
-    punch.add_argument("--poissons-ratio", type=float, default=0.5)
+    punch.add_argument(
+        "--poissons-ratio",
+        type=_poissons_ratio,
+        default=0.5,
+        help="Poisson's ratio of the tissue, in (-1, 0.5] (default 0.5: incompressible)",
+    )
     punch.add_argument("--geometry", choices=("flat", "sphere"), default="flat")
     punch.add_argument(
         "--thickness-m",

@@ -1,10 +1,10 @@
 """Least-squares fitting for every model of warptissue.
 
 ``least_squares`` minimizes a residual function with Levenberg-Marquardt (``method="lm"``)
-or seed 002's self-adapting LM (``method="salm"``), with bounds, refusals of trial points
+or Tong et al.'s self-adapting LM (``method="salm"``), with bounds, refusals of trial points
 (:class:`RejectStep`), finite-difference or caller-supplied Jacobians, and parameter
 statistics. ``fit_curve`` fits model predictions to data with an absolute or relative
-objective. See :mod:`warptissue.fit.engine` for the algorithms and the seed's misprints.
+objective. See :mod:`warptissue.fit.engine` for the algorithms and the papers' misprints.
 """
 
 from warptissue.fit import metrics

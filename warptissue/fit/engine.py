@@ -14,8 +14,8 @@ Notes:
     through the SVD of the column-scaled Jacobian J D^-1 (as a damped least-squares problem,
     which is better conditioned than forming J^T J). The cost is 0.5 * ||r||^2.
 
-    ``method="lm"``: Levenberg-Marquardt with Marquardt's scaling, D^2 = diag(J^T J) (seed
-    000, Eq. 8, prints the Levenberg form J^T J + lambda I; Marquardt's diagonal makes the
+    ``method="lm"``: Levenberg-Marquardt with Marquardt's scaling, D^2 = diag(J^T J) (Ahn &
+    Kim, Eq. 8, print the Levenberg form J^T J + lambda I; Marquardt's diagonal makes the
     step invariant to the units of each parameter, which matters for moduli in Pa next to
     dimensionless exponents). D is taken from the current Jacobian at every iteration; a
     zero column (a parameter without effect) gets D = 1, so D^2 stays positive. (MINPACK's
@@ -26,7 +26,7 @@ Notes:
     by max(1/3, 1 - (2 rho - 1)^3); a rejected step multiplies it by nu (2, 4, 8, ...).
     The ``gtol`` test is MINPACK's: the largest cosine between r and a column of J.
 
-    ``method="salm"``: the self-adapting LM of seed 002 (Tong et al.), Eq. 7-12 and
+    ``method="salm"``: the self-adapting LM of Tong et al., Eq. 7-12 and
     Algorithm 1, with D = I (or 1/x_scale):
 
         lambda_k = eta_k (theta m_k / ||Y_k|| + (1 - theta) m_k / ||J_k^T Y_k||),
@@ -35,7 +35,7 @@ Notes:
         x_{k+1} = x_k + d_k if tau_k > p0, else x_k                                 (Eq. 12)
         eta_{k+1} = max(c, eta_k q(tau_k)),  q(tau) = max(0.5, 1 - 2 (2 tau - 1)^3)
 
-    and the loop runs while ||J^T Y||_2 >= epsilon (``gtol``). Two misprints of the seed are
+    and the loop runs while ||J^T Y||_2 >= epsilon (``gtol``). Two misprints of the paper are
     corrected here. (1) Eq. 9 prints eta_{k+1} = min{c, eta_k q}, but Algorithm 1 asks for
     eta_1 > c, which only makes sense if c is a lower bound: with min, eta could never exceed
     c again and the initial value would be meaningless. It is max{c, .}, as in the
@@ -44,8 +44,8 @@ Notes:
     only shrink, also after a rejected step, so a rejected step would be retried with a
     LONGER step, forever. Fan & Pan's q is max{1/4, 1 - 2 (2 tau - 1)^3}, which grows the
     damping (q(0) = 3) after a poor step and shrinks it (q(1) = 1/4) after a good one; we
-    use that cubic with the seed's floor of 0.5. Defaults: theta = 0.5, c = 1e-8,
-    p0 = 1e-4, eta_1 = 1 (the seed gives no values). The seed has no ``ftol``/``xtol``
+    use that cubic with the paper's floor of 0.5. Defaults: theta = 0.5, c = 1e-8,
+    p0 = 1e-4, eta_1 = 1 (the paper gives no values). The paper has no ``ftol``/``xtol``
     tests; they are added as safeguards, with the same meaning as for "lm".
 
     Refused trial points (``RejectStep`` raised by the model, or non-finite residuals) are
@@ -159,7 +159,7 @@ class _MarquardtDamping:
 
 
 class _SelfAdaptingDamping:
-    """Tong et al.'s self-adapting LM (seed 002, Eq. 8-12), misprints corrected."""
+    """Tong et al.'s self-adapting LM (Eq. 8-12), misprints corrected."""
 
     def __init__(self, options: Mapping[str, float], x_scale: np.ndarray | None) -> None:
         self.theta = float(options["theta"])
@@ -170,7 +170,7 @@ class _SelfAdaptingDamping:
             raise InputError("salm option theta must lie in [0, 1]", value=self.theta)
         if not (self.c > 0.0 and 0.0 < self.p0 < 1.0 and self.eta > self.c):
             raise InputError(
-                "salm options need c > 0, 0 < p0 < 1 and eta0 > c (seed 002, Algorithm 1)",
+                "salm options need c > 0, 0 < p0 < 1 and eta0 > c (Tong et al., Algorithm 1)",
                 value=dict(options),
             )
         self.fixed_scale = None if x_scale is None else 1.0 / x_scale
@@ -322,7 +322,7 @@ def least_squares(
         jac: Jacobian of the residuals, ``jac(x) -> (m, n)`` (analytic or FE sensitivities),
             or None for forward finite differences.
         bounds: (lower, upper), scalars or arrays of n; ``-inf``/``inf`` for none.
-        method: "lm" (Levenberg-Marquardt, Marquardt scaling) or "salm" (seed 002's
+        method: "lm" (Levenberg-Marquardt, Marquardt scaling) or "salm" (Tong et al.'s
             self-adapting LM).
         x_scale: Characteristic scale of each parameter, shape (n,) or scalar. When given,
             the damping uses D = 1/x_scale in place of the method's own scaling.
@@ -592,12 +592,13 @@ def fit_curve(
 ) -> FitResult:
     """Fit model predictions to data with an absolute or a relative error objective.
 
-    Residuals: ``w * (model(p) - y)`` ("absolute", seed 003 Eq. 4) or
-    ``w * (model(p) - y) / y`` ("relative", seed 000 Eq. 7 and seed 003 Eq. 5, the objective
-    Abaqus uses). Relative residuals are undefined where the data are zero; by default any
-    |y_i| below 1e-6 * max|y| is an InputError (select a data window, e.g. strain > 0.05 as
-    seed 003 does). With ``relative_floor`` set, the divisor is instead
-    sign(y) * max(|y|, relative_floor), documented in the result's ``objective``.
+    Residuals: ``w * (model(p) - y)`` ("absolute", the needle-indentation study's Eq. 4) or
+    ``w * (model(p) - y) / y`` ("relative", Ahn & Kim Eq. 7 and the needle-indentation
+    study's Eq. 5, the objective Abaqus uses). Relative residuals are undefined where the
+    data are zero; by default any |y_i| below 1e-6 * max|y| is an InputError (select a data
+    window, e.g. strain > 0.05 as the needle-indentation study does). With
+    ``relative_floor`` set, the divisor is instead sign(y) * max(|y|, relative_floor),
+    documented in the result's ``objective``.
 
     Args:
         model: Predictions, ``model(p) -> (m,)``; may raise :class:`RejectStep`.

@@ -45,9 +45,9 @@ factor is a small-strain (linear elastic) result."""
 
 def _check(radius_m: float, poissons_ratio: float) -> None:
     if not (math.isfinite(radius_m) and radius_m > 0.0):
-        raise InputError("must be a finite positive number", column="radius_m", value=radius_m)
+        raise InputError("radius_m must be a finite positive number", value=float(radius_m))
     if not (math.isfinite(poissons_ratio) and -1.0 < poissons_ratio <= 0.5):
-        raise InputError("must lie in (-1, 0.5]", column="poissons_ratio", value=poissons_ratio)
+        raise InputError("poissons_ratio must lie in (-1, 0.5]", value=float(poissons_ratio))
 
 
 def _depth(depth_m: np.ndarray | float) -> np.ndarray:
@@ -108,7 +108,7 @@ def flat_punch_modulus_Pa(
 
     Notes:
         Sneddon (1965), Int. J. Eng. Sci. 3:47, the flat-ended cylinder: F = 2 a E* delta.
-        Seed 001 (Kim et al.) Eq. 2 prints (1 - nu) instead of (1 - nu^2); the printed form
+        Kim et al. Eq. 2 prints (1 - nu) instead of (1 - nu^2); the printed form
         is smaller by the factor 1 / (1 + nu), 2/3 at nu = 0.5. It is available, for
         reproducing the paper's numbers only, as :func:`flat_punch_modulus_printed_Pa`.
     """
@@ -129,9 +129,7 @@ def _layer_kappa(radius_m: float, poissons_ratio: float, thickness_m: float | No
     if thickness_m is None:
         return 1.0
     if not (math.isfinite(thickness_m) and thickness_m > 0.0):
-        raise InputError(
-            "must be a finite positive number", column="thickness_m", value=thickness_m
-        )
+        raise InputError("thickness_m must be a finite positive number", value=float(thickness_m))
     return hayes_kappa(radius_m / thickness_m, poissons_ratio)
 
 
@@ -173,15 +171,12 @@ def hayes_kappa(
     _check(1.0, poissons_ratio)
     ratio = float(radius_over_thickness)
     if not (math.isfinite(ratio) and ratio >= 0.0):
-        raise InputError(
-            "must be finite and non-negative", column="radius_over_thickness", value=ratio
-        )
+        raise InputError("radius_over_thickness must be finite and non-negative", value=ratio)
     if ratio > HAYES_MAX_RADIUS_OVER_THICKNESS:
         raise InputError(
             f"radius/thickness a/h = {ratio:.4g} is beyond the range of the finite-thickness "
             f"(Hayes) correction, a/h <= {HAYES_MAX_RADIUS_OVER_THICKNESS:g}: the layer is much "
             "thinner than the punch radius; use a smaller punch or a thicker layer",
-            column="thickness_m",
         )
     if ratio == 0.0:
         return 1.0
@@ -220,7 +215,7 @@ def flat_punch_modulus_printed_Pa(
     radius_m: float,
     poissons_ratio: float,
 ) -> np.ndarray:
-    """Seed 001 Eq. 2 AS PRINTED, E = (1 - nu) F / (2 a delta). Not Sneddon's result.
+    """Kim et al. Eq. 2 AS PRINTED, E = (1 - nu) F / (2 a delta). Not Sneddon's result.
 
     Use only to reproduce the paper's moduli; :func:`flat_punch_modulus_Pa` is correct.
     ``flat_punch_modulus_Pa = (1 + nu) * flat_punch_modulus_printed_Pa``.
@@ -328,7 +323,7 @@ def fit_punch_modulus(
             depth, radius_m=radius_m, youngs_modulus_Pa=1.0, poissons_ratio=poissons_ratio
         )
     else:
-        raise InputError("geometry must be 'flat' or 'sphere'", column="geometry", value=geometry)
+        raise InputError("geometry must be 'flat' or 'sphere'", value=geometry)
     start = float(unit_force @ force / (unit_force @ unit_force))
     result = fit_curve(
         lambda p: p[0] * unit_force,

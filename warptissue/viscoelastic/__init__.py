@@ -1,8 +1,8 @@
 """Lumped viscoelastic tissue models and their fits.
 
-Standard linear solid (Kelvin), Prony series and quasi-linear viscoelasticity (seeds 000 and
-001), Wiechert bodies, linear and with exponential springs (seed 004), the Blatz exponential
-model and the nonlinear parallel-spring model of seed 001. Forces come from sampled
+Standard linear solid (Kelvin), Prony series and quasi-linear viscoelasticity (Ahn & Kim,
+Kim et al.), Wiechert bodies, linear and with exponential springs (Takacs et al.), the Blatz
+exponential model and the nonlinear parallel-spring model of Kim et al. Forces come from sampled
 displacement histories in SI units (``time_s``, ``displacement_m`` -> ``force_N``).
 """
 

@@ -54,7 +54,7 @@ def validate_history(
         bad = np.flatnonzero(~np.isfinite(array))
         if bad.size:
             raise InputError(
-                f"non-finite value at sample {bad[0]}", column=label, value=array[bad[0]]
+                f"non-finite value at sample {bad[0]}", column=label, value=float(array[bad[0]])
             )
     steps = np.diff(time)
     if np.any(steps <= 0.0):

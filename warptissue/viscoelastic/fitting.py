@@ -231,11 +231,11 @@ def fit_relaxation_joint(
     """
     checked = [r if isinstance(r, RelaxationRecord) else RelaxationRecord(*r) for r in records]
     if not checked:
-        raise InputError("at least one record is needed", column="records")
+        raise InputError("at least one record is needed")
     if model not in RELAXATION_MODELS:
-        raise InputError(f"model must be one of {RELAXATION_MODELS}", column="model", value=model)
+        raise InputError(f"model must be one of {RELAXATION_MODELS}", value=model)
     if model == "prony" and int(terms) < 1:
-        raise InputError("terms must be >= 1", column="terms", value=terms)
+        raise InputError("terms must be >= 1", value=terms)
     data_warnings = [m for r in checked for m in r.plausibility_warnings()]
     names, units, start, build = _model_setup(checked, model, int(terms), p0, method)
     start = np.asarray(start, dtype=np.float64)
@@ -374,8 +374,8 @@ def fit_qlv(
 ) -> FitResult:
     """Fit QLV with an exponential elastic response to a real ramp-and-hold record.
 
-    Model: F(t) = integral G(t - s) dF_e(x(s)), G(t) = 1 - sum g_i (1 - exp(-t/tau_i)) (seed
-    000 Eq. 2, sign fixed) and F_e(x) = A (exp(B x) - 1), both fitted at once on the measured
+    Model: F(t) = integral G(t - s) dF_e(x(s)), G(t) = 1 - sum g_i (1 - exp(-t/tau_i)) (Ahn
+    & Kim Eq. 2, sign fixed) and F_e(x) = A (exp(B x) - 1), both fitted at once on the measured
     history, finite ramp included.
 
     Args:
@@ -394,7 +394,7 @@ def fit_qlv(
     data_warnings = record.plausibility_warnings()
     n = int(terms)
     if n < 1:
-        raise InputError("terms must be >= 1", column="terms", value=terms)
+        raise InputError("terms must be >= 1", value=terms)
     if p0 is None:
         prony = _initial_prony(record, n)
         instantaneous = prony[0] + prony[1 : 1 + n].sum()
@@ -473,14 +473,12 @@ def fit_wiechert_joint(
         residuals at the optimum (as for LM).
     """
     if model not in ("linear", "nonlinear"):
-        raise InputError("model must be 'linear' or 'nonlinear'", column="model", value=model)
+        raise InputError("model must be 'linear' or 'nonlinear'", value=model)
     if optimizer not in ("lm", "nelder-mead"):
-        raise InputError(
-            "optimizer must be 'lm' or 'nelder-mead'", column="optimizer", value=optimizer
-        )
+        raise InputError("optimizer must be 'lm' or 'nelder-mead'", value=optimizer)
     checked = [r if isinstance(r, RelaxationRecord) else RelaxationRecord(*r) for r in records]
     if not checked:
-        raise InputError("at least one record is needed", column="records")
+        raise InputError("at least one record is needed")
     if optimizer == "lm":
         result = fit_relaxation_joint(
             checked,

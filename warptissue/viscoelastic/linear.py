@@ -39,20 +39,20 @@ class NotARelaxationWarning(UserWarning):
 def _require_positive(**values: float) -> None:
     for name, value in values.items():
         if not (math.isfinite(value) and value > 0.0):
-            raise InputError("must be a finite positive number", column=name, value=value)
+            raise InputError(f"{name} must be a finite positive number", value=float(value))
 
 
 def _require_non_negative(**values: float) -> None:
     for name, value in values.items():
         if not (math.isfinite(value) and value >= 0.0):
-            raise InputError("must be a finite non-negative number", column=name, value=value)
+            raise InputError(f"{name} must be a finite non-negative number", value=float(value))
 
 
 @dataclass(frozen=True)
 class PronySeries:
     """A Prony-series relaxation stiffness G(t) = k_inf + sum_i k_i exp(-t/tau_i).
 
-    The lumped (force-displacement) form of seed 000 Eq. 4, in N/m. The normalized form of
+    The lumped (force-displacement) form of Ahn & Kim Eq. 4, in N/m. The normalized form of
     Eq. 2 and 5, G(t) = G0 (1 - sum_i g_i (1 - exp(-t/tau_i))), follows with
     G0 = k_inf + sum_i k_i and g_i = k_i / G0 (Eq. 6).
 
@@ -62,7 +62,7 @@ class PronySeries:
         relaxation_times_s: tau_i > 0, one per term.
 
     Notes:
-        Seed 000 (Ahn & Kim) prints Eq. 5 as G0 (1 - g1 (1 - e^-t/tau1) + g2 (1 - e^-t/tau2));
+        Ahn & Kim prints Eq. 5 as G0 (1 - g1 (1 - e^-t/tau1) + g2 (1 - e^-t/tau2));
         the second sign is a misprint. Equating G(0) and G(infinity) of Eq. 4 and Eq. 5 gives
         G0 = k0 + k1 + k2 and G0 (1 - g1 - g2) = k0, which holds only with a minus sign on
         both terms. This class implements the corrected form.
@@ -96,10 +96,10 @@ class PronySeries:
         g: tuple[float, ...] | list[float],
         relaxation_times_s: tuple[float, ...] | list[float],
     ) -> PronySeries:
-        """Build from seed 000 Eq. 2: G0 and the normalized coefficients g_i (sum < 1)."""
+        """Build from Ahn & Kim Eq. 2: G0 and the normalized coefficients g_i (sum < 1)."""
         g_values = tuple(float(v) for v in g)
         if sum(g_values) > 1.0:
-            raise InputError("the g_i must sum to at most 1", column="g", value=g_values)
+            raise InputError("the g_i must sum to at most 1", value=g_values)
         g0 = float(instantaneous_stiffness_N_per_m)
         return cls(
             equilibrium_stiffness_N_per_m=g0 * (1.0 - sum(g_values)),
@@ -119,7 +119,7 @@ class PronySeries:
 
     @property
     def g(self) -> tuple[float, ...]:
-        """Normalized Prony coefficients g_i = k_i / G0 (seed 000 Eq. 6)."""
+        """Normalized Prony coefficients g_i = k_i / G0 (Ahn & Kim Eq. 6)."""
         g0 = self.instantaneous_stiffness_N_per_m
         return tuple(k / g0 for k in self.branch_stiffness_N_per_m)
 
@@ -172,7 +172,7 @@ class StandardLinearSolid:
         relaxation_time_s: tau.
 
     Notes:
-        Seed 001 (Kim et al.) Eq. 4 prints G(t) = k1 [1 - (1 - k2/k1) exp(-(b/k1) t)] 1(t)
+        Kim et al. Eq. 4 prints G(t) = k1 [1 - (1 - k2/k1) exp(-(b/k1) t)] 1(t)
         with k1 = 0.008 N/mm, k2 = 0.007 N/mm, b = 0.130 s N/mm. It starts at k2 and ends at
         k1, so with the published values it rises with time: not a stress relaxation. Its
         exponent (b/k1) t is also not dimensionless (b/k1 is in seconds). Use
@@ -196,7 +196,7 @@ class StandardLinearSolid:
     def from_printed(
         cls, k1_N_per_m: float, k2_N_per_m: float, b_N_s_per_m: float
     ) -> StandardLinearSolid:
-        """Reproduce seed 001 Eq. 4 exactly as printed.
+        """Reproduce Kim et al. Eq. 4 exactly as printed.
 
         G(t) = k1 [1 - (1 - k2/k1) exp(-(b/k1) t)], evaluated with the numbers in SI units
         (N/m, N s/m, s); the ratio b/k1 is the same in N/mm units. So
@@ -216,7 +216,7 @@ class StandardLinearSolid:
         _require_positive(k1_N_per_m=k1_N_per_m, k2_N_per_m=k2_N_per_m, b_N_s_per_m=b_N_s_per_m)
         if k2_N_per_m < k1_N_per_m:
             warnings.warn(
-                f"seed 001 Eq. 4 with k1={k1_N_per_m} N/m > k2={k2_N_per_m} N/m gives a G(t) "
+                f"Kim et al. Eq. 4 with k1={k1_N_per_m} N/m > k2={k2_N_per_m} N/m gives a G(t) "
                 "that rises from k2 to k1: this is not a stress relaxation",
                 NotARelaxationWarning,
                 stacklevel=2,
@@ -228,7 +228,7 @@ class StandardLinearSolid:
         )
 
     def to_printed(self) -> dict[str, float]:
-        """Parameters of seed 001 Eq. 4 as printed: k1, k2 (N/m) and b (N s/m)."""
+        """Parameters of Kim et al. Eq. 4 as printed: k1, k2 (N/m) and b (N s/m)."""
         k1 = self.equilibrium_stiffness_N_per_m
         return {
             "k1_N_per_m": k1,
@@ -319,8 +319,8 @@ class QuasiLinearViscoelastic:
     """Fung's quasi-linear viscoelasticity for force-displacement records.
 
     F(t) = integral_0^t G(t - s) dF_e(x(s))/ds ds with the reduced (normalized, G(0) = 1)
-    relaxation function G(t) = 1 - sum_i g_i (1 - exp(-t/tau_i)) of seed 000 Eq. 2 and a
-    nonlinear elastic response F_e (seed 000 Eq. 1 reduced to one dimension).
+    relaxation function G(t) = 1 - sum_i g_i (1 - exp(-t/tau_i)) of Ahn & Kim Eq. 2 and a
+    nonlinear elastic response F_e (Ahn & Kim Eq. 1 reduced to one dimension).
 
     Attributes:
         g: Normalized Prony coefficients g_i (sum <= 1).
@@ -348,7 +348,9 @@ class QuasiLinearViscoelastic:
                 value=(len(self.g), len(self.relaxation_times_s)),
             )
         if sum(self.g) > 1.0 or any(v < 0.0 for v in self.g):
-            raise InputError("the g_i must be >= 0 and sum to at most 1", column="g", value=self.g)
+            raise InputError(
+                "the g_i must be >= 0 and sum to at most 1", value=tuple(float(v) for v in self.g)
+            )
         for i, tau in enumerate(self.relaxation_times_s):
             _require_positive(**{f"relaxation_times_s[{i}]": tau})
 
@@ -373,7 +375,7 @@ class QuasiLinearViscoelastic:
         """
         time, displacement = validate_history(time_s, displacement_m, name="displacement_m")
         if int(substeps) < 1:
-            raise InputError("substeps must be >= 1", column="substeps", value=substeps)
+            raise InputError("substeps must be >= 1", value=substeps)
         m = int(substeps)
         if time.size > 1 and m > 1:
             fractions = np.arange(m) / m

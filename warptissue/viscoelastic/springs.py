@@ -1,4 +1,4 @@
-"""Seed 001's nonlinear models: the Blatz exponential law (Eq. 3) and parallel springs (Eq. 5).
+"""Kim et al.'s nonlinear models: the Blatz exponential law (Eq. 3) and parallel springs (Eq. 5).
 
 Kim et al. fit both to in vivo indentation of pig liver and esophagus with a 2 mm flat
 probe. The parallel-spring parameters of their table are in the paper's units
@@ -23,7 +23,7 @@ __all__ = ["ParallelNonlinearSprings", "blatz_pressure_Pa", "fit_blatz"]
 
 
 def blatz_pressure_Pa(stretch: np.ndarray | float, *, alpha: float, gamma_Pa: float) -> np.ndarray:
-    """The Blatz exponential law, seed 001 Eq. 3.
+    """The Blatz exponential law, Kim et al. Eq. 3.
 
     P = gamma / (alpha + 1) (lambda exp(alpha (lambda^2 - 1)) - exp(alpha (1/lambda - 1)) /
     lambda^2).
@@ -43,9 +43,9 @@ def blatz_pressure_Pa(stretch: np.ndarray | float, *, alpha: float, gamma_Pa: fl
     """
     lam = np.asarray(stretch, dtype=np.float64)
     if np.any(~np.isfinite(lam)) or np.any(lam <= 0.0):
-        raise InputError("stretch must be finite and positive", column="stretch")
+        raise InputError("stretch must be finite and positive")
     if alpha == -1.0:
-        raise InputError("alpha = -1 makes Eq. 3 singular", column="alpha", value=alpha)
+        raise InputError("alpha = -1 makes Eq. 3 singular", value=float(alpha))
     return (
         gamma_Pa
         / (alpha + 1.0)
@@ -104,7 +104,7 @@ def _signed_power(value: np.ndarray, exponent: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ParallelNonlinearSprings:
-    """Seed 001 Eq. 5: a nonlinear spring in parallel with relaxing nonlinear branches.
+    """Kim et al. Eq. 5: a nonlinear spring in parallel with relaxing nonlinear branches.
 
     F = F0 + sum_j F_j, F0 = k01 x^k02 and, for each branch j (state a_j, b_j):
     F_j = k_j3 (x - a_j)^k_j2, a_j' = b_j, b_j' = k_j1 (x - a_j)^k_j2 - b_j.
@@ -121,7 +121,7 @@ class ParallelNonlinearSprings:
         defined. The printed second branch reads F2(t + tau), with a tau the paper never
         defines or tabulates; it is taken as 0. The branch states are integrated with
         ``solve_ivp`` (LSODA by default).
-        Seed 001's table, liver: k01 = 0.0020, k02 = 1.6797, (k11, k12, k13) =
+        Kim et al.'s table, liver: k01 = 0.0020, k02 = 1.6797, (k11, k12, k13) =
         (0.0250, 2.2355, 0.0070), (k21, k22, k23) = (0.080, 2.1838, 0.0005).
     """
 

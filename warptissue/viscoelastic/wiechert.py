@@ -1,4 +1,4 @@
-"""Wiechert bodies (seed 004, Takacs et al.): linear, with exponential springs, distributed.
+"""Wiechert bodies (Takacs et al.): linear, with exponential springs, distributed.
 
 A Wiechert body is a spring k0 in parallel with two Maxwell arms (k1, b1) and (k2, b2). The
 nonlinear variant replaces every spring by k_j(chi) = K_j exp(kappa_j chi) (Eq. 2), so that a
@@ -40,14 +40,14 @@ def _check_positive(instance: object) -> None:
         value = getattr(instance, item.name)
         if item.name.startswith("kappa"):
             if not math.isfinite(value):
-                raise InputError("must be finite", column=item.name, value=value)
+                raise InputError(f"{item.name} must be finite", value=float(value))
         elif not (math.isfinite(value) and value > 0.0):
-            raise InputError("must be a finite positive number", column=item.name, value=value)
+            raise InputError(f"{item.name} must be a finite positive number", value=float(value))
 
 
 @dataclass(frozen=True)
 class LinearWiechert:
-    """The 5-parameter linear Wiechert model (seed 004 Eq. 1).
+    """The 5-parameter linear Wiechert model (Takacs et al. Eq. 1).
 
     Attributes:
         k0_N_per_m: Parallel (equilibrium) spring.
@@ -58,7 +58,7 @@ class LinearWiechert:
         W(s) = k0 + k1 b1 s / (b1 s + k1) + k2 b2 s / (b2 s + k2). Over the common
         denominator B2 s^2 + B1 s + B0 with B2 = b1 b2, B1 = b1 k2 + b2 k1, B0 = k1 k2 the
         numerator is A2 s^2 + A1 s + A0 with A2 = b1 b2 (k0 + k1 + k2),
-        A1 = b1 k2 (k0 + k1) + b2 k1 (k0 + k2) and A0 = k0 k1 k2. Seed 004 prints the
+        A1 = b1 k2 (k0 + k1) + b2 k1 (k0 + k2) and A0 = k0 k1 k2. Takacs et al. prints the
         constant term as a second A2 and defines A0 = k0 k1 k2 b2; both are misprints (the
         extra b2 breaks the units and the static limit W(0) = k0).
         Inverting W(s) U(s) gives G(t) = k0 + k1 exp(-t k1/b1) + k2 exp(-t k2/b2): a
@@ -132,7 +132,7 @@ class LinearWiechert:
 
 @dataclass(frozen=True)
 class NonlinearWiechert:
-    """The 8-parameter Wiechert model with exponential springs (seed 004 Eq. 2-4).
+    """The 8-parameter Wiechert model with exponential springs (Takacs et al. Eq. 2-4).
 
     Attributes:
         K0_N_per_m, K1_N_per_m, K2_N_per_m: Spring coefficients K_j.
@@ -145,7 +145,7 @@ class NonlinearWiechert:
         F = K0 x0 exp(kappa0 x0) + sum_j K_j (x0 - x_j) exp(kappa_j (x0 - x_j)). x0 is the
         imposed surface displacement, x_j the dashpot-spring junctions. Integrated with
         scipy's ``solve_ivp`` (LSODA by default, switching to a stiff method as needed) with
-        the analytic (diagonal) Jacobian. Table I of seed 004 gives parameters for a
+        the analytic (diagonal) Jacobian. Table I of Takacs et al. gives parameters for a
         20 x 20 mm sample; Table II lists them per square metre (divided by 4e-4 m^2), its
         b1 = 127e6 is ten times 5073 / 4e-4 = 12.7e6 (one of the tables is misprinted) and
         its kappa values, which do not scale with area, were lost in extraction.
@@ -175,7 +175,7 @@ class NonlinearWiechert:
     def scaled(self, factor: float) -> NonlinearWiechert:
         """Multiply the K_j and b_j by ``factor`` (kappa_j unchanged).
 
-        ``scaled(1 / area_m2)`` gives the specific parameters per square metre of seed 004
+        ``scaled(1 / area_m2)`` gives the specific parameters per square metre of Takacs et al.
         Table II; ``scaled(area_m2)`` turns specific parameters back into a body of that area.
         """
         values = self.to_vector()
@@ -281,7 +281,7 @@ def _integrate_junctions(
 
 
 def quadratic_profile(radius_m: float) -> SurfaceProfile:
-    """Seed 004 Eq. 6: x(y) = x_d (|y| - rho)^2 / rho^2 for |y| <= rho, zero beyond.
+    """Takacs et al. Eq. 6: x(y) = x_d (|y| - rho)^2 / rho^2 for |y| <= rho, zero beyond.
 
     Args:
         radius_m: rho, the distance from the indentation line beyond which the surface does
@@ -291,7 +291,7 @@ def quadratic_profile(radius_m: float) -> SurfaceProfile:
         A :data:`SurfaceProfile`.
     """
     if not (math.isfinite(radius_m) and radius_m > 0):
-        raise InputError("must be a finite positive number", column="radius_m", value=radius_m)
+        raise InputError("radius_m must be a finite positive number", value=float(radius_m))
 
     def profile(y_m: np.ndarray, depth_m: float) -> np.ndarray:
         gap = np.maximum(radius_m - np.abs(np.asarray(y_m, dtype=np.float64)), 0.0)
@@ -312,7 +312,7 @@ def line_indenter_force_N(
     method: str = "LSODA",
     rtol: float = 1e-7,
 ) -> np.ndarray:
-    """Force under a line indenter from distributed Wiechert bodies (seed 004 Eq. 5-8).
+    """Force under a line indenter from distributed Wiechert bodies (Takacs et al. Eq. 5-8).
 
     F(t) = integral f(y, z, t) dy dz over the surface, with one body per surface element
     driven by its own displacement history x(y, t) = profile(y, depth(t)) (Eq. 6 and 8 for
@@ -337,17 +337,14 @@ def line_indenter_force_N(
     time, depth = validate_history(time_s, depth_m, name="depth_m")
     for name, value in (("half_width_m", half_width_m), ("length_m", length_m)):
         if not (math.isfinite(value) and value > 0):
-            raise InputError("must be a finite positive number", column=name, value=value)
+            raise InputError(f"{name} must be a finite positive number", value=float(value))
     if int(element_count) < 1:
-        raise InputError("must be >= 1", column="element_count", value=element_count)
+        raise InputError("element_count must be >= 1", value=element_count)
     width = half_width_m / int(element_count)
     centres = (np.arange(int(element_count)) + 0.5) * width
     surface = np.stack([np.asarray(profile(centres, float(d)), dtype=np.float64) for d in depth], 1)
     if surface.shape != (centres.size, time.size) or not np.all(np.isfinite(surface)):
-        raise InputError(
-            "profile(y_m, depth_m) must return finite values of the shape of y_m",
-            column="profile",
-        )
+        raise InputError("profile(y_m, depth_m) must return finite values of the shape of y_m")
     moving = np.any(surface != 0.0, axis=1)
     force = np.zeros(time.size)
     if not np.any(moving):
