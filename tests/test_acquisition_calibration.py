@@ -315,3 +315,36 @@ def test_a_saved_file_corrects_one_reading_at_a_time_as_the_recorder_applies_it(
         np.testing.assert_allclose(
             one_at_a_time, fits[name].correct(six.signal_V), rtol=1e-12, atol=1e-9
         )
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--test-samples", "0"], "--test-samples must be between 1 and 22"),
+        (["--test-samples", "23"], "--test-samples must be between 1 and 22"),
+        (["--folds", "1"], "--folds must be 2 or more"),
+        (["--folds", "10"], "--folds must be at most 9"),
+        (["--model", "SVM"], "--model must be one of polynomial, bp,"),
+        (["--out", "sensor.csv"], "--out: cannot create the folder"),
+    ],
+)
+def test_cli_calibrate_sensor_bad_options_refused_before_fitting(
+    tmp_path, capsys, monkeypatch, options, message
+):
+    """Named by option in one line, before any model is fitted and before --out is made."""
+    from warptissue.acquisition import calibration
+    from warptissue.cli import main
+
+    def no_fits(*args, **kwargs):
+        raise AssertionError("fitted before the options were checked")
+
+    monkeypatch.setattr(calibration, "fit_calibrations", no_fits)
+    monkeypatch.chdir(tmp_path)
+    data = synthetic_sensor(samples=24, readings=3, seed=5)
+    write_csv(
+        "sensor.csv", {"sample": data.sample, "force_N": data.force_N, "signal_V": data.signal_V}
+    )
+    assert main(["calibrate-sensor", "sensor.csv", *options]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sensor.csv"]

@@ -703,7 +703,9 @@ def fit_calibrations(
     _, force, readings = sample_readings(data)
     if folds < 2 or len(force) < 2 * folds:
         raise InputError(
-            f"need at least {2 * folds} samples and 2 folds to fit", value=(len(force), folds)
+            f"folds must be 2 or more, with at least two samples per fold ({len(force)} "
+            "samples)",
+            value=folds,
         )
     signal_offset = float(readings.min())
     signal_scale = float(np.ptp(readings)) or 1.0

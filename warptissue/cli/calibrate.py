@@ -49,8 +49,26 @@ def run(args: argparse.Namespace) -> int:
     from warptissue.io import write_csv, write_json
 
     if args.model not in CALIBRATION_MODELS:
-        raise InputError(f"--model must be one of {CALIBRATION_MODELS}", value=args.model)
+        raise InputError(
+            f"--model must be one of {', '.join(CALIBRATION_MODELS)}", value=args.model
+        )
+    if args.folds < 2:
+        raise InputError("--folds must be 2 or more", value=args.folds)
     data = read_calibration_csv(args.data)
+    samples = len(np.unique(data.sample))
+    if not 0 < args.test_samples < samples - 1:
+        raise InputError(
+            f"--test-samples must be between 1 and {samples - 2} ({args.data} has {samples} "
+            "samples; at least 2 must remain to train on)",
+            value=args.test_samples,
+        )
+    if 2 * args.folds > samples - args.test_samples:
+        raise InputError(
+            f"--folds must be at most {(samples - args.test_samples) // 2} (two training "
+            f"samples per fold; {samples - args.test_samples} samples train)",
+            value=args.folds,
+        )
+    _check_output_folder(args.out)
     train, test = split_samples(data, test_samples=args.test_samples, seed=args.seed)
     calibrations = fit_calibrations(train, folds=args.folds, seed=args.seed, progress=True)
     table = evaluate_calibrations(calibrations, test)
@@ -89,6 +107,20 @@ def run(args: argparse.Namespace) -> int:
         f"{len(np.unique(test.sample))})"
     )
     return 0
+
+
+def _check_output_folder(folder: Path) -> None:
+    """Create ``--out`` (or find it writable) before the fits, not after."""
+    import os
+
+    from warptissue.errors import InputError
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"--out: cannot create the folder: {exc.strerror}", path=folder) from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise InputError("--out: the folder is not writable", path=folder)
 
 
 def _plot(path: Path, test, calibrations) -> None:
