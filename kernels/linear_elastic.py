@@ -1,7 +1,7 @@
-"""Linear tetrahedral elasticity in substitution parameters (seed 002, Tong et al.).
+"""Linear tetrahedral elasticity in substitution parameters (Tong et al.).
 
 Device code only. The isotropic elasticity matrix is written as D = alpha (G + nu H) with
-alpha = E / ((1 + nu)(1 - 2 nu)) (seed 002, Eq. 2). In Voigt order (xx, yy, zz, xy, yz, zx)
+alpha = E / ((1 + nu)(1 - 2 nu)) (Tong et al., Eq. 2). In Voigt order (xx, yy, zz, xy, yz, zx)
 with engineering shear strains, G = diag(1, 1, 1, 1/2, 1/2, 1/2) and H has the normal block
 1 1^T - 2 I and -1 on the shear diagonal; G is the Lame pair (lambda = 0, mu = 1/2) and H the
 pair (lambda = 1, mu = -1). For shape-function gradients a, b of nodes p, q the 3x3 blocks of
@@ -10,7 +10,7 @@ V B^T G B and V B^T H B are therefore
     KG_pq[i, j] = V / 2 * ((a . b) delta_ij + a_j b_i)
     KH_pq[i, j] = V * (a_i b_j - a_j b_i - (a . b) delta_ij)
 
-and the element stiffness is K^e = alpha (KG + nu KH) (the consistent form of seed 002 Eq. 4;
+and the element stiffness is K^e = alpha (KG + nu KH) (the consistent form of Tong et al.'s Eq. 4;
 the printed equation lacks alpha on the second term).
 """
 

@@ -16,9 +16,9 @@ compiled kernel serves every model. This file holds functions only; the kernels 
 code is compiled once, in one Warp module.
 
 Notes:
-    Abaqus conventions (Abaqus Theory Manual 4.6.1; seed 003, Eq. 2): isochoric invariants
-    ``I1b = J^(-2/3) I1``, ``I2b = J^(-4/3) I2``; ``U(J) = (J - 1)^2 / D1`` with
-    ``D1 = 2 / K``.
+    Abaqus conventions (Abaqus Theory Manual 4.6.1; the needle-indentation study, Eq. 2):
+    isochoric invariants ``I1b = J^(-2/3) I1``, ``I2b = J^(-4/3) I2``;
+    ``U(J) = (J - 1)^2 / D1`` with ``D1 = 2 / K``.
 
     - Invariant models: ``psi_dev = sum_i C_i0 (I1b - 3)^i + C01 (I2b - 3)`` (neo-Hookean,
       Mooney-Rivlin, reduced polynomial and Yeoh are special cases).
