@@ -168,3 +168,29 @@ def test_errors_name_the_option_not_a_column(tmp_path, capsys):
     assert status == 2
     err = capsys.readouterr().err
     assert err.startswith("warptissue: error: option --growth: ") and "column" not in err
+
+
+MM_TET = (
+    "*NODE\n1, 0, 0, 0\n2, 1000, 0, 0\n3, 0, 1000, 0\n4, 0, 0, 1000\n"
+    "*ELEMENT, TYPE=C3D4\n1, 1, 2, 3, 4\n"
+)
+"""One tet 1 m (1000 mm) on a side, in an Abaqus file in millimetres."""
+
+
+def test_a_file_in_millimetres_is_warned_about_and_read_with_unit(tmp_path, capsys):
+    source = tmp_path / "part.inp"
+    source.write_text(MM_TET)  # read as metres: 1 km
+    assert main(["mesh", "check", str(source), "--json", str(tmp_path / "m.json")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("warptissue: warning: ") and "--unit mm" in err
+    assert (
+        main(["mesh", "check", str(source), "--unit", "mm", "--json", str(tmp_path / "mm.json")])
+        == 0
+    )
+    assert capsys.readouterr().err == ""
+    volumes = [json.loads((tmp_path / f"{u}.json").read_text())["quality"]["total_volume_m3"]
+               for u in ("m", "mm")]  # fmt: skip
+    assert volumes[0] == pytest.approx(1000.0**3 / 6.0)
+    assert volumes[1] == pytest.approx(1.0 / 6.0)
+    assert main(["mesh", "convert", str(source), str(tmp_path / "part.vtu"), "--unit", "mm"]) == 0
+    assert read_mesh(tmp_path / "part.vtu").points.max() == pytest.approx(1.0)

@@ -4,12 +4,13 @@
         --size-near-m 5e-4 --size-far-m 4e-3 --out runs/block.vtu
     warptissue mesh disc --radius-m 0.02 ... --out runs/disc.msh
     warptissue mesh check organ.msh --json runs/organ_quality.json
-    warptissue mesh convert model.inp model.vtu
+    warptissue mesh convert model.inp model.vtu --unit mm   # an Abaqus file in millimetres
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from warptissue.cli._args import positive_length_m, positive_number
@@ -57,13 +58,47 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     check = actions.add_parser("check", help="read a mesh file and report its quality")
     check.add_argument("path", type=Path, help=".vtu, .msh or .inp file")
+    _add_unit(check)
     check.add_argument("--json", type=Path, help="write the quality summary here")
     check.set_defaults(handler=_check)
 
     convert = actions.add_parser("convert", help="convert between .vtu/.msh/.inp and .vtu/.msh")
     convert.add_argument("source", type=Path)
-    convert.add_argument("target", type=Path)
+    convert.add_argument("target", type=Path, help="written in metres")
+    _add_unit(convert)
     convert.set_defaults(handler=_convert)
+
+
+FILE_UNITS_M = {"m": 1.0, "mm": 1e-3, "um": 1e-6}
+"""Coordinate units a mesh file may be in, and their length in metres."""
+PLAUSIBLE_EXTENT_M = 1.0
+"""A mesh read as metres and larger than this across is probably in millimetres: warned."""
+
+
+def _add_unit(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--unit",
+        choices=tuple(FILE_UNITS_M),
+        default="m",
+        help="unit of the file's coordinates (default m; Abaqus and CAD files are often in mm)",
+    )
+
+
+def _read(path: Path, unit: str):
+    """Read a mesh file in ``unit``, warning when metres look implausible."""
+    import numpy as np
+
+    from warptissue.mesh import read_mesh
+
+    mesh = read_mesh(path, unit_m=FILE_UNITS_M[unit])
+    extent = float(np.ptp(mesh.points, axis=0).max()) if mesh.node_count else 0.0
+    if unit == "m" and extent > PLAUSIBLE_EXTENT_M:
+        print(
+            f"warptissue: warning: {path}: the mesh is {extent:.4g} m across; if its "
+            "coordinates are in millimetres, add --unit mm",
+            file=sys.stderr,
+        )
+    return mesh
 
 
 def _generate(args: argparse.Namespace) -> int:
@@ -90,15 +125,13 @@ def _generate(args: argparse.Namespace) -> int:
 
 
 def _check(args: argparse.Namespace) -> int:
-    from warptissue.mesh import read_mesh
-
-    return _report(read_mesh(args.path), args.json)
+    return _report(_read(args.path, args.unit), args.json)
 
 
 def _convert(args: argparse.Namespace) -> int:
-    from warptissue.mesh import read_mesh, write_mesh
+    from warptissue.mesh import write_mesh
 
-    mesh = read_mesh(args.source)
+    mesh = _read(args.source, args.unit)
     write_mesh(args.target, mesh)
     print(f"wrote {args.target}: {mesh.tet_count} {mesh.element_type}, {mesh.node_count} nodes")
     return 0
