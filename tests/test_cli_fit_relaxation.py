@@ -74,16 +74,23 @@ def test_relaxation_cli_errors_are_one_line(relaxation_csv, tmp_path, capsys):
     assert "bad.csv" in error and error.count("\n") == 1
 
 
-def test_punch_modulus_cli(tmp_path, capsys):
-    depth = np.linspace(0.0, 1e-3, 21)
+def _punch_csv(path, *, deepest_m, radius_m):
+    """A Sneddon flat-punch curve of E = 30 kPa, nu = 0.5, from zero to ``deepest_m``."""
+    depth = np.linspace(0.0, deepest_m, 21)
     force = np.concatenate(
         [
             [0.0],
-            flat_punch_force_N(depth[1:], radius_m=1e-3, youngs_modulus_Pa=3e4, poissons_ratio=0.5),
+            flat_punch_force_N(
+                depth[1:], radius_m=radius_m, youngs_modulus_Pa=3e4, poissons_ratio=0.5
+            ),
         ]
     )
-    path = tmp_path / "probe.csv"
     write_csv(path, {"displacement_m": depth, "force_N": force})
+    return path
+
+
+def test_punch_modulus_cli(tmp_path, capsys):
+    path = _punch_csv(tmp_path / "probe.csv", deepest_m=1e-3, radius_m=1e-3)
     status = main(
         [
             "fit",
@@ -237,15 +244,7 @@ def test_implausible_relaxation_data_is_refused_with_exit_2(tmp_path, capsys, tr
 
 
 def test_punch_modulus_takes_units_and_refuses_a_thin_layer(tmp_path, capsys):
-    depth = np.linspace(0.0, 1e-4, 21)
-    force = np.concatenate(
-        [
-            [0.0],
-            flat_punch_force_N(depth[1:], radius_m=5e-3, youngs_modulus_Pa=3e4, poissons_ratio=0.5),
-        ]
-    )
-    path = tmp_path / "thin.csv"
-    write_csv(path, {"displacement_m": depth, "force_N": force})
+    path = _punch_csv(tmp_path / "thin.csv", deepest_m=1e-4, radius_m=5e-3)
     argv = ["fit", "punch-modulus", str(path), "--radius-m", "5mm", "--out", str(tmp_path)]
     assert main([*argv, "--json"]) == 0
     printed = json.loads(capsys.readouterr().out)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -145,36 +146,23 @@ def _refusing(model: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray
 
 
 def fit_relaxation(
-    time_s: np.ndarray,
-    displacement_m: np.ndarray,
-    force_N: np.ndarray,
-    *,
-    model: str = "sls",
-    terms: int = 2,
-    p0: Sequence[float] | None = None,
-    method: str = "lm",
-    objective: str = "absolute",
-    relative_floor: float | None = None,
-    max_iterations: int = 200,
-    progress: bool = False,
+    time_s: np.ndarray, displacement_m: np.ndarray, force_N: np.ndarray, **options: Any
 ) -> FitResult:
     """Fit a lumped viscoelastic model to one measured test (ramp-and-hold or any history).
 
     The model is driven by the measured displacement history (linear between samples), so
-    the finite ramp of a real ramp-and-hold test is part of the fit. One record of
-    :func:`fit_relaxation_joint`; see there for the arguments and the result.
+    the finite ramp of a real ramp-and-hold test is part of the fit.
+
+    Args:
+        time_s, displacement_m, force_N: The record, shape (n,) each.
+        **options: The keyword options of :func:`fit_relaxation_joint` (``model``,
+            ``terms``, ``p0``, ``method``, ``objective``, ``relative_floor``,
+            ``max_iterations``, ``progress``).
+
+    Returns:
+        The result of :func:`fit_relaxation_joint` for this one record.
     """
-    return fit_relaxation_joint(
-        [RelaxationRecord(time_s, displacement_m, force_N)],
-        model=model,
-        terms=terms,
-        p0=p0,
-        method=method,
-        objective=objective,
-        relative_floor=relative_floor,
-        max_iterations=max_iterations,
-        progress=progress,
-    )
+    return fit_relaxation_joint([RelaxationRecord(time_s, displacement_m, force_N)], **options)
 
 
 def fit_relaxation_joint(
