@@ -364,3 +364,35 @@ def test_a_model_unstable_inside_the_tested_range_is_warned(compression_csv, tmp
     assert status == 0
     assert "mooney_rivlin: the fitted model is not Drucker-stable in uniaxial compression" in error
     assert "reduced_polynomial:2:" not in error
+
+
+def test_millimetres_in_a_tension_record_are_refused(compression_csv, tmp_path, capsys):
+    """Before: a tension record with the displacement in mm (strains up to 159) was fitted,
+    exit 0."""
+    columns = np.loadtxt(compression_csv, delimiter=",", skiprows=1)
+    path = _write_record(tmp_path / "mm.csv", 1000.0 * columns[:, 1], columns[:, 2])
+    status = main(
+        [
+            "fit", "uniaxial", str(path), "--area-m2", str(AREA_M2), "--height-m", "0.08",
+            "--loading", "tension", "--model", "neo_hookean",
+        ]
+    )  # fmt: skip
+    error = capsys.readouterr().err.strip()
+    assert status == 2 and len(error.splitlines()) == 1
+    assert "mm.csv" in error and "'displacement_m'" in error and "metres" in error
+
+
+def test_an_implausible_modulus_is_warned(compression_csv, tmp_path, capsys):
+    """The area in mm^2 given as m^2 (5600 for 70 x 80 mm): stresses a million times too small,
+    E = 3 mu0 of a few mPa. Before: fitted without a word."""
+    status = main(
+        [
+            "fit", "uniaxial", str(compression_csv), "--area-m2", "5600", "--height-m", "0.08",
+            "--model", "reduced_polynomial:2", "--out", str(tmp_path / "o"), "--json",
+        ]
+    )  # fmt: skip
+    captured = capsys.readouterr()
+    assert status == 0
+    assert "outside the plausible range of soft tissue" in captured.err
+    (row,) = json.loads(captured.out)["models"]
+    assert any("specimen's area and height" in warning for warning in row["warnings"])

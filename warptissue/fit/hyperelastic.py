@@ -41,6 +41,7 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.fit.engine import fit_curve
+from warptissue.fit.plausibility import SOFT_TISSUE_MODULUS_RANGE_PA, fit_quality_warnings
 from warptissue.fit.result import FitResult, RejectStep
 from warptissue.materials import (
     HyperelasticMaterial,
@@ -54,6 +55,7 @@ from warptissue.materials import (
 
 __all__ = [
     "LOADINGS",
+    "MAX_NOMINAL_STRAIN",
     "MODEL_NAMES",
     "STABILITY_MODES",
     "HomogeneousTest",
@@ -83,6 +85,10 @@ STABILITY_MODES: tuple[str, ...] = (
     "planar_compression",
 )
 """The six modes of the Drucker stability check."""
+
+MAX_NOMINAL_STRAIN = 10.0
+"""Largest plausible nominal strain of a test in tension (Abaqus checks stability to 10); a
+larger one is refused (a displacement in millimetres?)."""
 
 MODEL_NAMES: tuple[str, ...] = (
     "neo_hookean",
@@ -156,6 +162,15 @@ def _check_magnitudes(
             f"the compressive nominal strain must stay below 1 but reaches "
             f"{float(strain[row]):.4g} at data row {row + 1}: check the specimen height and "
             "that the displacement is in metres",
+            path=path,
+            column=strain_column,
+        )
+    if loading != "compression" and np.any(strain > MAX_NOMINAL_STRAIN):
+        row = int(np.flatnonzero(strain > MAX_NOMINAL_STRAIN)[0])
+        raise InputError(
+            f"a nominal strain of {float(strain[row]):.4g} at data row {row + 1} is implausible "
+            f"(more than {MAX_NOMINAL_STRAIN:g}): check the specimen height and that the "
+            "displacement is in metres",
             path=path,
             column=strain_column,
         )
@@ -518,8 +533,9 @@ def fit_hyperelastic(
         InputError: Bad model name, objective or data (e.g. zero stress in the window of a
             relative fit).
 
-    A fitted model that is Drucker-unstable inside the strain range of a test gets a message
-    in ``result.warnings``.
+    ``result.warnings`` gets a message when the fitted model is Drucker-unstable inside the
+    strain range of a test, when its small-strain Young's modulus 3 mu0 is implausible for soft
+    tissue, or when R^2 < 0.
     """
     template = model_from_name(model) if isinstance(model, str) else model
     if not isinstance(template, HyperelasticMaterial):
@@ -591,6 +607,8 @@ def fit_hyperelastic(
     )
     fitted = template.with_parameters(result.x)
     stability = drucker_stability(fitted)
+    result.warnings.extend(fit_quality_warnings(result))
+    result.warnings.extend(_modulus_warnings(fitted))
     result.warnings.extend(_instability_warnings(stability, test_list))
     return HyperelasticFit(
         model=fitted,
@@ -600,6 +618,21 @@ def fit_hyperelastic(
         min_strain=window,
         stability=stability,
     )
+
+
+def _modulus_warnings(model: HyperelasticMaterial) -> list[str]:
+    """A message when the small-strain Young's modulus 3 mu0 of the fitted model lies outside
+    :data:`~warptissue.fit.plausibility.SOFT_TISSUE_MODULUS_RANGE_PA` (units of the data or
+    of the specimen geometry off?)."""
+    youngs_Pa = 3.0 * model.initial_shear_modulus_Pa
+    low, high = SOFT_TISSUE_MODULUS_RANGE_PA
+    if low <= youngs_Pa <= high:
+        return []
+    return [
+        f"the fitted small-strain Young's modulus 3 mu0 = {youngs_Pa:.4g} Pa is outside the "
+        f"plausible range of soft tissue [{low:.4g}, {high:.4g}] Pa: check the units of the "
+        "force and displacement and the specimen's area and height"
+    ]
 
 
 def _instability_warnings(
