@@ -283,3 +283,21 @@ def test_the_shipped_example_records_fit_back_to_their_sidecar_model(tmp_path, c
     assert model["g"] == pytest.approx(truth["g"], rel=0.01)
     assert model["relaxation_times_s"] == pytest.approx(truth["relaxation_times_s"], rel=0.01)
     assert printed["predictions"][0]["r_squared"] > 0.999
+
+
+def test_conditioning_errors_say_what_to_do(tmp_path, capsys):
+    path = _record(tmp_path / "ramp.csv")
+    base = ["fit", "relaxation", str(path), "--out", str(tmp_path)]
+    assert main([*base, "--contact", "10mm"]) == 2
+    error = capsys.readouterr().err
+    assert "ramp.csv" in error and "outside the recorded positions" in error
+    moving = tmp_path / "moving.csv"
+    time = np.arange(0.0, 10.0, 0.01)
+    x = 2e-3 * np.minimum(time / 0.5, 1.0)
+    write_csv(moving, {"time_s": time, "displacement_m": x, "force_N": TRUTH.force_N(time, x)})
+    assert main(["fit", "relaxation", str(moving), "--contact", "auto"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "moving.csv" in error and "--contact none" in error
+    assert main([*base, "--model", "prony:2", "--p0", "1,2"]) == 2
+    error = capsys.readouterr().err
+    assert "p0 needs 5 values" in error and "np.float64" not in error

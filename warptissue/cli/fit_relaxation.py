@@ -263,6 +263,12 @@ def _condition(
             if not kept.any():
                 raise InputError("no sample left after --keep-depth/--window")
             return _Record(path, t[kept], x[kept], f[kept], False, summary)
+        if args.contact != "auto" and not float(np.min(x)) <= args.contact < float(np.max(x)):
+            raise InputError(
+                f"--contact {args.contact:g} m lies outside the recorded positions "
+                f"[{float(np.min(x)):g}, {float(np.max(x)):g}] m",
+                column="displacement_m",
+            )
         prepared = prepare_record(
             {"time_s": t, "displacement_m": x, "force_N": f},
             contact_position_m=None if args.contact == "auto" else args.contact,
@@ -270,6 +276,13 @@ def _condition(
             window_s=args.window,
         )
     except InputError as exc:
+        if args.contact == "auto" and "baseline" in exc.message:
+            exc = InputError(
+                f"--contact auto: {exc.message}; it needs the probe at rest, off the "
+                "specimen, for at least 10 samples before it moves: give the contact "
+                "position or use --contact none",
+                value=exc.value,
+            )
         raise _named(exc, path) from None
     force = prepared.force_N if args.offset == "auto" else f[prepared.kept]
     summary = prepared.summary()

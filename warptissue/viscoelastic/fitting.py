@@ -228,7 +228,7 @@ def fit_relaxation_joint(
     names, units, start, build = _model_setup(checked, model, int(terms), p0, method)
     start = np.asarray(start, dtype=np.float64)
     if start.size != len(names):
-        raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
+        raise InputError(f"p0 needs {len(names)} values {names}", value=start.tolist())
     is_kappa = np.array([n.startswith("kappa") for n in names])
     start = np.where((start == 0.0) & ~is_kappa, 1e-300, start)
     weights = np.concatenate(
@@ -392,7 +392,7 @@ def fit_qlv(
         p0 = np.concatenate([[scale, rate], prony[1 : 1 + n] / instantaneous, prony[1 + n :]])
     start = np.asarray(p0, dtype=np.float64)
     if start.size != 2 + 2 * n:
-        raise InputError(f"p0 needs {2 + 2 * n} values", value=list(start))
+        raise InputError(f"p0 needs {2 + 2 * n} values", value=start.tolist())
     names = ("A_N", "B_per_m") + tuple(f"g{i + 1}" for i in range(n))
     names += tuple(f"tau{i + 1}_s" for i in range(n))
     units = ("N", "1/m") + ("",) * n + ("s",) * n
@@ -484,7 +484,7 @@ def fit_wiechert_joint(
     )
     start = np.asarray(p0, dtype=np.float64)
     if start.size != len(names):
-        raise InputError(f"p0 needs {len(names)} values {names}", value=list(start))
+        raise InputError(f"p0 needs {len(names)} values {names}", value=start.tolist())
     data_warnings = [m for r in checked for m in r.plausibility_warnings()]
     positive = np.array([not n.startswith("kappa") for n in names])
     weights = [1.0 / math.sqrt(r.time_s.size) for r in checked]
