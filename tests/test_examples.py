@@ -35,8 +35,12 @@ def run_example(name: str, *args: str, cwd: Path) -> str:
 
 
 def test_every_example_has_a_test():
-    tested = {"wiechert_table1_refit.py", "pillow_case.py", "rig_acquisition_demo.py"}
-    tested |= {"verify_flat_punch.py"}
+    tested = {
+        "wiechert_table1_refit.py",
+        "pillow_case.py",
+        "rig_acquisition_demo.py",
+        "verify_flat_punch.py",
+    }
     assert {p.name for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -64,6 +68,20 @@ def test_pillow_case_quick_beats_the_homogeneous_estimate(tmp_path):
     assert row["linear_max_mm"] > 2.0 * row["field_max_mm"]
     assert set(report["sensor"]) >= {"polynomial", "WCFM_SVM"}
     assert (tmp_path / "pillow" / "calibration.json").is_file()
+
+
+def test_verify_flat_punch_quick_matches_the_layer_factor_and_shows_locking(tmp_path):
+    """The small-depth punch stiffness on the coarse meshes lies within 3 % of the layer
+    factor that hayes_kappa computes (Hayes et al. 1972), and displacement TET4 locks."""
+    run_example("verify_flat_punch.py", "--quick", "--out", "verify.json", cwd=tmp_path)
+    report = json.loads((tmp_path / "verify.json").read_text())
+    study = report["mesh_convergence"]
+    for level in study["levels"]:
+        for contact in ("frictionless", "bonded"):
+            assert level[contact] == pytest.approx(study["hayes_k_over_8mua"], rel=0.03)
+    (locking,) = report["locking_K_over_mu_1000"]
+    assert locking["tet4_displacement"] > 4.0 * locking["tet10_mixed"]
+    assert locking["tet10_mixed"] < locking["tet10_displacement"]
 
 
 def test_rig_acquisition_demo_recovers_the_simulated_tissue(tmp_path):
