@@ -307,3 +307,14 @@ def test_an_all_zero_stress_is_not_fitted():
     test = HomogeneousTest("compression", np.linspace(0.0, 0.1, 11), np.zeros(11))
     with pytest.raises(InputError, match="nothing to fit"):
         fit_hyperelastic("neo_hookean", test)
+
+
+def test_window_errors_show_plain_numbers():
+    """Before: '(got np.float64(-1.0))' and a window error without the data's range."""
+    test = HomogeneousTest("compression", np.linspace(0.0, 0.1, 5), np.linspace(0.0, 1.0, 5))
+    with pytest.raises(InputError) as error:
+        fit_hyperelastic("neo_hookean", test, min_strain=np.float64(-1.0))
+    assert "np.float64" not in str(error.value) and "(got -1.0)" in str(error.value)
+    with pytest.raises(InputError, match="largest nominal strain 0.1") as error:
+        fit_hyperelastic("neo_hookean", test, min_strain=np.float64(0.5))
+    assert "np.float64" not in str(error.value)

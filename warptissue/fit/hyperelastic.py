@@ -292,8 +292,9 @@ class HomogeneousTest:
         )
         if not np.any(keep):
             raise InputError(
-                f"no data above the strain window's lower end in test {self.name!r}",
-                value=min_strain,
+                f"no data above the strain window's lower end min_strain = {float(min_strain):g} "
+                f"in test {self.name!r} (largest nominal strain "
+                f"{float(np.max(self.nominal_strain)):.4g})",
             )
         return HomogeneousTest(
             self.loading, self.nominal_strain[keep], self.nominal_stress_Pa[keep], self.name
@@ -413,7 +414,7 @@ def drucker_stability(
     if not 0.0 < max_compression_strain < 1.0 or not max_tension_strain > 0.0:
         raise InputError(
             "need max_tension_strain > 0 and 0 < max_compression_strain < 1",
-            value=(max_tension_strain, max_compression_strain),
+            value=(float(max_tension_strain), float(max_compression_strain)),
         )
     ranges = []
     for mode_name in STABILITY_MODES:
@@ -552,14 +553,17 @@ def fit_hyperelastic(
         raise InputError("objective must be 'absolute' or 'relative'", value=objective)
     window = (0.05 if objective == "relative" else 0.0) if min_strain is None else min_strain
     if not (math.isfinite(window) and window >= 0.0):
-        raise InputError("min_strain must be >= 0", value=min_strain)
+        raise InputError("min_strain must be >= 0", value=float(window))
     fitted_tests = [t.window(window) for t in test_list]
     data = np.concatenate([t.nominal_stress_Pa for t in fitted_tests])
     divisors = data.copy() if objective == "relative" else np.ones_like(data)
     if not np.any(data):
         raise InputError("the stress is zero throughout the strain window: nothing to fit")
     if objective == "relative" and np.any(data == 0.0):
-        raise InputError("the relative objective needs non-zero stresses in the strain window")
+        raise InputError(
+            "the relative objective needs non-zero stresses in the strain window (raise "
+            "min_strain above the zero-stress points, or use the absolute objective)"
+        )
 
     def model_at(p: np.ndarray) -> HyperelasticMaterial:
         try:
