@@ -313,6 +313,7 @@ def test_a_well_determined_fit_is_identified(rng):
     assert summary["identified"] is True
     assert summary["identifiability"] == [] and summary["warnings"] == []
     assert "warning:" not in result.summary()
+    assert "parameters identified: yes" in result.summary()
 
 
 def test_a_parameter_pinned_at_a_bound_is_not_identified(rng):
@@ -330,6 +331,7 @@ def test_a_parameter_pinned_at_a_bound_is_not_identified(rng):
     (message,) = result.identifiability
     assert message.startswith("slope_N_per_m = 0 N/m is pinned at its lower bound")
     assert "warning: slope_N_per_m = 0 N/m is pinned" in result.summary()
+    assert "parameters identified: NO (1 finding(s))" in result.summary(warnings=False)
     assert json.loads(json.dumps(result.to_dict()))["identified"] is False
 
 

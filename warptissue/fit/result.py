@@ -316,6 +316,10 @@ class FitResult:
             f"R^2 = {r2}, RMSE = {self.rmse:.6g}, cost = {self.cost:.6g}, "
             f"iterations = {self.iterations}, status = {self.status}: {self.message}"
         )
+        lines.append(
+            "parameters identified: "
+            + ("yes" if self.identified else f"NO ({len(self.identifiability)} finding(s))")
+        )
         if warnings:
             lines.extend(f"warning: {message}" for message in self.all_warnings)
         return "\n".join(lines)
