@@ -356,7 +356,7 @@ def least_squares(
     x = np.asarray(x0, dtype=np.float64).reshape(-1).copy()
     n = x.size
     if n == 0 or not np.all(np.isfinite(x)):
-        raise InputError("x0 must be a non-empty array of finite numbers", value=x0)
+        raise InputError("x0 must be a non-empty array of finite numbers", value=x.tolist())
     names = _validate_names(parameter_names, n, "x", "parameter_names")
     units = (
         ("",) * n
@@ -368,7 +368,10 @@ def least_squares(
     lower = _as_vector("lower bound", bounds[0], n)
     upper = _as_vector("upper bound", bounds[1], n)
     if np.any(np.isnan(lower)) or np.any(np.isnan(upper)) or np.any(lower >= upper):
-        raise InputError("each lower bound must be below its upper bound", value=bounds)
+        raise InputError(
+            "each lower bound must be below its upper bound",
+            value=(lower.tolist(), upper.tolist()),
+        )
     outside = np.flatnonzero((x < lower) | (x > upper))
     if outside.size:
         j = int(outside[0])
@@ -380,7 +383,7 @@ def least_squares(
     if x_scale is not None:
         scale_vector = _as_vector("x_scale", x_scale, n)
         if not np.all(np.isfinite(scale_vector) & (scale_vector > 0.0)):
-            raise InputError("x_scale must be positive and finite", value=x_scale)
+            raise InputError("x_scale must be positive and finite", value=scale_vector.tolist())
     if int(max_iterations) < 1:
         raise InputError("max_iterations must be at least 1", value=max_iterations)
     for tol_name, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
@@ -634,7 +637,9 @@ def fit_curve(
             raise InputError(f"weights need {y.size} entries", value=w.size)
         if not np.all(np.isfinite(w) & (w > 0.0)):
             bad = int(np.flatnonzero(~(np.isfinite(w) & (w > 0.0)))[0])
-            raise InputError(f"weights must be positive and finite (index {bad})", value=w[bad])
+            raise InputError(
+                f"weights must be positive and finite (index {bad})", value=float(w[bad])
+            )
     if objective == "absolute":
         divisor = np.ones_like(y)
     elif objective == "relative":

@@ -135,7 +135,9 @@ class ParallelNonlinearSprings:
         )
         values = [self.k01, self.k02] + [v for branch in self.branches for v in branch]
         if not all(math.isfinite(v) and v >= 0.0 for v in values):
-            raise InputError("parameters must be finite and non-negative", value=values)
+            raise InputError(
+                "parameters must be finite and non-negative", value=[float(v) for v in values]
+            )
         if any(len(branch) != 3 for branch in self.branches):
             raise InputError("each branch needs (k_j1, k_j2, k_j3)", value=self.branches)
 
