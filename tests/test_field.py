@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from field_cases import PILLOW_FORCE_N, synthetic_pillow, synthetic_slab, write_case_files
 
 from warptissue.errors import InputError
 from warptissue.field import LinearTetModel, alpha_from_youngs, youngs_from_alpha
@@ -21,7 +22,6 @@ from warptissue.field.markers import (
     read_markers_csv,
     surface_interpolation,
 )
-from warptissue.field.pillow import PILLOW_FORCE_N, synthetic_pillow, write_pillow_files
 from warptissue.field.pipeline import estimate_load_set
 from warptissue.mesh import block_mesh
 
@@ -144,24 +144,28 @@ def test_group_forces_reproduce_k_times_u(device, rng):
     )
 
 
+def case_problem(case, device="cpu"):
+    """The field problem of a synthetic case, every marker used for training."""
+    mesh = case.grid.mesh
+    interpolation = surface_interpolation(mesh, case.marker_reference_m)
+    nodal = fill_nodal_displacements(
+        case.grid, interpolation, case.marker_displacement_m, smoothing=1e-12
+    )
+    return FieldProblem(
+        LinearTetModel(mesh, device=device),
+        mesh.node_set("zmin"),
+        case.force_N,
+        interpolation,
+        case.marker_displacement_m,
+        nodal,
+    )
+
+
 def synthetic_problem(columns: int = 6, rows: int = 4, noise_m: float = 0.0, device="cpu"):
     pillow = synthetic_pillow(
         load_set="F", columns=columns, rows=rows, noise_m=noise_m, device=device
     )
-    mesh = pillow.grid.mesh
-    interpolation = surface_interpolation(mesh, pillow.marker_reference_m)
-    nodal = fill_nodal_displacements(
-        pillow.grid, interpolation, pillow.marker_displacement_m, smoothing=1e-12
-    )
-    problem = FieldProblem(
-        LinearTetModel(mesh, device=device),
-        mesh.node_set("zmin"),
-        pillow.force_N,
-        interpolation,
-        pillow.marker_displacement_m,
-        nodal,
-    )
-    return pillow, problem
+    return pillow, case_problem(pillow, device)
 
 
 @pytest.mark.parametrize("objective", ["force", "displacement"])
@@ -221,6 +225,37 @@ def test_force_objective_recovers_the_field_from_complete_exact_data():
     assert error[resolved].max() < 0.01
 
 
+@pytest.mark.parametrize("noise_m", [0.0, 5e-6])
+def test_constrained_cells_lie_within_their_error_bounds_on_an_independent_slab(noise_m):
+    """Issue 19: on a slab unlike the pillow (a 3x stiff inclusion on a gradient, nu 0.30-0.35,
+    an oblique force off the centre), a cell reported constrained (R_alpha >= 0.9, standard
+    error <= 3%) was 13% off on noise-free data: the Tikhonov bias was not in the confidence.
+
+    Now every resolved cell's true E and nu lie within the reported error bounds (bias bound
+    + 2 standard errors), and every constrained cell's E is within the 10% it claims.
+    """
+    case = synthetic_slab(noise_m=noise_m)
+    estimate = estimate_field(
+        case_problem(case), objective="displacement", gamma=1e-5, method="lm", max_iterations=100
+    )
+    assert estimate.fit.success
+    error = np.abs(estimate.youngs_modulus_Pa / case.youngs_modulus_Pa - 1.0)
+    resolved = estimate.resolution_alpha >= 0.9
+    assert resolved.sum() >= 10
+    np.testing.assert_array_less(error[resolved], estimate.youngs_error_bound[resolved])
+    constrained = estimate.constrained_youngs()
+    assert 1 <= constrained.sum() < resolved.sum()
+    np.testing.assert_array_less(error[constrained], 0.10)
+    nu_error = np.abs(estimate.poissons_ratio - case.poissons_ratio)
+    resolved_nu = estimate.resolution_nu >= 0.9
+    np.testing.assert_array_less(
+        nu_error[resolved_nu], estimate.poissons_ratio_error_bound[resolved_nu]
+    )
+    np.testing.assert_array_less(nu_error[estimate.constrained_poissons_ratio()], 0.02)
+    # The bias bound is what makes the difference: noise alone does not cover the error.
+    assert np.any(error[resolved] > 3.0 * estimate.youngs_relative_error[resolved])
+
+
 def test_reduced_pillow_case_matches_table_3_pattern():
     """Seed 002's pillow at half marker resolution (12 x 7 markers, 66 hexahedra).
 
@@ -257,10 +292,15 @@ def test_reduced_pillow_case_matches_table_3_pattern():
         assert result.field_errors["max_error_m"] < 1.5e-3
         assert result.homogeneous_errors["max_error_m"] > 2.0 * result.field_errors["max_error_m"]
         assert result.homogeneous_errors["mean_error_m"] > 2.0 * result.field_errors["mean_error_m"]
-        constrained = result.field.constrained_youngs()
+        field = result.field
+        error = np.abs(field.youngs_modulus_Pa / pillow.youngs_modulus_Pa - 1.0)
+        resolved = field.resolution_alpha >= 0.9
+        assert resolved.sum() >= 10
+        np.testing.assert_array_less(error[resolved], field.youngs_error_bound[resolved])
+        # One point load pins E per cell to about 20% at best under the bias bound.
+        constrained = field.constrained_youngs(relative_error=0.25)
         assert constrained.sum() >= 1
-        error = np.abs(result.field.youngs_modulus_Pa / pillow.youngs_modulus_Pa - 1.0)
-        assert error[constrained].max() < 0.10
+        np.testing.assert_array_less(error[constrained], 0.25)
 
 
 def test_youngs_alpha_round_trip():
@@ -300,7 +340,7 @@ def test_cli_fit_field_writes_outputs_and_reports_bad_input(tmp_path, capsys):
     from warptissue.cli import main
 
     pillows = {"C": synthetic_pillow(load_set="C", columns=6, rows=4, noise_m=1e-5)}
-    markers_path, forces_path = write_pillow_files(tmp_path, pillows)
+    markers_path, forces_path = write_case_files(tmp_path, pillows)
     out = tmp_path / "out"
     status = main(
         [

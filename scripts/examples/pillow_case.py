@@ -18,6 +18,7 @@ Usage: python scripts/examples/pillow_case.py [--out runs/pillow] [--noise-m 2e-
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -31,9 +32,12 @@ from warptissue.acquisition.calibration import (
     synthetic_sensor,
 )
 from warptissue.field.markers import read_forces_csv, read_markers_csv
-from warptissue.field.pillow import synthetic_pillow, write_pillow_files
 from warptissue.field.pipeline import estimate_load_set, write_load_set_outputs
 from warptissue.io import write_json
+
+# The synthetic pillow is a test fixture: it lives in the repository's tests/ folder.
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
+from field_cases import synthetic_pillow, write_case_files  # noqa: E402
 
 
 def pillow(
@@ -51,7 +55,7 @@ def pillow(
         label: synthetic_pillow(load_set=label, columns=columns, rows=rows, noise_m=noise_m)
         for label in sets
     }
-    markers_path, forces_path = write_pillow_files(out, pillows)
+    markers_path, forces_path = write_case_files(out, pillows)
     markers, forces = read_markers_csv(markers_path), read_forces_csv(forces_path)
     table = []
     print(

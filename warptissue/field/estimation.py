@@ -47,6 +47,9 @@ NU_UPPER = 0.49
 NU_SCALE = 0.1
 """Scale of Poisson's ratio in the normalized unknowns and the Tikhonov term."""
 
+CONFIDENCE_SIGMAS = 2.0
+"""Standard errors added to the regularization bias bound in the per-group error bounds."""
+
 
 @dataclass(frozen=True)
 class FieldProblem:
@@ -233,8 +236,22 @@ class FieldEstimate:
             [0, 1]: the share of each parameter set by the data rather than by the prior.
         resolution_nu: The same for nu.
         youngs_relative_error: Standard error of E relative to E per group (noise estimated
-            from the data residual, propagated through the regularized estimator).
-        poissons_ratio_error: Standard error of nu per group.
+            from the data residual, propagated through the regularized estimator). Noise
+            only: the regularization bias is in :attr:`youngs_bias_bound`.
+        poissons_ratio_error: Standard error of nu per group (noise only).
+        youngs_leakage: Regularization-bias weights of E per group, shape (group_count, 2):
+            the l1 norms, over the alpha columns and over the nu columns, of the group's
+            row of d(ln E)/dx (I - R), R the resolution matrix. With every group's true
+            alpha within ``alpha_deviation`` (relative) of alpha0 and every true nu within
+            ``nu_deviation`` of nu0, the linearized bias of ln E is at most
+            ``youngs_leakage @ (alpha_deviation, nu_deviation / NU_SCALE)``.
+        poissons_ratio_leakage: The same for nu (rows of NU_SCALE (I - R)), shape
+            (group_count, 2), so that the bias of nu is at most
+            ``poissons_ratio_leakage @ (alpha_deviation, nu_deviation / NU_SCALE)``.
+        alpha_deviation: The assumed largest relative deviation of the true alpha from
+            alpha0 in any group (given, or the fitted field's largest deviation).
+        nu_deviation: The assumed largest deviation of the true nu from nu0 (given, or the
+            fitted field's largest deviation).
     """
 
     alpha_Pa: np.ndarray
@@ -248,23 +265,68 @@ class FieldEstimate:
     resolution_nu: np.ndarray
     youngs_relative_error: np.ndarray
     poissons_ratio_error: np.ndarray
+    youngs_leakage: np.ndarray
+    poissons_ratio_leakage: np.ndarray
+    alpha_deviation: float
+    nu_deviation: float
+
+    @property
+    def _deviation(self) -> np.ndarray:
+        return np.array([self.alpha_deviation, self.nu_deviation / NU_SCALE])
+
+    @property
+    def youngs_bias_bound(self) -> np.ndarray:
+        """Bound on the regularization bias of E relative to E per group (linearized, under
+        the deviation assumption of ``alpha_deviation`` and ``nu_deviation``)."""
+        return self.youngs_leakage @ self._deviation
+
+    @property
+    def poissons_ratio_bias_bound(self) -> np.ndarray:
+        """Bound on the regularization bias of nu per group (as :attr:`youngs_bias_bound`)."""
+        return self.poissons_ratio_leakage @ self._deviation
+
+    @property
+    def youngs_error_bound(self) -> np.ndarray:
+        """Error bound of E relative to E per group: bias bound + CONFIDENCE_SIGMAS standard
+        errors."""
+        return self.youngs_bias_bound + CONFIDENCE_SIGMAS * self.youngs_relative_error
+
+    @property
+    def poissons_ratio_error_bound(self) -> np.ndarray:
+        """Error bound of nu per group: bias bound + CONFIDENCE_SIGMAS standard errors."""
+        return self.poissons_ratio_bias_bound + CONFIDENCE_SIGMAS * self.poissons_ratio_error
 
     def constrained_youngs(
-        self, *, resolution: float = 0.9, relative_error: float = 0.03
+        self, *, resolution: float = 0.9, relative_error: float = 0.10
     ) -> np.ndarray:
-        """Groups whose E the data constrain: alpha's resolution >= ``resolution`` (the prior
-        contributes at most 10%) and E's standard error <= ``relative_error`` of E."""
-        return (self.resolution_alpha >= resolution) & (
-            self.youngs_relative_error <= relative_error
-        )
+        """Groups whose E the data constrain: alpha's resolution >= ``resolution`` and the
+        error bound (regularization bias bound + 2 standard errors, :attr:`youngs_error_bound`)
+        <= ``relative_error`` of E."""
+        return (self.resolution_alpha >= resolution) & (self.youngs_error_bound <= relative_error)
 
     def constrained_poissons_ratio(
-        self, *, resolution: float = 0.9, relative_error: float = 0.03
+        self, *, resolution: float = 0.9, error: float = 0.02
     ) -> np.ndarray:
-        """Groups whose nu the data constrain (as :meth:`constrained_youngs`, for nu)."""
-        return (self.resolution_nu >= resolution) & (
-            self.poissons_ratio_error <= relative_error * self.poissons_ratio
-        )
+        """Groups whose nu the data constrain: nu's resolution >= ``resolution`` and
+        :attr:`poissons_ratio_error_bound` <= ``error`` (absolute)."""
+        return (self.resolution_nu >= resolution) & (self.poissons_ratio_error_bound <= error)
+
+    def confidence_assumptions(self) -> dict:
+        """What the error bounds and the constrained flags assume (JSON-ready)."""
+        return {
+            "alpha_deviation": self.alpha_deviation,
+            "nu_deviation": self.nu_deviation,
+            "standard_errors_in_bound": CONFIDENCE_SIGMAS,
+            "constrained_youngs": {"resolution_alpha_min": 0.9, "youngs_error_bound_max": 0.10},
+            "constrained_poissons_ratio": {
+                "resolution_nu_min": 0.9,
+                "poissons_ratio_error_bound_max": 0.02,
+            },
+            "meaning": "bias bound: largest linearized regularization bias for a true field "
+            "whose alpha lies within alpha_deviation (relative) of alpha0 and whose nu lies "
+            "within nu_deviation of nu0 in every cell; error bound = bias bound + "
+            f"{CONFIDENCE_SIGMAS:g} standard errors (noise)",
+        }
 
     def to_dict(self) -> dict:
         """JSON-ready summary (per-group arrays included)."""
@@ -284,28 +346,40 @@ class FieldEstimate:
                 "resolution_alpha": self.resolution_alpha,
                 "resolution_nu": self.resolution_nu,
                 "youngs_relative_error": self.youngs_relative_error,
+                "youngs_bias_bound": self.youngs_bias_bound,
+                "youngs_error_bound": self.youngs_error_bound,
                 "poissons_ratio_error": self.poissons_ratio_error,
+                "poissons_ratio_bias_bound": self.poissons_ratio_bias_bound,
+                "poissons_ratio_error_bound": self.poissons_ratio_error_bound,
                 "constrained_youngs": self.constrained_youngs(),
                 "constrained_poissons_ratio": self.constrained_poissons_ratio(),
             },
+            "confidence": self.confidence_assumptions(),
             "fit": {
                 "method": self.fit.method,
                 "status": self.fit.status,
                 "message": self.fit.message,
                 "iterations": self.fit.iterations,
                 "cost": self.fit.cost,
+                "identified": self.fit.identified,
+                "identifiability": self.fit.identifiability,
             },
         }
 
 
 def _resolution_and_spread(
     data_jacobian: np.ndarray, data_residual: np.ndarray, gamma: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Model-resolution diagonal and noise covariance of the regularized estimate.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Model resolution, noise covariance and regularization-bias operator of the estimate.
 
-    With A = J^T J + gamma I: resolution R = A^-1 J^T J (its diagonal in [0, 1]) and, for
-    residual noise of variance s^2, covariance s^2 A^-1 J^T J A^-1, where s^2 is estimated
-    as ||r||^2 / (m - trace R) (the effective degrees of freedom).
+    With A = J^T J + gamma I (J the data Jacobian in the normalized unknowns): the resolution
+    matrix R = A^-1 J^T J (its diagonal in [0, 1]); for residual noise of variance s^2, the
+    covariance s^2 A^-1 J^T J A^-1, where s^2 is estimated as ||r||^2 / (m - trace R) (the
+    effective degrees of freedom); and the bias operator I - R = gamma A^-1: linearized, the
+    regularized estimate x of a true x_t anchored at x0 has the bias -(I - R)(x_t - x0).
+
+    Returns:
+        (diag R, shape (n,); covariance, shape (n, n); I - R, shape (n, n)).
     """
     _, singular, vt = np.linalg.svd(data_jacobian, full_matrices=False)
     power = singular**2
@@ -314,7 +388,15 @@ def _resolution_and_spread(
     dof = max(data_jacobian.shape[0] - float(filters.sum()), 1.0)
     variance = float(data_residual @ data_residual) / dof
     covariance = (vt.T * (variance * power / (power + gamma) ** 2)) @ vt
-    return resolution, covariance
+    # I - V F V^T holds the null space of J (filter 0) too, which the thin SVD leaves out.
+    bias_operator = np.eye(vt.shape[1]) - (vt.T * filters) @ vt
+    return resolution, covariance, bias_operator
+
+
+def _leakage(rows: np.ndarray, groups: int) -> np.ndarray:
+    """l1 norms of rows over the alpha and the nu columns, shape (rows, 2)."""
+    magnitude = np.abs(rows)
+    return np.column_stack([magnitude[:, :groups].sum(axis=1), magnitude[:, groups:].sum(axis=1)])
 
 
 def data_objective(
@@ -401,6 +483,8 @@ def estimate_field(
     ftol: float = 1e-10,
     xtol: float = 1e-10,
     gtol: float = 0.0,
+    alpha_deviation: float | None = None,
+    nu_deviation: float | None = None,
     progress: bool = False,
 ) -> FieldEstimate:
     """Estimate alpha and nu per group (seed 002, Eq. 5-6, solved by the self-adapting LM).
@@ -425,6 +509,11 @@ def estimate_field(
         method: "salm" (seed 002's self-adapting LM) or "lm".
         max_iterations: Iteration limit of the LM.
         ftol, xtol, gtol: Stopping tolerances of :func:`warptissue.fit.least_squares`.
+        alpha_deviation: Assumed largest deviation of the true alpha from alpha0 in any
+            group, relative (0.5: within +-50%), for the regularization bias bounds. None:
+            the fitted field's largest deviation.
+        nu_deviation: Assumed largest deviation of the true nu from nu0 in any group
+            (absolute). None: the fitted field's largest deviation.
         progress: Show a progress bar.
 
     Returns:
@@ -440,7 +529,10 @@ def estimate_field(
     if objective not in ("force", "displacement"):
         raise InputError("objective must be 'force' or 'displacement'", value=objective)
     if not gamma >= 0:
-        raise InputError("gamma must be >= 0", value=gamma)
+        raise InputError("gamma must be >= 0", value=float(gamma))
+    for name, deviation in (("alpha_deviation", alpha_deviation), ("nu_deviation", nu_deviation)):
+        if deviation is not None and not (np.isfinite(deviation) and deviation >= 0):
+            raise InputError(f"{name} must be a finite number >= 0", value=float(deviation))
     initial = homogeneous_estimate(problem) if initial is None else initial
     groups = problem.model.group_count
     alpha0 = initial.alpha_Pa
@@ -480,10 +572,10 @@ def estimate_field(
         parameter_names=names,
     )
     alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu_scale
-    resolution, covariance = _resolution_and_spread(
+    resolution, covariance, bias_operator = _resolution_and_spread(
         data_jacobian(result.x), data_residual(result.x), max(gamma, 1e-300)
     )
-    # dE/E = d alpha / alpha + (1 / (1 + nu) - 2 / (1 - 2 nu)) d nu, in normalized x.
+    # d(ln E)/dx: d alpha / alpha + (1 / (1 + nu) - 2 / (1 - 2 nu)) d nu, x normalized.
     cells = np.arange(groups)
     weights_alpha = alpha0 / alpha
     weights_nu = nu_scale * (1.0 / (1.0 + nu) - 2.0 / (1.0 - 2.0 * nu))
@@ -492,6 +584,14 @@ def estimate_field(
         + weights_nu**2 * covariance[cells + groups, cells + groups]
         + 2.0 * weights_alpha * weights_nu * covariance[cells, cells + groups]
     )
+    youngs_rows = (
+        weights_alpha[:, None] * bias_operator[:groups]
+        + weights_nu[:, None] * bias_operator[groups:]
+    )
+    if alpha_deviation is None:
+        alpha_deviation = float(np.abs(alpha / alpha0 - 1.0).max())
+    if nu_deviation is None:
+        nu_deviation = float(np.abs(nu - initial.poissons_ratio).max())
     return FieldEstimate(
         alpha_Pa=alpha,
         poissons_ratio=nu,
@@ -504,6 +604,10 @@ def estimate_field(
         resolution_nu=resolution[groups:],
         youngs_relative_error=np.sqrt(np.maximum(variance_e, 0.0)),
         poissons_ratio_error=np.sqrt(np.maximum(np.diag(covariance)[groups:], 0.0)) * nu_scale,
+        youngs_leakage=_leakage(youngs_rows, groups),
+        poissons_ratio_leakage=_leakage(nu_scale * bias_operator[groups:], groups),
+        alpha_deviation=float(alpha_deviation),
+        nu_deviation=float(nu_deviation),
     )
 
 
