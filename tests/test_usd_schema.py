@@ -121,3 +121,20 @@ def test_record_maps_keys_and_inverts():
         material_record(
             {"model": "ogden", "mu1_Pa": 1.0, "alpha1": 2.0, "mu3_Pa": 1.0, "alpha3": 2.0}
         )
+
+
+def test_records_and_material_objects_give_the_same_small_strain_equivalent():
+    """One owner: a material dictionary goes through the warptissue.materials model."""
+    from warptissue import materials
+
+    for material in (
+        materials.NeoHookean(287.5, 3e4),
+        materials.MooneyRivlin(-40.0, 160.0, 2500.0),
+        materials.Yeoh(300.0, -20.0, 15.0, 6000.0),
+        materials.Ogden((250.0, -30.0, 5.0), (3.0, -2.0, 8.0), 4000.0),
+        materials.CompressibleNeoHookean(200.0, 1500.0),
+    ):
+        record = material.to_dict()
+        assert small_strain_from_record(record) == material.small_strain_equivalent()
+    with pytest.raises(InputError, match="cannot derive"):
+        small_strain_from_record({"model": "compressible_neo_hookean", "shear_modulus_Pa": 1.0})

@@ -200,11 +200,12 @@ def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
         ``(E_Pa, nu)``. Without a bulk modulus the model is incompressible and nu = 0.5.
 
     Notes:
-        Linearizing each strain energy at the reference state gives the initial shear modulus
-        mu0: 2 C10 (neo-Hookean, reduced polynomial, Yeoh), 2 (C10 + C01) (Mooney-Rivlin),
-        sum mu_i (Ogden, Abaqus form 2 mu_i / alpha_i^2). With bulk modulus K,
-        E = 9 K mu0 / (3 K + mu0) and nu = (3 K - 2 mu0) / (2 (3 K + mu0)); incompressible
-        gives E = 3 mu0, nu = 1/2.
+        The record becomes the :mod:`warptissue.materials` model (incompressible without a
+        bulk modulus; a compressible neo-Hookean needs one), whose
+        ``small_strain_equivalent()`` linearizes the strain energy at the reference state:
+        initial shear modulus mu0 = 2 C10 (neo-Hookean, reduced polynomial, Yeoh),
+        2 (C10 + C01) (Mooney-Rivlin), sum mu_i (Ogden); E = 9 K mu0 / (3 K + mu0) and
+        nu = (3 K - 2 mu0) / (2 (3 K + mu0)), and E = 3 mu0, nu = 1/2 when incompressible.
     """
     if "model" not in record:
         raise InputError("material dictionary has no 'model' key", value=dict(record))
@@ -212,30 +213,51 @@ def small_strain_from_record(record: Mapping[str, Any]) -> tuple[float, float]:
     values = _hyperelastic_values(record)
     if "youngsModulus" in values and "poissonsRatio" in values:
         return float(values["youngsModulus"]), float(values["poissonsRatio"])
-    if model in ("neohookean", "reducedpolynomial", "yeoh") and "C10" in values:
-        shear = 2.0 * float(values["C10"])
-    elif model == "mooneyrivlin" and "C10" in values and "C01" in values:
-        shear = 2.0 * (float(values["C10"]) + float(values["C01"]))
-    elif model == "ogden" and "mu" in values:
-        shear = float(np.sum(values["mu"]))
-    elif model == "compressibleneohookean" and "shearModulus" in values:
-        shear = float(values["shearModulus"])
-    else:
-        raise InputError(
-            "cannot derive small-strain E and nu from this material dictionary; give "
-            "'youngs_modulus_Pa' and 'poissons_ratio' or pass the material object",
-            value=dict(record),
-        )
-    if not shear > 0:
-        raise InputError("the material's initial shear modulus must be positive", value=shear)
     if "bulkModulus" in values:
         bulk = float(values["bulkModulus"])
     elif "D1" in values:
         bulk = 2.0 / float(values["D1"])
     else:
-        return 3.0 * shear, 0.5
-    youngs = 9.0 * bulk * shear / (3.0 * bulk + shear)
-    return youngs, (3.0 * bulk - 2.0 * shear) / (2.0 * (3.0 * bulk + shear))
+        bulk = None
+    material = _small_strain_material(model, values, bulk)
+    if material is None:
+        raise InputError(
+            "cannot derive small-strain E and nu from this material dictionary; give "
+            "'youngs_modulus_Pa' and 'poissons_ratio' or pass the material object",
+            value=dict(record),
+        )
+    return material.small_strain_equivalent()
+
+
+def _small_strain_material(model: str, values: Mapping[str, Any], bulk: float | None) -> Any:
+    """The :mod:`warptissue.materials` model of ``tissue:hyperelastic:`` values (see
+    :func:`_hyperelastic_values`) with bulk modulus ``bulk`` (None: incompressible), or None
+    when the model or a parameter is unknown or missing.
+
+    Raises:
+        InputError: The initial shear modulus is not positive, or a value the model refuses.
+    """
+    from warptissue import materials
+
+    coefficients = []
+    while f"C{len(coefficients) + 1}0" in values:
+        coefficients.append(float(values[f"C{len(coefficients) + 1}0"]))
+    if model == "compressibleneohookean":
+        if "shearModulus" not in values or bulk is None:
+            return None
+        return materials.CompressibleNeoHookean(float(values["shearModulus"]), bulk)
+    if model in ("neohookean", "reducedpolynomial", "yeoh") and coefficients:
+        material = materials.ReducedPolynomial(tuple(coefficients))
+    elif model == "mooneyrivlin" and "C10" in values and "C01" in values:
+        material = materials.MooneyRivlin(float(values["C10"]), float(values["C01"]))
+    elif model == "ogden" and "mu" in values and "alpha" in values:
+        material = materials.Ogden(tuple(values["mu"]), tuple(values["alpha"]))
+    else:
+        return None
+    shear = material.initial_shear_modulus_Pa
+    if not shear > 0:
+        raise InputError("the material's initial shear modulus must be positive", value=shear)
+    return material.with_bulk_modulus(bulk)
 
 
 def material_record(material: Any) -> MaterialRecord:
