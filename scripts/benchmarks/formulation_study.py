@@ -28,6 +28,7 @@ import math
 import time
 
 import numpy as np
+from bench_flat_punch import geometric_levels  # this folder is on sys.path when run
 
 PROBE_RADIUS_M = 1.0e-3
 RADIUS_M = 10.0e-3
@@ -80,15 +81,6 @@ def warptissue_force(poisson_ratio: float, size_near_m: float, formulation: str)
         "force_N": float(result.reaction_force_N[0]),
         "seconds": time.perf_counter() - started,
     }
-
-
-def geometric_levels(length_m: float, first_m: float, growth: float) -> np.ndarray:
-    """Positions 0..length with spacing first_m, first_m * growth, ... (scaled to fit)."""
-    sizes = [first_m]
-    while sum(sizes) < length_m:
-        sizes.append(sizes[-1] * growth)
-    positions = np.concatenate([[0.0], np.cumsum(sizes)])
-    return positions * (length_m / positions[-1])
 
 
 def felupe_force(poisson_ratio: float, size_near_m: float, *, mixed: bool) -> dict:
