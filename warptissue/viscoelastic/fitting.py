@@ -184,7 +184,8 @@ def fit_relaxation_joint(
     (predict it with ``result.fitted_model.force_N``). Each model is driven by each record's
     measured displacement history. The residuals of record i are weighted by
     1 / sqrt(n_i), so that every test weighs as its mean square error whatever its sampling
-    rate and length (for one record this changes nothing).
+    rate and length (one record is fitted unweighted; the parameters and their covariance
+    would be the same).
 
     Args:
         records: The tests (:class:`RelaxationRecord`, or (time_s, displacement_m, force_N)
@@ -231,8 +232,10 @@ def fit_relaxation_joint(
         raise InputError(f"p0 needs {len(names)} values {names}", value=start.tolist())
     is_kappa = np.array([n.startswith("kappa") for n in names])
     start = np.where((start == 0.0) & ~is_kappa, 1e-300, start)
-    weights = np.concatenate(
-        [np.full(r.time_s.size, 1.0 / math.sqrt(r.time_s.size)) for r in checked]
+    weights = (  # one record: unweighted, so that the cost is its plain 0.5 * SSR
+        None
+        if len(checked) == 1
+        else np.concatenate([np.full(r.time_s.size, r.time_s.size**-0.5) for r in checked])
     )
 
     def predict(p: np.ndarray) -> np.ndarray:
