@@ -247,3 +247,23 @@ def test_rig_sim_bad_options_one_line(options, message):
     err = finished.stderr.strip()
     assert finished.returncode == 2 and len(err.splitlines()) == 1, err
     assert message in err and "column" not in err and "Traceback" not in err
+
+
+def test_ctrl_c_during_the_start_move_stops_the_axis(tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the axis moves to --start: the client sends STOP on its way out (exit
+    130), so the axis does not run on to its target."""
+    from warptissue.acquisition import RigClient
+
+    def interrupted(self, *, timeout_s):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(RigClient, "wait_until_done", interrupted)
+    rig = SimulatedRig(ReferenceSLS(40.0, 20.0, 2.0), RigConfig(time_scale=1.0))
+    with RigServer(rig, transport="tcp") as server:
+        command = ["acquire", "--port", server.url, "--depth", "1mm", "--speed", "8mm/s"]
+        assert (
+            main([*command, "--hold", "0s", "--start", "20mm", "--out", str(tmp_path / "x.csv")])
+            == 130
+        )
+        assert rig.motion is None and rig.position_m < 20e-3  # stopped short of 20 mm
+    assert not (tmp_path / "x.csv").exists()

@@ -48,7 +48,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     acquire.add_argument("--cycles", type=float, help="number of sine cycles")
     acquire.add_argument("--rate", default="1000Hz", help="sample rate, at most 1000Hz")
     acquire.add_argument("--out", required=True, help="output CSV (the sidecar is .json)")
-    acquire.add_argument("--start", help="move to this axis position first, e.g. 10mm")
+    acquire.add_argument(
+        "--start",
+        help="move to this axis position first, e.g. 10mm (a sine swings about it; the axis "
+        "starts at 0, the top of its travel)",
+    )
     acquire.add_argument("--zero", action="store_true", help="tare the force before the test")
     acquire.add_argument("--calibration", help="force calibration JSON (raw column kept)")
     acquire.add_argument("--overwrite", action="store_true", help="replace an existing CSV")
@@ -74,7 +78,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--instantaneous-stiffness", default="40N/m")
     sim.add_argument("--equilibrium-stiffness", default="20N/m")
     sim.add_argument("--relaxation-time", default="2s")
-    sim.add_argument("--force-curve", help="CSV with displacement_m,force_N (--tissue curve)")
+    sim.add_argument(
+        "--force-curve",
+        help="CSV with displacement_m,force_N columns, e.g. simulate's force_curve.csv "
+        "(--tissue curve)",
+    )
     sim.add_argument("--surface", default="0.3mm", help="specimen surface below the start")
     sim.add_argument("--noise", default="0.3mN", help="force noise (standard deviation)")
     sim.add_argument("--offset", default="0mN", help="force transducer offset")
@@ -185,7 +193,7 @@ def run_acquire(args: argparse.Namespace) -> int:
         try:
             if start_m is not None:
                 client.move_to(start_m)
-                client.wait_until_done(timeout_s=60.0)
+                client.wait_until_done(timeout_s=60.0)  # Ctrl-C: the client sends STOP
             if args.zero:
                 client.zero_force()
             result = recorder.record(test)
