@@ -66,7 +66,13 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         help="neo_hookean, mooney_rivlin, reduced_polynomial:N, yeoh, ogden:N, a "
         "comma-separated list, or all (default)",
     )
-    parser.add_argument("--objective", choices=("absolute", "relative"), default="absolute")
+    parser.add_argument(
+        "--objective",
+        choices=("absolute", "relative"),
+        default="absolute",
+        help="least squares of the stress (absolute, default) or of its relative error "
+        "(the needle-indentation study's Eq. 4 and 5)",
+    )
     parser.add_argument(
         "--min-strain",
         type=float,
@@ -77,9 +83,18 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         "--loading",
         choices=("compression", "tension", "equibiaxial", "planar"),
         default="compression",
+        help="the test: uniaxial compression (default) or tension, equibiaxial tension, or "
+        "planar tension (pure shear)",
     )
-    parser.add_argument("--method", choices=("lm", "salm"), default="lm")
-    parser.add_argument("--out", type=Path, default=None, help="output folder")
+    parser.add_argument(
+        "--method",
+        choices=("lm", "salm"),
+        default="lm",
+        help="Levenberg-Marquardt (default) or Tong et al.'s self-adapting LM",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default STEM_uniaxial_fit)"
+    )
     parser.add_argument(
         "--usd",
         type=Path,
