@@ -255,6 +255,7 @@ def test_calibration_json_round_trip(tmp_path, sensor_fits):
         ("{", r"bad.json:1: not JSON"),
         ("[1, 2]", r"bad.json: not a force calibration"),
         ('{"format": "warptissue.force_calibration", "version": 1}', r"key 'model' missing"),
+        ('{"format": "warptissue.force_calibration", "version": 9}', r'key "version".*got 9'),
         ('{"model": "polynomial", "coefficients": []}', r'key "coefficients".*\(got \[\]\)'),
         ('{"model": "polynomial", "coefficients": [1, "x"]}', r"finite numbers"),
         ('{"model": "polynomial", "coefficients": [1, NaN]}', r"finite numbers"),

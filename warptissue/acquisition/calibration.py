@@ -479,9 +479,9 @@ class ForceCalibration:
             )
         if data.get("version") != FORMAT_VERSION:
             raise InputError(
-                "unsupported calibration version",
+                f'key "version": unsupported calibration version; this warptissue reads '
+                f"{FORMAT_VERSION}",
                 path=path,
-                column="version",
                 value=data.get("version"),
             )
         try:
@@ -703,8 +703,7 @@ def fit_calibrations(
     _, force, readings = sample_readings(data)
     if folds < 2 or len(force) < 2 * folds:
         raise InputError(
-            f"folds must be 2 or more, with at least two samples per fold ({len(force)} "
-            "samples)",
+            f"folds must be 2 or more, with at least two samples per fold ({len(force)} samples)",
             value=folds,
         )
     signal_offset = float(readings.min())
