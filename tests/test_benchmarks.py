@@ -70,3 +70,44 @@ def test_the_markdown_option_refuses_a_filter_that_keeps_nothing():
     )
     assert completed.returncode == 2
     assert "no run in" in completed.stderr and "Traceback" not in completed.stderr
+
+
+def run_benchmark(name: str, *args: str, cwd: Path) -> str:
+    completed = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "benchmarks" / name), *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+    )
+    assert completed.returncode == 0, completed.stderr[-4000:]
+    return completed.stdout
+
+
+def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):
+    """Two of the 20 load steps on about a thousand tets: the force per depth lies 0-30 %
+    above Sneddon's half-space 8 mu a (the finite block is stiffer, by 1.09 at convergence),
+    the run is reported as not completed, and --markdown prints it."""
+    run_benchmark("bench_flat_punch.py", "--sizes", "600", "--steps", "2", "--out", "b.json",
+                  cwd=tmp_path)  # fmt: skip
+    report = json.loads((tmp_path / "b.json").read_text())
+    (run,) = report["runs"]
+    assert run["steps_converged"] == 2 and not run["completed"]
+    half_space = 8 * 575.0 * 1e-3 * 0.5e-3 / 20  # N per load step of depth
+    for step, force in enumerate(run["force_N"], start=1):
+        assert 1.0 < force / (step * half_space) < 1.3
+    table = run_benchmark("bench_flat_punch.py", "--markdown", "b.json", cwd=tmp_path)
+    assert "| 2 of 20 |" in table
+
+
+@pytest.mark.parametrize(
+    "name, args, expected",
+    [
+        ("bench_mesh.py", ("--factors", "0.5"), r"\n\s+0\.50\s+\d+"),
+        ("bench_usd.py", ("--cells", "4", "4", "4", "--steps", "2"), r"validate_stage: .* 0 find"),
+        ("bench_fit_engine.py", (), r"\ntotal \S+ s"),
+    ],
+)
+def test_a_quick_benchmark_runs(name, args, expected, tmp_path):
+    """The benchmarks without a test of their numbers still run on a small case."""
+    assert re.search(expected, run_benchmark(name, *args, cwd=tmp_path))
