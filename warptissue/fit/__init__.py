@@ -5,6 +5,13 @@ or Tong et al.'s self-adapting LM (``method="salm"``), with bounds, refusals of 
 (:class:`RejectStep`), finite-difference or caller-supplied Jacobians, and parameter
 statistics. ``fit_curve`` fits model predictions to data with an absolute or relative
 objective. See :mod:`warptissue.fit.engine` for the algorithms and the papers' misprints.
+Every :class:`FitResult` reports whether its parameters are identified
+(:attr:`FitResult.identifiability`).
+
+Submodules: :mod:`~warptissue.fit.plausibility` (sign, magnitude and unit checks of
+indentation data and results), :mod:`~warptissue.fit.punch` (Sneddon, Hertz and Hayes et al.
+contact formulas and the punch-modulus fit), :mod:`~warptissue.fit.hyperelastic`
+(homogeneous hyperelastic tests), :mod:`~warptissue.fit.metrics` (R², RMSE).
 """
 
 from warptissue.fit import metrics
