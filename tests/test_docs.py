@@ -127,7 +127,7 @@ def _run_bash(page: Path, block: Block, cwd: Path) -> None:
     env["MPLBACKEND"] = "Agg"
     script = shell_script(block.text)
     done = subprocess.run(
-        ["bash", "-e", "-o", "pipefail", "-c", script],
+        ["bash", "-e", "-c", script],
         cwd=cwd,
         env=env,
         capture_output=True,
