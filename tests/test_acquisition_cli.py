@@ -187,6 +187,7 @@ ACQUIRE_ERRORS = [
     ([*SINE_EXAMPLE[:-1], "inf"], "--cycles must be a finite positive number"),
     ([*SINE_EXAMPLE[:-1], "nan"], "--cycles must be a finite positive number"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--meta", "x"], "--meta takes"),
+    (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--meta", "status=ok"], "own sidecar"),
 ]
 
 
@@ -234,6 +235,7 @@ RIG_SIM_ERRORS = [
     (["--noise=-1mN"], "--noise must be zero or more"),
     (["--respiration", "8mN@-1Hz"], "--respiration"),
     (["--time-scale", "0"], "--time-scale must be positive"),
+    (["--seed=-1"], "--seed must be zero or more"),
     (["--tissue", "curve"], "--force-curve"),
     (["--tissue", "curve", "--force-curve", "missing.csv"], "not found"),
 ]

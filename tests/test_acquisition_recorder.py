@@ -26,6 +26,7 @@ from warptissue.acquisition import (
     SimulatedRig,
 )
 from warptissue.acquisition.conditioning import prepare_record
+from warptissue.errors import InputError
 from warptissue.io import read_experiment_csv
 
 TRUE_SLS = (40.0, 20.0, 2.0)
@@ -245,6 +246,13 @@ def test_calibration_is_applied_and_raw_force_kept(tmp_path):
     np.testing.assert_allclose(data["force_N"], 1e-3 + 1.1 * raw - 0.5 * raw**2, rtol=1e-12)
     assert result.status == "complete"
     assert data.metadata["calibration"] == {"model": "polynomial"}
+
+
+def test_metadata_cannot_replace_the_recorders_own_sidecar_entries(tmp_path):
+    rig = SimulatedRig(ReferenceSLS(*TRUE_SLS), RigConfig(time_scale=50.0))
+    with RigServer(rig, transport="tcp") as server, RigClient(server.url) as client:
+        with pytest.raises(InputError, match="'counts' is the recorder's own sidecar entry"):
+            Recorder(client, tmp_path / "run.csv", metadata={"counts": 0, "specimen": "A"})
 
 
 def test_existing_output_is_not_overwritten(tmp_path):

@@ -181,6 +181,27 @@ class RecordingResult:
         return self.samples_received
 
 
+SIDECAR_KEYS: frozenset[str] = frozenset(
+    {
+        "schema",
+        "status",
+        "data_file",
+        "port",
+        "sample_rate_Hz",
+        "units_as_recorded",
+        "columns",
+        "counts",
+        "software",
+        "rig",
+        "protocol",
+        "started_utc",
+        "finished_utc",
+        "calibration",
+    }
+)
+"""Keys the recorder writes to the sidecar itself; metadata may not replace them."""
+
+
 def _utc_now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="milliseconds")
 
@@ -240,6 +261,13 @@ class Recorder:
         if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
             reason = "not a folder" if not folder.is_dir() else "permission denied"
             raise InputError(f"cannot write the output: {folder}: {reason}", path=self.csv_path)
+        reserved = sorted(SIDECAR_KEYS.intersection(metadata or {}))
+        if reserved:
+            raise InputError(
+                f"metadata key {reserved[0]!r} is the recorder's own sidecar entry; choose "
+                "another name",
+                value=reserved,
+            )
         self.rate_Hz = rate_Hz
         self.calibration = calibration
         self.metadata = dict(metadata or {})

@@ -158,6 +158,7 @@ def run_acquire(args: argparse.Namespace) -> int:
     """Handler of ``warptissue acquire``."""
     from warptissue.acquisition import CommandRefused, ForceCalibration, Recorder, RigClient
     from warptissue.acquisition.protocol import ErrorCode
+    from warptissue.acquisition.recorder import SIDECAR_KEYS
 
     test = _test(args)
     rate_Hz = _quantity(args, "rate", "frequency", sign="positive")
@@ -170,6 +171,11 @@ def run_acquire(args: argparse.Namespace) -> int:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise InputError("--meta takes KEY=VALUE", value=item)
+        if key in SIDECAR_KEYS:
+            raise InputError(
+                f"--meta: {key!r} is the recorder's own sidecar entry; choose another key",
+                value=item,
+            )
         metadata[key] = value
     calibration = None if args.calibration is None else ForceCalibration.load(args.calibration)
     if calibration is not None:
@@ -277,6 +283,8 @@ def run_rig_sim(args: argparse.Namespace) -> int:
         raise InputError("--time-scale: not a number", value=args.time_scale) from None
     if not time_scale > 0:
         raise InputError("--time-scale must be positive", value=args.time_scale)
+    if args.seed < 0:
+        raise InputError("--seed must be zero or more", value=args.seed)
     surface_m = _quantity(args, "surface", "length", sign="nonnegative")
     travel_m = RigConfig.travel_m
     if surface_m >= travel_m:
