@@ -96,3 +96,21 @@ def test_atomic_write_gives_the_usual_file_mode(tmp_path):
     finally:
         os.umask(umask)
     assert path.stat().st_mode & 0o777 == 0o644
+
+
+def test_experiment_csv_from_a_spreadsheet_with_a_byte_order_mark(tmp_path):
+    path = tmp_path / "excel.csv"
+    path.write_bytes(b"\xef\xbb\xbftime_s,displacement_m,force_N\r\n0,0,0\r\n1,0.001,0.01\r\n")
+    record = read_experiment_csv(path)
+    assert list(record.columns) == ["time_s", "displacement_m", "force_N"]
+    assert record["force_N"].tolist() == [0.0, 0.01]
+
+
+def test_a_file_that_is_not_utf8_is_a_one_line_input_error(tmp_path):
+    path = tmp_path / "latin1.csv"
+    path.write_bytes(b"time_s,displacement_m,force_N\n0,0,0\n1,0.001,\xb5\n")
+    with pytest.raises(InputError, match="not UTF-8 text") as caught:
+        read_experiment_csv(path)
+    assert (caught.value.path, caught.value.line) == (path, 3)
+    with pytest.raises(InputError, match="not UTF-8 text"):
+        read_csv_rows(path, required=("time_s",))

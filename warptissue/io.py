@@ -188,6 +188,26 @@ def read_sidecar(csv_path: str | Path) -> dict[str, Any]:
     return {}
 
 
+def _text_lines(path: Path) -> list[str]:
+    """The lines of a UTF-8 text file (a byte-order mark, as spreadsheets write, is dropped).
+
+    Raises:
+        InputError: The file is not UTF-8 text (naming the line of the first bad byte).
+        OSError: The file cannot be read.
+    """
+    data = path.read_bytes()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise InputError(
+            f"not UTF-8 text (byte 0x{data[exc.start]:02x}); save the file as UTF-8",
+            path=path,
+            line=line,
+        ) from None
+    return text.splitlines(keepends=True)
+
+
 def read_experiment_csv(
     path: str | Path,
     *,
@@ -212,8 +232,10 @@ def read_experiment_csv(
     csv_path = Path(path)
     if not csv_path.is_file():
         raise InputError("experiment file not found", path=csv_path)
-    with csv_path.open(newline="", encoding="utf-8") as f:
-        rows = list(csv.reader(f))
+    try:
+        rows = list(csv.reader(_text_lines(csv_path)))
+    except OSError as exc:
+        raise InputError(f"cannot read file: {exc.strerror}", path=csv_path) from exc
     rows = [
         (number, row)
         for number, row in enumerate(rows, start=1)
@@ -291,19 +313,16 @@ def read_csv_rows(path: str | Path, *, required: Sequence[str]) -> list[tuple[in
     """
     csv_path = Path(path)
     try:
-        handle = csv_path.open(newline="", encoding="utf-8")
+        lines = _text_lines(csv_path)
     except OSError as exc:
         raise InputError(f"cannot read file: {exc.strerror}", path=csv_path) from exc
-    with handle:
-        reader = csv.DictReader(handle)
-        header = [name.strip() for name in (reader.fieldnames or [])]
-        missing = [name for name in required if name not in header]
-        if missing:
-            raise InputError(
-                f"missing column(s) {missing}; header is {header}", path=csv_path, line=1
-            )
-        reader.fieldnames = header
-        return [(index + 2, row) for index, row in enumerate(reader)]
+    reader = csv.DictReader(lines)
+    header = [name.strip() for name in (reader.fieldnames or [])]
+    missing = [name for name in required if name not in header]
+    if missing:
+        raise InputError(f"missing column(s) {missing}; header is {header}", path=csv_path, line=1)
+    reader.fieldnames = header
+    return [(index + 2, row) for index, row in enumerate(reader)]
 
 
 def csv_number(path: str | Path, line: int, row: Mapping[str, str | None], column: str) -> float:
