@@ -256,9 +256,11 @@ def write_case_files(
     *,
     markers_name: str = "markers.csv",
     forces_name: str = "forces.csv",
+    decimals: int | None = None,
 ) -> tuple[Path, Path]:
     """Write synthetic load sets (label to case) as a marker file and a force file (formats
     of :mod:`warptissue.field.markers`), ``markers_name`` and ``forces_name`` in ``out_dir``.
+    Marker coordinates are rounded to ``decimals`` decimal places of a metre when given.
 
     Returns:
         The two paths.
@@ -274,6 +276,8 @@ def write_case_files(
         node = case.grid.top_nodes.ravel()[case.loaded_marker]
         force_rows.append((label, f"M{case.loaded_marker + 1:03d}", *case.force_N[node]))
     before, after = np.concatenate(before), np.concatenate(after)
+    if decimals is not None:
+        before, after = np.round(before, decimals), np.round(after, decimals)
     markers_path = write_csv(
         out / markers_name,
         {
