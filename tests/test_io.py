@@ -114,3 +114,10 @@ def test_a_file_that_is_not_utf8_is_a_one_line_input_error(tmp_path):
     assert (caught.value.path, caught.value.line) == (path, 3)
     with pytest.raises(InputError, match="not UTF-8 text"):
         read_csv_rows(path, required=("time_s",))
+
+
+def test_a_semicolon_separated_file_gets_a_hint(tmp_path):
+    path = tmp_path / "semicolons.csv"
+    path.write_text("time_s;displacement_m;force_N\n0;0;0\n", encoding="utf-8")
+    with pytest.raises(InputError, match="fields separated by ';': use commas"):
+        read_experiment_csv(path)

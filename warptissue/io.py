@@ -247,8 +247,10 @@ def read_experiment_csv(
     names = [name.strip() for name in header]
     missing = [name for name in required if name not in names]
     if missing:
+        separator = next((c for c in ";\t|" if len(names) == 1 and c in names[0]), None)
+        hint = f" (fields separated by {separator!r}: use commas)" if separator else ""
         raise InputError(
-            f"missing required column(s) {missing}; header has {names}",
+            f"missing required column(s) {missing}; header has {names}{hint}",
             path=csv_path,
             line=header_line,
         )
