@@ -271,6 +271,16 @@ def test_malformed_calibration_files_get_one_line_naming_file_and_key(tmp_path, 
         ForceCalibration.load(tmp_path / "missing.json")
 
 
+@pytest.mark.parametrize("column", ["signal_V", "force_N"])
+def test_a_constant_column_is_refused(tmp_path, column):
+    """A dead sensor (or the wrong column) would otherwise give a calibration 240 % off."""
+    rows = {"force_N": np.arange(12.0), "signal_V": 0.1 * np.arange(12.0)}
+    rows[column] = np.full(12, 1.0)
+    path = write_csv(tmp_path / "sensor.csv", rows)
+    with pytest.raises(InputError, match=f"column '{column}': {column} is 1 in every reading"):
+        read_calibration_csv(path)
+
+
 def test_calibration_csv_errors_name_line_and_column(tmp_path):
     path = tmp_path / "sensor.csv"
     path.write_text("sample,force_N,signal_V\n" + "S1,1.0,0.1\n" * 10 + "S2,x,0.2\n")
@@ -326,6 +336,7 @@ def test_a_saved_file_corrects_one_reading_at_a_time_as_the_recorder_applies_it(
         (["--folds", "1"], "--folds must be 2 or more"),
         (["--folds", "10"], "--folds must be at most 9"),
         (["--model", "SVM"], "--model must be one of polynomial, bp,"),
+        (["--seed=-1"], "--seed must be zero or more"),
         (["--out", "sensor.csv"], "--out: cannot create the folder"),
     ],
 )

@@ -558,6 +558,13 @@ def read_calibration_csv(path: str | Path) -> CalibrationData:
         samples.append((row.get("sample") or str(line)).strip())
     if len(forces) < 10:
         raise InputError(f"need at least 10 readings, got {len(forces)}", path=path)
+    for column, values in (("signal_V", signals), ("force_N", forces)):
+        if np.ptp(values) == 0:
+            raise InputError(
+                f"{column} is {values[0]:g} in every reading: nothing to calibrate",
+                path=path,
+                column=column,
+            )
     data = CalibrationData(np.array(samples), np.array(forces), np.array(signals))
     try:
         sample_readings(data)

@@ -54,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.folds < 2:
         raise InputError("--folds must be 2 or more", value=args.folds)
+    if args.seed < 0:
+        raise InputError("--seed must be zero or more", value=args.seed)
     data = read_calibration_csv(args.data)
     samples = len(np.unique(data.sample))
     if not 0 < args.test_samples < samples - 1:
