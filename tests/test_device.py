@@ -28,3 +28,40 @@ def test_unknown_device_lists_available():
 def test_available_host_memory_is_positive_and_below_the_total():
     available = available_host_memory_bytes()
     assert 0 < available <= os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def _cgroup(root, files: dict[str, str]):
+    for name, text in files.items():
+        (root / name).parent.mkdir(parents=True, exist_ok=True)
+        (root / name).write_text(text)
+    return root
+
+
+def test_a_container_limit_caps_the_available_memory(tmp_path):
+    """In a container /proc/meminfo shows the whole machine: the cgroup's limit, less what
+    the container uses (its reclaimable page cache counted as free), is what is available."""
+    meminfo = tmp_path / "meminfo"
+    meminfo.write_text("MemTotal:       16000000 kB\nMemAvailable:    8388608 kB\n")
+    machine = 8 << 30
+    assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=tmp_path / "none") == machine
+    v2 = _cgroup(
+        tmp_path / "v2",
+        {"memory.max": "2147483648\n", "memory.current": "1073741824\n",
+         "memory.stat": "anon 1\ninactive_file 268435456\n"},
+    )  # fmt: skip
+    # 2 GiB limit, 1 GiB used of which 0.25 GiB reclaimable cache: 1.25 GiB left.
+    assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=v2) == (1280 << 20)
+    v1 = _cgroup(
+        tmp_path / "v1",
+        {"memory/memory.limit_in_bytes": "1073741824", "memory/memory.usage_in_bytes": "0",
+         "memory/memory.stat": "total_inactive_file 0\n"},
+    )  # fmt: skip
+    assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=v1) == 1 << 30
+    unlimited = _cgroup(tmp_path / "max", {"memory.max": "max", "memory.current": "5"})
+    assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=unlimited) == machine
+    v1_unlimited = _cgroup(
+        tmp_path / "v1max",
+        {"memory/memory.limit_in_bytes": "9223372036854771712",
+         "memory/memory.usage_in_bytes": "17741119488"},
+    )  # fmt: skip
+    assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=v1_unlimited) == machine

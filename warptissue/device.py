@@ -6,7 +6,9 @@ generators) does not load it.
 
 from __future__ import annotations
 
+import contextlib
 import os
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from warptissue.errors import DeviceError
@@ -59,14 +61,63 @@ def quiet_warp() -> None:
         wp.config.quiet = True
 
 
-def available_host_memory_bytes() -> int:
-    """Host memory available to a new allocation, bytes (Linux ``MemAvailable``, else the
-    free physical pages)."""
+def available_host_memory_bytes(
+    *, meminfo: str | Path = "/proc/meminfo", cgroup_root: str | Path = "/sys/fs/cgroup"
+) -> int:
+    """Host memory available to a new allocation, bytes.
+
+    Linux's ``MemAvailable`` (else the free physical pages), capped by the headroom of the
+    process's memory cgroup where one sets a limit (a container's memory limit: v2
+    ``memory.max``, v1 ``memory.limit_in_bytes``; its reclaimable page cache counts as free).
+    In a container ``/proc/meminfo`` shows the whole machine, not the limit the container is
+    killed at.
+
+    Args:
+        meminfo: The kernel's memory summary.
+        cgroup_root: Where the cgroup file system is mounted.
+    """
+    available = None
     try:
-        with open("/proc/meminfo", encoding="ascii") as meminfo:
-            for line in meminfo:
+        with open(meminfo, encoding="ascii") as lines:
+            for line in lines:
                 if line.startswith("MemAvailable:"):
-                    return 1024 * int(line.split()[1])
+                    available = 1024 * int(line.split()[1])
+                    break
     except OSError:
         pass
-    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    if available is None:
+        available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    headroom = _cgroup_headroom_bytes(Path(cgroup_root))
+    return available if headroom is None else min(available, headroom)
+
+
+_CGROUP_FILES = (
+    ("memory.max", "memory.current", "memory.stat", "inactive_file"),
+    (
+        "memory/memory.limit_in_bytes",
+        "memory/memory.usage_in_bytes",
+        "memory/memory.stat",
+        "total_inactive_file",
+    ),
+)
+"""(limit, usage, statistics, reclaimable cache key) of cgroup v2 and v1."""
+
+
+def _cgroup_headroom_bytes(root: Path) -> int | None:
+    """Limit minus non-reclaimable usage of the memory cgroup, or None without a limit."""
+    for limit_name, usage_name, stat_name, cache_key in _CGROUP_FILES:
+        try:
+            limit_text = (root / limit_name).read_text().strip()
+            usage = int((root / usage_name).read_text().strip())
+        except (OSError, ValueError):
+            continue
+        if limit_text == "max" or not limit_text.isdigit() or int(limit_text) >= 2**60:
+            return None  # no limit (v1 writes a huge number)
+        cache = 0
+        with contextlib.suppress(OSError, ValueError):
+            for line in (root / stat_name).read_text().splitlines():
+                key, _, value = line.partition(" ")
+                if key == cache_key:
+                    cache = int(value)
+        return max(0, int(limit_text) - max(0, usage - cache))
+    return None
