@@ -24,7 +24,7 @@ from typing import Any
 
 from warptissue.cli._args import positive_length_m, positive_number
 
-__all__ = ["ALL_MODELS", "MAX_PLOT_POINTS", "register_fit"]
+__all__ = ["ALL_MODELS", "register_fit"]
 
 ALL_MODELS: tuple[str, ...] = (
     "neo_hookean",
@@ -35,9 +35,6 @@ ALL_MODELS: tuple[str, ...] = (
     "ogden:2",
 )
 """The models fitted by ``--model all``."""
-
-MAX_PLOT_POINTS = 2000
-"""Most measured points a plot shows (evenly spaced); the fit and the CSV use all of them."""
 
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
@@ -245,13 +242,12 @@ def _output_folder(args: argparse.Namespace) -> Path:
     return folder
 
 
-def _format_parameter(name: str, entry: dict[str, Any], *, short: bool = False) -> str:
-    """``C10_Pa = 600.9 +- 0.42 Pa`` (``short``: ``C10 = 600.9 +- 0.42 Pa``)."""
+def _format_parameter(name: str, entry: dict[str, Any]) -> str:
+    """``C10_Pa = 600.9 +- 0.42 Pa``: value, standard error and unit of a fitted parameter."""
     unit = entry["unit"]
-    label = name.removesuffix(f"_{unit}") if short and unit else name
     error = entry["standard_error"]
     spread = "" if error is None else f" +- {error:.2g}"
-    return f"{label} = {entry['value']:.6g}{spread}{' ' + unit if unit else ''}"
+    return f"{name} = {entry['value']:.6g}{spread}{' ' + unit if unit else ''}"
 
 
 def _table_row(row: dict[str, Any]) -> dict[str, Any]:
@@ -272,15 +268,14 @@ def _write_model_outputs(
     summary: dict[str, Any],
     record: Any,
 ) -> dict[str, Path]:
-    """Write one model's JSON (fit result and metadata), CSV (every point) and PNG plot (at
-    most :data:`MAX_PLOT_POINTS` points; axes with units; parameters in the title)."""
+    """Write one model's JSON (fit result and metadata), CSV (every point) and PNG plot
+    (:func:`warptissue.report.write_fit_outputs`: axes with units, the fitted parameters in
+    the legend, large records decimated for the plot only)."""
     import numpy as np
 
-    from warptissue.io import write_csv, write_json
-    from warptissue.report import plot_fit
+    from warptissue.report import write_fit_outputs
 
     test = fit.tests[0]
-    base = out_dir / f"{args.data.stem}_{name.replace(':', '_')}"
     fitted_stress = test.predicted_stress_Pa(fit.model)
     in_window = test.nominal_strain > fit.min_strain if fit.min_strain > 0.0 else None
     metadata = fit.to_dict()
@@ -295,8 +290,14 @@ def _write_model_outputs(
             "loading direction",
         }
     )
-    csv_path = write_csv(
-        base.with_suffix(".csv"),
+    r_squared = "n/a" if summary["r_squared"] is None else f"{summary['r_squared']:.5f}"
+    title = f"{name} ({args.objective} objective), R² = {r_squared}"
+    if not summary["identified"]:
+        title += "\nparameters not identified (see the warnings)"
+    return write_fit_outputs(
+        out_dir,
+        f"{args.data.stem}_{name.replace(':', '_')}",
+        fit.result,
         {
             "nominal_strain": test.nominal_strain,
             "measured_nominal_stress_Pa": test.nominal_stress_Pa,
@@ -306,36 +307,9 @@ def _write_model_outputs(
             "fitted_force_N": fitted_stress * args.area_m2,
             "in_fit_window": np.ones(fitted_stress.size) if in_window is None else in_window * 1.0,
         },
+        metadata=metadata,
+        title=title,
     )
-    json_path = write_json(base.with_suffix(".json"), {**summary, "metadata": metadata})
-    shown = _plot_indices(test.nominal_strain.size)
-    scale, unit = (1e-3, "kPa") if np.max(np.abs(test.nominal_stress_Pa)) >= 1e3 else (1.0, "Pa")
-    r_squared = "n/a" if summary["r_squared"] is None else f"{summary['r_squared']:.5f}"
-    parameters = [
-        _format_parameter(key, entry, short=True) for key, entry in summary["parameters"].items()
-    ]
-    lines = [", ".join(parameters[i : i + 2]) for i in range(0, len(parameters), 2)]
-    if not summary["identified"]:
-        lines.append("parameters not identified (see the warnings)")
-    png_path = plot_fit(
-        base.with_suffix(".png"),
-        test.nominal_strain[shown],
-        scale * test.nominal_stress_Pa[shown],
-        scale * fitted_stress[shown],
-        xlabel="nominal strain",
-        ylabel=f"nominal stress ({unit})",
-        title="\n".join([f"{name} ({args.objective} objective), R² = {r_squared}", *lines]),
-    )
-    return {"json": json_path, "csv": csv_path, "png": png_path}
-
-
-def _plot_indices(size: int) -> Any:
-    """Indices of at most :data:`MAX_PLOT_POINTS` evenly spaced points of ``size``, ends kept."""
-    import numpy as np
-
-    if size <= MAX_PLOT_POINTS:
-        return np.arange(size)
-    return np.unique(np.linspace(0, size - 1, MAX_PLOT_POINTS).round().astype(np.int64))
 
 
 def _write_best_usd(args: argparse.Namespace, row: dict[str, Any], fit: Any) -> Path:
