@@ -376,3 +376,13 @@ def test_start_parameters_solve_the_linear_models_exactly():
         design, ogden.nominal_stress_Pa(stretch, "uniaxial")
     )
     np.testing.assert_allclose(start, [300.0, 5.0], rtol=1e-9)  # alpha = 5 is on the grid
+
+
+def test_a_typo_of_a_required_key_is_named():
+    """Before: {"C10_pa": ...} was reported as a missing C10_Pa without naming the typo."""
+    with pytest.raises(InputError, match="'C10_pa' looks like a typo") as error:
+        material_from_dict({"model": "neo_hookean", "C10_pa": 1.0, "bulk_modulus_Pa": 1e4})
+    assert error.value.column == "C10_Pa"
+    with pytest.raises(InputError, match="expected C10_Pa, bulk_modulus_Pa") as error:
+        material_from_dict({"model": "neo_hookean", "C10_Pa": 1.0, "bulk_modulus_Pa": 1e4, "x": 1})
+    assert error.value.column == "x"

@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import abc
 import dataclasses
+import difflib
 import itertools
 import math
 from collections.abc import Callable, Mapping
@@ -902,12 +903,15 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
     else:
         expected = [f.name for f in fields(cls)]
     missing = [key for key in expected if key not in values]
-    if missing:
-        raise InputError(f"missing parameter for model {name!r}", column=missing[0])
     unknown = [key for key in values if key not in expected]
+    if missing:
+        lowered = {key.lower(): key for key in unknown}
+        close = difflib.get_close_matches(missing[0].lower(), list(lowered), n=1, cutoff=0.6)
+        hint = f" (the unknown key {lowered[close[0]]!r} looks like a typo of it)" if close else ""
+        raise InputError(f"missing parameter for model {name!r}{hint}", column=missing[0])
     if unknown:
         raise InputError(
-            f"unknown parameter for model {name!r}; expected {expected}",
+            f"unknown parameter for model {name!r}; expected {', '.join(expected)}",
             column=unknown[0],
             value=values[unknown[0]],
         )
