@@ -386,3 +386,9 @@ def test_a_typo_of_a_required_key_is_named():
     with pytest.raises(InputError, match="expected C10_Pa, bulk_modulus_Pa") as error:
         material_from_dict({"model": "neo_hookean", "C10_Pa": 1.0, "bulk_modulus_Pa": 1e4, "x": 1})
     assert error.value.column == "x"
+
+
+def test_an_unknown_model_names_the_close_one():
+    with pytest.raises(InputError, match="did you mean 'neo_hookean'") as error:
+        material_from_dict({"model": "neo_hooken", "C10_Pa": 1.0, "bulk_modulus_Pa": 1e4})
+    assert error.value.column == "model" and "[" not in error.value.message

@@ -866,8 +866,11 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
     else:
         order = None
     if name not in _MODELS:
+        names = sorted([*_MODELS, "yeoh"])
+        close = difflib.get_close_matches(str(name).lower(), names, n=1, cutoff=0.6)
+        hint = f"did you mean {close[0]!r}? " if close else ""
         raise InputError(
-            f"unknown material model; choose from {sorted(_MODELS) + ['yeoh']}",
+            f"unknown material model ({hint}choose from {', '.join(names)})",
             column="model",
             value=name,
         )
