@@ -153,3 +153,26 @@ def test_newton_path_analyses_once(monkeypatch):
     assert newton >= 4
     assert phases.count(11) == 1
     assert phases.count(22) == phases.count(33) == newton
+
+
+def test_pardiso_that_does_not_load_is_a_one_line_device_error(monkeypatch):
+    """pypardiso imports but MKL's mkl_rt is missing: a DeviceError naming the reason and
+    the fix, not an ImportError from inside pypardiso."""
+    from warptissue.errors import DeviceError
+    from warptissue.fem import direct
+
+    def missing_mkl():
+        raise ImportError("Shared library mkl_rt not found.")
+
+    monkeypatch.setattr(direct, "_pardiso_routine", missing_mkl)
+    direct.pardiso_unavailable_reason.cache_clear()
+    try:
+        assert not direct.pardiso_available()
+        assert "mkl_rt not found" in direct.pardiso_unavailable_reason()
+        mesh = _mesh()
+        assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device="cpu")
+        matrix = assembler.assemble(np.zeros((mesh.node_count, 3))).matrix
+        with pytest.raises(DeviceError, match="MKL PARDISO could not be loaded .*superlu"):
+            CpuDirectSolver(matrix, method="pardiso")
+    finally:
+        direct.pardiso_unavailable_reason.cache_clear()

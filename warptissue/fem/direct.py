@@ -30,7 +30,15 @@ import numpy as np
 import scipy.sparse as sp
 import warp.sparse as wps
 
-__all__ = ["CPU_DIRECT_METHODS", "CpuDirectSolver", "bsr33_scalar_pattern"]
+from warptissue.errors import DeviceError
+
+__all__ = [
+    "CPU_DIRECT_METHODS",
+    "CpuDirectSolver",
+    "bsr33_scalar_pattern",
+    "pardiso_available",
+    "pardiso_unavailable_reason",
+]
 
 CPU_DIRECT_METHODS = ("pardiso", "superlu")
 
@@ -44,6 +52,25 @@ def _pardiso_routine():
     from pypardiso import PyPardisoSolver
 
     return PyPardisoSolver()._mkl_pardiso
+
+
+@functools.cache
+def pardiso_unavailable_reason() -> str | None:
+    """Why MKL PARDISO cannot be used in this process, in one line, or None where it loads.
+
+    pypardiso may import while Intel MKL's ``mkl_rt`` library is missing or does not load;
+    this loads the routine itself.
+    """
+    try:
+        _pardiso_routine()
+    except (ImportError, OSError, AttributeError) as exc:
+        return f"{type(exc).__name__}: {exc}"
+    return None
+
+
+def pardiso_available() -> bool:
+    """Whether pypardiso imports and MKL's PARDISO routine loads."""
+    return pardiso_unavailable_reason() is None
 
 
 def bsr33_scalar_pattern(
@@ -103,6 +130,10 @@ class CpuDirectSolver:
         method: ``"pardiso"`` (MKL PARDISO, symmetric indefinite, analysis reused) or
             ``"superlu"`` (SciPy's SuperLU, full matrix, a fresh factorization per solve).
 
+    Raises:
+        DeviceError: ``"pardiso"`` where MKL's PARDISO does not load (see
+            :func:`pardiso_unavailable_reason`).
+
     Attributes:
         analyses: Symbolic analyses (orderings) done so far (PARDISO: 1 per pattern).
         factorizations: Numerical factorizations done so far.
@@ -151,6 +182,12 @@ class CpuDirectSolver:
         np.take(values, self._source, out=self._data)
 
     def _init_pardiso(self) -> None:
+        reason = pardiso_unavailable_reason()
+        if reason is not None:
+            raise DeviceError(
+                f"MKL PARDISO could not be loaded ({reason}); install it with "
+                "'pip install pypardiso mkl', or use linear_solver = 'superlu'"
+            )
         self._pardiso_routine = _pardiso_routine()
         self._handle = np.zeros(64, dtype=np.int64)  # PARDISO's internal pointers
         self._perm = np.zeros(0, dtype=np.int32)
