@@ -143,7 +143,13 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         "relaxation",
         help="fit a lumped viscoelastic model (SLS, Prony, Wiechert) to one or several "
         "relaxation records",
-        description=__doc__.split("\n\n", 1)[1],
+        description="Fit a lumped viscoelastic model (standard linear solid, Prony series of "
+        "N terms, linear or nonlinear Wiechert body) to one record, or to several at once (a "
+        "joint fit, as Takacs et al. fit a near-step and a ramp), driven by each measured "
+        "displacement history. Writes STEM_MODEL.json, .csv and .png. Implausible data "
+        "(zero force, opposite signs, depths beyond 0.1 m) end with exit status 2; "
+        "unidentified parameters and implausible results print 'warptissue: warning:' lines "
+        "on stderr and are listed under 'warnings' in the JSON (exit status 0).",
     )
     relaxation.add_argument(
         "data",
@@ -160,7 +166,12 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         help="comma-separated initial parameters in the model's order, SI units "
         "(default: from the data; recommended for wiechert-nonlinear)",
     )
-    relaxation.add_argument("--method", choices=("lm", "salm"), default="lm")
+    relaxation.add_argument(
+        "--method",
+        choices=("lm", "salm"),
+        default="lm",
+        help="lm: Levenberg-Marquardt (default); salm: Tong et al.'s self-adapting LM",
+    )
     relaxation.add_argument(
         "--objective",
         choices=("absolute", "relative"),
@@ -183,7 +194,7 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         default=[],
         metavar="CSV",
         help="predict this record (same columns, same conditioning) with the fitted model and "
-        "write STEM_prediction.csv/.png with R^2 and RMSE; may be repeated",
+        "write CSVSTEM_MODEL_prediction.csv/.png with R^2 and RMSE; may be repeated",
     )
     _add_conditioning(relaxation)
     relaxation.add_argument("--out", type=Path, default=None, help="output folder")
@@ -193,6 +204,10 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     punch = subparsers.add_parser(
         "punch-modulus",
         help="Young's modulus from a force-depth curve (Sneddon flat punch or Hertz sphere)",
+        description="Fit Young's modulus to a displacement_m,force_N curve with Sneddon's "
+        "flat punch (optionally corrected for a layer of finite thickness bonded to a rigid "
+        "base, Hayes et al. 1972, for radius/thickness up to 16) or Hertz's sphere. Writes "
+        "STEM_GEOMETRY_modulus.json, .csv and .png.",
     )
     punch.add_argument("data", type=Path, help="CSV with displacement_m,force_N")
     punch.add_argument(
