@@ -94,7 +94,10 @@ def _plain(value: Any) -> Any:
 
 
 class MeshError(WarpTissueError, ValueError):
-    """A mesh that cannot be used: bad connectivity, inverted or degenerate elements.
+    """A mesh that cannot be used: bad connectivity, degenerate elements, too large for memory.
+
+    Inverted or degenerate elements name the first one; a mesh too large for the memory
+    available is refused before it is made.
 
     Args:
         message: What is wrong.
