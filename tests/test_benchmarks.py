@@ -1,18 +1,16 @@
-"""The benchmark tables of docs/performance.md are what the benchmark prints from the results
-files the page names, and the reference force the tables use is the one those files hold."""
+"""The benchmarks run, and the tables of docs/performance.md are what the flat-punch benchmark
+prints from the results files the page names, against the reference force those files hold."""
 
 from __future__ import annotations
 
 import json
 import re
 import shlex
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from _scripts import ROOT, run_script
 
-ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "performance.md"
 BENCHMARK = "scripts/benchmarks/bench_flat_punch.py"
 
@@ -34,15 +32,7 @@ def test_the_page_has_generated_tables():
 @pytest.mark.parametrize("command, table", generated_tables(), ids=lambda x: str(x)[:40])
 def test_a_performance_table_is_the_benchmarks_output(command, table):
     arguments = shlex.split(command)[2:]
-    completed = subprocess.run(
-        [sys.executable, str(ROOT / BENCHMARK), *arguments],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
-    )
-    assert completed.returncode == 0, completed.stderr
-    assert completed.stdout.strip() == table
+    assert run_script(BENCHMARK, *arguments, cwd=ROOT).strip() == table
 
 
 def test_the_reference_force_is_the_felupe_extrapolation():
@@ -54,34 +44,16 @@ def test_the_reference_force_is_the_felupe_extrapolation():
 
 
 def test_the_markdown_option_refuses_a_filter_that_keeps_nothing():
-    completed = subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / BENCHMARK),
-            "--markdown",
-            "scripts/results/bench_flat_punch_2core_cpu.json",
-            "--only",
-            "damping=on",
-        ],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=120,
+    results = "scripts/results/bench_flat_punch_2core_cpu.json"
+    stderr = run_script(
+        BENCHMARK, "--markdown", results, "--only", "damping=on", cwd=ROOT, expect_status=2
     )
-    assert completed.returncode == 2
-    assert "no run in" in completed.stderr and "Traceback" not in completed.stderr
+    assert "no run in" in stderr and "Traceback" not in stderr
 
 
 def run_benchmark(name: str, *args: str, cwd: Path) -> str:
-    completed = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "benchmarks" / name), *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        timeout=600,
-    )
-    assert completed.returncode == 0, completed.stderr[-4000:]
-    return completed.stdout
+    """Run ``scripts/benchmarks/NAME`` with ``args``; return its stdout."""
+    return run_script(f"scripts/benchmarks/{name}", *args, cwd=cwd)
 
 
 def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):

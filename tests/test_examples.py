@@ -11,27 +11,17 @@ from __future__ import annotations
 
 import json
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
+from _scripts import ROOT, run_script
 
-ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "scripts" / "examples"
 
 
 def run_example(name: str, *args: str, cwd: Path) -> str:
-    """Run one example script with ``args``; return its stdout (fail with its stderr)."""
-    completed = subprocess.run(
-        [sys.executable, str(EXAMPLES / name), *args],
-        capture_output=True,
-        text=True,
-        cwd=cwd,
-        timeout=900,
-    )
-    assert completed.returncode == 0, completed.stderr[-4000:]
-    return completed.stdout
+    """Run ``scripts/examples/NAME`` with ``args``; return its stdout."""
+    return run_script(f"scripts/examples/{name}", *args, cwd=cwd)
 
 
 def test_every_example_has_a_test():
