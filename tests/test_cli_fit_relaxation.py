@@ -301,3 +301,12 @@ def test_conditioning_errors_say_what_to_do(tmp_path, capsys):
     assert main([*base, "--model", "prony:2", "--p0", "1,2"]) == 2
     error = capsys.readouterr().err
     assert "p0 needs 5 values" in error and "np.float64" not in error
+
+
+def test_punch_modulus_on_a_ramp_and_hold_warns_about_the_hold(tmp_path, capsys):
+    path = _record(tmp_path / "hold.csv")
+    argv = ["fit", "punch-modulus", str(path), "--radius-m", "5mm", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    assert "hold the deepest point" in capsys.readouterr().err
+    assert main([*argv, "--keep-depth", "1.8mm"]) == 0
+    assert "hold the deepest point" not in capsys.readouterr().err

@@ -509,7 +509,7 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
     """Fit E to a force-depth curve, write JSON + CSV + PNG; return the exit status."""
     import numpy as np
 
-    from warptissue.fit.plausibility import check_indentation_record
+    from warptissue.fit.plausibility import check_indentation_record, elastic_curve_warnings
     from warptissue.fit.punch import fit_punch_modulus
     from warptissue.report import write_fit_outputs
 
@@ -518,7 +518,7 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
     force = np.abs(record.force_N)
     data_warnings = check_indentation_record(
         depth, force, path=args.data, conditioned=record.conditioned
-    )
+    ) + elastic_curve_warnings(depth, force)
     loaded = depth > 0.0
     if np.count_nonzero(loaded) < 2:
         raise InputError(

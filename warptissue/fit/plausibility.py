@@ -29,6 +29,7 @@ __all__ = [
     "MAX_INDENTATION_FORCE_N",
     "SOFT_TISSUE_MODULUS_RANGE_PA",
     "check_indentation_record",
+    "elastic_curve_warnings",
     "fit_quality_warnings",
     "modulus_warnings",
     "stiffness_warnings",
@@ -128,6 +129,31 @@ def check_indentation_record(
                 "probably above the surface; condition the record (--contact auto)"
             )
     return warnings
+
+
+def elastic_curve_warnings(depth_m: np.ndarray, force_N: np.ndarray) -> list[str]:
+    """A warning when an elastic force-depth fit is given a hold (a relaxing force).
+
+    More than a fifth of the samples within 0.5 % of the deepest point, over which the force
+    changes by more than 5 % of its peak, is a hold: an elastic formula averages the
+    relaxation into one modulus. Fit the loading ramp instead (``--keep-depth``).
+    """
+    depth = np.abs(np.asarray(depth_m, dtype=np.float64).reshape(-1))
+    force = np.asarray(force_N, dtype=np.float64).reshape(-1)
+    if depth.size == 0:
+        return []
+    held = depth >= 0.995 * float(np.max(depth))
+    peak = float(np.max(np.abs(force)))
+    if held.mean() <= 0.2 or peak == 0.0:
+        return []
+    change = float(np.ptp(force[held]))
+    if change <= 0.05 * peak:
+        return []
+    return [
+        f"{100 * held.mean():.0f} % of the samples hold the deepest point while the force "
+        f"changes by {100 * change / peak:.0f} % of its peak (relaxation): an elastic fit "
+        "averages it; fit the loading ramp (--keep-depth)"
+    ]
 
 
 def fit_quality_warnings(result: FitResult) -> list[str]:
