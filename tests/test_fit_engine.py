@@ -12,9 +12,6 @@ import json
 import numpy as np
 import pytest
 import scipy.optimize
-
-from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
 from fit_problems import (
     PROBLEMS,
     freudenstein_roth,
@@ -22,6 +19,9 @@ from fit_problems import (
     rosenbrock,
     rosenbrock_jacobian,
 )
+
+from warptissue.errors import ConvergenceError, InputError
+from warptissue.fit import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
 
 METHODS = ("lm", "salm")
 
