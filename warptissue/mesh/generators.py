@@ -46,7 +46,7 @@ HEX_TO_FIVE_TETS: np.ndarray = np.array(
     ],
     dtype=np.int32,
 )
-"""Five-tet splits (seed 002): a central tet and four corners. Cells alternate between the
+"""Five-tet splits (Tong et al.): a central tet and four corners. Cells alternate between the
 two mirror splits by the parity of i + j + k, which makes neighbouring face diagonals match."""
 
 
@@ -87,13 +87,13 @@ def block_mesh(
     Node sets ``xmin``, ``xmax``, ``ymin``, ``ymax``, ``zmin``, ``zmax`` hold the nodes on each
     face of the box, and face sets of the same names hold the boundary triangles there.
     ``tet_regions`` holds the index of the hexahedral cell each tet came from
-    (i + nx * (j + ny * k)), so that per-cell parameters (seed 002) can be grouped.
+    (i + nx * (j + ny * k)), so that per-cell parameters (Tong et al.) can be grouped.
 
     Args:
         x_m: Increasing x coordinates of the grid planes, shape (nx + 1,), metres.
         y_m: Increasing y coordinates, shape (ny + 1,).
         z_m: Increasing z coordinates, shape (nz + 1,).
-        split: ``"six"`` (Kuhn) or ``"five"`` (seed 002, alternating).
+        split: ``"six"`` (Kuhn) or ``"five"`` (Tong et al., alternating).
 
     Returns:
         A positively oriented TET4 mesh.
