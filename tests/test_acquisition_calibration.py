@@ -360,3 +360,30 @@ def test_cli_calibrate_sensor_bad_options_refused_before_fitting(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sensor.csv"]
+
+
+def test_every_blas_runs_one_thread_during_the_fits_of_a_fresh_process():
+    """threadpoolctl limits only the libraries loaded when the limit starts: the fit must
+    load scikit-learn's (and so SciPy's BLAS) first, or a first fit oversubscribes the cores.
+    In a fresh process, where nothing is loaded yet."""
+    import subprocess
+    import sys
+
+    script = """
+import threadpoolctl
+from warptissue.acquisition import calibration
+seen = []
+fit_model = calibration._fit_model
+def spy(*args, **kwargs):
+    result = fit_model(*args, **kwargs)
+    seen.extend(pool["num_threads"] for pool in threadpoolctl.threadpool_info())
+    return result
+calibration._fit_model = spy
+data = calibration.synthetic_sensor(samples=20, readings=2, seed=1)
+calibration.fit_calibrations(data, models=("bp",), folds=2)
+print(max(seen))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300, check=True
+    )
+    assert done.stdout.split()[-1] == "1"
