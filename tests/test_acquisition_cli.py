@@ -185,6 +185,8 @@ ACQUIRE_ERRORS = [
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--stall-timeout", "0s"], "stall"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--reconnect-attempts", "-1"], "rec"),
     ([*SINE_EXAMPLE[:-1], "inf"], "--cycles must be a finite positive number"),
+    ([*SINE_EXAMPLE, "--depth", "4mm"], "--depth is an option of --protocol ramp-hold, not sine"),
+    (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--cycles", "3"], "of --protocol sine"),
     ([*SINE_EXAMPLE[:-1], "nan"], "--cycles must be a finite positive number"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--meta", "x"], "--meta takes"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--meta", "status=ok"], "own sidecar"),
@@ -269,3 +271,26 @@ def test_ctrl_c_during_the_start_move_stops_the_axis(tmp_path, capsys, monkeypat
         )
         assert rig.motion is None and rig.position_m < 20e-3  # stopped short of 20 mm
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.parametrize("status", ["fault", "stopped", "link_lost", "stalled"])
+def test_a_test_that_did_not_run_to_its_end_exits_5(tmp_path, capsys, monkeypatch, status):
+    """The rig ended the motion early (FAULT, a STOP from its panel) or the link failed: the
+    data are kept, and the exit status says the test is incomplete."""
+    from warptissue.acquisition import Recorder
+
+    record = Recorder.record
+
+    def ends_early(self, test):
+        result = record(self, test)
+        result.status = status
+        return result
+
+    monkeypatch.setattr(Recorder, "record", ends_early)
+    rig = SimulatedRig(ReferenceSLS(40.0, 20.0, 2.0), RigConfig(time_scale=np.inf))
+    out = tmp_path / "run.csv"
+    with RigServer(rig, transport="tcp") as server:
+        command = ["acquire", "--port", server.url, "--depth", "1mm", "--speed", "8mm/s"]
+        assert main([*command, "--hold", "0s", "--out", str(out), "--no-progress"]) == 5
+    assert "data so far are kept" in one_error_line(capsys)
+    assert read_experiment_csv(out).sample_count > 0

@@ -120,10 +120,23 @@ def _quantity(args: argparse.Namespace, name: str, kind: str, *, sign: str = "an
     return value
 
 
+PROTOCOL_OPTIONS: dict[str, tuple[str, ...]] = {
+    "ramp-hold": ("depth", "speed", "hold"),
+    "sine": ("amplitude", "frequency", "cycles"),
+}
+"""The options that describe each protocol's motion."""
+
+
 def _test(args: argparse.Namespace):
     """The RampHold or Sine the options describe."""
     from warptissue.acquisition import RampHold, Sine
 
+    for protocol, names in PROTOCOL_OPTIONS.items():
+        given = [name for name in names if getattr(args, name) is not None]
+        if protocol != args.protocol and given:
+            raise InputError(
+                f"--{given[0]} is an option of --protocol {protocol}, not {args.protocol}"
+            )
     if args.protocol == "ramp-hold":
         return RampHold(
             depth_m=_quantity(args, "depth", "length", sign="positive"),
@@ -221,13 +234,22 @@ def run_acquire(args: argparse.Namespace) -> int:
     for key, value in counts.items():
         print(f"{key:<{width}}  {value}")
     print(f"wrote {result.csv_path} and {result.sidecar_path}")
-    if result.status in ("link_lost", "stalled"):
+    if result.status in INCOMPLETE:
         print(
-            f"warptissue: error: rig {result.status.replace('_', ' ')}; data so far kept",
+            f"warptissue: error: {INCOMPLETE[result.status]}; the data so far are kept",
             file=sys.stderr,
         )
         return DeviceError.exit_code
     return 0
+
+
+INCOMPLETE: dict[str, str] = {
+    "link_lost": "rig link lost",
+    "stalled": "the rig stopped answering",
+    "fault": "the rig ended the test with FAULT",
+    "stopped": "the rig was stopped (STOP from elsewhere) before the test ended",
+}
+"""Recording statuses of a test that did not run to its end (exit 5), and what they mean."""
 
 
 def _disturbance(args: argparse.Namespace):
