@@ -35,7 +35,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="run a test on the indentation rig and record it (CSV + JSON sidecar)",
         description="Run a ramp-and-hold or sine test on the rig and record every valid "
         "sample to CSV, flushed as it arrives. Quantities take unit suffixes: 4mm, 8mm/s, "
-        "100s, 250ms, 1000Hz.",
+        "100s, 250ms, 1000Hz. Exit status: 0 complete; 2 bad input, or a test the rig refuses "
+        "(nothing is written); 5 the rig cannot be reached, or the test did not run to its "
+        "end (FAULT, STOP, link lost, rig silent: the data so far are kept); 130 Ctrl-C (the "
+        "rig is stopped, the data so far are kept).",
     )
     acquire.add_argument("--port", required=True, help="port or pyserial URL of the rig")
     acquire.add_argument("--protocol", choices=("ramp-hold", "sine"), default="ramp-hold")
@@ -69,7 +72,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "rig-sim",
         help="serve a simulated indentation rig on a pty or a loopback TCP socket",
         description="A simulated rig speaking the rig protocol (docs/rig-protocol.md). "
-        "Prints the port to pass to 'warptissue acquire --port', then serves until Ctrl-C.",
+        "Prints the port to pass to 'warptissue acquire --port', then serves until Ctrl-C "
+        "or SIGTERM (exit 0). Exit status 2: a bad option, a bad force curve, or a TCP port "
+        "that is busy or out of range.",
     )
     where = sim.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (default)")

@@ -7,7 +7,8 @@ the training samples) and the combinations (CFM_SVM, CFM_LSSVM, WCFM_LSSVM, WCFM
 writes ``calibration.json`` (the chosen model, for the recorder), ``calibration_metrics.json``
 and ``.csv`` (Table 1: MAE, the paper's MSE, MAPE on the test samples, each sample's force
 corrected from its readings) and ``calibration.png``. Every sample needs the same number of
-readings.
+readings. Exit status: 0 written; 2 bad input (the file, line and column, or the option,
+named), checked before any model is fitted.
 """
 
 from __future__ import annotations
