@@ -1,4 +1,4 @@
-"""Heterogeneous linear field estimation (seed 002): FE, estimation steps, markers, CLI."""
+"""Heterogeneous linear field estimation (Tong et al.): FE, estimation steps, markers, CLI."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from warptissue.field.markers import (
 from warptissue.field.pipeline import estimate_load_set
 from warptissue.mesh import block_mesh
 
-# Seed 002, Eq. 2: D = alpha (G + nu H) in Voigt order (xx, yy, zz, xy, yz, zx).
+# Tong et al., Eq. 2: D = alpha (G + nu H) in Voigt order (xx, yy, zz, xy, yz, zx).
 G_MATRIX = np.diag([1.0, 1.0, 1.0, 0.5, 0.5, 0.5])
 H_MATRIX = np.zeros((6, 6))
 H_MATRIX[:3, :3] = np.ones((3, 3)) - 2.0 * np.eye(3)
@@ -257,7 +257,7 @@ def test_constrained_cells_lie_within_their_error_bounds_on_an_independent_slab(
 
 
 def test_reduced_pillow_case_matches_table_3_pattern():
-    """Seed 002's pillow at half marker resolution (12 x 7 markers, 66 hexahedra).
+    """Tong et al.'s pillow at half marker resolution (12 x 7 markers, 66 hexahedra).
 
     Block 50 x 30 x 10 cm, load at the middle marker, forces of sets A and F (Table 2),
     a smooth +-50% E field and nu in 0.03-0.11, 0.02 mm marker noise, 14 of 84 markers held
@@ -420,3 +420,81 @@ def test_cell_centroids_follow_the_hexahedron_numbering():
     expected = np.zeros((5 * 3 * 2, 3))
     np.add.at(expected, mesh.tet_regions, mesh.points[mesh.tets].mean(axis=1) / 5.0)
     np.testing.assert_allclose(_cell_centroids(grid), expected, atol=1e-15)
+
+
+@pytest.fixture(scope="module")
+def slab_files(tmp_path_factory):
+    """A small slab's marker and force files (5 x 4 markers, load set A, 5 um noise)."""
+    out = tmp_path_factory.mktemp("slab")
+    case = synthetic_slab(noise_m=5e-6, columns=5, rows=4, device="cpu")
+    return write_case_files(out, {"A": case})
+
+
+def run_fit_field(*args: str) -> int:
+    """``warptissue fit field ARGS``, returning the exit status (argparse's too)."""
+    from warptissue.cli import main
+
+    try:
+        return main(["fit", "field", *args])
+    except SystemExit as exc:
+        return int(exc.code)
+
+
+@pytest.mark.parametrize(
+    ("forces", "options", "expected"),
+    [
+        # Markers moving against the force gave a negative E0 with exit 0.
+        ("A,M012,-0.5,0,2", {}, "move against the applied force"),
+        # A second force row for a marker silently replaced the first.
+        ("A,M012,0,0,-1\nA,M012,0,0,-1", {}, "forces.csv:3, column 'marker'"),
+        # An empty marker label was reported without file or line.
+        ("A,,0,0,-1", {}, "forces.csv:2, column 'marker'"),
+        # All-zero forces were reported without the file.
+        ("A,M012,0,0,0", {}, "forces.csv: load set 'A' has no applied force"),
+        ("A,M099,0,0,-1", {}, "force on marker 'M099', which is not in"),
+        ("A,M012,0,0,-1", {"--load-set": "Z"}, "markers.csv: load set 'Z' is not in the file"),
+        # Options were named as Python arguments (thickness_m, max_iterations).
+        ("A,M012,0,0,-1", {"--thickness-m": "-0.03"}, "argument --thickness-m: must be positive"),
+        ("A,M012,0,0,-1", {"--max-iterations": "0"}, "argument --max-iterations"),
+        ("A,M012,0,0,-1", {"--gamma": "nan"}, "argument --gamma: not a finite number"),
+        ("A,M012,0,0,-1", {"--test-markers": "40"}, "(--test-markers); the 19 markers"),
+    ],
+)
+def test_cli_fit_field_refuses_bad_input_in_one_line(
+    tmp_path, capsys, slab_files, forces, options, expected
+):
+    markers_path, _ = slab_files
+    forces_path = tmp_path / "forces.csv"
+    forces_path.write_text("load_set,marker,fx_N,fy_N,fz_N\n" + forces + "\n")
+    arguments = {"--thickness-m": "0.03", "--test-markers": "3", **options}
+    flat = [item for pair in arguments.items() for item in pair]
+    status = run_fit_field(
+        str(markers_path), "--forces", str(forces_path), "--out", str(tmp_path / "o"), *flat
+    )
+    assert status == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert expected in error[-1]
+    assert "np.float64" not in error[-1] and "Traceback" not in "\n".join(error)
+
+
+def test_cli_fit_field_refuses_millimetres_in_metre_columns(tmp_path, capsys, slab_files):
+    """Coordinates in mm in the _m columns made cells 500 times wider than thick (the fit ran
+    for minutes); now refused up front, naming the cell size and the unit."""
+    markers_path, forces_path = slab_files
+    table = np.genfromtxt(markers_path, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    scaled = tmp_path / "markers_mm.csv"
+    lines = ["load_set,marker,x0_m,y0_m,z0_m,x1_m,y1_m,z1_m"]
+    for row in table:
+        values = ",".join(repr(1000.0 * float(row[name])) for name in table.dtype.names[2:])
+        lines.append(f"{row['load_set']},{row['marker']},{values}")
+    scaled.write_text("\n".join(lines) + "\n")
+    common = ["--forces", str(forces_path), "--test-markers", "3", "--out", str(tmp_path / "o")]
+    assert run_fit_field(str(scaled), "--thickness-m", "0.03", *common) == 2
+    assert "aspect ratio" in capsys.readouterr().err.strip().splitlines()[-1]
+    # Consistently in mm (thickness 30): it runs, but says out loud that E0 is implausible.
+    assert run_fit_field(str(scaled), "--thickness-m", "30", *common) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "warning:" in line]
+    assert any("are the marker coordinates in metres" in line for line in warnings)
+    assert any("E0 = " in line and "outside" in line for line in warnings)
+    summary = json.loads((tmp_path / "o" / "field_A.json").read_text())
+    assert any("outside" in message for message in summary["warnings"])

@@ -1,4 +1,4 @@
-"""Heterogeneous linear elastic field estimation (Tong et al., seed 002)."""
+"""Heterogeneous linear elastic field estimation (Tong et al.)."""
 
 from warptissue.field.fe import (
     ElementBasis,

@@ -1,9 +1,9 @@
-"""Heterogeneous linear elastic parameter estimation (Tong et al., seed 002).
+"""Heterogeneous linear elastic parameter estimation (Tong et al.).
 
 Three steps, each a function:
 
 1. :func:`homogeneous_estimate`: one (E, nu) for the whole body from the force balance
-   (seed 002, Eq. 13-14), the initial value and the Tikhonov anchor of step 2.
+   (Tong et al., Eq. 13-14), the initial value and the Tikhonov anchor of step 2.
 2. :func:`estimate_field` with ``objective="force"``: per-group (alpha, nu) minimizing the
    regularized force residual of Eq. 5-6, by the self-adapting LM of ``warptissue.fit``.
 3. :func:`estimate_field` with ``objective="displacement"``: the same parameters fitted to
@@ -13,6 +13,7 @@ Three steps, each a function:
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -49,6 +50,15 @@ NU_SCALE = 0.1
 
 CONFIDENCE_SIGMAS = 2.0
 """Standard errors added to the regularization bias bound in the per-group error bounds."""
+
+CONSTRAINED_RESOLUTION = 0.9
+"""Smallest resolution (diagonal of R) of a parameter counted as constrained."""
+
+CONSTRAINED_YOUNGS_ERROR = 0.10
+"""Largest error bound of E, relative, of a cell whose E counts as constrained."""
+
+CONSTRAINED_NU_ERROR = 0.02
+"""Largest error bound of nu, absolute, of a cell whose nu counts as constrained."""
 
 
 @dataclass(frozen=True)
@@ -156,7 +166,7 @@ def fill_nodal_displacements(
 
 @dataclass(frozen=True)
 class HomogeneousEstimate:
-    """The homogeneous linear estimate of seed 002, Eq. 13-14.
+    """The homogeneous linear estimate of Tong et al., Eq. 13-14.
 
     Attributes:
         youngs_modulus_Pa: E0, Pa.
@@ -172,7 +182,7 @@ class HomogeneousEstimate:
 
 
 def homogeneous_estimate(problem: FieldProblem) -> HomogeneousEstimate:
-    """Solve seed 002 Eq. 14: min_(E, nu) sum_i ||E N_i(nu) - f_i||^2 over the free dofs.
+    """Solve Tong et al.'s Eq. 14: min_(E, nu) sum_i ||E N_i(nu) - f_i||^2 over the free dofs.
 
     With K = E (phi(nu) K_G + varphi(nu) K_H) (Eq. 13), phi = 1/((1+nu)(1-2nu)) and
     varphi = nu phi, the forces are a K_G u + b K_H u with a = E phi, b = E varphi: a linear
@@ -187,7 +197,8 @@ def homogeneous_estimate(problem: FieldProblem) -> HomogeneousEstimate:
         The estimate.
 
     Raises:
-        InputError: The displacements produce no forces (all zero), so nothing is determined.
+        InputError: The displacements produce no forces (all zero), so nothing is determined,
+            or the best homogeneous E is not positive (the markers move against the force).
     """
     force_g, force_h = problem.model.group_forces(problem.nodal_displacement_m)
     free = problem.free_dofs
@@ -213,6 +224,12 @@ def homogeneous_estimate(problem: FieldProblem) -> HomogeneousEstimate:
         ).x
         column = basis @ np.array([1.0, nu])
         youngs = column @ target / (column @ column) * (1.0 + nu) * (1.0 - 2.0 * nu)
+    if not youngs > 0:
+        raise InputError(
+            "the markers move against the applied force (the best homogeneous fit has "
+            f"E = {float(youngs):.4g} Pa, not positive): check the signs of the forces and "
+            "of the displacements"
+        )
     alpha = float(alpha_from_youngs(youngs, nu))
     residual = alpha * (basis @ np.array([1.0, nu])) - target
     return HomogeneousEstimate(
@@ -252,6 +269,10 @@ class FieldEstimate:
             alpha0 in any group (given, or the fitted field's largest deviation).
         nu_deviation: The assumed largest deviation of the true nu from nu0 (given, or the
             fitted field's largest deviation).
+        identifiability: The fit's identifiability warnings
+            (:attr:`warptissue.fit.FitResult.identifiability`: a parameter pinned at a bound,
+            a standard error above its value) in physical units, one per parameter
+            (``alpha[g]`` in Pa, ``nu[g]``); empty when every parameter is identified.
     """
 
     alpha_Pa: np.ndarray
@@ -269,6 +290,7 @@ class FieldEstimate:
     poissons_ratio_leakage: np.ndarray
     alpha_deviation: float
     nu_deviation: float
+    identifiability: list[str]
 
     @property
     def _deviation(self) -> np.ndarray:
@@ -297,7 +319,10 @@ class FieldEstimate:
         return self.poissons_ratio_bias_bound + CONFIDENCE_SIGMAS * self.poissons_ratio_error
 
     def constrained_youngs(
-        self, *, resolution: float = 0.9, relative_error: float = 0.10
+        self,
+        *,
+        resolution: float = CONSTRAINED_RESOLUTION,
+        relative_error: float = CONSTRAINED_YOUNGS_ERROR,
     ) -> np.ndarray:
         """Groups whose E the data constrain: alpha's resolution >= ``resolution`` and the
         error bound (regularization bias bound + 2 standard errors, :attr:`youngs_error_bound`)
@@ -305,7 +330,7 @@ class FieldEstimate:
         return (self.resolution_alpha >= resolution) & (self.youngs_error_bound <= relative_error)
 
     def constrained_poissons_ratio(
-        self, *, resolution: float = 0.9, error: float = 0.02
+        self, *, resolution: float = CONSTRAINED_RESOLUTION, error: float = CONSTRAINED_NU_ERROR
     ) -> np.ndarray:
         """Groups whose nu the data constrain: nu's resolution >= ``resolution`` and
         :attr:`poissons_ratio_error_bound` <= ``error`` (absolute)."""
@@ -317,10 +342,13 @@ class FieldEstimate:
             "alpha_deviation": self.alpha_deviation,
             "nu_deviation": self.nu_deviation,
             "standard_errors_in_bound": CONFIDENCE_SIGMAS,
-            "constrained_youngs": {"resolution_alpha_min": 0.9, "youngs_error_bound_max": 0.10},
+            "constrained_youngs": {
+                "resolution_alpha_min": CONSTRAINED_RESOLUTION,
+                "youngs_error_bound_max": CONSTRAINED_YOUNGS_ERROR,
+            },
             "constrained_poissons_ratio": {
-                "resolution_nu_min": 0.9,
-                "poissons_ratio_error_bound_max": 0.02,
+                "resolution_nu_min": CONSTRAINED_RESOLUTION,
+                "poissons_ratio_error_bound_max": CONSTRAINED_NU_ERROR,
             },
             "meaning": "bias bound: largest linearized regularization bias for a true field "
             "whose alpha lies within alpha_deviation (relative) of alpha0 and whose nu lies "
@@ -361,8 +389,8 @@ class FieldEstimate:
                 "message": self.fit.message,
                 "iterations": self.fit.iterations,
                 "cost": self.fit.cost,
-                "identified": self.fit.identified,
-                "identifiability": self.fit.identifiability,
+                "identified": not self.identifiability,
+                "identifiability": self.identifiability,
             },
         }
 
@@ -487,7 +515,7 @@ def estimate_field(
     nu_deviation: float | None = None,
     progress: bool = False,
 ) -> FieldEstimate:
-    """Estimate alpha and nu per group (seed 002, Eq. 5-6, solved by the self-adapting LM).
+    """Estimate alpha and nu per group (Tong et al., Eq. 5-6, solved by the self-adapting LM).
 
     The unknowns are normalized, x = (alpha_g / alpha0, nu_g / NU_SCALE), and the residual is
 
@@ -506,7 +534,7 @@ def estimate_field(
         initial: The homogeneous estimate (computed when None): anchor and default start.
         start: Starting (alpha_Pa, nu) per group; default the homogeneous values.
         gamma: Tikhonov weight (dimensionless, on the normalized parameters).
-        method: "salm" (seed 002's self-adapting LM) or "lm".
+        method: "salm" (Tong et al.'s self-adapting LM) or "lm".
         max_iterations: Iteration limit of the LM.
         ftol, xtol, gtol: Stopping tolerances of :func:`warptissue.fit.least_squares`.
         alpha_deviation: Assumed largest deviation of the true alpha from alpha0 in any
@@ -557,7 +585,7 @@ def estimate_field(
     def jacobian(x: np.ndarray) -> np.ndarray:
         return np.vstack([data_jacobian(x), root_gamma * np.eye(x.size)])
 
-    names = [f"alpha_{g}" for g in range(groups)] + [f"nu_{g}" for g in range(groups)]
+    names = [f"alpha[{g}]" for g in range(groups)] + [f"nu[{g}]" for g in range(groups)]
     result = least_squares(
         residual,
         x0,
@@ -608,10 +636,29 @@ def estimate_field(
         poissons_ratio_leakage=_leakage(nu_scale * bias_operator[groups:], groups),
         alpha_deviation=float(alpha_deviation),
         nu_deviation=float(nu_deviation),
+        identifiability=_physical(result, scales, groups).identifiability,
+    )
+
+
+def _physical(result: FitResult, scales: np.ndarray, groups: int) -> FitResult:
+    """The fit in physical units (alpha in Pa, nu), for messages that name values."""
+    errors = result.standard_errors
+    return dataclasses.replace(
+        result,
+        x=result.x * scales,
+        jacobian=result.jacobian / scales,
+        covariance=None
+        if result.covariance is None
+        else result.covariance * np.outer(scales, scales),
+        standard_errors=None if errors is None else errors * scales,
+        lower_bounds=None if result.lower_bounds is None else result.lower_bounds * scales,
+        upper_bounds=None if result.upper_bounds is None else result.upper_bounds * scales,
+        parameter_units=("Pa",) * groups + ("",) * groups,
+        history=[],
     )
 
 
 def displacement_errors(predicted_m: np.ndarray, measured_m: np.ndarray) -> dict[str, float]:
-    """Maximum and mean Euclidean marker displacement error (seed 002, Table 3), metres."""
+    """Maximum and mean Euclidean marker displacement error (Tong et al., Table 3), metres."""
     error = np.linalg.norm(np.asarray(predicted_m) - np.asarray(measured_m), axis=1)
     return {"max_error_m": float(error.max()), "mean_error_m": float(error.mean())}

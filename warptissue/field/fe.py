@@ -1,4 +1,4 @@
-"""Linear tetrahedral FE with per-group substitution parameters (seed 002, Eq. 2-4).
+"""Linear tetrahedral FE with per-group substitution parameters (Tong et al., Eq. 2-4).
 
 The element matrices V B^T G B and V B^T H B do not depend on the parameters, so they are
 computed once by a Warp kernel; the stiffness for any (alpha, nu) is then a cheap
@@ -32,7 +32,7 @@ __all__ = [
 
 
 def alpha_from_youngs(youngs_modulus_Pa: np.ndarray, nu: np.ndarray) -> np.ndarray:
-    """Substitution parameter alpha = E / ((1 + nu)(1 - 2 nu)) in Pa (seed 002, Eq. 2)."""
+    """Substitution parameter alpha = E / ((1 + nu)(1 - 2 nu)) in Pa (Tong et al., Eq. 2)."""
     nu = np.asarray(nu, dtype=np.float64)
     return np.asarray(youngs_modulus_Pa, dtype=np.float64) / ((1.0 + nu) * (1.0 - 2.0 * nu))
 
@@ -119,7 +119,7 @@ def combine_element_stiffness(
         Element stiffness matrices, shape (tet_count, 12, 12), N/m.
 
     Notes:
-        Seed 002 Eq. 4 as printed reads K^e = alpha V B^T G B + nu V B^T H B; from Eq. 2 the
+        Tong et al.'s Eq. 4 as printed reads K^e = alpha V B^T G B + nu V B^T H B; from Eq. 2 the
         second term is alpha nu V B^T H B, which is what is assembled here.
     """
     target = resolve_device(device)
@@ -211,7 +211,7 @@ class LinearTetModel:
         device: Warp device for the element kernels.
 
     Notes:
-        D = alpha (G + nu H), alpha = E / ((1 + nu)(1 - 2 nu)) (Tong et al., seed 002, Eq. 2),
+        D = alpha (G + nu H), alpha = E / ((1 + nu)(1 - 2 nu)) (Tong et al., Eq. 2),
         K = sum_g alpha_g (sum_{e in g} V B^T G B + nu_g V B^T H B) (Eq. 3-4 with the ERRATA).
     """
 

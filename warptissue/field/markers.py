@@ -121,14 +121,26 @@ def read_forces_csv(path: str | Path) -> dict[str, dict[str, np.ndarray]]:
     """Read a force file: ``{load_set: {marker: force (3,) in N}}``.
 
     Raises:
-        InputError: Missing columns or non-numeric values, with file, line and column.
+        InputError: Missing columns, non-numeric values, an empty marker label, or a marker
+            listed twice in one load set, with file, line and column.
     """
     forces: dict[str, dict[str, np.ndarray]] = {}
     for line, row in _read_rows(path, FORCE_COLUMNS):
         label = (row.get("load_set") or "A").strip() or "A"
         marker = (row.get("marker") or "").strip()
+        if not marker:
+            raise InputError("empty marker label", path=path, line=line, column="marker")
         vector = np.array([csv_number(path, line, row, c) for c in FORCE_COLUMNS[1:]])
-        forces.setdefault(label, {})[marker] = vector
+        entries = forces.setdefault(label, {})
+        if marker in entries:
+            raise InputError(
+                f"marker {marker!r} has two forces in load set {label!r}; give one row per "
+                "marker (the sum of its forces)",
+                path=path,
+                line=line,
+                column="marker",
+            )
+        entries[marker] = vector
     return forces
 
 
@@ -159,6 +171,16 @@ class MarkerGrid:
         return i + (nx + 1) * (j + (ny + 1) * k)
 
 
+MAX_CELL_ASPECT = 50.0
+"""Largest ratio of a cell's marker spacing to its layer thickness (or the inverse) accepted
+by :func:`grid_from_markers`; flatter cells come from a wrong unit or thickness."""
+
+
+def _length(value_m: float) -> str:
+    """A length for messages, in metres with 3 significant digits."""
+    return f"{value_m:.3g} m"
+
+
 def _cluster(values: np.ndarray, tolerance: float) -> np.ndarray:
     ordered = np.sort(values)
     breaks = np.flatnonzero(np.diff(ordered) > tolerance) + 1
@@ -172,7 +194,7 @@ def grid_from_markers(
     layers: int = 1,
     tolerance_m: float | None = None,
 ) -> MarkerGrid:
-    """Build the hexahedral (5-tet) mesh of seed 002 from the markers' grid.
+    """Build the hexahedral (5-tet) mesh of Tong et al. from the markers' grid.
 
     The markers lie on the top face z = mean(z0) of a block whose base (z = top -
     thickness_m) is fixed. Marker x and y coordinates are clustered into grid lines
@@ -188,7 +210,8 @@ def grid_from_markers(
         The grid and its mesh.
 
     Raises:
-        InputError: Fewer than 2 grid lines along x or y, or bad thickness or layers.
+        InputError: Fewer than 2 grid lines along x or y, bad thickness or layers, or cells
+            flatter (or taller) than an aspect ratio of :data:`MAX_CELL_ASPECT`.
     """
     reference_m = np.asarray(reference_m, dtype=np.float64)
     if not thickness_m > 0 or layers < 1:
@@ -203,6 +226,17 @@ def grid_from_markers(
         raise InputError(
             f"markers span {len(x_m)} x {len(y_m)} grid lines; need at least 2 x 2",
             value=(len(x_m), len(y_m)),
+        )
+    spacing = min(float(np.diff(x_m).min()), float(np.diff(y_m).min()))
+    span = max(float(np.ptp(x_m)), float(np.ptp(y_m)))
+    layer = thickness_m / layers
+    aspect = max(spacing / layer, layer / spacing)
+    if aspect > MAX_CELL_ASPECT:
+        raise InputError(
+            f"the cells would be {_length(spacing)} across and {_length(layer)} thick "
+            f"(aspect ratio {aspect:.0f}, at most {MAX_CELL_ASPECT:.0f}) for markers spanning "
+            f"{_length(span)}: check --thickness-m and --layers, and that the marker "
+            "coordinates are in metres"
         )
     top = float(reference_m[:, 2].mean())
     z_m = np.linspace(top - thickness_m, top, layers + 1)

@@ -1,4 +1,4 @@
-"""The field-estimation workflow of seed 002 for marker data, and its outputs.
+"""The field-estimation workflow of Tong et al. for marker data, and its outputs.
 
 Per load set: build the 5-tet hexahedral mesh on the marker grid, split the markers into
 training and test markers (the paper: 249 / 50), estimate the homogeneous (E0, nu0)
@@ -15,6 +15,7 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.field.estimation import (
+    CONSTRAINED_YOUNGS_ERROR,
     FieldEstimate,
     FieldProblem,
     HomogeneousEstimate,
@@ -44,9 +45,10 @@ def split_markers(
         (train, test) sorted index arrays.
     """
     candidates = np.setdiff1d(np.arange(marker_count), exclude)
-    if not 0 <= test_count < len(candidates):
+    if not 1 <= test_count < len(candidates):
         raise InputError(
-            f"test marker count must be between 0 and {len(candidates) - 1}", value=test_count
+            f"{test_count} test markers asked for (--test-markers); the {len(candidates)} "
+            f"markers without a force allow 1 to {len(candidates) - 1}"
         )
     test = np.sort(np.random.default_rng(seed).choice(candidates, test_count, replace=False))
     return np.setdiff1d(np.arange(marker_count), test), test
@@ -67,6 +69,8 @@ class LoadSetResult:
             solves, shape (node_count, 3).
         test_measured_m: Measured test-marker displacements, shape (t, 3).
         test_homogeneous_m, test_field_m: Predicted test-marker displacements, shape (t, 3).
+        warnings: Implausible data or results, and parameters the data do not determine
+            (:func:`load_set_warnings`), one sentence each.
     """
 
     load_set: str
@@ -82,6 +86,7 @@ class LoadSetResult:
     test_measured_m: np.ndarray
     test_homogeneous_m: np.ndarray
     test_field_m: np.ndarray
+    warnings: list[str]
 
 
 def estimate_load_set(
@@ -97,10 +102,12 @@ def estimate_load_set(
     gamma: float = 1e-5,
     method: str = "salm",
     max_iterations: int = 60,
+    alpha_deviation: float | None = None,
+    nu_deviation: float | None = None,
     device: str | None = None,
     progress: bool = False,
 ) -> LoadSetResult:
-    """Run seed 002's estimation for one load set of marker data.
+    """Run Tong et al.'s estimation for one load set of marker data.
 
     Args:
         markers: Marker positions and displacements (all load sets).
@@ -115,6 +122,8 @@ def estimate_load_set(
         gamma: Tikhonov weight of Eq. 6 (normalized parameters).
         method: "salm" or "lm".
         max_iterations: LM iteration limit.
+        alpha_deviation, nu_deviation: Assumed largest deviations of the true field from the
+            homogeneous estimate, for the error bounds (:func:`estimate_field`).
         device: Warp device of the element kernels.
         progress: Show progress bars.
 
@@ -122,11 +131,14 @@ def estimate_load_set(
         The result.
 
     Raises:
-        InputError: Unknown load set, a force on a marker that is not on a mesh node, or a
-            bad split.
+        InputError: Unknown load set, no force, a force on a marker that is not on a mesh
+            node, a bad split, or markers that move against the force.
     """
     if load_set not in markers.load_sets:
-        raise InputError(f"unknown load set {load_set!r}; have {list(markers.load_sets)}")
+        raise InputError(
+            f"load set {load_set!r} is not in the marker file, which has "
+            f"{', '.join(markers.load_sets)}"
+        )
     grid = grid_from_markers(markers.reference_m, thickness_m=thickness_m, layers=layers)
     mesh = grid.mesh
     interpolation = surface_interpolation(mesh, markers.reference_m)
@@ -134,16 +146,20 @@ def estimate_load_set(
     loaded = []
     for label, vector in forces.items():
         if label not in markers.markers:
-            raise InputError(f"force on unknown marker {label!r}", value=label)
+            raise InputError(
+                f"load set {load_set!r}: force on marker {label!r}, which is not in the marker file"
+            )
         index = markers.markers.index(label)
         row = interpolation.getrow(index)
         if row.data.max() < 1.0 - 1e-6:
             raise InputError(
-                f"loaded marker {label!r} is not on a mesh node; forces act on nodes",
-                value=label,
+                f"load set {load_set!r}: loaded marker {label!r} is not on a grid node of "
+                "the markers; forces act on nodes"
             )
         force[row.indices[np.argmax(row.data)]] += vector
         loaded.append(index)
+    if not np.any(force):
+        raise InputError(f"load set {load_set!r} has no applied force (all forces are zero)")
     train, test = split_markers(
         len(markers.markers), test_count=test_count, exclude=np.array(loaded), seed=seed
     )
@@ -152,7 +168,10 @@ def estimate_load_set(
     nodal = fill_nodal_displacements(grid, interpolation[train], measured[train])
     base = mesh.node_set("zmin")
     problem = FieldProblem(model, base, force, interpolation[train], measured[train], nodal)
-    homogeneous = homogeneous_estimate(problem)
+    try:
+        homogeneous = homogeneous_estimate(problem)
+    except InputError as exc:
+        raise InputError(f"load set {load_set!r}: {exc.message}") from None
     field = estimate_field(
         problem,
         objective=objective,
@@ -160,6 +179,8 @@ def estimate_load_set(
         gamma=gamma,
         method=method,
         max_iterations=max_iterations,
+        alpha_deviation=alpha_deviation,
+        nu_deviation=nu_deviation,
         progress=progress,
     )
     groups = model.group_count
@@ -186,7 +207,67 @@ def estimate_load_set(
         test_measured_m=measured[test],
         test_homogeneous_m=test_homogeneous,
         test_field_m=test_field,
+        warnings=load_set_warnings(grid, measured, homogeneous, field, thickness_m=thickness_m),
     )
+
+
+PLAUSIBLE_YOUNGS_PA: tuple[float, float] = (10.0, 1e9)
+"""Range of Young's modulus, Pa, outside which a homogeneous estimate is reported as
+implausible for soft tissue and phantoms (a unit is likely wrong)."""
+
+
+def load_set_warnings(
+    grid: MarkerGrid,
+    displacement_m: np.ndarray,
+    homogeneous: HomogeneousEstimate,
+    field: FieldEstimate,
+    *,
+    thickness_m: float,
+) -> list[str]:
+    """Say out loud what is implausible or not determined in a load set's estimate.
+
+    Checks: a marker grid wider than 2 m or an E0 outside :data:`PLAUSIBLE_YOUNGS_PA` (a unit
+    off by 1000), marker displacements above 10% of the thickness (beyond the small strains
+    of linear elasticity), a fit that did not converge, parameters that the fit does not
+    identify (:attr:`FieldEstimate.identifiability`, counted), and no cell whose
+    E is constrained (:meth:`FieldEstimate.constrained_youngs`).
+
+    Returns:
+        One sentence per finding; empty when there is nothing to say.
+    """
+    messages = []
+    span = max(float(np.ptp(grid.x_m)), float(np.ptp(grid.y_m)))
+    if span > 2.0:
+        messages.append(f"the markers span {span:.4g} m: are the marker coordinates in metres?")
+    low, high = PLAUSIBLE_YOUNGS_PA
+    if not low <= homogeneous.youngs_modulus_Pa <= high:
+        messages.append(
+            f"the homogeneous estimate E0 = {homogeneous.youngs_modulus_Pa:.4g} Pa is outside "
+            f"{low:g} Pa to {high:g} Pa: are the coordinates in metres and the forces in "
+            "newtons?"
+        )
+    largest = float(np.linalg.norm(displacement_m, axis=1).max())
+    if largest > 0.1 * thickness_m:
+        messages.append(
+            f"the largest marker displacement, {largest:.4g} m, exceeds 10% of the thickness "
+            f"({thickness_m:.4g} m): linear elasticity assumes small strains"
+        )
+    if not field.fit.success:
+        messages.append(f"the field fit did not converge: {field.fit.message}")
+    unidentified = field.identifiability
+    if unidentified:
+        messages.append(
+            f"{len(unidentified)} of {field.fit.x.size} cell parameters are not identified "
+            f"by the data (first: {unidentified[0]}); see 'identifiability' in the JSON"
+        )
+    if not field.constrained_youngs().any():
+        messages.append(
+            f"no cell's E is constrained to {100 * CONSTRAINED_YOUNGS_ERROR:g}% (regularization "
+            "bias bound + 2 standard errors; smallest bound "
+            f"{100 * float(field.youngs_error_bound.min()):.3g}%): "
+            "read the cells CSV's error bounds before using a cell's E"
+        )
+    return messages
 
 
 def _cell_centroids(grid: MarkerGrid) -> np.ndarray:
@@ -201,7 +282,7 @@ def _cell_centroids(grid: MarkerGrid) -> np.ndarray:
 
 
 def plot_field_maps(path: str | Path, result: LoadSetResult) -> Path:
-    """Maps of E and nu per hexahedron of the top layer (seed 002, Figure 5), PNG.
+    """Maps of E and nu per hexahedron of the top layer (Tong et al., Figure 5), PNG.
 
     Constrained cells (:meth:`FieldEstimate.constrained_youngs`) are marked with a dot.
     """
@@ -267,10 +348,15 @@ def write_load_set_outputs(out_dir: str | Path, result: LoadSetResult) -> dict[s
             "test_max_error_m": result.field_errors["max_error_m"],
             "test_mean_error_m": result.field_errors["mean_error_m"],
             "constrained_youngs_cells": int(field.constrained_youngs().sum()),
+            "constrained_poissons_ratio_cells": int(field.constrained_poissons_ratio().sum()),
             "cells": int(len(field.alpha_Pa)),
+            "confidence": field.confidence_assumptions(),
+            "identified": not field.identifiability,
+            "identifiability": field.identifiability,
         },
         "train_markers": len(result.train),
         "test_markers": len(result.test),
+        "warnings": result.warnings,
     }
     paths = {"json": write_json(out / f"{stem}.json", summary)}
     paths["cells_csv"] = write_csv(
@@ -286,7 +372,13 @@ def write_load_set_outputs(out_dir: str | Path, result: LoadSetResult) -> dict[s
             "resolution_alpha": field.resolution_alpha,
             "resolution_nu": field.resolution_nu,
             "youngs_relative_error": field.youngs_relative_error,
+            "youngs_bias_bound": field.youngs_bias_bound,
+            "youngs_error_bound": field.youngs_error_bound,
             "constrained_youngs": field.constrained_youngs().astype(int),
+            "poissons_ratio_error": field.poissons_ratio_error,
+            "poissons_ratio_bias_bound": field.poissons_ratio_bias_bound,
+            "poissons_ratio_error_bound": field.poissons_ratio_error_bound,
+            "constrained_poissons_ratio": field.constrained_poissons_ratio().astype(int),
         },
     )
     paths["test_csv"] = write_csv(
