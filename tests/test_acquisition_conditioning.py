@@ -136,3 +136,44 @@ def test_prepare_record_keeps_raw_columns_and_logs_steps(rng):
     assert window.sum() == 1001
     with pytest.raises(InputError, match="displacement_m"):
         prepare_record({"time_s": time, "force_N": force})
+
+
+def record_columns(rng, **changes):
+    time, position, force = approach_record(rng)
+    columns = {"time_s": time, "displacement_m": position, "force_N": force}
+    return {**columns, **changes}
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"physiological_rates_Hz": "foo"}, 'must be "auto", rates in Hz or None'),
+        ({"physiological_rates_Hz": (600.0,)}, "below 0.45 times the sample rate"),
+        ({"physiological_rates_Hz": (0.25,), "quality": 0.0}, "quality must be a positive"),
+        ({"physiological_rates_Hz": (0.25,), "harmonics": 0}, "harmonics must be a whole"),
+        ({"threshold_sigma": -1.0}, "threshold_sigma must be a positive number"),
+        ({"contact_position_m": 50e-3}, "contact_position_m is not above the deepest"),
+        ({"keep_depth_m": 10e-3}, "keep_depth_m lies well below the deepest point"),
+        ({"window_s": (100.0, 200.0)}, "no sample left: the record spans 0 to"),
+    ],
+)
+def test_prepare_record_refuses_options_that_cannot_work(rng, options, message):
+    """Each was silently accepted (a notch above the Nyquist rate skipped, a window or a
+    depth outside the record kept nothing or everything, a contact below the record made
+    the whole force the offset) or raised a bare ValueError / ZeroDivisionError."""
+    with pytest.raises(InputError, match=message):
+        prepare_record(record_columns(rng), **options)
+
+
+def test_prepare_record_names_a_non_finite_value(rng):
+    time, position, force = approach_record(rng)
+    force[100] = np.nan
+    with pytest.raises(InputError, match=r"column 'force_N': not a finite number at sample 100"):
+        prepare_record({"time_s": time, "displacement_m": position, "force_N": force})
+
+
+def test_a_force_that_only_falls_is_said_to_have_the_wrong_sign(rng):
+    """Compression recorded as negative: not 'the force never leaves the baseline'."""
+    time, position, force = approach_record(rng)
+    with pytest.raises(InputError, match="falls below the pre-contact baseline"):
+        prepare_record({"time_s": time, "displacement_m": position, "force_N": -force})

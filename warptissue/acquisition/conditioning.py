@@ -80,6 +80,14 @@ def _check(time_s: np.ndarray, *arrays: np.ndarray) -> None:
     for array in arrays:
         if np.asarray(array).shape != t.shape:
             raise InputError("columns differ in length", value=(t.shape, np.shape(array)))
+    for name, array in (("time_s", t), *((None, a) for a in arrays)):
+        bad = np.flatnonzero(~np.isfinite(np.asarray(array, dtype=np.float64)))
+        if bad.size:
+            raise InputError(
+                f"not a finite number at sample {int(bad[0])}",
+                column=name,
+                value=float(np.asarray(array)[bad[0]]),
+            )
     if not np.all(np.diff(t) > 0):
         raise InputError("time_s must strictly increase")
 
@@ -126,6 +134,13 @@ def detect_contact(
     threshold = max(threshold_sigma * noise, min_threshold_N)
     above = np.flatnonzero((f - level > threshold) & (np.arange(len(f)) >= stop))
     if not above.size:
+        if np.any(level - f[stop:] > threshold):
+            raise InputError(
+                "no contact: the force falls below the pre-contact baseline instead of rising; "
+                "give the compressive force as positive",
+                column="force_N",
+                value=float(np.min(f[stop:]) - level),
+            )
         raise InputError("no contact: the force never leaves the baseline", value=threshold)
     crossing = int(above[0])
     # Early loading: from the crossing until the rise reaches fit_multiple thresholds, less
@@ -369,6 +384,12 @@ def suppress_physiological(
     if not rates or not all(r > 0 for r in rates):
         raise InputError("rates must be positive", value=rates_Hz)
     sample_rate = 1.0 / float(np.mean(steps))
+    if max(rates) >= 0.45 * sample_rate:
+        raise InputError(
+            f"a rate to notch must lie below 0.45 times the sample rate "
+            f"({0.45 * sample_rate:.6g} Hz)",
+            value=max(rates),
+        )
     # A notch of width w = rate / quality decays as exp(-pi w t): pad 8 time constants.
     pad = int(8.0 * quality / (np.pi * min(rates)) * sample_rate)
     filtered = []
@@ -392,6 +413,39 @@ def select_window(time_s: np.ndarray, *, start_s: float, stop_s: float) -> np.nd
     if not stop_s > start_s:
         raise InputError("the window must end after it starts", value=(start_s, stop_s))
     return (t >= start_s) & (t <= stop_s)
+
+
+def _check_options(
+    position_m: np.ndarray,
+    *,
+    physiological_rates_Hz: tuple[float, ...] | str | None,
+    harmonics: int,
+    quality: float,
+    contact_position_m: float | None,
+    threshold_sigma: float,
+) -> None:
+    """InputError naming the first option of :func:`prepare_record` that cannot work."""
+    rates = physiological_rates_Hz
+    if isinstance(rates, str) and rates != "auto":
+        raise InputError('physiological_rates_Hz must be "auto", rates in Hz or None', value=rates)
+    if rates is not None and rates != "auto":
+        values = np.atleast_1d(np.asarray(rates, dtype=np.float64))
+        if values.size == 0 or not np.all(np.isfinite(values) & (values > 0)):
+            raise InputError("physiological_rates_Hz must be positive rates in Hz", value=rates)
+    if not (isinstance(harmonics, int | np.integer) and harmonics >= 1):
+        raise InputError("harmonics must be a whole number of 1 or more", value=harmonics)
+    if not (math.isfinite(quality) and quality > 0):
+        raise InputError("quality must be a positive number", value=quality)
+    if not (math.isfinite(threshold_sigma) and threshold_sigma > 0):
+        raise InputError("threshold_sigma must be a positive number", value=threshold_sigma)
+    if contact_position_m is not None and not (
+        math.isfinite(contact_position_m) and contact_position_m < float(np.max(position_m))
+    ):
+        raise InputError(
+            f"contact_position_m is not above the deepest recorded position "
+            f"({float(np.max(position_m)):.6g} m): the probe never reaches it",
+            value=contact_position_m,
+        )
 
 
 @dataclass(frozen=True)
@@ -496,7 +550,23 @@ def prepare_record(
             raise InputError("missing column", column=name)
     raw = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
     t, x, f = raw["time_s"], raw["displacement_m"], raw["force_N"]
+    for name in ("displacement_m", "force_N"):
+        bad = np.flatnonzero(~np.isfinite(raw[name]))
+        if bad.size:
+            raise InputError(
+                f"not a finite number at sample {int(bad[0])}",
+                column=name,
+                value=float(raw[name][bad[0]]),
+            )
     _check(t, x, f)
+    _check_options(
+        x,
+        physiological_rates_Hz=physiological_rates_Hz,
+        harmonics=harmonics,
+        quality=quality,
+        contact_position_m=contact_position_m,
+        threshold_sigma=threshold_sigma,
+    )
     steps: list[str] = []
     rates: tuple[float, ...] = ()
     if physiological_rates_Hz == "auto":
@@ -550,11 +620,24 @@ def prepare_record(
         depth = np.clip(depth, 0.0, None)
     kept = np.ones(len(t), dtype=bool)
     if keep_depth_m is not None:
+        deepest = float(np.max(x)) - contact.position_m
+        if keep_depth_m > 1.1 * deepest:  # 10 %: the contact is an estimate
+            raise InputError(
+                f"keep_depth_m lies well below the deepest point of the record ({deepest:.6g} "
+                "m below the contact): nothing to trim (a length in mm given in m?)",
+                value=keep_depth_m,
+            )
         kept &= trim_ramp(x, contact_position_m=contact.position_m, keep_depth_m=keep_depth_m)
         steps.append(f"kept the ramp to {keep_depth_m:.6g} m below contact")
     if window_s is not None:
         kept &= select_window(t, start_s=window_s[0], stop_s=window_s[1])
         steps.append(f"kept the window {window_s} s")
+    if not kept.any():
+        raise InputError(
+            f"no sample left: the record spans {t[0]:.6g} to {t[-1]:.6g} s"
+            + ("" if keep_depth_m is None else ", and keep_depth_m keeps the loading ramp only"),
+            value=window_s,
+        )
     return ConditionedRecord(
         time_s=t[kept],
         displacement_m=depth[kept],
