@@ -371,6 +371,15 @@ def test_estimate_counts_the_study_mesh(api_run):
     assert estimate.node_count == outputs.summary["mesh"]["node_count"]
 
 
+def test_a_device_that_is_no_device_name_is_bad_input(tiny_record, tmp_path, capsys):
+    """``--device gpu`` is a typo (exit 2), not a missing device (exit 5)."""
+    study_path = _study_file(tiny_record, tmp_path)
+    with pytest.raises(SystemExit) as caught:
+        main(["simulate", str(study_path), "--device", "gpu", "--out", str(tmp_path / "o")])
+    assert caught.value.code == 2
+    assert "expected cpu, cuda or cuda:N, got 'gpu'" in capsys.readouterr().err
+
+
 def test_bad_output_folders_are_refused_in_one_line(tiny_record, tmp_path, capsys):
     study_path = _study_file(tiny_record, tmp_path)
     a_file = tmp_path / "taken"

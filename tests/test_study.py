@@ -262,6 +262,32 @@ def test_toml_syntax_error_names_the_line(tmp_path):
 def test_missing_file(tmp_path):
     with pytest.raises(InputError, match="not found"):
         load_study(tmp_path / "nope.toml")
+    with pytest.raises(InputError, match="a folder, not a study file"):
+        load_study(tmp_path)
+
+
+def test_a_binary_file_is_refused_with_its_line(tmp_path):
+    path = tmp_path / "study.toml"
+    path.write_bytes(b"schema_version = 1\n\xff\xfe\n")
+    with pytest.raises(InputError, match="not a text") as caught:
+        load_study(path)
+    assert caught.value.line == 2 and caught.value.path == path
+
+
+@pytest.mark.parametrize("name", ["../../elsewhere", "a/b", "..", " "])
+def test_a_name_that_is_not_a_plain_folder_name_is_refused(tmp_path, name):
+    """The name makes the default output folder runs/<name>: no path may escape runs/."""
+    text = MINIMAL.replace("schema_version = 1", f"schema_version = 1\nname = {name!r}")
+    with pytest.raises(InputError, match="must be a plain name") as caught:
+        load_study(write(tmp_path, text))
+    assert caught.value.line == line_of(text, "name =")
+
+
+def test_too_many_load_steps_are_refused(tmp_path):
+    """Every converged state is kept in memory: a billion steps is refused at once."""
+    text = MINIMAL.replace("steps = 4", "steps = 1000000000")
+    with pytest.raises(InputError, match="at most 10000"):
+        load_study(write(tmp_path, text))
 
 
 def test_study_from_dict_rejects_non_table():

@@ -139,8 +139,7 @@ def test_cli_errors(tmp_path, capsys):
 
 
 def test_export_study(tmp_path):
-    """A study's specimen and material as USD (runs once fe-app's study module is merged)."""
-    pytest.importorskip("warptissue.study")
+    """A study's specimen, material and indenter as USD, no results."""
     from pathlib import Path
 
     from warptissue.usd.export import export_study
@@ -152,3 +151,85 @@ def test_export_study(tmp_path):
     mesh = read_tetmesh_usd(paths.root)
     assert {"top", "bottom"} <= set(mesh.node_sets)
     assert read_material_usd(paths.root)["density_kg_per_m3"] == 1060.0
+
+
+def _corrupt(folder, change):
+    summary = json.loads((folder / "result.json").read_text())
+    change(summary)
+    (folder / "result.json").write_text(json.dumps(summary))
+
+
+BAD_SUMMARIES = [
+    pytest.param(
+        lambda s: s.clear() or s.update(x=1) or None, "no study.material", id="no-material"
+    ),
+    pytest.param(
+        lambda s: s["force_curve"].update(depth_m=["a", "b", "c"]),
+        "force_curve.depth_m must be a list of numbers",
+        id="depths-not-numbers",
+    ),
+    pytest.param(
+        lambda s: s.update(force_curve=[1, 2]), "'force_curve' must be a JSON object", id="curve"
+    ),
+    pytest.param(lambda s: s.update(study=[1]), "'study' must be a JSON object", id="study"),
+    pytest.param(
+        lambda s: s["study"]["indenter"].update(radius_m=-1.0),
+        "study.indenter.radius_m: must be a positive length",
+        id="indenter",
+    ),
+]
+
+
+@pytest.mark.parametrize(("change", "message"), BAD_SUMMARIES)
+def test_cli_bad_result_json_is_one_line_exit_2(simulate_folder, tmp_path, capsys, change, message):
+    folder = simulate_folder[0]
+    _corrupt(folder, change)
+    assert main(["export", str(folder), "--out", str(tmp_path / "x.usda")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "result.json" in error[0] and message in error[0]
+
+
+def test_cli_result_json_that_is_not_an_object(simulate_folder, tmp_path, capsys):
+    folder = simulate_folder[0]
+    (folder / "result.json").write_text("[1, 2]")
+    assert main(["export", str(folder), "--out", str(tmp_path / "x.usda")]) == 2
+    assert "must hold a JSON object" in capsys.readouterr().err
+
+
+def test_cli_unreadable_vtu_is_one_line_exit_2(simulate_folder, tmp_path, capsys):
+    """meshio prints and exits on a file it cannot parse: that must not end the command."""
+    folder = simulate_folder[0]
+    (folder / "fields.vtu").write_text("not a vtu file")
+    assert main(["export", str(folder), "--out", str(tmp_path / "x.usda")]) == 2
+    captured = capsys.readouterr()
+    error = captured.err.strip().splitlines()
+    assert len(error) == 1 and "fields.vtu" in error[0] and "cannot read VTU" in error[0]
+    assert captured.out == ""
+
+
+def test_step_fields_of_another_mesh_are_refused(simulate_folder, tmp_path):
+    folder, mesh, displacement, _, _ = simulate_folder
+    grid = np.linspace(0.0, 0.01, 4)
+    other = block_mesh(grid, grid, grid)
+    for k in range(3):
+        step_mesh, values = (
+            (other, np.zeros((other.node_count, 3)))
+            if k == 1
+            else (
+                mesh,
+                displacement[k],
+            )
+        )
+        _write_vtu(folder / f"fields_{k + 1:03d}.vtu", step_mesh, {"displacement_m": values}, {})
+    with pytest.raises(InputError, match="another run") as caught:
+        export_result_dir(folder, tmp_path / "x.usda")
+    assert caught.value.path == folder / "fields_002.vtu"
+
+
+def test_cli_out_must_be_usda_and_source_must_exist(simulate_folder, tmp_path, capsys):
+    folder = simulate_folder[0]
+    assert main(["export", str(folder), "--out", str(tmp_path / "x.usdc")]) == 2
+    assert ".usda" in capsys.readouterr().err
+    assert not list(tmp_path.glob("x.*"))
+    assert main(["export", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "y.usda")]) == 2
+    assert "no such simulate output folder or study file" in capsys.readouterr().err

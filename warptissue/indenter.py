@@ -38,9 +38,9 @@ CONTACTS: tuple[str, ...] = ("bonded", "frictionless")
 
 def _positive_length(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{key} must be a number in metres", column=key, value=value)
+        raise InputError("must be a number in metres", column=key, value=value)
     if not (math.isfinite(value) and value > 0):
-        raise InputError(f"{key} must be a positive length in metres", column=key, value=value)
+        raise InputError("must be a positive length in metres", column=key, value=value)
     return float(value)
 
 
@@ -76,13 +76,13 @@ class Indenter:
     def __post_init__(self) -> None:
         if self.kind not in INDENTER_KINDS:
             raise InputError(
-                f"indenter kind must be one of {', '.join(map(repr, INDENTER_KINDS))}",
+                f"must be one of {', '.join(map(repr, INDENTER_KINDS))}",
                 column="kind",
                 value=self.kind,
             )
         if self.contact not in CONTACTS:
             raise InputError(
-                f"contact must be one of {', '.join(map(repr, CONTACTS))}",
+                f"must be one of {', '.join(map(repr, CONTACTS))}",
                 column="contact",
                 value=self.contact,
             )
@@ -102,9 +102,9 @@ class Indenter:
             if value is None:
                 continue
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise InputError(f"{key} must be a number in metres", column=key, value=value)
+                raise InputError("must be a number in metres", column=key, value=value)
             if not math.isfinite(value):
-                raise InputError(f"{key} must be finite", column=key, value=value)
+                raise InputError("must be finite", column=key, value=value)
             object.__setattr__(self, key, float(value))
 
     @classmethod

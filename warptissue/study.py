@@ -54,6 +54,8 @@ SCHEMA_VERSION: int = 1
 SPECIMEN_SHAPES: tuple[str, ...] = ("block", "disc")
 ELEMENT_TYPES: tuple[str, ...] = ("TET10", "TET4")
 BASE_KINDS: tuple[str, ...] = ("fixed", "sliding")
+MAX_STEPS: int = 10_000
+"""Most load steps a study may have: the run keeps every converged state in memory."""
 DEVICE_PATTERN = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
 
 _MISSING = object()
@@ -490,6 +492,8 @@ def _read_protocol(table: _Table, thickness_m: float) -> Protocol:
         )
     if has_list:
         depths = table.number_list("depths_m")
+        if len(depths) > MAX_STEPS:
+            raise table.error("depths_m", f"must hold at most {MAX_STEPS} depths", len(depths))
         for previous, depth in zip((0.0, *depths[:-1]), depths, strict=True):
             if depth <= previous:
                 raise table.error(
@@ -499,6 +503,8 @@ def _read_protocol(table: _Table, thickness_m: float) -> Protocol:
     else:
         max_depth_m = table.number("max_depth_m")
         steps = table.integer("steps")
+        if steps > MAX_STEPS:
+            raise table.error("steps", f"must be at most {MAX_STEPS}", steps)
         depths = tuple(max_depth_m * (k + 1) / steps for k in range(steps))
         last_key = "max_depth_m"
     if depths[-1] >= thickness_m:
@@ -552,6 +558,10 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
             version,
         )
     name = root.string("name", default=default_name)
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\0"):
+        raise root.error(
+            "name", "must be a plain name (it names the default output folder runs/<name>)", name
+        )
     description = root.string("description", default="")
     indenter = _read_indenter(root.table("indenter"))
     specimen = _read_specimen(root.table("specimen"), indenter.radius_m)
@@ -610,9 +620,15 @@ def load_study(path: str | Path) -> Study:
             line, the key path and the value).
     """
     study_path = Path(path)
+    if study_path.is_dir():
+        raise InputError("this is a folder, not a study file", path=study_path)
     if not study_path.is_file():
         raise InputError("study file not found", path=study_path)
-    text = study_path.read_text(encoding="utf-8")
+    try:
+        text = study_path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        line = study_path.read_bytes()[: exc.start].count(b"\n") + 1
+        raise InputError("not a text (UTF-8) TOML file", path=study_path, line=line) from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -42,6 +42,10 @@ def run_export(args: argparse.Namespace) -> int:
     from warptissue.usd.export import export_result_dir, export_study
 
     source: Path = args.source
+    if args.out.suffix != ".usda":
+        raise InputError("--out takes the root layer's path, a .usda file", path=args.out)
+    if not source.exists():
+        raise InputError("no such simulate output folder or study file", path=source)
     if source.is_dir():
         paths = export_result_dir(source, args.out, density_kg_per_m3=args.density_kg_per_m3)
     elif source.suffix == ".toml" and source.is_file():

@@ -39,6 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--device",
         default=None,
+        type=_device,
         metavar="DEVICE",
         help="cpu, cuda or cuda:N (default: the study's solver.device)",
     )
@@ -61,6 +62,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "path: scene.usda in the output folder)",
     )
     parser.set_defaults(handler=run)
+
+
+def _device(text: str) -> str:
+    """A ``--device`` value: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (others: exit 2)."""
+    from warptissue.study import DEVICE_PATTERN
+
+    if not DEVICE_PATTERN.match(text):
+        raise argparse.ArgumentTypeError(f"expected cpu, cuda or cuda:N, got {text!r}")
+    return text
 
 
 def run(args: argparse.Namespace) -> int:

@@ -12,6 +12,8 @@ results. ``warptissue simulate --usd`` and ``warptissue fit ... --usd`` call
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from collections.abc import Mapping
 from pathlib import Path
@@ -48,10 +50,14 @@ def read_fields_vtu(
     path = Path(path)
     if not path.is_file():
         raise InputError("no such VTU file", path=path)
+    printed = io.StringIO()
     try:
-        data = meshio.read(path)
-    except Exception as exc:  # meshio raises many types for malformed files
-        raise InputError(f"cannot read VTU: {exc}", path=path) from None
+        # meshio prints its complaints and exits (SystemExit) on a file it cannot parse.
+        with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(printed):
+            data = meshio.read(path, file_format="vtu")
+    except (Exception, SystemExit) as exc:
+        detail = " ".join(printed.getvalue().split()) or str(exc)
+        raise InputError(f"cannot read VTU: {detail}", path=path) from None
     blocks = [i for i, block in enumerate(data.cells) if block.type in _CELL_TYPES]
     if len(blocks) != 1:
         raise InputError("expected exactly one tetra or tetra10 cell block", path=path)
@@ -80,14 +86,46 @@ def _read_summary(result_dir: Path) -> dict[str, Any]:
             "no result.json: is this a 'warptissue simulate' output folder?", path=path
         )
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        summary = json.loads(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise InputError("result.json is not UTF-8 text", path=path) from None
     except json.JSONDecodeError as exc:
         raise InputError(
-            f"result.json is not valid JSON: {exc.msg}",
-            path=path,
-            line=exc.lineno,
-            column=exc.colno,
+            f"result.json is not valid JSON: {exc.msg}", path=path, line=exc.lineno
         ) from None
+    if not isinstance(summary, Mapping):
+        raise InputError("result.json must hold a JSON object", path=path)
+    for key in ("study", "force_curve"):
+        if not isinstance(summary.get(key, {}), Mapping):
+            raise InputError(f"result.json's {key!r} must be a JSON object", path=path)
+    return summary
+
+
+def _curve(summary: Mapping[str, Any], key: str, path: Path) -> np.ndarray:
+    """One column of ``result.json``'s force curve as float64, shape (S,)."""
+    values = (summary.get("force_curve") or {}).get(key, [])
+    try:
+        array = np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"force_curve.{key} must be a list of numbers", path=path) from None
+    if array.ndim != 1 or not np.all(np.isfinite(array)):
+        raise InputError(f"force_curve.{key} must be a list of finite numbers", path=path)
+    return array
+
+
+def _step_displacements(step_files: list[Path], node_count: int) -> np.ndarray:
+    """The ``displacement_m`` of each ``fields_NNN.vtu``, shape (S, N, 3)."""
+    steps = []
+    for step_file in step_files:
+        displacement = read_fields_vtu(step_file)[1].get("displacement_m")
+        if displacement is None or np.shape(displacement) != (node_count, 3):
+            raise InputError(
+                f"no displacement_m of shape ({node_count}, 3) as in fields.vtu: "
+                "is it from another run?",
+                path=step_file,
+            )
+        steps.append(displacement)
+    return np.stack(steps)
 
 
 def _read_indenter(spec: Any, path: Path) -> Indenter | None:
@@ -128,18 +166,20 @@ def export_result_dir(
     """
     result_dir = Path(result_dir)
     summary = _read_summary(result_dir)
+    summary_path = result_dir / "result.json"
     mesh, point_data, cell_data = read_fields_vtu(result_dir / "fields.vtu")
-    curve = summary.get("force_curve") or {}
-    depths = np.asarray(curve.get("depth_m", []), dtype=np.float64)
-    forces = np.asarray(curve.get("reaction_force_N", []), dtype=np.float64)
+    depths = _curve(summary, "depth_m", summary_path)
+    forces = _curve(summary, "reaction_force_N", summary_path)
     study = summary.get("study") or {}
     if material is None:
         material = study.get("material")
+        if material is None:
+            raise InputError("result.json has no study.material to write", path=summary_path)
     result = None
     if depths.size:
         step_files = [result_dir / f"fields_{k:03d}.vtu" for k in range(1, depths.size + 1)]
         if all(p.is_file() for p in step_files):
-            displacement = np.stack([read_fields_vtu(p)[1]["displacement_m"] for p in step_files])
+            displacement = _step_displacements(step_files, mesh.node_count)
         else:
             displacement = point_data.get("displacement_m")
         result = {
@@ -151,7 +191,7 @@ def export_result_dir(
             "completed": summary.get("completed"),
             "message": summary.get("message"),
         }
-    indenter = _read_indenter(study.get("indenter"), result_dir / "result.json")
+    indenter = _read_indenter(study.get("indenter"), summary_path)
     info: dict[str, Any] = {
         "result_dir": str(result_dir.resolve()),
         "study_file": str(study.get("path", "")),
