@@ -1,5 +1,5 @@
 """Newton load stepping and linear solvers: homogeneous uniaxial compression against the
-incompressible analytic solutions (seed 003, Eq. 3), solver agreement, cutback."""
+incompressible analytic solutions (the needle-indentation study, Eq. 3), solver agreement, cutback."""
 
 from __future__ import annotations
 

@@ -54,14 +54,14 @@ def line_of(text: str, fragment: str) -> int:
     raise AssertionError(f"{fragment!r} not in the text")
 
 
-def test_bundled_scene_loads_with_seed_values():
+def test_bundled_scene_loads_with_the_papers_values():
     study = load_study(SCENE)
     assert study.schema_version == SCHEMA_VERSION
-    # Seed 001: a 2 mm DIAMETER probe, so the radius is 1 mm.
+    # Kim et al.: a 2 mm DIAMETER probe, so the radius is 1 mm.
     assert study.indenter.radius_m == pytest.approx(1.0e-3)
     assert study.indenter.kind == "flat_punch"
     assert study.indenter.contact == "bonded"
-    # Seed 000, Table 2: C10 = 287.5 Pa; nearly incompressible with K / mu = 1000.
+    # Ahn & Kim, Table 2: C10 = 287.5 Pa; nearly incompressible with K / mu = 1000.
     assert study.material.C10_Pa == pytest.approx(287.5)
     assert study.material.bulk_modulus_Pa / (2 * study.material.C10_Pa) == pytest.approx(1000)
     assert study.specimen.quarter and study.specimen.element == "TET10"
