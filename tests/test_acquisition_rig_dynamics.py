@@ -112,6 +112,27 @@ def test_fit_recovers_parameters_from_simulated_sine_sweep(rng, tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_fit_of_parameters_the_response_cannot_tell_apart_says_so(rng):
+    """A force-to-force response fixes four combinations: freeing every parameter (a common
+    scale of the inertias and stiffnesses cancels) must be reported as not identified, in
+    the result and its JSON; the default four come back identified."""
+    import json
+
+    from warptissue.acquisition.rig_dynamics import PARAMETER_UNITS
+    from warptissue.io import to_jsonable
+
+    frequencies = np.geomspace(5.0, 400.0, 24)
+    noise = 1.0 + 0.005 * (rng.normal(size=24) + 1j * rng.normal(size=24))  # 0.5 %
+    measured = KIM_RIG.frequency_response(frequencies) * noise
+    start = replace(KIM_RIG, link_inertia_kg_m2=KIM_RIG.link_inertia_kg_m2 * 1.2)
+    good = fit_rig_dynamics(frequencies, measured, initial=start)
+    assert good.identified and good.to_dict()["warnings"] == []
+    everything = fit_rig_dynamics(frequencies, measured, initial=start, free=tuple(PARAMETER_UNITS))
+    assert not everything.identified
+    report = json.loads(json.dumps(to_jsonable(everything.to_dict()), allow_nan=False))
+    assert report["identified"] is False and report["warnings"]
+
+
 def test_invalid_parameters_and_inputs_are_rejected():
     with pytest.raises(InputError, match="link_inertia"):
         replace(KIM_RIG, link_inertia_kg_m2=-1.0)

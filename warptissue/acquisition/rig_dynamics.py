@@ -280,6 +280,33 @@ class RigDynamicsFit:
     message: str
     nfev: int
 
+    @property
+    def identifiability(self) -> list[str]:
+        """Free parameters the data do not determine: a standard error larger than the
+        value, or none at all (a singular Jacobian: some combination of them leaves the
+        response unchanged). Empty for an identified fit."""
+        messages = []
+        values = asdict(self.model)
+        for name in self.free_parameters:
+            error = self.standard_errors[name]
+            unit = PARAMETER_UNITS[name]
+            if not math.isfinite(error):
+                messages.append(
+                    f"{name} has no standard error (singular Jacobian: with the other free "
+                    "parameters it is not identified by a force-to-force response)"
+                )
+            elif error > abs(values[name]):
+                messages.append(
+                    f"{name} = {values[name]:.6g} {unit} has a standard error of "
+                    f"{error:.3g} {unit}, larger than its value: it is not identified"
+                )
+        return messages
+
+    @property
+    def identified(self) -> bool:
+        """True when :attr:`identifiability` has nothing to report."""
+        return not self.identifiability
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready result, with the flat band and bandwidth of the fitted model."""
         values = asdict(self.model)
@@ -288,12 +315,18 @@ class RigDynamicsFit:
                 name: {
                     "value": values[name],
                     "unit": PARAMETER_UNITS[name],
-                    "standard_error": self.standard_errors.get(name),
+                    "standard_error": (
+                        self.standard_errors[name]
+                        if math.isfinite(self.standard_errors.get(name, math.nan))
+                        else None
+                    ),
                     "fitted": name in self.free_parameters,
                 }
                 for name in values
             },
             "rms_log_error": self.rms_log_error,
+            "identified": self.identified,
+            "warnings": self.identifiability,
             "success": self.success,
             "message": self.message,
             "nfev": self.nfev,
@@ -337,7 +370,8 @@ def fit_rig_dynamics(
     Raises:
         InputError: Shapes, non-finite values, unknown parameter names.
     """
-    from scipy.optimize import least_squares
+    from warptissue.fit.engine import least_squares
+    from warptissue.fit.result import RejectStep
 
     f = np.asarray(frequency_Hz, dtype=np.float64)
     measured = np.asarray(response, dtype=np.complex128)
@@ -356,28 +390,33 @@ def fit_rig_dynamics(
     x0 = np.log([start[name] for name in free])
 
     def model(x: np.ndarray) -> RigDynamics:
-        return replace(initial, **dict(zip(free, np.exp(x).tolist(), strict=True)))
+        with np.errstate(over="ignore", under="ignore"):
+            values = np.exp(x)
+        try:
+            return replace(initial, **dict(zip(free, values.tolist(), strict=True)))
+        except InputError:  # a trial step left the domain (a value 0 or infinite)
+            raise RejectStep from None
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        ratio = np.log(model(x).frequency_response(f) / measured)
+        with np.errstate(all="ignore"):
+            ratio = np.log(model(x).frequency_response(f) / measured)
         return np.concatenate([ratio.real, ratio.imag])
 
-    solution = least_squares(residuals, x0, method="lm", x_scale="jac")
+    solution = least_squares(
+        residuals, x0, method="lm", parameter_names=[f"log_{name}" for name in free]
+    )
     fitted = model(solution.x)
-    dof = max(2 * f.size - len(free), 1)
-    variance = float(solution.fun @ solution.fun) / dof
-    try:
-        covariance_log = np.linalg.inv(solution.jac.T @ solution.jac) * variance
-        log_errors = np.sqrt(np.clip(np.diag(covariance_log), 0.0, None))
-    except np.linalg.LinAlgError:
+    log_errors = solution.standard_errors  # None: too few residuals or a singular Jacobian
+    if log_errors is None:
         log_errors = np.full(len(free), np.nan)
     values = asdict(fitted)
-    errors = {name: values[name] * e for name, e in zip(free, log_errors, strict=True)}
+    # Fitted in log space: the standard error of log(p) is p's relative standard error.
+    errors = {name: float(values[name] * e) for name, e in zip(free, log_errors, strict=True)}
     return RigDynamicsFit(
         model=fitted,
         free_parameters=tuple(free),
         standard_errors=errors,
-        rms_log_error=float(np.sqrt(np.mean(solution.fun**2))),
+        rms_log_error=float(solution.rmse),
         success=bool(solution.success),
         message=str(solution.message),
         nfev=int(solution.nfev),
