@@ -380,6 +380,18 @@ def test_a_device_that_is_no_device_name_is_bad_input(tiny_record, tmp_path, cap
     assert "expected cpu, cuda or cuda:N, got 'gpu'" in capsys.readouterr().err
 
 
+def test_a_linear_solver_of_another_device_is_refused_before_meshing(tiny_record, tmp_path, capsys):
+    record = dict(tiny_record, solver=dict(tiny_record["solver"], linear_solver="cudss"))
+    study_path = tmp_path / "cudss.toml"
+    study_path.write_text(tomli_w.dumps(record))
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--device", "cpu", "--out", str(out_dir)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "cudss.toml" in error[0] and "solver.linear_solver" in error[0]
+    assert "column" not in error[0]
+    assert not (out_dir / "result.json").exists()
+
+
 def test_bad_output_folders_are_refused_in_one_line(tiny_record, tmp_path, capsys):
     study_path = _study_file(tiny_record, tmp_path)
     a_file = tmp_path / "taken"

@@ -414,3 +414,17 @@ def test_numpy_values_are_read_and_printed_as_plain_numbers():
         message = str(caught.value)
         assert f"{table}.{key}" in message and "np." not in message and "array(" not in message
         assert str(value.tolist()) in message
+
+
+def test_tet4_with_the_mixed_formulation_is_refused_at_load(tmp_path):
+    """It used to pass the study and fail after meshing, naming a 'column'."""
+    text = MINIMAL.replace("thickness_m = 0.01", 'thickness_m = 0.01\nelement = "TET4"')
+    with pytest.raises(InputError, match="formulation 'mixed' needs element 'TET10'") as caught:
+        load_study(write(tmp_path, text))
+    assert caught.value.line == line_of(text, "element =")
+    text += '[solver]\nformulation = "mixed"\n'
+    with pytest.raises(InputError, match="solver.formulation") as caught:
+        load_study(write(tmp_path, text))
+    assert caught.value.line == line_of(text, "formulation =")
+    study = load_study(write(tmp_path, text.replace('"mixed"', '"displacement"')))
+    assert study.specimen.element == "TET4"

@@ -207,6 +207,20 @@ def _prepare_out_dir(out_path: Path) -> None:
             stale.unlink()
 
 
+def _check_linear_solver(study: Study, device: Any) -> None:
+    """Refuse, before any work, a linear solver that does not run on the device."""
+    from warptissue.fem import LinearSolver
+
+    try:
+        LinearSolver(method=study.solver.options.linear_solver, device=device)
+    except InputError as exc:
+        raise InputError(
+            f"solver.{exc.column or 'linear_solver'}: {exc.message}",
+            path=study.path,
+            value=exc.value,
+        ) from None
+
+
 def kernels_need_compiling(device: Any) -> bool:
     """Whether the project's Warp kernels are missing from Warp's kernel cache for a device.
 
@@ -310,6 +324,7 @@ def run_study(
     _prepare_out_dir(out_path)
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
+    _check_linear_solver(study, warp_device)
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     started = time.perf_counter()
     mesh = build_mesh(study)

@@ -569,6 +569,14 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
     material = _read_material(root.table("material"))
     boundary = _read_boundary(_optional_table(root, "boundary"))
     solver = _read_solver(_optional_table(root, "solver"))
+    if solver.formulation == "mixed" and specimen.element != "TET10":
+        key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
+        raise source.error(
+            key,
+            f"formulation 'mixed' needs element 'TET10' (specimen.element is "
+            f"{specimen.element!r}); TET4 takes formulation 'displacement', which locks when "
+            "nearly incompressible",
+        )
     root.finish()
     return Study(
         name=name,
