@@ -498,3 +498,31 @@ def test_cli_fit_field_refuses_millimetres_in_metre_columns(tmp_path, capsys, sl
     assert any("E0 = " in line and "outside" in line for line in warnings)
     summary = json.loads((tmp_path / "o" / "field_A.json").read_text())
     assert any("outside" in message for message in summary["warnings"])
+
+
+def test_cli_fit_field_names_a_marker_off_the_grid(tmp_path, capsys, slab_files):
+    """A marker off the rectangle of grid lines was reported as 'point 4 ... outside face set
+    'zmax'' (an index, a face-set name and a list repr); now the marker is named."""
+    markers_path, forces_path = slab_files
+    lines = markers_path.read_text().splitlines()
+    fields = lines[5].split(",")  # M005, the last marker of the first row (x = L)
+    assert fields[1] == "M005"
+    for column in (2, 5):  # x0_m and x1_m move 5 mm outwards (the spacing is 30 mm)
+        fields[column] = repr(float(fields[column]) + 0.005)
+    lines[5] = ",".join(fields)
+    moved = tmp_path / "markers.csv"
+    moved.write_text("\n".join(lines) + "\n")
+    status = run_fit_field(
+        str(moved),
+        "--forces",
+        str(forces_path),
+        "--thickness-m",
+        "0.03",
+        "--test-markers",
+        "3",
+        "--out",
+        str(tmp_path),
+    )
+    assert status == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "marker 'M005' at x0 = " in error and "rectangular grid" in error

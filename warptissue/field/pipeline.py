@@ -89,6 +89,23 @@ class LoadSetResult:
     warnings: list[str]
 
 
+def _check_markers_inside(markers: MarkerData, grid: MarkerGrid) -> None:
+    """Refuse a marker outside the rectangle of the grid lines, naming it."""
+    slack = 1e-9 + 1e-6 * max(float(np.ptp(grid.x_m)), float(np.ptp(grid.y_m)))
+    for axis, lines in ((0, grid.x_m), (1, grid.y_m)):
+        values = markers.reference_m[:, axis]
+        outside = np.flatnonzero((values < lines[0] - slack) | (values > lines[-1] + slack))
+        if outside.size:
+            index = int(outside[0])
+            name = "xy"[axis]
+            raise InputError(
+                f"marker {markers.markers[index]!r} at {name}0 = {values[index]:.6g} m lies "
+                f"outside the outermost grid lines ({lines[0]:.6g} to {lines[-1]:.6g} m; each "
+                f"line is the mean {name}0 of a row or column of markers): the markers must "
+                "lie on a rectangular grid"
+            )
+
+
 def estimate_load_set(
     markers: MarkerData,
     forces: dict[str, np.ndarray],
@@ -140,6 +157,7 @@ def estimate_load_set(
             f"{', '.join(markers.load_sets)}"
         )
     grid = grid_from_markers(markers.reference_m, thickness_m=thickness_m, layers=layers)
+    _check_markers_inside(markers, grid)
     mesh = grid.mesh
     interpolation = surface_interpolation(mesh, markers.reference_m)
     force = np.zeros((mesh.node_count, 3))
