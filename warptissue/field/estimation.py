@@ -553,6 +553,13 @@ def estimate_field(
         FG_g, FH_g the group's nodal forces per unit parameter. For the displacement
         objective, du/dtheta = -K^-1 (dK/dtheta u) with the same columns evaluated at the
         current u: one factorization, one multi-right-hand-side solve per iteration.
+
+        Confidence (docs/field.md, "Confidence"): the resolution R, the noise standard
+        errors, and a bound on the Tikhonov bias -(I - R)(x_true - x0), linearized at the
+        estimate, for a true field within ``alpha_deviation`` and ``nu_deviation`` of the
+        homogeneous estimate; a cell is constrained when its resolution is >= 0.9 and the
+        bias bound plus 2 standard errors is within the tolerance. The resolution alone
+        bounds nothing: a cell with R >= 0.9 still averages its neighbours.
     """
     if objective not in ("force", "displacement"):
         raise InputError("objective must be 'force' or 'displacement'", value=objective)
