@@ -542,3 +542,31 @@ def test_cli_fit_field_names_a_marker_off_the_grid(tmp_path, capsys, slab_files)
     assert status == 2
     error = capsys.readouterr().err.strip().splitlines()[-1]
     assert "marker 'M005' at x0 = " in error and "rectangular grid" in error
+
+
+def test_the_shipped_marker_example_is_the_generated_one_and_fits_within_its_bounds(
+    tmp_path, capsys
+):
+    """scenes/data/slab_*.csv are what scripts/tools/make_field_example.py writes, and the
+    documented command (docs/field.md) puts every resolved cell's true E, from the sidecar,
+    within its error bound."""
+    from _scripts import ROOT, run_script
+
+    run_script("scripts/tools/make_field_example.py", "--out", str(tmp_path), cwd=tmp_path)
+    data = ROOT / "scenes" / "data"
+    for name in ("slab_markers.csv", "slab_forces.csv", "slab_markers.json"):
+        assert (tmp_path / name).read_text() == (data / name).read_text(), name
+    out = tmp_path / "out"
+    status = run_fit_field(
+        str(data / "slab_markers.csv"), "--forces", str(data / "slab_forces.csv"),
+        "--thickness-m", "30mm", "--test-markers", "8", "--method", "lm", "--out", str(out),
+    )  # fmt: skip
+    assert status == 0
+    truth = json.loads((data / "slab_markers.json").read_text())["true_field"]
+    for label in ("A", "B"):
+        cells = np.genfromtxt(out / f"field_{label}_cells.csv", delimiter=",", names=True)
+        error = np.abs(cells["youngs_modulus_Pa"] / truth["youngs_modulus_Pa"] - 1.0)
+        resolved = cells["resolution_alpha"] >= 0.9
+        assert resolved.sum() >= 10
+        np.testing.assert_array_less(error[resolved], cells["youngs_error_bound"][resolved])
+        np.testing.assert_array_less(error[cells["constrained_youngs"] == 1], 0.10)
