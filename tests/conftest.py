@@ -33,3 +33,26 @@ def unit_cube_tet4():
 
     grid = np.linspace(0.0, 1.0, 3)
     return block_mesh(grid, grid, grid, split="six")
+
+
+@pytest.fixture
+def ctrl_c_at_newton_increment(monkeypatch: pytest.MonkeyPatch):
+    """Arm a Ctrl-C: ``arm(n)`` makes the n-th Newton increment from then on raise
+    KeyboardInterrupt, as Ctrl-C during a load step would (one increment per load step while
+    no step is cut back)."""
+    import warptissue.fem.solvers as solvers
+
+    original = solvers._newton_increment
+
+    def arm(number: int) -> None:
+        calls: list[int] = []
+
+        def interrupted(*args, **kwargs):
+            calls.append(1)
+            if len(calls) == number:
+                raise KeyboardInterrupt
+            return original(*args, **kwargs)
+
+        monkeypatch.setattr(solvers, "_newton_increment", interrupted)
+
+    return arm

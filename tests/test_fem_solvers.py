@@ -1,5 +1,6 @@
 """Newton load stepping and linear solvers: homogeneous uniaxial compression against the
-incompressible analytic solutions (the needle-indentation study, Eq. 3), solver agreement, cutback."""
+incompressible analytic solutions (the needle-indentation study, Eq. 3), solver agreement,
+cutback."""
 
 from __future__ import annotations
 
@@ -482,26 +483,17 @@ def test_solvers_take_one_options_object():
     )
 
 
-def test_ctrl_c_keeps_the_converged_steps(monkeypatch):
+def test_ctrl_c_keeps_the_converged_steps(ctrl_c_at_newton_increment):
     """KeyboardInterrupt in the third load step: SolveInterrupted (a KeyboardInterrupt)
     carries the two converged steps, equal to those of an uninterrupted run."""
-    import warptissue.fem.solvers as solvers
+    from warptissue.fem import SolveInterrupted
 
     assembler, conditions, loads = _six_step_compression()
     full = solve_quasistatic(assembler, conditions, loads)
-    newton_increment = solvers._newton_increment
-    calls = []
-
-    def interrupted_in_step_three(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return newton_increment(*args, **kwargs)
-
-    monkeypatch.setattr(solvers, "_newton_increment", interrupted_in_step_three)
+    ctrl_c_at_newton_increment(3)
     with pytest.raises(KeyboardInterrupt) as error:
         solve_quasistatic(assembler, conditions, loads)
-    assert isinstance(error.value, solvers.SolveInterrupted)
+    assert isinstance(error.value, SolveInterrupted)
     partial = error.value.partial_result
     assert not partial.completed and partial.message == "interrupted"
     np.testing.assert_array_equal(partial.loads, loads[:2])

@@ -252,21 +252,12 @@ def test_cli_usd_takes_an_optional_path(tiny_record, tmp_path):
     assert not (tmp_path / "bad").exists()
 
 
-def test_ctrl_c_keeps_the_converged_steps_and_exits_130(tiny_record, tmp_path, capsys, monkeypatch):
+def test_ctrl_c_keeps_the_converged_steps_and_exits_130(
+    tiny_record, tmp_path, capsys, ctrl_c_at_newton_increment
+):
     """KeyboardInterrupt in the third load step: force_curve.csv and result.json hold the two
     converged steps with status "interrupted", and the exit status is 130."""
-    import warptissue.fem.solvers as solvers
-
-    newton_increment = solvers._newton_increment
-    calls = []
-
-    def interrupted_in_step_three(*args, **kwargs):
-        calls.append(1)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return newton_increment(*args, **kwargs)
-
-    monkeypatch.setattr(solvers, "_newton_increment", interrupted_in_step_three)
+    ctrl_c_at_newton_increment(3)
     study_path = _study_file(tiny_record, tmp_path, DEPTHS_M)
     out_dir = tmp_path / "out"
     assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 130
