@@ -128,23 +128,23 @@ def rig_sim_process(*options: str):
 
 
 def simulate_force_curve(path, depth_m, force_N):
-    """A force curve in ``warptissue simulate``'s layout: its columns, in its order, with
-    columns rig-sim does not use."""
-    steps = np.arange(1, len(depth_m) + 1)
-    return write_csv(
-        path,
-        {
-            "step": steps,
-            "time_s": steps / len(steps),
-            "displacement_m": depth_m,
-            "force_N": force_N,
-            "newton_iterations": np.full(len(steps), 3),
-        },
-    )
+    """A force curve in ``warptissue simulate``'s layout (its columns, in its order, with the
+    undeformed row first)."""
+    from warptissue.simulate import FORCE_CURVE_COLUMNS
+
+    steps = np.arange(len(depth_m) + 1)
+    values = {
+        "time_s": steps / len(depth_m),
+        "displacement_m": np.r_[0.0, depth_m],
+        "force_N": np.r_[0.0, force_N],
+        "step": steps,
+        "newton_iterations": np.r_[0, np.full(len(depth_m), 3)],
+    }
+    return write_csv(path, {name: values[name] for name in FORCE_CURVE_COLUMNS})
 
 
 def test_rig_sim_plays_simulates_force_curve(tmp_path, capsys):
-    """simulate's force_curve.csv (extra columns, no zero row) drives rig-sim --tissue curve:
+    """simulate's force_curve.csv (extra columns, a zero row) drives rig-sim --tissue curve:
     the recorded force at each depth is the curve's, interpolated linearly."""
     depth = np.linspace(0.2e-3, 4e-3, 20)
     curve = simulate_force_curve(tmp_path / "force_curve.csv", depth, 3000.0 * depth**1.5)
