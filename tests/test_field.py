@@ -473,6 +473,8 @@ def run_fit_field(*args: str) -> int:
         ("A,M012,0,0,-1", {"--thickness-m": "-0.03"}, "argument --thickness-m: must be positive"),
         ("A,M012,0,0,-1", {"--max-iterations": "0"}, "argument --max-iterations"),
         ("A,M012,0,0,-1", {"--gamma": "nan"}, "argument --gamma: not a finite number"),
+        # A negative seed ended in a NumPy traceback.
+        ("A,M012,0,0,-1", {"--seed": "-1"}, "argument --seed: must be 0 or more"),
         ("A,M012,0,0,-1", {"--test-markers": "40"}, "(--test-markers); the 19 markers"),
     ],
 )

@@ -224,8 +224,8 @@ def grid_from_markers(
     y_m = _cluster(reference_m[:, 1], tolerance_m)
     if len(x_m) < 2 or len(y_m) < 2:
         raise InputError(
-            f"markers span {len(x_m)} x {len(y_m)} grid lines; need at least 2 x 2",
-            value=(len(x_m), len(y_m)),
+            f"the markers lie on {len(x_m)} x {len(y_m)} grid lines (x by y); a block needs "
+            "at least 2 x 2"
         )
     spacing = min(float(np.diff(x_m).min()), float(np.diff(y_m).min()))
     span = max(float(np.ptp(x_m)), float(np.ptp(y_m)))
