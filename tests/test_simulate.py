@@ -260,9 +260,11 @@ def test_ctrl_c_keeps_the_converged_steps_and_exits_130(
     ctrl_c_at_newton_increment(3)
     study_path = _study_file(tiny_record, tmp_path, DEPTHS_M)
     out_dir = tmp_path / "out"
-    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 130
-    error = capsys.readouterr().err.strip().splitlines()
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--json", "--quiet"]) == 130
+    captured = capsys.readouterr()
+    error = captured.err.strip().splitlines()
     assert error == [f"warptissue: interrupted: 2 converged load steps written to {out_dir}"]
+    assert json.loads(captured.out)["status"] == "interrupted"
     header, rows = read_csv(out_dir / "force_curve.csv")
     assert [r[1] for r in rows] == pytest.approx([0.0, *DEPTHS_M[:2]])
     summary = json.loads((out_dir / "result.json").read_text())

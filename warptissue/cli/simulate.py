@@ -98,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
         )
     except SolveInterrupted as interrupted:
         outputs = interrupted.partial_result
+        if args.json:
+            sys.stdout.write(outputs.files["result"].read_text(encoding="utf-8"))
         print(
             f"warptissue: interrupted: {outputs.summary['steps_converged']} converged load "
             f"steps written to {outputs.out_dir}",
