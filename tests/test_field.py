@@ -572,3 +572,16 @@ def test_the_shipped_marker_example_is_the_generated_one_and_fits_within_its_bou
         assert resolved.sum() >= 10
         np.testing.assert_array_less(error[resolved], cells["youngs_error_bound"][resolved])
         np.testing.assert_array_less(error[cells["constrained_youngs"] == 1], 0.10)
+
+
+def test_a_field_too_large_for_memory_is_refused_before_the_fit(monkeypatch):
+    """A marker grid of 100 x 100 (19 602 unknowns) needs several GB of dense matrices; the
+    estimate is refused up front, naming the cells and the memory, instead of running out
+    of memory in the fit (here: a small problem with the available memory made small)."""
+    from warptissue.field import estimation
+
+    _, problem = synthetic_problem(4, 3)
+    monkeypatch.setattr(estimation, "available_host_memory_bytes", lambda: 10_000)
+    with pytest.raises(InputError, match=r"6 cells \(12 unknowns.*GB of dense matrices"):
+        estimate_field(problem, objective="displacement", gamma=1e-5)
+    assert estimation.dense_memory_bytes(rows=3 * 10_000 + 19_602, unknowns=19_602) > 1e10

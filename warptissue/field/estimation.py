@@ -21,6 +21,7 @@ import numpy as np
 import scipy.optimize
 import scipy.sparse as sp
 
+from warptissue.device import available_host_memory_bytes
 from warptissue.errors import InputError
 from warptissue.field.fe import (
     LinearSolution,
@@ -547,6 +548,10 @@ def estimate_field(
     Returns:
         The estimate.
 
+    Raises:
+        InputError: A bad objective, gamma or deviation, or a field whose dense matrices
+            (:func:`dense_memory_bytes`) exceed the available host memory.
+
     Notes:
         The force residual K(alpha, nu) u = FG alpha + FH (alpha nu) is bilinear, and its
         Jacobian is analytic: d/d alpha_g = FG_g + nu_g FH_g, d/d nu_g = alpha_g FH_g, with
@@ -581,6 +586,13 @@ def estimate_field(
     lower = np.concatenate([np.full(groups, 1e-3), np.zeros(groups)])
     upper = np.concatenate([np.full(groups, np.inf), np.full(groups, NU_UPPER / nu_scale)])
     x0 = np.clip(x0, lower, upper)
+    _check_memory(
+        rows=(
+            problem.free_dofs.size if objective == "force" else problem.marker_displacement_m.size
+        )
+        + 2 * groups,
+        unknowns=2 * groups,
+    )
     root_gamma = np.sqrt(gamma)
     data_residual, data_jacobian = data_objective(
         problem, objective=objective, alpha0_Pa=alpha0, nu_scale=nu_scale
@@ -645,6 +657,25 @@ def estimate_field(
         nu_deviation=float(nu_deviation),
         identifiability=_physical(result, scales, groups).identifiability,
     )
+
+
+def dense_memory_bytes(*, rows: int, unknowns: int) -> int:
+    """Rough peak of the dense float64 matrices of :func:`estimate_field`, bytes: the
+    Jacobian (rows x unknowns) and its copies in the fit and its SVD (4), and the n x n
+    normal matrix, covariance, resolution and bias operators with their temporaries (8)."""
+    return 8 * (4 * rows * unknowns + 8 * unknowns * unknowns)
+
+
+def _check_memory(*, rows: int, unknowns: int) -> None:
+    """Refuse a field whose dense matrices cannot fit in the available host memory."""
+    needed = dense_memory_bytes(rows=rows, unknowns=unknowns)
+    available = available_host_memory_bytes()
+    if needed > available:
+        raise InputError(
+            f"{unknowns // 2} cells ({unknowns} unknowns, {rows} residuals) need about "
+            f"{needed / 1e9:.3g} GB of dense matrices, more than the {available / 1e9:.3g} GB "
+            "available: use fewer markers (a coarser grid) or fewer layers"
+        )
 
 
 def _physical(result: FitResult, scales: np.ndarray, groups: int) -> FitResult:
