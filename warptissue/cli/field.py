@@ -5,7 +5,8 @@ hexahedron with its own (E, nu). Per load set, markers are split into training a
 markers, the homogeneous linear estimate (Eq. 13-14) and the heterogeneous field
 are estimated, and both are evaluated on the test markers (Table 3). Writes per load set
 ``field_<set>.json``, ``field_<set>_cells.csv``, ``field_<set>_test_markers.csv``,
-``field_<set>.png`` (E and nu maps) and ``field_<set>.vtu``, plus ``field_summary.csv``.
+``field_<set>.png`` (E, nu and error-bound maps) and ``field_<set>.vtu``, plus
+``field_summary.csv``.
 Each cell's E and nu come with an error bound (the bound on the Tikhonov regularization's
 bias, for a true field within --alpha-deviation and --nu-deviation of the homogeneous
 estimate, plus 2 standard errors); a cell's E counts as constrained when its resolution is at

@@ -300,7 +300,8 @@ def _cell_centroids(grid: MarkerGrid) -> np.ndarray:
 
 
 def plot_field_maps(path: str | Path, result: LoadSetResult) -> Path:
-    """Maps of E and nu per hexahedron of the top layer (Tong et al., Figure 5), PNG.
+    """Maps of E, nu and E's error bound per hexahedron of the top layer (Tong et al.,
+    Figure 5, with the bound beside it), PNG.
 
     Constrained cells (:meth:`FieldEstimate.constrained_youngs`) are marked with a dot.
     """
@@ -316,14 +317,20 @@ def plot_field_maps(path: str | Path, result: LoadSetResult) -> Path:
     top = slice((nz - 1) * nx * ny, nz * nx * ny)
     centroids = _cell_centroids(grid)[top]
     constrained = field.constrained_youngs()[top]
-    figure, axes = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    figure, axes = plt.subplots(1, 3, figsize=(18, 3.8), constrained_layout=True)
     panels = (
-        (field.youngs_modulus_Pa[top] / 1e3, "Young's modulus E (kPa)"),
-        (field.poissons_ratio[top], "Poisson's ratio nu"),
+        (field.youngs_modulus_Pa[top] / 1e3, "Young's modulus E (kPa)", None),
+        (field.poissons_ratio[top], "Poisson's ratio nu", None),
+        (100.0 * field.youngs_error_bound[top], "error bound of E (%, scale to 100)", 100.0),
     )
-    for axis, (values, label) in zip(axes, panels, strict=True):
+    for axis, (values, label, largest) in zip(axes, panels, strict=True):
         image = axis.pcolormesh(
-            grid.x_m * 100, grid.y_m * 100, values.reshape(ny, nx), cmap="viridis"
+            grid.x_m * 100,
+            grid.y_m * 100,
+            values.reshape(ny, nx),
+            cmap="viridis",
+            vmin=0.0 if largest else None,
+            vmax=largest,
         )
         axis.plot(centroids[constrained, 0] * 100, centroids[constrained, 1] * 100, "w.", ms=4)
         axis.set_aspect("equal")
