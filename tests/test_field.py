@@ -585,3 +585,37 @@ def test_a_field_too_large_for_memory_is_refused_before_the_fit(monkeypatch):
     with pytest.raises(InputError, match=r"6 cells \(12 unknowns.*GB of dense matrices"):
         estimate_field(problem, objective="displacement", gamma=1e-5)
     assert estimation.dense_memory_bytes(rows=3 * 10_000 + 19_602, unknowns=19_602) > 1e10
+
+
+def test_bias_operator_predicts_the_noise_free_error_of_the_regularized_estimate():
+    """On noise-free data the whole error of the estimate is the Tikhonov bias, which the
+    linearized operator I - R = gamma A^-1 predicts from the known truth:
+    x - x_true = -(I - R)(x_true - x0). The bounds are built on this operator."""
+    from warptissue.field.estimation import NU_SCALE, _resolution_and_spread
+
+    case = synthetic_slab()
+    problem = case_problem(case)
+    gamma = 1e-5
+    estimate = estimate_field(
+        problem, objective="displacement", gamma=gamma, method="lm", max_iterations=100
+    )
+    groups = problem.model.group_count
+    alpha0 = estimate.initial.alpha_Pa
+    anchor = np.concatenate(
+        [np.ones(groups), np.full(groups, estimate.initial.poissons_ratio / NU_SCALE)]
+    )
+    truth = np.concatenate(
+        [alpha_from_youngs(case.youngs_modulus_Pa, case.poissons_ratio) / alpha0,
+         case.poissons_ratio / NU_SCALE]
+    )  # fmt: skip
+    residual, jacobian = data_objective(problem, objective="displacement", alpha0_Pa=alpha0)
+    _, _, bias_operator = _resolution_and_spread(
+        jacobian(estimate.fit.x), residual(estimate.fit.x), gamma
+    )
+    predicted = -bias_operator @ (truth - anchor)
+    actual = estimate.fit.x - truth
+    resolved = np.concatenate([estimate.resolution_alpha, estimate.resolution_nu]) >= 0.9
+    assert resolved.sum() >= 40
+    assert np.abs(actual[resolved]).max() > 0.05  # a bias worth predicting
+    mismatch = np.linalg.norm(predicted[resolved] - actual[resolved])
+    assert mismatch < 0.2 * np.linalg.norm(actual[resolved]), mismatch
