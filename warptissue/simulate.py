@@ -243,11 +243,14 @@ def kernels_need_compiling(device: Any) -> bool:
         module = wp.get_module(kernels.__name__)
         # Warp launches on the CPU with one thread per block (its kernel cache key).
         block_dim = 1 if device.is_cpu else module.options["block_dim"]
-        binary = os.path.join(
-            wp.config.kernel_cache_dir,
-            module.get_module_identifier(block_dim),
-            module._get_compile_output_name(device, block_dim=block_dim),
-        )
+        try:
+            binary = os.path.join(
+                wp.config.kernel_cache_dir,
+                module.get_module_identifier(block_dim),
+                module._get_compile_output_name(device, block_dim=block_dim),
+            )
+        except Exception:  # Warp's cache layout is not public API: where unknown, say nothing
+            return False
         if not os.path.exists(binary):
             return True
     return False
