@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -428,3 +429,19 @@ def test_tet4_with_the_mixed_formulation_is_refused_at_load(tmp_path):
     assert caught.value.line == line_of(text, "formulation =")
     study = load_study(write(tmp_path, text.replace('"mixed"', '"displacement"')))
     assert study.specimen.element == "TET4"
+
+
+def test_every_key_is_in_the_study_file_reference():
+    """docs/study-files.md's table lists every key a study has, under the same names."""
+    page = (REPOSITORY / "docs" / "study-files.md").read_text(encoding="utf-8")
+    documented = set(re.findall(r"^\| `([A-Za-z0-9_]+)` \|", page, flags=re.MULTILINE))
+    tables = set(re.findall(r"^\| \*\*`\[([a-z]+)\]`\*\* \|", page, flags=re.MULTILINE))
+    record = load_study(SCENE).to_dict()
+    keys = {key for key, value in record.items() if not isinstance(value, dict)}
+    for table, values in record.items():
+        if isinstance(values, dict) and table != "material":
+            keys |= set(values)
+    keys |= {"radius_m", "depths_m", "max_depth_m", "steps", "model"}
+    assert keys <= documented, sorted(keys - documented)
+    assert {k for k, v in record.items() if isinstance(v, dict)} <= tables
+    assert set(NewtonOptions.keys()) <= documented
