@@ -184,6 +184,7 @@ ACQUIRE_ERRORS = [
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--rate=-5Hz"], "--rate must"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--stall-timeout", "0s"], "stall"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--reconnect-attempts", "-1"], "rec"),
+    (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--give-up", "1s"], "--give-up must"),
     ([*SINE_EXAMPLE[:-1], "inf"], "--cycles must be a finite positive number"),
     ([*SINE_EXAMPLE, "--depth", "4mm"], "--depth is an option of --protocol ramp-hold, not sine"),
     (["--depth", "4mm", "--speed", "8mm/s", "--hold", "1s", "--cycles", "3"], "of --protocol sine"),
@@ -239,6 +240,11 @@ RIG_SIM_ERRORS = [
     (["--time-scale", "0"], "--time-scale must be positive"),
     (["--seed=-1"], "--seed must be zero or more"),
     (["--tissue", "curve"], "--force-curve"),
+    (["--faults", "garbage=0"], "--faults: garbage must be 1 or more"),
+    (["--faults", "drop=-5"], "--faults: drop must be 1 or more"),
+    (["--faults", "stall=100,stall_s=-1"], "stall_s must be a positive number of seconds"),
+    (["--faults", "drop=100,drop=200"], "drop is given twice"),
+    (["--faults", "split"], "NAME=VALUE"),
     (["--tissue", "curve", "--force-curve", "missing.csv"], "not found"),
 ]
 

@@ -192,13 +192,21 @@ class FaultPlan:
         }
         options: dict[str, float | int] = {}
         for item in filter(None, (part.strip() for part in text.split(","))):
-            key, _, value = item.partition("=")
+            key, sep, value = item.partition("=")
             if key not in names:
                 raise InputError(f"--faults: unknown fault; use {', '.join(names)}", value=item)
+            if not sep:
+                raise InputError("--faults takes NAME=VALUE pairs, e.g. drop=400", value=item)
+            if names[key] in options:
+                raise InputError(f"--faults: {key} is given twice", value=text)
             try:
-                options[names[key]] = float(value) if key == "stall_s" else int(value)
+                number = float(value) if key == "stall_s" else int(value)
             except ValueError:
                 raise InputError("--faults: not a number", value=item) from None
+            if not (math.isfinite(number) and number > 0):
+                what = "a positive number of seconds" if key == "stall_s" else "1 or more"
+                raise InputError(f"--faults: {key} must be {what}", value=item)
+            options[names[key]] = number
         return cls(**options)
 
 

@@ -201,6 +201,11 @@ def run_acquire(args: argparse.Namespace) -> int:
     start_m = None if args.start is None else _quantity(args, "start", "length")
     stall_timeout_s = _quantity(args, "stall_timeout", "time", sign="positive")
     give_up_s = _quantity(args, "give_up", "time", sign="positive")
+    if not give_up_s > stall_timeout_s:
+        raise InputError(
+            "--give-up must be longer than --stall-timeout (first ask the rig, then reopen)",
+            value=f"{args.give_up} <= {args.stall_timeout}",
+        )
     client = RigClient(args.port, reconnect_attempts=args.reconnect_attempts)
     with client:
         recorder = Recorder(  # checks the output before the rig moves
