@@ -7,6 +7,12 @@ import sys
 from pathlib import Path
 
 DOCS = Path(__file__).resolve().parent
+ROOT = DOCS.parent
+
+# `python -m sphinx` run from the checkout puts the checkout first on sys.path, where the
+# device code is the top-level folder kernels/, not the installed warptissue.kernels: document
+# the installed package (an editable install maps both itself).
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != ROOT]
 sys.path.insert(0, str(DOCS / "_ext"))
 
 from warptissue import __version__  # noqa: E402
