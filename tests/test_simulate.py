@@ -410,3 +410,38 @@ def test_a_rerun_leaves_no_step_fields_of_the_earlier_run(tiny_record, tmp_path)
     assert (out_dir / "fields_003.vtu").is_file()
     assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 0
     assert not list(out_dir.glob("fields_*.vtu"))
+
+
+def test_implausible_force_curves_are_said_out_loud():
+    from warptissue.simulate import force_curve_warnings
+
+    depths = np.array([1e-4, 2e-4, 3e-4])
+    assert force_curve_warnings(depths, np.array([1e-3, 2e-3, 3e-3])) == []
+    negative = force_curve_warnings(depths, np.array([-1e-3, -2e-3, -3e-3]))
+    assert len(negative) == 1 and "not positive at step 1" in negative[0]
+    falling = force_curve_warnings(depths, np.array([1e-3, 3e-3, 2e-3]))
+    assert len(falling) == 1 and "falls from step 2 to 3" in falling[0]
+    assert "not positive" in force_curve_warnings(depths, np.array([1e-3, np.nan, 2e-3]))[0]
+
+
+def test_a_curve_that_pulls_is_a_warning_line_and_a_json_field(
+    tiny_record, tmp_path, capsys, monkeypatch
+):
+    """A sign error in the force (forced here) must not pass with exit 0 and no word."""
+    import warptissue.fem.indentation as indentation
+
+    original = indentation._indentation_result
+
+    def pulling(*args, **kwargs):
+        result = original(*args, **kwargs)
+        result.reaction_force_N = -result.reaction_force_N
+        return result
+
+    monkeypatch.setattr(indentation, "_indentation_result", pulling)
+    study_path = _study_file(tiny_record, tmp_path)
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--out", str(out_dir), "--quiet"]) == 0
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and error[0].startswith("warptissue: warning: the reaction force")
+    summary = json.loads((out_dir / "result.json").read_text())
+    assert len(summary["warnings"]) == 1

@@ -12,8 +12,9 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
   ``warptissue acquire rig-sim --tissue curve --force-curve``). The simulation is
   quasi-static (rate-independent): ``time_s`` is a pseudo-time, the load-step number;
 - ``result.json``: the study echoed back with every default, the force curve, iterations,
-  ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message, mesh
-  statistics, timings and software versions;
+  ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,
+  ``warnings`` (an implausible force curve: :func:`force_curve_warnings`), mesh statistics,
+  timings and software versions;
 - ``fields.vtu``: the mesh with nodal displacement (point data ``displacement_m``) and per-tet
   Cauchy stress (cell data ``cauchy_stress_Pa``, Voigt order xx, yy, zz, yz, xz, xy) and von
   Mises stress (``von_mises_Pa``) at the last converged load step;
@@ -51,6 +52,7 @@ __all__ = [
     "build_mesh",
     "build_problem",
     "estimate_mesh",
+    "force_curve_warnings",
     "kernels_need_compiling",
     "run_study",
 ]
@@ -221,6 +223,40 @@ def _check_linear_solver(study: Study, device: Any) -> None:
         ) from None
 
 
+def force_curve_warnings(depths_m: np.ndarray, forces_N: np.ndarray) -> list[str]:
+    """What is implausible in an indentation force curve (empty when nothing is).
+
+    A probe pushed into a specimen meets a positive reaction force that grows with the depth
+    (monotonic loading of a hyperelastic solid); a force that is not positive, or that falls
+    while the depth grows, points at a sign, unit or set-up error (or an instability).
+
+    Args:
+        depths_m: Depths of the converged steps, shape (S,), m.
+        forces_N: Reaction forces there, shape (S,), N, positive pushing in.
+
+    Returns:
+        One sentence per finding, naming the first step concerned (a force that is not
+        positive hides the falling one).
+    """
+    warnings: list[str] = []
+    not_positive = np.flatnonzero(~(forces_N > 0.0))
+    if not_positive.size:
+        step = int(not_positive[0])
+        warnings.append(
+            f"the reaction force is not positive at step {step + 1} "
+            f"({forces_N[step]:.6g} N at depth {depths_m[step]:.6g} m): the probe should push"
+        )
+        return warnings
+    falling = np.flatnonzero(np.diff(forces_N) < 0.0)
+    if falling.size:
+        step = int(falling[0]) + 1
+        warnings.append(
+            f"the reaction force falls from step {step} to {step + 1} "
+            f"({forces_N[step - 1]:.6g} N to {forces_N[step]:.6g} N) while the depth grows"
+        )
+    return warnings
+
+
 def kernels_need_compiling(device: Any) -> bool:
     """Whether the project's Warp kernels are missing from Warp's kernel cache for a device.
 
@@ -389,6 +425,7 @@ def run_study(
         },
         "steps_requested": study.protocol.step_count,
         "steps_converged": converged,
+        "warnings": force_curve_warnings(depths, forces),
         "mesh": mesh_statistics,
         "timings_s": {
             "mesh_and_setup": meshed - started,

@@ -114,6 +114,8 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(outputs.files["result"].read_text(encoding="utf-8"))
     elif not args.quiet:
         _print_summary(outputs)
+    for warning in outputs.summary["warnings"]:
+        print(f"warptissue: warning: {warning}", file=sys.stderr)
     if outputs.status == "stopped_early":
         print(f"warptissue: error: stopped early: {outputs.message}", file=sys.stderr)
     return outputs.exit_code
