@@ -250,6 +250,12 @@ def test_cli_usd_takes_an_optional_path(tiny_record, tmp_path):
     bad = ["simulate", str(study_path), "--out", str(tmp_path / "bad"), "--usd", "run.usd"]
     assert main(bad) == 2
     assert not (tmp_path / "bad").exists()
+    (tmp_path / "a_file").write_text("")
+    blocked = str(tmp_path / "a_file" / "run.usda")
+    assert (
+        main(["simulate", str(study_path), "--out", str(tmp_path / "bad"), "--usd", blocked]) == 2
+    )
+    assert not (tmp_path / "bad").exists()
 
 
 def test_ctrl_c_keeps_the_converged_steps_and_exits_130(

@@ -6,7 +6,25 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["register"]
+__all__ = ["check_usda_path", "register"]
+
+
+def check_usda_path(path: Path, option: str) -> None:
+    """Refuse, before any work, a USD root layer path that is not ``.usda`` or whose folder
+    cannot be made (a file stands where a folder must be).
+
+    Raises:
+        InputError: Naming the option and the path.
+    """
+    from warptissue.errors import InputError
+
+    if path.suffix != ".usda":
+        raise InputError(f"{option} takes the root layer's path, a .usda file", path=path)
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():
+        raise InputError(f"{option}: {folder} is a file, not a folder", path=path)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,8 +60,7 @@ def run_export(args: argparse.Namespace) -> int:
     from warptissue.usd.export import export_result_dir, export_study
 
     source: Path = args.source
-    if args.out.suffix != ".usda":
-        raise InputError("--out takes the root layer's path, a .usda file", path=args.out)
+    check_usda_path(args.out, "--out")
     if not source.exists():
         raise InputError("no such simulate output folder or study file", path=source)
     if source.is_dir():

@@ -75,8 +75,8 @@ def _device(text: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue simulate``; returns the exit status."""
+    from warptissue.cli.export import check_usda_path
     from warptissue.device import quiet_warp
-    from warptissue.errors import InputError
     from warptissue.fem import SolveInterrupted
     from warptissue.simulate import run_study
     from warptissue.study import load_study
@@ -85,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
     study = load_study(args.study)
     out_dir = args.out if args.out is not None else Path("runs") / study.name
     usd_path = out_dir / "scene.usda" if args.usd is True else args.usd
-    if usd_path is not None and usd_path.suffix != ".usda":
-        raise InputError("--usd takes the root layer's path, a .usda file", path=usd_path)
+    if usd_path is not None:
+        check_usda_path(usd_path, "--usd")
     try:
         outputs = run_study(
             study,
