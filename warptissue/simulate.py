@@ -9,7 +9,7 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
   depth (positive into the specimen) and ``force_N`` the reaction force (positive pushing
   in), so that the file reads as an indentation record
   (:func:`warptissue.io.read_experiment_csv`: ``warptissue fit punch-modulus``,
-  ``warptissue acquire rig-sim --tissue curve --force-curve``). The simulation is
+  ``warptissue rig-sim --tissue curve --force-curve``). The simulation is
   quasi-static (rate-independent): ``time_s`` is a pseudo-time, the load-step number;
 - ``result.json``: the study echoed back with every default, the force curve, iterations,
   ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,

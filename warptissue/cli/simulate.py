@@ -21,11 +21,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Run the indentation simulation described by a study TOML file and write "
             "force_curve.csv (time_s,displacement_m,force_N,step,newton_iterations: an "
-            "indentation record that 'fit punch-modulus' and 'acquire rig-sim --force-curve' "
-            "read), result.json and fields.vtu to the output folder. Exit status: 0 complete, "
-            "2 bad input, 3 bad mesh or a mesh too large for the memory (refused before it "
-            "is made), 4 stopped early, 5 device missing, 130 interrupted (Ctrl-C); after 4 "
-            "and 130 the outputs hold the load steps that converged."
+            "indentation record that 'fit punch-modulus' and 'rig-sim --tissue curve "
+            "--force-curve' read), result.json and fields.vtu to the output folder. Exit "
+            "status: 0 complete, 2 bad input, 3 bad mesh or a mesh too large for the "
+            "memory (refused before it is made), 4 stopped early, 5 device missing, 130 "
+            "interrupted (Ctrl-C); after 4 and 130 the outputs hold the load steps that "
+            "converged."
         ),
     )
     parser.add_argument("study", type=Path, metavar="STUDY.toml", help="the study file")
