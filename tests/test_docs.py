@@ -226,3 +226,25 @@ def test_readme_links_point_to_files() -> None:
     assert relative, "the README links to the docs pages"
     missing = [t for t in relative if not (ROOT / t).exists()]
     assert not missing, f"README.md links to missing files: {missing}"
+
+
+def test_readme_command_table_names_every_command() -> None:
+    """Each command of ``warptissue --help`` (and each ``fit`` kind) has a row in the README."""
+    import argparse
+
+    from warptissue.cli import build_parser
+
+    def subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+        actions = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        return dict(actions[0].choices) if actions else {}
+
+    commands = subcommands(build_parser())
+    names = [f"warptissue fit {kind}" for kind in subcommands(commands.pop("fit"))]
+    names += [f"warptissue {name}" for name in commands]
+    rows = [
+        line
+        for line in (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+        if line.startswith("| `warptissue ")
+    ]
+    missing = [n for n in names if not any(row.startswith(f"| `{n}") for row in rows)]
+    assert not missing, f"README.md's command table lacks {missing}"
