@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.io import software_versions, write_csv, write_json
+from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
 from warptissue.study import Study
 
 __all__ = [
@@ -57,14 +57,9 @@ __all__ = [
     "run_study",
 ]
 
-FORCE_CURVE_COLUMNS: tuple[str, ...] = (
-    "time_s",
-    "displacement_m",
-    "force_N",
-    "step",
-    "newton_iterations",
-)
-"""Columns of ``force_curve.csv``: an indentation record's three first, then the solver's."""
+FORCE_CURVE_COLUMNS: tuple[str, ...] = (*INDENTATION_COLUMNS, "step", "newton_iterations")
+"""Columns of ``force_curve.csv``: an indentation record's
+(:data:`warptissue.io.INDENTATION_COLUMNS`), then the solver's."""
 INTERRUPTED_EXIT_CODE = 130
 """Exit status of an interrupted run (Ctrl-C), as the shell gives a process ended by SIGINT."""
 COMPILE_NOTICE = "compiling Warp kernels (first run only, about a minute)..."
@@ -397,7 +392,7 @@ def run_study(
         "force_curve": write_csv(
             out_path / "force_curve.csv",
             {
-                "time_s": np.arange(converged + 1, dtype=np.float64),
+                "time_s": np.arange(converged + 1, dtype=np.float64),  # pseudo-time: the step
                 "displacement_m": np.concatenate([[0.0], depths]),
                 "force_N": np.concatenate([[0.0], forces]),
                 "step": np.arange(converged + 1, dtype=np.int64),
