@@ -11,7 +11,7 @@ gradients precomputed per quadrature point on the host. Two formulations share o
   and the exact tangent is ``int grad N_a . (A_dev + U'(Jbar) d2J/dF2) . grad N_b dV
   + V_e U''(Jbar) g_a (x) g_b``. The pressure ``U'(Jbar)`` is constant per element, i.e. the
   P2/P0 pair. In 3D its discrete inf-sup constant is not uniform on these meshes (it falls
-  about like h; ``scripts/infsup_p2p0.py``), although the punch forces show no locking.
+  about like h; docs/design-notes/inf-sup.md), although the punch forces show no locking.
 """
 
 import warp as wp
