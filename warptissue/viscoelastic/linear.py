@@ -121,7 +121,7 @@ class PronySeries:
     def g(self) -> tuple[float, ...]:
         """Normalized Prony coefficients g_i = k_i / G0 (Ahn & Kim Eq. 6)."""
         g0 = self.instantaneous_stiffness_N_per_m
-        return tuple(k / g0 for k in self.branch_stiffness_N_per_m)
+        return tuple(float(k / g0) for k in self.branch_stiffness_N_per_m)
 
     def relaxation_N_per_m(self, time_s: np.ndarray | float) -> np.ndarray:
         """G(t) in N/m at the given times (s); shape of ``time_s``."""
