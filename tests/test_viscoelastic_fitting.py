@@ -21,7 +21,7 @@ from warptissue.viscoelastic import (
     model_from_result,
 )
 
-SEED000_TABLE1 = [  # tau1 (s), tau2 (s), g1, g2
+AHN_KIM_TABLE1 = [  # tau1 (s), tau2 (s), g1, g2
     (1.376, 49.369, 0.348, 0.358),
     (1.087, 52.545, 0.353, 0.365),
     (0.944, 51.698, 0.408, 0.288),
@@ -35,7 +35,7 @@ def ramp_and_hold(ramp_s, depth_m, total_s, dt_s):
 
 
 @pytest.mark.parametrize("method", ["lm", "salm"])
-def test_sls_recovers_seed001_kelvin_parameters(method, rng):
+def test_sls_recovers_kim_et_al_kelvin_parameters(method, rng):
     with pytest.warns(NotARelaxationWarning):
         truth = StandardLinearSolid.from_printed(8.0, 7.0, 130.0)  # 0.008, 0.007 N/mm; 0.130
     time, x = ramp_and_hold(0.05, 3e-3, 1.0, 1e-3)
@@ -50,7 +50,7 @@ def test_sls_recovers_seed001_kelvin_parameters(method, rng):
     assert isinstance(model_from_result(result), StandardLinearSolid)
 
 
-@pytest.mark.parametrize("row", SEED000_TABLE1)
+@pytest.mark.parametrize("row", AHN_KIM_TABLE1)
 def test_prony_recovers_ahn_kim_table1_from_real_ramp(row, rng):
     tau1, tau2, g1, g2 = row
     truth = PronySeries.from_normalized(50.0, (g1, g2), (tau1, tau2))
@@ -65,7 +65,7 @@ def test_prony_recovers_ahn_kim_table1_from_real_ramp(row, rng):
 
 
 def test_qlv_recovers_ahn_kim_table1_and_elastic_response(rng):
-    tau1, tau2, g1, g2 = SEED000_TABLE1[0]
+    tau1, tau2, g1, g2 = AHN_KIM_TABLE1[0]
     truth = QuasiLinearViscoelastic(
         (g1, g2),
         (tau1, tau2),
