@@ -40,8 +40,12 @@ from warptissue.errors import InputError
 from warptissue.io import ExperimentData
 
 __all__ = [
+    "CONTACT_MODES",
+    "OFFSET_MODES",
     "ConditionedRecord",
     "ContactPoint",
+    "FitRecord",
+    "condition_for_fit",
     "detect_contact",
     "estimate_rate_Hz",
     "prepare_record",
@@ -50,6 +54,11 @@ __all__ = [
     "suppress_physiological",
     "trim_ramp",
 ]
+
+CONTACT_MODES: tuple[str, ...] = ("none", "auto")
+"""The contact choices of :func:`condition_for_fit` besides a position (m)."""
+OFFSET_MODES: tuple[str, ...] = ("auto", "none")
+"""The force-offset choices of :func:`condition_for_fit`."""
 
 
 @dataclass(frozen=True)
@@ -649,4 +658,130 @@ def prepare_record(
         force_drift_N_per_s=drift,
         notch_rates_Hz=rates,
         steps=tuple(steps),
+    )
+
+
+@dataclass(frozen=True)
+class FitRecord:
+    """A record as a fit uses it, and what :func:`condition_for_fit` did to it.
+
+    Attributes:
+        time_s: Time of the kept samples (s), shape (m,); the sample index where the record
+            has no time column.
+        displacement_m: Indentation depth (m), shape (m,).
+        force_N: Force (N), shape (m,).
+        conditioned: True where a contact point was given or detected (depths measured from
+            it, force offset removed unless ``offset="none"``).
+        summary: JSON-ready description of the conditioning.
+    """
+
+    time_s: np.ndarray
+    displacement_m: np.ndarray
+    force_N: np.ndarray
+    conditioned: bool
+    summary: dict[str, Any]
+
+
+_OPTION_NAMES = {
+    "contact": "contact",
+    "offset": "offset",
+    "keep_depth_m": "keep_depth_m",
+    "window_s": "window_s",
+}
+
+
+def condition_for_fit(
+    columns: ExperimentData | dict[str, np.ndarray],
+    *,
+    contact: str | float = "none",
+    offset: str = "auto",
+    keep_depth_m: float | None = None,
+    window_s: tuple[float, float] | None = None,
+    option_names: dict[str, str] | None = None,
+) -> FitRecord:
+    """Condition one record with a fit's four choices (the one owner of those choices).
+
+    ``warptissue fit relaxation`` and ``punch-modulus`` (``--contact``, ``--offset``,
+    ``--keep-depth``, ``--window``) and the ``[[data]]`` records of a study file
+    (:mod:`warptissue.study`) both come here.
+
+    Args:
+        columns: ``displacement_m`` and ``force_N`` (shape (n,) each) and, optionally,
+            ``time_s``.
+        contact: ``"none"`` (``displacement_m`` is already the depth), ``"auto"`` (detect
+            where the force leaves the pre-contact baseline) or the axis position at contact
+            (m); with a contact, depths are measured from it and clipped at zero.
+        offset: With a contact: ``"auto"`` subtracts the force offset (and drift) measured
+            where the probe carries no load; ``"none"`` keeps the force as recorded.
+        keep_depth_m: Keep only the loading ramp down to this depth below contact (m).
+        window_s: Keep only the samples with ``start <= time_s <= stop`` (s).
+        option_names: How messages name the four options (``contact``, ``offset``,
+            ``keep_depth_m``, ``window_s``), e.g. ``--contact`` for the command line.
+
+    Returns:
+        The kept samples and a summary of the conditioning.
+
+    Raises:
+        InputError: An option that cannot work on this record, or no sample left. The
+            message names the option; ``column`` is the data column at fault, if any.
+    """
+    names = {**_OPTION_NAMES, **(option_names or {})}
+    if contact not in CONTACT_MODES and (
+        isinstance(contact, str | bool) or not math.isfinite(contact)
+    ):
+        raise InputError(f"{names['contact']} must be none, auto or a position in m", value=contact)
+    if offset not in OFFSET_MODES:
+        raise InputError(f"{names['offset']} must be auto or none", value=offset)
+    source = columns.columns if isinstance(columns, ExperimentData) else columns
+    x = np.asarray(source["displacement_m"], dtype=np.float64)
+    f = np.asarray(source["force_N"], dtype=np.float64)
+    has_time = "time_s" in source
+    t = (
+        np.asarray(source["time_s"], dtype=np.float64)
+        if has_time
+        else np.arange(x.size, dtype=np.float64)
+    )
+    if window_s is not None and not has_time:
+        raise InputError(f"{names['window_s']} needs a time_s column")
+    if contact == "none":
+        kept = np.ones(x.size, dtype=bool)
+        if keep_depth_m is not None:
+            kept &= trim_ramp(x, contact_position_m=0.0, keep_depth_m=keep_depth_m)
+        if window_s is not None:
+            kept &= select_window(t, start_s=window_s[0], stop_s=window_s[1])
+        summary = {"contact": "none"} if kept.all() else {"samples_kept": int(kept.sum())}
+        if not kept.any():
+            raise InputError(f"no sample left after {names['keep_depth_m']}/{names['window_s']}")
+        return FitRecord(t[kept], x[kept], f[kept], False, summary)
+    if contact != "auto" and not float(np.min(x)) <= contact < float(np.max(x)):
+        raise InputError(
+            f"{names['contact']} {contact:g} m lies outside the recorded positions "
+            f"[{float(np.min(x)):g}, {float(np.max(x)):g}] m",
+            column="displacement_m",
+        )
+    try:
+        prepared = prepare_record(
+            {"time_s": t, "displacement_m": x, "force_N": f},
+            contact_position_m=None if contact == "auto" else float(contact),
+            keep_depth_m=keep_depth_m,
+            window_s=window_s,
+        )
+    except InputError as exc:
+        if contact == "auto" and "baseline" in exc.message:
+            raise InputError(
+                f"{names['contact']} auto: {exc.message}; it needs the probe at rest, off the "
+                "specimen, for at least 10 samples before it moves: give the contact "
+                f"position or use {names['contact']} none",
+                value=exc.value,
+            ) from None
+        raise
+    force = prepared.force_N if offset == "auto" else f[prepared.kept]
+    summary = prepared.summary()
+    summary["offset"] = offset
+    if offset == "none":
+        summary["force_offset_N"] = summary["force_drift_N_per_s"] = 0.0
+    if not prepared.kept.any():
+        raise InputError("no sample left after the conditioning")
+    return FitRecord(
+        prepared.time_s, np.clip(prepared.displacement_m, 0.0, None), force, True, summary
     )

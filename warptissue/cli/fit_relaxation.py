@@ -248,6 +248,15 @@ class _Record:
     conditioning: dict[str, Any] = field(default_factory=dict)
 
 
+_OPTION_FLAGS = {
+    "contact": "--contact",
+    "offset": "--offset",
+    "keep_depth_m": "--keep-depth",
+    "window_s": "--window",
+}
+"""How conditioning errors name the options on the command line."""
+
+
 def _named(exc: InputError, path: Path) -> InputError:
     """``exc`` with ``path`` as its file when it names none."""
     if exc.path is not None:
@@ -259,60 +268,29 @@ def _condition(
     data: ExperimentData, path: Path, args: argparse.Namespace, *, has_time: bool
 ) -> _Record:
     """Apply ``--contact/--offset/--keep-depth/--window`` to one record."""
-    import numpy as np
+    from warptissue.acquisition.conditioning import condition_for_fit
 
-    from warptissue.acquisition.conditioning import prepare_record, select_window, trim_ramp
-
-    x, f = data["displacement_m"], data["force_N"]
-    t = data["time_s"] if has_time else np.arange(x.size, dtype=np.float64)
-    if args.window is not None and not has_time:
-        raise InputError("--window needs a time_s column", path=path)
+    columns = {name: data[name] for name in ("displacement_m", "force_N")}
+    if has_time:
+        columns["time_s"] = data["time_s"]
     try:
-        if args.contact == "none":
-            kept = np.ones(x.size, dtype=bool)
-            if args.keep_depth is not None:
-                kept &= trim_ramp(x, contact_position_m=0.0, keep_depth_m=args.keep_depth)
-            if args.window is not None:
-                kept &= select_window(t, start_s=args.window[0], stop_s=args.window[1])
-            summary = {"contact": "none"} if kept.all() else {"samples_kept": int(kept.sum())}
-            if not kept.any():
-                raise InputError("no sample left after --keep-depth/--window")
-            return _Record(path, t[kept], x[kept], f[kept], False, summary)
-        if args.contact != "auto" and not float(np.min(x)) <= args.contact < float(np.max(x)):
-            raise InputError(
-                f"--contact {args.contact:g} m lies outside the recorded positions "
-                f"[{float(np.min(x)):g}, {float(np.max(x)):g}] m",
-                column="displacement_m",
-            )
-        prepared = prepare_record(
-            {"time_s": t, "displacement_m": x, "force_N": f},
-            contact_position_m=None if args.contact == "auto" else args.contact,
+        record = condition_for_fit(
+            columns,
+            contact=args.contact,
+            offset=args.offset,
             keep_depth_m=args.keep_depth,
             window_s=args.window,
+            option_names=_OPTION_FLAGS,
         )
     except InputError as exc:
-        if args.contact == "auto" and "baseline" in exc.message:
-            exc = InputError(
-                f"--contact auto: {exc.message}; it needs the probe at rest, off the "
-                "specimen, for at least 10 samples before it moves: give the contact "
-                "position or use --contact none",
-                value=exc.value,
-            )
         raise _named(exc, path) from None
-    force = prepared.force_N if args.offset == "auto" else f[prepared.kept]
-    summary = prepared.summary()
-    summary["offset"] = args.offset
-    if args.offset == "none":
-        summary["force_offset_N"] = summary["force_drift_N_per_s"] = 0.0
-    if not prepared.kept.any():
-        raise InputError("no sample left after the conditioning", path=path)
     return _Record(
         path,
-        prepared.time_s,
-        np.clip(prepared.displacement_m, 0.0, None),
-        force,
-        True,
-        summary,
+        record.time_s,
+        record.displacement_m,
+        record.force_N,
+        record.conditioned,
+        record.summary,
     )
 
 
