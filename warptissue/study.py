@@ -5,12 +5,20 @@ the boundary conditions and the solver settings. It is the reproducible record o
 the unit of batch work: ``warptissue simulate STUDY.toml`` runs one, and the result JSON
 echoes it back with every default filled in.
 
-The schema is versioned (``schema_version = 1``). Every key carries its unit in its name
+The schema is versioned. Version 1 describes a simulation; version 2 (:data:`SCHEMA_VERSION`)
+adds the tables of a fit: ``[[data]]``, the measured records (CSV files relative to the study
+file, their columns and their conditioning, read and conditioned on loading), and ``[fit]``,
+which material parameters are free, their bounds and start values, the least-squares method
+and its tolerances. Version-1 files load unchanged. Every key carries its unit in its name
 (``thickness_m``, ``C10_Pa``). Loading validates the whole file: an unknown key, a missing
 key, a value of the wrong type or out of range raises :class:`~warptissue.errors.InputError`
-naming the file, the line, the key path (for example ``material.C10_Pa``) and the value.
-Later schema additions (measured data, fit settings) come as new tables; a version-1 reader
-rejects tables it does not know, so that a typo never passes silently.
+naming the file, the line, the key path (for example ``material.C10_Pa`` or
+``data[0].keep_depth_m``) and the value, with the closest known name where one is close.
+
+:func:`start_values_from_record` gives the start of every free parameter from the small-depth
+stiffness of a record (Sneddon's flat punch with the Hayes layer factor);
+:func:`save_study` writes a study (a fitted one, say) back as TOML, its data paths relative to
+the new file.
 
 Example:
     >>> from warptissue.study import load_study
@@ -23,10 +31,11 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 import re
 import tomllib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -35,21 +44,50 @@ from warptissue.indenter import CONTACTS, SIMULATED_KINDS, Indenter
 from warptissue.mesh.generators import MESHERS
 
 if TYPE_CHECKING:
+    import numpy as np
+
+    from warptissue.acquisition.conditioning import FitRecord
     from warptissue.fem.solvers import NewtonOptions
 
 __all__ = [
+    "FIT_METHODS",
+    "FIT_OBJECTIVES",
     "SCHEMA_VERSION",
+    "SCHEMA_VERSIONS",
+    "START_FROM",
     "Boundary",
+    "DataRecord",
+    "FitSettings",
     "Protocol",
     "Solver",
     "Specimen",
     "Study",
     "load_study",
+    "record_youngs_modulus_Pa",
+    "save_study",
+    "start_values_from_record",
     "study_from_dict",
 ]
 
-SCHEMA_VERSION: int = 1
-"""The study schema version this module reads and writes."""
+SCHEMA_VERSION: int = 2
+"""The newest study schema version: the one with ``[[data]]`` and ``[fit]``."""
+SCHEMA_VERSIONS: tuple[int, ...] = (1, 2)
+"""The versions this module reads (1: a simulation; 2: a simulation that may hold a fit)."""
+FIT_METHODS: tuple[str, ...] = ("lm", "salm")
+"""``fit.method``: the methods of :func:`warptissue.fit.least_squares`."""
+FIT_OBJECTIVES: tuple[str, ...] = ("absolute", "relative")
+"""``fit.objective``: force residuals (N), or residuals divided by the measured force."""
+START_FROM: tuple[str, ...] = ("record", "material")
+"""``fit.start_from``: where a free parameter without a ``[fit.start]`` value starts."""
+DEFAULT_COLUMNS: dict[str, str] = {
+    "time_column": "time_s",
+    "displacement_column": "displacement_m",
+    "force_column": "force_N",
+}
+"""The ``[[data]]`` column keys and the column each names by default."""
+START_DEPTH_SHARE: float = 0.1
+"""Depth, as a share of the smaller of the probe radius and the specimen thickness, to
+which :func:`record_youngs_modulus_Pa` takes a record's small-depth stiffness."""
 
 SPECIMEN_SHAPES: tuple[str, ...] = ("block", "disc")
 ELEMENT_TYPES: tuple[str, ...] = ("TET10", "TET4")
@@ -193,7 +231,9 @@ class Study:
         boundary: Base boundary condition.
         solver: Solver settings.
         path: The file it was loaded from, or None when built from a mapping.
-        schema_version: The schema version of the record (always :data:`SCHEMA_VERSION`).
+        schema_version: The schema version of the record (1 or 2, as read).
+        data: The measured records of ``[[data]]`` (version 2), conditioned; empty when none.
+        fit: The ``[fit]`` settings (version 2), or None.
     """
 
     name: str
@@ -206,13 +246,19 @@ class Study:
     solver: Solver
     path: Path | None = None
     schema_version: int = SCHEMA_VERSION
+    data: tuple[DataRecord, ...] = ()
+    fit: FitSettings | None = None
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, *, relative_to: str | Path | None = None) -> dict[str, Any]:
         """The study as a TOML-ready mapping, with every default filled in.
 
         ``study_from_dict(study.to_dict())`` reproduces the study.
+
+        Args:
+            relative_to: A folder: the data files are written relative to it (where the
+                study is written to a new place). None: as the study file gave them.
         """
-        return {
+        record = {
             "schema_version": self.schema_version,
             "name": self.name,
             "description": self.description,
@@ -223,6 +269,175 @@ class Study:
             "boundary": self.boundary.to_dict(),
             "solver": self.solver.to_dict(),
         }
+        if self.data:
+            record["data"] = [item.to_dict(relative_to=relative_to) for item in self.data]
+        if self.fit is not None:
+            record["fit"] = self.fit.to_dict()
+        return record
+
+
+@dataclass(frozen=True)
+class DataRecord:
+    """One measured record of ``[[data]]``: its file, its columns and its conditioning.
+
+    The record is read (:func:`warptissue.io.read_experiment_csv`) and conditioned
+    (:func:`warptissue.acquisition.conditioning.condition_for_fit`, the code behind
+    ``warptissue fit relaxation --contact/--offset/--keep-depth/--window``) when the study is
+    loaded; ``time_s``, ``displacement_m`` and ``force_N`` are the conditioned samples.
+
+    Attributes:
+        file: The CSV file as the study gives it (relative to the study file's folder, or
+            absolute).
+        path: The file, resolved.
+        time_column: The CSV column of the time (s).
+        displacement_column: The CSV column of the displacement (m).
+        force_column: The CSV column of the force (N).
+        contact: ``"none"`` (the displacement is already the depth), ``"auto"`` (detect the
+            contact) or the axis position at contact (m).
+        offset: ``"auto"`` (with a contact, subtract the force measured off the specimen)
+            or ``"none"``.
+        keep_depth_m: Keep only the loading ramp down to this depth below contact (m).
+        window_s: Keep only ``start <= time_s <= stop`` (s).
+        record: The conditioned samples and a summary of the conditioning.
+    """
+
+    file: str
+    path: Path
+    time_column: str = "time_s"
+    displacement_column: str = "displacement_m"
+    force_column: str = "force_N"
+    contact: str | float = "none"
+    offset: str = "auto"
+    keep_depth_m: float | None = None
+    window_s: tuple[float, float] | None = None
+    record: FitRecord | None = field(default=None, compare=False, repr=False)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Time of the kept samples (s), shape (m,)."""
+        return self._loaded().time_s
+
+    @property
+    def displacement_m(self) -> np.ndarray:
+        """Depth of the kept samples (m), shape (m,)."""
+        return self._loaded().displacement_m
+
+    @property
+    def force_N(self) -> np.ndarray:
+        """Force of the kept samples (N), shape (m,)."""
+        return self._loaded().force_N
+
+    def _loaded(self) -> FitRecord:
+        if self.record is None:
+            raise InputError("the record was not read (build studies with load_study)")
+        return self.record
+
+    def to_dict(self, *, relative_to: str | Path | None = None) -> dict[str, Any]:
+        """The record's ``[[data]]`` table (see :meth:`Study.to_dict` for ``relative_to``)."""
+        file = self.file
+        if relative_to is not None:
+            file = Path(os.path.relpath(self.path.resolve(), Path(relative_to).resolve()))
+            file = file.as_posix()
+        table: dict[str, Any] = {
+            "file": file,
+            "time_column": self.time_column,
+            "displacement_column": self.displacement_column,
+            "force_column": self.force_column,
+        }
+        if isinstance(self.contact, str):
+            table["contact"] = self.contact
+        else:
+            table["contact_position_m"] = self.contact
+        if self.contact != "none":
+            table["offset"] = self.offset
+        if self.keep_depth_m is not None:
+            table["keep_depth_m"] = self.keep_depth_m
+        if self.window_s is not None:
+            table["window_s"] = list(self.window_s)
+        return table
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """The ``[fit]`` table: which material parameters a fit frees, and how it runs.
+
+    Material parameters not in ``free`` stay at their ``[material]`` values.
+
+    Attributes:
+        free: The free parameters, named as in ``[material]`` (``C10_Pa``, ``mu1_Pa``,
+            ``alpha1``, ...), in the order of the fit's parameter vector.
+        start: Given start values (name -> value); the other free parameters start as
+            ``start_from`` says.
+        bounds: Given bounds (name -> (lower, upper)); the other free parameters have the
+            material model's own box (:attr:`warptissue.materials.Material.parameter_bounds`).
+        start_from: ``"record"``: free parameters without a start value that set the
+            initial shear modulus start from the first record's small-depth stiffness
+            (:func:`start_values_from_record`), the others from ``[material]``;
+            ``"material"``: from ``[material]``.
+        method: ``"lm"`` or ``"salm"`` (:func:`warptissue.fit.least_squares`).
+        objective: ``"absolute"`` (force residuals, N) or ``"relative"`` (divided by the
+            measured force).
+        relative_floor_N: With the relative objective, the smallest |force| used as a
+            divisor (N); None: 1 % of the largest |force| of the records.
+        max_iterations: Most trial steps of the least-squares engine.
+        ftol: Relative cost-reduction tolerance of the engine.
+        xtol: Relative step tolerance of the engine.
+        gtol: Gradient tolerance of the engine.
+        stop_r_squared: Stop as soon as R^2 of the fit exceeds this (None: run to the
+            tolerances).
+    """
+
+    free: tuple[str, ...]
+    start: dict[str, float] = field(default_factory=dict)
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    start_from: str = "record"
+    method: str = "lm"
+    objective: str = "absolute"
+    relative_floor_N: float | None = None
+    max_iterations: int = 50
+    ftol: float = 1e-8
+    xtol: float = 1e-8
+    gtol: float = 1e-8
+    stop_r_squared: float | None = None
+
+    def parameter_bounds(self, material: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of the free parameters, each shape (n,), in ``free`` order.
+
+        Given bounds, else the material model's own box (+-inf where it has none).
+        """
+        import numpy as np
+
+        names = list(material.parameter_names)
+        lower, upper = material.parameter_bounds
+        box = [
+            self.bounds.get(k, (lower[names.index(k)], upper[names.index(k)])) for k in self.free
+        ]
+        return (
+            np.array([low for low, _ in box], dtype=np.float64),
+            np.array([high for _, high in box], dtype=np.float64),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``[fit]`` table, with every default filled in."""
+        table: dict[str, Any] = {
+            "free": list(self.free),
+            "start_from": self.start_from,
+            "method": self.method,
+            "objective": self.objective,
+            "max_iterations": self.max_iterations,
+            "ftol": self.ftol,
+            "xtol": self.xtol,
+            "gtol": self.gtol,
+        }
+        if self.relative_floor_N is not None:
+            table["relative_floor_N"] = self.relative_floor_N
+        if self.stop_r_squared is not None:
+            table["stop_r_squared"] = self.stop_r_squared
+        if self.start:
+            table["start"] = dict(self.start)
+        if self.bounds:
+            table["bounds"] = {k: list(v) for k, v in self.bounds.items()}
+        return table
 
 
 class _Source:
@@ -237,8 +452,18 @@ class _Source:
     def _index_lines(self, text: str) -> None:
         table = ""
         header = re.compile(r"^\s*\[([^\[\]]+)\]\s*(#.*)?$")
+        array_header = re.compile(r"^\s*\[\[([^\[\]]+)\]\]\s*(#.*)?$")
         assignment = re.compile(r"^\s*([A-Za-z0-9_\-\"'.]+)\s*=")
+        counts: dict[str, int] = {}
         for number, line in enumerate(text.splitlines(), start=1):
+            match = array_header.match(line)
+            if match:  # [[data]]: the key paths data[0], data[1], ...
+                name = match.group(1).strip().replace(" ", "")
+                counts[name] = counts.get(name, -1) + 1
+                table = f"{name}[{counts[name]}]"
+                self._lines.setdefault(name, number)
+                self._lines.setdefault(table, number)
+                continue
             match = header.match(line)
             if match:
                 table = match.group(1).strip().replace(" ", "")
@@ -546,15 +771,248 @@ def _read_solver(table: _Table) -> Solver:
     return Solver(device=device, formulation=formulation, options=options)
 
 
+_RECORD_KEYS = (
+    "file",
+    *DEFAULT_COLUMNS,
+    "contact",
+    "contact_position_m",
+    "offset",
+    "keep_depth_m",
+    "window_s",
+)
+"""The keys of a ``[[data]]`` record."""
+
+
+def _read_record(table: _Table, base: Path) -> DataRecord:
+    """One ``[[data]]`` record: validate its keys, read its CSV, condition it."""
+    from warptissue.acquisition.conditioning import (
+        CONTACT_MODES,
+        OFFSET_MODES,
+        condition_for_fit,
+    )
+    from warptissue.io import read_experiment_csv
+
+    file = table.string("file")
+    if not file.strip():
+        raise table.error("file", "must name a CSV file (relative to the study file)", file)
+    path = Path(file) if Path(file).is_absolute() else base / file
+    columns = {key: table.string(key, default=name) for key, name in DEFAULT_COLUMNS.items()}
+    for index, (key, name) in enumerate(columns.items()):
+        if not name.strip():
+            raise table.error(key, "must name a column of the CSV file", name)
+        if name in list(columns.values())[:index]:
+            raise table.error(key, "names the same column as another column key", name)
+    if table.has("contact") and table.has("contact_position_m"):
+        raise table.error(
+            "contact_position_m",
+            "give contact ('none' or 'auto') or contact_position_m (a position), not both",
+            table.data["contact_position_m"],
+        )
+    contact: str | float
+    if table.has("contact_position_m"):
+        contact = table.number("contact_position_m", positive=False)
+    else:
+        contact = table.string("contact", default="none", choices=CONTACT_MODES)
+    offset = table.string("offset", default="auto", choices=OFFSET_MODES)
+    if contact == "none" and table.has("offset"):
+        raise table.error(
+            "offset",
+            "applies only with a contact point (contact = 'auto' or contact_position_m): "
+            "without one the force is used as recorded",
+            offset,
+        )
+    keep_depth_m = table.number("keep_depth_m", default=None)
+    window_s = None
+    if table.has("window_s"):
+        window = table.number_list("window_s")
+        if len(window) != 2 or window[0] < 0 or not window[1] > window[0]:
+            raise table.error(
+                "window_s", "must be [start, stop] in seconds, 0 <= start < stop", list(window)
+            )
+        window_s = (window[0], window[1])
+    table.finish(also_known=_RECORD_KEYS)
+    try:
+        data = read_experiment_csv(path, required=tuple(columns.values()), monotonic=None)
+    except InputError as exc:
+        raise table.error("file", str(exc), file) from None
+    time_s = data[columns["time_column"]]
+    steps = time_s[1:] - time_s[:-1]
+    if (steps <= 0).any():
+        raise table.error(
+            "time_column",
+            f"{path}: column {columns['time_column']!r} must strictly increase (a time in s)",
+            columns["time_column"],
+        )
+    values = {
+        "time_s": time_s,
+        "displacement_m": data[columns["displacement_column"]],
+        "force_N": data[columns["force_column"]],
+    }
+    option_key = "contact" if isinstance(contact, str) else "contact_position_m"
+    try:
+        record = condition_for_fit(
+            values,
+            contact=contact,
+            offset=offset,
+            keep_depth_m=keep_depth_m,
+            window_s=window_s,
+            option_names={"contact": option_key},
+        )
+    except InputError as exc:
+        named = ("contact_position_m", "keep_depth_m", "window_s", "contact")
+        key = next((k for k in named if table.has(k) and k in exc.message), None)
+        if key is None and "no sample left" in exc.message:
+            key = next((k for k in ("window_s", "keep_depth_m") if table.has(k)), None)
+        key = key or "file"
+        raise table.error(key, f"{path}: {exc.message}", table.data[key]) from None
+    return DataRecord(
+        file=file,
+        path=path,
+        **columns,
+        contact=contact,
+        offset=offset,
+        keep_depth_m=keep_depth_m,
+        window_s=window_s,
+        record=record,
+    )
+
+
+def _read_data(root: _Table, base: Path) -> tuple[DataRecord, ...]:
+    """``[[data]]`` (one or more records) or a single ``[data]`` table."""
+    value = root.raw("data")
+    if isinstance(value, Mapping):
+        return (_read_record(root.table("data"), base),)
+    if not isinstance(value, list) or not value:
+        raise root.error("data", "must be one or more [[data]] tables", value)
+    return tuple(
+        _read_record(_Table(item, f"data[{i}]", root.source), base) for i, item in enumerate(value)
+    )
+
+
+def _free_name_problem(name: str, material: Any) -> str:
+    """Why ``name`` is not a free parameter of ``material``."""
+    names = material.parameter_names
+    if name in material.to_dict():
+        return (
+            f"is held fixed: the volumetric term is not a fit parameter of model "
+            f"{material.model_name!r} (its fit parameters: {', '.join(names)})"
+        )
+    close = _closest(name, names)
+    hint = f"did you mean {close!r}? " if close else ""
+    return f"is not a parameter of model {material.model_name!r} ({hint}its fit parameters: " + (
+        f"{', '.join(names)})"
+    )
+
+
+def _parameter_table(table: _Table, free: Sequence[str], material: Any) -> dict[str, Any]:
+    """The keys of ``[fit.start]`` or ``[fit.bounds]``: each must be a free parameter."""
+    for key in table.data:
+        if key in free:
+            continue
+        if key in material.parameter_names:
+            raise table.error(
+                key,
+                "is not free: list it in fit.free, or set its value in [material]",
+                table.data[key],
+            )
+        raise table.error(key, _free_name_problem(key, material), None)
+    return dict(table.data)
+
+
+def _read_fit(table: _Table, material: Any) -> FitSettings:
+    import numpy as np
+
+    free_raw = table.raw("free")
+    if (
+        not isinstance(free_raw, list)
+        or not free_raw
+        or not all(isinstance(name, str) for name in free_raw)
+    ):
+        raise table.error("free", "must be a non-empty list of parameter names", free_raw)
+    for name in free_raw:
+        if name not in material.parameter_names:
+            raise table.error("free", f"{name!r} {_free_name_problem(name, material)}", name)
+        if free_raw.count(name) > 1:
+            raise table.error("free", f"names {name!r} twice", free_raw)
+    free = tuple(free_raw)
+    bounds_table = _optional_table(table, "bounds")
+    bounds: dict[str, tuple[float, float]] = {}
+    for key in _parameter_table(bounds_table, free, material):
+        pair = bounds_table.raw(key)
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise bounds_table.error(key, "must be [lower, upper]", pair)
+        low, high = (_plain(v) for v in pair)
+        if any(isinstance(v, bool) or not isinstance(v, int | float) for v in (low, high)):
+            raise bounds_table.error(key, "must be [lower, upper], two numbers", pair)
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise bounds_table.error(key, "the lower bound must be below the upper", pair)
+        bounds[key] = (float(low), float(high))
+    start_table = _optional_table(table, "start")
+    start = {
+        key: start_table.number(key, positive=False)
+        for key in _parameter_table(start_table, free, material)
+    }
+    start_from = table.string("start_from", default="record", choices=START_FROM)
+    method = table.string("method", default="lm", choices=FIT_METHODS)
+    objective = table.string("objective", default="absolute", choices=FIT_OBJECTIVES)
+    relative_floor_N = table.number("relative_floor_N", default=None)
+    if relative_floor_N is not None and objective != "relative":
+        raise table.error(
+            "relative_floor_N", "applies only with objective = 'relative'", relative_floor_N
+        )
+    max_iterations = table.integer("max_iterations", default=50)
+    tolerances = {key: table.number(key, default=1e-8) for key in ("ftol", "xtol", "gtol")}
+    stop_r_squared = table.number("stop_r_squared", default=None)
+    if stop_r_squared is not None and not stop_r_squared < 1.0:
+        raise table.error("stop_r_squared", "must lie between 0 and 1", stop_r_squared)
+    table.finish()
+    settings = FitSettings(
+        free=free,
+        start=start,
+        bounds=bounds,
+        start_from=start_from,
+        method=method,
+        objective=objective,
+        relative_floor_N=relative_floor_N,
+        max_iterations=max_iterations,
+        stop_r_squared=stop_r_squared,
+        **tolerances,
+    )
+    lower, upper = settings.parameter_bounds(material)
+    current = dict(zip(material.parameter_names, material.parameter_vector.tolist(), strict=True))
+    for j, name in enumerate(free):
+        if name in start:
+            where, value = start_table, start[name]
+        elif start_from == "material":
+            where, value = table, current[name]
+        else:
+            continue
+        if not lower[j] <= value <= upper[j]:
+            key, problem = (
+                (name, "lies outside fit.bounds")
+                if where is start_table
+                else ("start_from", f"the [material] value of {name} lies outside its bounds")
+            )
+            raise where.error(key, f"{problem} [{lower[j]:g}, {upper[j]:g}]", value)
+    if start:
+        vector = np.array([start.get(name, current[name]) for name in material.parameter_names])
+        try:
+            material.with_parameters(vector)
+        except InputError as exc:
+            key = exc.column if exc.column in start else next(iter(start))
+            raise start_table.error(key, exc.message, start[key]) from None
+    return settings
+
+
 def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study:
     root = _Table(data, "", source)
     version = root.raw("schema_version")
     if isinstance(version, bool) or not isinstance(version, int):
         raise root.error("schema_version", "must be an integer", version)
-    if version != SCHEMA_VERSION:
+    if version not in SCHEMA_VERSIONS:
         raise root.error(
             "schema_version",
-            f"unsupported schema version; this reader knows {SCHEMA_VERSION}",
+            f"unsupported schema version; this reader knows {', '.join(map(str, SCHEMA_VERSIONS))}",
             version,
         )
     name = root.string("name", default=default_name)
@@ -577,6 +1035,20 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
             f"{specimen.element!r}); TET4 takes formulation 'displacement', which locks when "
             "nearly incompressible",
         )
+    records: tuple[DataRecord, ...] = ()
+    fit = None
+    if version >= 2:
+        base = source.path.parent if source.path is not None else Path.cwd()
+        if root.has("data"):
+            records = _read_data(root, base)
+        if root.has("fit"):
+            if not records:
+                raise root.error("fit", "a fit needs measured records: add [[data]] tables")
+            fit = _read_fit(root.table("fit"), material)
+    else:
+        for key in ("data", "fit"):
+            if root.has(key):
+                raise root.error(key, "needs schema_version = 2 (this file says 1)", None)
     root.finish()
     return Study(
         name=name,
@@ -588,6 +1060,9 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
         boundary=boundary,
         solver=solver,
         path=source.path,
+        schema_version=version,
+        data=records,
+        fit=fit,
     )
 
 
@@ -646,3 +1121,160 @@ def load_study(path: str | Path) -> Study:
             line = int(match.group(1)) if match else None
         raise InputError(f"not valid TOML: {exc}", path=study_path, line=line) from exc
     return _build(data, _Source(study_path, text), default_name=study_path.stem)
+
+
+def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
+    """Young's modulus of a record's small-depth stiffness, for the study's probe and layer.
+
+    Fits Sneddon's flat punch with the Hayes factor of the study's layer,
+    F = 2 a E delta kappa(a/h, nu) / (1 - nu^2) (:func:`warptissue.fit.punch.fit_punch_modulus`),
+    to the loading samples (up to the deepest point) at depths up to :data:`START_DEPTH_SHARE`
+    of the smaller of the probe radius a and the specimen thickness h (the two shallowest
+    loading samples if fewer lie there). nu is the study material's small-strain Poisson's
+    ratio. For a nearly incompressible material the bonded and the frictionless punch have
+    the same small-depth stiffness, so the study's contact does not enter.
+
+    Args:
+        study: The study (its indenter, specimen thickness and material).
+        record: A conditioned record of the study.
+
+    Returns:
+        E, Pa.
+
+    Raises:
+        InputError: The record has fewer than two loading samples with a positive depth.
+    """
+    import numpy as np
+
+    from warptissue.fit.punch import fit_punch_modulus
+
+    depth, force = record.displacement_m, record.force_N
+    loading = slice(0, int(np.argmax(depth)) + 1)
+    depth, force = depth[loading], force[loading]
+    loaded = depth > 0.0
+    depth, force = depth[loaded], force[loaded]
+    if depth.size < 2:
+        raise InputError(
+            "has fewer than two loading samples below the contact: no stiffness to start "
+            "from (give start values in [fit.start], or set contact)",
+            path=record.path,
+        )
+    limit = START_DEPTH_SHARE * min(study.indenter.radius_m, study.specimen.thickness_m)
+    shallow = depth <= limit
+    if np.count_nonzero(shallow) < 2:
+        shallow = np.argsort(depth, kind="stable")[:2]
+    poissons_ratio = min(study.material.small_strain_equivalent()[1], 0.5)
+    result = fit_punch_modulus(
+        depth[shallow],
+        force[shallow],
+        radius_m=study.indenter.radius_m,
+        poissons_ratio=poissons_ratio,
+        geometry="flat",
+        thickness_m=study.specimen.thickness_m,
+    )
+    return float(result.x[0])
+
+
+_SHEAR_WEIGHTS = {"C10_Pa": 2.0, "C01_Pa": 2.0, "shear_modulus_Pa": 1.0}
+"""d mu0 / d parameter of the parameters that set the initial shear modulus mu0 (with the
+Ogden mu_i, weight 1, and Young's modulus, weight 1 / (2 (1 + nu)))."""
+
+
+def _shear_weight(name: str, material: Any) -> float:
+    """d mu0 / d ``name`` (0 for a parameter that does not set the initial shear modulus)."""
+    if name in _SHEAR_WEIGHTS:
+        return _SHEAR_WEIGHTS[name]
+    if re.fullmatch(r"mu\d+_Pa", name):
+        return 1.0
+    if name == "youngs_modulus_Pa":
+        return 1.0 / (2.0 * (1.0 + material.poissons_ratio))
+    return 0.0
+
+
+def start_values_from_record(study: Study, record: DataRecord | None = None) -> dict[str, float]:
+    """The start of every free parameter of the study's fit.
+
+    A value in ``[fit.start]`` is taken as it is. With ``start_from = "material"`` the others
+    start from ``[material]``. With ``start_from = "record"`` (the default), the free
+    parameters that set the initial shear modulus mu0 (``C10_Pa``, ``C01_Pa``, the Ogden
+    ``mu<i>_Pa``, ``shear_modulus_Pa``, ``youngs_modulus_Pa``) are multiplied by one common
+    factor, chosen so that mu0 equals the record's small-depth shear modulus
+    mu = E / (2 (1 + nu)), E from :func:`record_youngs_modulus_Pa`; the other free
+    parameters (C20, C30, the Ogden alpha<i>, a Poisson's ratio) start from ``[material]``.
+    For neo-Hookean and reduced-polynomial models this is C10 = mu / 2; for Mooney-Rivlin
+    with both free it splits mu / 2 in the ratio of the ``[material]`` values of C10 and C01,
+    and with one free it gives that one what the fixed one leaves; for Ogden it scales the
+    free mu_i so that sum mu_i = mu. A start outside the parameter's bounds is moved onto the
+    nearer bound.
+
+    Args:
+        study: A study with a ``[fit]`` table.
+        record: The record whose stiffness sets the start (default: the first of ``data``).
+
+    Returns:
+        Free parameter name -> start value, in ``study.fit.free`` order.
+
+    Raises:
+        InputError: The study has no fit; the record has no usable small-depth stiffness;
+            or no positive common factor reaches the record's stiffness (give start values).
+    """
+    import numpy as np
+
+    if study.fit is None:
+        raise InputError("the study has no [fit] table", path=study.path)
+    settings, material = study.fit, study.material
+    current = dict(zip(material.parameter_names, material.parameter_vector.tolist(), strict=True))
+    start = {name: settings.start.get(name, current[name]) for name in settings.free}
+    scaled = [
+        name
+        for name in settings.free
+        if name not in settings.start and _shear_weight(name, material) != 0.0
+    ]
+    if settings.start_from == "record" and scaled:
+        record = study.data[0] if record is None else record
+        youngs_Pa = record_youngs_modulus_Pa(study, record)
+        nu = min(material.small_strain_equivalent()[1], 0.5)
+        target = youngs_Pa / (2.0 * (1.0 + nu))
+        free_part = sum(_shear_weight(name, material) * current[name] for name in scaled)
+        fixed_part = sum(
+            _shear_weight(name, material) * start.get(name, value)
+            for name, value in current.items()
+            if name not in scaled
+        )
+        factor = (target - fixed_part) / free_part if free_part > 0.0 else math.nan
+        if not factor > 0.0:
+            raise InputError(
+                f"fit.free: scaling {', '.join(scaled)} cannot reach the record's small-depth "
+                f"shear modulus {target:.4g} Pa (the fixed parameters give {fixed_part:.4g} "
+                "Pa): give start values in [fit.start]",
+                path=study.path,
+            )
+        for name in scaled:
+            start[name] = factor * current[name]
+    lower, upper = settings.parameter_bounds(material)
+    values = np.clip([start[name] for name in settings.free], lower, upper)
+    return dict(zip(settings.free, values.tolist(), strict=True))
+
+
+def save_study(study: Study, path: str | Path) -> Path:
+    """Write a study as TOML (atomically), its data files relative to the new file's folder.
+
+    ``load_study(save_study(study, path))`` gives the study back, and ``warptissue simulate``
+    runs the file as it is (a fitted study: ``dataclasses.replace(study, material=fitted)``).
+
+    Args:
+        study: The study.
+        path: The ``.toml`` file to write.
+
+    Returns:
+        The path written.
+    """
+    import tomli_w
+
+    from warptissue.io import atomic_path
+
+    target = Path(path)
+    text = tomli_w.dumps(study.to_dict(relative_to=target.resolve().parent))
+    with atomic_path(target) as temporary:
+        temporary.write_text(text, encoding="utf-8")
+    return target
