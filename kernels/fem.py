@@ -21,6 +21,7 @@ from warptissue.kernels.materials import (
     deviatoric_response,
     flat,
     mat99d,
+    ogden_alpha_stress_derivative,
     volumetric_energy,
 )
 
@@ -168,6 +169,34 @@ def assemble_elements_kernel(
                     matrix_values, block_index[e, a * npe + b], (k_bar / volume) * wp.outer(ga, gb)
                 )
     wp.atomic_add(energy, 0, element_energy)
+
+
+@wp.kernel
+def ogden_alpha_residual_kernel(
+    params: MaterialParams,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    quadrature_volumes: wp.array2d(dtype=wp.float64),
+    displacement: wp.array(dtype=wp.vec3d),
+    term: int,
+    residual: wp.array(dtype=wp.vec3d),
+):
+    """Add ``dR/d alpha_term = int dP_dev/d alpha_term grad N_a dV`` of an Ogden material (N).
+
+    The internal force is linear in every other material parameter (C_i0, C01, mu_i, K, mu,
+    lambda), so their derivatives are residuals of ``assemble_elements_kernel`` with the
+    parameters' derivative struct; alpha_i enters nonlinearly and only the deviatoric stress,
+    in either formulation (the mean-dilatation pressure depends on K only).
+    """
+    e = wp.tid()
+    for q in range(quadrature_volumes.shape[1]):
+        f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+        if wp.determinant(f) <= wp.float64(0.0):
+            continue
+        dv = quadrature_volumes[e, q]
+        dp = ogden_alpha_stress_derivative(params, f, term)
+        for a in range(tets.shape[1]):
+            wp.atomic_add(residual, tets[e, a], dv * (dp @ shape_gradients[e, q, a]))
 
 
 @wp.kernel

@@ -323,6 +323,42 @@ def ogden_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
 
 
 @wp.func
+def ogden_alpha_stress_derivative(params: MaterialParams, f: wp.mat33d, term: int) -> wp.mat33d:
+    """``dP/d alpha_term`` of the deviatoric Ogden stress at fixed F (Pa per unit alpha).
+
+    With ``t_a = exp(alpha/2 (e_a - e_mean))`` (``e_a = ln c_a``), ``h1_a = dpsi/de_a =
+    mu/alpha (t_a - sum_b t_b / 3)`` and ``S = sum_a 2 h1_a / c_a n_a (x) n_a``, so
+    ``dS/dalpha = sum_a 2 (dh1_a/dalpha) / c_a n_a (x) n_a`` with ``dh1_a/dalpha =
+    -mu/alpha^2 (t_a - T/3) + mu/alpha (t'_a - T'/3)``, ``t'_a = (e_a - e_mean)/2 t_a``.
+    The volumetric part does not depend on alpha. Equal eigenvalues need no limit here: S is
+    a sum over the eigenvectors with equal weights inside an eigenspace.
+    """
+    c = wp.transpose(f) @ f
+    eig, vecs = symmetric_eigen(c)
+    e = wp.vec3d(wp.log(eig[0]), wp.log(eig[1]), wp.log(eig[2]))
+    e_mean = (e[0] + e[1] + e[2]) / wp.float64(3.0)
+    alpha = params.ogden_alpha[term]
+    mu = params.ogden_mu[term]
+    half = wp.float64(0.5) * alpha
+    t = wp.vec3d()
+    dt = wp.vec3d()
+    for a in range(3):
+        t[a] = wp.exp(half * (e[a] - e_mean))
+        dt[a] = wp.float64(0.5) * (e[a] - e_mean) * t[a]
+    total = t[0] + t[1] + t[2]
+    d_total = dt[0] + dt[1] + dt[2]
+    third = wp.float64(1.0) / wp.float64(3.0)
+    ds = wp.mat33d()
+    for a in range(3):
+        dh1 = -mu / (alpha * alpha) * (t[a] - third * total) + mu / alpha * (
+            dt[a] - third * d_total
+        )
+        n = wp.vec3d(vecs[0, a], vecs[1, a], vecs[2, a])
+        ds += wp.float64(2.0) * dh1 / eig[a] * wp.outer(n, n)
+    return f @ ds
+
+
+@wp.func
 def linear_elastic_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
     """Small-strain isotropic linear elasticity (not frame invariant)."""
     eye = wp.identity(n=3, dtype=wp.float64)

@@ -296,6 +296,82 @@ class Material:
     def _fill_device_params(self, params: Any, km: Any) -> None:
         """Set the model-specific struct fields."""
 
+    @property
+    def sensitivity_names(self) -> tuple[str, ...]:
+        """Parameters the FE force can be differentiated by: :attr:`parameter_names` plus
+        ``bulk_modulus_Pa`` where the model has one (the keys of :meth:`to_dict`)."""
+        return tuple(self._flat_parameters())
+
+    def device_params_derivative(self, name: str) -> tuple[Any, int]:
+        """The derivative of :meth:`device_params` with respect to one parameter.
+
+        The FE internal force is linear in every numeric field of ``MaterialParams`` except
+        the Ogden exponents (``c_i0``, ``c01``, ``ogden_mu``, ``bulk_modulus``,
+        ``shear_modulus``, ``lame_lambda``): the returned struct holds ``d field / d name`` in
+        those fields and the material's own model, term counts and alphas, so that the
+        internal force assembled with it is ``dR/d name`` of those fields (chain rule through
+        ``mu0(theta)``, ``K(theta)`` and ``lambda = K - 2 mu0 / 3``). ``alpha_i`` enters
+        nonlinearly: it is returned as the term index ``i - 1`` (else -1), and its derivative
+        is a kernel of its own.
+
+        Args:
+            name: One of :attr:`sensitivity_names`.
+
+        Returns:
+            (struct, alpha_term).
+
+        Raises:
+            InputError: ``name`` is not a parameter of this model.
+        """
+        from warptissue.kernels import materials as km
+
+        names = self.sensitivity_names
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise InputError(
+                f"{self.model_name} has no parameter {name!r}; it has {', '.join(names)}{hint}",
+                column="sensitivities",
+                value=name,
+            )
+        params = self.device_params()
+        c_i0, c01, ogden_mu = [0.0] * MAX_TERMS, 0.0, [0.0] * MAX_TERMS
+        alpha_term = -1
+        if name == "C01_Pa":
+            c01 = 1.0
+        elif name.startswith("C") and name.endswith("0_Pa"):
+            c_i0[int(name[1:-4]) - 1] = 1.0
+        elif name.startswith("mu") and name[2:-3].isdigit():
+            ogden_mu[int(name[2:-3]) - 1] = 1.0
+        elif name.startswith("alpha"):
+            alpha_term = int(name[5:]) - 1
+        d_shear, d_bulk = self._moduli_derivative(name)
+        params.c_i0 = km.vec6d(*c_i0)
+        params.c01 = c01
+        params.ogden_mu = km.vec6d(*ogden_mu)
+        params.bulk_modulus = d_bulk
+        params.shear_modulus = d_shear
+        params.lame_lambda = d_bulk - 2.0 * d_shear / 3.0
+        return params, alpha_term
+
+    def _moduli_derivative(self, name: str) -> tuple[float, float]:
+        """``(d mu0 / d name, d K / d name)`` of the initial shear and bulk moduli.
+
+        The hyperelastic models' ``mu0`` is linear in their Pa parameters (2 C10,
+        2 (C10 + C01), sum mu_i), so its derivative is its value at a unit parameter.
+        """
+        if name == "bulk_modulus_Pa":
+            return 0.0, 1.0
+        if not name.endswith("_Pa"):
+            return 0.0, 0.0
+        unit = {key: 0.0 for key in self._flat_parameters()}
+        unit[name] = 1.0
+        return self._shear_modulus_of(unit), 0.0
+
+    def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
+        """mu0 of flat parameter values (linear in them); see :meth:`_moduli_derivative`."""
+        raise NotImplementedError
+
 
 def _optional_bulk_modulus(value: float | None) -> float | None:
     return None if value is None else _check_positive("bulk_modulus_Pa", value)
@@ -496,6 +572,9 @@ class ReducedPolynomial(_InvariantModel):
         params.polynomial_terms = self.order
         params.c_i0 = km.vec6d(*self.C_Pa, *([0.0] * (MAX_TERMS - self.order)))
 
+    def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
+        return 2.0 * flat["C10_Pa"]
+
 
 def _with_bulk(values: dict[str, float], bulk_modulus_Pa: float | None) -> dict[str, float]:
     """``values`` plus ``bulk_modulus_Pa`` when the model has one."""
@@ -540,6 +619,9 @@ class NeoHookean(_InvariantModel):
     def _fill_device_params(self, params: Any, km: Any) -> None:
         params.polynomial_terms = 1
         params.c_i0 = km.vec6d(self.C10_Pa, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
+        return 2.0 * flat["C10_Pa"]
 
 
 @dataclass(frozen=True)
@@ -593,6 +675,9 @@ class MooneyRivlin(_InvariantModel):
         params.polynomial_terms = 1
         params.c_i0 = km.vec6d(self.C10_Pa, 0.0, 0.0, 0.0, 0.0, 0.0)
         params.c01 = self.C01_Pa
+
+    def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
+        return 2.0 * (flat["C10_Pa"] + flat["C01_Pa"])
 
 
 def Yeoh(  # noqa: N802 (a constructor named like the model)
@@ -740,6 +825,9 @@ class Ogden(HyperelasticMaterial):
         params.ogden_mu = km.vec6d(*self.mu_Pa, *pad)
         params.ogden_alpha = km.vec6d(*self.alpha, *pad)
 
+    def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
+        return sum(flat[f"mu{i + 1}_Pa"] for i in range(self.order))
+
 
 @dataclass(frozen=True)
 class CompressibleNeoHookean(Material):
@@ -776,6 +864,9 @@ class CompressibleNeoHookean(Material):
 
     def _flat_parameters(self) -> dict[str, float]:
         return {"shear_modulus_Pa": self.shear_modulus_Pa, "bulk_modulus_Pa": self.bulk_modulus_Pa}
+
+    def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
+        return flat["shear_modulus_Pa"]
 
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> CompressibleNeoHookean:
@@ -825,6 +916,13 @@ class LinearElastic(Material):
 
     def _flat_parameters(self) -> dict[str, float]:
         return {"youngs_modulus_Pa": self.youngs_modulus_Pa, "poissons_ratio": self.poissons_ratio}
+
+    def _moduli_derivative(self, name: str) -> tuple[float, float]:
+        """mu = E / (2 (1 + nu)) and K = E / (3 (1 - 2 nu)) differentiated by E or nu."""
+        e, nu = self.youngs_modulus_Pa, self.poissons_ratio
+        if name == "youngs_modulus_Pa":
+            return 1.0 / (2.0 * (1.0 + nu)), 1.0 / (3.0 * (1.0 - 2.0 * nu))
+        return -e / (2.0 * (1.0 + nu) ** 2), 2.0 * e / (3.0 * (1.0 - 2.0 * nu) ** 2)
 
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> LinearElastic:

@@ -235,6 +235,51 @@ class Assembler:
             min_jacobian=float(self._min_jacobian.numpy()[0]),
         )
 
+    def parameter_residual(self, displacement_m: np.ndarray | wp.array, name: str) -> np.ndarray:
+        """``dR/d theta``: the internal forces' derivative by one material parameter at fixed u.
+
+        The internal force is linear in every material parameter but the Ogden exponents, so
+        for those it is the residual assembled with the parameters' derivative struct
+        (:meth:`warptissue.materials.Material.device_params_derivative`, the chain rule from
+        the parameter to the device fields included); for ``alpha_i`` it is
+        ``ogden_alpha_residual_kernel``.
+
+        Args:
+            displacement_m: Nodal displacements, (N, 3) or a vec3d Warp array, metres.
+            name: A parameter of :attr:`material` (``C10_Pa``, ``alpha1``, ``bulk_modulus_Pa``,
+                ...; :attr:`warptissue.materials.Material.sensitivity_names`).
+
+        Returns:
+            dR/d theta, shape (N, 3), N per unit of the parameter (a copy: the assembler's
+            residual buffer is reused).
+        """
+        from warptissue.kernels import fem as kf
+
+        derivative, alpha_term = self.material.device_params_derivative(name)
+        u = self._as_device_displacement(displacement_m)
+        self._residual.zero_()
+        if alpha_term >= 0:
+            wp.launch(
+                kf.ogden_alpha_residual_kernel,
+                dim=self.tet_count,
+                inputs=[*self._element_inputs(u), alpha_term],
+                outputs=[self._residual],
+                device=self.device,
+            )
+            return self._residual.numpy().copy()
+        self._energy.zero_()
+        self._min_jacobian.fill_(np.inf)
+        inputs = self._element_inputs(u)
+        inputs[0] = derivative
+        wp.launch(
+            kf.assemble_elements_kernel,
+            dim=self.tet_count,
+            inputs=[*inputs, self._block_index, int(self.formulation == "mixed"), 0],
+            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
+            device=self.device,
+        )
+        return self._residual.numpy().copy()
+
     def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
         in place; optionally damp the free dofs' diagonal.

@@ -524,6 +524,25 @@ class CudssSolver:
             x = self._solver.solve()
             return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
 
+    def solve_factorized(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve with the factors of the last :meth:`solve`, without a new factorization.
+
+        Args:
+            rhs: Right-hand side, shape (N, 3).
+
+        Returns:
+            x, shape (N, 3).
+        """
+        rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
+        if rhs.shape != (self.row_count // 3, 3):
+            raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
+        if self.factorizations == 0:
+            raise RuntimeError("solve_factorized needs a factorization: call solve first")
+        self._rhs.assign(rhs)
+        with self._cupy.cuda.Device(self.device.ordinal), self._stream:
+            x = self._solver.solve()
+            return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+
     def free(self) -> None:
         """Release cuDSS's factors and workspace now (they are also freed with the object)."""
         self._solver.free()

@@ -248,10 +248,38 @@ class CpuDirectSolver:
         self.factorizations += 1
         if self.method == "superlu":
             self.analyses += 1
-            x = sp.linalg.spsolve(self._csc, b)
-            return np.asarray(x).reshape(-1, 3)
-        if self._pardiso(22) != 0 or self._pardiso(33, b) != 0:
+            try:
+                self._lu = sp.linalg.splu(self._csc)
+            except RuntimeError:  # exactly singular
+                self._lu = None
+                return np.full((self.row_count // 3, 3), np.nan)
+            return self._lu.solve(b).reshape(-1, 3)
+        self._factorized = self._pardiso(22) == 0
+        if not self._factorized:
             return np.full((self.row_count // 3, 3), np.nan)
+        return self.solve_factorized(rhs)
+
+    def solve_factorized(self, rhs: np.ndarray) -> np.ndarray:
+        """Solve with the factors of the last :meth:`solve`, without a new factorization.
+
+        The matrix's values may have changed since: this solves with the matrix as it was
+        factorized (PARDISO's iterative refinement, too, uses those values).
+
+        Args:
+            rhs: Right-hand side, shape (N, 3).
+
+        Returns:
+            x, shape (N, 3); all NaN when there is no factorization or the solve failed.
+        """
+        b = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1)
+        if b.shape[0] != self.row_count:
+            raise ValueError(f"rhs must have {self.row_count} entries, got {b.shape[0]}")
+        failed = np.full((self.row_count // 3, 3), np.nan)
+        if self.method == "superlu":
+            lu = getattr(self, "_lu", None)
+            return failed if lu is None else lu.solve(b).reshape(-1, 3)
+        if not getattr(self, "_factorized", False) or self._pardiso(33, b) != 0:
+            return failed
         return self._x.reshape(-1, 3).copy()
 
     def __del__(self) -> None:

@@ -17,6 +17,7 @@ times the symmetry factor (2 per symmetry plane), positive when the punch pushes
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
+from warptissue.fem.sensitivity import ForceSensitivity, check_sensitivity_names
 from warptissue.fem.solvers import (
     DirichletConditions,
     NewtonOptions,
@@ -206,6 +208,10 @@ class IndentationResult:
         message: What happened.
         cutbacks: Number of increment halvings used.
         formulation, element_type, symmetry_factor, linear_solver: How it was solved.
+        sensitivity_names: The parameters of ``force_sensitivity_N_per_unit``'s columns.
+        force_sensitivity_N_per_unit: Exact ``dF/dtheta`` of the punch force at each depth,
+            (S, n), N per unit of each parameter (N/Pa for ``C10_Pa``, N for ``alpha1``);
+            n = 0 unless ``sensitivities`` were asked for (docs/fe.md "Sensitivities").
     """
 
     depths_m: np.ndarray
@@ -223,6 +229,8 @@ class IndentationResult:
     element_type: str = "TET10"
     symmetry_factor: int = 4
     linear_solver: str = "auto"
+    sensitivity_names: tuple[str, ...] = ()
+    force_sensitivity_N_per_unit: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
@@ -240,6 +248,14 @@ class IndentationResult:
             "symmetry_factor": int(self.symmetry_factor),
             "linear_solver": self.linear_solver,
             "max_von_mises_Pa": float(self.von_mises_Pa.max()) if self.von_mises_Pa.size else None,
+            **(
+                {
+                    "sensitivity_names": list(self.sensitivity_names),
+                    "force_sensitivity_N_per_unit": self.force_sensitivity_N_per_unit.tolist(),
+                }
+                if self.sensitivity_names
+                else {}
+            ),
         }
 
 
@@ -252,6 +268,8 @@ def simulate_indentation(
     options: NewtonOptions | None = None,
     strict: bool = False,
     assembler: Assembler | None = None,
+    sensitivities: Sequence[str] = (),
+    sensitivity_factorization: str = "reuse",
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -268,6 +286,12 @@ def simulate_indentation(
             returning an incomplete one.
         assembler: Reuse an :class:`Assembler` built for this mesh, material and formulation
             (for repeated solves in a fit); built when None.
+        sensitivities: Material parameters (keys of ``problem.material.to_dict()``:
+            ``C10_Pa``, ``mu1_Pa``, ``alpha1``, ``bulk_modulus_Pa``, ...) to differentiate the
+            force by, exactly, at each depth: ``result.force_sensitivity_N_per_unit``.
+        sensitivity_factorization: ``"reuse"`` (Newton's last factors with iterative
+            refinement; no new factorization) or ``"refactorize"`` (one factorization of the
+            converged tangent per depth); see :mod:`warptissue.fem.sensitivity`.
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -293,28 +317,39 @@ def simulate_indentation(
         assembler.set_material(problem.material)
     weights = np.zeros((mesh.node_count, 3))
     weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
+    conditions = problem.dirichlet_conditions()
+    names = check_sensitivity_names(sensitivities)
+    sensitivity = None
+    if names:
+        sensitivity = ForceSensitivity(
+            assembler, conditions, names, weights, factorization=sensitivity_factorization
+        )
     try:
         path = solve_quasistatic(
             assembler,
-            problem.dirichlet_conditions(),
+            conditions,
             depths,
             reaction_weights=weights,
             options=options,
             progress=progress,
             progress_label="indentation depths",
             load_name="depth (m)",
+            sensitivity=sensitivity,
         )
     except SolveInterrupted as interrupted:
-        partial = _indentation_result(problem, assembler, interrupted.partial_result)
+        partial = _indentation_result(problem, assembler, interrupted.partial_result, names)
         raise SolveInterrupted(interrupted.message, partial_result=partial) from interrupted
-    result = _indentation_result(problem, assembler, path)
+    result = _indentation_result(problem, assembler, path, names)
     if strict and not result.completed:
         raise ConvergenceError(result.message, partial_result=result)
     return result
 
 
 def _indentation_result(
-    problem: IndentationProblem, assembler: Assembler, path: QuasistaticResult
+    problem: IndentationProblem,
+    assembler: Assembler,
+    path: QuasistaticResult,
+    sensitivity_names: tuple[str, ...] = (),
 ) -> IndentationResult:
     """The indentation result of a load path: the curve, the fields at its last state."""
     if len(path.loads):
@@ -337,4 +372,6 @@ def _indentation_result(
         element_type=problem.mesh.element_type,
         symmetry_factor=problem.symmetry_factor,
         linear_solver=path.linear_solver,
+        sensitivity_names=sensitivity_names,
+        force_sensitivity_N_per_unit=path.reaction_sensitivity,
     )

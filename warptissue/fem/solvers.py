@@ -297,6 +297,30 @@ class LinearSolver:
             self.direct = CpuDirectSolver(matrix, method=self.method)
         return self.direct.solve(rhs), 1
 
+    def solve_factorized(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
+        """Solve with the factorization of the last :meth:`solve`, without a new one.
+
+        Direct methods reuse their factors of ``matrix`` as it was at the last :meth:`solve`
+        (its values may have changed since); where there is none yet for this matrix object,
+        this is :meth:`solve`. CG has no factorization: it solves with ``matrix`` as it is.
+
+        Args:
+            matrix: The matrix object passed to the last :meth:`solve`.
+            rhs: Right-hand side, shape (N, 3).
+
+        Returns:
+            (x of shape (N, 3), iterations).
+        """
+        if self.method == "cg":
+            return self._solve_cg(matrix, rhs)
+        if self.method == "cudss":
+            if self._cudss is None or self._cudss.matrix is not matrix:
+                return self.solve(matrix, rhs)
+            return self._cudss.solve_factorized(rhs), 1
+        if self.direct is None or self.direct.matrix is not matrix:
+            return self.solve(matrix, rhs)
+        return self.direct.solve_factorized(rhs), 1
+
     def _solve_cg(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
         from warp.optim.linear import cg, preconditioner
 
@@ -333,6 +357,8 @@ class QuasistaticResult:
         linear_solver: The linear solver used.
         history: One record per attempted increment (load, converged, iterations,
             local_iterations, reason).
+        reaction_sensitivity: ``d reaction / d theta`` at each converged load, shape (S, n),
+            for the n parameters of the ``sensitivity`` passed in (n = 0 without one).
     """
 
     loads: np.ndarray
@@ -346,6 +372,7 @@ class QuasistaticResult:
     cutbacks: int = 0
     linear_solver: str = ""
     history: list[dict] = field(default_factory=list)
+    reaction_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def _norm(values: np.ndarray) -> float:
@@ -741,6 +768,7 @@ def solve_quasistatic(
     progress_label: str = "load steps",
     load_name: str = "load",
     initial_displacement_m: np.ndarray | None = None,
+    sensitivity: Any = None,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -773,6 +801,10 @@ def solve_quasistatic(
         progress_label: The bar's label.
         load_name: What the load is called in messages (e.g. ``"depth (m)"``).
         initial_displacement_m: Start state (N, 3); zero by default (load 0).
+        sensitivity: A :class:`warptissue.fem.sensitivity.ForceSensitivity` of this
+            assembler and these conditions: its ``at_converged_state`` runs at each converged
+            requested load, after Newton (with Newton's linear solver), into
+            ``reaction_sensitivity``.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -802,6 +834,8 @@ def solve_quasistatic(
     previous: tuple[float, np.ndarray] | None = None
     reached, states, reactions = [], [], []
     newton_counts, linear_counts, local_counts = [], [], []
+    sensitivities: list[np.ndarray] = []
+    sensitivity_count = 0 if sensitivity is None else len(sensitivity.names)
     message = f"converged at all {len(loads)} requested values of {load_name}"
     completed = True
     total_cutbacks = 0
@@ -821,6 +855,7 @@ def solve_quasistatic(
             cutbacks=total_cutbacks,
             linear_solver=solver.method,
             history=history,
+            reaction_sensitivity=np.array(sensitivities[:count]).reshape(count, sensitivity_count),
         )
 
     if progress:
@@ -904,6 +939,8 @@ def solve_quasistatic(
             states.append(u.copy())
             internal = assembler.assemble(u, with_tangent=False).residual.numpy()
             reactions.append(float(np.sum(weights * internal)))
+            if sensitivity is not None:
+                sensitivities.append(sensitivity.at_converged_state(solver, u))
             newton_counts.append(step_newton)
             linear_counts.append(step_linear)
             local_counts.append(step_local)

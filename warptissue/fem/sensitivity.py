@@ -1,0 +1,198 @@
+"""Exact derivatives of a reaction force by material parameters at converged load steps.
+
+At a converged state the free dofs satisfy ``R_f(u, theta) = 0`` with the prescribed dofs set
+by the load alone, so differentiating by a material parameter theta gives
+
+    K_ff du_f/dtheta = -dR_f/dtheta,    du_p/dtheta = 0,
+
+one linear solve with the tangent per parameter, and the reaction ``F = w . R(u, theta)``
+(``w`` nonzero on prescribed dofs only) has the total derivative
+
+    dF/dtheta = w . (dR/dtheta + K du/dtheta).
+
+``dR/dtheta`` comes from the Warp element kernels
+(:meth:`warptissue.fem.Assembler.parameter_residual`): the internal force is linear in every
+material parameter but the Ogden exponents, and those have a hand-written kernel. Everything
+is exact up to the Newton tolerance of the state and the accuracy of the linear solve; a
+hyperelastic state depends on the load alone, not on the path, so each step is independent.
+
+The linear solve: Newton's last factorization is of the iterate before the converged one (the
+step that reached it was solved with it; the line search, nonlinear elimination and damping
+may change the state and matrix after it). ``factorization="reuse"`` solves with those factors
+and refines iteratively against the tangent at the converged state (``x += K_old^-1 (b - K
+x)``: no new factorization; it converges fast because K_old is close to K), falling back to
+one factorization at the converged state where the refinement does not converge;
+``"refactorize"`` factorizes the converged tangent once per step. Both agree with central
+differences of whole forward runs (tests/test_fem_sensitivity.py; docs/fe.md
+"Sensitivities").
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+import warp.sparse as wps
+
+from warptissue.errors import InputError
+from warptissue.fem.assembly import Assembler
+from warptissue.fem.solvers import DirichletConditions, LinearSolver
+
+__all__ = ["SENSITIVITY_FACTORIZATIONS", "ForceSensitivity", "check_sensitivity_names"]
+
+SENSITIVITY_FACTORIZATIONS = ("reuse", "refactorize")
+
+
+@dataclass
+class ForceSensitivity:
+    """Computes ``dF/dtheta`` of a reaction force at each converged state of a load path.
+
+    Args:
+        assembler: The discretized body (its material is the one differentiated).
+        conditions: The prescribed dofs of the load path.
+        names: Parameters to differentiate by, a subset of the material's
+            :attr:`~warptissue.materials.Material.sensitivity_names`.
+        reaction_weights: Weights (N, 3) of the internal forces summed into the reaction
+            (nonzero on prescribed dofs only).
+        factorization: ``"reuse"`` (Newton's last factors with iterative refinement) or
+            ``"refactorize"`` (one factorization of the converged tangent per step).
+        refinement_tolerance: Relative residual of the refined solves (``"reuse"``).
+        max_refinements: Refinement steps before falling back to a factorization; 0 uses
+            Newton's last factors as they are (no refinement, no fallback: for measuring).
+
+    Attributes:
+        solves: Linear solves with existing factors so far.
+        factorizations: Factorizations made for the sensitivities so far.
+        refinement_steps: Refinement steps so far.
+
+    Raises:
+        InputError: An unknown parameter name or factorization, or mis-shaped weights.
+    """
+
+    assembler: Assembler
+    conditions: DirichletConditions
+    names: tuple[str, ...]
+    reaction_weights: np.ndarray
+    factorization: str = "reuse"
+    refinement_tolerance: float = 1e-12
+    max_refinements: int = 20
+    solves: int = field(default=0, init=False)
+    factorizations: int = field(default=0, init=False)
+    refinement_steps: int = field(default=0, init=False)
+
+    def __post_init__(self) -> None:
+        self.names = check_sensitivity_names(self.names)
+        if len(set(self.names)) != len(self.names):
+            raise InputError("sensitivities must be distinct parameter names", value=self.names)
+        for name in self.names:
+            self.assembler.material.device_params_derivative(name)  # names a bad one
+        if self.factorization not in SENSITIVITY_FACTORIZATIONS:
+            raise InputError(
+                f"must be one of {', '.join(map(repr, SENSITIVITY_FACTORIZATIONS))}",
+                column="sensitivity_factorization",
+                value=self.factorization,
+            )
+        n = self.assembler.node_count
+        self.reaction_weights = np.asarray(self.reaction_weights, dtype=np.float64)
+        if self.reaction_weights.shape != (n, 3):
+            raise InputError(
+                f"reaction_weights must have shape ({n}, 3)", value=self.reaction_weights.shape
+            )
+        mask = self.conditions.mask(n)
+        self._free = 1.0 - mask
+        self._constrained = wp.array(mask, dtype=wp.vec3d, device=self.assembler.device)
+
+    def at_converged_state(self, solver: LinearSolver, displacement_m: np.ndarray) -> np.ndarray:
+        """``dF/dtheta`` for every name at a converged state.
+
+        Assembles the tangent at the state (overwriting the assembler's matrix and residual).
+
+        Args:
+            solver: The linear solver that Newton used (its last factorization is reused).
+            displacement_m: The converged nodal displacements, (N, 3), m.
+
+        Returns:
+            dF/dtheta, shape (len(names),), in the reaction's unit per unit of each parameter.
+        """
+        count = len(self.names)
+        if count == 0:
+            return np.zeros(0)
+        assembler = self.assembler
+        matrix = assembler.assemble(displacement_m).matrix
+        full_values = wp.clone(matrix.values)
+        derivatives = [assembler.parameter_residual(displacement_m, name) for name in self.names]
+        assembler.eliminate(self._constrained)
+        refactorize = self.factorization == "refactorize"
+        steps = []
+        for d_residual in derivatives:
+            rhs = -d_residual * self._free
+            if refactorize:
+                du, _ = solver.solve(matrix, rhs)
+                self.factorizations += 1
+                refactorize = False
+            else:
+                du, refactorize_now = self._refined_solve(solver, matrix, rhs)
+                if refactorize_now:
+                    du, _ = solver.solve(matrix, rhs)
+                    self.factorizations += 1
+            steps.append(du * self._free)
+        # K du on the prescribed rows needs the tangent before elimination.
+        matrix.values.assign(full_values)
+        product = wp.zeros(assembler.node_count, dtype=wp.vec3d, device=assembler.device)
+        out = np.empty(count)
+        for i, (d_residual, du) in enumerate(zip(derivatives, steps, strict=True)):
+            du_wp = wp.array(du, dtype=wp.vec3d, device=assembler.device)
+            wps.bsr_mv(matrix, du_wp, product, alpha=1.0, beta=0.0)
+            out[i] = float(np.sum(self.reaction_weights * (d_residual + product.numpy())))
+        return out
+
+    def _refined_solve(
+        self, solver: LinearSolver, matrix: wps.BsrMatrix, rhs: np.ndarray
+    ) -> tuple[np.ndarray, bool]:
+        """Solve ``matrix x = rhs`` with the existing factors plus iterative refinement.
+
+        Returns:
+            (x, whether the refinement failed and a factorization is needed).
+        """
+        x, _ = solver.solve_factorized(matrix, rhs)
+        self.solves += 1
+        if self.max_refinements == 0:
+            return x, False
+        scale = _norm(rhs)
+        if scale == 0.0:
+            return np.zeros_like(rhs), False
+        product = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=matrix.device)
+        for _ in range(self.max_refinements):
+            if not np.all(np.isfinite(x)):
+                return x, True
+            wps.bsr_mv(
+                matrix,
+                wp.array(x, dtype=wp.vec3d, device=matrix.device),
+                product,
+                alpha=1.0,
+                beta=0.0,
+            )
+            residual = rhs - product.numpy()
+            if _norm(residual) <= self.refinement_tolerance * scale:
+                return x, False
+            correction, _ = solver.solve_factorized(matrix, residual)
+            self.solves += 1
+            self.refinement_steps += 1
+            x = x + correction
+        return x, True
+
+
+def _norm(values: np.ndarray) -> float:
+    return math.sqrt(float(np.einsum("ij,ij->", values, values)))
+
+
+def check_sensitivity_names(names: Sequence[str] | str) -> tuple[str, ...]:
+    """The names as a tuple; a bare string is refused (a common slip for a 1-tuple)."""
+    if isinstance(names, str):
+        raise InputError(
+            "sensitivities must be a sequence of parameter names, e.g. ('C10_Pa',)", value=names
+        )
+    return tuple(names)
