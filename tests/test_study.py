@@ -458,6 +458,13 @@ def test_every_key_is_in_the_study_file_reference():
     assert keys <= documented, sorted(keys - documented)
     assert {k for k, v in record.items() if isinstance(v, dict)} <= tables
     assert set(NewtonOptions.keys()) <= documented
+    # Version 2: every [[data]] and [fit] key, and the tables [[data]], [fit.start], [fit.bounds].
+    fit_record = load_study(FIT_SCENE).to_dict()
+    v2_keys = set(fit_record["data"][0]) | set(fit_record["fit"]) - {"start", "bounds"}
+    v2_keys |= {"contact_position_m", "offset", "window_s", "relative_floor_N", "stop_r_squared"}
+    assert v2_keys <= documented, sorted(v2_keys - documented)
+    for header in ("[[data]]", "[fit]", "[fit.start]", "[fit.bounds]"):
+        assert f"| **`{header}`** |" in page, header
 
 
 # --- Version 2: [[data]] and [fit] -------------------------------------------------------

@@ -335,9 +335,12 @@ class DataRecord:
     def to_dict(self, *, relative_to: str | Path | None = None) -> dict[str, Any]:
         """The record's ``[[data]]`` table (see :meth:`Study.to_dict` for ``relative_to``)."""
         file = self.file
-        if relative_to is not None:
-            file = Path(os.path.relpath(self.path.resolve(), Path(relative_to).resolve()))
-            file = file.as_posix()
+        if relative_to is not None:  # absolute paths without resolving links, as given
+            try:
+                file = os.path.relpath(os.path.abspath(self.path), os.path.abspath(relative_to))
+            except ValueError:  # another drive (Windows): keep the absolute path
+                file = os.path.abspath(self.path)
+            file = Path(file).as_posix()
         table: dict[str, Any] = {
             "file": file,
             "time_column": self.time_column,
@@ -1274,7 +1277,7 @@ def save_study(study: Study, path: str | Path) -> Path:
     from warptissue.io import atomic_path
 
     target = Path(path)
-    text = tomli_w.dumps(study.to_dict(relative_to=target.resolve().parent))
+    text = tomli_w.dumps(study.to_dict(relative_to=os.path.abspath(target.parent)))
     with atomic_path(target) as temporary:
         temporary.write_text(text, encoding="utf-8")
     return target
