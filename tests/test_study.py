@@ -244,6 +244,26 @@ BAD_INPUTS = [
 ]
 
 
+def assert_names_key_and_line(error: InputError, text: str, path: Path, key_path: str, value):
+    """``error`` names the file, the key path, the value and the line of the key (or of a
+    table of that name; a missing key: some line). Keys of ``[a.b]`` tables are looked up
+    below their table's header."""
+    message = str(error)
+    assert str(path) in message and key_path in message, message
+    if value is not None:
+        assert value in message, message
+    table, _, key = key_path.rpartition(".")
+    header = f"[{table}]" if table.count(".") else None  # [fit.start], [fit.bounds]
+    offset = line_of(text, header) if header and header in text else 0
+    below = "\n".join(text.splitlines()[offset:])
+    for fragment in (f"{key} =", f"[{key_path}]"):
+        if fragment in below:
+            assert error.line == offset + line_of(below, fragment)
+            break
+    else:
+        assert error.line is not None  # the line of the table that lacks the key
+
+
 @pytest.mark.parametrize(("old", "new", "key_path", "value"), BAD_INPUTS)
 def test_bad_input_names_file_line_key_and_value(tmp_path, old, new, key_path, value):
     assert old in MINIMAL
@@ -251,18 +271,7 @@ def test_bad_input_names_file_line_key_and_value(tmp_path, old, new, key_path, v
     path = write(tmp_path, text)
     with pytest.raises(InputError) as caught:
         load_study(path)
-    message = str(caught.value)
-    assert str(path) in message
-    assert key_path in message
-    if value is not None:
-        assert value in message
-    key = key_path.rpartition(".")[2]
-    for fragment in (f"{key} =", f"[{key}]"):
-        if fragment in text:
-            assert caught.value.line == line_of(text, fragment)
-            break
-    else:
-        assert caught.value.line is not None  # the line of the table that lacks the key
+    assert_names_key_and_line(caught.value, text, path, key_path, value)
 
 
 def test_toml_syntax_error_names_the_line(tmp_path):
@@ -891,20 +900,7 @@ def test_bad_fit_input_names_file_line_key_and_value(tmp_path, old, new, key_pat
     path = write_v2(tmp_path, text)
     with pytest.raises(InputError) as caught:
         load_study(path)
-    message = str(caught.value)
-    assert str(path) in message and key_path in message, message
-    if value is not None:
-        assert value in message, message
-    table, _, key = key_path.rpartition(".")
-    header = f"[{table}]" if table.count(".") else None  # [fit.start], [fit.bounds]
-    offset = line_of(text, header) if header and header in text else 0
-    below = "\n".join(text.splitlines()[offset:])
-    for fragment in (f"{key} =", f"[{key_path}]"):
-        if fragment in below:
-            assert caught.value.line == offset + line_of(below, fragment)
-            break
-    else:
-        assert caught.value.line is not None
+    assert_names_key_and_line(caught.value, text, path, key_path, value)
 
 
 def test_a_version_1_file_with_fit_tables_asks_for_version_2(tmp_path):
@@ -926,3 +922,15 @@ def test_second_record_errors_name_its_index(tmp_path):
     with pytest.raises(InputError, match=r"data\[1\]\.window_s") as caught:
         load_study(write_v2(tmp_path, text))
     assert caught.value.line == line_of(text, "window_s = [3.0")
+
+
+def test_a_record_whose_time_goes_back_names_the_csv_line(tmp_path):
+    path = write_v2(tmp_path)
+    csv = tmp_path / "record.csv"
+    lines = csv.read_text().splitlines()
+    lines[5] = lines[3]  # the time of line 6 repeats line 4's
+    csv.write_text("\n".join(lines) + "\n")
+    with pytest.raises(InputError, match=r"record\.csv:6.*time_s must strictly increase") as caught:
+        load_study(path)
+    assert "data[0].file" in str(caught.value)
+    assert caught.value.line == line_of(V2, 'file = "record.csv"')

@@ -835,19 +835,13 @@ def _read_record(table: _Table, base: Path) -> DataRecord:
         window_s = (window[0], window[1])
     table.finish(also_known=_RECORD_KEYS)
     try:
-        data = read_experiment_csv(path, required=tuple(columns.values()), monotonic=None)
+        data = read_experiment_csv(
+            path, required=tuple(columns.values()), monotonic=columns["time_column"]
+        )
     except InputError as exc:
         raise table.error("file", str(exc), file) from None
-    time_s = data[columns["time_column"]]
-    steps = time_s[1:] - time_s[:-1]
-    if (steps <= 0).any():
-        raise table.error(
-            "time_column",
-            f"{path}: column {columns['time_column']!r} must strictly increase (a time in s)",
-            columns["time_column"],
-        )
     values = {
-        "time_s": time_s,
+        "time_s": data[columns["time_column"]],
         "displacement_m": data[columns["displacement_column"]],
         "force_N": data[columns["force_column"]],
     }
