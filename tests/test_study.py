@@ -934,3 +934,17 @@ def test_a_record_whose_time_goes_back_names_the_csv_line(tmp_path):
         load_study(path)
     assert "data[0].file" in str(caught.value)
     assert caught.value.line == line_of(V2, 'file = "record.csv"')
+
+
+def test_a_layer_beyond_the_hayes_range_asks_for_start_values(tmp_path):
+    """a / h = 1 mm / 0.05 mm = 20 > 16: no start from the record, said in one line."""
+    text = V2.replace("thickness_m = 0.01", "thickness_m = 0.01\nsize_far_m = 0.005").replace(
+        "max_depth_m = 0.0005", "max_depth_m = 0.00001"
+    )
+    study = load_study(write_v2(tmp_path, text))
+    thin = study_from_dict(
+        dict(study.to_dict(), specimen=dict(study.to_dict()["specimen"], thickness_m=5e-5)),
+        path=study.path,
+    )
+    with pytest.raises(InputError, match=r"no start value from record\.csv: .*\[fit\.start\]"):
+        start_values_from_record(thin)

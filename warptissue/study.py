@@ -1161,14 +1161,21 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
     if np.count_nonzero(shallow) < 2:
         shallow = np.argsort(depth, kind="stable")[:2]
     poissons_ratio = min(study.material.small_strain_equivalent()[1], 0.5)
-    result = fit_punch_modulus(
-        depth[shallow],
-        force[shallow],
-        radius_m=study.indenter.radius_m,
-        poissons_ratio=poissons_ratio,
-        geometry="flat",
-        thickness_m=study.specimen.thickness_m,
-    )
+    try:
+        result = fit_punch_modulus(
+            depth[shallow],
+            force[shallow],
+            radius_m=study.indenter.radius_m,
+            poissons_ratio=poissons_ratio,
+            geometry="flat",
+            thickness_m=study.specimen.thickness_m,
+        )
+    except InputError as exc:  # e.g. a layer beyond the range of the Hayes factor
+        raise InputError(
+            f"no start value from {record.file}: {exc.message} (give start values in [fit.start])",
+            path=study.path,
+            value=exc.value,
+        ) from None
     return float(result.x[0])
 
 
