@@ -527,7 +527,7 @@ def test_the_example_fit_study_loads_with_three_conditioned_records():
     for record in study.data:
         assert record.path.is_file() and record.contact == "auto"
         # The probe starts 0.5 mm above the surface (the records' air gap): found to 0.05 mm.
-        assert record.record.summary["contact"]["position_m"] == pytest.approx(5e-4, abs=5e-5)
+        assert record.conditioning["contact"]["position_m"] == pytest.approx(5e-4, abs=5e-5)
         # keep_depth_m keeps the loading ramp to 3.6 mm below the contact.
         assert 3.3e-3 < record.displacement_m.max() <= 3.6e-3 + 1e-9
         assert np.all(np.diff(record.displacement_m) >= -1e-9)
@@ -553,8 +553,8 @@ def test_a_record_is_conditioned_by_the_same_code_as_the_fit_command(tmp_path):
     record = study.data[0]
     np.testing.assert_array_equal(record.displacement_m, same.displacement_m)
     np.testing.assert_array_equal(record.force_N, same.force_N)
-    assert record.record.summary == same.summary
-    assert record.record.summary["force_offset_N"] == pytest.approx(3e-3, abs=1e-5)
+    assert record.conditioning == same.summary
+    assert record.conditioning["force_offset_N"] == pytest.approx(3e-3, abs=1e-5)
 
 
 def test_start_value_from_a_sneddon_hayes_record(tmp_path):

@@ -327,6 +327,11 @@ class DataRecord:
         """Force of the kept samples (N), shape (m,)."""
         return self._loaded().force_N
 
+    @property
+    def conditioning(self) -> dict[str, Any]:
+        """What the conditioning did (contact point, offset removed, samples kept), JSON-ready."""
+        return self._loaded().summary
+
     def _loaded(self) -> FitRecord:
         if self.record is None:
             raise InputError("the record was not read (build studies with load_study)")
