@@ -4,7 +4,8 @@ Public API (CONVENTIONS.md): :class:`IndentationProblem` (a mesh, a material and
 :class:`warptissue.indenter.Indenter`), :func:`simulate_indentation` ->
 :class:`IndentationResult`, with the Newton solver's settings in one :class:`NewtonOptions`;
 lower level: :class:`Assembler`, :class:`DirichletConditions`, :func:`solve_quasistatic`,
-:class:`LinearSolver`.
+:class:`LinearSolver`; exact force sensitivities to material parameters:
+:class:`ForceSensitivity` (``simulate_indentation(..., sensitivities=...)``).
 """
 
 from warptissue.fem.assembly import FORMULATIONS, Assembler, Assembly, von_mises
@@ -14,6 +15,7 @@ from warptissue.fem.indentation import (
     IndentationResult,
     simulate_indentation,
 )
+from warptissue.fem.sensitivity import ForceSensitivity
 from warptissue.fem.solvers import (
     LINEAR_SOLVERS,
     DirichletConditions,
@@ -31,6 +33,7 @@ __all__ = [
     "Assembly",
     "DirichletConditions",
     "ElementGeometry",
+    "ForceSensitivity",
     "IndentationProblem",
     "IndentationResult",
     "LinearSolver",

@@ -1,0 +1,186 @@
+"""Cost of the exact force Jacobian per parameter against finite differences of whole runs.
+
+A flat-punch curve on a small quarter block (TET10, mean dilatation) of a two-term Ogden
+material; for 1, 2 and 4 parameters (mu1; mu1, alpha1; mu1, alpha1, mu2, alpha2):
+
+- the forward curve alone, and with ``sensitivities=`` (``"reuse"``: Newton's last factors
+  with iterative refinement; ``"refactorize"``: one fresh factorization per depth); the
+  Jacobian's cost is the difference, given per parameter as a fraction of the forward curve;
+- forward differences (p more forward runs) and central differences (2p), timed;
+- the agreement of the exact Jacobian with central differences of runs at Newton tolerance
+  1e-12 and relative step 1e-6 (not timed).
+
+Times are the best of ``--repeat`` runs (the machine is shared). Writes a JSON file.
+
+Usage: python scripts/benchmarks/bench_sensitivity.py [--near 0.5] [--steps 5]
+    [--repeat 3] [--out scripts/results/bench_sensitivity_2core_cpu.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+from warptissue.indenter import Indenter
+from warptissue.materials import Ogden, material_from_dict
+from warptissue.mesh import indentation_block
+
+RADIUS_M = 1e-3
+MATERIAL = Ogden((150.0, 30.0), (4.0, -2.0), 5000.0)
+PARAMETER_SETS = {
+    1: ("mu1_Pa",),
+    2: ("mu1_Pa", "alpha1"),
+    4: ("mu1_Pa", "alpha1", "mu2_Pa", "alpha2"),
+}
+RELATIVE_STEP = 1e-6
+REFERENCE_STEPS = (1e-4, 1e-6)
+"""Relative steps of the reference central differences (Newton tolerance 1e-12): at 1e-6 the
+runs' own convergence noise, divided by the step, limits the agreement to about 1e-6-1e-5; at
+1e-4 the truncation error (h^2) is still below it."""
+
+
+def _problem(mesh, material) -> IndentationProblem:
+    return IndentationProblem(mesh, material, Indenter("flat_punch", radius_m=RADIUS_M))
+
+
+def _moved(name: str, sign: float, relative_step: float = RELATIVE_STEP) -> Ogden:
+    flat = MATERIAL.to_dict()
+    return material_from_dict({**flat, name: flat[name] + sign * relative_step * abs(flat[name])})
+
+
+def _central_difference(mesh, depths: np.ndarray, name: str, relative_step: float) -> np.ndarray:
+    """(F(theta + h) - F(theta - h)) / 2h of runs at Newton tolerance 1e-12, shape (S,)."""
+    forces = [
+        simulate_indentation(
+            _problem(mesh, _moved(name, sign, relative_step)),
+            depths,
+            device="cpu",
+            progress=False,
+            options=NewtonOptions(tolerance=1e-12),
+        ).reaction_force_N
+        for sign in (1.0, -1.0)
+    ]
+    step = relative_step * abs(MATERIAL.to_dict()[name])
+    return (forces[0] - forces[1]) / (2.0 * step)
+
+
+def _timed(function, repeat: int):
+    best, value = float("inf"), None
+    for _ in range(repeat):
+        start = time.perf_counter()
+        value = function()
+        best = min(best, time.perf_counter() - start)
+    return best, value
+
+
+def main() -> None:
+    """Run the comparison and write the JSON."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--near", type=float, default=0.5, help="element size at the punch / a")
+    parser.add_argument("--steps", type=int, default=5, help="depths up to a quarter radius")
+    parser.add_argument("--repeat", type=int, default=3, help="timed repetitions (best kept)")
+    parser.add_argument("--out", type=Path, default=None, help="JSON file to write")
+    args = parser.parse_args()
+    thickness = 3.0 * RADIUS_M
+    mesh = indentation_block(
+        width_m=3.0 * thickness,
+        thickness_m=thickness,
+        probe_radius_m=RADIUS_M,
+        element="TET10",
+        size_near_m=args.near * RADIUS_M,
+        size_far_m=thickness / 2.0,
+    )
+    depths = 0.25 * RADIUS_M * np.arange(1, args.steps + 1) / args.steps
+    options = NewtonOptions()
+
+    def forward(material=MATERIAL, **kwargs):
+        result = simulate_indentation(
+            _problem(mesh, material), depths, device="cpu", progress=False, options=options,
+            **kwargs,
+        )  # fmt: skip
+        if not result.completed:
+            raise SystemExit(f"the forward run did not converge: {result.message}")
+        return result
+
+    forward()  # compile and warm up
+    t_forward, base = _timed(forward, args.repeat)
+    print(f"mesh: {mesh.tet_count} TET10, {3 * mesh.node_count} dofs; {args.steps} depths")
+    iterations = int(base.newton_iterations.sum())
+    print(f"forward curve: {t_forward:.3f} s, {iterations} Newton iterations")
+    rows = []
+    for count, names in PARAMETER_SETS.items():
+        row = {"parameters": list(names), "count": count}
+        for mode in ("reuse", "refactorize"):
+            seconds, result = _timed(
+                lambda mode=mode, names=names: forward(
+                    sensitivities=names, sensitivity_factorization=mode
+                ),
+                args.repeat,
+            )
+            row[f"exact_{mode}_s"] = seconds
+            row[f"exact_{mode}_fraction_per_parameter"] = (seconds - t_forward) / (
+                count * t_forward
+            )
+            row[f"jacobian_{mode}"] = result.force_sensitivity_N_per_unit.tolist()
+        t_fd, _ = _timed(lambda names=names: [forward(_moved(n, 1.0)) for n in names], args.repeat)
+        t_cd, _ = _timed(
+            lambda names=names: [forward(_moved(n, s)) for n in names for s in (1.0, -1.0)],
+            args.repeat,
+        )
+        row["forward_differences_s"] = t_fd
+        row["forward_differences_fraction_per_parameter"] = t_fd / (count * t_forward)
+        row["central_differences_s"] = t_cd
+        row["central_differences_fraction_per_parameter"] = t_cd / (count * t_forward)
+        for relative_step in REFERENCE_STEPS:
+            reference = np.column_stack(
+                [_central_difference(mesh, depths, name, relative_step) for name in names]
+            )
+            for mode in ("reuse", "refactorize"):
+                exact = np.asarray(row[f"jacobian_{mode}"])
+                row[f"max_relative_difference_{mode}_vs_central_step_{relative_step:g}"] = float(
+                    np.max(np.abs(exact - reference) / np.max(np.abs(reference), axis=0))
+                )
+        rows.append(row)
+        print(
+            f"{count} parameter(s): exact (reuse) {row['exact_reuse_fraction_per_parameter']:.3f}, "
+            f"exact (refactorize) {row['exact_refactorize_fraction_per_parameter']:.3f}, "
+            f"forward differences {row['forward_differences_fraction_per_parameter']:.2f}, "
+            f"central {row['central_differences_fraction_per_parameter']:.2f} forward curves "
+            "per parameter; exact (reuse) vs central differences of runs at tolerance 1e-12: "
+            + ", ".join(
+                f"{row[f'max_relative_difference_reuse_vs_central_step_{h:g}']:.1e} (step {h:g})"
+                for h in REFERENCE_STEPS
+            )
+        )
+    report = {
+        "benchmark": "bench_sensitivity",
+        "machine": {
+            "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(),
+        },  # fmt: skip
+        "mesh": {"tets": mesh.tet_count, "dofs": 3 * mesh.node_count, "element": "TET10"},
+        "material": MATERIAL.to_dict(),
+        "depths_m": depths.tolist(),
+        "newton_tolerance": options.tolerance,
+        "forward_s": t_forward,
+        "forward_newton_iterations": iterations,
+        "repeat": args.repeat,
+        "rows": rows,
+    }
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        temporary = args.out.with_suffix(args.out.suffix + ".tmp")
+        temporary.write_text(json.dumps(report, indent=1) + "\n")
+        temporary.replace(args.out)
+        print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()
