@@ -30,6 +30,7 @@ differences of whole forward runs (tests/test_fem_sensitivity.py; docs/fe.md
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -67,6 +68,7 @@ class ForceSensitivity:
         solves: Linear solves with existing factors so far.
         factorizations: Factorizations made for the sensitivities so far.
         refinement_steps: Refinement steps so far.
+        seconds: Wall time spent in :meth:`at_converged_state` so far, s.
 
     Raises:
         InputError: An unknown parameter name or factorization, or mis-shaped weights.
@@ -82,6 +84,7 @@ class ForceSensitivity:
     solves: int = field(default=0, init=False)
     factorizations: int = field(default=0, init=False)
     refinement_steps: int = field(default=0, init=False)
+    seconds: float = field(default=0.0, init=False)
 
     def __post_init__(self) -> None:
         self.names = check_sensitivity_names(self.names)
@@ -117,6 +120,13 @@ class ForceSensitivity:
         Returns:
             dF/dtheta, shape (len(names),), in the reaction's unit per unit of each parameter.
         """
+        start = time.perf_counter()
+        try:
+            return self._derivatives(solver, displacement_m)
+        finally:
+            self.seconds += time.perf_counter() - start
+
+    def _derivatives(self, solver: LinearSolver, displacement_m: np.ndarray) -> np.ndarray:
         count = len(self.names)
         if count == 0:
             return np.zeros(0)
