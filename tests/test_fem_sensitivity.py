@@ -238,3 +238,34 @@ def test_bad_sensitivity_requests_are_refused(mesh):
             sensitivities=("C10_Pa",),
             sensitivity_factorization="new",
         )
+
+
+def test_superlu_reuses_its_factors(mesh):
+    """SuperLU keeps its factorization for the sensitivity solves, as PARDISO does: no
+    factorization for the sensitivities, and the result of a fresh PARDISO one."""
+    material = MATERIALS["mooney_rivlin"]
+    problem = _problem(mesh, material)
+    weights = np.zeros((mesh.node_count, 3))
+    weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
+    jacobians = []
+    for solver, factorization in (("superlu", "reuse"), ("pardiso", "refactorize")):
+        assembler = Assembler(mesh, material)
+        sensitivity = ForceSensitivity(
+            assembler,
+            problem.dirichlet_conditions(),
+            material.sensitivity_names,
+            weights,
+            factorization=factorization,
+        )
+        path = solve_quasistatic(
+            assembler,
+            problem.dirichlet_conditions(),
+            DEPTHS_M[:2],
+            reaction_weights=weights,
+            options=NewtonOptions(linear_solver=solver),
+            sensitivity=sensitivity,
+        )
+        assert path.completed and path.linear_solver == solver
+        assert sensitivity.factorizations == (0 if factorization == "reuse" else 2)
+        jacobians.append(path.reaction_sensitivity)
+    np.testing.assert_allclose(jacobians[0], jacobians[1], rtol=1e-9)
