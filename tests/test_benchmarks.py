@@ -78,6 +78,11 @@ def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):
         ("bench_mesh.py", ("--factors", "0.5"), r"\n\s+0\.50\s+\d+"),
         ("bench_usd.py", ("--cells", "4", "4", "4", "--steps", "2"), r"validate_stage: .* 0 find"),
         ("bench_fit_engine.py", (), r"\ntotal \S+ s"),
+        (
+            "bench_sensitivity.py",
+            ("--steps", "2", "--repeat", "1", "--near", "1.0"),
+            r"4 parameter\(s\): exact",
+        ),
     ],
 )
 def test_a_quick_benchmark_runs(name, args, expected, tmp_path):
