@@ -29,3 +29,20 @@ def test_an_option_is_named_as_an_option():
     error = InputError("must be >= 1", column="growth", value=0.5)
     assert str(error.for_option("--growth")) == "option --growth: must be >= 1 (got 0.5)"
     assert str(error) == "column 'growth': must be >= 1 (got 0.5)"
+
+
+def test_a_key_is_named_as_a_key_not_a_column():
+    """Parameters and study keys are not data columns: the solver's options once read
+    "column 'linear_solver': 'superlu' runs on the CPU"."""
+    from warptissue.fem import NewtonOptions
+
+    error = InputError("must lie between 0 and 1", key="tolerance", value=np.float64(2.0))
+    assert str(error) == "key 'tolerance': must lie between 0 and 1 (got 2.0)"
+    assert error.column == "tolerance"  # callers map the name through one attribute
+    assert str(error.for_option("--tolerance")).startswith("option --tolerance: ")
+    try:
+        NewtonOptions(tolerance=2.0)
+    except InputError as caught:
+        assert "key 'tolerance'" in str(caught) and "column" not in str(caught)
+    else:
+        raise AssertionError("NewtonOptions accepted a tolerance of 2")

@@ -249,7 +249,7 @@ def test_superlu_reuses_its_factors(mesh):
     weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
     jacobians = []
     for solver, factorization in (("superlu", "reuse"), ("pardiso", "refactorize")):
-        assembler = Assembler(mesh, material)
+        assembler = Assembler(mesh, material, device="cpu")  # both solvers run on the CPU
         sensitivity = ForceSensitivity(
             assembler,
             problem.dirichlet_conditions(),

@@ -40,10 +40,13 @@ class InputError(WarpTissueError, ValueError):
         message: What is wrong, in one sentence.
         path: The file the value came from, if any.
         line: 1-based line number in ``path``, if known.
-        column: Column or key name, if known.
+        column: Column name of a data file, if known.
         value: The offending value, if any.
         option: The command-line option the value came from (``"--growth"``), if any; it is
-            named instead of ``column``.
+            named instead of ``column`` or ``key``.
+        key: Name of a parameter, option or study key that is not a data column (shown as
+            ``key 'tolerance'``); :attr:`column` then holds the same name, so callers that
+            map a name to a study key or an option read one attribute.
     """
 
     exit_code = 2
@@ -57,11 +60,13 @@ class InputError(WarpTissueError, ValueError):
         column: str | None = None,
         value: Any = None,
         option: str | None = None,
+        key: str | None = None,
     ) -> None:
         self.message = message
         self.path = None if path is None else Path(path)
         self.line = line
-        self.column = column
+        self.column = column if column is not None else key
+        self.key = key
         self.value = _plain(value)
         self.option = option
         where = []
@@ -71,6 +76,8 @@ class InputError(WarpTissueError, ValueError):
             where.append(f"line {line}")
         if option is not None:
             where.append(f"option {option}")
+        elif key is not None:
+            where.append(f"key {key!r}")
         elif column is not None:
             where.append(f"column {column!r}")
         text = message if not where else f"{', '.join(where)}: {message}"
@@ -82,7 +89,7 @@ class InputError(WarpTissueError, ValueError):
         """The same error, naming the command-line option ``option`` instead of the column."""
         return InputError(
             self.message, path=self.path, line=self.line, column=self.column, value=self.value,
-            option=option,
+            option=option, key=self.key,
         )  # fmt: skip
 
 

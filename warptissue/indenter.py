@@ -38,9 +38,9 @@ CONTACTS: tuple[str, ...] = ("bonded", "frictionless")
 
 def _positive_length(value: Any, key: str) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError("must be a number in metres", column=key, value=value)
+        raise InputError("must be a number in metres", key=key, value=value)
     if not (math.isfinite(value) and value > 0):
-        raise InputError("must be a positive length in metres", column=key, value=value)
+        raise InputError("must be a positive length in metres", key=key, value=value)
     return float(value)
 
 
@@ -77,13 +77,13 @@ class Indenter:
         if self.kind not in INDENTER_KINDS:
             raise InputError(
                 f"must be one of {', '.join(map(repr, INDENTER_KINDS))}",
-                column="kind",
+                key="kind",
                 value=self.kind,
             )
         if self.contact not in CONTACTS:
             raise InputError(
                 f"must be one of {', '.join(map(repr, CONTACTS))}",
-                column="contact",
+                key="contact",
                 value=self.contact,
             )
         for key, needed in (
@@ -94,7 +94,7 @@ class Indenter:
             if needed or value != 0:
                 if needed and value == 0:
                     raise InputError(
-                        f"a {self.kind} indenter needs {key} > 0", column=key, value=value
+                        f"a {self.kind} indenter needs {key} > 0", key=key, value=value
                     )
                 object.__setattr__(self, key, _positive_length(value, key))
         for key in ("x_m", "y_m", "z_m"):
@@ -102,9 +102,9 @@ class Indenter:
             if value is None:
                 continue
             if isinstance(value, bool) or not isinstance(value, int | float):
-                raise InputError("must be a number in metres", column=key, value=value)
+                raise InputError("must be a number in metres", key=key, value=value)
             if not math.isfinite(value):
-                raise InputError("must be finite", column=key, value=value)
+                raise InputError("must be finite", key=key, value=value)
             object.__setattr__(self, key, float(value))
 
     @classmethod
@@ -118,10 +118,10 @@ class Indenter:
         unknown = sorted(set(data) - known)
         if unknown:
             raise InputError(
-                f"unknown indenter key (known: {', '.join(sorted(known))})", column=unknown[0]
+                f"unknown indenter key (known: {', '.join(sorted(known))})", key=unknown[0]
             )
         if "kind" not in data:
-            raise InputError("the indenter needs a kind", column="kind")
+            raise InputError("the indenter needs a kind", key="kind")
         return cls(**dict(data))
 
     def to_dict(self) -> dict[str, Any]:

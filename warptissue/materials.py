@@ -106,17 +106,17 @@ HOMOGENEOUS_MODES: tuple[str, ...] = ("uniaxial", "equibiaxial", "planar")
 
 def _check_finite(name: str, value: float) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
-        raise InputError("must be a number", column=name, value=value)
+        raise InputError("must be a number", key=name, value=value)
     value = float(value)
     if not math.isfinite(value):
-        raise InputError("must be finite", column=name, value=value)
+        raise InputError("must be finite", key=name, value=value)
     return value
 
 
 def _check_positive(name: str, value: float) -> float:
     value = _check_finite(name, value)
     if value <= 0.0:
-        raise InputError("must be positive", column=name, value=value)
+        raise InputError("must be positive", key=name, value=value)
     return value
 
 
@@ -124,9 +124,9 @@ def _check_terms(name: str, values: Any) -> tuple[float, ...]:
     try:
         items = tuple(values)
     except TypeError:
-        raise InputError("must be a sequence of numbers", column=name, value=values) from None
+        raise InputError("must be a sequence of numbers", key=name, value=values) from None
     if not 1 <= len(items) <= MAX_TERMS:
-        raise InputError(f"must have 1 to {MAX_TERMS} terms", column=name, value=values)
+        raise InputError(f"must have 1 to {MAX_TERMS} terms", key=name, value=values)
     return tuple(_check_finite(f"{name}[{i}]", v) for i, v in enumerate(items))
 
 
@@ -274,7 +274,7 @@ class Material:
             raise InputError(
                 f"the FE needs a bulk modulus; this {self.model_name} model is incompressible "
                 "(give bulk_modulus_Pa, or use with_bulk_modulus)",
-                column="bulk_modulus_Pa",
+                key="bulk_modulus_Pa",
             )
         params = km.MaterialParams()
         params.model = int(self._device_model)
@@ -331,7 +331,7 @@ class Material:
             hint = f" (did you mean {close[0]!r}?)" if close else ""
             raise InputError(
                 f"{self.model_name} has no parameter {name!r}; it has {', '.join(names)}{hint}",
-                column="sensitivities",
+                key="sensitivities",
                 value=name,
             )
         params = self.device_params()
@@ -648,7 +648,7 @@ class MooneyRivlin(_InvariantModel):
         if self.bulk_modulus_Pa is not None and self.C10_Pa + self.C01_Pa <= 0.0:
             raise InputError(
                 "C10_Pa + C01_Pa must be positive (initial shear modulus 2 (C10 + C01))",
-                column="C01_Pa",
+                key="C01_Pa",
                 value=self.C01_Pa,
             )
 
@@ -725,16 +725,16 @@ class Ogden(HyperelasticMaterial):
         if len(self.mu_Pa) != len(self.alpha):
             raise InputError(
                 f"mu_Pa has {len(self.mu_Pa)} terms but alpha has {len(self.alpha)}",
-                column="alpha",
+                key="alpha",
                 value=self.alpha,
             )
         for i, a in enumerate(self.alpha):
             if a == 0.0:
-                raise InputError("must be nonzero", column=f"alpha{i + 1}", value=a)
+                raise InputError("must be nonzero", key=f"alpha{i + 1}", value=a)
         if self.bulk_modulus_Pa is not None and sum(self.mu_Pa) <= 0.0:
             raise InputError(
                 "sum of mu_i must be positive (initial shear modulus)",
-                column="mu_Pa",
+                key="mu_Pa",
                 value=self.mu_Pa,
             )
         object.__setattr__(self, "bulk_modulus_Pa", _optional_bulk_modulus(self.bulk_modulus_Pa))
@@ -854,7 +854,7 @@ class CompressibleNeoHookean(Material):
         if self.bulk_modulus_Pa <= 2.0 * self.shear_modulus_Pa / 3.0:
             raise InputError(
                 "bulk_modulus_Pa must exceed 2/3 shear_modulus_Pa (Poisson's ratio > 0)",
-                column="bulk_modulus_Pa",
+                key="bulk_modulus_Pa",
                 value=self.bulk_modulus_Pa,
             )
 
@@ -900,7 +900,7 @@ class LinearElastic(Material):
         )
         nu = _check_finite("poissons_ratio", self.poissons_ratio)
         if not -1.0 < nu < 0.5:
-            raise InputError("must lie in (-1, 0.5)", column="poissons_ratio", value=nu)
+            raise InputError("must lie in (-1, 0.5)", key="poissons_ratio", value=nu)
         object.__setattr__(self, "poissons_ratio", nu)
 
     @property
@@ -969,13 +969,13 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
         hint = f"did you mean {close[0]!r}? " if close else ""
         raise InputError(
             f"unknown material model ({hint}choose from {', '.join(names)})",
-            column="model",
+            key="model",
             value=name,
         )
     cls = _MODELS[name]
     if "D1_per_Pa" in values:
         if "bulk_modulus_Pa" in values:
-            raise InputError("give bulk_modulus_Pa or D1_per_Pa, not both", column="D1_per_Pa")
+            raise InputError("give bulk_modulus_Pa or D1_per_Pa, not both", key="D1_per_Pa")
         d1 = _check_positive("D1_per_Pa", values.pop("D1_per_Pa"))
         values["bulk_modulus_Pa"] = 2.0 / d1
     for list_key, prefix, suffix in (
@@ -1009,11 +1009,11 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
         lowered = {key.lower(): key for key in unknown}
         close = difflib.get_close_matches(missing[0].lower(), list(lowered), n=1, cutoff=0.6)
         hint = f" (the unknown key {lowered[close[0]]!r} looks like a typo of it)" if close else ""
-        raise InputError(f"missing parameter for model {name!r}{hint}", column=missing[0])
+        raise InputError(f"missing parameter for model {name!r}{hint}", key=missing[0])
     if unknown:
         raise InputError(
             f"unknown parameter for model {name!r}; expected {', '.join(expected)}",
-            column=unknown[0],
+            key=unknown[0],
             value=values[unknown[0]],
         )
     for key in expected:

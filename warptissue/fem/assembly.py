@@ -115,7 +115,7 @@ class Assembler:
         if formulation not in FORMULATIONS:
             raise InputError(
                 f"formulation must be one of {FORMULATIONS}",
-                column="formulation",
+                key="formulation",
                 value=formulation,
             )
         if formulation == "mixed" and mesh.nodes_per_tet != 10:
@@ -123,7 +123,7 @@ class Assembler:
                 "the mixed (mean-dilatation) formulation needs TET10 elements: with TET4 a "
                 "constant pressure per element locks; promote the mesh with "
                 "warptissue.mesh.to_tet10 or use formulation='displacement'",
-                column="formulation",
+                key="formulation",
                 value=formulation,
             )
         if mesh.tet_count == 0:

@@ -46,14 +46,14 @@ def _plane_component(mesh: TetMesh, name: str) -> int:
     """The axis normal to a planar node set (the coordinate that does not vary on it)."""
     nodes = mesh.node_set(name)
     if nodes.size == 0:
-        raise InputError(f"symmetry node set {name!r} is empty", column="symmetry_planes")
+        raise InputError(f"symmetry node set {name!r} is empty", key="symmetry_planes")
     points = mesh.points[nodes]
     spread = np.ptp(points, axis=0)
     size = float(np.ptp(mesh.points, axis=0).max())
     axis = int(np.argmin(spread))
     if spread[axis] > 1e-9 * size:
         raise InputError(
-            f"symmetry node set {name!r} is not an axis-aligned plane", column="symmetry_planes"
+            f"symmetry node set {name!r} is not an axis-aligned plane", key="symmetry_planes"
         )
     return axis
 
@@ -86,28 +86,28 @@ class IndentationProblem:
         if not isinstance(self.indenter, Indenter):
             raise InputError(
                 "the indenter must be a warptissue.indenter.Indenter",
-                column="indenter",
+                key="indenter",
                 value=type(self.indenter).__name__,
             )
         if self.indenter.kind not in SIMULATED_KINDS:
             raise InputError(
                 f"the finite elements simulate only {', '.join(map(repr, SIMULATED_KINDS))} "
                 "indenters",
-                column="kind",
+                key="kind",
                 value=self.indenter.kind,
             )
         if self.indenter.x_m != 0.0 or self.indenter.y_m != 0.0:
             raise InputError(
                 "the finite elements need the punch on the axis x = y = 0",
-                column="x_m" if self.indenter.x_m != 0.0 else "y_m",
+                key="x_m" if self.indenter.x_m != 0.0 else "y_m",
                 value=self.indenter.x_m if self.indenter.x_m != 0.0 else self.indenter.y_m,
             )
         if self.base not in BASES:
-            raise InputError(f"base must be one of {BASES}", column="base", value=self.base)
+            raise InputError(f"base must be one of {BASES}", key="base", value=self.base)
         if self.formulation not in FORMULATIONS:
             raise InputError(
                 f"formulation must be one of {FORMULATIONS}",
-                column="formulation",
+                key="formulation",
                 value=self.formulation,
             )
         if self.formulation == "mixed" and self.mesh.nodes_per_tet != 10:
@@ -115,7 +115,7 @@ class IndentationProblem:
                 "formulation 'mixed' needs a TET10 mesh (use warptissue.mesh.to_tet10 or "
                 "element='TET10'); 'displacement' accepts TET4 but locks when nearly "
                 "incompressible",
-                column="formulation",
+                key="formulation",
                 value=self.formulation,
             )
         object.__setattr__(self, "symmetry_planes", tuple(self.symmetry_planes))
@@ -123,20 +123,20 @@ class IndentationProblem:
             if name not in self.mesh.node_sets:
                 raise InputError(
                     f"the mesh has no node set {name!r} (it has {sorted(self.mesh.node_sets)})",
-                    column="mesh",
+                    key="mesh",
                 )
         if self.punch_nodes.size == 0:
             raise InputError(
                 f"no node of {self.surface!r} lies within the punch radius "
                 f"{self.indenter.radius_m} m of the axis x = y = 0",
-                column="radius_m",
+                key="radius_m",
             )
         if self.indenter.z_m is not None:
             top = float(self.mesh.points[self.punch_nodes, 2].max())
             if abs(self.indenter.z_m - top) > 1e-9 * float(np.ptp(self.mesh.points[:, 2])):
                 raise InputError(
                     f"the punch's contact point z_m is off the indented surface (z = {top:g} m)",
-                    column="z_m",
+                    key="z_m",
                     value=self.indenter.z_m,
                 )
 

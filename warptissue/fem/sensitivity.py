@@ -95,7 +95,7 @@ class ForceSensitivity:
         if self.factorization not in SENSITIVITY_FACTORIZATIONS:
             raise InputError(
                 f"must be one of {', '.join(map(repr, SENSITIVITY_FACTORIZATIONS))}",
-                column="sensitivity_factorization",
+                key="sensitivity_factorization",
                 value=self.factorization,
             )
         n = self.assembler.node_count

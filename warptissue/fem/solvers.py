@@ -107,23 +107,23 @@ class NewtonOptions:
             value = getattr(self, key)
             if value not in allowed:
                 raise InputError(
-                    f"must be one of {', '.join(map(repr, allowed))}", column=key, value=value
+                    f"must be one of {', '.join(map(repr, allowed))}", key=key, value=value
                 )
         tolerance = self.tolerance
         if isinstance(tolerance, bool) or not isinstance(tolerance, int | float):
-            raise InputError("must be a number", column="tolerance", value=tolerance)
+            raise InputError("must be a number", key="tolerance", value=tolerance)
         if not 0.0 < tolerance < 1.0:
-            raise InputError("must lie between 0 and 1", column="tolerance", value=tolerance)
+            raise InputError("must lie between 0 and 1", key="tolerance", value=tolerance)
         object.__setattr__(self, "tolerance", float(tolerance))
         for key, minimum in (("max_newton_iterations", 1), ("max_cutbacks", 0)):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, int):
-                raise InputError("must be an integer", column=key, value=value)
+                raise InputError("must be an integer", key=key, value=value)
             if value < minimum:
-                raise InputError(f"must be at least {minimum}", column=key, value=value)
+                raise InputError(f"must be at least {minimum}", key=key, value=value)
         for key in ("nonlinear_elimination", "damping"):
             if not isinstance(getattr(self, key), bool):
-                raise InputError("must be true or false", column=key, value=getattr(self, key))
+                raise InputError("must be true or false", key=key, value=getattr(self, key))
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:
@@ -236,7 +236,7 @@ class LinearSolver:
         if method not in LINEAR_SOLVERS:
             raise InputError(
                 f"linear solver must be one of {LINEAR_SOLVERS}",
-                column="linear_solver",
+                key="linear_solver",
                 value=method,
             )
         if method == "auto":
@@ -247,26 +247,26 @@ class LinearSolver:
         if method == "pardiso" and not _pardiso_available():
             raise InputError(
                 "pypardiso (Intel MKL) is not installed on this machine",
-                column="linear_solver",
+                key="linear_solver",
                 value=method,
             )
         if method in ("pardiso", "superlu") and device.is_cuda:
             raise InputError(
                 f"{method!r} runs on the CPU; use linear_solver='cg' on {device}",
-                column="linear_solver",
+                key="linear_solver",
                 value=method,
             )
         if method == "cudss" and not device.is_cuda:
             raise InputError(
                 f"'cudss' runs on CUDA devices; use 'pardiso' or 'superlu' on {device}",
-                column="linear_solver",
+                key="linear_solver",
                 value=method,
             )
         if method == "cudss" and not cudss_available():
             raise InputError(
                 "the cuDSS solver needs nvmath-python, nvidia-cudss-cu13 and cupy-cuda13x "
                 "(pip install 'warptissue[gpu]')",
-                column="linear_solver",
+                key="linear_solver",
                 value=method,
             )
         self.method = method

@@ -277,11 +277,11 @@ def graded_spacing(
     if largest_m < first_m:
         raise InputError(
             f"largest_m ({largest_m} m) must not be smaller than first_m ({first_m} m)",
-            column="largest_m",
+            key="largest_m",
             value=largest_m,
         )
     if not growth >= 1.0:
-        raise InputError("growth must be >= 1", column="growth", value=growth)
+        raise InputError("growth must be >= 1", key="growth", value=growth)
     ramp_count = 1 if growth == 1.0 else int(np.ceil(np.log(largest_m / first_m) / np.log(growth)))
     # Every ramp interval is >= first_m, so no more than this many can be used (a growth just
     # above 1 would otherwise ask for an astronomically long ramp).
@@ -510,7 +510,7 @@ def indentation_disc(
 def _require_positive(**values: float) -> None:
     for name, value in values.items():
         if not (np.isfinite(value) and value > 0):
-            raise InputError(f"{name} must be a positive finite number", column=name, value=value)
+            raise InputError(f"{name} must be a positive finite number", key=name, value=value)
 
 
 _INNER_SQUARE_FRACTION = 0.5
@@ -538,23 +538,23 @@ def _indentation_specimen(
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
     _require_positive(probe_radius_m=probe_radius_m, size_near_m=size_near_m, size_far_m=size_far_m)
     if element not in ("TET4", "TET10"):
-        raise InputError("element must be 'TET4' or 'TET10'", column="element", value=element)
+        raise InputError("element must be 'TET4' or 'TET10'", key="element", value=element)
     if mesher not in MESHERS:
-        raise InputError(f"mesher must be one of {MESHERS}", column="mesher", value=mesher)
+        raise InputError(f"mesher must be one of {MESHERS}", key="mesher", value=mesher)
     if probe_radius_m >= half_extent_m:
         raise InputError(
             f"probe_radius_m must be smaller than the specimen's half-width ({half_extent_m} m)",
-            column="probe_radius_m",
+            key="probe_radius_m",
             value=probe_radius_m,
         )
     if size_far_m < size_near_m:
         raise InputError(
             f"size_far_m must not be smaller than size_near_m ({size_near_m} m)",
-            column="size_far_m",
+            key="size_far_m",
             value=size_far_m,
         )
     if not (np.isfinite(growth) and growth >= 1.0):
-        raise InputError("growth must be a finite number >= 1", column="growth", value=growth)
+        raise InputError("growth must be a finite number >= 1", key="growth", value=growth)
     estimate_indentation_mesh(
         shape="disc" if outer == "circle" else "block",
         half_extent_m=half_extent_m,

@@ -158,9 +158,9 @@ def estimate_indentation_mesh(
     )
 
     if shape not in ("block", "disc"):
-        raise InputError("shape must be 'block' or 'disc'", column="shape", value=shape)
+        raise InputError("shape must be 'block' or 'disc'", key="shape", value=shape)
     if element not in ("TET4", "TET10"):
-        raise InputError("element must be 'TET4' or 'TET10'", column="element", value=element)
+        raise InputError("element must be 'TET4' or 'TET10'", key="element", value=element)
     layer_max_m = size_far_m if layer_max_m is None else layer_max_m
     _require_positive(
         half_extent_m=half_extent_m,
