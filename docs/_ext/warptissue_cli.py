@@ -23,13 +23,6 @@ HELP_WIDTH = 92
 """Terminal width the help texts are formatted for."""
 
 
-GENERIC_EXIT = (
-    "Exit status: 0 on success, 2 on bad input or a usage error; the table of exit statuses "
-    "above lists the others."
-)
-"""Said of a command whose ``--help`` does not state its exit statuses itself."""
-
-
 def _subcommands(
     parser: argparse.ArgumentParser,
 ) -> Iterator[tuple[str, argparse.ArgumentParser, str]]:
@@ -101,11 +94,6 @@ class CliDirective(Directive):
             if summary:
                 text = summary[0].upper() + summary[1:]
                 section += nodes.paragraph(text, text if text.endswith(".") else text + ".")
-            if (
-                sub.get_default("handler") is not None
-                and "exit status" not in ((sub.description or "") + (sub.epilog or "")).lower()
-            ):
-                section += nodes.paragraph(GENERIC_EXIT, GENERIC_EXIT)
             help_text = _help_text(sub)
             block = nodes.literal_block(help_text, help_text)
             block["language"] = "text"

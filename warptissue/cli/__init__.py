@@ -69,7 +69,28 @@ def build_parser() -> argparse.ArgumentParser:
             module.register(commands)
         if hasattr(module, "register_fit"):
             module.register_fit(fit_kinds)
+    _state_exit_statuses(parser)
     return parser
+
+
+STANDARD_EXIT = (
+    "exit status: 0 success (warnings go to stderr), 2 bad input or usage, 3 unusable mesh, "
+    "4 no convergence, 5 device, 130 interrupted, 141 broken pipe"
+)
+"""The exit statuses said in the ``--help`` of a command that does not state its own."""
+
+
+def _state_exit_statuses(parser: argparse.ArgumentParser) -> None:
+    """Give every command that runs something and says nothing of its exit statuses the
+    standard list as its ``--help`` epilog (the codes of :mod:`warptissue.errors`)."""
+    for action in parser._actions:
+        if not isinstance(action, argparse._SubParsersAction):
+            continue
+        for sub in action.choices.values():
+            stated = ((sub.description or "") + (sub.epilog or "")).lower()
+            if sub.get_default("handler") is not None and "exit status" not in stated:
+                sub.epilog = STANDARD_EXIT if not sub.epilog else f"{sub.epilog}\n{STANDARD_EXIT}"
+            _state_exit_statuses(sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
