@@ -513,9 +513,7 @@ class CudssSolver:
         Returns:
             x, shape (N, 3).
         """
-        rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
-        if rhs.shape != (self.row_count // 3, 3):
-            raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
+        rhs = self._rhs_blocks(rhs)
         bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
         self._rhs.assign(rhs)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream:
@@ -533,15 +531,20 @@ class CudssSolver:
         Returns:
             x, shape (N, 3).
         """
-        rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
-        if rhs.shape != (self.row_count // 3, 3):
-            raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
+        rhs = self._rhs_blocks(rhs)
         if self.factorizations == 0:
             raise RuntimeError("solve_factorized needs a factorization: call solve first")
         self._rhs.assign(rhs)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream:
             x = self._solver.solve()
             return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+
+    def _rhs_blocks(self, rhs: np.ndarray) -> np.ndarray:
+        """``rhs`` as a contiguous float64 (N, 3) array; a ValueError for another size."""
+        rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
+        if rhs.shape != (self.row_count // 3, 3):
+            raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
+        return rhs
 
     def free(self) -> None:
         """Release cuDSS's factors and workspace now (they are also freed with the object)."""
