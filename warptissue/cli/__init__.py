@@ -45,6 +45,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.mesh",
     "warptissue.cli.export",
     "warptissue.cli.fit_relaxation",
+    "warptissue.cli.fit_indentation",
     "warptissue.cli.acquire",
     "warptissue.cli.simulate",
 )
