@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -145,3 +146,103 @@ def test_plot_of_several_records_has_one_colour_per_record(tmp_path, monkeypatch
         "step.csv: measured",
         "step.csv: fitted",
     ]
+
+
+# --- The inverse-FE fit's report (warptissue fit indentation) ------------------------------
+
+
+def _indentation_fit(study):
+    """An IndentationFit-like object of two records: C10 of a line F = k C10 d fitted to
+    noisy samples (the report only reads the fit's attributes)."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(3)
+    records, depths, measured = [], [], []
+    for k, name in enumerate(("data/fast.csv", "data/slow.csv")):
+        time = np.linspace(0.0, 2.0 + 3.0 * k, 40 + 60 * k)
+        depth = np.minimum(time, 1.0) * 1e-3
+        depths.append(depth)
+        measured.append(0.02 * depth / 1e-3 + rng.normal(0.0, 1e-4, time.size))
+        records.append(SimpleNamespace(file=name, time_s=time, depth_m=depth))
+    all_depth, all_measured = np.concatenate(depths), np.concatenate(measured)
+    result = fit_curve(
+        lambda p: p[0] * 7e-2 * all_depth,
+        [250.0],
+        all_measured,
+        parameter_names=["C10_Pa"],
+        parameter_units=["Pa"],
+    )
+    start = 0
+    for record, force in zip(records, measured, strict=True):
+        stop = start + force.size
+        record.measured_force_N = force
+        record.fitted_force_N = result.fitted[start:stop]
+        record.r_squared, record.rmse_N, start = 0.99, 1e-4, stop
+    material = dataclasses.replace(study.material, C10_Pa=float(result.x[0]))
+    fit = SimpleNamespace(
+        study=study,
+        fitted_study=dataclasses.replace(study, material=material),
+        result=result,
+        records=tuple(records),
+        strategy="joint",
+        stage_one=None,
+        forward_solves=4,
+        finite_difference_solves=8,
+        status="converged",
+        message="test",
+        seconds=1.0,
+        warnings=[],
+    )
+    fit.to_dict = lambda: {"parameters": result.to_dict()["parameters"], "status": fit.status}
+    return fit
+
+
+def test_indentation_fit_outputs_csv_json_study_and_four_panels(tmp_path, monkeypatch):
+    from warptissue.report import indentation_fit_columns, write_indentation_fit_outputs
+    from warptissue.study import load_study
+
+    root = Path(__file__).resolve().parents[1]
+    fit = _indentation_fit(load_study(root / "scenes" / "tutorial_punch.toml"))
+    figures = _captured_figures(monkeypatch)
+    files = write_indentation_fit_outputs(tmp_path / "out", fit)
+    assert {k: p.name for k, p in files.items()} == {
+        "study": "fitted_study.toml",
+        "json": "fit.json",
+        "csv": "fit_curves.csv",
+        "png": "fit.png",
+    }
+    with files["csv"].open() as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == [
+        "record",
+        "time_s",
+        "depth_m",
+        "measured_force_N",
+        "fitted_force_N",
+        "residual_N",
+    ]
+    assert len(rows) == 40 + 100 and rows[0]["record"] == "data/fast.csv"
+    assert rows[-1]["record"] == "data/slow.csv"
+    for row in rows[::17]:
+        residual = float(row["fitted_force_N"]) - float(row["measured_force_N"])
+        assert float(row["residual_N"]) == pytest.approx(residual, abs=1e-15)
+    columns = indentation_fit_columns(fit)
+    assert columns["measured_force_N"] == pytest.approx(
+        np.concatenate([r.measured_force_N for r in fit.records])
+    )
+    summary = json.loads(files["json"].read_text())
+    assert summary["parameters"]["C10_Pa"]["value"] == pytest.approx(fit.result.x[0])
+    assert summary["fitted_study_file"] == "fitted_study.toml" and "numpy" in summary["software"]
+    fitted = load_study(files["study"])
+    assert fitted.material.C10_Pa == pytest.approx(fit.result.x[0], rel=1e-12)
+    assert fitted.material.C10_Pa != pytest.approx(287.5, rel=1e-3)
+    by_depth, by_time, residuals, history = figures[0].axes
+    assert by_depth.get_xlabel() == "depth (mm)" and by_time.get_ylabel() == "force (N)"
+    assert residuals.get_ylabel() == "fitted - measured (N)"
+    legend = [t.get_text() for t in by_depth.get_legend().get_texts()]
+    assert legend[0] == "fast.csv: measured" and legend[3].startswith("slow.csv: fitted")
+    # One cost per trial step of the engine.
+    assert len(history.get_lines()[0].get_ydata()) == len(fit.result.history) > 0
+    assert "C10_Pa" in figures[0].get_suptitle()
+    assert imread(files["png"]).shape[1] > 1000

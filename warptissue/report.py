@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -17,14 +17,21 @@ from warptissue.errors import InputError
 from warptissue.fit.result import FitResult
 from warptissue.io import atomic_path, write_csv, write_json
 
+if TYPE_CHECKING:
+    from warptissue.fit.indentation import IndentationFit
+
 __all__ = [
+    "INDENTATION_FIT_FILES",
     "MAX_PLOT_POINTS",
     "axis_label",
     "comparison_table",
+    "indentation_fit_columns",
     "parameter_legend",
     "plot_fit",
+    "plot_indentation_fit",
     "write_comparison",
     "write_fit_outputs",
+    "write_indentation_fit_outputs",
 ]
 
 
@@ -296,3 +303,197 @@ def write_comparison(
         temporary.write_text(comparison_table(rows) + "\n", encoding="utf-8")
     json_path = write_json(folder / f"{name}.json", {"models": [dict(r) for r in rows]})
     return {"txt": text_path, "json": json_path}
+
+
+INDENTATION_FIT_FILES: dict[str, str] = {
+    "json": "fit.json",
+    "csv": "fit_curves.csv",
+    "png": "fit.png",
+    "study": "fitted_study.toml",
+    "usd": "specimen.usda",
+}
+"""The files :func:`write_indentation_fit_outputs` writes, by key (``usd`` only when asked)."""
+
+
+def indentation_fit_columns(fit: IndentationFit) -> dict[str, np.ndarray]:
+    """The measured and fitted force of every record of an inverse-FE fit, as CSV columns.
+
+    Args:
+        fit: A :class:`warptissue.fit.indentation.IndentationFit`.
+
+    Returns:
+        ``record`` (the record's file as the study names it), ``time_s``, ``depth_m``,
+        ``measured_force_N``, ``fitted_force_N`` and ``residual_N`` (fitted - measured), each
+        shape (m,) with m the samples of all records (conditioned: time and depth from the
+        contact).
+    """
+    records = fit.records
+    measured = np.concatenate([np.asarray(r.measured_force_N, float) for r in records])
+    fitted = np.concatenate([np.asarray(r.fitted_force_N, float) for r in records])
+    return {
+        "record": np.concatenate(
+            [np.full(len(r.time_s), str(r.file), dtype=object) for r in records]
+        ),
+        "time_s": np.concatenate([np.asarray(r.time_s, float) for r in records]),
+        "depth_m": np.concatenate([np.asarray(r.depth_m, float) for r in records]),
+        "measured_force_N": measured,
+        "fitted_force_N": fitted,
+        "residual_N": fitted - measured,
+    }
+
+
+def plot_indentation_fit(
+    path: str | Path, fit: IndentationFit, *, max_points: int = MAX_PLOT_POINTS
+) -> Path:
+    """Plot an inverse-FE fit to a PNG, atomically: four panels.
+
+    Force against depth and force against time (each record's measured samples as dots, the
+    fitted FE force as a line, one colour per record), the residuals (fitted - measured)
+    against time, and the convergence history of the least-squares engine (the cost after
+    each trial step, with the cost of each refused or rejected trial marked).
+
+    Args:
+        path: Output PNG file.
+        fit: A :class:`warptissue.fit.indentation.IndentationFit`.
+        max_points: Each record with more samples is decimated (every k-th sample) for the
+            plot; the CSV keeps every sample.
+
+    Returns:
+        The path written.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(11.0, 8.0), layout="constrained")
+    FigureCanvasAgg(figure)
+    (by_depth, by_time), (residuals, history) = figure.subplots(2, 2)
+    residuals.axhline(0.0, color="0.5", linewidth=1)
+    for k, record in enumerate(fit.records):
+        colour = f"C{k % 10}"
+        name = Path(str(record.file)).name
+        time = np.asarray(record.time_s, float)
+        depth = np.asarray(record.depth_m, float)
+        measured = np.asarray(record.measured_force_N, float)
+        fitted = np.asarray(record.fitted_force_N, float)
+        keep = _decimation(time.size, max_points)
+        r2 = "n/a" if record.r_squared is None else f"{record.r_squared:.4f}"
+        by_depth.plot(
+            depth[keep] * 1e3,
+            measured[keep],
+            "o",
+            color=colour,
+            markersize=2.5,
+            alpha=0.4,
+            label=f"{name}: measured",
+        )
+        by_depth.plot(
+            depth * 1e3,
+            fitted,
+            "-",
+            color=colour,
+            linewidth=1.5,
+            label=f"{name}: fitted (R^2 = {r2})",
+        )
+        by_time.plot(time[keep], measured[keep], "o", color=colour, markersize=2.5, alpha=0.4)
+        by_time.plot(time, fitted, "-", color=colour, linewidth=1.5)
+        residuals.plot(
+            time[keep], (fitted - measured)[keep], ".", color=colour, markersize=3, label=name
+        )
+    by_depth.set_xlabel("depth (mm)")
+    by_depth.set_ylabel("force (N)")
+    by_depth.legend(fontsize="x-small")
+    by_time.set_xlabel("time from contact (s)")
+    by_time.set_ylabel("force (N)")
+    residuals.set_xlabel("time from contact (s)")
+    residuals.set_ylabel("fitted - measured (N)")
+    for axes in (by_depth, by_time, residuals):
+        axes.grid(alpha=0.3)
+    _plot_history(history, fit)
+    result = fit.result
+    r2 = "n/a" if result.r_squared is None else f"{result.r_squared:.4f}"
+    figure.suptitle(
+        f"{fit.study.name}: inverse-FE fit ({fit.strategy.replace('_', '-')}), "
+        f"R^2 = {r2}, {fit.forward_solves} forward solves, {fit.status}\n"
+        + ", ".join(
+            f"{name} = {float(value):.4g} {unit}".rstrip()
+            for name, value, unit in zip(
+                result.parameter_names, result.x, result.parameter_units, strict=True
+            )
+        ),
+        fontsize="medium",
+    )
+    with atomic_path(path) as temporary:
+        figure.savefig(temporary, format="png", dpi=110)
+    return Path(path)
+
+
+def _plot_history(axes: Any, fit: IndentationFit) -> None:
+    """The engine's cost per trial step (accepted: line; refused or rejected: crosses)."""
+    history = list(fit.result.history)
+    axes.set_xlabel("trial step of the least-squares engine")
+    axes.set_ylabel("cost 0.5 sum r^2")
+    axes.grid(alpha=0.3)
+    if not history:
+        axes.text(0.5, 0.5, "no trial steps", ha="center", va="center", transform=axes.transAxes)
+        return
+    steps = np.array([h.iteration for h in history], dtype=float)
+    cost = np.array([h.cost for h in history], dtype=float)
+    axes.plot(steps, cost, "-o", color="k", markersize=3, label="cost after the trial")
+    refused = [(h.iteration, h.trial_cost) for h in history if not h.accepted]
+    if refused:
+        axes.plot(
+            [i for i, _ in refused],
+            [c if c is not None and np.isfinite(c) else np.nan for _, c in refused],
+            "x",
+            color="C3",
+            label="refused trial (cost)",
+        )
+    if np.all(cost > 0):
+        axes.set_yscale("log")
+    axes.xaxis.get_major_locator().set_params(integer=True)
+    axes.legend(fontsize="x-small")
+
+
+def write_indentation_fit_outputs(
+    out_dir: str | Path, fit: IndentationFit, *, usd: bool = False
+) -> dict[str, Path]:
+    """Write an inverse-FE fit's report files into a folder (atomically, each).
+
+    - ``fit.json``: :meth:`IndentationFit.to_dict` (every parameter's value, unit, standard
+      error and correlation; R^2, RMSE, iterations, forward solves, status, warnings, each
+      record's R^2 and RMSE, stage one) with the software versions;
+    - ``fit_curves.csv``: :func:`indentation_fit_columns`;
+    - ``fit.png``: :func:`plot_indentation_fit`;
+    - ``fitted_study.toml``: the study with the fitted material
+      (:func:`warptissue.study.save_study`; ``warptissue simulate`` runs it as it is);
+    - with ``usd``: ``specimen.usda`` (over ``specimen.asset.usda``), the specimen mesh with
+      the fitted material and the probe (:func:`warptissue.usd.export.export_study`).
+
+    Args:
+        out_dir: Output folder (created).
+        fit: A :class:`warptissue.fit.indentation.IndentationFit` (an interrupted one
+            included: its best parameters).
+        usd: Also write the USD scene.
+
+    Returns:
+        The paths written, by the keys of :data:`INDENTATION_FIT_FILES`.
+    """
+    from warptissue.io import software_versions
+    from warptissue.study import save_study
+
+    folder = Path(out_dir)
+    names = INDENTATION_FIT_FILES
+    files: dict[str, Path] = {}
+    files["study"] = save_study(fit.fitted_study, folder / names["study"])
+    summary = dict(fit.to_dict())
+    summary["study_file"] = None if fit.study.path is None else str(fit.study.path)
+    summary["fitted_study_file"] = names["study"]
+    summary["software"] = software_versions()
+    files["json"] = write_json(folder / names["json"], summary)
+    files["csv"] = write_csv(folder / names["csv"], indentation_fit_columns(fit))
+    files["png"] = plot_indentation_fit(folder / names["png"], fit)
+    if usd:
+        from warptissue.usd.export import export_study
+
+        files["usd"] = export_study(files["study"], folder / names["usd"]).root
+    return files
