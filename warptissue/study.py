@@ -52,6 +52,8 @@ if TYPE_CHECKING:
 __all__ = [
     "FIT_METHODS",
     "FIT_OBJECTIVES",
+    "FIT_STRATEGIES",
+    "PROTOCOL_KINDS",
     "SCHEMA_VERSION",
     "SCHEMA_VERSIONS",
     "START_FROM",
@@ -77,6 +79,12 @@ FIT_METHODS: tuple[str, ...] = ("lm", "salm")
 """``fit.method``: the methods of :func:`warptissue.fit.least_squares`."""
 FIT_OBJECTIVES: tuple[str, ...] = ("absolute", "relative")
 """``fit.objective``: force residuals (N), or residuals divided by the measured force."""
+FIT_STRATEGIES: tuple[str, ...] = ("joint", "two_stage")
+"""``fit.strategy``: all free parameters at once, or Ahn & Kim's Prony-first two stages."""
+PROTOCOL_KINDS: tuple[str, ...] = ("quasi_static", "timed", "ramp_hold", "sine", "record")
+"""``protocol.kind``: depths only, explicit depths and times, or a generated history."""
+PRONY_NAME = re.compile(r"^(g\d+|tau\d+_s)$")
+"""A Prony parameter of a viscoelastic ``[material]``: ``g<i>`` or ``tau<i>_s``."""
 START_FROM: tuple[str, ...] = ("record", "material")
 """``fit.start_from``: where a free parameter without a ``[fit.start]`` value starts."""
 DEFAULT_COLUMNS: dict[str, str] = {
@@ -150,28 +158,68 @@ class Specimen:
 
 @dataclass(frozen=True)
 class Protocol:
-    """The loading protocol: the probe depths of the load steps.
+    """The loading protocol: the probe depth at the end of each load (or time) step.
+
+    A quasi-static protocol (``kind = "quasi_static"``, the default) is a list of depths,
+    rate-independent. A timed one (``"ramp_hold"``, ``"sine"``, ``"record"`` or an explicit
+    ``"timed"`` list) also gives the time of each step: the FE starts from depth 0 at time 0
+    and moves the probe linearly in time between steps, and a viscoelastic material relaxes
+    (:func:`warptissue.fem.simulate_indentation` with ``times_s``). The depth-time histories
+    are :mod:`warptissue.loading`'s.
 
     Attributes:
-        depths_m: Probe depth at the end of each load step, shape (steps,), strictly
-            increasing and positive, m.
+        depths_m: Probe depth at the end of each step, shape (steps,), m. Quasi-static:
+            positive and strictly increasing; timed: >= 0 (the probe may go up and down).
+        times_s: Time at the end of each step, shape (steps,), s, strictly increasing and
+            > 0; None for a quasi-static protocol.
+        kind: ``"quasi_static"``, ``"timed"`` (explicit ``depths_m`` and ``times_s``),
+            ``"ramp_hold"``, ``"sine"`` or ``"record"``.
+        settings: The keys that generated a ``ramp_hold`` or ``sine`` protocol (every
+            default filled in), or ``{"steps": n}`` for a record; empty otherwise.
+        record: The record whose depth-time history a ``"record"`` protocol follows (its
+            force, where the CSV has one, is not used), else None.
     """
 
     depths_m: tuple[float, ...]
+    times_s: tuple[float, ...] | None = None
+    kind: str = "quasi_static"
+    settings: dict[str, Any] = field(default_factory=dict)
+    record: DataRecord | None = None
 
     @property
     def max_depth_m(self) -> float:
-        """The final depth, m."""
-        return self.depths_m[-1]
+        """The deepest depth, m (the final one of a quasi-static protocol)."""
+        return max(self.depths_m)
 
     @property
     def step_count(self) -> int:
-        """Number of load steps."""
+        """Number of load (time) steps."""
         return len(self.depths_m)
 
-    def to_dict(self) -> dict[str, Any]:
-        """The ``[protocol]`` table (always as an explicit depth list)."""
-        return {"depths_m": list(self.depths_m)}
+    @property
+    def timed(self) -> bool:
+        """True when the steps have times (a time-stepped run)."""
+        return self.times_s is not None
+
+    def to_dict(self, *, relative_to: str | Path | None = None) -> dict[str, Any]:
+        """The ``[protocol]`` table.
+
+        Quasi-static: an explicit depth list (no ``kind``, so that a version-1 study is
+        echoed as version 1). Timed: the kind and the keys that generated it, every default
+        filled in (``"timed"``: the two lists; ``"record"``: the record's keys, its file
+        relative to ``relative_to`` where given, as :meth:`Study.to_dict`).
+        """
+        if self.kind == "quasi_static":
+            return {"depths_m": list(self.depths_m)}
+        table: dict[str, Any] = {"kind": self.kind}
+        if self.kind == "timed":
+            table.update(depths_m=list(self.depths_m), times_s=list(self.times_s or ()))
+        elif self.kind == "record" and self.record is not None:
+            table.update(self.record.to_dict(relative_to=relative_to))
+            table.update(self.settings)
+        else:
+            table.update(self.settings)
+        return table
 
 
 @dataclass(frozen=True)
@@ -264,7 +312,7 @@ class Study:
             "description": self.description,
             "specimen": self.specimen.to_dict(),
             "indenter": self.indenter.to_dict(),
-            "protocol": self.protocol.to_dict(),
+            "protocol": self.protocol.to_dict(relative_to=relative_to),
             "material": dict(self.material.to_dict()),
             "boundary": self.boundary.to_dict(),
             "solver": self.solver.to_dict(),
@@ -332,6 +380,50 @@ class DataRecord:
         """What the conditioning did (contact point, offset removed, samples kept), JSON-ready."""
         return self._loaded().summary
 
+    @property
+    def contact_time_s(self) -> float:
+        """The time of the contact on the record's clock (s).
+
+        With a contact point (given or detected) the time the probe reached it; with
+        ``contact = "none"`` 0: the record's own time axis counts from the contact.
+        """
+        contact = self.conditioning.get("contact")
+        return float(contact["time_s"]) if isinstance(contact, Mapping) else 0.0
+
+    def load_history(self, *, steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """FE time steps that follow the record's own depth-time history.
+
+        :func:`warptissue.loading.resample_history` of the kept samples, their time counted
+        from the contact (``time_s - contact_time_s``, so that the FE starts from depth 0 at
+        time 0 as the probe did): the ramps and sines resolved, a hold in log time, the
+        deepest point and the last sample included. A ``window_s`` that starts after the
+        contact leaves out the history before it (the FE then ramps straight from the
+        contact to the window's first depth).
+
+        Args:
+            steps: About how many time steps (>= 2), e.g. ``fit.time_steps``.
+
+        Returns:
+            ``(times_s, depths_m)``, each shape (about ``steps``,): times > 0 since the
+            contact (s), strictly increasing, and the record's depth there (m).
+
+        Raises:
+            InputError: Fewer than two samples after the contact, or ``steps`` below 2
+                (naming the record's file).
+        """
+        from warptissue.loading import resample_history
+
+        try:
+            return resample_history(
+                self.time_s - self.contact_time_s, self.displacement_m, steps=steps
+            )
+        except InputError as exc:
+            raise InputError(
+                f"{exc.key}: {exc.message}" if exc.key else exc.message,
+                path=self.path,
+                value=exc.value,
+            ) from None
+
     def _loaded(self) -> FitRecord:
         if self.record is None:
             raise InputError("the record was not read (build studies with load_study)")
@@ -393,6 +485,12 @@ class FitSettings:
         gtol: Gradient tolerance of the engine.
         stop_r_squared: Stop as soon as R^2 of the fit exceeds this (None: run to the
             tolerances).
+        strategy: ``"joint"``: every free parameter by inverse FE at once; ``"two_stage"``
+            (Ahn & Kim): the free Prony terms from the normalized relaxation first, then the
+            other free parameters by inverse FE with the Prony terms fixed (needs Prony
+            terms in ``[material]`` and at least one of them free).
+        time_steps: FE time steps per record: the grid of
+            :meth:`DataRecord.load_history` (:func:`warptissue.loading.resample_history`).
     """
 
     free: tuple[str, ...]
@@ -407,6 +505,8 @@ class FitSettings:
     xtol: float = 1e-8
     gtol: float = 1e-8
     stop_r_squared: float | None = None
+    strategy: str = "joint"
+    time_steps: int = 24
 
     def parameter_bounds(self, material: Any) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the free parameters, each shape (n,), in ``free`` order.
@@ -436,6 +536,8 @@ class FitSettings:
             "ftol": self.ftol,
             "xtol": self.xtol,
             "gtol": self.gtol,
+            "strategy": self.strategy,
+            "time_steps": self.time_steps,
         }
         if self.relative_floor_N is not None:
             table["relative_floor_N"] = self.relative_floor_N
@@ -715,7 +817,129 @@ def _read_indenter(table: _Table) -> Indenter:
     )
 
 
-def _read_protocol(table: _Table, thickness_m: float) -> Protocol:
+_PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
+    "quasi_static": ("depths_m", "max_depth_m", "steps"),
+    "timed": ("depths_m", "times_s"),
+    "ramp_hold": ("max_depth_m", "speed_m_per_s", "hold_s", "ramp_steps", "hold_steps"),
+    "sine": (
+        "preload_depth_m",
+        "amplitude_m",
+        "frequency_Hz",
+        "cycles",
+        "preload_s",
+        "preload_steps",
+        "steps_per_cycle",
+    ),
+    "record": (
+        "file",
+        "time_column",
+        "displacement_column",
+        "force_column",
+        "contact",
+        "contact_position_m",
+        "offset",
+        "keep_depth_m",
+        "window_s",
+        "steps",
+    ),
+}
+"""The keys of ``[protocol]`` for each kind (besides ``kind``)."""
+RECORD_PROTOCOL_STEPS: int = 40
+"""Default ``protocol.steps`` of a ``"record"`` protocol."""
+
+
+def _read_protocol(table: _Table, thickness_m: float, *, version: int, base: Path) -> Protocol:
+    timed_list = table.has("times_s")
+    kind = table.string(
+        "kind", default="timed" if timed_list else "quasi_static", choices=PROTOCOL_KINDS
+    )
+    if version < 2 and (kind != "quasi_static" or timed_list):
+        key = "kind" if table.has("kind") else "times_s"
+        raise table.error(
+            key, "a timed protocol needs schema_version = 2 (this file says 1)", table.data[key]
+        )
+    for key in table.data:  # a key of another kind (a typo is named by finish())
+        owners = [k for k, keys in _PROTOCOL_KEYS.items() if key in keys]
+        if key != "kind" and owners and key not in _PROTOCOL_KEYS[kind]:
+            raise table.error(
+                key,
+                f"is not a key of kind {kind!r} (its keys: {', '.join(_PROTOCOL_KEYS[kind])}); "
+                f"it belongs to kind {owners[0]!r}",
+                None,
+            )
+    if kind == "quasi_static":
+        return _read_quasi_static(table, thickness_m)
+    settings: dict[str, Any] = {}
+    record = None
+    if kind == "timed":
+        depths = table.number_list("depths_m")
+        times = table.number_list("times_s")
+        if len(times) != len(depths):
+            raise table.error(
+                "times_s",
+                f"must hold one time per depth ({len(depths)} depths, {len(times)} times)",
+                len(times),
+            )
+        for previous, time in zip((0.0, *times[:-1]), times, strict=True):
+            if time <= previous:
+                raise table.error(
+                    "times_s", "must be positive and strictly increasing", list(times)
+                )
+        depth_key = "depths_m"
+    elif kind == "ramp_hold":
+        from warptissue.loading import ramp_hold
+
+        settings = {
+            "max_depth_m": table.number("max_depth_m"),
+            "speed_m_per_s": table.number("speed_m_per_s"),
+            "hold_s": table.number("hold_s", positive=False),
+            "ramp_steps": table.integer("ramp_steps", default=10),
+            "hold_steps": table.integer("hold_steps", default=20),
+        }
+        times, depths = table.build(lambda values: ramp_hold(**values), settings)
+        depth_key = "max_depth_m"
+    elif kind == "sine":
+        from warptissue.loading import sine
+
+        settings = {
+            "preload_depth_m": table.number("preload_depth_m"),
+            "amplitude_m": table.number("amplitude_m"),
+            "frequency_Hz": table.number("frequency_Hz"),
+            "cycles": table.integer("cycles"),
+            "preload_s": table.number("preload_s"),
+            "preload_steps": table.integer("preload_steps", default=5),
+            "steps_per_cycle": table.integer("steps_per_cycle", default=16, minimum=4),
+        }
+        times, depths = table.build(lambda values: sine(**values), settings)
+        depth_key = "amplitude_m"
+    else:  # record
+        options = _record_options(table, base)
+        steps = table.integer("steps", default=RECORD_PROTOCOL_STEPS, minimum=2)
+        if steps > MAX_STEPS:
+            raise table.error("steps", f"must be at most {MAX_STEPS}", steps)
+        record = _condition_record(table, options, force_required=False)
+        try:
+            times, depths = record.load_history(steps=steps)
+        except InputError as exc:
+            raise table.error("file", exc.message, options["file"]) from None
+        settings = {"steps": steps}
+        depth_key = "file"
+    times, depths = tuple(map(float, times)), tuple(map(float, depths))
+    if len(depths) > MAX_STEPS:
+        raise table.error(depth_key, f"gives more than {MAX_STEPS} steps", len(depths))
+    if min(depths) < 0.0:
+        raise table.error(depth_key, "depths must be >= 0 (into the specimen)", min(depths))
+    if max(depths) >= thickness_m:
+        raise table.error(
+            depth_key,
+            f"the deepest depth must be less than the thickness ({thickness_m!r} m)",
+            max(depths),
+        )
+    table.finish(also_known=_PROTOCOL_KEYS[kind])
+    return Protocol(depths_m=depths, times_s=times, kind=kind, settings=settings, record=record)
+
+
+def _read_quasi_static(table: _Table, thickness_m: float) -> Protocol:
     has_list = table.has("depths_m")
     has_ramp = table.has("max_depth_m") or table.has("steps")
     if has_list == has_ramp:
@@ -746,7 +970,7 @@ def _read_protocol(table: _Table, thickness_m: float) -> Protocol:
             f"the final depth must be less than the thickness ({thickness_m!r} m)",
             depths[-1],
         )
-    table.finish(also_known=("depths_m", "max_depth_m", "steps"))
+    table.finish(also_known=("kind", *_PROTOCOL_KEYS["quasi_static"]))
     return Protocol(depths_m=depths)
 
 
@@ -791,14 +1015,9 @@ _RECORD_KEYS = (
 """The keys of a ``[[data]]`` record."""
 
 
-def _read_record(table: _Table, base: Path) -> DataRecord:
-    """One ``[[data]]`` record: validate its keys, read its CSV, condition it."""
-    from warptissue.acquisition.conditioning import (
-        CONTACT_MODES,
-        OFFSET_MODES,
-        condition_for_fit,
-    )
-    from warptissue.io import read_experiment_csv
+def _record_options(table: _Table, base: Path) -> dict[str, Any]:
+    """The keys of a record (``[[data]]``, or a ``"record"`` protocol), validated."""
+    from warptissue.acquisition.conditioning import CONTACT_MODES, OFFSET_MODES
 
     file = table.string("file")
     if not file.strip():
@@ -838,26 +1057,62 @@ def _read_record(table: _Table, base: Path) -> DataRecord:
                 "window_s", "must be [start, stop] in seconds, 0 <= start < stop", list(window)
             )
         window_s = (window[0], window[1])
-    table.finish(also_known=_RECORD_KEYS)
+    return {
+        "file": file,
+        "path": path,
+        **columns,
+        "contact": contact,
+        "offset": offset,
+        "keep_depth_m": keep_depth_m,
+        "window_s": window_s,
+    }
+
+
+def _condition_record(
+    table: _Table, options: Mapping[str, Any], *, force_required: bool = True
+) -> DataRecord:
+    """Read a record's CSV and condition it; errors placed at the table's keys.
+
+    Without ``force_required`` a CSV without the force column is read with zero force (a
+    depth-time history needs none); the contact must then be given (``"none"`` or a
+    position): detecting it needs the force.
+    """
+    import numpy as np
+
+    from warptissue.acquisition.conditioning import condition_for_fit
+    from warptissue.io import read_experiment_csv
+
+    path, file, contact = options["path"], options["file"], options["contact"]
+    names = {key: options[key] for key in DEFAULT_COLUMNS}
+    required = tuple(names.values()) if force_required else tuple(names.values())[:2]
     try:
-        data = read_experiment_csv(
-            path, required=tuple(columns.values()), monotonic=columns["time_column"]
-        )
+        data = read_experiment_csv(path, required=required, monotonic=names["time_column"])
     except InputError as exc:
         raise table.error("file", str(exc), file) from None
+    columns = data.columns
     values = {
-        "time_s": data[columns["time_column"]],
-        "displacement_m": data[columns["displacement_column"]],
-        "force_N": data[columns["force_column"]],
+        "time_s": columns[names["time_column"]],
+        "displacement_m": columns[names["displacement_column"]],
     }
+    if names["force_column"] in columns:
+        values["force_N"] = columns[names["force_column"]]
+    elif contact == "auto":
+        raise table.error(
+            "contact",
+            f"'auto' detects the contact from the force, and {file} has no column "
+            f"{names['force_column']!r}: give contact_position_m, or contact = 'none'",
+            contact,
+        )
+    else:
+        values["force_N"] = np.zeros_like(values["time_s"])
     option_key = "contact" if isinstance(contact, str) else "contact_position_m"
     try:
         record = condition_for_fit(
             values,
             contact=contact,
-            offset=offset,
-            keep_depth_m=keep_depth_m,
-            window_s=window_s,
+            offset=options["offset"],
+            keep_depth_m=options["keep_depth_m"],
+            window_s=options["window_s"],
             option_names={"contact": option_key},
         )
     except InputError as exc:
@@ -867,16 +1122,14 @@ def _read_record(table: _Table, base: Path) -> DataRecord:
             key = next((k for k in ("window_s", "keep_depth_m") if table.has(k)), None)
         key = key or "file"
         raise table.error(key, f"{path}: {exc.message}", table.data[key]) from None
-    return DataRecord(
-        file=file,
-        path=path,
-        **columns,
-        contact=contact,
-        offset=offset,
-        keep_depth_m=keep_depth_m,
-        window_s=window_s,
-        record=record,
-    )
+    return DataRecord(**options, record=record)
+
+
+def _read_record(table: _Table, base: Path) -> DataRecord:
+    """One ``[[data]]`` record: validate its keys, read its CSV, condition it."""
+    options = _record_options(table, base)
+    table.finish(also_known=_RECORD_KEYS)
+    return _condition_record(table, options)
 
 
 def _read_data(root: _Table, base: Path) -> tuple[DataRecord, ...]:
@@ -967,6 +1220,27 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
     stop_r_squared = table.number("stop_r_squared", default=None)
     if stop_r_squared is not None and not stop_r_squared < 1.0:
         raise table.error("stop_r_squared", "must lie between 0 and 1", stop_r_squared)
+    strategy = table.string("strategy", default="joint", choices=FIT_STRATEGIES)
+    if strategy == "two_stage":
+        prony = [name for name in material.parameter_names if PRONY_NAME.match(name)]
+        if not prony:
+            raise table.error(
+                "strategy",
+                "'two_stage' (Ahn & Kim) fits Prony terms first, and [material] has none "
+                f"(model {material.model_name!r}): add g1, tau1_s, ... to [material], or use "
+                "'joint'",
+                strategy,
+            )
+        if not any(name in free for name in prony):
+            raise table.error(
+                "strategy",
+                f"'two_stage' fits the Prony terms first, and fit.free names none of them "
+                f"({', '.join(prony)}): free them, or use 'joint'",
+                strategy,
+            )
+    time_steps = table.integer("time_steps", default=24, minimum=2)
+    if time_steps > MAX_STEPS:
+        raise table.error("time_steps", f"must be at most {MAX_STEPS}", time_steps)
     table.finish()
     settings = FitSettings(
         free=free,
@@ -978,6 +1252,8 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         relative_floor_N=relative_floor_N,
         max_iterations=max_iterations,
         stop_r_squared=stop_r_squared,
+        strategy=strategy,
+        time_steps=time_steps,
         **tolerances,
     )
     lower, upper = settings.parameter_bounds(material)
@@ -1025,7 +1301,10 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
     description = root.string("description", default="")
     indenter = _read_indenter(root.table("indenter"))
     specimen = _read_specimen(root.table("specimen"), indenter.radius_m)
-    protocol = _read_protocol(root.table("protocol"), specimen.thickness_m)
+    base = source.path.parent if source.path is not None else Path.cwd()
+    protocol = _read_protocol(
+        root.table("protocol"), specimen.thickness_m, version=version, base=base
+    )
     material = _read_material(root.table("material"))
     boundary = _read_boundary(_optional_table(root, "boundary"))
     solver = _read_solver(_optional_table(root, "solver"))
@@ -1040,7 +1319,6 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
     records: tuple[DataRecord, ...] = ()
     fit = None
     if version >= 2:
-        base = source.path.parent if source.path is not None else Path.cwd()
         if root.has("data"):
             records = _read_data(root, base)
         if root.has("fit"):
