@@ -27,6 +27,28 @@ from warptissue.kernels.materials import (
 
 wp.set_module_options({"enable_backward": False})
 
+MAX_PRONY_TERMS = wp.constant(6)
+vec6d = wp.types.vector(length=6, dtype=wp.float64)
+
+
+@wp.struct
+class ViscousStep:
+    """The Prony coefficients of one time step of a viscoelastic material.
+
+    With ``x_i = dt / tau_i``: ``a_i = exp(-x_i)`` (the history's decay over the step),
+    ``b_i = g_i (1 - a_i) / x_i`` (the weight of the step's elastic-stress increment, the
+    exact convolution of a stress linear in time over the step) and
+    ``gamma = 1 - sum g_i + sum b_i`` (the weight of the current elastic stress).
+    ``active = 0`` for an elastic material (the rest unused).
+    """
+
+    active: wp.int32
+    terms: wp.int32
+    gamma: wp.float64
+    a: vec6d
+    b: vec6d
+
+
 mat10x3d = wp.types.matrix(shape=(10, 3), dtype=wp.float64)
 mat3x9d = wp.types.matrix(shape=(3, 9), dtype=wp.float64)
 
@@ -54,6 +76,8 @@ def quadrature_point_response(
     mixed: int,
     element_pressure: wp.float64,
     with_tangent: int,
+    viscous: ViscousStep,
+    frozen: wp.mat33d,
 ):
     """Energy density, P and A at one quadrature point of either formulation (Pa).
 
@@ -62,8 +86,30 @@ def quadrature_point_response(
     pressure ``element_pressure = U'(Jbar)`` (its stiffness ``U''(Jbar)`` is the element's
     rank-one term, added by the caller). The material code is called once, not per branch, so
     that it is inlined once into each kernel.
+
+    Viscoelastic step (``viscous.active != 0``): the deviatoric second Piola-Kirchhoff stress
+    of the step is ``S = gamma S0(F) + Q`` with the step's ``gamma`` and the quadrature
+    point's ``frozen`` history stress Q (fixed during the step), the stationarity condition of
+    the incremental energy ``gamma psi_dev + Q : (C - I) / 2``, so P gains ``F Q`` and A gains
+    ``delta_ik Q_LJ``.
     """
     psi, p, a_mat = deviatoric_response(params, f, with_tangent)
+    if viscous.active != 0:
+        gamma = viscous.gamma
+        psi = gamma * psi + wp.float64(0.5) * wp.ddot(
+            frozen, wp.transpose(f) @ f - wp.identity(n=3, dtype=wp.float64)
+        )
+        p = gamma * p + f @ frozen
+        if with_tangent != 0:
+            for r in range(9):
+                for c in range(9):
+                    a_mat[r, c] = gamma * a_mat[r, c]
+            for i in range(3):
+                for jj in range(3):
+                    for ll in range(3):
+                        a_mat[flat(i, jj), flat(i, ll)] = (
+                            a_mat[flat(i, jj), flat(i, ll)] + frozen[ll, jj]
+                        )
     pressure = element_pressure
     stiffness = wp.float64(0.0)
     if mixed == 0:
@@ -85,6 +131,8 @@ def assemble_elements_kernel(
     block_index: wp.array2d(dtype=wp.int32),
     mixed: int,
     with_tangent: int,
+    viscous: ViscousStep,
+    frozen: wp.array2d(dtype=wp.mat33d),
     residual: wp.array(dtype=wp.vec3d),
     matrix_values: wp.array(dtype=wp.mat33d),
     energy: wp.array(dtype=wp.float64),
@@ -94,6 +142,7 @@ def assemble_elements_kernel(
 
     ``block_index[e, a * nodes_per_tet + b]`` is the BSR block of node pair (a, b) of tet e.
     ``energy[0]`` accumulates the stored energy (J) and ``min_jacobian[0]`` the smallest J.
+    A viscoelastic step reads the frozen history stress ``frozen[e, q]`` (unused otherwise).
     """
     e = wp.tid()
     npe = tets.shape[1]
@@ -131,7 +180,12 @@ def assemble_elements_kernel(
         if j <= wp.float64(0.0):
             continue
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, with_tangent)
+        history = wp.mat33d()
+        if viscous.active != 0:
+            history = frozen[e, q]
+        psi, p, a_mat = quadrature_point_response(
+            params, f, j, mixed, p_bar, with_tangent, viscous, history
+        )
         element_energy += psi * dv
         for a in range(npe):
             grad_a = shape_gradients[e, q, a]
@@ -237,12 +291,15 @@ def cauchy_stress_kernel(
     quadrature_volumes: wp.array2d(dtype=wp.float64),
     displacement: wp.array(dtype=wp.vec3d),
     mixed: int,
+    viscous: ViscousStep,
+    frozen: wp.array2d(dtype=wp.mat33d),
     stress: wp.array2d(dtype=wp.float64),
 ):
     """Volume-averaged Cauchy stress per tet, Voigt order xx, yy, zz, yz, xz, xy (Pa).
 
     sigma = P F^T / J at each quadrature point; in the mixed formulation the pressure part is
-    U'(Jbar) I, constant over the element.
+    U'(Jbar) I, constant over the element. A viscoelastic state passes ``gamma = g_inf`` and
+    ``frozen = sum_i H_i`` (the committed stress).
     """
     e = wp.tid()
     nq = quadrature_volumes.shape[1]
@@ -259,7 +316,10 @@ def cauchy_stress_kernel(
         f = deformation_gradient(e, q, tets, shape_gradients, displacement)
         j = wp.determinant(f)
         dv = quadrature_volumes[e, q]
-        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, 0)
+        history = wp.mat33d()
+        if viscous.active != 0:
+            history = frozen[e, q]
+        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, 0, viscous, history)
         sigma += (dv / (j * volume)) * (p @ wp.transpose(f))
     stress[e, 0] = sigma[0, 0]
     stress[e, 1] = sigma[1, 1]
@@ -283,7 +343,166 @@ def evaluate_material_kernel(
     """
     i = wp.tid()
     f = deformation_gradients[i]
-    psi, p, a = quadrature_point_response(params, f, wp.determinant(f), 0, wp.float64(0.0), 1)
+    elastic = ViscousStep()
+    elastic.active = 0
+    psi, p, a = quadrature_point_response(
+        params, f, wp.determinant(f), 0, wp.float64(0.0), 1, elastic, wp.mat33d()
+    )
     energy[i] = psi
     stress[i] = p
     tangent[i] = a
+
+
+@wp.func
+def deviatoric_pk2(params: MaterialParams, f: wp.mat33d) -> wp.mat33d:
+    """The hyperelastic deviatoric second Piola-Kirchhoff stress ``S0 = F^-1 P_dev`` (Pa)."""
+    psi, p, a_mat = deviatoric_response(params, f, 0)
+    return wp.inverse(f) @ p
+
+
+@wp.kernel
+def viscous_frozen_kernel(
+    viscous: ViscousStep,
+    history: wp.array3d(dtype=wp.mat33d),
+    elastic_stress: wp.array2d(dtype=wp.mat33d),
+    frozen: wp.array2d(dtype=wp.mat33d),
+):
+    """The history stress held fixed over a step: ``Q = sum_i (a_i H_i - b_i S0_prev)`` (Pa).
+
+    ``history[e, q, i]`` is H_i and ``elastic_stress[e, q]`` the deviatoric elastic stress S0
+    of the last converged step. Launched over (elements, quadrature points).
+    """
+    e, q = wp.tid()
+    total = wp.mat33d()
+    for i in range(viscous.terms):
+        total += viscous.a[i] * history[e, q, i] - viscous.b[i] * elastic_stress[e, q]
+    frozen[e, q] = total
+
+
+@wp.kernel
+def viscous_commit_kernel(
+    params: MaterialParams,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    displacement: wp.array(dtype=wp.vec3d),
+    viscous: ViscousStep,
+    history: wp.array3d(dtype=wp.mat33d),
+    elastic_stress: wp.array2d(dtype=wp.mat33d),
+):
+    """Advance the history to a converged step: ``H_i <- a_i H_i + b_i (S0_n - S0_prev)``,
+    ``S0_prev <- S0_n``, with ``S0_n`` the deviatoric elastic stress at ``displacement``.
+
+    Launched over (elements, quadrature points).
+    """
+    e, q = wp.tid()
+    f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+    current = deviatoric_pk2(params, f)
+    change = current - elastic_stress[e, q]
+    for i in range(viscous.terms):
+        history[e, q, i] = viscous.a[i] * history[e, q, i] + viscous.b[i] * change
+    elastic_stress[e, q] = current
+
+
+@wp.kernel
+def viscous_history_residual_kernel(
+    params: MaterialParams,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    quadrature_volumes: wp.array2d(dtype=wp.float64),
+    displacement: wp.array(dtype=wp.vec3d),
+    viscous: ViscousStep,
+    d_viscous: ViscousStep,
+    history: wp.array3d(dtype=wp.mat33d),
+    elastic_stress: wp.array2d(dtype=wp.mat33d),
+    d_history: wp.array4d(dtype=wp.mat33d),
+    d_elastic_stress: wp.array3d(dtype=wp.mat33d),
+    parameter: int,
+    residual: wp.array(dtype=wp.vec3d),
+):
+    """Add the history's part of ``dR/d theta`` at fixed u (N): ``int F dS/dtheta grad N_a dV``
+    with ``dS/dtheta = dgamma S0(F) + sum_i (da_i H_i + a_i dH_i - db_i S0_prev - b_i dS0_prev)``.
+
+    ``d_viscous`` holds ``dgamma, da_i, db_i`` by the parameter; ``d_history[parameter]`` and
+    ``d_elastic_stress[parameter]`` the derivatives of H_i and S0_prev carried from the earlier
+    steps. The elastic part ``gamma dP0/dtheta`` is the assembly kernel's (with derivative
+    parameters).
+    """
+    e = wp.tid()
+    for q in range(quadrature_volumes.shape[1]):
+        f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+        if wp.determinant(f) <= wp.float64(0.0):
+            continue
+        d_stress = d_viscous.gamma * deviatoric_pk2(params, f)
+        for i in range(viscous.terms):
+            d_stress += (
+                d_viscous.a[i] * history[e, q, i]
+                + viscous.a[i] * d_history[parameter, e, q, i]
+                - d_viscous.b[i] * elastic_stress[e, q]
+                - viscous.b[i] * d_elastic_stress[parameter, e, q]
+            )
+        dp = f @ d_stress
+        dv = quadrature_volumes[e, q]
+        for a in range(tets.shape[1]):
+            wp.atomic_add(residual, tets[e, a], dv * (dp @ shape_gradients[e, q, a]))
+
+
+@wp.kernel
+def viscous_sensitivity_commit_kernel(
+    params: MaterialParams,
+    d_params: MaterialParams,
+    with_explicit: int,
+    alpha_term: int,
+    tets: wp.array2d(dtype=wp.int32),
+    shape_gradients: wp.array3d(dtype=wp.vec3d),
+    displacement: wp.array(dtype=wp.vec3d),
+    d_displacement: wp.array(dtype=wp.vec3d),
+    viscous: ViscousStep,
+    d_viscous: ViscousStep,
+    history: wp.array3d(dtype=wp.mat33d),
+    elastic_stress: wp.array2d(dtype=wp.mat33d),
+    d_history: wp.array4d(dtype=wp.mat33d),
+    d_elastic_stress: wp.array3d(dtype=wp.mat33d),
+    parameter: int,
+):
+    """Advance the history's derivatives by one parameter to a converged step.
+
+    With ``dF = sum_a du_a/dtheta (x) grad N_a`` and ``dP0 = A0 : dF (+ dP0/dtheta at fixed F
+    when ``with_explicit``: ``d_params``' stress, or the Ogden ``alpha_term``'s)``:
+    ``dS0_n = F^-1 (dP0 - dF S0_n)``, then
+    ``dH_i <- da_i H_i + a_i dH_i + db_i (S0_n - S0_prev) + b_i (dS0_n - dS0_prev)`` and
+    ``dS0_prev <- dS0_n``. Must run before :func:`viscous_commit_kernel` (it reads the
+    previous H_i and S0_prev). Launched over (elements, quadrature points).
+    """
+    e, q = wp.tid()
+    f = deformation_gradient(e, q, tets, shape_gradients, displacement)
+    df = wp.mat33d()
+    for a in range(tets.shape[1]):
+        df += wp.outer(d_displacement[tets[e, a]], shape_gradients[e, q, a])
+    psi, p, a_mat = deviatoric_response(params, f, 1)
+    f_inv = wp.inverse(f)
+    current = f_inv @ p
+    dp = wp.mat33d()
+    for i in range(3):
+        for jj in range(3):
+            value = wp.float64(0.0)
+            for k in range(3):
+                for ll in range(3):
+                    value += a_mat[flat(i, jj), flat(k, ll)] * df[k, ll]
+            dp[i, jj] = value
+    if with_explicit != 0:
+        if alpha_term >= 0:
+            dp += ogden_alpha_stress_derivative(params, f, alpha_term)
+        else:
+            psi_d, p_d, a_d = deviatoric_response(d_params, f, 0)
+            dp += p_d
+    d_current = f_inv @ (dp - df @ current)
+    change = current - elastic_stress[e, q]
+    d_change = d_current - d_elastic_stress[parameter, e, q]
+    for i in range(viscous.terms):
+        d_history[parameter, e, q, i] = (
+            d_viscous.a[i] * history[e, q, i]
+            + viscous.a[i] * d_history[parameter, e, q, i]
+            + d_viscous.b[i] * change
+            + viscous.b[i] * d_change
+        )
+    d_elastic_stress[parameter, e, q] = d_current

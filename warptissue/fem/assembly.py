@@ -19,7 +19,8 @@ import warp.sparse as wps
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
 from warptissue.fem.elements import element_geometry
-from warptissue.materials import Material
+from warptissue.fem.viscous import ViscousHistory, elastic_step
+from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
 __all__ = ["Assembler", "Assembly", "FORMULATIONS", "gather_bsr_blocks", "von_mises"]
@@ -146,14 +147,48 @@ class Assembler:
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._energy = wp.zeros(1, dtype=wp.float64, device=dev)
         self._min_jacobian = wp.zeros(1, dtype=wp.float64, device=dev)
+        self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
+        self._elastic_step = elastic_step()
+        self.viscous: ViscousHistory | None = None
         self.set_material(material)
 
     def set_material(self, material: Material) -> None:
-        """Use new material parameters from the next assembly on (same mesh and pattern)."""
+        """Use new material parameters from the next assembly on (same mesh and pattern).
+
+        A :class:`warptissue.materials.Viscoelastic` material gets a
+        :class:`warptissue.fem.viscous.ViscousHistory` (:attr:`viscous`) at the undeformed,
+        unloaded state; otherwise :attr:`viscous` is None.
+        """
         if not isinstance(material, Material):
             raise InputError("material must be a warptissue.materials material", value=material)
+        params = material.device_params()
+        if isinstance(material, Viscoelastic):
+            if self.viscous is not None and self.viscous.material.term_count == material.term_count:
+                self.viscous.reset(material)
+            else:
+                self.viscous = ViscousHistory(
+                    material,
+                    tet_count=self.tet_count,
+                    quadrature_points=self._quadrature_volumes.shape[1],
+                    device=self.device,
+                )
+        else:
+            self.viscous = None
         self.material = material
-        self._params = material.device_params()
+        self._params = params
+
+    def reset_history(self) -> None:
+        """Back to the unloaded state at t = 0 (a viscoelastic material forgets its history)."""
+        if self.viscous is not None:
+            self.viscous.reset()
+
+    def _viscous_inputs(self, *, zero_history: bool = False) -> list[Any]:
+        """The ``viscous, frozen`` inputs of the element kernels for the current step."""
+        if self.viscous is None:
+            return [self._elastic_step, self._no_history]
+        if zero_history:
+            return [self.viscous.step, wp.zeros_like(self.viscous.frozen)]
+        return [self.viscous.step, self.viscous.frozen]
 
     def _build_pattern(self, tets: np.ndarray) -> None:
         npe = tets.shape[1]
@@ -210,7 +245,7 @@ class Assembler:
         """
         from warptissue.kernels import fem as kf
 
-        u = self._as_device_displacement(displacement_m)
+        u = self.device_displacement(displacement_m)
         self._residual.zero_()
         self._energy.zero_()
         self._min_jacobian.fill_(np.inf)
@@ -224,6 +259,7 @@ class Assembler:
                 self._block_index,
                 int(self.formulation == "mixed"),
                 int(with_tangent),
+                *self._viscous_inputs(),
             ],
             outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
             device=self.device,
@@ -256,9 +292,12 @@ class Assembler:
         from warptissue.kernels import fem as kf
 
         derivative, alpha_term = self.material.device_params_derivative(name)
-        u = self._as_device_displacement(displacement_m)
+        u = self.device_displacement(displacement_m)
         self._residual.zero_()
-        if alpha_term >= 0:
+        viscous = self.viscous
+        if viscous is not None and viscous.material.prony_derivative(name) is not None:
+            explicit = np.zeros((self.node_count, 3))
+        elif alpha_term >= 0:
             wp.launch(
                 kf.ogden_alpha_residual_kernel,
                 dim=self.tet_count,
@@ -266,19 +305,33 @@ class Assembler:
                 outputs=[self._residual],
                 device=self.device,
             )
-            return self._residual.numpy().copy()
-        self._energy.zero_()
-        self._min_jacobian.fill_(np.inf)
-        inputs = self._element_inputs(u)
-        inputs[0] = derivative
-        wp.launch(
-            kf.assemble_elements_kernel,
-            dim=self.tet_count,
-            inputs=[*inputs, self._block_index, int(self.formulation == "mixed"), 0],
-            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
-            device=self.device,
-        )
-        return self._residual.numpy().copy()
+            explicit = self._residual.numpy().copy()
+            if viscous is not None:  # the deviatoric stress of a step is gamma P0 + F Q
+                explicit *= viscous.step.gamma
+        else:
+            self._energy.zero_()
+            self._min_jacobian.fill_(np.inf)
+            inputs = self._element_inputs(u)
+            inputs[0] = derivative
+            wp.launch(
+                kf.assemble_elements_kernel,
+                dim=self.tet_count,
+                inputs=[
+                    *inputs,
+                    self._block_index,
+                    int(self.formulation == "mixed"),
+                    0,
+                    *self._viscous_inputs(zero_history=True),
+                ],
+                outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
+                device=self.device,
+            )
+            explicit = self._residual.numpy().copy()
+        if viscous is None or name not in viscous.names:
+            return explicit
+        self._residual.zero_()
+        viscous.history_residual(self, u, name, self._residual)
+        return explicit + self._residual.numpy()
 
     def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
@@ -375,15 +428,26 @@ class Assembler:
         return nodes
 
     def cauchy_stress(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:
-        """Volume-averaged Cauchy stress per tet (xx, yy, zz, yz, xz, xy), shape (M, 6), Pa."""
+        """Volume-averaged Cauchy stress per tet (xx, yy, zz, yz, xz, xy), shape (M, 6), Pa.
+
+        A viscoelastic material gives the stress of its last committed step.
+        """
         from warptissue.kernels import fem as kf
 
-        u = self._as_device_displacement(displacement_m)
+        u = self.device_displacement(displacement_m)
         stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
         wp.launch(
             kf.cauchy_stress_kernel,
             dim=self.tet_count,
-            inputs=[*self._element_inputs(u), int(self.formulation == "mixed")],
+            inputs=[
+                *self._element_inputs(u),
+                int(self.formulation == "mixed"),
+                *(
+                    self._viscous_inputs()
+                    if self.viscous is None
+                    else list(self.viscous.stress_state())
+                ),
+            ],
             outputs=[stress],
             device=self.device,
         )
@@ -407,7 +471,9 @@ class Assembler:
             displacement,
         ]
 
-    def _as_device_displacement(self, displacement_m: Any) -> wp.array:
+    def device_displacement(self, displacement_m: Any) -> wp.array:
+        """The displacement as a vec3d Warp array on the assembler's device (NumPy (N, 3) is
+        copied into the assembler's own buffer, reused by the next call)."""
         if isinstance(displacement_m, wp.array):
             if displacement_m.shape != (self.node_count,) or displacement_m.dtype != wp.vec3d:
                 raise InputError("displacement must be a vec3d array of one entry per node")

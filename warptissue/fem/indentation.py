@@ -34,7 +34,7 @@ from warptissue.fem.solvers import (
     solve_quasistatic,
 )
 from warptissue.indenter import SIMULATED_KINDS, Indenter
-from warptissue.materials import Material
+from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
 __all__ = ["IndentationProblem", "IndentationResult", "simulate_indentation"]
@@ -212,6 +212,7 @@ class IndentationResult:
         force_sensitivity_N_per_unit: Exact ``dF/dtheta`` of the punch force at each depth,
             (S, n), N per unit of each parameter (N/Pa for ``C10_Pa``, N for ``alpha1``);
             n = 0 unless ``sensitivities`` were asked for (docs/fe.md "Sensitivities").
+        times_s: The time of each depth of a timed run, s; else the step number 1..S, (S,).
     """
 
     depths_m: np.ndarray
@@ -231,11 +232,13 @@ class IndentationResult:
     linear_solver: str = "auto"
     sensitivity_names: tuple[str, ...] = ()
     force_sensitivity_N_per_unit: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
         return {
             "depths_m": self.depths_m.tolist(),
+            "times_s": self.times_s.tolist(),
             "reaction_force_N": self.reaction_force_N.tolist(),
             "newton_iterations": self.newton_iterations.tolist(),
             "linear_iterations": self.linear_iterations.tolist(),
@@ -270,12 +273,14 @@ def simulate_indentation(
     assembler: Assembler | None = None,
     sensitivities: Sequence[str] = (),
     sensitivity_factorization: str = "reuse",
+    times_s: np.ndarray | None = None,
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
     Args:
         problem: The :class:`IndentationProblem`.
-        depths_m: Increasing positive depths, shape (S,), m.
+        depths_m: Depths, shape (S,), m: increasing and positive for a quasi-static run; with
+            ``times_s``, any depths >= 0 (a loading history may hold and unload).
         device: Warp device (``"cpu"``, ``"cuda:0"``); None for Warp's default.
         progress: Show a tqdm progress bar over the depths.
         options: The Newton solver's settings (linear solver, tolerance, iterations,
@@ -292,6 +297,11 @@ def simulate_indentation(
         sensitivity_factorization: ``"reuse"`` (Newton's last factors with iterative
             refinement; no new factorization) or ``"refactorize"`` (one factorization of the
             converged tangent per depth); see :mod:`warptissue.fem.sensitivity`.
+        times_s: The time of each depth, shape (S,), s, strictly increasing; the probe
+            starts at depth 0 at t = 0 and its depth is linear in time between steps. Needed
+            by a :class:`warptissue.materials.Viscoelastic` material (its history is carried
+            forward in time, :mod:`warptissue.fem.viscous`; so are the sensitivities, Prony
+            parameters included); an elastic material gives the same forces as without.
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -304,8 +314,20 @@ def simulate_indentation(
     depths = np.atleast_1d(np.asarray(depths_m, dtype=np.float64))
     if depths.ndim != 1 or depths.size == 0 or not np.all(np.isfinite(depths)):
         raise InputError("depths_m must be a non-empty 1-D sequence of numbers", value=depths_m)
-    if np.any(depths <= 0) or np.any(np.diff(depths) <= 0):
-        raise InputError("depths_m must be positive and strictly increasing", value=depths.tolist())
+    if times_s is None:
+        if np.any(depths <= 0) or np.any(np.diff(depths) <= 0):
+            raise InputError(
+                "depths_m must be positive and strictly increasing (give times_s for a "
+                "loading history that holds or unloads)",
+                value=depths.tolist(),
+            )
+        if isinstance(problem.material, Viscoelastic):
+            raise InputError(
+                "a viscoelastic material needs the time of each depth (times_s)",
+                key="times_s",
+            )
+    elif np.any(depths < 0):
+        raise InputError("depths_m must be >= 0 (the probe stays in contact)", value=depths.tolist())
     mesh = problem.mesh
     if assembler is None:
         assembler = Assembler(
@@ -314,7 +336,7 @@ def simulate_indentation(
     elif assembler.node_count != mesh.node_count or assembler.formulation != problem.formulation:
         raise InputError("the assembler was built for another mesh or formulation")
     else:
-        assembler.set_material(problem.material)
+        assembler.set_material(problem.material)  # also resets a viscous history
     weights = np.zeros((mesh.node_count, 3))
     weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
     conditions = problem.dirichlet_conditions()
@@ -335,6 +357,7 @@ def simulate_indentation(
             progress_label="indentation depths",
             load_name="depth (m)",
             sensitivity=sensitivity,
+            times_s=times_s,
         )
     except SolveInterrupted as interrupted:
         partial = _indentation_result(problem, assembler, interrupted.partial_result, names)
@@ -374,4 +397,5 @@ def _indentation_result(
         linear_solver=path.linear_solver,
         sensitivity_names=sensitivity_names,
         force_sensitivity_N_per_unit=path.reaction_sensitivity,
+        times_s=path.times_s,
     )

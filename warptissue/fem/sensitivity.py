@@ -104,6 +104,8 @@ class ForceSensitivity:
             raise InputError(
                 f"reaction_weights must have shape ({n}, 3)", value=self.reaction_weights.shape
             )
+        if self.assembler.viscous is not None:
+            self.assembler.viscous.track_sensitivities(self.names)
         mask = self.conditions.mask(n)
         self._free = 1.0 - mask
         self._constrained = wp.array(mask, dtype=wp.vec3d, device=self.assembler.device)
@@ -149,6 +151,11 @@ class ForceSensitivity:
                     du, _ = solver.solve(matrix, rhs)
                     self.factorizations += 1
             steps.append(du * self._free)
+        viscous = assembler.viscous
+        if viscous is not None:  # advance the history's derivatives with du/dtheta
+            u_device = wp.array(displacement_m, dtype=wp.vec3d, device=assembler.device)
+            for name, du in zip(self.names, steps, strict=True):
+                viscous.commit_sensitivity(assembler, u_device, du, name)
         # K du on the prescribed rows needs the tangent before elimination.
         matrix.values.assign(full_values)
         product = wp.zeros(assembler.node_count, dtype=wp.vec3d, device=assembler.device)

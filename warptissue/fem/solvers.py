@@ -359,6 +359,8 @@ class QuasistaticResult:
             local_iterations, reason).
         reaction_sensitivity: ``d reaction / d theta`` at each converged load, shape (S, n),
             for the n parameters of the ``sensitivity`` passed in (n = 0 without one).
+        times_s: The time of each converged load of a timed path, s; else the load-step
+            number 1..S, shape (S,).
     """
 
     loads: np.ndarray
@@ -373,6 +375,7 @@ class QuasistaticResult:
     linear_solver: str = ""
     history: list[dict] = field(default_factory=list)
     reaction_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def _norm(values: np.ndarray) -> float:
@@ -769,6 +772,7 @@ def solve_quasistatic(
     load_name: str = "load",
     initial_displacement_m: np.ndarray | None = None,
     sensitivity: Any = None,
+    times_s: np.ndarray | None = None,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -804,7 +808,14 @@ def solve_quasistatic(
         sensitivity: A :class:`warptissue.fem.sensitivity.ForceSensitivity` of this
             assembler and these conditions: its ``at_converged_state`` runs at each converged
             requested load, after Newton (with Newton's linear solver), into
-            ``reaction_sensitivity``.
+            ``reaction_sensitivity`` (with a viscous history: at every converged substep,
+            which advances the history's derivatives).
+        times_s: The time of each load, shape (S,), s, strictly increasing from t = 0 (the
+            unloaded start): a timed path. Between two requested loads the load is linear in
+            time, and cutbacks split both. Needed by a viscoelastic material
+            (``assembler.viscous``), whose history is advanced after every converged
+            (sub)step (:mod:`warptissue.fem.viscous`); an elastic one ignores time. None: a
+            quasi-static path.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -816,11 +827,31 @@ def solve_quasistatic(
     loads = np.atleast_1d(np.asarray(loads, dtype=np.float64))
     if loads.ndim != 1 or not np.all(np.isfinite(loads)):
         raise InputError("loads must be a finite 1-D sequence", value=loads)
+    if times_s is not None:
+        times = np.atleast_1d(np.asarray(times_s, dtype=np.float64))
+        if times.shape != loads.shape or not np.all(np.isfinite(times)):
+            raise InputError(
+                f"times_s must be finite, one per load ({loads.size})", value=times.shape
+            )
+        steps = np.diff(np.concatenate([[0.0], times]))
+        if np.any(steps <= 0.0):
+            raise InputError(
+                "times_s must be positive and strictly increasing (the path starts at t = 0)",
+                key="times_s",
+                value=times[: int(np.argmax(steps <= 0.0)) + 1].tolist()[-2:],
+            )
+    else:
+        times = None
     options = _checked_options(options)
     n = assembler.node_count
     weights = np.zeros((n, 3)) if reaction_weights is None else np.asarray(reaction_weights)
     if weights.shape != (n, 3):
         raise InputError(f"reaction_weights must have shape ({n}, 3)", value=weights.shape)
+    viscous = getattr(assembler, "viscous", None)
+    if viscous is not None and times is None:
+        raise InputError(
+            "a viscoelastic material needs the time of each load (times_s)", key="times_s"
+        )
     solver = LinearSolver(method=options.linear_solver, device=assembler.device)
     mask = conditions.mask(n)
     free = 1.0 - mask
@@ -829,8 +860,9 @@ def solve_quasistatic(
     # Absolute floor of the residual norm: a roundoff-level force for this body and material.
     length = float(np.sum(assembler.tet_volumes)) ** (1.0 / 3.0)
     force_floor = 1e-13 * assembler.material.initial_shear_modulus_Pa * length**2
-    load = 0.0
-    # The converged state before the current one, for the extrapolated predictor.
+    load, time = 0.0, 0.0
+    # The converged state before the current one (path coordinate, state), for the
+    # extrapolated predictor; the path coordinate is the time of a timed path, else the load.
     previous: tuple[float, np.ndarray] | None = None
     reached, states, reactions = [], [], []
     newton_counts, linear_counts, local_counts = [], [], []
@@ -856,29 +888,48 @@ def solve_quasistatic(
             linear_solver=solver.method,
             history=history,
             reaction_sensitivity=np.array(sensitivities[:count]).reshape(count, sensitivity_count),
+            times_s=(
+                np.arange(1.0, count + 1.0) if times is None else np.array(times[:count])
+            ),
         )
 
     if progress:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=len(loads), desc=progress_label, unit="step")
+        bar = tqdm(total=len(loads), desc=progress_label, unit="step", leave=False)
     try:
-        for target in loads:
+        for index, target in enumerate(loads):
+            target_time = time if times is None else float(times[index])
             step_newton, step_linear, step_local, halvings = 0, 0, 0, 0
-            increment = target - load
+            start_load, start_time = load, time
+            fraction, step_fraction = 0.0, 1.0
             retry_linearized = False
             while True:
-                next_load = load + increment
-                if abs(target - next_load) <= 1e-12 * max(abs(target), 1e-300):
-                    next_load = target
+                next_fraction = fraction + step_fraction
+                if next_fraction >= 1.0 - 1e-12:
+                    next_fraction = 1.0
+                next_load = (
+                    target
+                    if next_fraction == 1.0
+                    else start_load + next_fraction * (target - start_load)
+                )
+                next_time = (
+                    target_time
+                    if next_fraction == 1.0
+                    else start_time + next_fraction * (target_time - start_time)
+                )
                 prescribed = conditions.values(next_load, n) - conditions.values(load, n)
+                if viscous is not None:
+                    viscous.begin_step(next_time - time)
+                here, there = (load, next_load) if times is None else (time, next_time)
                 free_guess = None
                 if (
                     options.predictor == "extrapolated"
                     and previous is not None
                     and not retry_linearized
+                    and here != previous[0]
                 ):
-                    free_guess = (u - previous[1]) * ((next_load - load) / (load - previous[0]))
+                    free_guess = (u - previous[1]) * ((there - here) / (here - previous[0]))
                 retry_linearized = False
                 step = _newton_increment(
                     assembler,
@@ -900,6 +951,7 @@ def solve_quasistatic(
                 history.append(
                     {
                         "load": next_load,
+                        **({} if times is None else {"time_s": next_time}),
                         "converged": step.converged,
                         "iterations": step.iterations,
                         "local_iterations": step.local_iterations,
@@ -907,15 +959,22 @@ def solve_quasistatic(
                     }
                 )
                 if step.converged:
-                    if next_load != load:
-                        previous = (load, u)
-                    u, load = step.displacement, next_load
-                    if next_load == target:
+                    if there != here:
+                        previous = (here, u)
+                    u, load, time, fraction = step.displacement, next_load, next_time, next_fraction
+                    at_target = fraction == 1.0
+                    if at_target:
+                        # With the step's frozen history: the force of the converged state.
+                        internal = assembler.assemble(u, with_tangent=False).residual.numpy()
+                        reaction = float(np.sum(weights * internal))
+                    if sensitivity is not None and (at_target or viscous is not None):
+                        # A viscous history needs its derivatives advanced at every substep.
+                        step_sensitivity = sensitivity.at_converged_state(solver, u)
+                    if viscous is not None:
+                        viscous.commit(assembler, assembler.device_displacement(u))
+                    if at_target:
                         break
-                    remaining = target - load
-                    increment = (
-                        remaining if abs(2.0 * increment) >= abs(remaining) else 2.0 * increment
-                    )
+                    step_fraction = min(2.0 * step_fraction, 1.0 - fraction)
                     continue
                 if step.from_guess:
                     # Retry the increment from the linearized predictor before cutting back.
@@ -926,21 +985,22 @@ def solve_quasistatic(
                 if halvings > options.max_cutbacks:
                     completed = False
                     message = (
-                        f"stopped at {load_name} {load:.6g} on the way to {target:.6g}: "
-                        f"Newton failed ({step.reason}) after {options.max_cutbacks} cutbacks "
-                        f"(last increment "
-                        f"{increment:.3g}); the {len(reached)} converged steps are kept"
+                        f"stopped at {load_name} {load:.6g} on the way to {target:.6g}"
+                        + ("" if times is None else f" (t = {time:.6g} s)")
+                        + f": Newton failed ({step.reason}) after {options.max_cutbacks} "
+                        f"cutbacks (last increment {step_fraction * (target - start_load):.3g}"
+                        + ("" if times is None else f" over {step_fraction * (target_time - start_time):.3g} s")
+                        + f"); the {len(reached)} converged steps are kept"
                     )
                     break
-                increment *= 0.5
+                step_fraction *= 0.5
             if not completed:
                 break
             reached.append(target)
             states.append(u.copy())
-            internal = assembler.assemble(u, with_tangent=False).residual.numpy()
-            reactions.append(float(np.sum(weights * internal)))
+            reactions.append(reaction)
             if sensitivity is not None:
-                sensitivities.append(sensitivity.at_converged_state(solver, u))
+                sensitivities.append(step_sensitivity)
             newton_counts.append(step_newton)
             linear_counts.append(step_linear)
             local_counts.append(step_local)

@@ -1,0 +1,281 @@
+"""The history of a viscoelastic material in the FE: internal variables per quadrature point.
+
+A :class:`warptissue.materials.Viscoelastic` material relaxes its deviatoric second
+Piola-Kirchhoff stress with a normalized Prony series (Ahn & Kim, Eq. 1-2):
+
+    S_dev(t) = int_0^t G(t - s) dS0/ds ds,   G(t) = g_inf + sum_i g_i exp(-t / tau_i),
+
+with ``S0 = F^-1 P_dev(F)`` the hyperelastic deviatoric stress and ``g_inf = 1 - sum g_i``.
+Split into ``S_dev = g_inf S0 + sum_i H_i`` with ``H_i(t) = int g_i exp(-(t - s)/tau_i) dS0``,
+a step from t_n-1 to t_n = t_n-1 + dt over which S0 changes linearly in time gives exactly
+
+    H_i(t_n) = a_i H_i(t_n-1) + b_i (S0(t_n) - S0(t_n-1)),
+    a_i = exp(-dt / tau_i),   b_i = g_i tau_i / dt (1 - a_i),
+
+(the recursive convolution of Simo 1987 and Taylor, Pister & Goudreau 1970; the midpoint
+rules of some codes are exact only in the limit dt -> 0). Hence within the step
+
+    S_dev = gamma S0(F) + Q,   gamma = g_inf + sum_i b_i,   Q = sum_i (a_i H_i - b_i S0_prev),
+
+where Q is fixed during the step's Newton iterations: the step is the minimum of the
+incremental energy ``gamma psi_dev(F) + Q : (C - I)/2 + U``, so Newton's tangent stays
+symmetric. :class:`ViscousHistory` holds H_i and S0_prev per quadrature point on the Warp
+device, computes Q for a step, and commits a converged step.
+
+Sensitivities carried forward in time (direct differentiation): for a parameter theta,
+``dR/dtheta`` at fixed u gains ``int F dS/dtheta grad N dV`` with
+
+    dS/dtheta = dgamma/dtheta S0 + sum_i (da_i H_i + a_i dH_i - db_i S0_prev - b_i dS0_prev)
+
+from the history, whose derivatives ``dH_i`` and ``dS0_prev`` are advanced after each step
+with the step's ``du/dtheta`` (:meth:`ViscousHistory.commit_sensitivity`). With
+``x_i = dt / tau_i``: ``da_i/dtau_i = a_i x_i / tau_i``, ``db_i/dg_i = (1 - a_i) / x_i``,
+``db_i/dtau_i = g_i ((1 - a_i) / dt - a_i / tau_i)``, ``dgamma/dg_i = db_i/dg_i - 1`` and
+``dgamma/dtau_i = db_i/dtau_i``. tests/test_fem_viscoelastic.py checks all of it against
+Fung's QLV integral and central differences of whole runs.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+import warp as wp
+
+from warptissue.errors import InputError
+from warptissue.materials import Viscoelastic
+
+__all__ = ["ViscousHistory", "elastic_step"]
+
+
+def elastic_step() -> object:
+    """The ``ViscousStep`` struct of an elastic material (``active = 0``)."""
+    from warptissue.kernels import fem as kf
+
+    step = kf.ViscousStep()
+    step.active = 0
+    step.terms = 0
+    step.gamma = 1.0
+    step.a = kf.vec6d()
+    step.b = kf.vec6d()
+    return step
+
+
+def _step_struct(gamma: float, a: Sequence[float], b: Sequence[float]) -> object:
+    from warptissue.kernels import fem as kf
+
+    step = kf.ViscousStep()
+    step.active = 1
+    step.terms = len(a)
+    step.gamma = float(gamma)
+    step.a = kf.vec6d(*a, *([0.0] * (6 - len(a))))
+    step.b = kf.vec6d(*b, *([0.0] * (6 - len(b))))
+    return step
+
+
+def _coefficients(material: Viscoelastic, dt: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(gamma, a, b)`` of a step of length ``dt`` (s)."""
+    g = np.asarray(material.g)
+    tau = np.asarray(material.tau_s)
+    x = dt / tau
+    a = np.exp(-x)
+    # (1 - exp(-x)) / x without cancellation for small x.
+    share = np.where(x > 1e-8, -np.expm1(-x) / np.where(x > 0, x, 1.0), 1.0 - 0.5 * x)
+    b = g * share
+    return 1.0 - float(g.sum()) + float(b.sum()), a, b
+
+
+class ViscousHistory:
+    """Internal variables of a viscoelastic material on a tet mesh, on a Warp device.
+
+    Args:
+        material: The viscoelastic material.
+        tet_count: Elements M.
+        quadrature_points: Quadrature points per element Q.
+        device: The Warp device of the assembler.
+
+    Attributes:
+        material: The material.
+        history: H_i per quadrature point, Warp array (M, Q, terms) of mat33d, Pa.
+        elastic_stress: S0 of the last converged step, Warp array (M, Q) of mat33d, Pa.
+        frozen: The step's fixed history stress Q, Warp array (M, Q) of mat33d, Pa.
+        step: The current step's ``ViscousStep`` struct (``gamma``, ``a_i``, ``b_i``).
+        dt_s: The current step's length, s.
+        names: The parameters whose history derivatives are carried
+            (:meth:`track_sensitivities`).
+    """
+
+    def __init__(
+        self, material: Viscoelastic, *, tet_count: int, quadrature_points: int, device: object
+    ) -> None:
+        if not isinstance(material, Viscoelastic):
+            raise InputError("a viscous history needs a viscoelastic material", value=material)
+        self.material = material
+        self.device = device
+        self._shape = (tet_count, quadrature_points)
+        terms = material.term_count
+        self.history = wp.zeros((*self._shape, terms), dtype=wp.mat33d, device=device)
+        self.elastic_stress = wp.zeros(self._shape, dtype=wp.mat33d, device=device)
+        self.frozen = wp.zeros(self._shape, dtype=wp.mat33d, device=device)
+        self.names: tuple[str, ...] = ()
+        self._d_history = wp.zeros((1, 1, 1, 1), dtype=wp.mat33d, device=device)
+        self._d_elastic_stress = wp.zeros((1, 1, 1), dtype=wp.mat33d, device=device)
+        self.reset()
+
+    def reset(self, material: Viscoelastic | None = None) -> None:
+        """Back to the undeformed, unloaded state at t = 0 (optionally with new parameters
+        of the same number of terms)."""
+        if material is not None:
+            if material.term_count != self.material.term_count:
+                raise InputError(
+                    "the new material has another number of Prony terms",
+                    value=(material.term_count, self.material.term_count),
+                )
+            self.material = material
+        self.history.zero_()
+        self.elastic_stress.zero_()
+        self.frozen.zero_()
+        self._d_history.zero_()
+        self._d_elastic_stress.zero_()
+        self.dt_s = math.nan
+        self.step = _step_struct(1.0, [1.0] * self.material.term_count, [0.0] * len(self.material.g))
+
+    def track_sensitivities(self, names: Sequence[str]) -> None:
+        """Carry the history's derivatives by these parameters from now on (zero now)."""
+        self.names = tuple(names)
+        count = max(len(self.names), 1)
+        terms = self.material.term_count
+        self._d_history = wp.zeros((count, *self._shape, terms), dtype=wp.mat33d, device=self.device)
+        self._d_elastic_stress = wp.zeros((count, *self._shape), dtype=wp.mat33d, device=self.device)
+
+    def begin_step(self, dt_s: float) -> None:
+        """Set the coefficients of a step of length ``dt_s`` and its frozen history stress."""
+        from warptissue.kernels import fem as kf
+
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise InputError("a time step must be positive and finite", key="times_s", value=dt_s)
+        gamma, a, b = _coefficients(self.material, dt_s)
+        self.dt_s = float(dt_s)
+        self.step = _step_struct(gamma, a, b)
+        wp.launch(
+            kf.viscous_frozen_kernel,
+            dim=self._shape,
+            inputs=[self.step, self.history, self.elastic_stress],
+            outputs=[self.frozen],
+            device=self.device,
+        )
+
+    def stress_state(self) -> tuple[object, wp.array]:
+        """``(step, frozen)`` giving the committed stress ``g_inf S0 + sum_i H_i`` (for the
+        stress output after a step: the assembly kernels read it as ``gamma S0 + Q``)."""
+        from warptissue.kernels import fem as kf
+
+        terms = self.material.term_count
+        step = _step_struct(self.material.long_term_factor, [1.0] * terms, [0.0] * terms)
+        total = wp.zeros(self._shape, dtype=wp.mat33d, device=self.device)
+        wp.launch(
+            kf.viscous_frozen_kernel,
+            dim=self._shape,
+            inputs=[step, self.history, self.elastic_stress],
+            outputs=[total],
+            device=self.device,
+        )
+        return step, total
+
+    def commit(self, assembler: object, displacement: wp.array) -> None:
+        """Advance H_i and S0_prev to a converged step (after its sensitivities)."""
+        from warptissue.kernels import fem as kf
+
+        wp.launch(
+            kf.viscous_commit_kernel,
+            dim=self._shape,
+            inputs=[
+                assembler._params,
+                assembler._tets,
+                assembler._shape_gradients,
+                displacement,
+                self.step,
+                self.history,
+                self.elastic_stress,
+            ],
+            device=self.device,
+        )
+
+    def step_derivative(self, name: str) -> object:
+        """``ViscousStep`` holding ``dgamma, da_i, db_i`` by one parameter for this step."""
+        terms = self.material.term_count
+        d_gamma, d_a, d_b = 0.0, np.zeros(terms), np.zeros(terms)
+        which = self.material.prony_derivative(name)
+        if which is not None:
+            kind, i = which
+            g, tau, dt = self.material.g[i], self.material.tau_s[i], self.dt_s
+            x = dt / tau
+            a = math.exp(-x)
+            if kind == "g":
+                d_b[i] = -math.expm1(-x) / x if x > 1e-8 else 1.0 - 0.5 * x
+                d_gamma = d_b[i] - 1.0
+            else:
+                d_a[i] = a * x / tau
+                d_b[i] = g * (-math.expm1(-x) / dt - a / tau)
+                d_gamma = d_b[i]
+        return _step_struct(d_gamma, d_a, d_b)
+
+    def history_residual(
+        self, assembler: object, displacement: wp.array, name: str, residual: wp.array
+    ) -> None:
+        """Add the history's part of ``dR/d name`` at fixed u into ``residual`` (N)."""
+        from warptissue.kernels import fem as kf
+
+        wp.launch(
+            kf.viscous_history_residual_kernel,
+            dim=self._shape[0],
+            inputs=[
+                assembler._params,
+                assembler._tets,
+                assembler._shape_gradients,
+                assembler._quadrature_volumes,
+                displacement,
+                self.step,
+                self.step_derivative(name),
+                self.history,
+                self.elastic_stress,
+                self._d_history,
+                self._d_elastic_stress,
+                self.names.index(name),
+            ],
+            outputs=[residual],
+            device=self.device,
+        )
+
+    def commit_sensitivity(
+        self, assembler: object, displacement: wp.array, d_displacement: np.ndarray, name: str
+    ) -> None:
+        """Advance the history's derivatives by ``name`` with the step's ``du/d name``
+        (before :meth:`commit`)."""
+        from warptissue.kernels import fem as kf
+
+        d_params, alpha_term = self.material.device_params_derivative(name)
+        explicit = int(self.material.prony_derivative(name) is None)
+        wp.launch(
+            kf.viscous_sensitivity_commit_kernel,
+            dim=self._shape,
+            inputs=[
+                assembler._params,
+                d_params,
+                explicit,
+                alpha_term,
+                assembler._tets,
+                assembler._shape_gradients,
+                displacement,
+                wp.array(d_displacement, dtype=wp.vec3d, device=self.device),
+                self.step,
+                self.step_derivative(name),
+                self.history,
+                self.elastic_stress,
+                self._d_history,
+                self._d_elastic_stress,
+                self.names.index(name),
+            ],
+            device=self.device,
+        )
