@@ -1088,9 +1088,7 @@ class Viscoelastic(Material):
         struct (the elastic response does not depend on them; their derivative is the
         history's, :mod:`warptissue.fem.viscous`)."""
         if PRONY_KEY.match(name) and name in self._prony_parameters():
-            params, _ = self.elastic.device_params_derivative(
-                self.elastic.sensitivity_names[0]
-            )
+            params, _ = self.elastic.device_params_derivative(self.elastic.sensitivity_names[0])
             return _zeroed(params), -1
         if name not in self.sensitivity_names:
             close = difflib.get_close_matches(name, self.sensitivity_names, n=1)

@@ -327,7 +327,9 @@ def simulate_indentation(
                 key="times_s",
             )
     elif np.any(depths < 0):
-        raise InputError("depths_m must be >= 0 (the probe stays in contact)", value=depths.tolist())
+        raise InputError(
+            "depths_m must be >= 0 (the probe stays in contact)", value=depths.tolist()
+        )
     mesh = problem.mesh
     if assembler is None:
         assembler = Assembler(

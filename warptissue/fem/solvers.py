@@ -888,9 +888,7 @@ def solve_quasistatic(
             linear_solver=solver.method,
             history=history,
             reaction_sensitivity=np.array(sensitivities[:count]).reshape(count, sensitivity_count),
-            times_s=(
-                np.arange(1.0, count + 1.0) if times is None else np.array(times[:count])
-            ),
+            times_s=(np.arange(1.0, count + 1.0) if times is None else np.array(times[:count])),
         )
 
     if progress:
@@ -989,7 +987,11 @@ def solve_quasistatic(
                         + ("" if times is None else f" (t = {time:.6g} s)")
                         + f": Newton failed ({step.reason}) after {options.max_cutbacks} "
                         f"cutbacks (last increment {step_fraction * (target - start_load):.3g}"
-                        + ("" if times is None else f" over {step_fraction * (target_time - start_time):.3g} s")
+                        + (
+                            ""
+                            if times is None
+                            else f" over {step_fraction * (target_time - start_time):.3g} s"
+                        )
                         + f"); the {len(reached)} converged steps are kept"
                     )
                     break

@@ -139,15 +139,17 @@ class ViscousHistory:
         self._d_history.zero_()
         self._d_elastic_stress.zero_()
         self.dt_s = math.nan
-        self.step = _step_struct(1.0, [1.0] * self.material.term_count, [0.0] * len(self.material.g))
+        terms = self.material.term_count
+        self.step = _step_struct(1.0, [1.0] * terms, [0.0] * terms)
 
     def track_sensitivities(self, names: Sequence[str]) -> None:
         """Carry the history's derivatives by these parameters from now on (zero now)."""
         self.names = tuple(names)
         count = max(len(self.names), 1)
         terms = self.material.term_count
-        self._d_history = wp.zeros((count, *self._shape, terms), dtype=wp.mat33d, device=self.device)
-        self._d_elastic_stress = wp.zeros((count, *self._shape), dtype=wp.mat33d, device=self.device)
+        dev = self.device
+        self._d_history = wp.zeros((count, *self._shape, terms), dtype=wp.mat33d, device=dev)
+        self._d_elastic_stress = wp.zeros((count, *self._shape), dtype=wp.mat33d, device=dev)
 
     def begin_step(self, dt_s: float) -> None:
         """Set the coefficients of a step of length ``dt_s`` and its frozen history stress."""
