@@ -948,3 +948,323 @@ def test_a_layer_beyond_the_hayes_range_asks_for_start_values(tmp_path):
     )
     with pytest.raises(InputError, match=r"no start value from record\.csv: .*\[fit\.start\]"):
         start_values_from_record(thin)
+
+
+# --- Timed protocols (version 2) and the [fit] strategy ---------------------------------
+
+QUASI_STATIC = "[protocol]\nmax_depth_m = 0.0005\nsteps = 4\n"
+RAMP_HOLD = (
+    '[protocol]\nkind = "ramp_hold"\nmax_depth_m = 0.0005\nspeed_m_per_s = 0.001\n'
+    "hold_s = 20.0\nramp_steps = 4\nhold_steps = 6\n"
+)
+SINE = (
+    '[protocol]\nkind = "sine"\npreload_depth_m = 0.0004\namplitude_m = 0.0001\n'
+    "frequency_Hz = 2.0\ncycles = 2\npreload_s = 1.0\n"
+)
+TIMED = "[protocol]\ndepths_m = [0.0002, 0.0004, 0.0004, 0.0001]\ntimes_s = [0.5, 1.0, 5.0, 6.0]\n"
+V2_SIM = MINIMAL.replace("schema_version = 1", "schema_version = 2")
+
+
+def with_protocol(protocol: str, text: str = V2_SIM) -> str:
+    assert QUASI_STATIC in text
+    return text.replace(QUASI_STATIC, protocol, 1)
+
+
+def assert_round_trips(study, tmp_path: Path) -> None:
+    record = study.to_dict()
+    assert study_from_dict(record, path=study.path) == study
+    assert study_from_dict(record, path=study.path).to_dict() == record
+    again = load_study(save_study(study, tmp_path / "again" / "study.toml"))
+    assert again.protocol.times_s == study.protocol.times_s
+    assert again.protocol.depths_m == study.protocol.depths_m
+
+
+def test_a_ramp_hold_protocol_has_the_steps_of_loading_ramp_hold(tmp_path):
+    from warptissue.loading import ramp_hold
+
+    study = load_study(write(tmp_path, with_protocol(RAMP_HOLD)))
+    protocol = study.protocol
+    assert protocol.kind == "ramp_hold" and protocol.timed
+    times, depths = ramp_hold(
+        max_depth_m=5e-4, speed_m_per_s=1e-3, hold_s=20.0, ramp_steps=4, hold_steps=6
+    )
+    np.testing.assert_array_equal(protocol.times_s, times)
+    np.testing.assert_array_equal(protocol.depths_m, depths)
+    assert protocol.times_s[3] == pytest.approx(0.5) and protocol.times_s[-1] == pytest.approx(20.5)
+    assert protocol.max_depth_m == pytest.approx(5e-4) and protocol.step_count == 10
+    assert protocol.to_dict() == {
+        "kind": "ramp_hold",
+        "max_depth_m": 5e-4,
+        "speed_m_per_s": 1e-3,
+        "hold_s": 20.0,
+        "ramp_steps": 4,
+        "hold_steps": 6,
+    }
+    assert_round_trips(study, tmp_path)
+    # The defaults are filled in.
+    text = with_protocol(RAMP_HOLD.replace("ramp_steps = 4\nhold_steps = 6\n", ""))
+    defaults = load_study(write(tmp_path, text, "defaults.toml")).protocol
+    assert (defaults.settings["ramp_steps"], defaults.settings["hold_steps"]) == (10, 20)
+
+
+def test_a_sine_protocol_oscillates_about_its_preload(tmp_path):
+    study = load_study(write(tmp_path, with_protocol(SINE)))
+    protocol = study.protocol
+    assert protocol.kind == "sine" and protocol.step_count == 5 + 2 * 16
+    times, depths = np.array(protocol.times_s), np.array(protocol.depths_m)
+    np.testing.assert_allclose(depths[:5], 4e-4 * times[:5] / 1.0)  # the ramp to the preload
+    expected = 4e-4 + 1e-4 * np.sin(2 * np.pi * 2.0 * (times[5:] - 1.0))
+    np.testing.assert_allclose(depths[5:], expected, atol=1e-15)
+    assert depths.max() == pytest.approx(5e-4) and depths[5:].min() == pytest.approx(3e-4)
+    assert protocol.to_dict()["steps_per_cycle"] == 16
+    assert_round_trips(study, tmp_path)
+
+
+def test_explicit_depths_and_times_are_a_timed_protocol(tmp_path):
+    study = load_study(write(tmp_path, with_protocol(TIMED)))
+    protocol = study.protocol
+    assert protocol.kind == "timed"
+    assert protocol.times_s == (0.5, 1.0, 5.0, 6.0)
+    assert protocol.depths_m == (2e-4, 4e-4, 4e-4, 1e-4)  # down again: allowed when timed
+    assert protocol.max_depth_m == 4e-4
+    assert protocol.to_dict() == {
+        "kind": "timed",
+        "depths_m": [2e-4, 4e-4, 4e-4, 1e-4],
+        "times_s": [0.5, 1.0, 5.0, 6.0],
+    }
+    assert_round_trips(study, tmp_path)
+
+
+def test_a_quasi_static_protocol_is_untimed_and_echoed_without_a_kind(tmp_path):
+    study = load_study(write(tmp_path, MINIMAL))
+    assert study.protocol.kind == "quasi_static" and not study.protocol.timed
+    assert study.protocol.times_s is None
+    assert study.protocol.to_dict() == {"depths_m": [1.25e-4, 2.5e-4, 3.75e-4, 5e-4]}
+    text = with_protocol('[protocol]\nkind = "quasi_static"\nmax_depth_m = 0.0005\nsteps = 4\n')
+    assert load_study(write(tmp_path, text, "explicit.toml")).protocol == study.protocol
+    # kind = "quasi_static" is read in a version-1 file too (a timed kind is not).
+    assert load_study(write(tmp_path, text.replace("schema_version = 2", "schema_version = 1")))
+
+
+def record_protocol(**keys: str) -> str:
+    lines = ['kind = "record"', 'file = "record.csv"', *(f"{k} = {v}" for k, v in keys.items())]
+    return "[protocol]\n" + "\n".join(lines) + "\n"
+
+
+def test_a_record_protocol_follows_the_records_depth_from_its_contact(tmp_path):
+    """synthetic_record: the probe moves at 0.5 mm/s from t = 1 s and meets the surface
+    0.2 mm lower, at t = 1.4 s; the FE history starts there: depth = 0.5 mm/s x time."""
+    synthetic_record(tmp_path / "record.csv")
+    text = with_protocol(record_protocol(contact='"auto"', steps="12"))
+    study = load_study(write(tmp_path, text))
+    protocol = study.protocol
+    assert protocol.kind == "record" and protocol.record is not None
+    assert protocol.record.contact_time_s == pytest.approx(1.4, abs=0.02)
+    times, depths = np.array(protocol.times_s), np.array(protocol.depths_m)
+    assert abs(times.size - 12) <= 1 and np.all(times > 0) and np.all(np.diff(times) > 0)
+    assert times[-1] == pytest.approx(2.39 - 1.4, abs=0.02)
+    np.testing.assert_allclose(depths, 5e-4 * times, atol=1e-5)  # 10 um: the contact estimate
+    assert protocol.to_dict()["steps"] == 12 and protocol.to_dict()["contact"] == "auto"
+    assert_round_trips(study, tmp_path)
+    moved = load_study(save_study(study, tmp_path / "elsewhere" / "moved.toml"))
+    assert moved.protocol.to_dict()["file"] == "../record.csv"
+    assert moved.protocol.record.path.resolve() == study.protocol.record.path.resolve()
+    assert (moved.protocol.times_s, moved.protocol.depths_m) == (
+        tuple(times),
+        tuple(depths),
+    )
+
+
+def test_a_record_protocol_needs_no_force_column_with_a_given_contact(tmp_path):
+    path = synthetic_record(tmp_path / "full.csv")
+    columns = np.genfromtxt(path, delimiter=",", names=True)
+    write_csv(
+        tmp_path / "record.csv",
+        {"time_s": columns["time_s"], "displacement_m": columns["displacement_m"]},
+    )
+    text = with_protocol(record_protocol(contact_position_m="0.0002", steps="8"))
+    protocol = load_study(write(tmp_path, text)).protocol
+    assert protocol.record.contact_time_s == pytest.approx(1.4, abs=0.011)
+    np.testing.assert_allclose(protocol.depths_m, 5e-4 * np.array(protocol.times_s), atol=3e-6)
+    bad = with_protocol(record_protocol(contact='"auto"'))
+    with pytest.raises(InputError, match="protocol.contact: 'auto' detects the contact") as caught:
+        load_study(write(tmp_path, bad, "auto.toml"))
+    assert caught.value.line == line_of(bad, 'contact = "auto"')
+
+
+def test_load_history_is_resample_history_from_the_contact(tmp_path):
+    from warptissue.loading import resample_history
+
+    study = load_study(write_v2(tmp_path))
+    (record,) = study.data
+    times, depths = record.load_history(steps=study.fit.time_steps)
+    expected = resample_history(
+        record.time_s - record.contact_time_s, record.displacement_m, steps=24
+    )
+    np.testing.assert_array_equal(times, expected[0])
+    np.testing.assert_array_equal(depths, expected[1])
+    assert times[0] > 0 and times[-1] == pytest.approx(record.time_s[-1] - record.contact_time_s)
+    with pytest.raises(InputError, match=r"record\.csv.*steps"):
+        record.load_history(steps=1)
+
+
+# (replace QUASI_STATIC with this, key path named, value named)
+BAD_PROTOCOLS = [
+    pytest.param('[protocol]\nkind = "ramp"\n', "protocol.kind", "'ramp'", id="unknown-kind"),
+    pytest.param(
+        RAMP_HOLD.replace("speed_m_per_s = 0.001\n", ""),
+        "protocol.speed_m_per_s",
+        None,
+        id="ramp-hold-missing-speed",
+    ),
+    pytest.param(
+        RAMP_HOLD.replace("hold_s = 20.0", "hold_s = -1.0"),
+        "protocol.hold_s",
+        "-1.0",
+        id="negative-hold",
+    ),
+    pytest.param(
+        RAMP_HOLD.replace("max_depth_m = 0.0005", "max_depth_m = 0.02"),
+        "protocol.max_depth_m",
+        "0.02",
+        id="ramp-hold-through-the-specimen",
+    ),
+    pytest.param(
+        RAMP_HOLD.replace("ramp_steps = 4", "ramp_steps = 0"),
+        "protocol.ramp_steps",
+        "0",
+        id="no-ramp-steps",
+    ),
+    pytest.param(RAMP_HOLD + 'file = "x.csv"\n', "protocol.file", None, id="a-key-of-another-kind"),
+    pytest.param(
+        RAMP_HOLD + "hold_step = 4\n", "protocol.hold_step", None, id="typo-in-a-timed-kind"
+    ),
+    pytest.param(
+        SINE.replace("amplitude_m = 0.0001", "amplitude_m = 0.0005"),
+        "protocol.amplitude_m",
+        "0.0005",
+        id="amplitude-above-preload",
+    ),
+    pytest.param(
+        SINE.replace("preload_depth_m = 0.0004", "preload_depth_m = 0.0099"),
+        "protocol.amplitude_m",
+        "0.01",
+        id="sine-through-the-specimen",
+    ),
+    pytest.param(
+        SINE.replace("cycles = 2", "cycles = 1.5"), "protocol.cycles", "1.5", id="cycles-int"
+    ),
+    pytest.param(
+        TIMED.replace("[0.5, 1.0, 5.0, 6.0]", "[0.5, 1.0, 1.0, 6.0]"),
+        "protocol.times_s",
+        "[0.5, 1.0, 1.0, 6.0]",
+        id="times-not-increasing",
+    ),
+    pytest.param(
+        TIMED.replace("[0.5, 1.0, 5.0, 6.0]", "[0.0, 1.0, 5.0, 6.0]"),
+        "protocol.times_s",
+        None,
+        id="time-zero",
+    ),
+    pytest.param(
+        TIMED.replace("[0.5, 1.0, 5.0, 6.0]", "[0.5, 1.0, 5.0]"),
+        "protocol.times_s",
+        "3",
+        id="times-shorter",
+    ),
+    pytest.param(
+        TIMED.replace("0.0001]", "-0.0001]"), "protocol.depths_m", "-0.0001", id="negative-depth"
+    ),
+    pytest.param(record_protocol(), "protocol.file", "record.csv", id="record-not-found"),
+    pytest.param(record_protocol(steps="1"), "protocol.steps", "1", id="record-one-step"),
+]
+
+
+@pytest.mark.parametrize(("new", "key_path", "value"), BAD_PROTOCOLS)
+def test_bad_protocols_name_file_line_key_and_value(tmp_path, new, key_path, value):
+    text = with_protocol(new)
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    message = str(caught.value)
+    assert str(path) in message and key_path in message, message
+    if value is not None:
+        assert value in message, message
+    key = key_path.rpartition(".")[2]
+    below = "\n".join(text.splitlines()[line_of(text, "[protocol]") :])
+    line = line_of(text, "[protocol]")
+    if f"\n{key} =" in "\n" + below:
+        line += next(n for n, x in enumerate(below.splitlines(), 1) if x.startswith(f"{key} ="))
+    assert caught.value.line == line
+
+
+def test_a_key_of_another_kind_says_whose_it_is(tmp_path):
+    with pytest.raises(InputError, match="not a key of kind 'ramp_hold'.*belongs to kind"):
+        load_study(write(tmp_path, with_protocol(RAMP_HOLD + "cycles = 2\n")))
+
+
+def test_a_timed_protocol_in_a_version_1_file_asks_for_version_2(tmp_path):
+    for protocol, key in ((RAMP_HOLD, "kind"), (TIMED, "times_s")):
+        text = MINIMAL.replace(QUASI_STATIC, protocol)
+        with pytest.raises(InputError, match="needs schema_version = 2") as caught:
+            load_study(write(tmp_path, text))
+        assert f"protocol.{key}" in str(caught.value)
+        assert caught.value.line == line_of(text, "[protocol]") + (1 if key == "kind" else 2)
+
+
+def test_fit_strategy_and_time_steps_defaults_and_round_trip(tmp_path):
+    study = load_study(write_v2(tmp_path))
+    assert (study.fit.strategy, study.fit.time_steps) == ("joint", 24)
+    table = study.fit.to_dict()
+    assert (table["strategy"], table["time_steps"]) == ("joint", 24)
+    text = V2.replace('method = "salm"', 'method = "salm"\ntime_steps = 12')
+    study = load_study(write_v2(tmp_path, text))
+    assert study.fit.time_steps == 12
+    assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
+
+
+VISCO_MATERIAL = "C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\ng1 = 0.3\ntau1_s = 1.0\n"
+
+
+def test_two_stage_needs_prony_terms_and_one_of_them_free(tmp_path):
+    text = V2.replace('method = "salm"', 'method = "salm"\nstrategy = "two_stage"')
+    with pytest.raises(InputError, match="fit.strategy: 'two_stage'.*has none") as caught:
+        load_study(write_v2(tmp_path, text))
+    assert caught.value.line == line_of(text, "strategy =")
+    visco = text.replace("C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\n", VISCO_MATERIAL)
+    with pytest.raises(InputError, match="fit.strategy: .*names none of them"):
+        load_study(write_v2(tmp_path, visco))
+    free = visco.replace('free = ["C10_Pa"]', 'free = ["C10_Pa", "g1", "tau1_s"]')
+    study = load_study(write_v2(tmp_path, free))
+    assert study.fit.strategy == "two_stage" and study.fit.free == ("C10_Pa", "g1", "tau1_s")
+    assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
+
+
+BAD_FIT_KEYS = [
+    pytest.param('strategy = "staged"', "fit.strategy", "'staged'", id="unknown-strategy"),
+    pytest.param("time_steps = 1", "fit.time_steps", "1", id="one-time-step"),
+    pytest.param("time_steps = 2.5", "fit.time_steps", "2.5", id="time-steps-not-integer"),
+]
+
+
+@pytest.mark.parametrize(("line", "key_path", "value"), BAD_FIT_KEYS)
+def test_bad_strategy_and_time_steps(tmp_path, line, key_path, value):
+    text = V2.replace('method = "salm"', f'method = "salm"\n{line}')
+    path = write_v2(tmp_path, text)
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    assert_names_key_and_line(caught.value, text, path, key_path, value)
+
+
+def test_every_protocol_key_is_in_the_study_file_reference():
+    from warptissue.study import _PROTOCOL_KEYS
+
+    page = (REPOSITORY / "docs" / "study-files.md").read_text(encoding="utf-8")
+    documented = set(re.findall(r"^\| `([A-Za-z0-9_]+)`[ ,|]", page, flags=re.MULTILINE))
+    rows = re.findall(r"^\| (`[A-Za-z0-9_]+`(?:, `[A-Za-z0-9_]+`)*) \|", page, re.MULTILINE)
+    for row in rows:
+        documented |= set(re.findall(r"`([A-Za-z0-9_]+)`", row))
+    keys = {"kind"} | {key for keys in _PROTOCOL_KEYS.values() for key in keys}
+    assert keys <= documented, sorted(keys - documented)
+    for kind in ("quasi_static", "timed", "ramp_hold", "sine", "record"):
+        assert f'`"{kind}"`' in page, kind
