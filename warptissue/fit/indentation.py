@@ -1,0 +1,989 @@
+"""Inverse-FE characterization: material parameters from indentation records.
+
+:func:`fit_indentation` fits the free material parameters of a study (``[fit] free``) so that
+the flat-punch force of the Warp FE (:func:`warptissue.fem.simulate_indentation`) matches the
+measured force of every ``[[data]]`` record, jointly. It is the Python API behind
+``warptissue fit indentation STUDY.toml``.
+
+Every forward run also gives the exact force sensitivities dF/dtheta (``K du/dtheta =
+-dR/dtheta`` at each converged step, docs/fe.md "Sensitivities"), so the least-squares engine
+(:func:`warptissue.fit.least_squares`, Levenberg-Marquardt or Tong et al.'s self-adapting LM)
+gets its Jacobian from the same run as its residuals: one forward run per trial point, where
+forward differences need 1 + n (FEBio's optimizer).
+
+Notes:
+    Model force at a record's samples. The record is conditioned (depth from the contact).
+    With an elastic material the force depends on the depth only (hyperelasticity is path
+    independent), so one FE run to the deepest point of all records, on ``time_steps``
+    equal depth steps, serves every record: the model force of a sample is the FE force
+    interpolated linearly in depth (with F = 0 at depth 0). With a viscoelastic material
+    (a Prony series) each record is its own time-stepped run on the FE grid of
+    :func:`warptissue.loading.resample_history` (time 0 at the contact), and the model force
+    is the FE force interpolated linearly in time (with F = 0 at t = 0). The Jacobian is
+    interpolated the same way from ``force_sensitivity_N_per_unit``.
+
+    Residuals, stacked over the records: ``F_model - F_measured`` (N, "absolute") or that
+    divided by ``max(|F_measured|, floor)`` ("relative", Ahn & Kim Eq. 7), with ``floor`` =
+    ``relative_floor_N`` or 1 % of the largest |force| of the records.
+
+    Strategies. "joint": every free parameter at once. "two_stage" (Ahn & Kim): stage (i)
+    fits the Prony series of each record from its relaxation, the finite ramp accounted for
+    (:func:`warptissue.viscoelastic.fitting.fit_qlv`, QLV with an exponential elastic force;
+    Ahn & Kim's Table 1), and takes the mean g_i, tau_i over the records; stage (ii) fits the
+    remaining free parameters by inverse FE with those Prony terms fixed (their Table 2).
+
+    Plausibility: a record measured with another probe radius than the study's (its sidecar
+    ``probe_radius_m``) is refused before fitting; systematic residuals (Durbin-Watson
+    statistic below :data:`DURBIN_WATSON_LIMIT`), a force that rises during a hold or does
+    not return to zero after unloading, a drift removed by the conditioning, non-identified
+    parameters (:attr:`warptissue.fit.FitResult.identifiability`) and a fit that did not
+    converge are warnings of the result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import ConvergenceError, InputError
+from warptissue.fit.engine import covariance_from_jacobian, least_squares
+from warptissue.fit.metrics import r_squared, rmse
+from warptissue.fit.result import FitResult, IterationRecord, RejectStep
+from warptissue.materials import PRONY_KEY, Viscoelastic
+from warptissue.study import FIT_STRATEGIES, DataRecord, Study, start_values_from_record
+
+__all__ = [
+    "DURBIN_WATSON_LIMIT",
+    "STATUSES",
+    "IndentationFit",
+    "IndentationFitProgress",
+    "RecordCurve",
+    "fit_indentation",
+]
+
+STATUSES: tuple[str, ...] = (
+    "converged",
+    "stopped_at_r_squared",
+    "max_iterations",
+    "interrupted",
+    "failed",
+)
+"""``IndentationFit.status``: the first two are successes."""
+DURBIN_WATSON_LIMIT = 0.5
+"""A record whose residuals have a Durbin-Watson statistic below this is fitted
+systematically badly (independent noise gives about 2)."""
+DRIFT_SHARE = 0.02
+"""A force change of more than this share of the record's peak force where none is expected
+(rising in a hold, left after unloading, a baseline drift) is reported."""
+RELATIVE_FLOOR_SHARE = 0.01
+"""Default floor of the relative objective: this share of the largest |force| of the records."""
+INTERRUPTED_EXIT_CODE = 130
+"""Exit status of an interrupted fit (Ctrl-C), as the shell gives a process ended by SIGINT."""
+_CACHE_SIZE = 8
+
+
+def _is_prony(name: str) -> bool:
+    return bool(PRONY_KEY.match(name))
+
+
+@dataclass(frozen=True)
+class IndentationFitProgress:
+    """What the fit reports after each trial step of the engine (to ``callback``).
+
+    Attributes:
+        stage: ``"joint"`` or ``"stage two"`` (the inverse FE of the two-stage strategy).
+        iteration: 1-based trial step of the engine.
+        parameters: The current free parameters (name -> value, SI units).
+        cost: 0.5 * sum of the squared residuals at the current parameters.
+        r_squared: R^2 of all records together at the current parameters, or None.
+        forward_solves: FE forward runs so far.
+        accepted: Whether this trial step was accepted.
+    """
+
+    stage: str
+    iteration: int
+    parameters: dict[str, float]
+    cost: float
+    r_squared: float | None
+    forward_solves: int
+    accepted: bool
+
+
+@dataclass
+class RecordCurve:
+    """One ``[[data]]`` record and its fitted force, at its own (conditioned) samples.
+
+    Attributes:
+        file: The record's file, as the study names it.
+        time_s: Sample times (s), shape (m,).
+        depth_m: Depth below the contact (m), shape (m,).
+        measured_force_N: Measured force (N), shape (m,).
+        fitted_force_N: FE force at the samples with the fitted parameters (N), shape (m,).
+        fe_time_s: Times of the FE steps behind this record (s, from the contact; for an
+            elastic material, where one FE run in depth serves every record, the times at
+            which the record first reaches each FE depth), shape (S,).
+        fe_depth_m: Depths of the FE steps (m), shape (S,).
+        fe_force_N: FE force at those steps (N), shape (S,).
+        r_squared: R^2 of this record's fit (None for constant data).
+        rmse_N: Root mean square error of this record's fit (N).
+        durbin_watson: Durbin-Watson statistic of this record's residuals (about 2 for
+            independent noise, near 0 for a systematic misfit; None for a perfect fit).
+    """
+
+    file: str
+    time_s: np.ndarray
+    depth_m: np.ndarray
+    measured_force_N: np.ndarray
+    fitted_force_N: np.ndarray
+    fe_time_s: np.ndarray
+    fe_depth_m: np.ndarray
+    fe_force_N: np.ndarray
+    r_squared: float | None
+    rmse_N: float
+    durbin_watson: float | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no sample arrays): file, samples, R^2, RMSE, Durbin-Watson."""
+        return {
+            "file": self.file,
+            "samples": int(self.time_s.size),
+            "r_squared": self.r_squared,
+            "rmse_N": self.rmse_N,
+            "durbin_watson": self.durbin_watson,
+            "peak_force_N": float(np.max(np.abs(self.measured_force_N))),
+        }
+
+
+@dataclass
+class IndentationFit:
+    """The outcome of :func:`fit_indentation`.
+
+    Attributes:
+        study: The study fitted.
+        fitted_study: The study with the fitted material (``dataclasses.replace(study,
+            material=...)``); ``warptissue simulate`` runs it as it is once saved
+            (:func:`warptissue.study.save_study`).
+        result: The engine's :class:`FitResult` of the (last-stage) inverse FE: parameter
+            names, units, values, standard errors, correlation, R^2 and RMSE (N) over all
+            records, history, iterations, status, identifiability.
+        records: One :class:`RecordCurve` per record, in ``[[data]]`` order.
+        strategy: ``"joint"`` or ``"two_stage"``.
+        stage_one: Ahn & Kim's stage (i) fit of the first record (None for "joint").
+        stage_one_fits: Stage (i) fits of every record (Ahn & Kim's Table 1); empty for
+            "joint".
+        stage_one_prony: The Prony terms stage (ii) used: the mean of ``stage_one_fits``
+            (``g1``, ``tau1_s``, ...); empty for "joint".
+        forward_solves: FE forward runs made (each with its sensitivities).
+        finite_difference_solves: The forward runs the same iterations would have needed
+            with forward differences: (Jacobian evaluations * n + residual evaluations) per
+            FE run of one evaluation.
+        status: One of :data:`STATUSES`.
+        message: One line on how the fit ended.
+        seconds: Wall time of the fit (s).
+        warnings: Identifiability and plausibility warnings (no "warning:" prefix).
+        start: The start values of the free parameters (name -> value).
+    """
+
+    study: Study
+    fitted_study: Study
+    result: FitResult
+    records: tuple[RecordCurve, ...]
+    strategy: str
+    stage_one: FitResult | None
+    forward_solves: int
+    finite_difference_solves: int
+    status: str
+    message: str
+    seconds: float
+    warnings: list[str] = field(default_factory=list)
+    stage_one_fits: tuple[FitResult, ...] = ()
+    stage_one_prony: dict[str, float] = field(default_factory=dict)
+    start: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def success(self) -> bool:
+        """True when the fit converged or stopped at the asked R^2."""
+        return self.status in ("converged", "stopped_at_r_squared")
+
+    @property
+    def exit_code(self) -> int:
+        """0 when successful, 130 when interrupted, else ConvergenceError's exit status."""
+        if self.success:
+            return 0
+        if self.status == "interrupted":
+            return INTERRUPTED_EXIT_CODE
+        return ConvergenceError.exit_code
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        """The fitted free parameters (name -> value)."""
+        return self.result.parameters
+
+    def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready summary of the fit.
+
+        Returns:
+            ``study`` (name and path), ``strategy``, ``status``, ``success``, ``message``,
+            ``parameters`` (name -> value, unit, standard error, start), ``correlation``
+            (``names`` and ``matrix``, or None), ``r_squared``, ``rmse_N``, ``iterations``,
+            ``forward_solves``, ``finite_difference_solves``, ``method``, ``objective``,
+            ``warnings``, ``identified``, ``records`` (per record: file, samples, R^2, RMSE,
+            Durbin-Watson), ``stage_one`` (None, or per record the Prony fit and the mean
+            used), ``fitted_material``, ``history`` (per trial step: x, cost, accepted...),
+            ``seconds`` and ``software``.
+        """
+        from warptissue.io import software_versions
+
+        result = self.result
+        errors = result.standard_errors
+        parameters = {
+            name: {
+                "value": float(result.x[i]),
+                "unit": result.parameter_units[i],
+                "standard_error": None if errors is None else float(errors[i]),
+                "start": self.start.get(name),
+            }
+            for i, name in enumerate(result.parameter_names)
+        }
+        stage_one = None
+        if self.strategy == "two_stage":
+            stage_one = {
+                "method": "Ahn & Kim stage (i): QLV Prony series of each record's relaxation, "
+                "finite ramp included (warptissue.viscoelastic.fitting.fit_qlv)",
+                "records": [
+                    {
+                        "file": record.file,
+                        "parameters": fit.parameters,
+                        "standard_errors": None
+                        if fit.standard_errors is None
+                        else dict(
+                            zip(fit.parameter_names, fit.standard_errors.tolist(), strict=True)
+                        ),
+                        "r_squared": fit.r_squared,
+                        "status": fit.status,
+                        "warnings": fit.all_warnings,
+                    }
+                    for record, fit in zip(self.records, self.stage_one_fits, strict=True)
+                ],
+                "mean": dict(self.stage_one_prony),
+            }
+        return {
+            "study": {
+                "name": self.study.name,
+                "path": None if self.study.path is None else str(self.study.path),
+            },
+            "strategy": self.strategy,
+            "status": self.status,
+            "success": self.success,
+            "message": self.message,
+            "parameters": parameters,
+            "correlation": None
+            if result.correlation is None
+            else {"names": list(result.parameter_names), "matrix": result.correlation.tolist()},
+            "r_squared": result.r_squared,
+            "rmse_N": result.rmse,
+            "cost": result.cost,
+            "iterations": result.iterations,
+            "forward_solves": self.forward_solves,
+            "finite_difference_solves": self.finite_difference_solves,
+            "method": result.method,
+            "objective": result.objective,
+            "engine_status": result.status,
+            "engine_message": result.message,
+            "identified": result.identified,
+            "warnings": list(self.warnings),
+            "records": [record.to_dict() for record in self.records],
+            "stage_one": stage_one,
+            "fitted_material": dict(self.fitted_study.material.to_dict()),
+            "history": [record.to_dict() for record in result.history],
+            "seconds": self.seconds,
+            "software": software_versions(),
+        }
+
+
+@dataclass
+class _Evaluation:
+    """One forward evaluation: residuals, Jacobian and the curves behind them."""
+
+    x: np.ndarray
+    residuals: np.ndarray
+    jacobian: np.ndarray
+    predicted: list[np.ndarray]
+    fe_curves: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+    @property
+    def cost(self) -> float:
+        return 0.5 * float(self.residuals @ self.residuals)
+
+
+def _durbin_watson(residuals: np.ndarray) -> float | None:
+    """sum(diff(r)^2) / sum(r^2): about 2 for independent residuals, near 0 for a trend."""
+    total = float(residuals @ residuals)
+    if residuals.size < 3 or total == 0.0:
+        return None
+    return float(np.sum(np.diff(residuals) ** 2) / total)
+
+
+def _record_drift_warnings(record: DataRecord) -> list[str]:
+    """A force that rises in a hold, stays after unloading, or a baseline drift removed."""
+    t, d, f = record.time_s, record.displacement_m, record.force_N
+    peak = float(np.max(np.abs(f))) if f.size else 0.0
+    if peak == 0.0 or f.size < 10:
+        return []
+    messages = []
+    name = record.file
+    drift = record.conditioning.get("force_drift_N_per_s")
+    if drift:
+        change = abs(float(drift)) * float(t[-1] - t[0])
+        if change > DRIFT_SHARE * peak:
+            messages.append(
+                f"{name}: the conditioning removed a force baseline drift of {float(drift):.4g} "
+                f"N/s ({100 * change / peak:.0f} % of the peak force over the record): a "
+                "drifting transducer offset; check the record's zero"
+            )
+    deepest = int(np.argmax(d))
+    span = float(d[deepest])
+    if span > 0.0:
+        hold = np.flatnonzero(np.abs(d - span) <= 0.005 * span)
+        hold = hold[hold >= deepest]
+        breaks = np.flatnonzero(np.diff(hold) > 1)
+        contiguous = hold[: int(breaks[0]) + 1] if breaks.size else hold  # the first hold
+        if contiguous.size >= 10:
+            forces = f[contiguous]
+            tail = max(3, contiguous.size // 10)
+            rise = float(np.mean(forces[-tail:]) - np.min(forces))
+            if rise > DRIFT_SHARE * peak:
+                messages.append(
+                    f"{name}: the force rises by {rise:.4g} N ({100 * rise / peak:.0f} % of "
+                    "its peak) during the hold at the deepest point, where a tissue relaxes: "
+                    "a drifting offset or a moving specimen"
+                )
+        after = np.flatnonzero((np.arange(d.size) > deepest) & (d <= 0.005 * span))
+        if after.size >= 5:
+            left = float(np.mean(f[after]))
+            if abs(left) > DRIFT_SHARE * peak:
+                messages.append(
+                    f"{name}: the force is {left:.4g} N ({100 * abs(left) / peak:.0f} % of its "
+                    "peak) after unloading, where it should return to zero: a drifting "
+                    "offset or a probe that lost contact late"
+                )
+    return messages
+
+
+def _check_probe_radius(study: Study) -> None:
+    """Refuse a record whose sidecar names another probe radius than the study's."""
+    from warptissue.io import read_sidecar
+
+    radius = study.indenter.radius_m
+    for record in study.data:
+        sidecar = read_sidecar(record.path)
+        value = sidecar.get("probe_radius_m")
+        if value is None:
+            continue
+        try:
+            measured = float(value)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{record.file}: the sidecar's probe_radius_m is not a number",
+                path=record.path,
+                key="probe_radius_m",
+                value=value,
+            ) from None
+        if not math.isclose(measured, radius, rel_tol=1e-3):
+            raise InputError(
+                f"{record.file} was measured with probe_radius_m = {measured:g} m (its "
+                f"sidecar), the study's indenter has radius_m = {radius:g} m: fit it with a "
+                "study of that probe",
+                path=record.path,
+                key="probe_radius_m",
+                value=measured,
+            )
+
+
+class _ForwardModel:
+    """The FE force of every record as a function of the free parameters, with a cache.
+
+    One evaluation runs the FE (once for an elastic material, once per record for a
+    viscoelastic one) with the sensitivities of the free parameters, and gives the
+    residuals and the Jacobian together: ``fun`` and ``jac`` at one point share one run.
+    """
+
+    def __init__(
+        self,
+        *,
+        study: Study,
+        problem: Any,
+        assembler: Any,
+        material: Any,
+        names: tuple[str, ...],
+        device: Any,
+        progress: bool,
+    ) -> None:
+        settings = study.fit
+        self.study = study
+        self.problem = problem
+        self.assembler = assembler
+        self.material = material
+        self.names = names
+        self.device = device
+        self.progress = progress
+        self.options = study.solver.options
+        self.all_names = tuple(material.parameter_names)
+        missing = [name for name in names if name not in self.all_names]
+        if missing:
+            raise InputError(
+                f"fit.free names {missing[0]!r}, not a parameter of the material "
+                f"({', '.join(self.all_names)})",
+                path=study.path,
+                key="fit.free",
+                value=missing[0],
+            )
+        self.index = [self.all_names.index(name) for name in names]
+        self.viscoelastic = isinstance(material, Viscoelastic)
+        self.records = study.data
+        steps = settings.time_steps
+        self.measured = [np.asarray(r.force_N, dtype=np.float64) for r in self.records]
+        everything = np.concatenate(self.measured)
+        largest = float(np.max(np.abs(everything)))
+        if settings.objective == "relative":
+            floor = settings.relative_floor_N or RELATIVE_FLOOR_SHARE * largest
+            self.divisors = [np.maximum(np.abs(f), floor) for f in self.measured]
+        else:
+            self.divisors = [np.ones_like(f) for f in self.measured]
+        self.contact_s = [r.contact_time_s for r in self.records]
+        if self.viscoelastic:
+            self.grids = [record.load_history(steps=steps) for record in self.records]
+        else:
+            deepest = max(float(np.max(r.displacement_m)) for r in self.records)
+            self.grids = [(None, deepest * np.arange(1, steps + 1) / steps)]
+        self.forward_solves = 0
+        self.solves_per_evaluation = len(self.grids)
+        self.cache: dict[bytes, _Evaluation] = {}
+        self.best: _Evaluation | None = None
+        self.evaluations = 0
+
+    def material_at(self, x: np.ndarray) -> Any:
+        vector = self.material.parameter_vector.copy()
+        vector[self.index] = x
+        return self.material.with_parameters(vector)
+
+    def _run(self, material: Any, times: np.ndarray | None, depths: np.ndarray) -> Any:
+        problem = dataclasses.replace(self.problem, material=material)
+        extra = {} if times is None else {"times_s": times}
+        self.forward_solves += 1
+        return _simulate()(
+            problem,
+            depths,
+            device=self.device,
+            progress=self.progress,
+            options=self.options,
+            assembler=self.assembler,
+            sensitivities=self.names,
+            **extra,
+        )
+
+    def evaluate(self, x: np.ndarray) -> _Evaluation:
+        key = np.asarray(x, dtype=np.float64).tobytes()
+        if key in self.cache:
+            return self.cache[key]
+        try:
+            material = self.material_at(x)
+        except InputError as exc:
+            raise RejectStep(str(exc)) from exc
+        if float(material.initial_shear_modulus_Pa) <= 0.0:
+            raise RejectStep("the initial shear modulus is not positive")
+        runs = []
+        for times, depths in self.grids:
+            result = self._run(material, times, depths)
+            if not result.completed:
+                raise RejectStep(f"the FE did not converge: {result.message}")
+            runs.append(result)
+        predicted, jacobians, curves = [], [], []
+        for k, record in enumerate(self.records):
+            if self.viscoelastic:
+                run = runs[k]
+                fe_time = np.asarray(self.grids[k][0], dtype=np.float64)
+                fe_depth = np.asarray(run.depths_m, dtype=np.float64)
+                where = np.concatenate([[0.0], fe_time])
+                at = record.time_s - self.contact_s[k]
+            else:
+                run = runs[0]
+                fe_depth = np.asarray(run.depths_m, dtype=np.float64)
+                where = np.concatenate([[0.0], fe_depth])
+                at = np.clip(record.displacement_m, 0.0, None)
+                fe_time = _first_passage_times(record, self.contact_s[k], fe_depth)
+            force = np.asarray(run.reaction_force_N, dtype=np.float64)
+            sensitivity = np.asarray(run.force_sensitivity_N_per_unit, dtype=np.float64)
+            predicted.append(np.interp(at, where, np.concatenate([[0.0], force])))
+            jacobians.append(
+                np.column_stack(
+                    [
+                        np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
+                        for j in range(len(self.names))
+                    ]
+                )
+            )
+            if self.viscoelastic:
+                curves.append((fe_time, fe_depth, force))
+            else:
+                # The FE steps up to the first one at or beyond the record's deepest point.
+                covered = int(np.searchsorted(fe_depth, float(np.max(record.displacement_m))))
+                keep = slice(0, covered + 1)
+                curves.append((fe_time[keep], fe_depth[keep], force[keep]))
+        residuals = np.concatenate(
+            [(p - f) / w for p, f, w in zip(predicted, self.measured, self.divisors, strict=True)]
+        )
+        jacobian = np.vstack(
+            [j / w[:, None] for j, w in zip(jacobians, self.divisors, strict=True)]
+        )
+        evaluation = _Evaluation(
+            np.array(x, dtype=np.float64), residuals, jacobian, predicted, curves
+        )
+        self.evaluations += 1
+        if len(self.cache) >= _CACHE_SIZE:
+            self.cache.pop(next(iter(self.cache)))
+        self.cache[key] = evaluation
+        if self.best is None or evaluation.cost < self.best.cost:
+            self.best = evaluation
+        return evaluation
+
+    def fun(self, x: np.ndarray) -> np.ndarray:
+        return self.evaluate(x).residuals
+
+    def jac(self, x: np.ndarray) -> np.ndarray:
+        return self.evaluate(x).jacobian
+
+    def r_squared_at(self, evaluation: _Evaluation) -> float | None:
+        try:
+            return r_squared(np.concatenate(self.measured), np.concatenate(evaluation.predicted))
+        except InputError:
+            return None
+
+
+def _first_passage_times(record: DataRecord, contact_s: float, depths: np.ndarray) -> np.ndarray:
+    """The times (from the contact) at which a record first reaches each depth (its loading
+    ramp); depths beyond its deepest point get its deepest point's time."""
+    t = record.time_s - contact_s
+    d = np.maximum.accumulate(np.clip(record.displacement_m, 0.0, None))
+    rising = np.concatenate([[True], np.diff(d) > 0.0])
+    return np.interp(depths, d[rising], t[rising])
+
+
+def _simulate() -> Callable[..., Any]:
+    from warptissue.fem import simulate_indentation
+
+    return simulate_indentation
+
+
+def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
+    """|start|, or for a zero start the mean |start| of the parameters of its unit (else 1)."""
+    scale = np.abs(start).astype(np.float64)
+    for j in np.flatnonzero(scale == 0.0):
+        same = [abs(start[k]) for k in range(start.size) if units[k] == units[j] and start[k]]
+        scale[j] = float(np.mean(same)) if same else 1.0
+    return scale
+
+
+def _positive_bounds(
+    names: Sequence[str], lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Moduli that must be positive get lower bound 0 where the model leaves them free."""
+    lower = lower.copy()
+    for j, name in enumerate(names):
+        if name in ("C10_Pa", "shear_modulus_Pa", "youngs_modulus_Pa", "bulk_modulus_Pa"):
+            lower[j] = max(lower[j], 0.0)
+        elif name.startswith("tau") and name.endswith("_s"):
+            lower[j] = max(lower[j], 0.0)
+        elif _is_prony(name):
+            lower[j] = max(lower[j], 0.0)
+            upper[j] = min(upper[j], 1.0)
+    return lower, upper
+
+
+def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitResult, ...], dict]:
+    """Ahn & Kim's stage (i): fit_qlv on every record; the mean Prony terms."""
+    from warptissue.viscoelastic.fitting import fit_qlv
+
+    terms = sum(1 for name in material.parameter_names if re.fullmatch(r"g\d+", name))
+    if terms == 0:
+        raise InputError(
+            "strategy two_stage fits a Prony series first: the material has none (add g1, "
+            "tau1_s, ... to [material])",
+            path=study.path,
+            key="fit.strategy",
+            value=strategy,
+        )
+    fits = []
+    for record in study.data:
+        try:
+            fits.append(fit_qlv(record.time_s, record.displacement_m, record.force_N, terms=terms))
+        except InputError as exc:
+            raise InputError(
+                f"{record.file}: stage (i) (Ahn & Kim): {exc.message}",
+                path=record.path,
+                value=exc.value,
+            ) from None
+    mean = {}
+    for i in range(1, terms + 1):
+        for name in (f"g{i}", f"tau{i}_s"):
+            mean[name] = float(np.mean([fit.parameters[name] for fit in fits]))
+    return tuple(fits), mean
+
+
+def fit_indentation(
+    study: Study,
+    *,
+    device: str | None = None,
+    progress: bool = True,
+    strategy: str | None = None,
+    callback: Callable[[IndentationFitProgress], None] | None = None,
+) -> IndentationFit:
+    """Fit the study's free material parameters to its records by inverse FE.
+
+    Args:
+        study: A study with ``[[data]]`` records and a ``[fit]`` table
+            (:func:`warptissue.study.load_study`).
+        device: Warp device (``"cpu"``, ``"cuda"``, ``"cuda:N"``); None: the study's
+            ``solver.device`` (``"auto"``: a GPU where present, else the CPU).
+        progress: Show a progress bar over the engine's trial steps (cost, R^2) and the FE's
+            bars over the load steps inside them.
+        strategy: ``"joint"`` or ``"two_stage"`` (Ahn & Kim); None: the study's
+            ``fit.strategy`` ("joint" by default).
+        callback: Called after each trial step of the engine with an
+            :class:`IndentationFitProgress`. It may raise ``KeyboardInterrupt`` to stop.
+
+    Returns:
+        The :class:`IndentationFit`. Ctrl-C (``KeyboardInterrupt``, also inside an FE run)
+        ends the fit with status ``"interrupted"`` and the best parameters evaluated so far
+        (their curves, residuals and standard errors). A fit that reaches the iteration
+        limit has status ``"max_iterations"``; one whose engine found no acceptable step or
+        could not evaluate the Jacobian, ``"failed"`` (both with the best point).
+
+    Raises:
+        InputError: The study has no fit or no records, a record was measured with another
+            probe radius (its sidecar), an unknown strategy or free parameter.
+        ConvergenceError: The FE does not converge at the start values (nothing to fit from).
+        KeyboardInterrupt: Ctrl-C before the first forward run finished (nothing to keep).
+        DeviceError: The device does not exist.
+
+    Notes:
+        Ahn & Kim (2010), the two-stage method and the relative objective (Eq. 7); the
+        engine: Levenberg-Marquardt with Marquardt's scaling or Tong et al.'s self-adapting
+        LM (:mod:`warptissue.fit.engine`). See the module docstring for the model force,
+        the residuals and the warnings.
+    """
+    from warptissue.device import resolve_device
+    from warptissue.fem import Assembler
+    from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
+
+    started = time.perf_counter()
+    if study.fit is None or not study.data:
+        raise InputError(
+            "the study holds no fit: add [[data]] records and a [fit] table (schema_version 2)",
+            path=study.path,
+        )
+    settings = study.fit
+    chosen_strategy = strategy if strategy is not None else settings.strategy
+    if chosen_strategy not in FIT_STRATEGIES:
+        raise InputError(
+            f"strategy must be one of {', '.join(FIT_STRATEGIES)}",
+            path=study.path,
+            key="fit.strategy",
+            value=chosen_strategy,
+        )
+    _check_probe_radius(study)
+    start = start_values_from_record(study)
+    material = study.material
+    free = tuple(settings.free)
+    all_lower, all_upper = settings.parameter_bounds(material)
+    stage_one_fits: tuple[FitResult, ...] = ()
+    prony: dict[str, float] = {}
+    if chosen_strategy == "two_stage":
+        stage_one_fits, prony = _stage_one(study, material, chosen_strategy)
+        vector = material.parameter_vector.copy()
+        names = list(material.parameter_names)
+        for name, value in prony.items():
+            vector[names.index(name)] = value
+        try:
+            material = material.with_parameters(vector)
+        except InputError as exc:
+            raise InputError(
+                f"stage (i) (Ahn & Kim) gave an invalid Prony series: {exc.message}",
+                path=study.path,
+                value=prony,
+            ) from None
+        keep = [j for j, name in enumerate(free) if not _is_prony(name)]
+        if not keep:
+            raise InputError(
+                "strategy two_stage fits the Prony terms in stage (i) and the other free "
+                "parameters by inverse FE in stage (ii): free an elastic parameter too",
+                path=study.path,
+                key="fit.free",
+                value=list(free),
+            )
+        free = tuple(free[j] for j in keep)
+        all_lower, all_upper = all_lower[keep], all_upper[keep]
+
+    chosen_device = device if device is not None else study.solver.device
+    warp_device = resolve_device(None if chosen_device == "auto" else chosen_device)
+    _check_linear_solver(study, warp_device)
+    estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
+    mesh = build_mesh(study)
+    problem = build_problem(dataclasses.replace(study, material=material), mesh)
+    assembler = Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
+    model = _ForwardModel(
+        study=study,
+        problem=problem,
+        assembler=assembler,
+        material=material,
+        names=free,
+        device=warp_device,
+        progress=progress,
+    )
+    units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
+    x0 = np.array([start[name] for name in free], dtype=np.float64)
+    lower, upper = _positive_bounds(free, all_lower, all_upper)
+    x0 = np.clip(x0, lower, upper)
+    stage = "stage two" if chosen_strategy == "two_stage" else "joint"
+    history: list[IterationRecord] = []
+    stopped_at_r_squared = False
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(
+        total=settings.max_iterations,
+        desc=f"inverse FE ({settings.method})",
+        unit="step",
+        disable=not progress,
+    )
+
+    def on_step(record: IterationRecord) -> bool:
+        nonlocal stopped_at_r_squared
+        history.append(record)
+        current = model.cache.get(np.asarray(record.x, dtype=np.float64).tobytes())
+        r2 = None if current is None else model.r_squared_at(current)
+        bar.update(1)
+        bar.set_postfix(
+            cost=f"{record.cost:.4g}",
+            R2="n/a" if r2 is None else f"{r2:.5f}",
+            solves=model.forward_solves,
+            refresh=False,
+        )
+        if callback is not None:
+            callback(
+                IndentationFitProgress(
+                    stage=stage,
+                    iteration=record.iteration,
+                    parameters=dict(zip(free, record.x.tolist(), strict=True)),
+                    cost=record.cost,
+                    r_squared=r2,
+                    forward_solves=model.forward_solves,
+                    accepted=record.accepted,
+                )
+            )
+        if (
+            settings.stop_r_squared is not None
+            and record.accepted
+            and r2 is not None
+            and r2 > settings.stop_r_squared
+        ):
+            stopped_at_r_squared = True
+            return True
+        return False
+
+    engine_result = None
+    interrupted = False
+    try:
+        try:
+            model.evaluate(x0)
+        except RejectStep as exc:
+            raise ConvergenceError(
+                f"the FE does not converge at the start values "
+                f"{dict(zip(free, x0.tolist(), strict=True))}: {exc}; give other start "
+                "values in [fit.start]"
+            ) from None
+        engine_result = least_squares(
+            model.fun,
+            x0,
+            jac=model.jac,
+            bounds=(lower, upper),
+            method=settings.method,
+            x_scale=None if settings.method == "lm" else _x_scale(x0, units),
+            max_iterations=settings.max_iterations,
+            ftol=settings.ftol,
+            xtol=settings.xtol,
+            gtol=settings.gtol,
+            callback=on_step,
+            progress=False,
+            parameter_names=free,
+            parameter_units=units,
+        )
+    except KeyboardInterrupt:
+        interrupted = True
+        if model.best is None:
+            raise
+    finally:
+        bar.close()
+
+    best = model.best if interrupted else model.evaluate(engine_result.x)
+    result = _result_from(
+        engine_result, best, model, free, units, settings.method, lower, upper, history
+    )
+    n = len(free)
+    if engine_result is not None:
+        finite_difference = (engine_result.njev * n + engine_result.nfev) * (
+            model.solves_per_evaluation
+        )
+    else:
+        jacobians = 1 + sum(1 for record in history if record.accepted)
+        finite_difference = (jacobians * n + 1 + len(history)) * model.solves_per_evaluation
+    if interrupted:
+        status = "interrupted"
+        message = (
+            f"interrupted (Ctrl-C) after {len(history)} trial steps: the best parameters "
+            f"evaluated so far are kept (cost {best.cost:.6g})"
+        )
+    elif stopped_at_r_squared:
+        status = "stopped_at_r_squared"
+        message = (
+            f"stopped at R^2 = {result.r_squared:.6g} > fit.stop_r_squared = "
+            f"{settings.stop_r_squared:g}"
+        )
+    elif engine_result.status > 0:
+        status, message = "converged", engine_result.message
+    elif engine_result.status == 0:
+        status, message = "max_iterations", engine_result.message
+    else:
+        status, message = "failed", engine_result.message
+    records = _record_curves(model, best)
+    warnings = _warnings(study, result, records, status, message)
+    result.warnings.extend(warnings)
+    fitted_material = model.material_at(best.x)
+    return IndentationFit(
+        study=study,
+        fitted_study=dataclasses.replace(study, material=fitted_material),
+        result=result,
+        records=records,
+        strategy=chosen_strategy,
+        stage_one=stage_one_fits[0] if stage_one_fits else None,
+        forward_solves=model.forward_solves,
+        finite_difference_solves=int(finite_difference),
+        status=status,
+        message=message,
+        seconds=time.perf_counter() - started,
+        warnings=result.all_warnings,
+        stage_one_fits=stage_one_fits,
+        stage_one_prony=prony,
+        start=dict(zip(free, x0.tolist(), strict=True)),
+    )
+
+
+def _result_from(
+    engine_result: FitResult | None,
+    best: _Evaluation,
+    model: _ForwardModel,
+    names: tuple[str, ...],
+    units: tuple[str, ...],
+    method: str,
+    lower: np.ndarray,
+    upper: np.ndarray,
+    history: list[IterationRecord],
+) -> FitResult:
+    """The engine's result with the data statistics (R^2, RMSE in N, fitted force); for an
+    interrupted fit, a result built from the best evaluation."""
+    measured = np.concatenate(model.measured)
+    fitted = np.concatenate(best.predicted)
+    if engine_result is None:
+        covariance, errors, correlation = covariance_from_jacobian(best.jacobian, best.cost)
+        result = FitResult(
+            x=best.x.copy(),
+            parameter_names=names,
+            parameter_units=units,
+            cost=best.cost,
+            residuals=best.residuals,
+            jacobian=best.jacobian,
+            success=False,
+            status=-1,
+            message="Interrupted (Ctrl-C): the best point evaluated so far.",
+            iterations=len(history),
+            nfev=model.evaluations,
+            njev=1 + sum(1 for record in history if record.accepted),
+            covariance=covariance,
+            standard_errors=errors,
+            correlation=correlation,
+            r_squared=None,
+            rmse=0.0,
+            history=list(history),
+            method=method,
+            lower_bounds=lower,
+            upper_bounds=upper,
+        )
+    else:
+        result = engine_result
+    result.fitted = fitted
+    result.objective = model.study.fit.objective
+    result.rmse = rmse(measured, fitted)
+    try:
+        result.r_squared = r_squared(measured, fitted)
+    except InputError:
+        result.r_squared = None
+    return result
+
+
+def _record_curves(model: _ForwardModel, best: _Evaluation) -> tuple[RecordCurve, ...]:
+    curves = []
+    for k, record in enumerate(model.records):
+        measured = model.measured[k]
+        fitted = best.predicted[k]
+        try:
+            r2 = r_squared(measured, fitted)
+        except InputError:
+            r2 = None
+        fe_time, fe_depth, fe_force = best.fe_curves[k]
+        curves.append(
+            RecordCurve(
+                file=record.file,
+                time_s=np.asarray(record.time_s, dtype=np.float64),
+                depth_m=np.asarray(record.displacement_m, dtype=np.float64),
+                measured_force_N=measured,
+                fitted_force_N=fitted,
+                fe_time_s=fe_time,
+                fe_depth_m=fe_depth,
+                fe_force_N=fe_force,
+                r_squared=r2,
+                rmse_N=rmse(measured, fitted),
+                durbin_watson=_durbin_watson(fitted - measured),
+            )
+        )
+    return tuple(curves)
+
+
+def _warnings(
+    study: Study,
+    result: FitResult,
+    records: tuple[RecordCurve, ...],
+    status: str,
+    message: str,
+) -> list[str]:
+    """Plausibility warnings of a fit (the identifiability ones are the result's own)."""
+    messages: list[str] = []
+    if status not in ("converged", "stopped_at_r_squared"):
+        messages.append(f"the fit did not converge ({status}): {message}")
+    for record, curve in zip(study.data, records, strict=True):
+        messages.extend(_record_drift_warnings(record))
+        if curve.durbin_watson is not None and curve.durbin_watson < DURBIN_WATSON_LIMIT:
+            messages.append(
+                f"{curve.file}: the residuals are systematic (Durbin-Watson statistic "
+                f"{curve.durbin_watson:.3g}, about 2 for noise; R^2 = "
+                f"{'n/a' if curve.r_squared is None else f'{curve.r_squared:.4g}'}): check "
+                "the probe radius, the contact point, a drifting force offset, or the "
+                "material model"
+            )
+    return messages
