@@ -56,7 +56,6 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.fit.engine import covariance_from_jacobian, least_squares
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import FitResult, IterationRecord, RejectStep
-from warptissue.materials import PRONY_KEY, Viscoelastic
 from warptissue.study import FIT_STRATEGIES, DataRecord, Study, start_values_from_record
 
 __all__ = [
@@ -90,6 +89,8 @@ _CACHE_SIZE = 8
 
 
 def _is_prony(name: str) -> bool:
+    from warptissue.materials import PRONY_KEY
+
     return bool(PRONY_KEY.match(name))
 
 
@@ -446,6 +447,8 @@ class _ForwardModel:
                 value=missing[0],
             )
         self.index = [self.all_names.index(name) for name in names]
+        from warptissue.materials import Viscoelastic
+
         self.viscoelastic = isinstance(material, Viscoelastic)
         self.records = study.data
         steps = settings.time_steps
