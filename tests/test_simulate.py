@@ -451,3 +451,79 @@ def test_a_curve_that_pulls_is_a_warning_line_and_a_json_field(
     assert len(error) == 1 and error[0].startswith("warptissue: warning: the reaction force")
     summary = json.loads((out_dir / "result.json").read_text())
     assert len(summary["warnings"]) == 1
+
+
+def viscoelastic_ramp_hold(tiny_record: dict) -> dict:
+    """The tiny study, viscoelastic (one Prony term, g1 = 0.5, tau1 = 1 s), ramped at
+    1 mm/s to 0.1 mm (0.1 s) and held for 20 s (20 tau)."""
+    record = json.loads(json.dumps(tiny_record))
+    record["schema_version"] = 2
+    record["material"].update(g1=0.5, tau1_s=1.0)
+    record["protocol"] = {
+        "kind": "ramp_hold",
+        "max_depth_m": DEPTHS_M[-1],
+        "speed_m_per_s": 1e-3,
+        "hold_s": 20.0,
+        "ramp_steps": 2,
+        "hold_steps": 6,
+    }
+    return record
+
+
+def test_a_viscoelastic_ramp_hold_relaxes_to_the_long_term_force(
+    api_run, tiny_record, tmp_path, capsys
+):
+    """Fung's QLV with a force linear in depth (at these depths the elastic run's force over
+    depth varies by 0.4 %): after a ramp of duration T to the depth of elastic force F_e,
+    F(t) = F_e [g_inf + g1 (tau / T) (1 - exp(-T / tau)) exp(-(t - T) / tau)], so the hold
+    relaxes monotonically to g_inf F_e = (1 - g1) F_e. F_e is the elastic run's (api_run)."""
+    study_path = tmp_path / "visco.toml"
+    study_path.write_text(tomli_w.dumps(viscoelastic_ramp_hold(tiny_record)))
+    out_dir = tmp_path / "out"
+    assert main(["simulate", str(study_path), "--out", str(out_dir)]) == 0
+    printed = capsys.readouterr().out
+    assert "time_s" in printed.splitlines()[1]  # the table has the time of each step
+    study = load_study(study_path)
+    times = np.array(study.protocol.times_s)
+    header, rows = read_csv(out_dir / "force_curve.csv")
+    assert [r[0] for r in rows] == pytest.approx([0.0, *times])  # real time, not the step
+    assert [r[1] for r in rows] == pytest.approx([0.0, *study.protocol.depths_m])
+    summary = json.loads((out_dir / "result.json").read_text())
+    assert summary["force_curve"]["time_s"] == pytest.approx(times.tolist())
+    assert summary["study"]["protocol"]["kind"] == "ramp_hold"
+    assert summary["warnings"] == []  # relaxation in a hold is no implausible curve
+    force = np.array([r[2] for r in rows[1:]])
+    elastic_N = api_run[1].result.reaction_force_N[-1]  # the same depth, elastic
+    ramp_s, g1, tau = 0.1, 0.5, 1.0
+    hold = times > ramp_s * (1 + 1e-9)
+    assert np.all(np.diff(force[times >= ramp_s * (1 - 1e-9)]) < 0)  # relaxes, monotonically
+    expected = elastic_N * (
+        (1 - g1) + g1 * tau / ramp_s * (1 - np.exp(-ramp_s / tau)) * np.exp(-(times - ramp_s) / tau)
+    )
+    # 0.05 % when written; the force over depth of these depths varies by 0.4 %.
+    np.testing.assert_allclose(force[hold], expected[hold], rtol=0.005)
+    assert force[-1] == pytest.approx((1 - g1) * elastic_N, rel=0.005)
+    assert force[-1] < 0.6 * force[1]  # it did relax (an elastic run would not)
+
+
+def test_a_viscoelastic_study_with_a_quasi_static_protocol_is_one_line(
+    tiny_record, tmp_path, capsys
+):
+    record = viscoelastic_ramp_hold(tiny_record)
+    record["protocol"] = {"depths_m": DEPTHS_M}
+    study_path = tmp_path / "visco.toml"
+    study_path.write_text(tomli_w.dumps(record))
+    assert main(["simulate", str(study_path), "--out", str(tmp_path / "out")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "needs a timed protocol" in error[0] and "visco.toml" in error[0]
+
+
+def test_timed_curves_are_judged_only_where_the_probe_goes_deeper():
+    from warptissue.simulate import force_curve_warnings
+
+    depths = np.array([1e-4, 2e-4, 2e-4, 1e-4, 0.5e-4])
+    relaxing_and_pulling = np.array([1e-3, 2e-3, 1.5e-3, 0.2e-3, -0.1e-3])
+    assert force_curve_warnings(depths, relaxing_and_pulling) == []
+    deeper_but_falling = np.array([1e-3, 2e-3, 1.5e-3, 0.2e-3, 0.1e-3, 0.05e-3])
+    warnings = force_curve_warnings(np.append(depths, 3e-4), deeper_but_falling)
+    assert len(warnings) == 1 and "falls from step 5 to 6" in warnings[0]

@@ -9,8 +9,10 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
   depth (positive into the specimen) and ``force_N`` the reaction force (positive pushing
   in), so that the file reads as an indentation record
   (:func:`warptissue.io.read_experiment_csv`: ``warptissue fit punch-modulus``,
-  ``warptissue rig-sim --tissue curve --force-curve``). The simulation is
-  quasi-static (rate-independent): ``time_s`` is a pseudo-time, the load-step number;
+  ``warptissue rig-sim --tissue curve --force-curve``). For a timed protocol
+  (:attr:`warptissue.study.Protocol.timed`: ramp-and-hold, sine, a record's history)
+  ``time_s`` is the time of each step (s), and a viscoelastic material relaxes; for a
+  quasi-static one (rate-independent) it is a pseudo-time, the load-step number;
 - ``result.json``: the study echoed back with every default, the force curve, iterations,
   ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,
   ``warnings`` (an implausible force curve: :func:`force_curve_warnings`), mesh statistics,
@@ -218,12 +220,20 @@ def _check_linear_solver(study: Study, device: Any) -> None:
         ) from None
 
 
+def _is_viscoelastic(material: Any) -> bool:
+    """True for a material with a Prony series (its parameters hold ``g1``, ``tau1_s``...)."""
+    return any(re.match(r"^(g\d+|tau\d+_s)$", name) for name in material.parameter_names)
+
+
 def force_curve_warnings(depths_m: np.ndarray, forces_N: np.ndarray) -> list[str]:
     """What is implausible in an indentation force curve (empty when nothing is).
 
     A probe pushed into a specimen meets a positive reaction force that grows with the depth
     (monotonic loading of a hyperelastic solid); a force that is not positive, or that falls
-    while the depth grows, points at a sign, unit or set-up error (or an instability).
+    while the depth grows, points at a sign, unit or set-up error (or an instability). In a
+    timed run the force may fall while the depth holds (relaxation) or goes back, and a
+    bonded probe may pull on the way back: only the steps that go deeper are judged, and a
+    force that is not positive only where the depth reaches a new deepest point.
 
     Args:
         depths_m: Depths of the converged steps, shape (S,), m.
@@ -234,7 +244,10 @@ def force_curve_warnings(depths_m: np.ndarray, forces_N: np.ndarray) -> list[str
         positive hides the falling one).
     """
     warnings: list[str] = []
-    not_positive = np.flatnonzero(~(forces_N > 0.0))
+    depths_m = np.asarray(depths_m, dtype=np.float64)
+    forces_N = np.asarray(forces_N, dtype=np.float64)
+    deepest = depths_m >= np.maximum.accumulate(depths_m)
+    not_positive = np.flatnonzero(~(forces_N > 0.0) & deepest)
     if not_positive.size:
         step = int(not_positive[0])
         warnings.append(
@@ -242,7 +255,7 @@ def force_curve_warnings(depths_m: np.ndarray, forces_N: np.ndarray) -> list[str
             f"({forces_N[step]:.6g} N at depth {depths_m[step]:.6g} m): the probe should push"
         )
         return warnings
-    falling = np.flatnonzero(np.diff(forces_N) < 0.0)
+    falling = np.flatnonzero((np.diff(forces_N) < 0.0) & (np.diff(depths_m) > 0.0))
     if falling.size:
         step = int(falling[0]) + 1
         warnings.append(
@@ -354,6 +367,15 @@ def run_study(
     from warptissue.device import resolve_device
     from warptissue.fem import SolveInterrupted, simulate_indentation
 
+    times = study.protocol.times_s
+    if times is None and _is_viscoelastic(study.material):
+        raise InputError(
+            "protocol: a viscoelastic [material] (Prony terms) needs a timed protocol "
+            "(kind = 'ramp_hold', 'sine' or 'record', or depths_m with times_s): a "
+            "quasi-static one has no time to relax in",
+            path=study.path,
+            value=study.protocol.kind,
+        )
     out_path = Path(out_dir)
     _prepare_out_dir(out_path)
     chosen = device if device is not None else study.solver.device
@@ -375,6 +397,7 @@ def run_study(
             device=warp_device,
             progress=progress,
             options=study.solver.options,
+            times_s=None if times is None else np.asarray(times, dtype=np.float64),
         )
         status = "completed" if result.completed else "stopped_early"
     except SolveInterrupted as exc:
@@ -387,12 +410,18 @@ def run_study(
     newton = np.asarray(result.newton_iterations, dtype=np.int64)
     depths = np.asarray(result.depths_m, dtype=np.float64)
     forces = np.asarray(result.reaction_force_N, dtype=np.float64)
+    # Real time for a timed protocol; for a quasi-static one a pseudo-time, the step number.
+    step_times = (
+        np.asarray(result.times_s, dtype=np.float64)[:converged]
+        if times is not None
+        else steps.astype(np.float64)
+    )
     files: dict[str, Path] = {
         "result": out_path / "result.json",
         "force_curve": write_csv(
             out_path / "force_curve.csv",
             {
-                "time_s": np.arange(converged + 1, dtype=np.float64),  # pseudo-time: the step
+                "time_s": np.concatenate([[0.0], step_times]),
                 "displacement_m": np.concatenate([[0.0], depths]),
                 "force_N": np.concatenate([[0.0], forces]),
                 "step": np.arange(converged + 1, dtype=np.int64),
@@ -412,6 +441,7 @@ def run_study(
         "cutbacks": int(result.cutbacks),
         "force_curve": {
             "step": steps,
+            "time_s": step_times,
             "depth_m": depths,
             "reaction_force_N": forces,
             "newton_iterations": newton,

@@ -22,7 +22,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Run the indentation simulation described by a study TOML file and write "
             "force_curve.csv (time_s,displacement_m,force_N,step,newton_iterations: an "
             "indentation record that 'fit punch-modulus' and 'rig-sim --tissue curve "
-            "--force-curve' read), result.json and fields.vtu to the output folder. Exit "
+            "--force-curve' read; time_s is the time of each step for a timed protocol "
+            "(ramp_hold, sine, record), the step number for a quasi-static one), "
+            "result.json and fields.vtu to the output folder. Exit "
             "status: 0 complete, 2 bad input, 3 bad mesh or a mesh too large for the "
             "memory (refused before it is made), 4 stopped early, 5 device missing, 130 "
             "interrupted (Ctrl-C); after 4 and 130 the outputs hold the load steps that "
@@ -130,13 +132,20 @@ def _print_summary(outputs: SimulationOutputs) -> None:
         f"{outputs.summary['steps_converged']}/{outputs.summary['steps_requested']} load steps "
         f"in {outputs.summary['timings_s']['total']:.1f} s on {outputs.summary['device']}"
     )
-    print(f"{'step':>4} {'depth_m':>12} {'reaction_force_N':>17} {'newton':>6}")
-    for step, depth, force, newton in zip(
+    timed = outputs.summary["study"]["protocol"].get("kind", "quasi_static") != "quasi_static"
+    time_header = f" {'time_s':>11}" if timed else ""
+    print(f"{'step':>4}{time_header} {'depth_m':>12} {'reaction_force_N':>17} {'newton':>6}")
+    for step, time_s, depth, force, newton in zip(
         curve["step"],
+        curve["time_s"],
         curve["depth_m"],
         curve["reaction_force_N"],
         curve["newton_iterations"],
         strict=True,
     ):
-        print(f"{int(step):>4} {float(depth):>12.4e} {float(force):>17.6e} {int(newton):>6}")
+        time_text = f" {float(time_s):>11.4g}" if timed else ""
+        print(
+            f"{int(step):>4}{time_text} {float(depth):>12.4e} {float(force):>17.6e} "
+            f"{int(newton):>6}"
+        )
     print(f"outputs in {outputs.out_dir}: " + ", ".join(p.name for p in outputs.files.values()))
