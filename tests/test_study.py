@@ -1226,18 +1226,20 @@ def test_fit_strategy_and_time_steps_defaults_and_round_trip(tmp_path):
 VISCO_MATERIAL = "C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\ng1 = 0.3\ntau1_s = 1.0\n"
 
 
-def test_two_stage_needs_prony_terms_and_one_of_them_free(tmp_path):
+def test_two_stage_needs_prony_terms_and_a_free_elastic_parameter(tmp_path):
     text = V2.replace('method = "salm"', 'method = "salm"\nstrategy = "two_stage"')
     with pytest.raises(InputError, match="fit.strategy: 'two_stage'.*has none") as caught:
         load_study(write_v2(tmp_path, text))
     assert caught.value.line == line_of(text, "strategy =")
     visco = text.replace("C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\n", VISCO_MATERIAL)
-    with pytest.raises(InputError, match="fit.strategy: .*names none of them"):
-        load_study(write_v2(tmp_path, visco))
-    free = visco.replace('free = ["C10_Pa"]', 'free = ["C10_Pa", "g1", "tau1_s"]')
-    study = load_study(write_v2(tmp_path, free))
-    assert study.fit.strategy == "two_stage" and study.fit.free == ("C10_Pa", "g1", "tau1_s")
-    assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
+    only_prony = visco.replace('free = ["C10_Pa"]', 'free = ["g1", "tau1_s"]')
+    with pytest.raises(InputError, match="fit.strategy: .*free an elastic parameter too"):
+        load_study(write_v2(tmp_path, only_prony))
+    for free in (["C10_Pa"], ["C10_Pa", "g1", "tau1_s"]):  # stage (i) fits every Prony term
+        listed = visco.replace('free = ["C10_Pa"]', f"free = {free!r}".replace("'", '"'))
+        study = load_study(write_v2(tmp_path, listed))
+        assert study.fit.strategy == "two_stage" and study.fit.free == tuple(free)
+        assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
 
 
 BAD_FIT_KEYS = [

@@ -486,9 +486,10 @@ class FitSettings:
         stop_r_squared: Stop as soon as R^2 of the fit exceeds this (None: run to the
             tolerances).
         strategy: ``"joint"``: every free parameter by inverse FE at once; ``"two_stage"``
-            (Ahn & Kim): the free Prony terms from the normalized relaxation first, then the
-            other free parameters by inverse FE with the Prony terms fixed (needs Prony
-            terms in ``[material]`` and at least one of them free).
+            (Ahn & Kim): stage (i) the Prony terms of ``[material]`` from the normalized
+            relaxation of the records, stage (ii) the free parameters other than Prony
+            terms by inverse FE with the Prony terms fixed (needs Prony terms in
+            ``[material]`` and a free parameter that is not one).
         time_steps: FE time steps per record: the grid of
             :meth:`DataRecord.load_history` (:func:`warptissue.loading.resample_history`).
     """
@@ -1231,11 +1232,12 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
                 "'joint'",
                 strategy,
             )
-        if not any(name in free for name in prony):
+        if all(PRONY_NAME.match(name) for name in free):
             raise table.error(
                 "strategy",
-                f"'two_stage' fits the Prony terms first, and fit.free names none of them "
-                f"({', '.join(prony)}): free them, or use 'joint'",
+                "'two_stage' fits the Prony terms in stage (i) and the other free parameters "
+                "by inverse FE in stage (ii), and fit.free names no other: free an elastic "
+                "parameter too (C10_Pa, ...), or use 'joint'",
                 strategy,
             )
     time_steps = table.integer("time_steps", default=24, minimum=2)
