@@ -1270,3 +1270,22 @@ def test_every_protocol_key_is_in_the_study_file_reference():
     assert keys <= documented, sorted(keys - documented)
     for kind in ("quasi_static", "timed", "ramp_hold", "sine", "record"):
         assert f'`"{kind}"`' in page, kind
+
+
+def test_a_protocol_from_a_data_record_is_written_and_read_back(tmp_path):
+    import dataclasses
+
+    from warptissue.study import Protocol
+
+    study = load_study(write_v2(tmp_path))
+    protocol = Protocol.from_record(study.data[0], steps=10)
+    times, depths = study.data[0].load_history(steps=10)
+    assert protocol.kind == "record" and protocol.times_s == tuple(times)
+    assert protocol.depths_m == tuple(depths)
+    replayed = dataclasses.replace(study, protocol=protocol)
+    again = load_study(save_study(replayed, tmp_path / "elsewhere" / "replay.toml"))
+    assert again.protocol.to_dict()["keep_depth_m"] == 0.0004  # the record's conditioning
+    assert (again.protocol.times_s, again.protocol.depths_m) == (
+        protocol.times_s,
+        protocol.depths_m,
+    )

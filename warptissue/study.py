@@ -186,6 +186,31 @@ class Protocol:
     settings: dict[str, Any] = field(default_factory=dict)
     record: DataRecord | None = None
 
+    @classmethod
+    def from_record(cls, record: DataRecord, *, steps: int = 40) -> Protocol:
+        """A ``"record"`` protocol along a record's own depth-time history.
+
+        For example a fitted viscoelastic study's protocol, so that ``warptissue simulate``
+        replays the first ``[[data]]`` record: ``dataclasses.replace(study,
+        protocol=Protocol.from_record(study.data[0], steps=study.fit.time_steps))``.
+        Written back (:func:`save_study`) it reads as the same protocol.
+
+        Args:
+            record: A conditioned record (of ``study.data``).
+            steps: About how many time steps (:meth:`DataRecord.load_history`).
+
+        Returns:
+            The protocol, its steps those of ``record.load_history(steps=steps)``.
+        """
+        times, depths = record.load_history(steps=steps)
+        return cls(
+            depths_m=tuple(float(d) for d in depths),
+            times_s=tuple(float(t) for t in times),
+            kind="record",
+            settings={"steps": int(steps)},
+            record=record,
+        )
+
     @property
     def max_depth_m(self) -> float:
         """The deepest depth, m (the final one of a quasi-static protocol)."""
