@@ -145,6 +145,10 @@ def run(args: argparse.Namespace) -> int:
     return fit.exit_code
 
 
+def _values(parameters: dict[str, float]) -> str:
+    return ", ".join(f"{name} = {float(value):.6g}" for name, value in parameters.items())
+
+
 def _check_out_dir(out_dir: Path) -> None:
     """Refuse, before the fit, an output folder that cannot be made (a file stands there)."""
     folder = out_dir
@@ -160,17 +164,13 @@ def summary(fit: IndentationFit) -> str:
     result = fit.result
     errors = result.standard_errors
     lines = []
-    if fit.stage_one is not None:
-        stage = fit.stage_one
-        lines.append(
-            "stage (i), Prony series from the relaxation (Ahn & Kim), fixed in stage (ii): "
-            + ", ".join(
-                f"{n} = {float(v):.6g} {u}".rstrip()
-                for n, v, u in zip(
-                    stage.parameter_names, stage.x, stage.parameter_units, strict=True
-                )
-            )
-        )
+    if fit.strategy == "two_stage":
+        lines.append("stage (i), Ahn & Kim: Prony series of each record's relaxation (fit_qlv)")
+        for record, stage in zip(fit.records, fit.stage_one_fits, strict=False):
+            r2 = "n/a" if stage.r_squared is None else f"{stage.r_squared:.5f}"
+            lines.append(f"  {record.file}: {_values(stage.parameters)}, R^2 = {r2}")
+        lines.append(f"  mean, fixed in stage (ii): {_values(fit.stage_one_prony)}")
+        lines.append("stage (ii), inverse FE:")
     width = max([len("parameter"), *(len(n) for n in result.parameter_names)])
     lines.append(f"{'parameter':<{width}}  {'value':>13}  {'std. error':>11}  unit")
     for i, name in enumerate(result.parameter_names):
