@@ -640,6 +640,38 @@ def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitRes
     return tuple(fits), mean
 
 
+def _forward_model(
+    study: Study,
+    material: Any,
+    free: tuple[str, ...],
+    *,
+    device: str | None,
+    progress: bool,
+) -> _ForwardModel:
+    """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
+    of the free parameters."""
+    from warptissue.device import resolve_device
+    from warptissue.fem import Assembler
+    from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
+
+    chosen = device if device is not None else study.solver.device
+    warp_device = resolve_device(None if chosen == "auto" else chosen)
+    _check_linear_solver(study, warp_device)
+    estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
+    mesh = build_mesh(study)
+    problem = build_problem(dataclasses.replace(study, material=material), mesh)
+    assembler = Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
+    return _ForwardModel(
+        study=study,
+        problem=problem,
+        assembler=assembler,
+        material=material,
+        names=free,
+        device=warp_device,
+        progress=progress,
+    )
+
+
 def fit_indentation(
     study: Study,
     *,
@@ -682,10 +714,6 @@ def fit_indentation(
         LM (:mod:`warptissue.fit.engine`). See the module docstring for the model force,
         the residuals and the warnings.
     """
-    from warptissue.device import resolve_device
-    from warptissue.fem import Assembler
-    from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
-
     started = time.perf_counter()
     if study.fit is None or not study.data:
         raise InputError(
@@ -734,22 +762,7 @@ def fit_indentation(
         free = tuple(free[j] for j in keep)
         all_lower, all_upper = all_lower[keep], all_upper[keep]
 
-    chosen_device = device if device is not None else study.solver.device
-    warp_device = resolve_device(None if chosen_device == "auto" else chosen_device)
-    _check_linear_solver(study, warp_device)
-    estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
-    mesh = build_mesh(study)
-    problem = build_problem(dataclasses.replace(study, material=material), mesh)
-    assembler = Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
-    model = _ForwardModel(
-        study=study,
-        problem=problem,
-        assembler=assembler,
-        material=material,
-        names=free,
-        device=warp_device,
-        progress=progress,
-    )
+    model = _forward_model(study, material, free, device=device, progress=progress)
     units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
     x0 = np.array([start[name] for name in free], dtype=np.float64)
     lower, upper = _positive_bounds(free, all_lower, all_upper)

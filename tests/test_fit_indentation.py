@@ -1,0 +1,374 @@
+"""Inverse-FE fits (warptissue.fit.indentation) against known truths.
+
+Every record here is made by the forward FE with known parameters (the same mesh as the
+fit's, on a finer time or depth grid than the fit's FE steps) plus 1 % Gaussian noise of the
+peak force (seeded), written as a CSV next to a study file, loaded with ``load_study`` and
+fitted. The fits must recover the truth (2 % for elastic parameters, 5 % for the Prony
+terms, and within 3 standard errors); the Jacobian of the residuals must equal central
+differences of whole forward runs; the exact sensitivities must save forward runs against
+forward differences; Ctrl-C keeps the best point; bad input and non-identified parameters
+are said out loud.
+
+The specimen is a quarter block 8 x 8 x 2 mm under a 1 mm flat punch (805 TET10 nodes).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.fem import simulate_indentation
+from warptissue.fit import IndentationFit, fit_indentation
+from warptissue.fit.indentation import _forward_model
+from warptissue.io import write_csv
+from warptissue.materials import material_from_dict
+from warptissue.simulate import build_mesh, build_problem
+from warptissue.study import load_study
+
+RADIUS_M = 1e-3
+BULK_PA = 575_000.0
+GEOMETRY = """\
+schema_version = 2
+name = "synthetic"
+
+[specimen]
+shape = "block"
+width_m = 0.008
+thickness_m = 0.002
+quarter = true
+element = "TET10"
+size_near_m = 0.0005
+size_far_m = 0.002
+
+[indenter]
+kind = "flat_punch"
+radius_m = 0.001
+
+[protocol]
+max_depth_m = 0.0003
+steps = 4
+
+[solver]
+device = "cpu"
+{solver}
+[material]
+{material}
+"""
+NEO_HOOKEAN = {"model": "neo_hookean", "C10_Pa": 287.5, "bulk_modulus_Pa": BULK_PA}
+REDUCED_POLYNOMIAL = {
+    "model": "reduced_polynomial",
+    "C10_Pa": 287.5,
+    "C20_Pa": 400.0,
+    "bulk_modulus_Pa": BULK_PA,
+}
+VISCOELASTIC = {**NEO_HOOKEAN, "g1": 0.5, "tau1_s": 1.0}
+
+
+def _toml_table(values: dict) -> str:
+    """A ``[material]`` table's lines."""
+    return "".join(f"{key} = {json.dumps(value)}\n" for key, value in values.items())
+
+
+def ramp(depth_m: float, samples: int = 30) -> tuple[np.ndarray, np.ndarray]:
+    """A loading ramp to ``depth_m`` in ``samples`` samples 0.1 s apart: (time_s, depth_m)."""
+    fraction = np.arange(1, samples + 1) / samples
+    return 0.1 * np.arange(1, samples + 1), depth_m * fraction
+
+
+def ramp_and_hold(depth_m: float = 0.3 * RADIUS_M) -> tuple[np.ndarray, np.ndarray]:
+    """A 0.5 s ramp, then a 5 s hold sampled in log time: (time_s, depth_m)."""
+    time = np.concatenate([np.linspace(0.02, 0.5, 12), 0.5 + np.geomspace(0.05, 5.0, 30)])
+    return time, np.where(time <= 0.5, depth_m * time / 0.5, depth_m)
+
+
+def make_study(
+    folder: Path,
+    *,
+    truth: dict,
+    start: dict,
+    fit: str,
+    history: tuple[np.ndarray, np.ndarray],
+    noise: float = 0.01,
+    seed: int = 1,
+    drift_per_s: float = 0.0,
+    solver: str = "",
+):
+    """Write record.csv (the FE force of ``truth`` along ``history`` plus Gaussian noise of
+    ``noise`` times the peak force and a drift of ``drift_per_s`` times the peak force per
+    second) and study.toml (material ``start``, the ``[fit]`` text), and load the study."""
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / "study.toml"
+    path.write_text(GEOMETRY.format(material=_toml_table(truth), solver=solver))
+    geometry = load_study(path)
+    truth_study = dataclasses.replace(geometry, material=material_from_dict(truth))
+    problem = build_problem(truth_study, build_mesh(truth_study))
+    time, depth = history
+    result = simulate_indentation(problem, depth, times_s=time, device="cpu", progress=False)
+    assert result.completed, result.message
+    force = result.reaction_force_N
+    rng = np.random.default_rng(seed)
+    peak = float(np.max(force))
+    noisy = force + rng.normal(0.0, noise * peak, force.size) + drift_per_s * peak * time
+    write_csv(
+        folder / "record.csv",
+        {
+            "time_s": np.concatenate([[0.0], time]),
+            "displacement_m": np.concatenate([[0.0], depth]),
+            "force_N": np.concatenate([[0.0], noisy]),
+        },
+    )
+    data = '\n[[data]]\nfile = "record.csv"\n\n[fit]\n' + fit
+    path.write_text(GEOMETRY.format(material=_toml_table(start), solver=solver) + data)
+    return load_study(path)
+
+
+def assert_recovered(fit: IndentationFit, truth: dict, rtol: float) -> None:
+    errors = fit.result.standard_errors
+    assert errors is not None
+    for name, value, error in zip(fit.result.parameter_names, fit.result.x, errors, strict=True):
+        assert value == pytest.approx(truth[name], rel=rtol), name
+        assert abs(value - truth[name]) <= 3.0 * error, (name, value, error)
+
+
+@pytest.fixture(scope="module")
+def neo_hookean_fit(tmp_path_factory) -> IndentationFit:
+    study = make_study(
+        tmp_path_factory.mktemp("neo_hookean"),
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 15\n',
+        history=ramp(0.3 * RADIUS_M),
+    )
+    return fit_indentation(study, progress=False)
+
+
+def test_neo_hookean_c10_is_recovered_from_a_noisy_fe_record(neo_hookean_fit):
+    fit = neo_hookean_fit
+    assert fit.status == "converged" and fit.exit_code == 0 and fit.success
+    assert fit.strategy == "joint" and fit.stage_one is None
+    # C10 starts from the record's small-depth stiffness (Sneddon + Hayes), not the truth.
+    assert fit.start["C10_Pa"] != pytest.approx(287.5, rel=1e-3)
+    assert_recovered(fit, NEO_HOOKEAN, 0.02)
+    assert fit.result.r_squared > 0.998
+    assert fit.warnings == []
+    # One record, its curves at its own samples, the fitted study runs the fitted material.
+    (record,) = fit.records
+    assert record.file == "record.csv"
+    assert record.fitted_force_N.shape == record.measured_force_N.shape == (31,)
+    assert record.fe_depth_m[-1] == pytest.approx(0.3 * RADIUS_M)
+    assert 1.0 < record.durbin_watson < 3.0  # independent noise: about 2
+    assert fit.fitted_study.material.C10_Pa == pytest.approx(fit.result.x[0])
+    assert fit.fitted_study.data == fit.study.data
+    summary = json.loads(json.dumps(fit.to_dict()))
+    assert summary["parameters"]["C10_Pa"]["unit"] == "Pa"
+    assert summary["parameters"]["C10_Pa"]["standard_error"] > 0.0
+    assert summary["forward_solves"] == fit.forward_solves
+    assert summary["records"][0]["r_squared"] == pytest.approx(record.r_squared)
+    assert summary["fitted_material"]["C10_Pa"] == pytest.approx(fit.result.x[0])
+    assert summary["status"] == "converged"
+
+
+def test_two_parameters_are_recovered_with_fewer_forward_runs_than_differences(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=REDUCED_POLYNOMIAL,
+        start={**REDUCED_POLYNOMIAL, "C10_Pa": 250.0, "C20_Pa": 100.0},
+        fit='free = ["C10_Pa", "C20_Pa"]\nstart_from = "material"\ntime_steps = 15\n',
+        history=ramp(0.5 * RADIUS_M),
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged"
+    assert_recovered(fit, REDUCED_POLYNOMIAL, 0.02)
+    # Forward differences: 1 + n runs per Jacobian; the sensitivities come with each run.
+    assert fit.forward_solves < fit.finite_difference_solves / 2
+    assert fit.result.correlation is not None and abs(fit.result.correlation[0, 1]) < 0.999
+
+
+@pytest.mark.parametrize(
+    ("truth", "free", "history", "steps"),
+    [
+        (REDUCED_POLYNOMIAL, ("C10_Pa", "C20_Pa"), ramp(0.4 * RADIUS_M, 12), 6),
+        (VISCOELASTIC, ("C10_Pa", "g1", "tau1_s"), ramp_and_hold(), 10),
+    ],
+    ids=["reduced_polynomial", "viscoelastic"],
+)
+def test_the_jacobian_equals_central_differences_of_the_residuals(
+    tmp_path, truth, free, history, steps
+):
+    study = make_study(
+        tmp_path,
+        truth=truth,
+        start=truth,
+        fit=f'free = {json.dumps(list(free))}\nobjective = "relative"\ntime_steps = {steps}\n',
+        history=history,
+        solver="tolerance = 1e-12",
+    )
+    model = _forward_model(study, study.material, free, device="cpu", progress=False)
+    x = np.array([truth[name] for name in free]) * 0.9
+    jacobian = model.jac(x)
+    assert model.forward_solves == model.solves_per_evaluation  # fun and jac: one run
+    model.fun(x)
+    assert model.forward_solves == model.solves_per_evaluation
+    for j, name in enumerate(free):
+        step = 1e-6 * x[j]
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
+        scale = float(np.max(np.abs(central)))
+        assert scale > 0.0
+        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale, err_msg=name)
+
+
+def test_ctrl_c_keeps_the_best_parameters_evaluated(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 8\n[fit.start]\nC10_Pa = 2000.0\n',
+        history=ramp(0.3 * RADIUS_M),
+    )
+    steps = []
+
+    def interrupt(progress):
+        steps.append(progress)
+        if progress.iteration == 2:
+            raise KeyboardInterrupt
+
+    fit = fit_indentation(study, progress=False, callback=interrupt)
+    assert fit.status == "interrupted" and fit.exit_code == 130 and not fit.success
+    assert [p.iteration for p in steps] == [1, 2]
+    start_cost = _forward_model(
+        study, study.material, ("C10_Pa",), device="cpu", progress=False
+    ).evaluate(np.array([2000.0]))
+    assert fit.result.cost <= start_cost.cost
+    best = min(steps, key=lambda p: p.cost)
+    assert fit.result.x[0] == pytest.approx(best.parameters["C10_Pa"])
+    assert fit.result.cost == pytest.approx(best.cost)
+    assert fit.fitted_study.material.C10_Pa == pytest.approx(fit.result.x[0])
+    assert fit.records[0].fitted_force_N.shape == (31,)
+    assert fit.result.standard_errors is not None
+    assert any("did not converge (interrupted)" in message for message in fit.warnings)
+
+
+def test_ctrl_c_inside_a_forward_run_keeps_the_best_parameters(
+    tmp_path, ctrl_c_at_newton_increment
+):
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 8\n[fit.start]\nC10_Pa = 2000.0\n',
+        history=ramp(0.3 * RADIUS_M),
+    )
+    costs = []
+    # One Newton increment per load step: the start run's 8 steps, the first trial's 8, then
+    # Ctrl-C in the third step of the second trial.
+    ctrl_c_at_newton_increment(8 * 2 + 3)
+    fit = fit_indentation(study, progress=False, callback=lambda p: costs.append(p.cost))
+    assert fit.status == "interrupted" and fit.exit_code == 130
+    assert len(costs) == 1  # the first trial step was reported, the second never finished
+    assert fit.result.cost == pytest.approx(costs[0])  # the better of the start and trial 1
+    assert fit.forward_solves == 3
+
+
+def test_stop_at_r_squared(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 8\nstop_r_squared = 0.99\n'
+        "[fit.start]\nC10_Pa = 400.0\n",
+        history=ramp(0.3 * RADIUS_M),
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "stopped_at_r_squared" and fit.exit_code == 0
+    assert fit.result.r_squared > 0.99
+    assert fit.result.iterations == 1
+
+
+def test_a_record_of_another_probe_radius_is_refused_before_fitting(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\n',
+        history=ramp(0.3 * RADIUS_M, 5),
+    )
+    (tmp_path / "record.json").write_text(json.dumps({"probe_radius_m": 0.002}))
+    with pytest.raises(InputError) as raised:
+        fit_indentation(study, progress=False, device="no-such-device")
+    message = str(raised.value)
+    assert "record.csv" in message and "probe_radius_m" in message
+    assert "0.002" in message and "0.001" in message
+    # The same radius passes the check (and then fails on the device, after it).
+    (tmp_path / "record.json").write_text(json.dumps({"probe_radius_m": 0.001}))
+    with pytest.raises(Exception, match="no-such-device"):
+        fit_indentation(study, progress=False, device="no-such-device")
+
+
+def test_a_start_100_times_too_stiff_converges(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 8\n[fit.start]\nC10_Pa = 28750.0\n',
+        history=ramp(0.3 * RADIUS_M),
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert_recovered(fit, NEO_HOOKEAN, 0.02)
+
+
+def test_a_drifting_offset_is_reported(tmp_path):
+    # An elastic record with a hold whose force rises: a transducer drifting by 2 % of the
+    # peak force per second, which an elastic tissue cannot do.
+    time = np.concatenate([np.linspace(0.1, 1.0, 10), np.linspace(1.25, 6.0, 20)])
+    depth = np.minimum(time, 1.0) * 0.3 * RADIUS_M
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 8\n',
+        history=(time, depth),
+        noise=0.002,
+        drift_per_s=0.02,
+    )
+    fit = fit_indentation(study, progress=False)
+    assert any("rises" in m and "during the hold" in m for m in fit.warnings), fit.warnings
+    assert any("Durbin-Watson" in m for m in fit.warnings), fit.warnings
+
+
+def test_two_prony_terms_on_a_one_term_record_are_not_identified(tmp_path):
+    two_terms = {**NEO_HOOKEAN, "g1": 0.2, "g2": 0.2, "tau1_s": 0.3, "tau2_s": 3.0}
+    study = make_study(
+        tmp_path,
+        truth=VISCOELASTIC,
+        start=two_terms,
+        fit='free = ["g1", "g2", "tau1_s", "tau2_s"]\ntime_steps = 12\nmax_iterations = 6\n',
+        history=ramp_and_hold(),
+    )
+    fit = fit_indentation(study, progress=False)
+    assert any("not identified" in m for m in fit.warnings), fit.warnings
+    assert not fit.result.identified
+
+
+@pytest.mark.slow
+def test_viscoelastic_c10_g1_tau1_are_recovered_from_a_ramp_and_hold(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=VISCOELASTIC,
+        start={**VISCOELASTIC, "C10_Pa": 250.0, "g1": 0.3, "tau1_s": 2.0},
+        fit='free = ["C10_Pa", "g1", "tau1_s"]\ntime_steps = 16\nftol = 1e-6\nxtol = 1e-6\n',
+        history=ramp_and_hold(),
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert_recovered(fit, {"C10_Pa": 287.5, "g1": 0.5, "tau1_s": 1.0}, 0.05)
+    assert fit.forward_solves < fit.finite_difference_solves / 2
+    assert fit.records[0].fe_time_s.size >= 16
