@@ -372,3 +372,39 @@ def test_viscoelastic_c10_g1_tau1_are_recovered_from_a_ramp_and_hold(tmp_path):
     assert_recovered(fit, {"C10_Pa": 287.5, "g1": 0.5, "tau1_s": 1.0}, 0.05)
     assert fit.forward_solves < fit.finite_difference_solves / 2
     assert fit.records[0].fe_time_s.size >= 16
+
+
+def test_ahn_and_kim_two_stage_fits_the_prony_series_first(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=VISCOELASTIC,
+        start={**VISCOELASTIC, "C10_Pa": 250.0, "g1": 0.3, "tau1_s": 2.0},
+        fit='free = ["C10_Pa", "g1", "tau1_s"]\nstrategy = "two_stage"\ntime_steps = 16\n',
+        history=ramp_and_hold(),
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.strategy == "two_stage" and fit.status == "converged"
+    # Stage (i): QLV on the record's relaxation, the 0.5 s ramp accounted for.
+    (stage,) = fit.stage_one_fits
+    assert fit.stage_one is stage
+    assert stage.parameters["g1"] == pytest.approx(0.5, rel=0.05)
+    assert stage.parameters["tau1_s"] == pytest.approx(1.0, rel=0.05)
+    assert fit.stage_one_prony == pytest.approx(
+        {"g1": stage.parameters["g1"], "tau1_s": stage.parameters["tau1_s"]}
+    )
+    # Stage (ii): C10 alone by inverse FE, the Prony terms fixed at stage (i)'s.
+    assert fit.result.parameter_names == ("C10_Pa",)
+    assert fit.result.x[0] == pytest.approx(287.5, rel=0.02)
+    material = fit.fitted_study.material
+    assert material.g == (stage.parameters["g1"],)
+    assert material.tau_s == (stage.parameters["tau1_s"],)
+    summary = json.loads(json.dumps(fit.to_dict()))
+    assert summary["stage_one"]["records"][0]["parameters"]["g1"] == pytest.approx(material.g[0])
+    assert summary["stage_one"]["mean"]["tau1_s"] == pytest.approx(material.tau_s[0])
+
+
+def test_two_stage_needs_a_prony_series(neo_hookean_fit):
+    with pytest.raises(InputError, match="Prony"):
+        fit_indentation(neo_hookean_fit.study, progress=False, strategy="two_stage")
+    with pytest.raises(InputError, match="strategy"):
+        fit_indentation(neo_hookean_fit.study, progress=False, strategy="three_stage")
