@@ -359,6 +359,22 @@ def test_two_prony_terms_on_a_one_term_record_are_not_identified(tmp_path):
     fit = fit_indentation(study, progress=False)
     assert any("not identified" in m for m in fit.warnings), fit.warnings
     assert not fit.result.identified
+    assert any("g1 and g2 are correlated" in m for m in fit.warnings), fit.warnings
+
+
+def test_the_iteration_limit_is_not_a_success(tmp_path):
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 6\nmax_iterations = 1\n[fit.start]\nC10_Pa = 2000.0\n',
+        history=ramp(0.3 * RADIUS_M),
+    )
+    fit = fit_indentation(study, progress=True)  # the bars run too
+    assert fit.status == "max_iterations" and not fit.success
+    assert fit.exit_code == 4  # ConvergenceError's
+    assert fit.result.iterations == 1
+    assert any("did not converge (max_iterations)" in m for m in fit.warnings)
 
 
 @pytest.mark.slow

@@ -59,6 +59,7 @@ from warptissue.fit.result import FitResult, IterationRecord, RejectStep
 from warptissue.study import FIT_STRATEGIES, DataRecord, Study, start_values_from_record
 
 __all__ = [
+    "CORRELATION_LIMIT",
     "DURBIN_WATSON_LIMIT",
     "STATUSES",
     "IndentationFit",
@@ -81,6 +82,9 @@ systematically badly (independent noise gives about 2)."""
 DRIFT_SHARE = 0.02
 """A force change of more than this share of the record's peak force where none is expected
 (rising in a hold, left after unloading, a baseline drift) is reported."""
+CORRELATION_LIMIT = 0.995
+"""Two parameters whose correlation exceeds this in magnitude are reported: the data
+determine a combination of them rather than each."""
 RELATIVE_FLOOR_SHARE = 0.01
 """Default floor of the relative objective: this share of the largest |force| of the records."""
 INTERRUPTED_EXIT_CODE = 130
@@ -598,7 +602,7 @@ def _positive_bounds(
     names: Sequence[str], lower: np.ndarray, upper: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Moduli that must be positive get lower bound 0 where the model leaves them free."""
-    lower = lower.copy()
+    lower, upper = lower.copy(), upper.copy()
     for j, name in enumerate(names):
         if name in ("C10_Pa", "shear_modulus_Pa", "youngs_modulus_Pa", "bulk_modulus_Pa"):
             lower[j] = max(lower[j], 0.0)
@@ -992,6 +996,18 @@ def _warnings(
     messages: list[str] = []
     if status not in ("converged", "stopped_at_r_squared"):
         messages.append(f"the fit did not converge ({status}): {message}")
+    correlation = result.correlation
+    if correlation is not None:
+        names = result.parameter_names
+        for i in range(len(names)):
+            for j in range(i + 1, len(names)):
+                if abs(correlation[i, j]) > CORRELATION_LIMIT:
+                    messages.append(
+                        f"{names[i]} and {names[j]} are correlated (r = "
+                        f"{correlation[i, j]:.4f}): the records determine a combination of "
+                        "them, not each; fix one, or add records that separate them (other "
+                        "depths, speeds or hold times)"
+                    )
     for record, curve in zip(study.data, records, strict=True):
         messages.extend(_record_drift_warnings(record))
         if curve.durbin_watson is not None and curve.durbin_watson < DURBIN_WATSON_LIMIT:
