@@ -361,10 +361,14 @@ def _record_drift_warnings(record: DataRecord) -> list[str]:
         breaks = np.flatnonzero(np.diff(hold) > 1)
         contiguous = hold[: int(breaks[0]) + 1] if breaks.size else hold  # the first hold
         if contiguous.size >= 10:
+            # Running means over a tenth of the hold: the last one against the lowest, beyond
+            # both DRIFT_SHARE of the peak and 4 noise levels of such a mean.
             forces = f[contiguous]
-            tail = max(3, contiguous.size // 10)
-            rise = float(np.mean(forces[-tail:]) - np.min(forces))
-            if rise > DRIFT_SHARE * peak:
+            window = max(3, contiguous.size // 10)
+            means = np.convolve(forces, np.full(window, 1.0 / window), mode="valid")
+            rise = float(means[-1] - np.min(means))
+            noise = 1.4826 * float(np.median(np.abs(np.diff(forces)))) / math.sqrt(2.0)
+            if rise > max(DRIFT_SHARE * peak, 4.0 * noise / math.sqrt(window)):
                 messages.append(
                     f"{name}: the force rises by {rise:.4g} N ({100 * rise / peak:.0f} % of "
                     "its peak) during the hold at the deepest point, where a tissue relaxes: "
