@@ -26,6 +26,11 @@ Notes:
     divided by ``max(|F_measured|, floor)`` ("relative", Ahn & Kim Eq. 7), with ``floor`` =
     ``relative_floor_N`` or 1 % of the largest |force| of the records.
 
+    The engine's scaling: "lm" uses Marquardt's diagonal of J^T J (invariant to the units
+    of each parameter; a fixed ``x_scale`` would make its initial damping 1e-3 absolute,
+    which against forces of millinewtons shrank the first steps a hundredfold), "salm" uses
+    ``x_scale`` = |start| (its damping is built from the residual norms).
+
     Strategies. "joint": every free parameter at once. "two_stage" (Ahn & Kim): stage (i)
     fits the Prony series of each record from its relaxation, the finite ramp accounted for
     (:func:`warptissue.viscoelastic.fitting.fit_qlv`, QLV with an exponential elastic force;
@@ -502,7 +507,8 @@ class _ForwardModel:
 
     def evaluate(self, x: np.ndarray) -> _Evaluation:
         key = np.asarray(x, dtype=np.float64).tobytes()
-        if key in self.cache:
+        if key in self.cache:  # least recently used out: the current point stays
+            self.cache[key] = self.cache.pop(key)
             return self.cache[key]
         try:
             material = self.material_at(x)
@@ -512,7 +518,10 @@ class _ForwardModel:
             raise RejectStep("the initial shear modulus is not positive")
         runs = []
         for times, depths in self.grids:
-            result = self._run(material, times, depths)
+            try:
+                result = self._run(material, times, depths)
+            except ConvergenceError as exc:
+                raise RejectStep(f"the FE failed: {exc}") from exc
             if not result.completed:
                 raise RejectStep(f"the FE did not converge: {result.message}")
             runs.append(result)
