@@ -34,8 +34,9 @@ the Richardson extrapolation of levels 4, 5 and 6, level 5 is 0.11 to 0.32 % hig
 depth (level 6: 0.04 to 0.22 %). The CSV is level 5 (about 1 minute on a free core): the
 curve is converged to about 0.3 %, from above. ``--quadratic`` runs the same meshes with
 8-node (serendipity) quadrilaterals and P0 pressure, which converge from below
-(level 3: 2.72051, 10.96898, 22.21764 mN; their extrapolation lies within 0.2 % of the
-Q1/P0 one).
+(``--quadratic --levels 2,3,4``; level 4: 2.72312, 10.97900, 22.21422 mN, order about 1 at
+small depth). The two extrapolations differ by 0.21 % (0.0625 mm) to 0.25 % (0.5 mm), and
+the CSV is 0.32 to 0.36 % above the Q2/P0 one: converged to better than 0.5 % either way.
 
 Why a / 10: deeper (to 1.0 and 1.5 mm, a / 5 and 0.3 a) the forces beyond about 0.15 a did
 not converge under refinement down to a / 512 (differences between successive levels of 0.2
