@@ -270,18 +270,23 @@ def test_the_shipped_example_records_fit_back_to_their_sidecar_model(tmp_path, c
 
     data = Path(__file__).resolve().parents[1] / "scenes" / "data"
     hold, slow, medium = (data / f"liver_ramp_{n}.csv" for n in ("hold", "slow", "medium"))
-    truth = json.loads(hold.with_suffix(".json").read_text())["model"]
+    # The records were made by the forward FE of a quasi-linear viscoelastic neo-Hookean
+    # slab (scripts/tools/make_relaxation_example.py); a lumped Prony series, linear in the
+    # depth, finds its relaxation within a few per cent (the FE force is not quite linear in
+    # the depth: 4 mm under a 5 mm radius punch).
+    truth = json.loads(hold.with_suffix(".json").read_text())["truth"]
     argv = ["relaxation", str(hold), str(slow), "--model", "prony:2", "--contact", "auto"]
     status, printed, err = _fit_json(
         capsys, [*argv, "--predict", str(medium), "--out", str(tmp_path)]
     )
     assert status == 0 and err == ""
     model = printed["model"]
-    assert model["equilibrium_stiffness_N_per_m"] == pytest.approx(
-        truth["equilibrium_stiffness_N_per_m"], rel=0.01
+    long_term = model["equilibrium_stiffness_N_per_m"] / model["instantaneous_stiffness_N_per_m"]
+    assert long_term == pytest.approx(1 - truth["g1"] - truth["g2"], rel=0.03)
+    assert model["g"] == pytest.approx([truth["g1"], truth["g2"]], rel=0.04)
+    assert model["relaxation_times_s"] == pytest.approx(
+        [truth["tau1_s"], truth["tau2_s"]], rel=0.03
     )
-    assert model["g"] == pytest.approx(truth["g"], rel=0.01)
-    assert model["relaxation_times_s"] == pytest.approx(truth["relaxation_times_s"], rel=0.01)
     assert printed["predictions"][0]["r_squared"] > 0.999
 
 

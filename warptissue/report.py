@@ -402,9 +402,9 @@ def plot_indentation_fit(
     by_depth.set_xlabel("depth (mm)")
     by_depth.set_ylabel("force (N)")
     by_depth.legend(fontsize="x-small")
-    by_time.set_xlabel("time from contact (s)")
+    by_time.set_xlabel("time (s)")
     by_time.set_ylabel("force (N)")
-    residuals.set_xlabel("time from contact (s)")
+    residuals.set_xlabel("time (s)")
     residuals.set_ylabel("fitted - measured (N)")
     for axes in (by_depth, by_time, residuals):
         axes.grid(alpha=0.3)
