@@ -1,7 +1,10 @@
 """Cost of the exact force Jacobian per parameter against finite differences of whole runs.
 
 A flat-punch curve on a small quarter block (TET10, mean dilatation) of a two-term Ogden
-material; for 1, 2 and 4 parameters (mu1; mu1, alpha1; mu1, alpha1, mu2, alpha2):
+material; for 1, 2 and 4 parameters (mu1; mu1, alpha1; mu1, alpha1, mu2, alpha2). With
+``--viscoelastic`` the material relaxes (a two-term Prony series on the Ogden model) and the
+curve is a ramp and a hold, time-stepped, whose sensitivities are carried forward in time
+(mu1; mu1, g1; mu1, alpha1, g1, tau1_s):
 
 - the curve with exact sensitivities (``"reuse"``: Newton's last factors with iterative
   refinement; ``"refactorize"``: one fresh factorization per depth): the time spent in the
@@ -16,7 +19,7 @@ Each ratio is the median of ``--repeat`` interleaved repetitions (the machine is
 Writes a JSON file.
 
 Usage: python scripts/benchmarks/bench_sensitivity.py [--near 0.5] [--steps 5]
-    [--repeat 3] [--out scripts/results/bench_sensitivity_2core_cpu.json]
+    [--repeat 3] [--viscoelastic] [--out scripts/results/bench_sensitivity_2core_cpu.json]
 """
 
 from __future__ import annotations
@@ -39,7 +42,7 @@ from warptissue.fem import (
     solve_quasistatic,
 )
 from warptissue.indenter import Indenter
-from warptissue.materials import Ogden, material_from_dict
+from warptissue.materials import Ogden, Viscoelastic, material_from_dict
 from warptissue.mesh import indentation_block
 
 RADIUS_M = 1e-3
@@ -49,6 +52,14 @@ PARAMETER_SETS = {
     2: ("mu1_Pa", "alpha1"),
     4: ("mu1_Pa", "alpha1", "mu2_Pa", "alpha2"),
 }
+VISCOELASTIC = Viscoelastic(MATERIAL, (0.3, 0.3), (0.5, 10.0))
+VISCOELASTIC_SETS = {
+    1: ("mu1_Pa",),
+    2: ("mu1_Pa", "g1"),
+    4: ("mu1_Pa", "alpha1", "g1", "tau1_s"),
+}
+TIMES_S: np.ndarray | None = None
+"""The step times of the viscoelastic curve (None: quasi-static)."""
 RELATIVE_STEP = 1e-6
 REFERENCE_STEPS = (1e-4, 1e-6)
 """Relative steps of the reference central differences (Newton tolerance 1e-12): at 1e-6 the
@@ -61,7 +72,7 @@ def _problem(mesh, material) -> IndentationProblem:
 
 
 def _moved(name: str, sign: float, relative_step: float = RELATIVE_STEP) -> Ogden:
-    flat = MATERIAL.to_dict()
+    flat = _material().to_dict()
     return material_from_dict({**flat, name: flat[name] + sign * relative_step * abs(flat[name])})
 
 
@@ -73,12 +84,17 @@ def _central_difference(mesh, depths: np.ndarray, name: str, relative_step: floa
             depths,
             device="cpu",
             progress=False,
-            options=NewtonOptions(tolerance=1e-12),
+            options=NewtonOptions(tolerance=1e-12 if TIMES_S is None else 1e-10),
+            times_s=TIMES_S,
         ).reaction_force_N
         for sign in (1.0, -1.0)
     ]
-    step = relative_step * abs(MATERIAL.to_dict()[name])
+    step = relative_step * abs(_material().to_dict()[name])
     return (forces[0] - forces[1]) / (2.0 * step)
+
+
+def _material():
+    return MATERIAL if TIMES_S is None else VISCOELASTIC
 
 
 def _timed(function, repeat: int):
@@ -97,7 +113,13 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=5, help="depths up to a quarter radius")
     parser.add_argument("--repeat", type=int, default=3, help="timed repetitions (median kept)")
     parser.add_argument("--out", type=Path, default=None, help="JSON file to write")
+    parser.add_argument(
+        "--viscoelastic", action="store_true", help="a Prony series, a ramp and a hold"
+    )
     args = parser.parse_args()
+    global TIMES_S
+    parameter_sets = PARAMETER_SETS
+    material = MATERIAL
     thickness = 3.0 * RADIUS_M
     mesh = indentation_block(
         width_m=3.0 * thickness,
@@ -108,12 +130,17 @@ def main() -> None:
         size_far_m=thickness / 2.0,
     )
     depths = 0.25 * RADIUS_M * np.arange(1, args.steps + 1) / args.steps
+    if args.viscoelastic:  # a 0.25 s ramp to the same depths, then as many hold steps
+        ramp = 0.25 * np.arange(1, args.steps + 1) / args.steps
+        TIMES_S = np.concatenate([ramp, 0.25 + np.geomspace(0.05, 20.0, args.steps)])
+        depths = 0.25 * RADIUS_M * np.minimum(TIMES_S / 0.25, 1.0)
+        parameter_sets, material = VISCOELASTIC_SETS, VISCOELASTIC
     options = NewtonOptions()
 
-    def forward(material=MATERIAL, **kwargs):
+    def forward(material=material, **kwargs):
         result = simulate_indentation(
             _problem(mesh, material), depths, device="cpu", progress=False, options=options,
-            **kwargs,
+            times_s=TIMES_S, **kwargs,
         )  # fmt: skip
         if not result.completed:
             raise SystemExit(f"the forward run did not converge: {result.message}")
@@ -124,13 +151,13 @@ def main() -> None:
     print(f"mesh: {mesh.tet_count} TET10, {3 * mesh.node_count} dofs; {args.steps} depths")
     iterations = int(base.newton_iterations.sum())
     print(f"forward curve: {t_forward:.3f} s, {iterations} Newton iterations")
-    problem = _problem(mesh, MATERIAL)
+    problem = _problem(mesh, material)
     weights = np.zeros((mesh.node_count, 3))
     weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
 
     def exact_curve(names, mode):
         """One curve with sensitivities: (wall s, s inside the sensitivities, Jacobian)."""
-        assembler = Assembler(mesh, MATERIAL)
+        assembler = Assembler(mesh, material)
         sensitivity = ForceSensitivity(
             assembler, problem.dirichlet_conditions(), names, weights, factorization=mode
         )
@@ -142,12 +169,13 @@ def main() -> None:
             reaction_weights=weights,
             options=options,
             sensitivity=sensitivity,
+            times_s=TIMES_S,
         )
         total = time.perf_counter() - start
         return total, sensitivity, path.reaction_sensitivity
 
     rows = []
-    for count, names in PARAMETER_SETS.items():
+    for count, names in parameter_sets.items():
         row = {"parameters": list(names), "count": count}
         samples: dict[str, list[float]] = {}
         for _ in range(args.repeat):
@@ -189,7 +217,8 @@ def main() -> None:
             f"exact (refactorize) {row['exact_refactorize_fraction_per_parameter']:.3f}, "
             f"forward differences {row['forward_differences_fraction_per_parameter']:.2f}, "
             f"central {row['central_differences_fraction_per_parameter']:.2f} forward curves "
-            "per parameter; exact (reuse) vs central differences of runs at tolerance 1e-12: "
+            "per parameter; exact (reuse) vs central differences of runs at tolerance "
+            f"{1e-12 if TIMES_S is None else 1e-10:g}: "
             + ", ".join(
                 f"{row[f'max_relative_difference_reuse_vs_central_step_{h:g}']:.1e} (step {h:g})"
                 for h in REFERENCE_STEPS
@@ -202,8 +231,9 @@ def main() -> None:
             "cpus": os.cpu_count(),
         },  # fmt: skip
         "mesh": {"tets": mesh.tet_count, "dofs": 3 * mesh.node_count, "element": "TET10"},
-        "material": MATERIAL.to_dict(),
+        "material": material.to_dict(),
         "depths_m": depths.tolist(),
+        "times_s": None if TIMES_S is None else TIMES_S.tolist(),
         "newton_tolerance": options.tolerance,
         "forward_s": t_forward,
         "forward_newton_iterations": iterations,
