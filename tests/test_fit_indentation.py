@@ -141,7 +141,7 @@ def neo_hookean_fit(tmp_path_factory) -> IndentationFit:
         tmp_path_factory.mktemp("neo_hookean"),
         truth=NEO_HOOKEAN,
         start=NEO_HOOKEAN,
-        fit='free = ["C10_Pa"]\ntime_steps = 15\n',
+        fit='free = ["C10_Pa"]\ntime_steps = 10\n',
         history=ramp(0.3 * RADIUS_M),
     )
     return fit_indentation(study, progress=False)
@@ -178,7 +178,7 @@ def test_two_parameters_are_recovered_with_fewer_forward_runs_than_differences(t
         tmp_path,
         truth=REDUCED_POLYNOMIAL,
         start={**REDUCED_POLYNOMIAL, "C10_Pa": 250.0, "C20_Pa": 100.0},
-        fit='free = ["C10_Pa", "C20_Pa"]\nstart_from = "material"\ntime_steps = 15\n',
+        fit='free = ["C10_Pa", "C20_Pa"]\nstart_from = "material"\ntime_steps = 10\n',
         history=ramp(0.5 * RADIUS_M),
     )
     fit = fit_indentation(study, progress=False)
@@ -320,7 +320,7 @@ def test_a_start_100_times_off_converges(tmp_path, factor):
         tmp_path,
         truth=NEO_HOOKEAN,
         start=NEO_HOOKEAN,
-        fit=f'free = ["C10_Pa"]\ntime_steps = 8\n[fit.start]\nC10_Pa = {287.5 * factor}\n',
+        fit=f'free = ["C10_Pa"]\ntime_steps = 4\n[fit.start]\nC10_Pa = {287.5 * factor}\n',
         history=ramp(0.3 * RADIUS_M),
     )
     fit = fit_indentation(study, progress=False)
