@@ -92,7 +92,7 @@ def make_study(
     truth: dict,
     start: dict,
     fit: str,
-    history: tuple[np.ndarray, np.ndarray],
+    history: tuple[np.ndarray, np.ndarray] | list[tuple[np.ndarray, np.ndarray]],
     noise: float = 0.01,
     seed: int = 1,
     drift_per_s: float = 0.0,
@@ -100,30 +100,36 @@ def make_study(
 ):
     """Write record.csv (the FE force of ``truth`` along ``history`` plus Gaussian noise of
     ``noise`` times the peak force and a drift of ``drift_per_s`` times the peak force per
-    second) and study.toml (material ``start``, the ``[fit]`` text), and load the study."""
+    second; a list of histories: record.csv, record2.csv, ...) and study.toml (material
+    ``start``, the ``[fit]`` text), and load the study."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "study.toml"
     path.write_text(GEOMETRY.format(material=_toml_table(truth), solver=solver))
     geometry = load_study(path)
     truth_study = dataclasses.replace(geometry, material=material_from_dict(truth))
     problem = build_problem(truth_study, build_mesh(truth_study))
-    time, depth = history
-    result = simulate_indentation(problem, depth, times_s=time, device="cpu", progress=False)
-    assert result.completed, result.message
-    force = result.reaction_force_N
+    tables = ""
+    histories = history if isinstance(history, list) else [history]
     rng = np.random.default_rng(seed)
-    peak = float(np.max(force))
-    noisy = force + rng.normal(0.0, noise * peak, force.size) + drift_per_s * peak * time
-    write_csv(
-        folder / "record.csv",
-        {
-            "time_s": np.concatenate([[0.0], time]),
-            "displacement_m": np.concatenate([[0.0], depth]),
-            "force_N": np.concatenate([[0.0], noisy]),
-        },
+    for k, (time, depth) in enumerate(histories):
+        result = simulate_indentation(problem, depth, times_s=time, device="cpu", progress=False)
+        assert result.completed, result.message
+        force = result.reaction_force_N
+        peak = float(np.max(force))
+        noisy = force + rng.normal(0.0, noise * peak, force.size) + drift_per_s * peak * time
+        name = "record.csv" if k == 0 else f"record{k + 1}.csv"
+        write_csv(
+            folder / name,
+            {
+                "time_s": np.concatenate([[0.0], time]),
+                "displacement_m": np.concatenate([[0.0], depth]),
+                "force_N": np.concatenate([[0.0], noisy]),
+            },
+        )
+        tables += f'\n[[data]]\nfile = "{name}"\n'
+    path.write_text(
+        GEOMETRY.format(material=_toml_table(start), solver=solver) + tables + "\n[fit]\n" + fit
     )
-    data = '\n[[data]]\nfile = "record.csv"\n\n[fit]\n' + fit
-    path.write_text(GEOMETRY.format(material=_toml_table(start), solver=solver) + data)
     return load_study(path)
 
 
@@ -171,6 +177,32 @@ def test_neo_hookean_c10_is_recovered_from_a_noisy_fe_record(neo_hookean_fit):
     assert summary["records"][0]["r_squared"] == pytest.approx(record.r_squared)
     assert summary["fitted_material"]["C10_Pa"] == pytest.approx(fit.result.x[0])
     assert summary["status"] == "converged"
+
+
+def test_elastic_records_of_different_depths_share_one_fe_run_per_evaluation(tmp_path):
+    # Elastic: the force depends on the depth only, so one FE run to the deepest point of
+    # both records serves both.
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 10\n',
+        history=[ramp(0.3 * RADIUS_M), ramp(0.15 * RADIUS_M, 20)],
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged"
+    assert_recovered(fit, NEO_HOOKEAN, 0.02)
+    assert [record.file for record in fit.records] == ["record.csv", "record2.csv"]
+    assert fit.result.residuals.shape == (31 + 21,)
+    assert fit.forward_solves == fit.result.nfev  # one run per evaluation, not per record
+    shallow = fit.records[1]
+    assert shallow.fe_depth_m[-1] >= 0.15 * RADIUS_M > shallow.fe_depth_m[-2]
+    # The FE curve passes through the fitted force at the record's deepest point.
+    assert shallow.fitted_force_N[-1] == pytest.approx(
+        np.interp(0.15 * RADIUS_M, shallow.fe_depth_m, shallow.fe_force_N)
+    )
+    for record in fit.records:
+        assert record.r_squared > 0.99 and record.rmse_N > 0.0
 
 
 def test_two_parameters_are_recovered_with_fewer_forward_runs_than_differences(tmp_path):
