@@ -200,3 +200,39 @@ def test_help_states_the_exit_statuses(capsys):
     text = " ".join(capsys.readouterr().out.split())
     for status in ("0 fitted", "2 bad input", "4 the fit failed", "130 interrupted"):
         assert status in text
+
+
+def test_the_shipped_liver_records_are_what_their_script_makes(tmp_path):
+    """scenes/data/liver_ramp_*.csv come from scripts/tools/make_relaxation_example.py (the
+    forward FE of scenes/liver_fit.toml with the truth of the sidecar): its quick form remakes
+    the fast record (the same FE run and noise) and writes its first 10 s, which must be the
+    shipped file's first 10 s, with the same sidecar."""
+    from _scripts import ROOT, run_script
+
+    run_script(
+        "scripts/tools/make_relaxation_example.py",
+        "--out-dir",
+        str(tmp_path),
+        "--quick",
+        cwd=tmp_path,
+    )
+    shipped_csv = ROOT / "scenes" / "data" / "liver_ramp_hold.csv"
+    made = np.loadtxt(tmp_path / "liver_ramp_hold.csv", delimiter=",", skiprows=1)
+    shipped = np.loadtxt(shipped_csv, delimiter=",", skiprows=1)
+    assert 400 < made.shape[0] < shipped.shape[0]
+    shipped = shipped[: made.shape[0]]
+    # Written with 6 decimals (1 uN against the 0.2 mN noise); the FE's own round-off
+    # between machines may move a last digit.
+    np.testing.assert_allclose(made, shipped, rtol=0.0, atol=2e-6)
+    assert made[:, 2].max() > 0.1  # the 4 mm peak is in the first 10 s
+    sidecar = json.loads((tmp_path / "liver_ramp_hold.json").read_text())
+    assert sidecar == json.loads(shipped_csv.with_suffix(".json").read_text())
+    assert sidecar["truth"] == {
+        "model": "neo_hookean",
+        "C10_Pa": 287.5,
+        "bulk_modulus_Pa": 575000.0,
+        "g1": 0.348,
+        "g2": 0.358,
+        "tau1_s": 1.376,
+        "tau2_s": 49.369,
+    }
