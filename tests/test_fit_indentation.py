@@ -279,6 +279,7 @@ def test_ctrl_c_keeps_the_best_parameters_evaluated(tmp_path):
         study, study.material, ("C10_Pa",), device="cpu", progress=False
     ).evaluate(np.array([2000.0]))
     assert fit.result.cost <= start_cost.cost
+    assert fit.start_cost == pytest.approx(start_cost.cost)
     best = min(steps, key=lambda p: p.cost)
     assert fit.result.x[0] == pytest.approx(best.parameters["C10_Pa"])
     assert fit.result.cost == pytest.approx(best.cost)

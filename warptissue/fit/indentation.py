@@ -199,6 +199,8 @@ class IndentationFit:
         seconds: Wall time of the fit (s).
         warnings: Identifiability and plausibility warnings (no "warning:" prefix).
         start: The start values of the free parameters (name -> value).
+        start_cost: The cost at the start values (before the first trial step of the
+            engine; the history lists the cost after each), or None.
     """
 
     study: Study
@@ -216,6 +218,7 @@ class IndentationFit:
     stage_one_fits: tuple[FitResult, ...] = ()
     stage_one_prony: dict[str, float] = field(default_factory=dict)
     start: dict[str, float] = field(default_factory=dict)
+    start_cost: float | None = None
 
     @property
     def success(self) -> bool:
@@ -300,6 +303,7 @@ class IndentationFit:
             "r_squared": result.r_squared,
             "rmse_N": result.rmse,
             "cost": result.cost,
+            "start_cost": self.start_cost,
             "iterations": result.iterations,
             "forward_solves": self.forward_solves,
             "finite_difference_solves": self.finite_difference_solves,
@@ -833,9 +837,10 @@ def fit_indentation(
 
     engine_result = None
     interrupted = False
+    start_cost = None
     try:
         try:
-            model.evaluate(x0)
+            start_cost = model.evaluate(x0).cost
         except RejectStep as exc:
             raise ConvergenceError(
                 f"the FE does not converge at the start values "
@@ -915,6 +920,7 @@ def fit_indentation(
         stage_one_fits=stage_one_fits,
         stage_one_prony=prony,
         start=dict(zip(free, x0.tolist(), strict=True)),
+        start_cost=start_cost,
     )
 
 
