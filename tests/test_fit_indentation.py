@@ -287,6 +287,10 @@ def test_ctrl_c_keeps_the_best_parameters_evaluated(tmp_path):
     assert fit.records[0].fitted_force_N.shape == (31,)
     assert fit.result.standard_errors is not None
     assert any("did not converge (interrupted)" in message for message in fit.warnings)
+    summary = json.loads(json.dumps(fit.to_dict()))
+    assert summary["status"] == "interrupted" and not summary["success"]
+    assert summary["parameters"]["C10_Pa"]["value"] == pytest.approx(fit.result.x[0])
+    assert len(summary["history"]) == 2
 
 
 def test_ctrl_c_inside_a_forward_run_keeps_the_best_parameters(
