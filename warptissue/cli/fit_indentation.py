@@ -141,7 +141,12 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     elif fit.exit_code != 0:
-        print(f"warptissue: error: the fit {fit.status}: {fit.message}", file=sys.stderr)
+        what = "failed" if fit.status == "failed" else f"did not converge ({fit.status})"
+        print(
+            f"warptissue: error: the fit {what}: {fit.message}; the outputs in {out_dir} hold "
+            "the best parameters found",
+            file=sys.stderr,
+        )
     return fit.exit_code
 
 
