@@ -240,15 +240,18 @@ def test_the_shipped_liver_records_are_what_their_script_makes(tmp_path):
 
 def test_a_fit_out_of_iterations_exits_4_with_its_outputs(study_file, tmp_path, capsys):
     """max_iterations = 1 cannot converge from the record's start value: the documented
-    convergence status (4), the reason on stderr, the files written from the best point."""
+    convergence status (4), the reason on stderr, the files written from the best point;
+    --json prints fit.json."""
     from warptissue.errors import ConvergenceError
 
     text = study_file.read_text().replace("time_steps = 6", "time_steps = 6\nmax_iterations = 1")
     study_file.write_text(text)
     out = tmp_path / "out"
-    status = main(["fit", "indentation", str(study_file), "-o", str(out), "--quiet"])
-    err = capsys.readouterr().err
+    status = main(["fit", "indentation", str(study_file), "-o", str(out), "--json"])
+    captured = capsys.readouterr()
+    err = captured.err
     assert status == ConvergenceError.exit_code == 4
+    assert json.loads(captured.out) == json.loads((out / "fit.json").read_text())
     assert "error: the fit did not converge (max_iterations)" in err and "Traceback" not in err
     summary = json.loads((out / "fit.json").read_text())
     assert summary["status"] == "max_iterations" and not summary["success"]

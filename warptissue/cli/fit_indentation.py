@@ -188,8 +188,9 @@ def summary(fit: IndentationFit) -> str:
         r2 = "n/a" if record.r_squared is None else f"{record.r_squared:.5f}"
         lines.append(f"  {record.file}: R^2 = {r2}, RMSE = {record.rmse_N:.4g} N")
     r2 = "n/a" if result.r_squared is None else f"{result.r_squared:.5f}"
+    unit = "" if result.objective == "relative" else " N"
     lines.append(
-        f"R^2 = {r2}, RMSE = {result.rmse:.4g}, {result.iterations} iterations, "
+        f"R^2 = {r2}, RMSE = {result.rmse:.4g}{unit}, {result.iterations} iterations, "
         f"{fit.forward_solves} forward solves (forward differences: "
         f"{fit.finite_difference_solves}), {fit.strategy.replace('_', '-')}, {fit.seconds:.1f} s"
     )
