@@ -193,6 +193,7 @@ def _indentation_fit(study):
         message="test",
         seconds=1.0,
         warnings=[],
+        start_cost=0.5 * float(np.sum((250.0 * 7e-2 * all_depth - all_measured) ** 2)),
     )
     fit.to_dict = lambda: {"parameters": result.to_dict()["parameters"], "status": fit.status}
     return fit
@@ -242,7 +243,8 @@ def test_indentation_fit_outputs_csv_json_study_and_four_panels(tmp_path, monkey
     assert residuals.get_ylabel() == "fitted - measured (N)"
     legend = [t.get_text() for t in by_depth.get_legend().get_texts()]
     assert legend[0] == "fast.csv: measured" and legend[3].startswith("slow.csv: fitted")
-    # One cost per trial step of the engine.
-    assert len(history.get_lines()[0].get_ydata()) == len(fit.result.history) > 0
+    # The start's cost, then one cost per trial step of the engine.
+    costs = history.get_lines()[0].get_ydata()
+    assert len(costs) == len(fit.result.history) + 1 > 1 and costs[0] == fit.start_cost
     assert "C10_Pa" in figures[0].get_suptitle()
     assert imread(files["png"]).shape[1] > 1000

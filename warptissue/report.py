@@ -350,7 +350,8 @@ def plot_indentation_fit(
     Force against depth and force against time (each record's measured samples as dots, the
     fitted FE force as a line, one colour per record), the residuals (fitted - measured)
     against time, and the convergence history of the least-squares engine (the cost after
-    each trial step, with the cost of each refused or rejected trial marked).
+    each trial step from the start values' at step 0, with the cost of each refused or
+    rejected trial marked).
 
     Args:
         path: Output PNG file.
@@ -438,6 +439,9 @@ def _plot_history(axes: Any, fit: IndentationFit) -> None:
         return
     steps = np.array([h.iteration for h in history], dtype=float)
     cost = np.array([h.cost for h in history], dtype=float)
+    start_cost = getattr(fit, "start_cost", None)
+    if start_cost is not None and np.isfinite(start_cost):  # the start values, step 0
+        steps, cost = np.concatenate([[0.0], steps]), np.concatenate([[start_cost], cost])
     axes.plot(steps, cost, "-o", color="k", markersize=3, label="cost after the trial")
     refused = [(h.iteration, h.trial_cost) for h in history if not h.accepted]
     if refused:
