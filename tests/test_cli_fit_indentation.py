@@ -198,6 +198,11 @@ def test_bad_input_is_one_line_with_status_2(study_file, tmp_path, capsys):
     assert err.count("\n") == 1 and "forward.toml" in err and "[[data]]" in err
     assert main(["fit", "indentation", str(tmp_path / "missing.toml")]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+    # A record measured with another probe (its sidecar says so) is refused before fitting.
+    (tmp_path / "ramp.json").write_text(json.dumps({"probe_radius_m": 0.002}))
+    assert main(["fit", "indentation", str(study_file), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "ramp" in err and "probe_radius_m" in err
     assert not (tmp_path / "o").exists()
 
 
