@@ -101,7 +101,7 @@ def test_ahn_kim_two_stage_quick_recovers_table_1_and_c10(tmp_path):
     assert two["C10_Pa"] == pytest.approx(287.5, rel=0.02)
     assert two["r_squared"] > 0.99
     noise = 0.01 * row["record"]["peak_force_N"]
-    assert noise < two["rmse_N"] < 1.25 * noise
+    assert 0.9 * noise < two["rmse_N"] < 1.25 * noise  # at the noise it added (1.09 measured)
     assert joint["parameters"]["C10_Pa"] == pytest.approx(287.5, rel=0.03)
     assert joint["r_squared"] > 0.99
     assert joint["forward_solves"] < joint["finite_difference_solves"]

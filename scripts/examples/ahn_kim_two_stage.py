@@ -28,7 +28,7 @@ Each record is fitted with :func:`warptissue.fit.indentation.fit_indentation`:
   (iterations, forward runs, recovered values).
 
 Prints a table (experiment | Table 1 truth | stage (i) | C10 (stage ii) | R^2 | joint fit) and
-writes it as JSON. The full run takes about 15 minutes on a shared 2-core CPU;
+writes it as JSON. The full run takes 5 to 10 minutes on a shared 2-core CPU;
 ``--quick`` (one experiment, a tiny mesh, few steps, a 60 s hold) takes well under a minute
 once the Warp kernels are compiled.
 
