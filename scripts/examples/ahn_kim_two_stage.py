@@ -38,7 +38,8 @@ Usage:
     python scripts/examples/ahn_kim_two_stage.py --markdown RESULTS.json
 
 Exit status: 0 on success (every fit ran; a missed recovery is reported, not an error),
-2 on bad arguments.
+2 on bad arguments or input (one line on stderr), another warptissue error's own status
+(1, or ConvergenceError's) when a fit cannot run.
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ def _settings(quick: bool, args: argparse.Namespace) -> dict:
     """The run's settings (mesh, time grids, sampling)."""
     if quick:
         return {
-            "size_near_m": 5e-3,
+            "size_near_m": (args.size_near_mm or 5.0) * 1e-3,
             "size_far_m": 10e-3,
             "hold_s": 60.0,
             "data_ramp_steps": 8,
@@ -465,6 +466,17 @@ def markdown(results: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the workflow (see the module docstring); a WarpTissueError is one line on stderr."""
+    from warptissue.errors import WarpTissueError
+
+    try:
+        return _main(argv)
+    except (WarpTissueError, OSError, json.JSONDecodeError) as exc:
+        print(f"ahn_kim_two_stage.py: error: {exc}", file=sys.stderr)
+        return int(getattr(exc, "exit_code", 2))
+
+
+def _main(argv: list[str] | None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one experiment, a tiny mesh")
     parser.add_argument("--out", type=Path, default=None, help="write the results (JSON)")
