@@ -45,6 +45,8 @@ DEPTH_M = 0.0036
 HOLD_S = 60.0
 NOISE_SHARE = 0.01
 BULK_RATIO = 1000.0
+SOLVER: dict = {}
+"""Extra ``[solver]`` settings of the fits' study (``--solver``)."""
 
 
 def _study_table(size_near_m: float, material: dict, *, time_steps: int, free: list[str]) -> dict:
@@ -183,6 +185,7 @@ def _fit_part(
         made_s = time.perf_counter() - start
         table = _study_table(size_near_m, material, time_steps=time_steps, free=free)
         table["solver"]["device"] = device
+        table["solver"].update(SOLVER)
         table["data"] = [{"file": f} for f in files]
         (folder / "study.toml").write_text(tomli_w.dumps(table))
         study = load_study(folder / "study.toml")
@@ -248,7 +251,7 @@ def _markdown(results: dict) -> str:
         ]
         for row in results["mesh"]["rows"]:
             lines.append(
-                f"| {row['size_near_m'] * 1e3:.3g} mm | {row['tets']} | {row['nodes']} "
+                f"| {row['size_near_m'] * 1e3:.3g} mm | {row['tets']} | {row.get('nodes', '')} "
                 f"| {row['force_N']:.5g} | {100 * row['error_vs_finest']:+.2f} % |"
             )
         lines.append("")
@@ -286,6 +289,13 @@ def main(argv: list[str] | None = None) -> int:
         help="mesh of the fits (default: the mesh part's choice, else 1.67 mm)",
     )
     parser.add_argument("--time-steps", type=int, default=24)
+    parser.add_argument(
+        "--solver",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="[solver] settings of the fits' study, e.g. nonlinear_elimination=false",
+    )
     parser.add_argument("--quick", action="store_true", help="a tiny run (tests)")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--markdown", type=Path, default=None)
@@ -303,6 +313,10 @@ def main(argv: list[str] | None = None) -> int:
         "python": sys.version.split()[0],
         "time_steps": args.time_steps,
     }
+    for item in args.solver:
+        key, _, value = item.partition("=")
+        SOLVER[key] = {"true": True, "false": False}.get(value.lower(), value)
+    results["solver"] = dict(SOLVER)
     size = None if args.size_near_mm is None else args.size_near_mm * 1e-3
     if "mesh" in args.parts:
         results["mesh"] = _mesh_part(args.device, [s * 1e-3 for s in args.sizes_mm])
