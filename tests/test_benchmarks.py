@@ -15,11 +15,15 @@ PAGE = ROOT / "docs" / "performance.md"
 BENCHMARK = "scripts/benchmarks/bench_flat_punch.py"
 
 
-def generated_tables() -> list[tuple[str, str]]:
-    """(command, the table printed under it) for every ``--markdown`` bash block of the page."""
+INVERSE_FIT = "scripts/benchmarks/bench_inverse_fit.py"
+
+
+def generated_tables(benchmark: str = BENCHMARK) -> list[tuple[str, str]]:
+    """(command, the tables printed under it) for every ``--markdown`` bash block of the page
+    that runs ``benchmark``."""
     found = re.findall(
-        r"```bash\n(python " + re.escape(BENCHMARK) + r" --markdown [^\n]*)\n```\n\n"
-        r"((?:\|[^\n]*\n)+)",
+        r"```bash\n(python " + re.escape(benchmark) + r" --markdown [^\n]*)\n```\n\n"
+        r"((?:\|[^\n]*\n)+(?:\n(?:\|[^\n]*\n)+)*)",
         PAGE.read_text(encoding="utf-8"),
     )
     return [(command, table.strip()) for command, table in found]
@@ -27,12 +31,17 @@ def generated_tables() -> list[tuple[str, str]]:
 
 def test_the_page_has_generated_tables():
     assert len(generated_tables()) >= 4
+    assert len(generated_tables(INVERSE_FIT)) >= 5
 
 
-@pytest.mark.parametrize("command, table", generated_tables(), ids=lambda x: str(x)[:40])
+@pytest.mark.parametrize(
+    "command, table",
+    generated_tables() + generated_tables(INVERSE_FIT),
+    ids=lambda x: str(x)[:40],
+)
 def test_a_performance_table_is_the_benchmarks_output(command, table):
-    arguments = shlex.split(command)[2:]
-    assert run_script(BENCHMARK, *arguments, cwd=ROOT).strip() == table
+    script, *arguments = shlex.split(command)[1:]
+    assert run_script(script, *arguments, cwd=ROOT).strip() == table
 
 
 def test_the_reference_force_is_the_felupe_extrapolation():
@@ -83,6 +92,7 @@ def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):
             ("--steps", "2", "--repeat", "1", "--near", "1.0"),
             r"4 parameter\(s\): exact",
         ),
+        ("bench_inverse_fit.py", ("--quick", "--parts", "mesh"), r"\| 2.5 mm \| \d+ \|"),
     ],
 )
 def test_a_quick_benchmark_runs(name, args, expected, tmp_path):
