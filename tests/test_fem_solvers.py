@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+from fem_cases import compression_conditions
 
 from warptissue.errors import InputError
 from warptissue.fem import (
@@ -38,22 +39,6 @@ def _cube():
     return to_tet10(block_mesh(grid, grid, grid))
 
 
-def _compression_conditions(mesh) -> DirichletConditions:
-    """Frictionless plates: symmetry on x=0, y=0, z=0 and uz = -load on the top."""
-    parts = []
-    for name, axis, value in (
-        ("xmin", 0, 0.0),
-        ("ymin", 1, 0.0),
-        ("zmin", 2, 0.0),
-        ("zmax", 2, -1.0),
-    ):
-        nodes = mesh.node_sets[name]
-        parts.append(
-            DirichletConditions(nodes, np.full(len(nodes), axis), np.full(len(nodes), value))
-        )
-    return DirichletConditions.combine(*parts)
-
-
 def _nominal_stress(material, stretches, *, linear_solver="auto"):
     mesh = _cube()
     weights = np.zeros((mesh.node_count, 3))
@@ -61,7 +46,7 @@ def _nominal_stress(material, stretches, *, linear_solver="auto"):
     assembler = Assembler(mesh, material, formulation="mixed", device="cpu")
     path = solve_quasistatic(
         assembler,
-        _compression_conditions(mesh),
+        compression_conditions(mesh),
         SIDE_M * (1.0 - stretches),
         reaction_weights=weights,
         options=NewtonOptions(linear_solver=linear_solver),
@@ -108,7 +93,7 @@ def test_uniaxial_compression_matches_incompressible_analytic(name):
 def test_linear_solvers_agree(rng):
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device="cpu")
-    conditions = _compression_conditions(mesh)
+    conditions = compression_conditions(mesh)
     u = 1e-4 * rng.standard_normal((mesh.node_count, 3))
     assembly = assembler.assemble(u)
     assembler.eliminate(
@@ -133,7 +118,7 @@ def test_cutback_recovers_and_reports(rng):
     material = NeoHookean(100.0, 2.0e5)
     mesh = _cube()
     assembler = Assembler(mesh, material, device="cpu")
-    conditions = _compression_conditions(mesh)
+    conditions = compression_conditions(mesh)
     target = [SIDE_M * 0.2, SIDE_M * 0.7]
     path = solve_quasistatic(
         assembler, conditions, target, options=NewtonOptions(max_newton_iterations=4)
@@ -161,7 +146,7 @@ def test_line_search_finds_the_energy_minimum_along_an_overshooting_direction(rn
     once."""
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e4), formulation="mixed", device="cpu")
-    conditions = _compression_conditions(mesh)
+    conditions = compression_conditions(mesh)
     mask = conditions.mask(mesh.node_count)
     free = 1.0 - mask
     solver = LinearSolver(method="superlu", device=assembler.device)
@@ -340,7 +325,7 @@ def _six_step_compression() -> tuple[Assembler, DirichletConditions, np.ndarray]
     its assembler (neo-Hookean, mu = 200 Pa, K/mu = 500), plate conditions and loads (m)."""
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    return assembler, _compression_conditions(mesh), SIDE_M * np.linspace(0.05, 0.3, 6)
+    return assembler, compression_conditions(mesh), SIDE_M * np.linspace(0.05, 0.3, 6)
 
 
 def test_extrapolated_predictor_saves_newton_iterations_on_a_smooth_path():
@@ -470,7 +455,7 @@ def test_solvers_take_one_options_object():
     """The defaults equal an explicit NewtonOptions(); loose keyword options are gone."""
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    conditions = _compression_conditions(mesh)
+    conditions = compression_conditions(mesh)
     default = solve_quasistatic(assembler, conditions, [1e-4])
     explicit = solve_quasistatic(assembler, conditions, [1e-4], options=NewtonOptions())
     np.testing.assert_array_equal(default.displacement_m, explicit.displacement_m)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fem_cases import compression_conditions
 from scipy.signal import lfilter
 
 from warptissue.errors import InputError
@@ -35,22 +36,10 @@ def _cube():
 
 
 def _compression(mesh) -> tuple[DirichletConditions, np.ndarray]:
-    """Frictionless plates (symmetry on x=0, y=0, z=0; uz = -load on top) and the top's
-    reaction weights: homogeneous uniaxial compression with free lateral faces."""
-    parts = []
-    for name, axis, value in (
-        ("xmin", 0, 0.0),
-        ("ymin", 1, 0.0),
-        ("zmin", 2, 0.0),
-        ("zmax", 2, -1.0),
-    ):
-        nodes = mesh.node_sets[name]
-        parts.append(
-            DirichletConditions(nodes, np.full(len(nodes), axis), np.full(len(nodes), value))
-        )
+    """Homogeneous uniaxial compression and the top's reaction weights (compressive > 0)."""
     weights = np.zeros((mesh.node_count, 3))
     weights[mesh.node_sets["zmax"], 2] = -1.0
-    return DirichletConditions.combine(*parts), weights
+    return compression_conditions(mesh), weights
 
 
 def _nominal_stress(
