@@ -27,8 +27,8 @@ from warptissue.fit import IndentationFit, fit_indentation
 from warptissue.fit.indentation import _forward_model
 from warptissue.io import write_csv
 from warptissue.materials import material_from_dict
-from warptissue.simulate import build_mesh, build_problem
-from warptissue.study import load_study
+from warptissue.simulate import build_mesh, build_problem, run_study
+from warptissue.study import load_study, save_study
 
 RADIUS_M = 1e-3
 BULK_PA = 575_000.0
@@ -468,6 +468,20 @@ def test_viscoelastic_c10_g1_tau1_are_recovered_from_a_ramp_and_hold(tmp_path):
     assert_recovered(fit, {"C10_Pa": 287.5, "g1": 0.5, "tau1_s": 1.0}, 0.05)
     assert fit.forward_solves < fit.finite_difference_solves / 2
     assert fit.records[0].fe_time_s.size >= 16
+    # The study's protocol is quasi-static: the fitted study replays the record's history
+    # instead, so that simulate runs it as it is and gives the fitted force.
+    assert not fit.study.protocol.timed
+    saved = load_study(save_study(fit.fitted_study, tmp_path / "fitted.toml"))
+    assert saved.protocol.kind == "record" and saved.protocol.timed
+    outputs = run_study(saved, out_dir=tmp_path / "run", progress=False, announce=False)
+    assert outputs.completed
+    record = fit.records[0]
+    simulated = np.interp(
+        record.time_s,
+        np.concatenate([[0.0], outputs.result.times_s]),
+        np.concatenate([[0.0], outputs.result.reaction_force_N]),
+    )
+    np.testing.assert_allclose(simulated, record.fitted_force_N, atol=1e-12)
 
 
 def test_ahn_and_kim_two_stage_fits_the_prony_series_first(tmp_path):

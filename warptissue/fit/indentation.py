@@ -61,7 +61,13 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.fit.engine import covariance_from_jacobian, least_squares
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import FitResult, IterationRecord, RejectStep
-from warptissue.study import FIT_STRATEGIES, DataRecord, Study, start_values_from_record
+from warptissue.study import (
+    FIT_STRATEGIES,
+    DataRecord,
+    Protocol,
+    Study,
+    start_values_from_record,
+)
 
 __all__ = [
     "CORRELATION_LIMIT",
@@ -906,7 +912,7 @@ def fit_indentation(
     fitted_material = model.material_at(best.x)
     return IndentationFit(
         study=study,
-        fitted_study=dataclasses.replace(study, material=fitted_material),
+        fitted_study=_fitted_study(study, fitted_material),
         result=result,
         records=records,
         strategy=chosen_strategy,
@@ -974,6 +980,20 @@ def _result_from(
     except InputError:
         result.r_squared = None
     return result
+
+
+def _fitted_study(study: Study, material: Any) -> Study:
+    """The study with the fitted material; a viscoelastic one whose study has a quasi-static
+    protocol replays the first record's history instead (``warptissue simulate`` needs time
+    steps for it)."""
+    from warptissue.materials import Viscoelastic
+
+    fitted = dataclasses.replace(study, material=material)
+    if isinstance(material, Viscoelastic) and not study.protocol.timed:
+        steps = study.fit.time_steps if study.fit is not None else 40
+        protocol = Protocol.from_record(study.data[0], steps=steps)
+        fitted = dataclasses.replace(fitted, protocol=protocol)
+    return fitted
 
 
 def _record_curves(model: _ForwardModel, best: _Evaluation) -> tuple[RecordCurve, ...]:
