@@ -518,3 +518,16 @@ def test_two_stage_needs_a_prony_series(neo_hookean_fit):
         fit_indentation(neo_hookean_fit.study, progress=False, strategy="two_stage")
     with pytest.raises(InputError, match="strategy"):
         fit_indentation(neo_hookean_fit.study, progress=False, strategy="three_stage")
+
+
+def test_the_fit_gives_the_same_parameters_on_every_device(neo_hookean_fit, device):
+    """The CUDA fit (cuDSS, Warp kernels on the GPU) equals the CPU fit of the module's
+    neo-Hookean record, to the optimizer's tolerance."""
+    if device == "cpu":
+        pytest.skip("the CPU fit is the reference (neo_hookean_fit)")
+    fit = fit_indentation(neo_hookean_fit.study, device=device, progress=False)
+    assert fit.status == neo_hookean_fit.status
+    np.testing.assert_allclose(fit.result.x, neo_hookean_fit.result.x, rtol=1e-6)
+    np.testing.assert_allclose(
+        fit.records[0].fitted_force_N, neo_hookean_fit.records[0].fitted_force_N, rtol=1e-6
+    )
