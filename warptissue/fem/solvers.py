@@ -929,6 +929,9 @@ def solve_quasistatic(
                 ):
                     free_guess = (u - previous[1]) * ((there - here) / (here - previous[0]))
                 retry_linearized = False
+                set_load = getattr(assembler, "set_load", None)
+                if set_load is not None:  # a rigid contact's depth follows the load
+                    set_load(next_load)
                 step = _newton_increment(
                     assembler,
                     solver,
