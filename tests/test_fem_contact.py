@@ -222,7 +222,8 @@ def test_sphere_force_is_insensitive_to_the_penalty_factor(sphere_mesh, sphere_r
 
 def test_sensitivities_through_contact_match_central_differences(sphere_mesh):
     """Exact dF/dtheta (the penalty's own dependence on mu0 included) against central
-    differences of whole runs with a tight Newton tolerance, relative step 1e-6."""
+    differences of whole runs with a tight Newton tolerance, relative step 1e-6 (measured
+    6e-8 for C10, 2e-6 for K)."""
     tight = NewtonOptions(tolerance=1e-12)
     material = NeoHookean(C10_PA, 50.0 * C10_PA)
     names = ("C10_Pa", "bulk_modulus_Pa")
