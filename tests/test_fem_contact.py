@@ -271,3 +271,24 @@ def test_bad_contact_input_is_refused_by_key(sphere_mesh):
     assert caught.value.column == "radius_m"
     for error in (caught.value,):
         assert "\n" not in str(error)
+
+
+STUDY_COARSE = "thickness_m = 0.01\nsize_near_m = 0.001\nsize_far_m = 0.005\n"
+
+
+def test_a_sphere_study_builds_and_simulates(tmp_path):
+    """The study path (mesh and problem from the study file) runs a sphere end to end."""
+    from warptissue.simulate import build_mesh, build_problem
+
+    path = _write(tmp_path, 'kind = "sphere"\nradius_m = 0.002')
+    text = path.read_text().replace("thickness_m = 0.01\n", STUDY_COARSE)
+    path.write_text(text, encoding="utf-8")
+    study = load_study(path)
+    mesh = build_mesh(study)
+    problem = build_problem(study, mesh)
+    assert problem.is_contact and problem.punch_nodes.size == 0
+    result = simulate_indentation(problem, [1e-4], device="cpu", progress=False)
+    assert result.completed, result.message
+    # Hertz with the study's E = 6 C10 (K/mu = 1000): measured +0.4 % on this coarse mesh.
+    hertz = 16.0 / 9.0 * 6.0 * 287.5 * np.sqrt(0.002) * 1e-4**1.5
+    assert result.reaction_force_N[0] == pytest.approx(hertz, rel=0.1)
