@@ -12,9 +12,11 @@ Newton's iterations. Depths 0.1-0.3 R show the large-depth departure from Hertz.
 Usage:
     python scripts/examples/hertz_sphere.py [--quick] [--out hertz_sphere.json]
 
-Measured on the 2-core CPU (full run, block 8 R thick and 16 R wide, 18 minutes ...): see
-docs/fe.md "Contact" for the table. ``--quick`` (under a minute) runs a 3 R x 1.5 R block
-at two depths.
+Measured on the 2-core CPU (full run: block 16 R wide and 8 R thick, 21 053 TET10 nodes,
+844 s): F / Hertz = 0.983, 0.990, 0.999, 0.995, 1.001, 1.001 at d/R = 0.005, 0.01, 0.02,
+0.03, 0.04, 0.045 (within 1.7 %), 0.998, 0.998, 0.990 at 0.1, 0.2, 0.3; against Hertz times
+the layer factor 0.97-0.98 at small depth (docs/fe.md "Contact" has the table). ``--quick``
+(under a minute) runs a 3 R x 1.5 R block at two depths.
 """
 
 from __future__ import annotations
