@@ -20,8 +20,8 @@ the punch nodes, times the symmetry factor (2 per symmetry plane), positive when
 pushes in. Under a sphere or a plate it is the base's: the sum of the z internal forces of the
 "bottom" nodes times the symmetry factor, which equals the contact force at equilibrium (the
 result reports both); as it is a reaction of prescribed dofs, the exact sensitivities
-(:mod:`warptissue.fem.sensitivity`) hold unchanged (the penalty does not depend on the
-material parameters, its tangent enters through ``K``).
+(:mod:`warptissue.fem.sensitivity`) hold unchanged: the penalty's tangent enters through
+``K``, and its one dependence on the material (``k`` follows ``mu0``) through ``dR/dtheta``.
 """
 
 from __future__ import annotations
