@@ -16,7 +16,7 @@ from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
 from warptissue.indenter import CONTACT_KINDS, SIMULATED_KINDS, Indenter
-from warptissue.materials import NeoHookean, material_from_dict
+from warptissue.materials import NeoHookean, Viscoelastic, material_from_dict
 from warptissue.mesh import TetMesh, block_mesh, indentation_block, to_tet10
 from warptissue.study import load_study
 
@@ -292,3 +292,23 @@ def test_a_sphere_study_builds_and_simulates(tmp_path):
     # Hertz with the study's E = 6 C10 (K/mu = 1000): measured +0.4 % on this coarse mesh.
     hertz = 16.0 / 9.0 * 6.0 * 287.5 * np.sqrt(0.002) * 1e-4**1.5
     assert result.reaction_force_N[0] == pytest.approx(hertz, rel=0.1)
+
+
+def test_a_sphere_on_a_viscoelastic_block_relaxes_at_a_held_depth(sphere_mesh):
+    """Timed run: ramp to 0.04 R, hold. The force relaxes toward the long-term share
+    (1 - g) of the instantaneous one, and the contact force stays the base reaction."""
+    elastic = NeoHookean(C10_PA, 2000.0 * C10_PA)
+    material = Viscoelastic(elastic, g=(0.5,), tau_s=(1.0,))
+    depth = SPHERE_DEPTHS_M[-1]
+    result = simulate_indentation(
+        _sphere_problem(sphere_mesh, material),
+        [depth, depth, depth],
+        times_s=[1e-3, 1.0, 20.0],
+        device="cpu",
+        progress=False,
+    )
+    assert result.completed, result.message
+    force = result.reaction_force_N
+    assert force[0] > force[1] > force[2]
+    assert force[2] / force[0] == pytest.approx(0.5, rel=0.05)
+    np.testing.assert_allclose(result.contact_force_N, force, rtol=1e-8)
