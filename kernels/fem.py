@@ -506,3 +506,117 @@ def viscous_sensitivity_commit_kernel(
             + viscous.b[i] * d_change
         )
     d_elastic_stress[parameter, e, q] = d_current
+
+
+@wp.func
+def add_contact_node(
+    node: int,
+    block: int,
+    gap: wp.float64,
+    normal: wp.vec3d,
+    curvature: wp.float64,
+    stiffness: wp.float64,
+    with_tangent: int,
+    residual: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+    contact_force: wp.array(dtype=wp.vec3d),
+):
+    """The penalty of one penetrating node (``gap < 0``): ``R -= f_c``, ``f_c = -k g n``.
+
+    The tangent block ``k (n n^T + g kappa (I - n n^T))`` goes to the node's diagonal block
+    (``kappa = 1 / |x - c|`` for a sphere, 0 for a plane); the energy gets ``k g^2 / 2``.
+    """
+    force = -stiffness * gap * normal
+    wp.atomic_sub(residual, node, force)
+    wp.atomic_add(contact_force, 0, force)
+    wp.atomic_add(energy, 0, wp.float64(0.5) * stiffness * gap * gap)
+    if with_tangent != 0:
+        nn = wp.outer(normal, normal)
+        tangential = wp.identity(n=3, dtype=wp.float64) - nn
+        wp.atomic_add(matrix_values, block, stiffness * (nn + gap * curvature * tangential))
+
+
+@wp.kernel
+def sphere_contact_kernel(
+    points: wp.array(dtype=wp.vec3d),
+    displacement: wp.array(dtype=wp.vec3d),
+    nodes: wp.array(dtype=wp.int32),
+    diagonal_blocks: wp.array(dtype=wp.int32),
+    centre: wp.vec3d,
+    radius: wp.float64,
+    stiffness: wp.float64,
+    with_tangent: int,
+    residual: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+    contact_force: wp.array(dtype=wp.vec3d),
+):
+    """Frictionless penalty contact of a rigid sphere (centre ``centre``, m) with the nodes.
+
+    Signed distance ``g = |x - c| - r`` (m), outward normal of the sphere
+    ``n = (x - c) / |x - c|``; only ``g < 0`` (penetration) acts. ``contact_force[0]``
+    accumulates the force on the body, N; ``diagonal_blocks[i]`` is the BSR block (i, i) of
+    ``nodes[i]``.
+    """
+    i = wp.tid()
+    node = nodes[i]
+    x = points[node] + displacement[node]
+    offset = x - centre
+    distance = wp.length(offset)
+    gap = distance - radius
+    if gap >= wp.float64(0.0) or distance <= wp.float64(0.0):
+        return
+    add_contact_node(
+        node,
+        diagonal_blocks[i],
+        gap,
+        offset / distance,
+        wp.float64(1.0) / distance,
+        stiffness,
+        with_tangent,
+        residual,
+        matrix_values,
+        energy,
+        contact_force,
+    )
+
+
+@wp.kernel
+def plate_contact_kernel(
+    points: wp.array(dtype=wp.vec3d),
+    displacement: wp.array(dtype=wp.vec3d),
+    nodes: wp.array(dtype=wp.int32),
+    diagonal_blocks: wp.array(dtype=wp.int32),
+    plane_z: wp.float64,
+    stiffness: wp.float64,
+    with_tangent: int,
+    residual: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+    contact_force: wp.array(dtype=wp.vec3d),
+):
+    """Frictionless penalty contact of a rigid plate filling ``z >= plane_z`` with the nodes.
+
+    Signed distance ``g = plane_z - z`` (m), outward normal ``n = (0, 0, -1)``; only
+    ``g < 0`` acts (see :func:`sphere_contact_kernel`).
+    """
+    i = wp.tid()
+    node = nodes[i]
+    x = points[node] + displacement[node]
+    gap = plane_z - x[2]
+    if gap >= wp.float64(0.0):
+        return
+    add_contact_node(
+        node,
+        diagonal_blocks[i],
+        gap,
+        wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(-1.0)),
+        wp.float64(0.0),
+        stiffness,
+        with_tangent,
+        residual,
+        matrix_values,
+        energy,
+        contact_force,
+    )

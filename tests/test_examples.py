@@ -31,6 +31,7 @@ def test_every_example_has_a_test():
         "rig_acquisition_demo.py",
         "verify_flat_punch.py",
         "ahn_kim_two_stage.py",
+        "hertz_sphere.py",
     }
     assert {p.name for p in EXAMPLES.glob("*.py")} == tested
 
@@ -105,3 +106,17 @@ def test_ahn_kim_two_stage_quick_recovers_table_1_and_c10(tmp_path):
     assert joint["parameters"]["C10_Pa"] == pytest.approx(287.5, rel=0.03)
     assert joint["r_squared"] > 0.99
     assert joint["forward_solves"] < joint["finite_difference_solves"]
+
+
+def test_hertz_sphere_quick_follows_the_layer_corrected_hertz(tmp_path):
+    """The sphere's quick form (a thin small block): the force within 8 % of Hertz times
+    Dimitriadis et al.'s bonded-layer factor, which the script computes from the formula, and
+    the contact force sum equal to the base reaction."""
+    run_example("hertz_sphere.py", "--quick", "--out", "hertz.json", cwd=tmp_path)
+    rows = json.loads((tmp_path / "hertz.json").read_text())["rows"]
+    assert [row["depth_over_radius"] for row in rows] == [0.02, 0.04]
+    for row in rows:
+        hertz = 16.0 / 9.0 * 6.0 * 500.0 * 1e-3**0.5 * (row["depth_over_radius"] * 1e-3) ** 1.5
+        assert row["hertz_N"] == pytest.approx(hertz, rel=1e-12)
+        assert row["force_over_corrected_hertz"] == pytest.approx(1.0, abs=0.08)
+        assert row["contact_force_N"] == pytest.approx(row["force_N"], rel=1e-8)

@@ -5,10 +5,12 @@ A study's ``[indenter]`` table reads into an :class:`Indenter`
 into the specimen, and :func:`warptissue.usd.write_simulation_usd` draws it. This module
 imports neither Warp nor USD, so that reading a study stays light.
 
-Kinds: ``"flat_punch"`` (a flat-ended cylinder along z; the kind the finite elements
-simulate), ``"line"`` (a cylinder along y pressed sideways, drawn only) and ``"platen"`` (a
-square plate, drawn only). Contact under the probe: ``"bonded"`` (no slip) or
-``"frictionless"``.
+Kinds: ``"flat_punch"`` (a flat-ended cylinder along z whose nodes are prescribed),
+``"sphere"`` (a rigid sphere of radius ``radius_m``) and ``"plate"`` (a rigid plane
+``z = top - depth``), which the finite elements simulate; ``"line"`` (a cylinder along y
+pressed sideways, drawn only) and ``"platen"`` (a square plate, drawn only). Contact under the
+probe: ``"bonded"`` (no slip; flat punch only) or ``"frictionless"`` (the only contact of a
+sphere or a plate: a penalty, :mod:`warptissue.fem.contact`).
 
 Example:
     >>> from warptissue.indenter import Indenter
@@ -26,12 +28,14 @@ from typing import Any
 
 from warptissue.errors import InputError
 
-__all__ = ["CONTACTS", "INDENTER_KINDS", "SIMULATED_KINDS", "Indenter"]
+__all__ = ["CONTACTS", "CONTACT_KINDS", "INDENTER_KINDS", "SIMULATED_KINDS", "Indenter"]
 
-INDENTER_KINDS: tuple[str, ...] = ("flat_punch", "line", "platen")
+INDENTER_KINDS: tuple[str, ...] = ("flat_punch", "sphere", "plate", "line", "platen")
 """Every kind an :class:`Indenter` may be."""
-SIMULATED_KINDS: tuple[str, ...] = ("flat_punch",)
+SIMULATED_KINDS: tuple[str, ...] = ("flat_punch", "sphere", "plate")
 """The kinds the finite elements (and so a study) simulate; the others are drawn only."""
+CONTACT_KINDS: tuple[str, ...] = ("sphere", "plate")
+"""Rigid indenters that touch the specimen through frictionless (penalty) contact."""
 CONTACTS: tuple[str, ...] = ("bonded", "frictionless")
 """Contact conditions under the probe."""
 
@@ -50,24 +54,28 @@ class Indenter:
 
     Args:
         kind: ``"flat_punch"`` (a flat-ended cylinder along z of radius ``radius_m``),
-            ``"line"`` (a cylinder along y of tip radius ``radius_m`` and length ``length_m``)
+            ``"sphere"`` (a rigid sphere of radius ``radius_m``, its lowest point at the
+            contact point), ``"plate"`` (a rigid plane ``z = top - depth``), ``"line"``
+            (a cylinder along y of tip radius ``radius_m`` and length ``length_m``)
             or ``"platen"`` (a thin square plate of side ``length_m``).
-        radius_m: Punch radius or line tip radius, m (0 where the kind has none).
+        radius_m: Punch, sphere or line tip radius, m (0 where the kind has none).
         contact: ``"bonded"`` (the nodes under a flat punch move with it in x, y and z) or
-            ``"frictionless"`` (only z is prescribed under the punch).
+            ``"frictionless"`` (only z is prescribed under the punch; a sphere or a plate
+            pushes the surface nodes along its normal). None: ``"bonded"`` for a flat punch,
+            ``"frictionless"`` for a sphere or a plate (their only contact).
         length_m: Line length or platen side, m (0 where the kind has none).
         x_m: Contact point x, m. The finite elements need the probe on the axis, 0.
         y_m: Contact point y, m. The finite elements need the probe on the axis, 0.
         z_m: Contact point z (the specimen's top surface), m; None: the top of the mesh.
 
     Raises:
-        InputError: An unknown kind or contact, or a missing, non-positive or non-finite
-            length (the error's ``column`` names the field).
+        InputError: An unknown kind or contact, a bonded sphere or plate, or a missing,
+            non-positive or non-finite length (the error's ``column`` names the field).
     """
 
     kind: str
     radius_m: float = field(default=0.0, kw_only=True)
-    contact: str = field(default="bonded", kw_only=True)
+    contact: str | None = field(default=None, kw_only=True)
     length_m: float = field(default=0.0, kw_only=True)
     x_m: float = field(default=0.0, kw_only=True)
     y_m: float = field(default=0.0, kw_only=True)
@@ -80,14 +88,24 @@ class Indenter:
                 key="kind",
                 value=self.kind,
             )
+        if self.contact is None:
+            contact = "frictionless" if self.kind in CONTACT_KINDS else "bonded"
+            object.__setattr__(self, "contact", contact)
         if self.contact not in CONTACTS:
             raise InputError(
                 f"must be one of {', '.join(map(repr, CONTACTS))}",
                 key="contact",
                 value=self.contact,
             )
+        if self.kind in CONTACT_KINDS and self.contact != "frictionless":
+            raise InputError(
+                f"a {self.kind} touches through frictionless contact only (a bonded rigid "
+                "contact is not simulated)",
+                key="contact",
+                value=self.contact,
+            )
         for key, needed in (
-            ("radius_m", self.kind in ("flat_punch", "line")),
+            ("radius_m", self.kind in ("flat_punch", "sphere", "line")),
             ("length_m", self.kind in ("line", "platen")),
         ):
             value = getattr(self, key)

@@ -114,11 +114,13 @@ def build_mesh(study: Study) -> Any:
         A :class:`warptissue.mesh.TetMesh` with the standard indentation node sets.
     """
     from warptissue.mesh import indentation_block, indentation_disc
+    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
+    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
     common = {
         "thickness_m": specimen.thickness_m,
-        "probe_radius_m": study.indenter.radius_m,
+        "probe_radius_m": mesh_probe_radius(study.indenter, half_size_m),
         "quarter": specimen.quarter,
         "element": specimen.element,
         "size_near_m": specimen.size_near_m,
@@ -142,13 +144,15 @@ def estimate_mesh(study: Study) -> Any:
         solve on the CPU).
     """
     from warptissue.mesh import estimate_indentation_mesh
+    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
+    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
     return estimate_indentation_mesh(
         shape=specimen.shape,
-        half_extent_m=specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m,
+        half_extent_m=half_size_m,
         thickness_m=specimen.thickness_m,
-        probe_radius_m=study.indenter.radius_m,
+        probe_radius_m=mesh_probe_radius(study.indenter, half_size_m),
         quarter=specimen.quarter,
         element=specimen.element,
         size_near_m=specimen.size_near_m,

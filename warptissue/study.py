@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from warptissue.errors import InputError
-from warptissue.indenter import CONTACTS, SIMULATED_KINDS, Indenter
+from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
 from warptissue.mesh.generators import MESHERS
 
 if TYPE_CHECKING:
@@ -778,7 +778,8 @@ class _Table:
             )
 
 
-def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
+def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
+    probe_radius_m = indenter.radius_m
     shape = table.string("shape", choices=SPECIMEN_SHAPES)
     thickness_m = table.number("thickness_m")
     other_size_key = "radius_m" if shape == "block" else "width_m"
@@ -791,6 +792,7 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
     width_m = table.number("width_m") if shape == "block" else None
     radius_m = table.number("radius_m") if shape == "disc" else None
     half_size_m = width_m / 2.0 if shape == "block" else radius_m
+    probe_radius_m = mesh_probe_radius(indenter, half_size_m)
     size_key = "width_m" if shape == "block" else "radius_m"
     if half_size_m <= probe_radius_m:
         raise table.error(
@@ -835,12 +837,24 @@ def _read_specimen(table: _Table, probe_radius_m: float) -> Specimen:
 
 def _read_indenter(table: _Table) -> Indenter:
     kind = table.string("kind", choices=SIMULATED_KINDS)
-    radius_m = table.number("radius_m")
-    contact = table.string("contact", default="bonded", choices=CONTACTS)
-    table.finish()
-    return table.build(
-        lambda values: Indenter(**values), {"kind": kind, "radius_m": radius_m, "contact": contact}
+    # A plate needs no radius; given, it is the radius of the mesh's refined zone.
+    radius_m = (
+        table.number("radius_m", default=0.0) if kind == "plate" else table.number("radius_m")
     )
+    contact = table.string(
+        "contact",
+        default="bonded" if kind not in CONTACT_KINDS else "frictionless",
+        choices=CONTACTS,
+    )
+    table.finish()
+    values = {"kind": kind, "radius_m": radius_m, "contact": contact}
+    return table.build(lambda values: Indenter(**values), values)
+
+
+def mesh_probe_radius(indenter: Indenter, half_size_m: float) -> float:
+    """The radius of the specimen mesh's refined zone under the probe, m: the probe's radius,
+    or half the specimen's half-size for a plate without one."""
+    return indenter.radius_m if indenter.radius_m > 0 else 0.5 * half_size_m
 
 
 _PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
@@ -1327,7 +1341,7 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
         )
     description = root.string("description", default="")
     indenter = _read_indenter(root.table("indenter"))
-    specimen = _read_specimen(root.table("specimen"), indenter.radius_m)
+    specimen = _read_specimen(root.table("specimen"), indenter)
     base = source.path.parent if source.path is not None else Path.cwd()
     protocol = _read_protocol(
         root.table("protocol"), specimen.thickness_m, version=version, base=base
@@ -1466,6 +1480,14 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
             "from (give start values in [fit.start], or set contact)",
             path=record.path,
         )
+    if study.indenter.kind == "plate":
+        raise InputError(
+            "no start value from an indentation formula for a plate (give start values in "
+            "[fit.start])",
+            path=study.path,
+            key="kind",
+            value=study.indenter.kind,
+        )
     limit = START_DEPTH_SHARE * min(study.indenter.radius_m, study.specimen.thickness_m)
     shallow = depth <= limit
     if np.count_nonzero(shallow) < 2:
@@ -1477,7 +1499,7 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
             force[shallow],
             radius_m=study.indenter.radius_m,
             poissons_ratio=poissons_ratio,
-            geometry="flat",
+            geometry="sphere" if study.indenter.kind == "sphere" else "flat",
             thickness_m=study.specimen.thickness_m,
         )
     except InputError as exc:  # e.g. a layer beyond the range of the Hayes factor

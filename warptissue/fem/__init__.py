@@ -1,4 +1,6 @@
-"""Tetrahedral hyperelastic finite elements on Warp: assembly, Newton, flat-punch indentation.
+"""Tetrahedral hyperelastic finite elements on Warp: assembly, Newton, indentation by a flat
+punch or, through frictionless penalty contact (:mod:`warptissue.fem.contact`), a rigid sphere
+or plate.
 
 Public API (CONVENTIONS.md): :class:`IndentationProblem` (a mesh, a material and a
 :class:`warptissue.indenter.Indenter`), :func:`simulate_indentation` ->

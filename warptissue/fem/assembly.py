@@ -18,6 +18,7 @@ import warp.sparse as wps
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
+from warptissue.fem.contact import RigidContact
 from warptissue.fem.elements import element_geometry
 from warptissue.fem.viscous import ViscousHistory, elastic_step
 from warptissue.materials import Material, Viscoelastic
@@ -34,7 +35,8 @@ class Assembly:
     """One evaluation of the discrete system at a displacement.
 
     Attributes:
-        residual: Internal nodal forces f_int (no external loads), Warp array (N,) vec3d, N.
+        residual: Internal nodal forces f_int (no external loads) less the rigid contact's
+            forces on the body where the assembler has one, Warp array (N,) vec3d, N.
         matrix: Tangent stiffness d f_int / d u as a 3x3-block BSR matrix (N/m), or None when
             only the residual was assembled. Shared with the assembler: the next assembly
             overwrites it.
@@ -143,6 +145,9 @@ class Assembler:
             geometry.quadrature_volumes, dtype=wp.float64, device=dev
         )
         self._build_pattern(mesh.tets)
+        self._points = wp.array(mesh.points, dtype=wp.vec3d, device=dev)
+        self.contact: RigidContact | None = None
+        self._contact_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._energy = wp.zeros(1, dtype=wp.float64, device=dev)
@@ -176,6 +181,80 @@ class Assembler:
             self.viscous = None
         self.material = material
         self._params = params
+
+    def set_contact(self, contact: RigidContact | None) -> None:
+        """Press a rigid indenter into the body from the next assembly on (None: no contact).
+
+        Every later :meth:`assemble` adds the frictionless penalty of ``contact`` at its
+        current depth (:mod:`warptissue.fem.contact`) to the residual (``R = f_int - f_c``),
+        the tangent's diagonal blocks and the energy; :meth:`set_load` moves the indenter.
+        """
+        if contact is not None:
+            nodes = contact.nodes
+            if nodes.min() < 0 or nodes.max() >= self.node_count:
+                raise InputError("contact nodes must be nodes of the mesh", key="mesh")
+            self._contact_nodes = wp.array(nodes, dtype=wp.int32, device=self.device)
+            self._contact_blocks = wp.array(
+                self._diagonal_blocks[nodes], dtype=wp.int32, device=self.device
+            )
+        self.contact = contact
+
+    def set_load(self, load: float) -> None:
+        """The load of the next assemblies: the rigid indenter's depth, m (no-op without one).
+
+        :func:`warptissue.fem.solve_quasistatic` calls it before each load increment.
+        """
+        if self.contact is not None:
+            self.contact.depth_m = float(load)
+
+    def contact_force(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:
+        """The total contact force on the body at a displacement and the current depth, (3,), N
+        (zeros without contact). Leaves the assembler's residual, tangent and energy as
+        they were."""
+        from warptissue.kernels import fem as kf
+
+        if self.contact is None:
+            return np.zeros(3)
+        u = self.device_displacement(displacement_m)
+        scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
+        energy = wp.zeros(1, dtype=wp.float64, device=self.device)
+        force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
+        self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
+        return force.numpy()[0].copy()
+
+    def _launch_contact(
+        self,
+        kf: Any,
+        u: wp.array,
+        with_tangent: int,
+        residual: wp.array,
+        values: wp.array,
+        energy: wp.array,
+        force: wp.array,
+    ) -> None:
+        contact = self.contact
+        stiffness = wp.float64(contact.stiffness_N_per_m)
+        if contact.indenter.kind == "sphere":
+            kernel = kf.sphere_contact_kernel
+            shape = [wp.vec3d(*contact.centre_m), wp.float64(contact.indenter.radius_m)]
+        else:
+            kernel = kf.plate_contact_kernel
+            shape = [wp.float64(contact.plane_z_m)]
+        wp.launch(
+            kernel,
+            dim=len(contact.nodes),
+            inputs=[
+                self._points,
+                u,
+                self._contact_nodes,
+                self._contact_blocks,
+                *shape,
+                stiffness,
+                with_tangent,
+            ],
+            outputs=[residual, values, energy, force],
+            device=self.device,
+        )
 
     def reset_history(self) -> None:
         """Back to the unloaded state at t = 0 (a viscoelastic material forgets its history)."""
@@ -221,6 +300,10 @@ class Assembler:
         offsets = np.concatenate([[0], np.cumsum(np.bincount(block_rows, minlength=n))])
         self._pattern_offsets = offsets
         self._pattern_columns = block_cols
+        diagonal = np.flatnonzero(np.repeat(np.arange(n), np.diff(offsets)) == block_cols)
+        if len(diagonal) != n:
+            raise InputError("every node must belong to an element", key="mesh")
+        self._diagonal_blocks = diagonal.astype(np.int32)
         nnz = len(unique_keys)
         if not (
             np.array_equal(self.matrix.offsets.numpy()[: n + 1], offsets)
@@ -264,6 +347,17 @@ class Assembler:
             outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
             device=self.device,
         )
+        if self.contact is not None:
+            self._contact_force.zero_()
+            self._launch_contact(
+                kf,
+                u,
+                int(with_tangent),
+                self._residual,
+                self.matrix.values,
+                self._energy,
+                self._contact_force,
+            )
         return Assembly(
             residual=self._residual,
             matrix=self.matrix if with_tangent else None,
@@ -327,11 +421,39 @@ class Assembler:
                 device=self.device,
             )
             explicit = self._residual.numpy().copy()
+        explicit = explicit + self._contact_parameter_residual(u, name)
         if viscous is None or name not in viscous.names:
             return explicit
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
+
+    def _contact_parameter_residual(self, u: wp.array, name: str) -> np.ndarray | float:
+        """The rigid contact's part of ``dR/dtheta``: its penalty ``k = beta mu0 h`` follows
+        the initial shear modulus, so ``dR_c/dtheta = R_c (dmu0/dtheta) / mu0`` (0 without
+        contact or for a parameter mu0 does not depend on)."""
+        from warptissue.kernels import fem as kf
+        from warptissue.materials import material_from_dict
+
+        if self.contact is None:
+            return 0.0
+        flat = self.material.to_dict()
+        value = float(flat[name])
+        step = 1e-6 * max(abs(value), 1e-12)
+        moduli = [
+            material_from_dict({**flat, name: value + sign * step}).initial_shear_modulus_Pa
+            for sign in (1.0, -1.0)
+        ]
+        # mu0 is linear (or smooth and elementary) in each parameter: the central difference
+        # is exact to roundoff for linear ones.
+        share = (moduli[0] - moduli[1]) / (2.0 * step) / self.material.initial_shear_modulus_Pa
+        if share == 0.0:
+            return 0.0
+        scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
+        energy = wp.zeros(1, dtype=wp.float64, device=self.device)
+        force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
+        self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
+        return share * scratch.numpy()
 
     def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,

@@ -11,8 +11,17 @@ in -z; the base is z = 0. Quarter models keep x >= 0, y >= 0 with symmetry plane
 - Base ``"fixed"``: all components zero on "bottom"; ``"sliding"``: ``uz = 0`` on "bottom",
   plus pins that remove the in-plane rigid motions the other conditions leave free.
 
-The reaction force is the sum of the z-components of the internal force over the punch nodes,
-times the symmetry factor (2 per symmetry plane), positive when the punch pushes in.
+- Sphere and plate (rigid indenters, :mod:`warptissue.fem.contact`): no node is prescribed
+  under them; a frictionless penalty pushes the surface nodes out of the indenter, whose depth
+  is the load.
+
+The reaction force of a flat punch is the sum of the z-components of the internal force over
+the punch nodes, times the symmetry factor (2 per symmetry plane), positive when the punch
+pushes in. Under a sphere or a plate it is the base's: the sum of the z internal forces of the
+"bottom" nodes times the symmetry factor, which equals the contact force at equilibrium (the
+result reports both); as it is a reaction of prescribed dofs, the exact sensitivities
+(:mod:`warptissue.fem.sensitivity`) hold unchanged: the penalty's tangent enters through
+``K``, and its one dependence on the material (``k`` follows ``mu0``) through ``dR/dtheta``.
 """
 
 from __future__ import annotations
@@ -25,6 +34,7 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, RigidContact
 from warptissue.fem.sensitivity import ForceSensitivity, check_sensitivity_names
 from warptissue.fem.solvers import (
     DirichletConditions,
@@ -33,7 +43,7 @@ from warptissue.fem.solvers import (
     SolveInterrupted,
     solve_quasistatic,
 )
-from warptissue.indenter import SIMULATED_KINDS, Indenter
+from warptissue.indenter import CONTACT_KINDS, SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
@@ -72,6 +82,8 @@ class IndentationProblem:
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
         surface: Node set of the indented surface.
+        penalty_factor: ``beta`` of the contact penalty ``k = beta mu0 h`` of a sphere or a
+            plate (:mod:`warptissue.fem.contact`; unused by a flat punch).
     """
 
     mesh: TetMesh
@@ -81,6 +93,7 @@ class IndentationProblem:
     symmetry_planes: tuple[str, ...] = field(default=("symmetry_x", "symmetry_y"), kw_only=True)
     formulation: str = field(default="mixed", kw_only=True)
     surface: str = field(default="top", kw_only=True)
+    penalty_factor: float = field(default=DEFAULT_PENALTY_FACTOR, kw_only=True)
 
     def __post_init__(self) -> None:
         if not isinstance(self.indenter, Indenter):
@@ -96,9 +109,11 @@ class IndentationProblem:
                 key="kind",
                 value=self.indenter.kind,
             )
-        if self.indenter.x_m != 0.0 or self.indenter.y_m != 0.0:
+        off_axis = self.indenter.x_m != 0.0 or self.indenter.y_m != 0.0
+        if off_axis and (self.indenter.kind == "flat_punch" or self.symmetry_planes):
             raise InputError(
-                "the finite elements need the punch on the axis x = y = 0",
+                "the finite elements need the punch on the axis x = y = 0"
+                + (" (a symmetry model)" if self.indenter.kind != "flat_punch" else ""),
                 key="x_m" if self.indenter.x_m != 0.0 else "y_m",
                 value=self.indenter.x_m if self.indenter.x_m != 0.0 else self.indenter.y_m,
             )
@@ -125,6 +140,9 @@ class IndentationProblem:
                     f"the mesh has no node set {name!r} (it has {sorted(self.mesh.node_sets)})",
                     key="mesh",
                 )
+        if self.is_contact:
+            self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
+            return
         if self.punch_nodes.size == 0:
             raise InputError(
                 f"no node of {self.surface!r} lies within the punch radius "
@@ -146,8 +164,39 @@ class IndentationProblem:
         return 2 ** len(self.symmetry_planes)
 
     @property
+    def is_contact(self) -> bool:
+        """Whether the indenter touches through contact (sphere, plate), not prescribed nodes."""
+        return self.indenter.kind in CONTACT_KINDS
+
+    def rigid_contact(self) -> RigidContact | None:
+        """The frictionless penalty contact of a sphere or a plate (None for a flat punch)."""
+        if not self.is_contact:
+            return None
+        return RigidContact.for_mesh(
+            self.mesh,
+            self.indenter,
+            self.material.initial_shear_modulus_Pa,
+            surface=self.surface,
+            penalty_factor=self.penalty_factor,
+        )
+
+    def reaction_weights(self) -> np.ndarray:
+        """Weights (N, 3) of the internal forces summed into the probe force: -factor on the
+        punch nodes' z (flat punch), +factor on the "bottom" nodes' z (sphere, plate)."""
+        weights = np.zeros((self.mesh.node_count, 3))
+        factor = float(self.symmetry_factor)
+        if self.is_contact:
+            weights[self.mesh.node_set("bottom"), 2] = factor
+        else:
+            weights[self.punch_nodes, 2] = -factor
+        return weights
+
+    @property
     def punch_nodes(self) -> np.ndarray:
-        """Nodes of the punch surface with r <= radius (1e-9 relative tolerance)."""
+        """Nodes of the punch surface with r <= radius (1e-9 relative tolerance); none under a
+        sphere or a plate (no node is prescribed there)."""
+        if self.is_contact:
+            return np.zeros(0, dtype=np.int64)
         nodes = self.mesh.node_set(self.surface)
         xy = self.mesh.points[nodes, :2]
         radius = self.indenter.radius_m
@@ -170,7 +219,7 @@ class IndentationProblem:
         base_components = (0, 1, 2) if self.base == "fixed" else (2,)
         for comp in base_components:
             parts.append(_fixed(bottom, comp, 0.0))
-        if self.base == "sliding" and self.indenter.contact == "frictionless":
+        if self.base == "sliding" and (self.indenter.contact == "frictionless" or self.is_contact):
             parts.extend(self._rigid_body_pins(bottom, planes))
         return DirichletConditions.combine(*parts)
 
@@ -213,6 +262,11 @@ class IndentationResult:
             (S, n), N per unit of each parameter (N/Pa for ``C10_Pa``, N for ``alpha1``);
             n = 0 unless ``sensitivities`` were asked for (docs/fe.md "Sensitivities").
         times_s: The time of each depth of a timed run, s; else the step number 1..S, (S,).
+        contact_force_N: Under a sphere or a plate: the z contact force on the body summed
+            over the nodes, times the symmetry factor, positive pushing in, (S,) (equal to
+            ``reaction_force_N`` at equilibrium); empty for a flat punch.
+        max_penetration_m: Under a sphere or a plate: the largest penetration of a node into
+            the indenter at each depth, (S,), m; empty for a flat punch.
     """
 
     depths_m: np.ndarray
@@ -233,6 +287,8 @@ class IndentationResult:
     sensitivity_names: tuple[str, ...] = ()
     force_sensitivity_N_per_unit: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    max_penetration_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
@@ -257,6 +313,14 @@ class IndentationResult:
                     "force_sensitivity_N_per_unit": self.force_sensitivity_N_per_unit.tolist(),
                 }
                 if self.sensitivity_names
+                else {}
+            ),
+            **(
+                {
+                    "contact_force_N": self.contact_force_N.tolist(),
+                    "max_penetration_m": self.max_penetration_m.tolist(),
+                }
+                if self.contact_force_N.size
                 else {}
             ),
         }
@@ -339,8 +403,8 @@ def simulate_indentation(
         raise InputError("the assembler was built for another mesh or formulation")
     else:
         assembler.set_material(problem.material)  # also resets a viscous history
-    weights = np.zeros((mesh.node_count, 3))
-    weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
+    assembler.set_contact(problem.rigid_contact())
+    weights = problem.reaction_weights()
     conditions = problem.dirichlet_conditions()
     names = check_sensitivity_names(sensitivities)
     sensitivity = None
@@ -381,6 +445,16 @@ def _indentation_result(
         stress = assembler.cauchy_stress(path.displacement_m[-1])
     else:
         stress = np.zeros((0, 6))
+    contact = assembler.contact
+    contact_force, penetration = np.zeros(0), np.zeros(0)
+    if contact is not None:
+        contact_force = np.empty(len(path.loads))
+        penetration = np.empty(len(path.loads))
+        for i, (depth, u) in enumerate(zip(path.loads, path.displacement_m, strict=True)):
+            assembler.set_load(depth)
+            contact_force[i] = -problem.symmetry_factor * assembler.contact_force(u)[2]
+            gaps = contact.gaps_m(problem.mesh.points + u)
+            penetration[i] = max(0.0, -float(gaps.min()))
     return IndentationResult(
         depths_m=path.loads,
         reaction_force_N=path.reaction,
@@ -400,4 +474,6 @@ def _indentation_result(
         sensitivity_names=sensitivity_names,
         force_sensitivity_N_per_unit=path.reaction_sensitivity,
         times_s=path.times_s,
+        contact_force_N=contact_force,
+        max_penetration_m=penetration,
     )

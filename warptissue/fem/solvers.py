@@ -782,7 +782,9 @@ def solve_quasistatic(
     successes. When the halvings run out the path stops there, keeping what converged.
 
     Args:
-        assembler: The discretized body.
+        assembler: The discretized body. Its ``set_load(load)`` (where it has one) is called
+            before each load increment and cutback with the load the increment goes to: a
+            rigid contact's depth follows it (:meth:`warptissue.fem.Assembler.set_load`).
         conditions: Prescribed dofs, ``u = load * values_per_load``.
         loads: Increasing (or any) sequence of load factors, shape (S,).
         reaction_weights: Weights (N, 3) of the internal forces summed into ``reaction``
@@ -929,6 +931,9 @@ def solve_quasistatic(
                 ):
                     free_guess = (u - previous[1]) * ((there - here) / (here - previous[0]))
                 retry_linearized = False
+                set_load = getattr(assembler, "set_load", None)
+                if set_load is not None:  # a rigid contact's depth follows the load
+                    set_load(next_load)
                 step = _newton_increment(
                     assembler,
                     solver,

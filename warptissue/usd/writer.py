@@ -210,6 +210,12 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
             ]
         )
         shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, height / 2))
+    elif indenter.kind == "sphere":
+        radius = indenter.radius_m
+        shape = UsdGeom.Sphere.Define(stage, f"{INDENTER}/Shape")
+        shape.CreateRadiusAttr(radius)
+        shape.CreateExtentAttr([(-radius, -radius, -radius), (radius, radius, radius)])
+        shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, radius))
     elif indenter.kind == "line":
         radius, length = indenter.radius_m, indenter.length_m
         shape = UsdGeom.Cylinder.Define(stage, f"{INDENTER}/Shape")
