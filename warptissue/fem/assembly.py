@@ -155,6 +155,7 @@ class Assembler:
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
         self._elastic_step = elastic_step()
         self.viscous: ViscousHistory | None = None
+        self._zero_history: wp.array | None = None
         self.set_material(material)
 
     def set_material(self, material: Material) -> None:
@@ -266,7 +267,9 @@ class Assembler:
         if self.viscous is None:
             return [self._elastic_step, self._no_history]
         if zero_history:
-            return [self.viscous.step, wp.zeros_like(self.viscous.frozen)]
+            if self._zero_history is None or self._zero_history.shape != self.viscous.frozen.shape:
+                self._zero_history = wp.zeros_like(self.viscous.frozen)
+            return [self.viscous.step, self._zero_history]
         return [self.viscous.step, self.viscous.frozen]
 
     def _build_pattern(self, tets: np.ndarray) -> None:
@@ -421,34 +424,28 @@ class Assembler:
                 device=self.device,
             )
             explicit = self._residual.numpy().copy()
-        explicit = explicit + self._contact_parameter_residual(u, name)
+        explicit = explicit + self._contact_parameter_residual(u, float(derivative.shear_modulus))
         if viscous is None or name not in viscous.names:
             return explicit
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
 
-    def _contact_parameter_residual(self, u: wp.array, name: str) -> np.ndarray | float:
+    def _contact_parameter_residual(self, u: wp.array, d_shear: float) -> np.ndarray | float:
         """The rigid contact's part of ``dR/dtheta``: its penalty ``k = beta mu0 h`` follows
         the initial shear modulus, so ``dR_c/dtheta = R_c (dmu0/dtheta) / mu0`` (0 without
-        contact or for a parameter mu0 does not depend on)."""
-        from warptissue.kernels import fem as kf
-        from warptissue.materials import material_from_dict
+        contact or for a parameter mu0 does not depend on).
 
-        if self.contact is None:
+        Args:
+            u: Nodal displacements on the device.
+            d_shear: ``dmu0/dtheta``, the ``shear_modulus`` field of
+                :meth:`warptissue.materials.Material.device_params_derivative`.
+        """
+        from warptissue.kernels import fem as kf
+
+        if self.contact is None or d_shear == 0.0:
             return 0.0
-        flat = self.material.to_dict()
-        value = float(flat[name])
-        step = 1e-6 * max(abs(value), 1e-12)
-        moduli = [
-            material_from_dict({**flat, name: value + sign * step}).initial_shear_modulus_Pa
-            for sign in (1.0, -1.0)
-        ]
-        # mu0 is linear (or smooth and elementary) in each parameter: the central difference
-        # is exact to roundoff for linear ones.
-        share = (moduli[0] - moduli[1]) / (2.0 * step) / self.material.initial_shear_modulus_Pa
-        if share == 0.0:
-            return 0.0
+        share = d_shear / self.material.initial_shear_modulus_Pa
         scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
         energy = wp.zeros(1, dtype=wp.float64, device=self.device)
         force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
