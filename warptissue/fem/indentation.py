@@ -43,6 +43,7 @@ from warptissue.fem.solvers import (
     SolveInterrupted,
     solve_quasistatic,
 )
+from warptissue.fem.timing import NewtonTimings
 from warptissue.indenter import CONTACT_KINDS, SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
@@ -267,6 +268,9 @@ class IndentationResult:
             ``reaction_force_N`` at equilibrium); empty for a flat punch.
         max_penetration_m: Under a sphere or a plate: the largest penetration of a node into
             the indenter at each depth, (S,), m; empty for a flat punch.
+        timings: Where the load path's wall time went, per phase of the Newton iterations
+            (:class:`warptissue.fem.NewtonTimings`), when run with ``profile=True``; else
+            None.
     """
 
     depths_m: np.ndarray
@@ -289,6 +293,7 @@ class IndentationResult:
     times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     max_penetration_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    timings: NewtonTimings | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
@@ -323,6 +328,7 @@ class IndentationResult:
                 if self.contact_force_N.size
                 else {}
             ),
+            **({} if self.timings is None else {"newton_profile": self.timings.to_dict()}),
         }
 
 
@@ -338,6 +344,7 @@ def simulate_indentation(
     sensitivities: Sequence[str] = (),
     sensitivity_factorization: str = "reuse",
     times_s: np.ndarray | None = None,
+    profile: bool = False,
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -366,6 +373,8 @@ def simulate_indentation(
             by a :class:`warptissue.materials.Viscoelastic` material (its history is carried
             forward in time, :mod:`warptissue.fem.viscous`; so are the sensitivities, Prony
             parameters included); an elastic material gives the same forces as without.
+        profile: Time each phase of the Newton iterations into ``result.timings`` (see
+            :func:`warptissue.fem.solve_quasistatic` and :mod:`warptissue.fem.timing`).
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -424,6 +433,7 @@ def simulate_indentation(
             load_name="depth (m)",
             sensitivity=sensitivity,
             times_s=times_s,
+            profile=profile,
         )
     except SolveInterrupted as interrupted:
         partial = _indentation_result(problem, assembler, interrupted.partial_result, names)
@@ -476,4 +486,5 @@ def _indentation_result(
         times_s=path.times_s,
         contact_force_N=contact_force,
         max_penetration_m=penetration,
+        timings=path.timings,
     )
