@@ -96,6 +96,7 @@ class RunRecord:
     damping: bool | None = None
     newton_tolerance: float | None = None
     relative_error: float | None = None
+    newton_profile: dict[str, Any] | None = None
 
 
 def comma_separated(text: str) -> list[str]:
@@ -459,11 +460,14 @@ def run_warptissue(
     predictor: str = "linearized",
     damping: bool = True,
     tolerance: float = NEWTON_TOLERANCE,
+    profile: bool = False,
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
     steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
     from ``predictor``, with or without ``damping``, converged to the Newton ``tolerance``
-    (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`)."""
+    (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`); with
+    ``profile``, the time of each phase of the Newton iterations is recorded too
+    (``newton_profile``, :class:`warptissue.fem.NewtonTimings`)."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -490,6 +494,7 @@ def run_warptissue(
         device=warp_device,
         progress=progress,
         options=NewtonOptions(tolerance=tolerance, predictor=predictor, damping=damping),
+        profile=profile,
     )
     wp.synchronize_device(warp_device)
     solve_s = time.perf_counter() - started
@@ -527,6 +532,7 @@ def run_warptissue(
         predictor=predictor,
         damping=damping,
         newton_tolerance=tolerance,
+        newton_profile=None if result.timings is None else result.timings.to_dict(),
     )
 
 
@@ -776,6 +782,13 @@ def main(argv: list[str] | None = None) -> int:
         "each mesh runs once per tolerance; the first is the one the reference and the "
         f"equal-accuracy comparison use (FElupe always runs at {NEWTON_TOLERANCE:g})",
     )
+    parser.add_argument(
+        "--profile",
+        action="store_true",
+        help="time each phase of warptissue's Newton iterations (assembly, factorization, "
+        "solve, line search, elimination, host; on CUDA the device is synchronized at each "
+        "phase boundary) and print and record the table (newton_profile)",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     parser.add_argument(
         "--markdown",
@@ -827,7 +840,7 @@ def main(argv: list[str] | None = None) -> int:
         wp.config.quiet = True
         started = time.perf_counter()
         warm_mesh, warm_size = warptissue_mesh(500)
-        run_warptissue(warm_mesh, warm_size, args.device)
+        run_warptissue(warm_mesh, warm_size, args.device, profile=args.profile)
         notes["warptissue_warmup_s"] = time.perf_counter() - started
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
@@ -844,9 +857,14 @@ def main(argv: list[str] | None = None) -> int:
                     predictor=predictor,
                     damping=settings[damping],
                     tolerance=tolerance,
+                    profile=args.profile,
                 )
                 records.append(record)
                 print_table([record])
+                if record.newton_profile is not None:
+                    from warptissue.fem import NewtonTimings
+
+                    print(NewtonTimings.from_dict(record.newton_profile).table())
                 sys.stdout.flush()
     for level in [int(s) for s in comma_separated(args.felupe_levels)]:
         size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
