@@ -16,7 +16,9 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
 - ``result.json``: the study echoed back with every default, the force curve, iterations,
   ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,
   ``warnings`` (an implausible force curve: :func:`force_curve_warnings`), mesh statistics,
-  timings and software versions;
+  timings, ``newton_profile`` (where the solve's time went, per phase of the Newton
+  iterations, when run with ``profile=True``; else null: :class:`warptissue.fem.NewtonTimings`)
+  and software versions;
 - ``fields.vtu``: the mesh with nodal displacement (point data ``displacement_m``) and per-tet
   Cauchy stress (cell data ``cauchy_stress_Pa``, Voigt order xx, yy, zz, yz, xz, xy) and von
   Mises stress (``von_mises_Pa``) at the last converged load step;
@@ -341,6 +343,7 @@ def run_study(
     progress: bool = True,
     vtu_every_step: bool = False,
     announce: bool = True,
+    profile: bool = False,
 ) -> SimulationOutputs:
     """Run a study's indentation simulation and write its outputs.
 
@@ -353,6 +356,10 @@ def run_study(
         vtu_every_step: Also write ``fields_NNN.vtu`` with the displacement of every step.
         announce: Say on standard error, once, that Warp compiles its kernels where they are
             not in its cache yet (the first run on a machine; about a minute).
+        profile: Time each phase of the Newton iterations (assembly, factorization, solve,
+            line search, nonlinear elimination, host work) into ``result.timings`` and
+            ``result.json``'s ``newton_profile`` (:mod:`warptissue.fem.timing`; on a GPU
+            this synchronizes the device at every phase boundary).
 
     Returns:
         The outputs. ``status`` is ``"stopped_early"`` when the cutbacks ran out; the files
@@ -402,6 +409,7 @@ def run_study(
             progress=progress,
             options=study.solver.options,
             times_s=None if times is None else np.asarray(times, dtype=np.float64),
+            profile=profile,
         )
         status = "completed" if result.completed else "stopped_early"
     except SolveInterrupted as exc:
@@ -462,6 +470,7 @@ def run_study(
             "write_fields": written - solved,
             "total": written - started,
         },
+        "newton_profile": None if result.timings is None else result.timings.to_dict(),
         "files": {kind: path.name for kind, path in files.items()},
         "software": software_versions(),
     }
