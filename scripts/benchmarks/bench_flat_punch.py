@@ -724,6 +724,67 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
     return "\n".join(lines)
 
 
+PROFILE_COLUMNS = (
+    ("assembly", "assembly"),
+    ("line search", "line_search"),
+    ("elimination", "elimination"),
+    ("host", "host"),
+    ("analysis", "analysis"),
+    ("factorization", "factorization"),
+    ("solve", "solve"),
+)
+"""The per-phase columns of :func:`markdown_profile_table` (title, phase): the Newton loop's
+own first, then the linear solver's (the sensitivity phase, zero in this benchmark, is left
+out)."""
+
+
+def markdown_profile_table(paths: list[Path], *, only: list[str] = ()) -> str:
+    """A Markdown table of where the Newton iterations' time went, one row per profiled run.
+
+    Milliseconds per Newton iteration per phase (:mod:`warptissue.fem.timing`), and the share
+    of the run's wall time outside the linear solver (the Newton loop's own cost). A results
+    file written with ``--label`` names its runs in a first column.
+    """
+    runs = []
+    for path in paths:
+        report = json.loads(Path(path).read_text())
+        mesher = report.get("problem", {}).get("warptissue_mesher", "extruded")
+        for run in report["runs"]:
+            if run.get("newton_profile"):
+                runs.append({"label": report.get("label", ""), "mesher": mesher, **run})
+    for condition in only:
+        key, _, value = condition.partition("=")
+        runs = [r for r in runs if str(r.get(key)) == value]
+    if not runs:
+        raise ValueError(f"no profiled run in {[str(p) for p in paths]} matches {list(only)}")
+    columns: list[tuple[str, Any]] = []
+    if any(r["label"] for r in runs):
+        columns.append(("run", lambda r: r["label"]))
+    columns += [
+        ("mesh", lambda r: r["mesher"]),
+        ("cells", lambda r: _grouped(r["cells"])),
+        ("DOFs", lambda r: _grouped(r["dofs"])),
+        ("Newton its", lambda r: str(r["newton_profile"]["newton_iterations"])),
+        ("total s", lambda r: _seconds(r["newton_profile"]["total_s"])),
+    ]
+
+    def per_iteration_ms(run: dict[str, Any], phase: str) -> str:
+        return f"{1e3 * run['newton_profile']['seconds_per_newton_iteration'][phase]:.0f}"
+
+    for title, phase in (*PROFILE_COLUMNS, ("total", "total")):
+        columns.append((f"{title} (ms/it)", lambda r, phase=phase: per_iteration_ms(r, phase)))
+    columns += [
+        ("outside the solver", lambda r: f"{100 * r['newton_profile']['own_share']:.1f} %"),
+    ]
+    text_columns = {"run", "mesh"}
+    lines = [
+        "| " + " | ".join(title for title, _ in columns) + " |",
+        "|" + "|".join("---" if t in text_columns else "---:" for t, _ in columns) + "|",
+    ]
+    lines += ["| " + " | ".join(cell(r) for _, cell in columns) + " |" for r in runs]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="cpu", help="warptissue device: cpu, cuda, cuda:N")
@@ -787,7 +848,14 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="time each phase of warptissue's Newton iterations (assembly, factorization, "
         "solve, line search, elimination, host; on CUDA the device is synchronized at each "
-        "phase boundary) and print and record the table (newton_profile)",
+        "phase boundary) and print and record the table (newton_profile); with --markdown: "
+        "print the profiled runs' milliseconds per Newton iteration per phase instead",
+    )
+    parser.add_argument(
+        "--label",
+        default="",
+        help="a name for this results file's runs (e.g. the code version), recorded in the "
+        "JSON and shown by --markdown --profile",
     )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     parser.add_argument(
@@ -808,8 +876,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.markdown:
+        table = markdown_profile_table if args.profile else markdown_table
         try:
-            print(markdown_table(args.markdown, only=args.only))
+            print(table(args.markdown, only=args.only))
         except (OSError, ValueError, KeyError) as exc:
             parser.error(f"--markdown: {exc}")
         return 0
@@ -916,6 +985,7 @@ def main(argv: list[str] | None = None) -> int:
     for target, runs in equal_accuracy.items():
         print(f"  {target}: {json.dumps(runs)}")
     report = {
+        **({"label": args.label} if args.label else {}),
         "problem": {
             "probe_radius_m": PROBE_RADIUS_M,
             "half_width_m": HALF_WIDTH_M,

@@ -409,6 +409,13 @@ def _norm(values: np.ndarray) -> float:
 
 @dataclass
 class _Step:
+    """Outcome of one load increment's Newton iterations.
+
+    ``residual`` is the internal force at ``displacement`` (N, 3), N, of a converged step:
+    a view of the assembler's residual where it lives on the CPU, valid until the next
+    assembly (the reaction is summed from it at once, without assembling again).
+    """
+
     converged: bool
     displacement: np.ndarray
     iterations: int
@@ -416,16 +423,22 @@ class _Step:
     reason: str
     local_iterations: int = 0
     from_guess: bool = False
+    residual: np.ndarray | None = None
 
 
 @dataclass
 class _Search:
-    """Outcome of a line search: the accepted state and its assembly (None if none)."""
+    """Outcome of a line search: the accepted state and its assembly (None if none).
+
+    ``current``: the assembler's residual buffer still holds ``assembly`` (the accepted state
+    was the last one assembled), so its residual needs no new assembly.
+    """
 
     alpha: float
     state: np.ndarray
     assembly: Assembly | None
     reason: str = ""
+    current: bool = False
 
 
 def _first_iteration_step(
@@ -441,7 +454,7 @@ def _first_iteration_step(
         trial = start + alpha * direction
         check = assembler.assemble(trial, with_tangent=False)
         if check.min_jacobian > 0.0 and math.isfinite(check.energy_J):
-            return _Search(alpha, trial, check)
+            return _Search(alpha, trial, check, current=True)
         alpha *= 0.5
     return _Search(alpha, start, None, "an element inverted (J <= 0)")
 
@@ -503,7 +516,7 @@ def _line_search(
                 or _norm(residual * free) < residual_norm
             )
             if decrease and (abs(g) <= curvature * abs(slope) or (g < 0.0 and alpha >= 1.0)):
-                return _Search(alpha, trial, check)
+                return _Search(alpha, trial, check, current=True)
             if decrease and check.energy_J < best_energy:
                 best, best_energy = _Search(alpha, trial, check), check.energy_J
             if g < 0.0 and decrease:
@@ -559,7 +572,10 @@ def _nonlinear_elimination(
         ratio: Stop when the patch's residual is this fraction of the rest's.
 
     Returns:
-        (displacement (N, 3), assembly of residual and tangent at it, local iterations taken).
+        (displacement (N, 3), its assembly, local iterations taken). The assembly's residual
+        is that of the returned displacement; after an accepted local step its tangent is
+        not assembled (``assembly.matrix`` is None): the caller assembles it where it needs
+        one, which it does not at a converged state.
 
     Notes:
         Nonlinear elimination (Lanzkron, Rose and Wilkes 1996; Cai and Li 2011, SIAM J. Sci.
@@ -617,14 +633,17 @@ def _nonlinear_elimination(
             assembly = assembler.assemble(u)
             break
         iterations += 1
-        u = accepted
-        assembly = assembler.assemble(u)
+        # The accepted trial was the last state assembled: its residual is the assembler's.
+        u, assembly = accepted, check
         residual = assembly.residual.numpy()
         energy = assembly.energy_J
         total = _norm(residual * free)
         local = _norm(residual[patch] * free[patch])
         if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
             break
+        if iterations < max_iterations:  # the next local step's patch tangent
+            assembly = assembler.assemble(u)
+            residual = assembly.residual.numpy()
     return u, assembly, iterations
 
 
@@ -705,7 +724,14 @@ def _newton_increment(
 
     def outcome(converged: bool, iteration: int, reason: str) -> _Step:
         return _Step(
-            converged, u, iteration, linear_total, reason, local_total, from_guess=not linearized
+            converged,
+            u,
+            iteration,
+            linear_total,
+            reason,
+            local_total,
+            from_guess=not linearized,
+            residual=residual if converged else None,
         )
 
     factor = 0.0
@@ -736,13 +762,22 @@ def _newton_increment(
         u, alpha = search.state, search.alpha
         if damping and not first:
             factor = _next_damping(factor, alpha)
-        with timer.phase("assembly"):
-            assembly = assembler.assemble(u)
+        if search.current:
+            # The line search's residual at u; the tangent only where another iteration
+            # (or the elimination) needs it, not at the converged state.
+            assembly = search.assembly
+        else:
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
         free_norm = _norm(residual * free)
         reaction_norm = _norm(residual * (1.0 - free))
         limit = max(tolerance * reaction_norm, force_floor)
         if nonlinear_elimination and free_norm > limit:
+            if assembly.matrix is None:
+                with timer.phase("assembly"):
+                    assembly = assembler.assemble(u)
+                residual = assembly.residual.numpy()
             with timer.phase("elimination"):
                 u, assembly, local = _nonlinear_elimination(assembler, assembly, u, free, limit)
             local_total += local
@@ -760,6 +795,10 @@ def _newton_increment(
             return outcome(True, iteration, "converged")
         if not math.isfinite(free_norm):
             return outcome(False, iteration, "the residual became non-finite")
+        if assembly.matrix is None:  # the next iteration's tangent
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
+            residual = assembly.residual.numpy()
     return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
 
 
@@ -1017,10 +1056,9 @@ def solve_quasistatic(
                     u, load, time, fraction = step.displacement, next_load, next_time, next_fraction
                     at_target = fraction == 1.0
                     if at_target:
-                        # With the step's frozen history: the force of the converged state.
-                        with timer.phase("assembly"):
-                            internal = assembler.assemble(u, with_tangent=False).residual
-                        reaction = float(np.sum(weights * internal.numpy()))
+                        # The internal force of the converged state (with the step's frozen
+                        # history), as Newton's last assembly left it.
+                        reaction = float(np.sum(weights * step.residual))
                     if sensitivity is not None and (at_target or viscous is not None):
                         # A viscous history needs its derivatives advanced at every substep.
                         with timer.phase("sensitivity"):
