@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
+import warp as wp
 
 from warptissue.cli import main
 from warptissue.fem import (
@@ -25,6 +26,7 @@ from warptissue.fem import (
     simulate_indentation,
     solve_quasistatic,
 )
+from warptissue.fem.cudss import cudss_available
 from warptissue.fem.timing import LINEAR_SOLVER_PHASES, PHASES, PhaseTimer
 from warptissue.indenter import Indenter
 from warptissue.materials import NeoHookean
@@ -190,3 +192,35 @@ def test_cli_profile_prints_the_table_and_writes_it_to_result_json(tmp_path, cap
     assert status == 0
     assert "where the solve's time went" not in capsys.readouterr().out
     assert json.loads((tmp_path / "b" / "result.json").read_text())["newton_profile"] is None
+
+
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize(
+    "linear_solver", (["cudss"] if cudss_available(warn=False) else []) + ["cg"]
+)
+def test_the_profile_on_cuda_adds_up_and_changes_no_result(problem, linear_solver):
+    """On a GPU the timer synchronizes the device at each phase boundary: the phases still
+    add up to the wall time, and the curve is the unprofiled one."""
+    runs = {}
+    for profile in (False, True):
+        started = time.perf_counter()
+        result = simulate_indentation(
+            problem,
+            DEPTHS_M[:2],
+            device="cuda:0",
+            progress=False,
+            options=NewtonOptions(tolerance=1e-8, linear_solver=linear_solver),
+            profile=profile,
+        )
+        runs[profile] = (result, time.perf_counter() - started)
+    (plain, _), (profiled, wall_s) = runs[False], runs[True]
+    np.testing.assert_allclose(profiled.reaction_force_N, plain.reaction_force_N, rtol=1e-8)
+    timings = profiled.timings
+    assert timings.device.startswith("cuda")
+    assert sum(timings.seconds.values()) == pytest.approx(timings.total_s, rel=1e-9)
+    assert 0.5 * wall_s < timings.total_s <= wall_s
+    assert timings.newton_iterations == int(np.sum(profiled.newton_iterations))
+    assert timings.seconds["solve"] > 0.0 and timings.seconds["assembly"] > 0.0
+    if linear_solver == "cudss":
+        assert timings.seconds["factorization"] > 0.0
+        assert timings.factorizations == timings.newton_iterations

@@ -33,6 +33,7 @@ import argparse
 import itertools
 import json
 import math
+import os
 import platform
 import resource
 import sys
@@ -594,8 +595,6 @@ def cheapest_run_within(records: list[RunRecord], target: float) -> dict[str, An
 
 
 def machine_description() -> dict[str, Any]:
-    import os
-
     model = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -749,9 +748,12 @@ def markdown_profile_table(paths: list[Path], *, only: list[str] = ()) -> str:
     for path in paths:
         report = json.loads(Path(path).read_text())
         mesher = report.get("problem", {}).get("warptissue_mesher", "extruded")
+        load = report.get("notes", {}).get("load_average_at_end")
         for run in report["runs"]:
             if run.get("newton_profile"):
-                runs.append({"label": report.get("label", ""), "mesher": mesher, **run})
+                runs.append(
+                    {"label": report.get("label", ""), "mesher": mesher, "load": load, **run}
+                )
     for condition in only:
         key, _, value = condition.partition("=")
         runs = [r for r in runs if str(r.get(key)) == value]
@@ -767,6 +769,8 @@ def markdown_profile_table(paths: list[Path], *, only: list[str] = ()) -> str:
         ("Newton its", lambda r: str(r["newton_profile"]["newton_iterations"])),
         ("total s", lambda r: _seconds(r["newton_profile"]["total_s"])),
     ]
+    if any(r["load"] for r in runs):
+        columns.append(("load", lambda r: f"{r['load'][0]:.1f}" if r["load"] else "-"))
 
     def per_iteration_ms(run: dict[str, Any], phase: str) -> str:
         return f"{1e3 * run['newton_profile']['seconds_per_newton_iteration'][phase]:.0f}"
@@ -984,6 +988,7 @@ def main(argv: list[str] | None = None) -> int:
     print("cheapest run within each relative force error:")
     for target, runs in equal_accuracy.items():
         print(f"  {target}: {json.dumps(runs)}")
+    notes["load_average_at_end"] = list(os.getloadavg())  # 1, 5 and 15 minutes
     report = {
         **({"label": args.label} if args.label else {}),
         "problem": {
