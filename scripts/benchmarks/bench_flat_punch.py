@@ -98,6 +98,7 @@ class RunRecord:
     newton_tolerance: float | None = None
     relative_error: float | None = None
     newton_profile: dict[str, Any] | None = None
+    assemblies: dict[str, int] | None = None
 
 
 def comma_separated(text: str) -> list[str]:
@@ -468,11 +469,12 @@ def run_warptissue(
     from ``predictor``, with or without ``damping``, converged to the Newton ``tolerance``
     (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`); with
     ``profile``, the time of each phase of the Newton iterations is recorded too
-    (``newton_profile``, :class:`warptissue.fem.NewtonTimings`)."""
+    (``newton_profile``, :class:`warptissue.fem.NewtonTimings`), and the assemblies of the
+    run are counted (``assemblies``: ``with_tangent``, ``residual_only``)."""
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+    from warptissue.fem import Assembler, IndentationProblem, NewtonOptions, simulate_indentation
     from warptissue.indenter import Indenter
     from warptissue.materials import NeoHookean
 
@@ -487,6 +489,16 @@ def run_warptissue(
         formulation="mixed",
     )
     setup_s = time.perf_counter() - started
+    assembler = Assembler(problem.mesh, problem.material, device=warp_device)
+    assemblies = {"with_tangent": 0, "residual_only": 0}
+    if profile:  # count this run's assemblies (an instance attribute hides the method)
+        assemble = assembler.assemble
+
+        def counted(displacement: Any, *, with_tangent: bool = True) -> Any:
+            assemblies["with_tangent" if with_tangent else "residual_only"] += 1
+            return assemble(displacement, with_tangent=with_tangent)
+
+        assembler.assemble = counted
     started = time.perf_counter()
     cpu_started = time.process_time()
     result = simulate_indentation(
@@ -495,6 +507,7 @@ def run_warptissue(
         device=warp_device,
         progress=progress,
         options=NewtonOptions(tolerance=tolerance, predictor=predictor, damping=damping),
+        assembler=assembler,
         profile=profile,
     )
     wp.synchronize_device(warp_device)
@@ -534,6 +547,7 @@ def run_warptissue(
         damping=damping,
         newton_tolerance=tolerance,
         newton_profile=None if result.timings is None else result.timings.to_dict(),
+        assemblies=assemblies if profile else None,
     )
 
 
@@ -771,6 +785,17 @@ def markdown_profile_table(paths: list[Path], *, only: list[str] = ()) -> str:
     ]
     if any(r["load"] for r in runs):
         columns.append(("load", lambda r: f"{r['load'][0]:.1f}" if r["load"] else "-"))
+    if any(r.get("assemblies") for r in runs):
+        columns.append(
+            (
+                "assemblies (tangent + residual)",
+                lambda r: (
+                    f"{r['assemblies']['with_tangent']} + {r['assemblies']['residual_only']}"
+                    if r.get("assemblies")
+                    else "-"
+                ),
+            )
+        )
 
     def per_iteration_ms(run: dict[str, Any], phase: str) -> str:
         return f"{1e3 * run['newton_profile']['seconds_per_newton_iteration'][phase]:.0f}"
