@@ -214,7 +214,8 @@ def test_the_profile_on_cuda_adds_up_and_changes_no_result(problem, linear_solve
         )
         runs[profile] = (result, time.perf_counter() - started)
     (plain, _), (profiled, wall_s) = runs[False], runs[True]
-    np.testing.assert_allclose(profiled.reaction_force_N, plain.reaction_force_N, rtol=1e-8)
+    # The GPU assembly adds with atomics in a varying order: equal to CG's tolerance.
+    np.testing.assert_allclose(profiled.reaction_force_N, plain.reaction_force_N, rtol=1e-7)
     timings = profiled.timings
     assert timings.device.startswith("cuda")
     assert sum(timings.seconds.values()) == pytest.approx(timings.total_s, rel=1e-9)
