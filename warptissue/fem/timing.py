@@ -6,7 +6,7 @@ iteration with one :class:`PhaseTimer`; the result carries the totals as a
 :class:`NewtonTimings` (``result.timings``). The phases (:data:`PHASES`):
 
 - ``assembly``: the residual and tangent assemblies of the Newton iterations (element
-  kernels, the Dirichlet elimination of the tangent, the reaction at each converged load);
+  kernels, the Dirichlet elimination of the tangent);
 - ``analysis``: the linear solver's set-up for the mesh's sparsity pattern, once per mesh
   (PARDISO's ordering and symbolic factorization, cuDSS's analysis, the scalar pattern);
 - ``factorization``: the numerical factorizations (PARDISO phase 22, cuDSS ``factorize``);
@@ -18,7 +18,8 @@ iteration with one :class:`PhaseTimer`; the result carries the totals as a
 - ``sensitivity``: the force sensitivities at the converged states, less their linear
   solves, which count as ``solve`` (or ``factorization``);
 - ``host``: the rest of the run's wall time (predictor, residual norms, copies between the
-  device and NumPy, the viscous history, bookkeeping).
+  device and NumPy, the gathering of the tangent's values for the direct solver, the
+  viscous history, bookkeeping).
 
 Each phase is timed exclusively: a phase that runs inside another (a solve inside the
 sensitivities) stops the outer one's clock, so the phases add up to the run's wall time.
