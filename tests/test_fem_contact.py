@@ -312,3 +312,146 @@ def test_a_sphere_on_a_viscoelastic_block_relaxes_at_a_held_depth(sphere_mesh):
     assert force[0] > force[1] > force[2]
     assert force[2] / force[0] == pytest.approx(0.5, rel=0.05)
     np.testing.assert_allclose(result.contact_force_N, force, rtol=1e-8)
+
+
+# --- The rigid bodies' geometry: the kernel's signed distance, force and tangent -----------
+
+BODIES = {
+    "sphere": Indenter("sphere", radius_m=2e-3),
+    "plate": Indenter("plate"),
+    "rounded_punch": Indenter("flat_punch", radius_m=2e-3, edge_radius_m=0.5e-3),
+    "hemispherical_punch": Indenter("flat_punch", radius_m=1e-3, edge_radius_m=1e-3),
+    "wedge": Indenter("wedge", radius_m=0.4e-3, angle_deg=30.0),
+    "cylinder": Indenter("wedge", radius_m=0.4e-3, angle_deg=0.0),
+}
+CONTACT_DEPTH_M = 1.0e-3
+
+
+def _profile(probe: Indenter) -> np.ndarray:
+    """The indenter's outline in its plane of symmetry (r or x, z), densely sampled, at the
+    contact depth: the independent description the kernel's distance is checked against."""
+    z0 = -CONTACT_DEPTH_M
+    if probe.kind == "sphere":
+        a = np.linspace(0.0, np.pi, 20001)
+        return np.column_stack([probe.radius_m * np.sin(a), z0 + probe.radius_m * (1 - np.cos(a))])
+    if probe.kind == "plate":
+        return np.column_stack([np.linspace(0.0, 0.02, 20001), np.full(20001, z0)])
+    rho = probe.edge_radius_m if probe.kind == "flat_punch" else probe.radius_m
+    if probe.kind == "flat_punch":
+        core = probe.radius_m - rho
+        face = np.column_stack([np.linspace(0.0, core, 5001), np.full(5001, z0)])
+        a = np.linspace(0.0, 0.5 * np.pi, 10001)
+        rim = np.column_stack([core + rho * np.sin(a), z0 + rho * (1 - np.cos(a))])
+        side = np.column_stack(
+            [np.full(30001, probe.radius_m), z0 + rho + np.linspace(0, 3e-3, 30001)]
+        )
+        return np.vstack([face, rim, side])
+    half = np.radians(0.5 * probe.angle_deg)
+    a = np.linspace(0.0, 0.5 * np.pi - half, 10001)
+    tip = np.column_stack([rho * np.sin(a), z0 + rho * (1 - np.cos(a))])
+    s = np.linspace(0.0, 0.01, 10001)
+    flank = tip[-1] + np.column_stack([s * np.sin(half), s * np.cos(half)])
+    return np.vstack([tip, flank])
+
+
+def _inside(probe: Indenter, planar: np.ndarray) -> np.ndarray:
+    """Whether points (r or |x|, z) lie inside the body (the outline of the others is a
+    function z(r) up to the side)."""
+    if probe.kind == "sphere":
+        centre = np.array([0.0, probe.radius_m - CONTACT_DEPTH_M])
+        return np.linalg.norm(planar - centre, axis=1) < probe.radius_m
+    profile = _profile(probe)
+    return planar[:, 1] > np.interp(planar[:, 0], profile[:, 0], profile[:, 1], right=np.inf)
+
+
+def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0):
+    import warp as wp
+
+    from warptissue.fem.contact import RigidContact
+    from warptissue.kernels import fem as kf
+
+    contact = RigidContact(probe, np.arange(len(points)), 0.0, stiffness, CONTACT_DEPTH_M)
+    count = len(points)
+    zeros = wp.zeros(count, dtype=wp.vec3d, device="cpu")
+    force_sum = wp.zeros(1, dtype=wp.vec3d, device="cpu")
+    node_force = wp.zeros(count, dtype=wp.vec3d, device="cpu")
+    gap = wp.zeros(count, dtype=wp.float64, device="cpu")
+    blocks = wp.zeros(count, dtype=wp.mat33d, device="cpu")
+    wp.launch(
+        kf.rigid_contact_kernel,
+        dim=count,
+        inputs=[
+            wp.array(points, dtype=wp.vec3d, device="cpu"),
+            zeros,
+            wp.array(np.arange(count), dtype=wp.int32, device="cpu"),
+            wp.array(np.arange(count), dtype=wp.int32, device="cpu"),
+            contact.device_body(),
+            wp.float64(stiffness),
+            1,
+        ],
+        outputs=[
+            wp.zeros(count, dtype=wp.vec3d, device="cpu"),
+            blocks,
+            wp.zeros(1, dtype=wp.float64, device="cpu"),
+            force_sum,
+            node_force,
+            gap,
+        ],
+        device="cpu",
+    )
+    return gap.numpy(), node_force.numpy(), blocks.numpy()
+
+
+def _sample_points(probe: Indenter, count: int = 400) -> np.ndarray:
+    rng = np.random.default_rng(7)
+    reach = 3e-3
+    return np.column_stack(
+        [
+            rng.uniform(-reach, reach, count),
+            rng.uniform(-reach, reach, count),
+            rng.uniform(-CONTACT_DEPTH_M - 0.8e-3, -CONTACT_DEPTH_M + 1.5e-3, count),
+        ]
+    )
+
+
+def _planar(probe: Indenter, points: np.ndarray) -> np.ndarray:
+    across = np.abs(points[:, 0]) if probe.kind == "wedge" else np.hypot(points[:, 0], points[:, 1])
+    return np.column_stack([across, points[:, 2]])
+
+
+@pytest.mark.parametrize("name", list(BODIES))
+def test_rigid_body_gap_matches_the_sampled_outline(name):
+    """The kernel's signed distance equals the distance to a densely sampled outline of the
+    body (its sign from inside/outside), for points on both sides of the surface."""
+    probe = BODIES[name]
+    points = _sample_points(probe)
+    gap, _, _ = _launch(probe, points)
+    planar = _planar(probe, points)
+    profile = _profile(probe)
+    distance = np.min(np.linalg.norm(planar[:, None, :] - profile[None, :, :], axis=2), axis=1)
+    expected = np.where(_inside(probe, planar), -distance, distance)
+    assert np.all(np.isfinite(gap))
+    assert np.abs(gap - expected).max() < 2e-7  # the outline's sampling step is ~1e-7 m
+    assert (gap < 0).sum() > 15 and (gap > 0).sum() > 40
+
+
+@pytest.mark.parametrize("name", list(BODIES))
+def test_rigid_contact_tangent_matches_central_differences(name):
+    """The kernel's tangent block k (n n^T + g dn/dx) is the derivative of -f_c = k g n with
+    respect to the node's position (central differences), at penetrating points."""
+    probe = BODIES[name]
+    points = _sample_points(probe)
+    gap, _, blocks = _launch(probe, points)
+    points, blocks = points[gap < -1e-5], blocks[gap < -1e-5]
+    step = 1e-8
+    numeric = np.empty_like(blocks)
+    for j in range(3):
+        shift = np.zeros(3)
+        shift[j] = step
+        _, plus, _ = _launch(probe, points + shift)
+        _, minus, _ = _launch(probe, points - shift)
+        numeric[:, :, j] = -(plus - minus) / (2 * step)
+    # Points within one step of a seam (a tip/flank or face/rim junction) are excluded.
+    error = np.abs(blocks - numeric).max(axis=(1, 2))
+    assert np.median(error) < 1e-6
+    assert np.mean(error < 1e-5) > 0.97

@@ -154,7 +154,7 @@ BAD_INPUTS = [
     ),
     pytest.param("width_m = 0.02\n", "", "specimen.width_m", None, id="missing-key"),
     pytest.param(
-        'kind = "flat_punch"', 'kind = "wedge"', "indenter.kind", "'wedge'", id="bad-choice"
+        'kind = "flat_punch"', 'kind = "cone"', "indenter.kind", "'cone'", id="bad-choice"
     ),
     pytest.param("steps = 4", "steps = 4.5", "protocol.steps", "4.5", id="float-for-int"),
     pytest.param("steps = 4", "steps = true", "protocol.steps", "True", id="bool-for-int"),

@@ -480,11 +480,17 @@ def test_every_material_model_round_trips(tmp_path, specimen):
 
 def test_indenter_validation():
     with pytest.raises(InputError, match="kind"):
-        Indenter("wedge", radius_m=1e-3)
+        Indenter("line", radius_m=1e-3)
     with pytest.raises(InputError, match="radius_m"):
         Indenter("flat_punch")
     with pytest.raises(InputError, match="length_m"):
-        Indenter("line", radius_m=1e-3)
+        Indenter("platen")
+    with pytest.raises(InputError, match="angle_deg"):
+        Indenter("wedge", radius_m=1e-3, angle_deg=180.0)
+    with pytest.raises(InputError, match="edge_radius_m"):
+        Indenter("flat_punch", radius_m=1e-3, edge_radius_m=2e-3)
+    with pytest.raises(InputError, match="edge_radius_m"):
+        Indenter("sphere", radius_m=1e-3, edge_radius_m=1e-4)
     with pytest.raises(InputError, match="x_m"):
         Indenter("flat_punch", radius_m=1e-3, x_m=float("nan"))
     with pytest.raises(InputError, match="unknown indenter key") as caught:
@@ -503,5 +509,8 @@ def test_one_indenter_type_from_the_study_to_usd():
     assert "indenter" in IndentationProblem.__dataclass_fields__
     probe = Indenter("flat_punch", radius_m=1e-3, contact="frictionless")
     assert probe.to_dict() == {"kind": "flat_punch", "radius_m": 1e-3, "contact": "frictionless"}
-    line = Indenter("line", radius_m=5e-4, length_m=0.03, z_m=0.01)
+    line = Indenter("wedge", radius_m=5e-4, angle_deg=30.0, length_m=0.03, z_m=0.01)
     assert Indenter.from_dict(line.to_dict()) == line
+    rounded = Indenter("flat_punch", radius_m=1e-3, edge_radius_m=1e-4)
+    assert rounded.contact == "frictionless" and rounded.is_rigid_contact
+    assert Indenter.from_dict(rounded.to_dict()) == rounded

@@ -841,20 +841,27 @@ def _read_indenter(table: _Table) -> Indenter:
     radius_m = (
         table.number("radius_m", default=0.0) if kind == "plate" else table.number("radius_m")
     )
-    contact = table.string(
-        "contact",
-        default="bonded" if kind not in CONTACT_KINDS else "frictionless",
-        choices=CONTACTS,
+    values: dict[str, Any] = {"kind": kind, "radius_m": radius_m}
+    if kind == "flat_punch":
+        values["edge_radius_m"] = table.number("edge_radius_m", default=0.0, positive=False)
+    if kind == "wedge":
+        values["angle_deg"] = table.number("angle_deg", positive=False)
+        values["length_m"] = table.number("length_m", default=0.0)
+    rigid = kind in CONTACT_KINDS or values.get("edge_radius_m", 0.0) > 0
+    values["contact"] = table.string(
+        "contact", default="frictionless" if rigid else "bonded", choices=CONTACTS
     )
     table.finish()
-    values = {"kind": kind, "radius_m": radius_m, "contact": contact}
     return table.build(lambda values: Indenter(**values), values)
 
 
 def mesh_probe_radius(indenter: Indenter, half_size_m: float) -> float:
     """The radius of the specimen mesh's refined zone under the probe, m: the probe's radius,
-    or half the specimen's half-size for a plate without one."""
-    return indenter.radius_m if indenter.radius_m > 0 else 0.5 * half_size_m
+    or half the specimen's half-size for a plate without one or a wedge (whose contact
+    widens with depth along its flanks)."""
+    if indenter.kind == "wedge" or indenter.radius_m <= 0:
+        return 0.5 * half_size_m
+    return indenter.radius_m
 
 
 _PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
@@ -1480,10 +1487,10 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
             "from (give start values in [fit.start], or set contact)",
             path=record.path,
         )
-    if study.indenter.kind == "plate":
+    if study.indenter.kind in ("plate", "wedge"):
         raise InputError(
-            "no start value from an indentation formula for a plate (give start values in "
-            "[fit.start])",
+            f"no start value from an indentation formula for a {study.indenter.kind} (give "
+            "start values in [fit.start])",
             path=study.path,
             key="kind",
             value=study.indenter.kind,

@@ -1,19 +1,22 @@
-"""Frictionless penalty contact of a rigid indenter (sphere or plate) with surface nodes.
+"""Frictionless penalty contact of a rigid indenter with the specimen's surface nodes.
 
 The indenter is an analytic rigid body positioned by the depth (the load of
-:func:`warptissue.fem.solve_quasistatic`): a sphere of radius ``r`` whose lowest point is at
-``top - depth`` on the axis ``(x_m, y_m)``, or the plane ``z = top - depth`` of a plate filling
-the half-space above it. Each candidate node (every node of the indented surface, TET10
-mid-edge nodes included) with signed distance ``g < 0`` to the indenter (penetration) gets the
-contact force ``f_c = -k g n`` along the indenter's outward normal ``n``; the residual becomes
-``R = f_int - f_c`` and the tangent gains ``k (n n^T + g/|x - c| (I - n n^T))`` on the node's
-diagonal block (sphere; the second term is the turning of the normal), ``k n n^T`` (plate).
-The energy gains ``k g^2 / 2``, so the line search sees one potential. The device code is
-``sphere_contact_kernel`` and ``plate_contact_kernel`` in ``kernels/fem.py``.
+:func:`warptissue.fem.solve_quasistatic`), its contact point at ``top - depth`` on the axis
+``(x_m, y_m)``: a sphere of radius ``r``; a plate (the plane ``z = top - depth``, filling the
+half-space above); a flat-ended cylinder of radius ``a`` whose edge is rounded with radius
+``rho`` (``edge_radius_m``); a wedge along y of opening angle ``2 alpha`` whose tip is rounded
+with radius ``rho``. Each candidate node (every node of the indented surface, TET10 mid-edge
+nodes included) with signed distance ``g < 0`` to the indenter (penetration) gets the contact
+force ``f_c = -k g n`` along the indenter's outward normal ``n``; the residual becomes
+``R = f_int - f_c`` and the node's diagonal tangent block gains ``k (n n^T + g dn/dx)`` (the
+second term is the turning of the normal over a curved surface). The energy gains
+``k g^2 / 2``, so the line search sees one potential. Device code: ``rigid_contact_point``
+and ``rigid_contact_kernel`` in ``kernels/fem.py``.
 
 Penalty stiffness per node: ``k = beta mu0 h``, ``mu0`` the material's initial shear modulus
 and ``h`` the mean edge length of the elements of the candidate nodes under the indenter
-(within its radius of the axis for a sphere, the whole surface for a plate); ``beta``
+(within its radius of the axis for a sphere or a punch, within the tip radius or one row of
+nodes of the line for a wedge, the whole surface for a plate); ``beta``
 (:data:`DEFAULT_PENALTY_FACTOR`) was chosen by measurement (docs/fe.md "Contact").
 """
 
@@ -21,14 +24,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import warp as wp
 
 from warptissue.errors import InputError
-from warptissue.indenter import CONTACT_KINDS, Indenter
+from warptissue.indenter import Indenter
 from warptissue.mesh import TetMesh
 
-__all__ = ["DEFAULT_PENALTY_FACTOR", "RigidContact", "mean_edge_length"]
+__all__ = ["DEFAULT_PENALTY_FACTOR", "ContactState", "RigidContact", "mean_edge_length"]
 
 DEFAULT_PENALTY_FACTOR = 1000.0
 """``beta`` of the penalty stiffness ``k = beta mu0 h`` (docs/fe.md "Contact": the force is
@@ -54,7 +59,7 @@ class RigidContact:
     """A rigid indenter pressed into a set of nodes through a frictionless penalty.
 
     Args:
-        indenter: A sphere or a plate (:data:`warptissue.indenter.CONTACT_KINDS`).
+        indenter: A rigid-contact indenter (:attr:`warptissue.indenter.Indenter.is_rigid_contact`).
         nodes: Candidate nodes (the indented surface), (k,) int.
         top_z_m: z of the contact point at depth 0 (the specimen's top), m.
         stiffness_N_per_m: Penalty stiffness per node ``k``, N/m.
@@ -68,9 +73,10 @@ class RigidContact:
     depth_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.indenter.kind not in CONTACT_KINDS:
+        if not self.indenter.is_rigid_contact:
             raise InputError(
-                f"rigid contact needs one of {', '.join(map(repr, CONTACT_KINDS))}",
+                "rigid contact needs a sphere, a plate, a wedge or a flat punch with "
+                "edge_radius_m > 0 (a sharp flat punch prescribes its nodes)",
                 key="kind",
                 value=self.indenter.kind,
             )
@@ -82,25 +88,33 @@ class RigidContact:
             raise InputError("the penalty stiffness must be positive", value=k)
 
     @property
-    def centre_m(self) -> np.ndarray:
-        """The sphere's centre at the current depth, (3,), m."""
-        radius = self.indenter.radius_m
-        return np.array(
-            [self.indenter.x_m, self.indenter.y_m, self.top_z_m - self.depth_m + radius]
-        )
-
-    @property
-    def plane_z_m(self) -> float:
-        """The plate's plane at the current depth, m."""
+    def contact_z_m(self) -> float:
+        """z of the indenter's lowest point at the current depth, m."""
         return self.top_z_m - self.depth_m
 
-    def gaps_m(self, points_m: np.ndarray) -> np.ndarray:
-        """Signed distances of the candidate nodes at current positions ``points_m`` (N, 3)
-        to the indenter (negative: penetration), (k,), m."""
-        x = np.asarray(points_m)[self.nodes]
-        if self.indenter.kind == "sphere":
-            return np.linalg.norm(x - self.centre_m, axis=1) - self.indenter.radius_m
-        return self.plane_z_m - x[:, 2]
+    def device_body(self) -> Any:
+        """The indenter at the current depth as the kernels' ``RigidBody`` struct."""
+        from warptissue.kernels import fem as kf
+
+        probe = self.indenter
+        body = kf.RigidBody()
+        body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m)
+        body.radius = wp.float64(probe.radius_m)
+        body.edge_radius = wp.float64(0.0)
+        body.half_angle = wp.float64(0.0)
+        if probe.kind == "sphere":
+            body.kind = int(kf.RIGID_SPHERE)
+            body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m + probe.radius_m)
+        elif probe.kind == "plate":
+            body.kind = int(kf.RIGID_PLATE)
+        elif probe.kind == "flat_punch":
+            body.kind = int(kf.RIGID_PUNCH)
+            body.edge_radius = wp.float64(probe.edge_radius_m)
+        else:
+            body.kind = int(kf.RIGID_WEDGE)
+            body.edge_radius = wp.float64(probe.radius_m)
+            body.half_angle = wp.float64(math.radians(0.5 * probe.angle_deg))
+        return body
 
     @classmethod
     def for_mesh(
@@ -129,15 +143,44 @@ class RigidContact:
         nodes = mesh.node_set(surface).astype(np.int64)
         top = float(mesh.points[nodes, 2].max()) if indenter.z_m is None else indenter.z_m
         under = nodes
-        if indenter.kind == "sphere":
+        if indenter.kind in ("sphere", "flat_punch"):
             xy = mesh.points[nodes, :2] - np.array([indenter.x_m, indenter.y_m])
             under = nodes[np.einsum("ij,ij->i", xy, xy) <= indenter.radius_m**2]
-            if under.size == 0:
-                raise InputError(
-                    f"no node of {surface!r} lies under the sphere (within {indenter.radius_m} m "
-                    f"of ({indenter.x_m}, {indenter.y_m}))",
-                    key="radius_m",
-                    value=indenter.radius_m,
-                )
+        elif indenter.kind == "wedge":
+            dx = np.abs(mesh.points[nodes, 0] - indenter.x_m)
+            under = nodes[dx <= max(indenter.radius_m, float(dx.min()))]
+        if under.size == 0:
+            raise InputError(
+                f"no node of {surface!r} lies under the {indenter.kind} (within "
+                f"{indenter.radius_m} m of ({indenter.x_m}, {indenter.y_m}))",
+                key="radius_m",
+                value=indenter.radius_m,
+            )
         h = mean_edge_length(mesh, under)
         return cls(indenter, nodes, top, float(penalty_factor) * shear_modulus_Pa * h)
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """The contact at one displacement: per candidate node, its gap and the force on it.
+
+    Attributes:
+        nodes: Candidate nodes, (k,) int.
+        gap_m: Signed distance of each node to the indenter (negative: penetration), (k,), m.
+        force_N: Contact force on each node (zero where the gap is >= 0), (k, 3), N; of the
+            modelled part of the specimen (not scaled by a symmetry factor).
+    """
+
+    nodes: np.ndarray
+    gap_m: np.ndarray
+    force_N: np.ndarray
+
+    @property
+    def total_force_N(self) -> np.ndarray:
+        """The summed contact force on the modelled part, (3,), N."""
+        return self.force_N.sum(axis=0)
+
+    @property
+    def max_penetration_m(self) -> float:
+        """The largest penetration of a node into the indenter, m (0 out of contact)."""
+        return max(0.0, -float(self.gap_m.min()))

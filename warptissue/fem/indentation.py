@@ -43,7 +43,7 @@ from warptissue.fem.solvers import (
     SolveInterrupted,
     solve_quasistatic,
 )
-from warptissue.indenter import CONTACT_KINDS, SIMULATED_KINDS, Indenter
+from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
@@ -165,8 +165,9 @@ class IndentationProblem:
 
     @property
     def is_contact(self) -> bool:
-        """Whether the indenter touches through contact (sphere, plate), not prescribed nodes."""
-        return self.indenter.kind in CONTACT_KINDS
+        """Whether the indenter touches through contact (sphere, plate, wedge, rounded punch),
+        not prescribed nodes."""
+        return self.indenter.is_rigid_contact
 
     def rigid_contact(self) -> RigidContact | None:
         """The frictionless penalty contact of a sphere or a plate (None for a flat punch)."""
@@ -452,9 +453,9 @@ def _indentation_result(
         penetration = np.empty(len(path.loads))
         for i, (depth, u) in enumerate(zip(path.loads, path.displacement_m, strict=True)):
             assembler.set_load(depth)
-            contact_force[i] = -problem.symmetry_factor * assembler.contact_force(u)[2]
-            gaps = contact.gaps_m(problem.mesh.points + u)
-            penetration[i] = max(0.0, -float(gaps.min()))
+            state = assembler.contact_state(u)
+            contact_force[i] = -problem.symmetry_factor * state.total_force_N[2]
+            penetration[i] = state.max_penetration_m
     return IndentationResult(
         depths_m=path.loads,
         reaction_force_N=path.reaction,

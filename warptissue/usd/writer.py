@@ -20,6 +20,7 @@ the surface Mesh (each face takes the value of the tet it bounds), in the asset 
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -216,14 +217,8 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
         shape.CreateRadiusAttr(radius)
         shape.CreateExtentAttr([(-radius, -radius, -radius), (radius, radius, radius)])
         shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, radius))
-    elif indenter.kind == "line":
-        radius, length = indenter.radius_m, indenter.length_m
-        shape = UsdGeom.Cylinder.Define(stage, f"{INDENTER}/Shape")
-        shape.CreateAxisAttr(UsdGeom.Tokens.y)
-        shape.CreateRadiusAttr(radius)
-        shape.CreateHeightAttr(length)
-        shape.CreateExtentAttr([(-radius, -length / 2, -radius), (radius, length / 2, radius)])
-        shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, radius))
+    elif indenter.kind == "wedge":
+        _wedge_mesh(stage, indenter)
     else:
         thickness = 0.05 * indenter.length_m
         shape = UsdGeom.Cube.Define(stage, f"{INDENTER}/Shape")
@@ -231,13 +226,50 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
         shape.CreateExtentAttr([(-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)])
         shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, thickness / 2))
         shape.AddScaleOp().Set(Gf.Vec3f(indenter.length_m, indenter.length_m, thickness))
-    for name, value in (("radius", indenter.radius_m), ("length", indenter.length_m)):
+    for name, value, unit in (
+        ("radius", indenter.radius_m, "m"),
+        ("length", indenter.length_m, "m"),
+        ("edgeRadius", indenter.edge_radius_m, "m"),
+        ("angle", indenter.angle_deg, "deg"),
+    ):
         if value > 0:
             attr = prim.CreateAttribute(
                 f"tissue:indenter:{name}", Sdf.ValueTypeNames.Double, custom=True
             )
             attr.Set(float(value))
-            attr.SetCustomDataByKey("unit", "m")
+            attr.SetCustomDataByKey("unit", unit)
+
+
+def _wedge_mesh(stage: Any, indenter: Indenter) -> None:
+    """A wedge along y (opening ``angle_deg``, tip radius ``radius_m``, its lowest line at the
+    origin) drawn as an extruded profile: the tip arc and two flanks up to a height of a few
+    tip radii; ``length_m`` along y (0: ten tip radii)."""
+    from pxr import UsdGeom
+
+    radius = indenter.radius_m
+    half = math.radians(0.5 * indenter.angle_deg)
+    length = indenter.length_m or 10.0 * radius
+    height = max(10.0 * radius, 1e-3)
+    # The tip arc from the left flank's tangent point to the right one's, then the flanks.
+    arc = np.linspace(-(0.5 * math.pi - half), 0.5 * math.pi - half, 17)
+    profile = [(radius * math.sin(a), radius * (1.0 - math.cos(a))) for a in arc]
+    x_top = profile[-1][0] + (height - profile[-1][1]) * math.tan(half)
+    profile = [(-x_top, height), *profile, (x_top, height)]
+    count = len(profile)
+    points = [(x, y, z) for y in (-length / 2, length / 2) for x, z in profile]
+    faces, counts = [], []
+    for i in range(count):  # the sides, the top closing the loop
+        j = (i + 1) % count
+        faces += [i, j, count + j, count + i]
+        counts.append(4)
+    faces += list(range(count - 1, -1, -1)) + list(range(count, 2 * count))
+    counts += [count, count]
+    shape = UsdGeom.Mesh.Define(stage, f"{INDENTER}/Shape")
+    shape.CreatePointsAttr(points)
+    shape.CreateFaceVertexCountsAttr(counts)
+    shape.CreateFaceVertexIndicesAttr(faces)
+    xs = [p[0] for p in points]
+    shape.CreateExtentAttr([(min(xs), -length / 2, 0.0), (max(xs), length / 2, height)])
 
 
 def _check_density(density_kg_per_m3: float) -> None:
