@@ -128,7 +128,10 @@ def run(args: argparse.Namespace) -> int:
     )
     counts = len(result.outcomes), len(result.failed), len(result.skipped)
     if not args.quiet:
-        ran = "in this process" if result.workers == 0 else f"on {result.workers} Dask workers"
+        plural = "" if result.workers == 1 else "s"
+        ran = (
+            "in this process" if result.workers == 0 else f"on {result.workers} Dask worker{plural}"
+        )
         print(
             f"{counts[0]} studies ({counts[2]} skipped: complete), {counts[1]} failed, "
             f"{result.seconds:.1f} s {ran}; summary in {result.summary_path}"
