@@ -363,3 +363,30 @@ def test_run_batch_is_stopped_by_ctrl_c_with_the_summary_of_what_ended(tmp_path,
         batch.run_batch([studies], out=tmp_path / "out", workers=0, progress=False)
     rows = _summary(tmp_path / "out" / "summary.csv")
     assert list(rows) == ["p0"] and rows["p0"]["status"] == "completed"
+
+
+def test_outputs_inside_out_are_not_studies_and_workers_take_gpus_in_turn(tmp_path, monkeypatch):
+    """A pattern reaching into OUT leaves the batch's own files out; on a LocalCluster of a
+    machine with 2 GPUs, worker 3 takes cuda:1 for 'cuda' and 'auto', and an explicit
+    device or the CPU stays as it is."""
+    (tmp_path / "out" / "fit").mkdir(parents=True)
+    (tmp_path / "out" / "fit" / "fitted_study.toml").write_text("", encoding="utf-8")
+    with pytest.raises(InputError, match="inside the output folder"):
+        batch.run_batch([str(tmp_path / "**" / "*.toml")], out=tmp_path / "out", workers=0)
+    distributed = pytest.importorskip("distributed")
+    import types
+
+    import warp as wp
+
+    monkeypatch.setattr(distributed, "get_worker", lambda: types.SimpleNamespace(name=3))
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
+    study = types.SimpleNamespace(solver=types.SimpleNamespace(device="auto"))
+    assert batch._worker_device(None, study) == "cuda:1"
+    assert batch._worker_device("cuda", study) == "cuda:1"
+    assert batch._worker_device("cuda:0", study) == "cuda:0"
+    assert batch._worker_device("cpu", study) == "cpu"
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 1)
+    assert batch._worker_device("cuda", study) == "cuda"
+    monkeypatch.setattr(distributed, "get_worker", lambda: types.SimpleNamespace(name="w"))
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
+    assert batch._worker_device("cuda", study) == "cuda"  # a worker of `dask worker`

@@ -518,7 +518,8 @@ def run_batch(
     """Run every study of a batch, one result folder each, and write the summary table.
 
     Args:
-        paths: Study files, folders of them and glob patterns (:func:`collect_studies`).
+        paths: Study files, folders of them and glob patterns (:func:`collect_studies`);
+            files inside ``out`` (the batch's own outputs) are left out.
         out: The batch's output folder: one folder per study (:func:`folder_names`) and
             ``summary.csv``.
         device: Warp device of every study (``"cpu"``, ``"cuda"``, ``"cuda:N"``); None:
@@ -545,10 +546,15 @@ def run_batch(
         KeyboardInterrupt: Ctrl-C; the summary then holds the studies that had ended.
     """
     started = time.perf_counter()
-    studies = collect_studies(paths)
     out_dir = Path(out)
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("the output folder is a file", path=out_dir)
+    # The batch's own outputs (a fit's fitted_study.toml) are not studies of the batch, even
+    # where a pattern such as '**/*.toml' reaches into OUT.
+    inside = os.path.realpath(out_dir) + os.sep
+    studies = [p for p in collect_studies(paths) if not os.path.realpath(p).startswith(inside)]
+    if not studies:
+        raise InputError("every study file given lies inside the output folder", path=out_dir)
     if scheduler is not None and workers is not None:
         raise InputError(
             "--workers sets the size of a LocalCluster; a running scheduler has its own "
