@@ -109,7 +109,7 @@ class StudyOutcome:
         kind: ``"simulation"``, ``"fit"``, or ``""`` when the file could not be read.
         status: The simulation's or the fit's status, or ``"error"`` (an exception).
         exit_status: The exit status the single-study command would give (0: success;
-            2 input, 3 mesh, 4 convergence, 5 device, 1 anything else).
+            2 input or a path the system refuses, 3 mesh, 4 convergence, 5 device, 1 anything else).
         seconds: Wall time of the study's task, s.
         peak_force_N: Largest reaction force of a simulation, N (None for a fit).
         r_squared: R^2 of a fit over all its records (None for a simulation).
@@ -301,6 +301,9 @@ def _one_line(error: BaseException) -> str:
     text = " ".join(str(error).split())
     if isinstance(error, WarpTissueError):
         return text
+    if isinstance(error, OSError) and error.strerror:
+        path = error.filename2 if error.filename2 is not None else error.filename
+        return error.strerror if path is None else f"cannot use {str(path)!r}: {error.strerror}"
     return f"{type(error).__name__}: {text}" if text else type(error).__name__
 
 
@@ -438,7 +441,12 @@ def run_study_task(task: _Task) -> StudyOutcome:
         numbers["warnings"] = numbers["warnings"] + python_warnings
         outcome = replace(outcome, **numbers)
     except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
-        exit_status = exc.exit_code if isinstance(exc, WarpTissueError) else 1
+        # As the command line: a project error's own status, 2 for a path the system
+        # refuses (a folder where a file goes, no permission, a full disk), else 1.
+        if isinstance(exc, WarpTissueError):
+            exit_status = exc.exit_code
+        else:
+            exit_status = 2 if isinstance(exc, OSError) else 1
         outcome = replace(outcome, status="error", exit_status=exit_status, error=_one_line(exc))
     outcome = replace(outcome, seconds=time.perf_counter() - started)
     if task.on_dask:
