@@ -24,7 +24,7 @@ import pytest
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
-from warptissue.fit.indentation import _forward_model
+from warptissue.fit.indentation import _forward_model, depth_offset_start_m
 from warptissue.io import write_csv
 from warptissue.materials import material_from_dict
 from warptissue.simulate import build_mesh, build_problem, run_study
@@ -97,11 +97,13 @@ def make_study(
     seed: int = 1,
     drift_per_s: float = 0.0,
     solver: str = "",
+    recorded_depth: list[np.ndarray] | None = None,
 ):
     """Write record.csv (the FE force of ``truth`` along ``history`` plus Gaussian noise of
     ``noise`` times the peak force and a drift of ``drift_per_s`` times the peak force per
     second; a list of histories: record.csv, record2.csv, ...) and study.toml (material
-    ``start``, the ``[fit]`` text), and load the study."""
+    ``start``, the ``[fit]`` text), and load the study. ``recorded_depth`` (one per history):
+    the displacement column written instead of the history's depth (a depth offset)."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "study.toml"
     path.write_text(GEOMETRY.format(material=_toml_table(truth), solver=solver))
@@ -118,11 +120,12 @@ def make_study(
         peak = float(np.max(force))
         noisy = force + rng.normal(0.0, noise * peak, force.size) + drift_per_s * peak * time
         name = "record.csv" if k == 0 else f"record{k + 1}.csv"
+        written = depth if recorded_depth is None else recorded_depth[k]
         write_csv(
             folder / name,
             {
                 "time_s": np.concatenate([[0.0], time]),
-                "displacement_m": np.concatenate([[0.0], depth]),
+                "displacement_m": np.concatenate([[0.0], written]),
                 "force_N": np.concatenate([[0.0], noisy]),
             },
         )
@@ -531,3 +534,148 @@ def test_the_fit_gives_the_same_parameters_on_every_device(neo_hookean_fit, devi
     np.testing.assert_allclose(
         fit.records[0].fitted_force_N, neo_hookean_fit.records[0].fitted_force_N, rtol=1e-6
     )
+
+
+# Contact point: a record whose recorded depth is offset from the true depth by d0.
+OFFSET_M = 0.15e-3
+"""The true contact of the offset records: the probe touches at a recorded depth of 0.15 mm."""
+
+
+def offset_ramp(
+    recorded_m: float = 0.45e-3, offset_m: float = OFFSET_M, samples: int = 45
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A ramp to the recorded depth ``recorded_m`` (samples 10 um apart by default) that
+    touches at ``offset_m``: ((time_s, true depth), recorded depth)."""
+    time = 0.1 * np.arange(1, samples + 1)
+    recorded = recorded_m * np.arange(1, samples + 1) / samples
+    return (time, np.clip(recorded - offset_m, 0.0, None)), recorded
+
+
+def offset_study(
+    folder: Path, fit: str, truth: dict = NEO_HOOKEAN, solver: str = "", **options
+) -> object:
+    history, recorded = offset_ramp(**options)
+    return make_study(
+        folder,
+        truth=truth,
+        start=truth,
+        fit=fit,
+        history=history,
+        recorded_depth=[recorded],
+        solver=solver,
+    )
+
+
+@pytest.fixture(scope="module")
+def offset_record(tmp_path_factory):
+    """The offset record's study (the contact given, as the lab recorded it)."""
+    return offset_study(tmp_path_factory.mktemp("offset"), 'free = ["C10_Pa"]\ntime_steps = 10\n')
+
+
+def with_fit(study, **changes):
+    return dataclasses.replace(study, fit=dataclasses.replace(study.fit, **changes))
+
+
+def test_the_contact_point_and_c10_are_recovered_jointly(offset_record):
+    # The offset's start is 50 % off (0.225 mm for 0.15 mm), C10 starts from the record.
+    study = with_fit(offset_record, contact_point="fit", start={"depth_offset_m": 0.225e-3})
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert fit.contact_point == "fit"
+    assert fit.result.parameter_names == ("C10_Pa", "depth_offset_m")
+    assert fit.result.parameter_units == ("Pa", "m")
+    assert fit.start["depth_offset_m"] == pytest.approx(0.225e-3)
+    d0, error = fit.parameters["depth_offset_m"], fit.result.standard_errors[1]
+    assert abs(d0 - OFFSET_M) < 5e-6, d0  # 5 um, half a sample spacing
+    assert abs(d0 - OFFSET_M) <= 3.0 * error
+    assert_recovered(fit, {"C10_Pa": 287.5, "depth_offset_m": OFFSET_M}, 0.05)
+    assert fit.parameters["C10_Pa"] == pytest.approx(287.5, rel=0.02)
+    assert fit.warnings == []
+    (record,) = fit.records
+    assert record.depth_offset_m == d0 and record.depth_offset_standard_error_m == error
+    # The FE depth is the recorded one less the offset; the FE ran in true depth.
+    assert record.fe_depth_m[-1] >= 0.45e-3 - d0 > record.fe_depth_m[-2]
+    before = record.depth_m < d0
+    np.testing.assert_array_equal(record.fitted_force_N[before], 0.0)
+    summary = json.loads(json.dumps(fit.to_dict()))
+    assert summary["contact_point"] == "fit"
+    assert summary["parameters"]["depth_offset_m"]["unit"] == "m"
+    assert summary["parameters"]["depth_offset_m"]["standard_error"] == pytest.approx(error)
+    assert summary["records"][0]["depth_offset_m"] == pytest.approx(d0)
+
+
+def test_without_the_contact_point_the_same_record_biases_c10(offset_record):
+    # The lab's depth counts 0.15 mm of air as indentation: the tissue looks much softer.
+    fit = fit_indentation(offset_record, progress=False)
+    assert fit.contact_point == "given" and fit.result.parameter_names == ("C10_Pa",)
+    assert fit.parameters["C10_Pa"] < 0.8 * 287.5, fit.parameters
+    assert any("Durbin-Watson" in m for m in fit.warnings), fit.warnings
+    assert "depth_offset_m" not in fit.to_dict()["records"][0]
+
+
+def test_the_offset_start_comes_from_the_first_force_above_noise(offset_record):
+    (record,) = offset_record.data
+    start = depth_offset_start_m(record)
+    assert abs(start - OFFSET_M) <= 2e-5, start  # within two samples of the touch
+    # A record conditioned with a contact point counts its depth from it: start 0.
+    conditioned = dataclasses.replace(
+        record,
+        record=dataclasses.replace(record.record, summary={"contact": {"time_s": 0.0}}),
+    )
+    assert depth_offset_start_m(conditioned) == 0.0
+
+
+def test_an_offset_pinned_at_its_bound_is_reported(offset_record):
+    study = with_fit(
+        offset_record,
+        contact_point="fit",
+        start={"depth_offset_m": 0.25e-3},
+        bounds={"depth_offset_m": (0.2e-3, 0.3e-3)},
+        max_iterations=8,
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.parameters["depth_offset_m"] == pytest.approx(0.2e-3)
+    assert any(
+        "depth_offset_m" in m and "lower bound" in m and "not identified" in m for m in fit.warnings
+    ), fit.warnings
+
+
+def test_the_offset_column_of_the_jacobian_equals_central_differences(tmp_path):
+    study = offset_study(
+        tmp_path,
+        'free = ["C10_Pa", "C20_Pa"]\nobjective = "relative"\ntime_steps = 6\n'
+        'contact_point = "fit"\n',
+        truth=REDUCED_POLYNOMIAL,
+        solver="tolerance = 1e-12",
+        samples=20,
+    )
+    free = ("C10_Pa", "C20_Pa")
+    model = _forward_model(
+        study, study.material, free, device="cpu", progress=False, offset_start=np.array([1e-4])
+    )
+    x = np.array([260.0, 380.0, 1.37e-4])
+    jacobian = model.jac(x)
+    assert jacobian.shape == (21, 3)
+    assert model.forward_solves == 1  # the offset's column costs no FE run
+    for j, step in enumerate((1e-6 * x[0], 1e-6 * x[1], 1e-10)):
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
+        scale = float(np.max(np.abs(central)))
+        assert scale > 0.0
+        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale)
+    # The FE lattice is fixed in true depth: a deeper trial adds steps of the same size.
+    assert model.depth_step_m == pytest.approx((0.45e-3 - 1e-4) / 6)
+    deeper = model.evaluate(np.array([260.0, 380.0, 0.2e-4]))
+    assert deeper.fe_curves[0][1][-1] >= 0.45e-3 - 0.2e-4
+
+
+def test_bad_contact_point_values_are_refused(offset_record, tmp_path):
+    with pytest.raises(InputError, match="contact_point") as raised:
+        fit_indentation(offset_record, progress=False, contact_point="guess")
+    assert "\n" not in str(raised.value)
+    # A viscoelastic material: its time-stepped runs do not take the offset (yet).
+    viscous = dataclasses.replace(offset_record, material=material_from_dict(VISCOELASTIC))
+    with pytest.raises(InputError, match=r"fit\.contact_point.*elastic"):
+        fit_indentation(viscous, progress=False, contact_point="fit")

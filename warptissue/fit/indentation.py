@@ -22,6 +22,16 @@ Notes:
     is the FE force interpolated linearly in time (with F = 0 at t = 0). The Jacobian is
     interpolated the same way from ``force_sensitivity_N_per_unit``.
 
+    Contact point (``fit.contact_point = "fit"``, elastic materials). Each record's depth
+    offset d0 (its recorded depth at first touch) is a parameter beside the material's:
+    F_model(d) = F_FE(max(d - d0, 0)). The FE runs on a lattice of equal depth steps fixed
+    in true depth for the whole fit (``time_steps`` steps to the deepest true depth at the
+    start values; a trial that needs deeper adds steps of the same size), so the FE force at
+    a lattice depth does not depend on d0 and the model is the linear interpolant of the FE
+    curve at ``d - d0``. Its offset column of the Jacobian is exact and costs no FE run:
+    dF/dd0 = -(the slope of the interpolant's segment at ``d - d0``), zero before the
+    touch.
+
     Residuals, stacked over the records: ``F_model - F_measured`` (N, "absolute") or that
     divided by ``max(|F_measured|, floor)`` ("relative", Ahn & Kim Eq. 7), with ``floor`` =
     ``relative_floor_N`` or 1 % of the largest |force| of the records.
@@ -62,6 +72,8 @@ from warptissue.fit.engine import covariance_from_jacobian, least_squares
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import FitResult, IterationRecord, RejectStep
 from warptissue.study import (
+    CONTACT_POINTS,
+    DEPTH_OFFSET,
     FIT_STRATEGIES,
     DataRecord,
     Protocol,
@@ -72,10 +84,13 @@ from warptissue.study import (
 __all__ = [
     "CORRELATION_LIMIT",
     "DURBIN_WATSON_LIMIT",
+    "OFFSET_IDENTIFIED_SHARE",
     "STATUSES",
     "IndentationFit",
     "IndentationFitProgress",
     "RecordCurve",
+    "depth_offset_names",
+    "depth_offset_start_m",
     "fit_indentation",
 ]
 
@@ -98,6 +113,16 @@ CORRELATION_LIMIT = 0.995
 determine a combination of them rather than each."""
 RELATIVE_FLOOR_SHARE = 0.01
 """Default floor of the relative objective: this share of the largest |force| of the records."""
+OFFSET_IDENTIFIED_SHARE = 0.1
+"""A fitted depth offset whose standard error exceeds this share of its record's depth span
+is reported as not identified (an offset may well be zero, so not judged by its value)."""
+OFFSET_BOUND_SHARES = (0.5, 0.1)
+"""Default bounds of a record's depth offset: from its shallowest recorded depth less this
+first share of its depth span, to its deepest less the second share (the probe touches
+before its deepest point)."""
+OFFSET_NOISE_SIGMA = 6.0
+"""The start of a depth offset without a contact point: where the force first exceeds this
+many noise standard deviations (and 1 % of the peak force)."""
 INTERRUPTED_EXIT_CODE = 130
 """Exit status of an interrupted fit (Ctrl-C), as the shell gives a process ended by SIGINT."""
 _CACHE_SIZE = 8
@@ -151,6 +176,9 @@ class RecordCurve:
         rmse_N: Root mean square error of this record's fit (N).
         durbin_watson: Durbin-Watson statistic of this record's residuals (about 2 for
             independent noise, near 0 for a systematic misfit; None for a perfect fit).
+        depth_offset_m: The fitted depth offset d0 (m; the recorded depth at first touch,
+            so the FE depth is ``depth_m - d0``), or None when the contact was given.
+        depth_offset_standard_error_m: Its standard error (m), or None.
     """
 
     file: str
@@ -164,10 +192,13 @@ class RecordCurve:
     r_squared: float | None
     rmse_N: float
     durbin_watson: float | None = None
+    depth_offset_m: float | None = None
+    depth_offset_standard_error_m: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (no sample arrays): file, samples, R^2, RMSE, Durbin-Watson."""
-        return {
+        """JSON-ready summary (no sample arrays): file, samples, R^2, RMSE, Durbin-Watson
+        (and the fitted depth offset with its standard error, when fitted)."""
+        summary = {
             "file": self.file,
             "samples": int(self.time_s.size),
             "r_squared": self.r_squared,
@@ -175,6 +206,10 @@ class RecordCurve:
             "durbin_watson": self.durbin_watson,
             "peak_force_N": float(np.max(np.abs(self.measured_force_N))),
         }
+        if self.depth_offset_m is not None:
+            summary["depth_offset_m"] = self.depth_offset_m
+            summary["depth_offset_standard_error_m"] = self.depth_offset_standard_error_m
+        return summary
 
 
 @dataclass
@@ -207,6 +242,8 @@ class IndentationFit:
         start: The start values of the free parameters (name -> value).
         start_cost: The cost at the start values (before the first trial step of the
             engine; the history lists the cost after each), or None.
+        contact_point: ``"given"`` or ``"fit"`` (each record's depth offset fitted: its
+            value in ``parameters`` and in its :class:`RecordCurve`).
     """
 
     study: Study
@@ -225,6 +262,7 @@ class IndentationFit:
     stage_one_prony: dict[str, float] = field(default_factory=dict)
     start: dict[str, float] = field(default_factory=dict)
     start_cost: float | None = None
+    contact_point: str = "given"
 
     @property
     def success(self) -> bool:
@@ -249,12 +287,14 @@ class IndentationFit:
         """A JSON-ready summary of the fit.
 
         Returns:
-            ``study`` (name and path), ``strategy``, ``status``, ``success``, ``message``,
-            ``parameters`` (name -> value, unit, standard error, start), ``correlation``
-            (``names`` and ``matrix``, or None), ``r_squared``, ``rmse_N``, ``iterations``,
+            ``study`` (name and path), ``strategy``, ``contact_point``, ``status``,
+            ``success``, ``message``, ``parameters`` (name -> value, unit, standard error,
+            start; the depth offsets too, when fitted), ``correlation`` (``names`` and
+            ``matrix``, or None), ``r_squared``, ``rmse_N``, ``iterations``,
             ``forward_solves``, ``finite_difference_solves``, ``method``, ``objective``,
             ``warnings``, ``identified``, ``records`` (per record: file, samples, R^2, RMSE,
-            Durbin-Watson), ``stage_one`` (None, or per record the Prony fit and the mean
+            Durbin-Watson, and ``depth_offset_m`` with its standard error when fitted),
+            ``stage_one`` (None, or per record the Prony fit and the mean
             used), ``fitted_material``, ``history`` (per trial step: x, cost, accepted...),
             ``seconds`` and ``software``.
         """
@@ -299,6 +339,7 @@ class IndentationFit:
                 "path": None if self.study.path is None else str(self.study.path),
             },
             "strategy": self.strategy,
+            "contact_point": self.contact_point,
             "status": self.status,
             "success": self.success,
             "message": self.message,
@@ -437,6 +478,10 @@ class _ForwardModel:
     One evaluation runs the FE (once for an elastic material, once per record for a
     viscoelastic one) with the sensitivities of the free parameters, and gives the
     residuals and the Jacobian together: ``fun`` and ``jac`` at one point share one run.
+
+    With ``offset_start`` (one depth offset per record, m; elastic materials) the parameter
+    vector is the free material parameters followed by the records' depth offsets, and the
+    FE depths are a lattice of steps fixed by the start (module docstring, "Contact point").
     """
 
     def __init__(
@@ -449,6 +494,7 @@ class _ForwardModel:
         names: tuple[str, ...],
         device: Any,
         progress: bool,
+        offset_start: np.ndarray | None = None,
     ) -> None:
         settings = study.fit
         self.study = study
@@ -484,8 +530,29 @@ class _ForwardModel:
         else:
             self.divisors = [np.ones_like(f) for f in self.measured]
         self.contact_s = [r.contact_time_s for r in self.records]
+        self.offset_count = 0 if offset_start is None else len(self.records)
+        self.depth_step_m = 0.0
+        if self.offset_count and self.viscoelastic:
+            raise InputError(
+                "fit.contact_point = 'fit' works with an elastic material only",
+                path=study.path,
+                key="fit.contact_point",
+                value="fit",
+            )
         if self.viscoelastic:
             self.grids = [record.load_history(steps=steps) for record in self.records]
+        elif self.offset_count:
+            reach = self._reach(np.asarray(offset_start, dtype=np.float64))
+            if not reach > 0.0:
+                raise InputError(
+                    f"the start of the depth offsets {np.asarray(offset_start).tolist()} m "
+                    "leaves no record in contact: give fit.start.depth_offset_m below the "
+                    "deepest recorded depth",
+                    path=study.path,
+                    key=f"fit.start.{DEPTH_OFFSET}",
+                )
+            self.depth_step_m = reach / steps
+            self.grids = [(None, self._lattice(np.asarray(offset_start, dtype=np.float64)))]
         else:
             deepest = max(float(np.max(r.displacement_m)) for r in self.records)
             self.grids = [(None, deepest * np.arange(1, steps + 1) / steps)]
@@ -497,8 +564,26 @@ class _ForwardModel:
 
     def material_at(self, x: np.ndarray) -> Any:
         vector = self.material.parameter_vector.copy()
-        vector[self.index] = x
+        vector[self.index] = np.asarray(x)[: len(self.names)]
         return self.material.with_parameters(vector)
+
+    def offsets_at(self, x: np.ndarray) -> np.ndarray:
+        """The records' depth offsets (m) in ``x``: zeros when the contact is given."""
+        if not self.offset_count:
+            return np.zeros(len(self.records))
+        return np.asarray(x, dtype=np.float64)[len(self.names) :]
+
+    def _reach(self, offsets: np.ndarray) -> float:
+        """The deepest true depth of the records at these offsets (m)."""
+        return max(
+            float(np.max(r.displacement_m)) - d0
+            for r, d0 in zip(self.records, offsets, strict=True)
+        )
+
+    def _lattice(self, offsets: np.ndarray) -> np.ndarray:
+        """FE depths: the fixed steps of ``depth_step_m`` to the deepest true depth."""
+        count = max(1, math.ceil(self._reach(offsets) / self.depth_step_m - 1e-9))
+        return self.depth_step_m * np.arange(1, count + 1)
 
     def _run(self, material: Any, times: np.ndarray | None, depths: np.ndarray) -> Any:
         problem = dataclasses.replace(self.problem, material=material)
@@ -526,8 +611,10 @@ class _ForwardModel:
             raise RejectStep(str(exc)) from exc
         if float(material.initial_shear_modulus_Pa) <= 0.0:
             raise RejectStep("the initial shear modulus is not positive")
+        offsets = self.offsets_at(x)
+        grids = [(None, self._lattice(offsets))] if self.offset_count else self.grids
         runs = []
-        for times, depths in self.grids:
+        for times, depths in grids:
             try:
                 result = self._run(material, times, depths)
             except ConvergenceError as exc:
@@ -547,24 +634,27 @@ class _ForwardModel:
                 run = runs[0]
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
                 where = np.concatenate([[0.0], fe_depth])
-                at = np.clip(record.displacement_m, 0.0, None)
-                fe_time = _first_passage_times(record, self.contact_s[k], fe_depth)
+                shifted = record.displacement_m - offsets[k]
+                at = np.clip(shifted, 0.0, None)
+                fe_time = _first_passage_times(record.time_s, shifted, self.contact_s[k], fe_depth)
             force = np.asarray(run.reaction_force_N, dtype=np.float64)
             sensitivity = np.asarray(run.force_sensitivity_N_per_unit, dtype=np.float64)
-            predicted.append(np.interp(at, where, np.concatenate([[0.0], force])))
-            jacobians.append(
-                np.column_stack(
-                    [
-                        np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
-                        for j in range(len(self.names))
-                    ]
+            curve = np.concatenate([[0.0], force])
+            predicted.append(np.interp(at, where, curve))
+            columns = [
+                np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
+                for j in range(len(self.names))
+            ]
+            for i in range(self.offset_count):
+                columns.append(
+                    _offset_column(shifted, where, curve) if i == k else np.zeros(at.size)
                 )
-            )
+            jacobians.append(np.column_stack(columns))
             if self.viscoelastic:
                 curves.append((fe_time, fe_depth, force))
             else:
                 # The FE steps up to the first one at or beyond the record's deepest point.
-                covered = int(np.searchsorted(fe_depth, float(np.max(record.displacement_m))))
+                covered = int(np.searchsorted(fe_depth, float(np.max(at))))
                 keep = slice(0, covered + 1)
                 curves.append((fe_time[keep], fe_depth[keep], force[keep]))
         residuals = np.concatenate(
@@ -597,11 +687,25 @@ class _ForwardModel:
             return None
 
 
-def _first_passage_times(record: DataRecord, contact_s: float, depths: np.ndarray) -> np.ndarray:
-    """The times (from the contact) at which a record first reaches each depth (its loading
-    ramp); depths beyond its deepest point get its deepest point's time."""
-    t = record.time_s - contact_s
-    d = np.maximum.accumulate(np.clip(record.displacement_m, 0.0, None))
+def _offset_column(shifted: np.ndarray, where: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    """d F_model / d d0 at the samples: minus the slope of the interpolant's segment at the
+    true depth ``shifted`` = d - d0 (m, shape (m,)); zero before the touch and beyond the
+    last FE depth, where the interpolant is flat. ``where``, ``curve``: the FE depths and
+    forces with (0, 0) first."""
+    slopes = np.diff(curve) / np.diff(where)
+    segment = np.clip(np.searchsorted(where, shifted, side="right") - 1, 0, slopes.size - 1)
+    inside = (shifted > 0.0) & (shifted < where[-1])
+    return np.where(inside, -slopes[segment], 0.0)
+
+
+def _first_passage_times(
+    time_s: np.ndarray, depth_m: np.ndarray, contact_s: float, depths: np.ndarray
+) -> np.ndarray:
+    """The times (from the contact) at which a record of depth ``depth_m`` (below the
+    contact, m) first reaches each depth (its loading ramp); depths beyond its deepest point
+    get its deepest point's time."""
+    t = time_s - contact_s
+    d = np.maximum.accumulate(np.clip(depth_m, 0.0, None))
     rising = np.concatenate([[True], np.diff(d) > 0.0])
     return np.interp(depths, d[rising], t[rising])
 
@@ -674,9 +778,10 @@ def _forward_model(
     *,
     device: str | None,
     progress: bool,
+    offset_start: np.ndarray | None = None,
 ) -> _ForwardModel:
     """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
-    of the free parameters."""
+    of the free parameters (and of the records' depth offsets, with ``offset_start``)."""
     from warptissue.device import resolve_device
     from warptissue.fem import Assembler
     from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
@@ -696,7 +801,95 @@ def _forward_model(
         names=free,
         device=warp_device,
         progress=progress,
+        offset_start=offset_start,
     )
+
+
+def depth_offset_names(records: Sequence[DataRecord]) -> tuple[str, ...]:
+    """The parameter names of the records' depth offsets: ``depth_offset_m`` for one record,
+    ``depth_offset1_m``, ``depth_offset2_m``, ... (in ``[[data]]`` order) for several."""
+    if len(records) == 1:
+        return (DEPTH_OFFSET,)
+    return tuple(f"depth_offset{k}_m" for k in range(1, len(records) + 1))
+
+
+def depth_offset_start_m(record: DataRecord) -> float:
+    """A start value of a record's depth offset d0 (m), from the record.
+
+    A record conditioned with a contact point (``contact = "auto"``, detected by
+    :func:`warptissue.acquisition.conditioning.detect_contact`, or ``contact_position_m``)
+    has its depths counted from it: 0. A record used as recorded (``contact = "none"``):
+    where the force first exceeds :data:`OFFSET_NOISE_SIGMA` noise standard deviations and
+    1 % of the peak force, refined by a straight line through the next samples (to 4 times
+    that force) back to zero force, kept between the last sample below it and the first one
+    above; a record above it from its first sample: that line's zero, at most that sample.
+
+    Args:
+        record: A conditioned ``[[data]]`` record.
+
+    Returns:
+        The recorded depth at first touch (m).
+
+    Notes:
+        The noise is estimated from second differences of the force (1.4826 times their
+        median absolute value over sqrt(6)), which a smooth loading curve leaves to the
+        noise. The force is taken as zero before the touch (the model's too).
+    """
+    if record.conditioning.get("contact", "none") != "none":
+        return 0.0
+    d = np.asarray(record.displacement_m, dtype=np.float64)
+    f = np.asarray(record.force_N, dtype=np.float64)
+    peak = float(np.max(f)) if f.size else 0.0
+    if f.size < 3 or not peak > 0.0:
+        return float(d[0]) if d.size else 0.0
+    noise = 1.4826 * float(np.median(np.abs(np.diff(f, 2)))) / math.sqrt(6.0)
+    threshold = max(OFFSET_NOISE_SIGMA * noise, 0.01 * peak)
+    loading = int(np.argmax(d)) + 1  # up to the deepest point
+    above = np.flatnonzero(f[:loading] > threshold)
+    if not above.size:
+        return float(d[int(np.argmax(f))])
+    first = int(above[0])
+    upto = np.flatnonzero(f[first:loading] > 4.0 * threshold)
+    last = first + (int(upto[0]) if upto.size else loading - 1 - first)
+    last = max(last, min(first + 1, loading - 1))
+    pick = slice(first, last + 1)
+    guess = float(d[first])
+    if last > first and np.ptp(d[pick]) > 0.0:
+        slope, intercept = np.polyfit(d[pick], f[pick], 1)
+        if slope > 0.0:
+            guess = float(-intercept / slope)
+    if first > 0:
+        return float(np.clip(guess, d[first - 1], d[first]))
+    return min(guess, float(d[0]))
+
+
+def _offset_box(study: Study) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, lower, upper) of each record's depth offset (m), each shape (records,):
+    ``[fit.start]``/``[fit.bounds]`` ``depth_offset_m`` where given, else from the record
+    (:func:`depth_offset_start_m`, :data:`OFFSET_BOUND_SHARES`); the start clipped into the
+    bounds."""
+    settings = study.fit
+    starts, lowers, uppers = [], [], []
+    below, above = OFFSET_BOUND_SHARES
+    for record in study.data:
+        d = np.asarray(record.displacement_m, dtype=np.float64)
+        shallow, deep = float(np.min(d)), float(np.max(d))
+        span = deep - shallow
+        low, high = settings.bounds.get(DEPTH_OFFSET, (shallow - below * span, deep - above * span))
+        start = settings.start.get(DEPTH_OFFSET)
+        start = depth_offset_start_m(record) if start is None else float(start)
+        starts.append(min(max(start, low), high))
+        lowers.append(low)
+        uppers.append(high)
+    return np.array(starts), np.array(lowers), np.array(uppers)
+
+
+def _shifted(record: DataRecord, offset_m: float) -> DataRecord:
+    """The record with its depths counted from a depth offset (``d - d0``)."""
+    if offset_m == 0.0:
+        return record
+    samples = dataclasses.replace(record.record, displacement_m=record.displacement_m - offset_m)
+    return dataclasses.replace(record, record=samples)
 
 
 def fit_indentation(
@@ -706,6 +899,7 @@ def fit_indentation(
     progress: bool = True,
     strategy: str | None = None,
     callback: Callable[[IndentationFitProgress], None] | None = None,
+    contact_point: str | None = None,
 ) -> IndentationFit:
     """Fit the study's free material parameters to its records by inverse FE.
 
@@ -720,6 +914,9 @@ def fit_indentation(
             ``fit.strategy`` ("joint" by default).
         callback: Called after each trial step of the engine with an
             :class:`IndentationFitProgress`. It may raise ``KeyboardInterrupt`` to stop.
+        contact_point: ``"given"`` (depths as conditioned) or ``"fit"`` (each record's depth
+            offset fitted with the material: parameters :func:`depth_offset_names`, in m,
+            after the material's); None: the study's ``fit.contact_point``.
 
     Returns:
         The :class:`IndentationFit`. Ctrl-C (``KeyboardInterrupt``, also inside an FE run)
@@ -730,7 +927,8 @@ def fit_indentation(
 
     Raises:
         InputError: The study has no fit or no records, a record was measured with another
-            probe radius (its sidecar), an unknown strategy or free parameter.
+            probe radius (its sidecar), an unknown strategy, contact point or free parameter,
+            or ``contact_point = "fit"`` with a viscoelastic material.
         ConvergenceError: The FE does not converge at the start values (nothing to fit from).
         KeyboardInterrupt: Ctrl-C before the first forward run finished (nothing to keep).
         DeviceError: The device does not exist.
@@ -756,8 +954,31 @@ def fit_indentation(
             key="fit.strategy",
             value=chosen_strategy,
         )
+    chosen_contact = contact_point if contact_point is not None else settings.contact_point
+    if chosen_contact not in CONTACT_POINTS:
+        raise InputError(
+            f"contact_point must be one of {', '.join(CONTACT_POINTS)}",
+            path=study.path,
+            key="fit.contact_point",
+            value=chosen_contact,
+        )
+    fit_offsets = chosen_contact == "fit"
+    if fit_offsets and any(_is_prony(name) for name in study.material.parameter_names):
+        raise InputError(
+            "'fit' works with an elastic material only (one FE run in depth shifted by the "
+            "offset), not yet with a viscoelastic one: give the contact in [[data]]",
+            path=study.path,
+            key="fit.contact_point",
+            value=chosen_contact,
+        )
     _check_probe_radius(study)
-    start = start_values_from_record(study)
+    offset_start: np.ndarray | None = None
+    offset_lower = offset_upper = np.zeros(0)
+    if fit_offsets:
+        offset_start, offset_lower, offset_upper = _offset_box(study)
+        start = start_values_from_record(study, _shifted(study.data[0], float(offset_start[0])))
+    else:
+        start = start_values_from_record(study)
     material = study.material
     free = tuple(settings.free)
     all_lower, all_upper = settings.parameter_bounds(material)
@@ -789,11 +1010,24 @@ def fit_indentation(
         free = tuple(free[j] for j in keep)
         all_lower, all_upper = all_lower[keep], all_upper[keep]
 
-    model = _forward_model(study, material, free, device=device, progress=progress)
+    model = _forward_model(
+        study, material, free, device=device, progress=progress, offset_start=offset_start
+    )
+    offset_names = depth_offset_names(study.data) if fit_offsets else ()
+    names = free + offset_names
     units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
+    units += ("m",) * len(offset_names)
     x0 = np.array([start[name] for name in free], dtype=np.float64)
     lower, upper = _positive_bounds(free, all_lower, all_upper)
     x0 = np.clip(x0, lower, upper)
+    spans = np.array([float(np.ptp(record.displacement_m)) for record in study.data])
+    if offset_start is not None:
+        x0 = np.concatenate([x0, offset_start])
+        lower = np.concatenate([lower, offset_lower])
+        upper = np.concatenate([upper, offset_upper])
+    x_scale = _x_scale(x0, units)
+    if offset_names:
+        x_scale[len(free) :] = spans  # an offset may start at 0: its record's depth span
     stage = "stage two" if chosen_strategy == "two_stage" else "joint"
     history: list[IterationRecord] = []
     stopped_at_r_squared = False
@@ -824,7 +1058,7 @@ def fit_indentation(
                 IndentationFitProgress(
                     stage=stage,
                     iteration=record.iteration,
-                    parameters=dict(zip(free, record.x.tolist(), strict=True)),
+                    parameters=dict(zip(names, record.x.tolist(), strict=True)),
                     cost=record.cost,
                     r_squared=r2,
                     forward_solves=model.forward_solves,
@@ -850,7 +1084,7 @@ def fit_indentation(
         except RejectStep as exc:
             raise ConvergenceError(
                 f"the FE does not converge at the start values "
-                f"{dict(zip(free, x0.tolist(), strict=True))}: {exc}; give other start "
+                f"{dict(zip(names, x0.tolist(), strict=True))}: {exc}; give other start "
                 "values in [fit.start]"
             ) from None
         engine_result = least_squares(
@@ -859,14 +1093,14 @@ def fit_indentation(
             jac=model.jac,
             bounds=(lower, upper),
             method=settings.method,
-            x_scale=None if settings.method == "lm" else _x_scale(x0, units),
+            x_scale=None if settings.method == "lm" else x_scale,
             max_iterations=settings.max_iterations,
             ftol=settings.ftol,
             xtol=settings.xtol,
             gtol=settings.gtol,
             callback=on_step,
             progress=False,
-            parameter_names=free,
+            parameter_names=names,
             parameter_units=units,
         )
     except KeyboardInterrupt:
@@ -878,9 +1112,13 @@ def fit_indentation(
 
     best = model.best if interrupted else model.evaluate(engine_result.x)
     result = _result_from(
-        engine_result, best, model, free, units, settings.method, lower, upper, history
+        engine_result, best, model, names, units, settings.method, lower, upper, history
     )
-    n = len(free)
+    if offset_names:
+        scales = np.full(len(names), np.nan)
+        scales[len(free) :] = OFFSET_IDENTIFIED_SHARE * spans
+        result.standard_error_scales = scales
+    n = len(names)
     if engine_result is not None:
         finite_difference = (engine_result.njev * n + engine_result.nfev) * (
             model.solves_per_evaluation
@@ -907,6 +1145,12 @@ def fit_indentation(
     else:
         status, message = "failed", engine_result.message
     records = _record_curves(model, best)
+    if offset_names:
+        errors = result.standard_errors
+        for k, curve in enumerate(records):
+            j = len(free) + k
+            curve.depth_offset_m = float(result.x[j])
+            curve.depth_offset_standard_error_m = None if errors is None else float(errors[j])
     warnings = _warnings(study, result, records, status, message)
     result.warnings.extend(warnings)
     fitted_material = model.material_at(best.x)
@@ -925,8 +1169,9 @@ def fit_indentation(
         warnings=result.all_warnings,
         stage_one_fits=stage_one_fits,
         stage_one_prony=prony,
-        start=dict(zip(free, x0.tolist(), strict=True)),
+        start=dict(zip(names, x0.tolist(), strict=True)),
         start_cost=start_cost,
+        contact_point=chosen_contact,
     )
 
 
