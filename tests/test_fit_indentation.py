@@ -679,3 +679,54 @@ def test_bad_contact_point_values_are_refused(offset_record, tmp_path):
     viscous = dataclasses.replace(offset_record, material=material_from_dict(VISCOELASTIC))
     with pytest.raises(InputError, match=r"fit\.contact_point.*elastic"):
         fit_indentation(viscous, progress=False, contact_point="fit")
+
+
+def test_each_record_has_its_own_offset_and_all_share_one_fe_run(tmp_path):
+    first, recorded_first = offset_ramp()
+    second, recorded_second = offset_ramp(0.3e-3, 0.05e-3, 30)
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 10\ncontact_point = "fit"\n',
+        history=[first, second],
+        recorded_depth=[recorded_first, recorded_second],
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert fit.result.parameter_names == ("C10_Pa", "depth_offset1_m", "depth_offset2_m")
+    assert fit.forward_solves == fit.result.nfev  # one FE run per evaluation, both records
+    assert fit.parameters["C10_Pa"] == pytest.approx(287.5, rel=0.02)
+    assert abs(fit.parameters["depth_offset1_m"] - OFFSET_M) < 5e-6
+    assert abs(fit.parameters["depth_offset2_m"] - 0.05e-3) < 5e-6
+    assert [r.depth_offset_m for r in fit.records] == list(fit.result.x[1:])
+    assert fit.warnings == []
+
+
+def test_the_cli_reports_the_fitted_contact_point(offset_record, tmp_path, capsys):
+    from warptissue.cli import main
+
+    text = offset_record.path.read_text() + 'contact_point = "fit"\n'
+    path = offset_record.path.with_name("contact_fit.toml")
+    path.write_text(text)
+    status = main(["fit", "indentation", str(path), "-o", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert "depth_offset_m" in captured.out
+    assert "record.csv: R^2 =" in captured.out and "contact fitted at recorded depth 0.15" in (
+        captured.out
+    )
+    summary = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert summary["contact_point"] == "fit"
+    d0 = summary["records"][0]["depth_offset_m"]
+    assert abs(d0 - OFFSET_M) < 5e-6
+    assert summary["parameters"]["depth_offset_m"]["value"] == d0
+    with (tmp_path / "out" / "fit_curves.csv").open() as handle:
+        header = handle.readline().strip().split(",")
+        rows = [line.strip().split(",") for line in handle]
+    below = np.array([float(row[header.index("depth_below_fitted_contact_m")]) for row in rows])
+    depth = np.array([float(row[header.index("depth_m")]) for row in rows])
+    np.testing.assert_allclose(below, np.clip(depth - d0, 0.0, None), atol=1e-15)
+    # The fitted study keeps the records as given (the offset is in fit.json) and still fits
+    # the contact point when run again.
+    assert "contact_point" in (tmp_path / "out" / "fitted_study.toml").read_text()
