@@ -730,3 +730,14 @@ def test_the_cli_reports_the_fitted_contact_point(offset_record, tmp_path, capsy
     # The fitted study keeps the records as given (the offset is in fit.json) and still fits
     # the contact point when run again.
     assert "contact_point" in (tmp_path / "out" / "fitted_study.toml").read_text()
+
+
+def test_the_cli_offers_the_study_keys_contact_points(capsys):
+    from warptissue.cli import fit_indentation as command
+    from warptissue.cli import main
+    from warptissue.study import CONTACT_POINTS
+
+    assert command.CONTACT_POINTS == CONTACT_POINTS
+    with pytest.raises(SystemExit):
+        main(["fit", "indentation", "--help"])
+    assert "--contact-point {given,fit}" in capsys.readouterr().out

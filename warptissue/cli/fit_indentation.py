@@ -31,6 +31,8 @@ __all__ = ["register_fit", "run", "summary"]
 
 STRATEGIES = ("joint", "two_stage")
 """``--strategy`` values: every free parameter at once, or Ahn & Kim's two stages."""
+CONTACT_POINTS = ("given", "fit")
+"""``--contact-point`` values: :data:`warptissue.study.CONTACT_POINTS`."""
 
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
@@ -82,6 +84,14 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         "relaxation, then the rest by inverse FE); default: the study's [fit] strategy",
     )
     parser.add_argument(
+        "--contact-point",
+        choices=CONTACT_POINTS,
+        default=None,
+        help="given: the records' depths count from the contact as conditioned; fit: each "
+        "record's depth offset (the recorded depth at first touch) is fitted with the "
+        "material (elastic materials); default: the study's [fit] contact_point",
+    )
+    parser.add_argument(
         "--device",
         default=None,
         type=_device,
@@ -127,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
         device=args.device,
         progress=not (args.quiet or args.json),
         strategy=args.strategy,
+        contact_point=args.contact_point,
     )
     files = write_indentation_fit_outputs(out_dir, fit, usd=args.usd)
     if args.json:
