@@ -678,10 +678,62 @@ def test_bad_contact_point_values_are_refused(offset_record, tmp_path):
     with pytest.raises(InputError, match="contact_point") as raised:
         fit_indentation(offset_record, progress=False, contact_point="guess")
     assert "\n" not in str(raised.value)
-    # A viscoelastic material: its time-stepped runs do not take the offset (yet).
-    viscous = dataclasses.replace(offset_record, material=material_from_dict(VISCOELASTIC))
-    with pytest.raises(InputError, match=r"fit\.contact_point.*elastic"):
-        fit_indentation(viscous, progress=False, contact_point="fit")
+    # A start beyond the deepest recorded depth leaves nothing in contact.
+    study = with_fit(
+        offset_record, start={"depth_offset_m": 1e-3}, bounds={"depth_offset_m": (0, 2e-3)}
+    )
+    with pytest.raises(InputError, match=r"fit\.start\.depth_offset_m") as raised:
+        fit_indentation(study, progress=False, contact_point="fit")
+    assert "\n" not in str(raised.value)
+
+
+def offset_ramp_and_hold(
+    offset_m: float = 0.1e-3, depth_m: float = 0.3 * RADIUS_M
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A 0.5 s ramp to the recorded depth ``offset_m + depth_m`` that touches at ``offset_m``
+    (a sample at the touch), then a 5 s hold in log time: ((time_s, true depth), recorded)."""
+    recorded_m = offset_m + depth_m
+    touch = 0.5 * offset_m / recorded_m
+    ramp = np.union1d(np.linspace(0.02, 0.5, 16), [touch])
+    time = np.concatenate([ramp, 0.5 + np.geomspace(0.05, 5.0, 24)])
+    recorded = np.where(time <= 0.5, recorded_m * time / 0.5, recorded_m)
+    return (time, np.clip(recorded - offset_m, 0.0, None)), recorded
+
+
+def viscous_offset_study(folder: Path, fit: str, **options):
+    history, recorded = offset_ramp_and_hold(**options)
+    return make_study(
+        folder,
+        truth=VISCOELASTIC,
+        start=VISCOELASTIC,
+        fit=fit,
+        history=history,
+        recorded_depth=[recorded],
+        solver="tolerance = 1e-12",
+    )
+
+
+def test_the_timed_offset_column_equals_central_differences(tmp_path):
+    # Viscoelastic: the FE run starts at the touch, which moves with the offset; the column
+    # is a one-sided difference (one more run), checked against central differences.
+    study = viscous_offset_study(
+        tmp_path, 'free = ["C10_Pa", "g1"]\ntime_steps = 6\ncontact_point = "fit"\n'
+    )
+    free = ("C10_Pa", "g1")
+    model = _forward_model(
+        study, study.material, free, device="cpu", progress=False, offset_start=np.array([1e-4])
+    )
+    x = np.array([270.0, 0.45, 0.93e-4])
+    jacobian = model.jac(x)
+    assert model.forward_solves == 2  # the record's run and the offset's difference
+    for j, step in ((0, 1e-6 * x[0]), (2, 1e-9)):  # C10 on the moving grid, the offset
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
+        scale = float(np.max(np.abs(central)))
+        assert scale > 0.0
+        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-3 * scale)
 
 
 def test_each_record_has_its_own_offset_and_all_share_one_fe_run(tmp_path):

@@ -1262,7 +1262,7 @@ def test_fit_strategy_and_time_steps_defaults_and_round_trip(tmp_path):
 VISCO_MATERIAL = "C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\ng1 = 0.3\ntau1_s = 1.0\n"
 
 
-def test_contact_point_defaults_round_trips_and_refuses_a_viscoelastic_material(tmp_path):
+def test_contact_point_defaults_and_round_trips(tmp_path):
     study = load_study(write_v2(tmp_path))
     assert study.fit.contact_point == "given" and "contact_point" not in study.fit.to_dict()
     text = V2.replace(
@@ -1276,15 +1276,9 @@ def test_contact_point_defaults_round_trips_and_refuses_a_viscoelastic_material(
     assert study.fit.bounds == {"depth_offset_m": (-1e-4, 1e-4)}
     assert study.fit.to_dict()["contact_point"] == "fit"
     assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
-    # A viscoelastic material: the timed runs do not take the offset; one line at the key.
+    # A viscoelastic material takes it too (each record's FE run starts at its touch).
     visco = text.replace("C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\n", VISCO_MATERIAL)
-    path = write_v2(tmp_path, visco)
-    with pytest.raises(
-        InputError, match="fit.contact_point: 'fit' works with an elastic"
-    ) as caught:
-        load_study(path)
-    assert "\n" not in str(caught.value)
-    assert caught.value.line == line_of(visco, "contact_point =")
+    assert load_study(write_v2(tmp_path, visco)).fit.contact_point == "fit"
 
 
 def test_two_stage_needs_prony_terms_and_a_free_elastic_parameter(tmp_path):

@@ -528,7 +528,7 @@ class FitSettings:
         contact_point: ``"given"``: the records' depths count from the contact as
             conditioned; ``"fit"``: each record's depth offset d0 (the recorded depth at
             first touch, m) is fitted with the material, F(d) = F_FE(max(d - d0, 0))
-            (docs/fitting.md "Contact point"; elastic materials only). Its start and bounds
+            (docs/fitting.md "Contact point"). Its start and bounds
             are ``start["depth_offset_m"]`` and ``bounds["depth_offset_m"]`` (each record's),
             else from each record.
     """
@@ -1260,14 +1260,6 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
             raise table.error("free", f"names {name!r} twice", free_raw)
     free = tuple(free_raw)
     contact_point = table.string("contact_point", default="given", choices=CONTACT_POINTS)
-    if contact_point == "fit" and any(PRONY_NAME.match(n) for n in material.parameter_names):
-        raise table.error(
-            "contact_point",
-            "'fit' works with an elastic [material] (one FE run in depth shifted by the "
-            "offset), not yet with a viscoelastic one: give each record's contact in "
-            "[[data]] (contact = 'auto' or contact_position_m) and use 'given'",
-            contact_point,
-        )
     bounds_table = _optional_table(table, "bounds")
     bounds: dict[str, tuple[float, float]] = {}
     for key in _parameter_table(bounds_table, free, material, contact_point=contact_point):

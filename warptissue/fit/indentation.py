@@ -120,6 +120,9 @@ OFFSET_BOUND_SHARES = (0.5, 0.1)
 """Default bounds of a record's depth offset: from its shallowest recorded depth less this
 first share of its depth span, to its deepest less the second share (the probe touches
 before its deepest point)."""
+OFFSET_DIFFERENCE_SHARE = 1e-4
+"""The step of the one-sided difference of a viscoelastic record's force by its depth offset,
+as a share of the record's depth span."""
 OFFSET_NOISE_SIGMA = 6.0
 """The start of a depth offset without a contact point: where the force first exceeds this
 many noise standard deviations (and 1 % of the peak force)."""
@@ -532,14 +535,23 @@ class _ForwardModel:
         self.contact_s = [r.contact_time_s for r in self.records]
         self.offset_count = 0 if offset_start is None else len(self.records)
         self.depth_step_m = 0.0
-        if self.offset_count and self.viscoelastic:
-            raise InputError(
-                "fit.contact_point = 'fit' works with an elastic material only",
-                path=study.path,
-                key="fit.contact_point",
-                value="fit",
-            )
-        if self.viscoelastic:
+        self.steps = steps
+        self.offset_differences = [
+            OFFSET_DIFFERENCE_SHARE * max(float(np.ptp(r.displacement_m)), 1e-12)
+            for r in self.records
+        ]
+        if self.viscoelastic and self.offset_count:
+            offsets = np.asarray(offset_start, dtype=np.float64)
+            try:
+                self.grids = [self._touch(k, offsets[k])[1] for k in range(len(self.records))]
+            except RejectStep as exc:
+                raise InputError(
+                    f"the start of the depth offsets {offsets.tolist()} m: {exc}; give "
+                    "fit.start.depth_offset_m below the deepest recorded depth",
+                    path=study.path,
+                    key=f"fit.start.{DEPTH_OFFSET}",
+                ) from None
+        elif self.viscoelastic:
             self.grids = [record.load_history(steps=steps) for record in self.records]
         elif self.offset_count:
             reach = self._reach(np.asarray(offset_start, dtype=np.float64))
@@ -573,6 +585,46 @@ class _ForwardModel:
             return np.zeros(len(self.records))
         return np.asarray(x, dtype=np.float64)[len(self.names) :]
 
+    def _touch(self, k: int, offset: float) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
+        """Record ``k``'s touch time at a depth offset and its FE time steps from it.
+
+        The touch time t0 is where the record's recorded depth (its running maximum) first
+        reaches ``offset`` (linear between samples; the first sample's time for a record
+        deeper than that from its start); the steps are
+        :func:`warptissue.loading.resample_history` of ``(time - t0, depth - offset)``, as
+        :meth:`DataRecord.load_history` does from a given contact.
+
+        Returns:
+            ``(t0, (times_s, depths_m))``: t0 on the record's clock (s); the FE times from
+            t0 (s) and true depths (m).
+
+        Raises:
+            RejectStep: The record never reaches the offset, or fewer than two samples
+                follow the touch.
+        """
+        record = self.records[k]
+        t = np.asarray(record.time_s, dtype=np.float64)
+        recorded = np.asarray(record.displacement_m, dtype=np.float64)
+        reached = np.maximum.accumulate(recorded)
+        i = int(np.searchsorted(reached, offset, side="left"))
+        if i >= reached.size:
+            raise RejectStep(
+                f"{record.file} never reaches the depth offset {offset:.6g} m (its deepest "
+                f"recorded depth is {reached[-1]:.6g} m)"
+            )
+        if i == 0:
+            touch = float(t[0])
+        else:
+            share = (offset - reached[i - 1]) / (reached[i] - reached[i - 1])
+            touch = float(t[i - 1] + share * (t[i] - t[i - 1]))
+        from warptissue.loading import resample_history
+
+        try:
+            grid = resample_history(t - touch, recorded - offset, steps=self.steps)
+        except InputError as exc:
+            raise RejectStep(f"{record.file}: {exc.message}") from exc
+        return touch, grid
+
     def _reach(self, offsets: np.ndarray) -> float:
         """The deepest true depth of the records at these offsets (m)."""
         return max(
@@ -585,20 +637,33 @@ class _ForwardModel:
         count = max(1, math.ceil(self._reach(offsets) / self.depth_step_m - 1e-9))
         return self.depth_step_m * np.arange(1, count + 1)
 
-    def _run(self, material: Any, times: np.ndarray | None, depths: np.ndarray) -> Any:
+    def _run(
+        self,
+        material: Any,
+        times: np.ndarray | None,
+        depths: np.ndarray,
+        *,
+        sensitivities: bool = True,
+    ) -> Any:
         problem = dataclasses.replace(self.problem, material=material)
         extra = {} if times is None else {"times_s": times}
         self.forward_solves += 1
-        return _simulate()(
-            problem,
-            depths,
-            device=self.device,
-            progress=self.progress,
-            options=self.options,
-            assembler=self.assembler,
-            sensitivities=self.names,
-            **extra,
-        )
+        try:
+            result = _simulate()(
+                problem,
+                depths,
+                device=self.device,
+                progress=self.progress,
+                options=self.options,
+                assembler=self.assembler,
+                sensitivities=self.names if sensitivities else (),
+                **extra,
+            )
+        except ConvergenceError as exc:
+            raise RejectStep(f"the FE failed: {exc}") from exc
+        if not result.completed:
+            raise RejectStep(f"the FE did not converge: {result.message}")
+        return result
 
     def evaluate(self, x: np.ndarray) -> _Evaluation:
         key = np.asarray(x, dtype=np.float64).tobytes()
@@ -612,24 +677,25 @@ class _ForwardModel:
         if float(material.initial_shear_modulus_Pa) <= 0.0:
             raise RejectStep("the initial shear modulus is not positive")
         offsets = self.offsets_at(x)
-        grids = [(None, self._lattice(offsets))] if self.offset_count else self.grids
-        runs = []
-        for times, depths in grids:
-            try:
-                result = self._run(material, times, depths)
-            except ConvergenceError as exc:
-                raise RejectStep(f"the FE failed: {exc}") from exc
-            if not result.completed:
-                raise RejectStep(f"the FE did not converge: {result.message}")
-            runs.append(result)
+        touches = list(self.contact_s)
+        if self.viscoelastic and self.offset_count:
+            timed = [self._touch(k, offsets[k]) for k in range(len(self.records))]
+            touches = [touch for touch, _ in timed]
+            grids = [grid for _, grid in timed]
+        elif self.offset_count:
+            grids = [(None, self._lattice(offsets))]
+        else:
+            grids = self.grids
+        runs = [self._run(material, times, depths) for times, depths in grids]
         predicted, jacobians, curves = [], [], []
         for k, record in enumerate(self.records):
             if self.viscoelastic:
                 run = runs[k]
-                fe_time = np.asarray(self.grids[k][0], dtype=np.float64)
+                fe_time = np.asarray(grids[k][0], dtype=np.float64)
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
                 where = np.concatenate([[0.0], fe_time])
-                at = record.time_s - self.contact_s[k]
+                at = record.time_s - touches[k]
+                shifted = at
             else:
                 run = runs[0]
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
@@ -646,9 +712,12 @@ class _ForwardModel:
                 for j in range(len(self.names))
             ]
             for i in range(self.offset_count):
-                columns.append(
-                    _offset_column(shifted, where, curve) if i == k else np.zeros(at.size)
-                )
+                if i != k:
+                    columns.append(np.zeros(at.size))
+                elif self.viscoelastic:
+                    columns.append(self._timed_offset_column(k, material, offsets[k], predicted[k]))
+                else:
+                    columns.append(_offset_column(shifted, where, curve))
             jacobians.append(np.column_stack(columns))
             if self.viscoelastic:
                 curves.append((fe_time, fe_depth, force))
@@ -673,6 +742,25 @@ class _ForwardModel:
         if self.best is None or evaluation.cost < self.best.cost:
             self.best = evaluation
         return evaluation
+
+    def _timed_offset_column(
+        self, k: int, material: Any, offset: float, force: np.ndarray
+    ) -> np.ndarray:
+        """dF/dd0 of record ``k`` with a viscoelastic material, by a one-sided difference.
+
+        The touch time, the FE time steps and the depths all move with the offset, and the
+        force is a hereditary integral of the depth history, not a function of the depth:
+        one more FE run (without sensitivities) at ``offset - h`` (the probe touching
+        earlier, so the record stays in contact), h = :data:`OFFSET_DIFFERENCE_SHARE` of the
+        record's depth span, gives (F(d0) - F(d0 - h)) / h at the samples.
+        """
+        step = self.offset_differences[k]
+        touch, (times, depths) = self._touch(k, offset - step)
+        run = self._run(material, times, depths, sensitivities=False)
+        where = np.concatenate([[0.0], np.asarray(times, dtype=np.float64)])
+        curve = np.concatenate([[0.0], np.asarray(run.reaction_force_N, dtype=np.float64)])
+        earlier = np.interp(self.records[k].time_s - touch, where, curve)
+        return (force - earlier) / step
 
     def fun(self, x: np.ndarray) -> np.ndarray:
         return self.evaluate(x).residuals
@@ -878,7 +966,17 @@ def _offset_box(study: Study) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         low, high = settings.bounds.get(DEPTH_OFFSET, (shallow - below * span, deep - above * span))
         start = settings.start.get(DEPTH_OFFSET)
         start = depth_offset_start_m(record) if start is None else float(start)
-        starts.append(min(max(start, low), high))
+        start = min(max(start, low), high)
+        if not start < deep:
+            key = "start" if DEPTH_OFFSET in settings.start else "bounds"
+            raise InputError(
+                f"{record.file}: a depth offset of {start:g} m leaves the record out of "
+                f"contact (its deepest recorded depth is {deep:g} m): give a start below it",
+                path=study.path,
+                key=f"fit.{key}.{DEPTH_OFFSET}",
+                value=start,
+            )
+        starts.append(start)
         lowers.append(low)
         uppers.append(high)
     return np.array(starts), np.array(lowers), np.array(uppers)
@@ -916,7 +1014,9 @@ def fit_indentation(
             :class:`IndentationFitProgress`. It may raise ``KeyboardInterrupt`` to stop.
         contact_point: ``"given"`` (depths as conditioned) or ``"fit"`` (each record's depth
             offset fitted with the material: parameters :func:`depth_offset_names`, in m,
-            after the material's); None: the study's ``fit.contact_point``.
+            after the material's; with a viscoelastic material each record's FE run starts
+            at its touch, and the two-stage strategy's stage (i) takes the records as
+            conditioned); None: the study's ``fit.contact_point``.
 
     Returns:
         The :class:`IndentationFit`. Ctrl-C (``KeyboardInterrupt``, also inside an FE run)
@@ -927,8 +1027,8 @@ def fit_indentation(
 
     Raises:
         InputError: The study has no fit or no records, a record was measured with another
-            probe radius (its sidecar), an unknown strategy, contact point or free parameter,
-            or ``contact_point = "fit"`` with a viscoelastic material.
+            probe radius (its sidecar), an unknown strategy, contact point or free
+            parameter.
         ConvergenceError: The FE does not converge at the start values (nothing to fit from).
         KeyboardInterrupt: Ctrl-C before the first forward run finished (nothing to keep).
         DeviceError: The device does not exist.
@@ -963,14 +1063,6 @@ def fit_indentation(
             value=chosen_contact,
         )
     fit_offsets = chosen_contact == "fit"
-    if fit_offsets and any(_is_prony(name) for name in study.material.parameter_names):
-        raise InputError(
-            "'fit' works with an elastic material only (one FE run in depth shifted by the "
-            "offset), not yet with a viscoelastic one: give the contact in [[data]]",
-            path=study.path,
-            key="fit.contact_point",
-            value=chosen_contact,
-        )
     _check_probe_radius(study)
     offset_start: np.ndarray | None = None
     offset_lower = offset_upper = np.zeros(0)
