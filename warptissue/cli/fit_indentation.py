@@ -89,7 +89,7 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="given: the records' depths count from the contact as conditioned; fit: each "
         "record's depth offset (the recorded depth at first touch) is fitted with the "
-        "material (elastic materials); default: the study's [fit] contact_point",
+        "material; default: the study's [fit] contact_point",
     )
     parser.add_argument(
         "--device",

@@ -22,15 +22,22 @@ Notes:
     is the FE force interpolated linearly in time (with F = 0 at t = 0). The Jacobian is
     interpolated the same way from ``force_sensitivity_N_per_unit``.
 
-    Contact point (``fit.contact_point = "fit"``, elastic materials). Each record's depth
-    offset d0 (its recorded depth at first touch) is a parameter beside the material's:
-    F_model(d) = F_FE(max(d - d0, 0)). The FE runs on a lattice of equal depth steps fixed
-    in true depth for the whole fit (``time_steps`` steps to the deepest true depth at the
-    start values; a trial that needs deeper adds steps of the same size), so the FE force at
-    a lattice depth does not depend on d0 and the model is the linear interpolant of the FE
-    curve at ``d - d0``. Its offset column of the Jacobian is exact and costs no FE run:
-    dF/dd0 = -(the slope of the interpolant's segment at ``d - d0``), zero before the
-    touch.
+    Contact point (``fit.contact_point = "fit"``). Each record's depth offset d0 (its
+    recorded depth at first touch) is a parameter beside the material's:
+    F_model(d) = F_FE(max(d - d0, 0)). Elastic: the FE runs on a lattice of equal depth
+    steps fixed in true depth for the whole fit (``time_steps`` steps to the deepest true
+    depth at the start values; a trial that needs deeper adds steps of the same size), so
+    the FE force at a lattice depth does not depend on d0 and the model is the linear
+    interpolant of the FE curve at ``d - d0``. Its offset column of the Jacobian is exact
+    and costs no FE run: dF/dd0 = -(the slope of the interpolant's segment at ``d - d0``),
+    zero before the touch. Viscoelastic: the touch time t0 is where the recorded depth
+    first reaches d0, and each record's FE run starts there at depth 0 (no steps before the
+    touch, where the force is zero; the time steps are
+    :func:`warptissue.loading.resample_history` of ``(t - t0, d - d0)``, as from a given
+    contact), so t0, the steps and the depths all move with d0; the force is a hereditary
+    integral of the depth history, and its offset column is a one-sided difference: one
+    more run per record (without sensitivities) at ``d0 - h``, h =
+    :data:`OFFSET_DIFFERENCE_SHARE` of the record's depth span.
 
     Residuals, stacked over the records: ``F_model - F_measured`` (N, "absolute") or that
     divided by ``max(|F_measured|, floor)`` ("relative", Ahn & Kim Eq. 7), with ``floor`` =
@@ -482,7 +489,7 @@ class _ForwardModel:
     viscoelastic one) with the sensitivities of the free parameters, and gives the
     residuals and the Jacobian together: ``fun`` and ``jac`` at one point share one run.
 
-    With ``offset_start`` (one depth offset per record, m; elastic materials) the parameter
+    With ``offset_start`` (one depth offset per record, m) the parameter
     vector is the free material parameters followed by the records' depth offsets, and the
     FE depths are a lattice of steps fixed by the start (module docstring, "Contact point").
     """
