@@ -27,6 +27,7 @@ from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
 from warptissue.fit.indentation import _forward_model, depth_offset_start_m
+from warptissue.fit.result import RejectStep
 from warptissue.io import write_csv
 from warptissue.materials import material_from_dict
 from warptissue.simulate import build_mesh, build_problem, run_study
@@ -813,3 +814,29 @@ def test_the_cli_offers_the_study_keys_contact_points(capsys):
     with pytest.raises(SystemExit):
         main(["fit", "indentation", "--help"])
     assert "--contact-point {given,fit}" in capsys.readouterr().out
+
+
+def test_the_touch_time_follows_the_offset_through_the_record():
+    from types import SimpleNamespace
+
+    from warptissue.acquisition.conditioning import FitRecord
+    from warptissue.fit.indentation import _ForwardModel
+    from warptissue.study import DataRecord
+
+    # As a conditioned record: depth 0 (clipped) until the contact at 1 s, then 0.1 mm/s.
+    time = np.arange(0.0, 4.01, 0.1)
+    depth = np.clip(time - 1.0, 0.0, None) * 1e-4
+    record = DataRecord(
+        file="r.csv",
+        path=Path("r.csv"),
+        record=FitRecord(time, depth, depth * 10.0, True, {}),
+    )
+    model = SimpleNamespace(records=(record,), steps=8)
+    touch, (times, depths) = _ForwardModel._touch(model, 0, 0.0)
+    assert touch == pytest.approx(1.0)  # the contact, not the first sample
+    assert times[-1] == pytest.approx(3.0) and depths[-1] == pytest.approx(3e-4)
+    touch, (times, depths) = _ForwardModel._touch(model, 0, 0.125e-4)
+    assert touch == pytest.approx(1.125)  # between samples
+    assert depths[-1] == pytest.approx(3e-4 - 0.125e-4)
+    with pytest.raises(RejectStep, match="never reaches"):
+        _ForwardModel._touch(model, 0, 4e-4)

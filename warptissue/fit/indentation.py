@@ -596,7 +596,7 @@ class _ForwardModel:
         """Record ``k``'s touch time at a depth offset and its FE time steps from it.
 
         The touch time t0 is where the record's recorded depth (its running maximum) first
-        reaches ``offset`` (linear between samples; the first sample's time for a record
+        passes ``offset`` (linear between samples; the first sample's time for a record
         deeper than that from its start); the steps are
         :func:`warptissue.loading.resample_history` of ``(time - t0, depth - offset)``, as
         :meth:`DataRecord.load_history` does from a given contact.
@@ -613,7 +613,10 @@ class _ForwardModel:
         t = np.asarray(record.time_s, dtype=np.float64)
         recorded = np.asarray(record.displacement_m, dtype=np.float64)
         reached = np.maximum.accumulate(recorded)
-        i = int(np.searchsorted(reached, offset, side="left"))
+        # The first sample beyond the offset; the touch lies after the one before it (the
+        # last at or above the offset's level: a conditioned record's clipped zeros end at
+        # its contact).
+        i = int(np.searchsorted(reached, offset, side="right"))
         if i >= reached.size:
             raise RejectStep(
                 f"{record.file} never reaches the depth offset {offset:.6g} m (its deepest "
@@ -702,7 +705,6 @@ class _ForwardModel:
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
                 where = np.concatenate([[0.0], fe_time])
                 at = record.time_s - touches[k]
-                shifted = at
             else:
                 run = runs[0]
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
