@@ -612,7 +612,9 @@ def test_without_the_contact_point_the_same_record_biases_c10(offset_record):
     fit = fit_indentation(offset_record, progress=False)
     assert fit.contact_point == "given" and fit.result.parameter_names == ("C10_Pa",)
     assert fit.parameters["C10_Pa"] < 0.8 * 287.5, fit.parameters
-    assert any("Durbin-Watson" in m for m in fit.warnings), fit.warnings
+    assert any(
+        "Durbin-Watson" in m and "fit.contact_point = 'fit' fits it" in m for m in fit.warnings
+    ), fit.warnings
     assert "depth_offset_m" not in fit.to_dict()["records"][0]
 
 
@@ -840,3 +842,40 @@ def test_the_touch_time_follows_the_offset_through_the_record():
     assert depths[-1] == pytest.approx(3e-4 - 0.125e-4)
     with pytest.raises(RejectStep, match="never reaches"):
         _ForwardModel._touch(model, 0, 4e-4)
+
+
+def test_an_offset_is_judged_against_its_record_not_its_value():
+    # A depth offset may be zero: its standard error is judged against a tenth of its
+    # record's depth span (standard_error_scales), a modulus against its own value.
+    from warptissue.fit.result import FitResult
+
+    def result(errors, scales):
+        x = np.array([287.5, 1e-7])
+        return FitResult(
+            x=x,
+            parameter_names=("C10_Pa", "depth_offset_m"),
+            parameter_units=("Pa", "m"),
+            cost=1.0,
+            residuals=np.ones(10),
+            jacobian=np.ones((10, 2)),
+            success=True,
+            status=1,
+            message="",
+            iterations=1,
+            nfev=1,
+            njev=1,
+            covariance=np.diag(np.square(errors)),
+            standard_errors=np.array(errors),
+            correlation=np.eye(2),
+            r_squared=None,
+            rmse=0.0,
+            standard_error_scales=scales,
+        )
+
+    scales = np.array([np.nan, 4.5e-5])
+    assert result([2.0, 1e-6], scales).identifiability == []
+    assert len(result([2.0, 1e-6], None).identifiability) == 1  # 1 um > 0.1 um: by value
+    (message,) = result([2.0, 5e-5], scales).identifiability
+    assert "depth_offset_m" in message and "larger than 4.5e-05 m" in message
+    (message,) = result([300.0, 1e-6], scales).identifiability
+    assert "C10_Pa" in message and "larger than its value" in message

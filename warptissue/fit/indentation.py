@@ -1379,6 +1379,8 @@ def _warnings(
 ) -> list[str]:
     """Plausibility warnings of a fit (the identifiability ones are the result's own)."""
     messages: list[str] = []
+    fitted = any(record.depth_offset_m is not None for record in records)
+    hint = "" if fitted else " (fit.contact_point = 'fit' fits it)"
     if status not in ("converged", "stopped_at_r_squared"):
         messages.append(f"the fit did not converge ({status}): {message}")
     correlation = result.correlation
@@ -1400,7 +1402,7 @@ def _warnings(
                 f"{curve.file}: the residuals are systematic (Durbin-Watson statistic "
                 f"{curve.durbin_watson:.3g}, about 2 for noise; R^2 = "
                 f"{'n/a' if curve.r_squared is None else f'{curve.r_squared:.4g}'}): check "
-                "the probe radius, the contact point, a drifting force offset, or the "
-                "material model"
+                f"the probe radius, the contact point{hint}, a drifting force offset, or "
+                "the material model"
             )
     return messages
