@@ -52,6 +52,8 @@ if TYPE_CHECKING:
 __all__ = [
     "FIT_METHODS",
     "FIT_OBJECTIVES",
+    "CONTACT_POINTS",
+    "DEPTH_OFFSET",
     "FIT_STRATEGIES",
     "PROTOCOL_KINDS",
     "SCHEMA_VERSION",
@@ -87,6 +89,12 @@ PRONY_NAME = re.compile(r"^(g\d+|tau\d+_s)$")
 """A Prony parameter of a viscoelastic ``[material]``: ``g<i>`` or ``tau<i>_s``."""
 START_FROM: tuple[str, ...] = ("record", "material")
 """``fit.start_from``: where a free parameter without a ``[fit.start]`` value starts."""
+CONTACT_POINTS: tuple[str, ...] = ("given", "fit")
+"""``fit.contact_point``: the records' depths as conditioned (``"given"``), or a depth offset
+of each record fitted with the material (``"fit"``, :mod:`warptissue.fit.indentation`)."""
+DEPTH_OFFSET: str = "depth_offset_m"
+"""The key of the depth offset in ``[fit.start]`` and ``[fit.bounds]`` (with
+``contact_point = "fit"``), and its parameter name in a fit of one record."""
 DEFAULT_COLUMNS: dict[str, str] = {
     "time_column": "time_s",
     "displacement_column": "displacement_m",
@@ -517,6 +525,12 @@ class FitSettings:
             ``[material]`` and a free parameter that is not one).
         time_steps: FE time steps per record: the grid of
             :meth:`DataRecord.load_history` (:func:`warptissue.loading.resample_history`).
+        contact_point: ``"given"``: the records' depths count from the contact as
+            conditioned; ``"fit"``: each record's depth offset d0 (the recorded depth at
+            first touch, m) is fitted with the material, F(d) = F_FE(max(d - d0, 0))
+            (docs/fitting.md "Contact point"). Its start and bounds
+            are ``start["depth_offset_m"]`` and ``bounds["depth_offset_m"]`` (each record's),
+            else from each record.
     """
 
     free: tuple[str, ...]
@@ -533,6 +547,7 @@ class FitSettings:
     stop_r_squared: float | None = None
     strategy: str = "joint"
     time_steps: int = 24
+    contact_point: str = "given"
 
     def parameter_bounds(self, material: Any) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the free parameters, each shape (n,), in ``free`` order.
@@ -565,6 +580,8 @@ class FitSettings:
             "strategy": self.strategy,
             "time_steps": self.time_steps,
         }
+        if self.contact_point != "given":
+            table["contact_point"] = self.contact_point
         if self.relative_floor_N is not None:
             table["relative_floor_N"] = self.relative_floor_N
         if self.stop_r_squared is not None:
@@ -1206,11 +1223,23 @@ def _free_name_problem(name: str, material: Any) -> str:
     )
 
 
-def _parameter_table(table: _Table, free: Sequence[str], material: Any) -> dict[str, Any]:
-    """The keys of ``[fit.start]`` or ``[fit.bounds]``: each must be a free parameter."""
+def _parameter_table(
+    table: _Table, free: Sequence[str], material: Any, *, contact_point: str = "given"
+) -> dict[str, Any]:
+    """The keys of ``[fit.start]`` or ``[fit.bounds]``: each must be a free parameter (or
+    the depth offset, with ``contact_point = "fit"``)."""
     for key in table.data:
         if key in free:
             continue
+        if key == DEPTH_OFFSET:
+            if contact_point == "fit":
+                continue
+            raise table.error(
+                key,
+                "applies only with fit.contact_point = 'fit' (the depth offset fitted with "
+                "the material)",
+                table.data[key],
+            )
         if key in material.parameter_names:
             raise table.error(
                 key,
@@ -1237,9 +1266,10 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         if free_raw.count(name) > 1:
             raise table.error("free", f"names {name!r} twice", free_raw)
     free = tuple(free_raw)
+    contact_point = table.string("contact_point", default="given", choices=CONTACT_POINTS)
     bounds_table = _optional_table(table, "bounds")
     bounds: dict[str, tuple[float, float]] = {}
-    for key in _parameter_table(bounds_table, free, material):
+    for key in _parameter_table(bounds_table, free, material, contact_point=contact_point):
         pair = bounds_table.raw(key)
         if not isinstance(pair, list) or len(pair) != 2:
             raise bounds_table.error(key, "must be [lower, upper]", pair)
@@ -1252,8 +1282,14 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
     start_table = _optional_table(table, "start")
     start = {
         key: start_table.number(key, positive=False)
-        for key in _parameter_table(start_table, free, material)
+        for key in _parameter_table(start_table, free, material, contact_point=contact_point)
     }
+    if DEPTH_OFFSET in start and DEPTH_OFFSET in bounds:
+        low, high = bounds[DEPTH_OFFSET]
+        if not low <= start[DEPTH_OFFSET] <= high:
+            raise start_table.error(
+                DEPTH_OFFSET, f"lies outside fit.bounds [{low:g}, {high:g}]", start[DEPTH_OFFSET]
+            )
     start_from = table.string("start_from", default="record", choices=START_FROM)
     method = table.string("method", default="lm", choices=FIT_METHODS)
     objective = table.string("objective", default="absolute", choices=FIT_OBJECTIVES)
@@ -1302,6 +1338,7 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         stop_r_squared=stop_r_squared,
         strategy=strategy,
         time_steps=time_steps,
+        contact_point=contact_point,
         **tolerances,
     )
     lower, upper = settings.parameter_bounds(material)
@@ -1320,13 +1357,14 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
                 else ("start_from", f"the [material] value of {name} lies outside its bounds")
             )
             raise where.error(key, f"{problem} [{lower[j]:g}, {upper[j]:g}]", value)
-    if start:
-        vector = np.array([start.get(name, current[name]) for name in material.parameter_names])
+    given = {name: value for name, value in start.items() if name != DEPTH_OFFSET}
+    if given:
+        vector = np.array([given.get(name, current[name]) for name in material.parameter_names])
         try:
             material.with_parameters(vector)
         except InputError as exc:
-            key = exc.column if exc.column in start else next(iter(start))
-            raise start_table.error(key, exc.message, start[key]) from None
+            key = exc.column if exc.column in given else next(iter(given))
+            raise start_table.error(key, exc.message, given[key]) from None
     return settings
 
 
