@@ -209,11 +209,12 @@ class ContactSurface:
     contact settles to at equilibrium (measured on the plate test: TET10 corner nodes carry
     1e-4 of a mid-edge node's force, at a gap ~1e-4 of the mid-edge nodes'). Dividing those
     forces by any positive lumping (the 4-sub-triangle one, corners ``A / 12``, mid-edge
-    ``A / 4``, or Hinton-Rock-Zienkiewicz's) gives a checkerboard, measured under a sphere:
-    corners 0.2-0.4 % of Hertz's pressure, mid-edge nodes 121-131 %. Hence:
+    ``A / 4``, or Hinton-Rock-Zienkiewicz's) gives a checkerboard, measured under a sphere
+    (docs/fe.md "Contact outputs"): corners below 0.4 % of Hertz's pressure, mid-edge nodes
+    121-131 %. Hence:
 
     - pressure ``p_i = |f_i| / w_i`` where ``w_i > 0``; the small force left on TET10 corner
-      nodes (0.01-0.5 % of the total, measured) is first handed to the mid-edge nodes of the
+      nodes (0.01-1.2 % of the total, measured under a sphere) is first handed to the mid-edge nodes of the
       triangles around them in proportion to their ``w``, so that the integral of the
       interpolated pressure, ``sum_i p_i w_i``, equals the summed normal contact force. A
       TET10 corner node, whose ``w`` is 0, shows the ``w``-weighted mean pressure of the
