@@ -13,9 +13,11 @@ pressure a positive lumping gives (the 4-sub-triangle one: corners A/12, mid-edg
 A/4), at corner and at mid-edge nodes, over Hertz's.
 
 Usage:
-    python scripts/examples/hertz_contact_pressure.py [--device cuda] [--out FILE.json]
+    python scripts/examples/hertz_contact_pressure.py [--quick] [--device cuda] [--out FILE.json]
 
-Measured on the 2-core CPU (about 40 s): docs/fe.md "Contact outputs".
+Measured on the 2-core CPU (about 50 s): docs/fe.md "Contact outputs". ``--quick`` (about
+15 s) runs the coarser 3 R x 1.5 R block of tests/test_fem_contact.py's ``sphere_mesh``
+(refined to 0.1 R within 0.2 R) at 0.02 R and 0.04 R.
 """
 
 from __future__ import annotations
@@ -65,21 +67,23 @@ def isoparametric_integral(points: np.ndarray, triangles: np.ndarray, values: np
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="a coarse block, two depths")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default=None, help="write the rows as JSON here")
     args = parser.parse_args()
+    width = 3.0 if args.quick else 6.0
     mesh = indentation_block(
-        width_m=6.0 * RADIUS_M,
-        thickness_m=3.0 * RADIUS_M,
-        probe_radius_m=0.25 * RADIUS_M,
-        size_near_m=0.075 * RADIUS_M,
-        size_far_m=1.5 * RADIUS_M,
-        growth=1.5,
+        width_m=width * RADIUS_M,
+        thickness_m=0.5 * width * RADIUS_M,
+        probe_radius_m=(0.2 if args.quick else 0.25) * RADIUS_M,
+        size_near_m=(0.1 if args.quick else 0.075) * RADIUS_M,
+        size_far_m=(0.6 if args.quick else 1.5) * RADIUS_M,
+        growth=1.2 if args.quick else 1.5,
     )
     material = NeoHookean(C10_PA, 2000.0 * C10_PA)
     problem = IndentationProblem(mesh, material, Indenter("sphere", radius_m=RADIUS_M))
     assembler = Assembler(mesh, material, device=args.device)
-    depths = RADIUS_M * np.array(DEPTHS_R)
+    depths = RADIUS_M * np.array((0.02, 0.04) if args.quick else DEPTHS_R)
     started = time.perf_counter()
     result = simulate_indentation(
         problem, depths, device=args.device, progress=False, assembler=assembler
@@ -90,7 +94,8 @@ def main() -> None:
     is_corner = np.zeros(mesh.node_count, dtype=bool)
     is_corner[np.unique(mesh.tets[:, :4])] = True
     print(
-        f"sphere R = {RADIUS_M * 1e3:g} mm on a 6 R x 3 R quarter block, {mesh.node_count} "
+        f"sphere R = {RADIUS_M * 1e3:g} mm on a {width:g} R x {width / 2:g} R quarter block, "
+        f"{mesh.node_count} "
         f"TET10 nodes, {elapsed:.1f} s on {args.device}"
     )
     header = (
@@ -125,6 +130,7 @@ def main() -> None:
         row = {
             "depth_over_R": float(depth / RADIUS_M),
             "force_N": float(result.reaction_force_N[step]),
+            "contact_area_m2": float(result.contact_area_m2[step]),
             "area_over_hertz": float(result.contact_area_m2[step] / (np.pi * a**2)),
             "pressure_rms_over_p0": float(np.sqrt(np.mean((pressure - hertz)[inner] ** 2)) / p0),
             "peak_over_p0": float(pressure[top].max() / p0),

@@ -210,7 +210,7 @@ class ContactSurface:
     1e-4 of a mid-edge node's force, at a gap ~1e-4 of the mid-edge nodes'). Dividing those
     forces by any positive lumping (the 4-sub-triangle one, corners ``A / 12``, mid-edge
     ``A / 4``, or Hinton-Rock-Zienkiewicz's) gives a checkerboard, measured under a sphere
-    (docs/fe.md "Contact outputs"): corners below 0.4 % of Hertz's pressure, mid-edge nodes
+    (docs/fe.md "Contact outputs"): corners 0-4 % of Hertz's pressure, mid-edge nodes
     121-131 %. Hence:
 
     - pressure ``p_i = |f_i| / w_i`` where ``w_i > 0``; the small force left on TET10 corner
