@@ -214,9 +214,10 @@ class ContactSurface:
     121-131 %. Hence:
 
     - pressure ``p_i = |f_i| / w_i`` where ``w_i > 0``; the small force left on TET10 corner
-      nodes (0.01-1.2 % of the total, measured under a sphere) is first handed to the mid-edge nodes of the
-      triangles around them in proportion to their ``w``, so that the integral of the
-      interpolated pressure, ``sum_i p_i w_i``, equals the summed normal contact force. A
+      nodes (0.01-1.2 % of the total, measured under a sphere) is first handed to the
+      mid-edge nodes of the triangles around them in proportion to their ``w``, so that the
+      integral of the interpolated pressure, ``sum_i p_i w_i``, equals the summed normal
+      contact force. A
       TET10 corner node, whose ``w`` is 0, shows the ``w``-weighted mean pressure of the
       mid-edge nodes of its triangles (for display; it does not enter the integral).
     - contact area ``sum of w_i`` over the nodes that penetrate the indenter (gap < 0); TET10
