@@ -217,9 +217,9 @@ class ContactSurface:
       nodes (0.01-1.2 % of the total, measured under a sphere) is first handed to the
       mid-edge nodes of the triangles around them in proportion to their ``w``, so that the
       integral of the interpolated pressure, ``sum_i p_i w_i``, equals the summed normal
-      contact force. A
-      TET10 corner node, whose ``w`` is 0, shows the ``w``-weighted mean pressure of the
-      mid-edge nodes of its triangles (for display; it does not enter the integral).
+      contact force. A TET10 corner node, whose ``w`` is 0, shows the ``w``-weighted mean
+      pressure of the mid-edge nodes of its triangles (for display; it does not enter the
+      integral).
     - contact area ``sum of w_i`` over the nodes that penetrate the indenter (gap < 0); TET10
       corner nodes, without area and with a gap of no meaning, count nothing. The edge of
       contact is resolved by whole nodes: the area is uncertain by a ring of nodes (half an
