@@ -628,3 +628,16 @@ def test_a_sharp_flat_punch_has_no_contact_outputs():
     assert result.contact_area_m2.size == 0
     assert result.contact_pressure_Pa.shape == (0, mesh.node_count)
     assert "contact_area_m2" not in result.to_dict()
+
+
+def test_a_contact_surface_without_triangles_is_refused_before_the_run():
+    """The contact outputs need the indented surface's triangles: a node set that holds no
+    boundary triangle is refused when the problem is made, naming the key."""
+    mesh = _plate_cube()
+    sets = dict(mesh.node_sets, few=mesh.node_sets["zmax"][:2])
+    mesh = TetMesh(points=mesh.points, tets=mesh.tets, node_sets=sets)
+    with pytest.raises(InputError) as caught:
+        IndentationProblem(
+            mesh, NeoHookean(100.0, 2e5), Indenter("plate"), base="sliding", surface="few"
+        )
+    assert caught.value.column == "surface" and "\n" not in str(caught.value)

@@ -81,7 +81,9 @@ class IndentationProblem:
         base: ``"fixed"`` or ``"sliding"``.
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
-        surface: Node set of the indented surface.
+        surface: Node set of the indented surface; under a rigid indenter its boundary
+            triangles carry the contact area and pressure
+            (:class:`warptissue.fem.contact.ContactSurface`: a set holding none is refused).
         penalty_factor: ``beta`` of the contact penalty ``k = beta mu0 h`` of a sphere or a
             plate (:mod:`warptissue.fem.contact`; unused by a flat punch).
     """
@@ -142,6 +144,8 @@ class IndentationProblem:
                 )
         if self.is_contact:
             self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
+            # The contact outputs need the surface's triangles: refused here, not after a run.
+            ContactSurface.for_mesh(self.mesh, surface=self.surface)
             return
         if self.punch_nodes.size == 0:
             raise InputError(
