@@ -351,7 +351,9 @@ def test_solver_table_keys_are_the_options_names(tmp_path):
     record["solver"].update(values)
     study = study_from_dict(record)
     assert study.solver.options == NewtonOptions(**values)
-    assert study.to_dict()["solver"] == dict(values, device="auto", formulation="mixed")
+    assert study.to_dict()["solver"] == dict(
+        values, device="auto", formulation="mixed", penalty_factor=1000.0
+    )
     path = write(tmp_path, tomli_w.dumps(study.to_dict()))
     assert load_study(path).solver == study.solver
 

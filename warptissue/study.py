@@ -275,7 +275,7 @@ class Boundary:
 class Solver:
     """Solver settings: the ``[solver]`` table.
 
-    The table is flat: ``device``, ``formulation`` and the keys of
+    The table is flat: ``device``, ``formulation``, ``penalty_factor`` and the keys of
     :class:`warptissue.fem.NewtonOptions` under the same names (``linear_solver``,
     ``tolerance``, ``max_newton_iterations``, ``max_cutbacks``, ``nonlinear_elimination``,
     ``predictor``, ``damping``), each with its default there.
@@ -287,15 +287,26 @@ class Solver:
             ``"displacement"`` (pure displacement; locks when nearly incompressible).
         options: The Newton solver's settings, passed as they are to
             :func:`warptissue.fem.simulate_indentation`.
+        penalty_factor: ``beta`` of the rigid contact's penalty stiffness ``k = beta mu0 h``
+            (:class:`warptissue.fem.IndentationProblem`; default
+            :data:`warptissue.fem.contact.DEFAULT_PENALTY_FACTOR`); unused by a sharp flat
+            punch, whose nodes are prescribed.
     """
 
     device: str
     formulation: str
     options: NewtonOptions
+    penalty_factor: float
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``[solver]`` table (flat: device, formulation, then the Newton options)."""
-        return {"device": self.device, "formulation": self.formulation, **self.options.to_dict()}
+        """The ``[solver]`` table (flat: device, formulation, penalty factor, then the Newton
+        options)."""
+        return {
+            "device": self.device,
+            "formulation": self.formulation,
+            "penalty_factor": self.penalty_factor,
+            **self.options.to_dict(),
+        }
 
 
 @dataclass(frozen=True)
@@ -1054,17 +1065,21 @@ def _read_boundary(table: _Table) -> Boundary:
 def _read_solver(table: _Table) -> Solver:
     # The solver's own modules: importing them does not start Warp (test_study checks).
     from warptissue.fem.assembly import FORMULATIONS
+    from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
     from warptissue.fem.solvers import NewtonOptions
 
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):
         raise table.error("device", "must be 'auto', 'cpu', 'cuda' or 'cuda:N'", device)
     formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
+    penalty_factor = table.number("penalty_factor", default=DEFAULT_PENALTY_FACTOR)
     options = table.build(
         lambda values: NewtonOptions(**values), table.present(NewtonOptions.keys())
     )
     table.finish()
-    return Solver(device=device, formulation=formulation, options=options)
+    return Solver(
+        device=device, formulation=formulation, options=options, penalty_factor=penalty_factor
+    )
 
 
 _RECORD_KEYS = (
