@@ -366,9 +366,9 @@ def _inside(probe: Indenter, planar: np.ndarray) -> np.ndarray:
 
 def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0):
     import warp as wp
+    from warptissue.kernels import fem as kf
 
     from warptissue.fem.contact import RigidContact
-    from warptissue.kernels import fem as kf
 
     contact = RigidContact(probe, np.arange(len(points)), 0.0, stiffness, CONTACT_DEPTH_M)
     count = len(points)
