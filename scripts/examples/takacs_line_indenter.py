@@ -36,7 +36,7 @@ Usage:
 The full run (4320 tets, three tip radii, 24 load steps each) writes
 scripts/results/takacs_line_indenter_2core_cpu.json; docs/viscoelastic.md ("Line indenter:
 finite elements against distributed Wiechert bodies") has the table. ``--quick`` (a 600-tet
-strip, one tip radius, 12 steps) takes about 20 s.
+strip, one tip radius) takes about 20 s.
 """
 
 from __future__ import annotations
@@ -179,18 +179,18 @@ def strip_mesh(*, quick: bool) -> TetMesh:
     return TetMesh(points=mesh.points, tets=mesh.tets, node_sets=sets, face_sets=mesh.face_sets)
 
 
-def wiechert_estimate_N(depth_m: np.ndarray) -> np.ndarray:
+def wiechert_estimate_N(depth_m: np.ndarray, radius_m: float = PROFILE_RADIUS_M) -> np.ndarray:
     """Takacs et al.'s estimate (Eq. 5-8) at the given depths of the 10 mm/min ramp: Table I
-    per square metre (/ 4e-4 m^2), the Eq. 6 profile with rho = 16 mm, over the strip's
-    25 mm width (the 30 mm wedge spans it)."""
+    per square metre (/ 4e-4 m^2), the Eq. 6 profile with rho = ``radius_m`` (16 mm, Fig. 9),
+    over the strip's 25 mm width (the 30 mm wedge spans it)."""
     time_s = np.linspace(0.0, MAX_DEPTH_M / RATE_M_PER_S, 241)
     force = line_indenter_force_N(
         TABLE_I.scaled(1.0 / CUBE_EDGE_M**2),
         time_s,
         RATE_M_PER_S * time_s,
-        half_width_m=PROFILE_RADIUS_M,
+        half_width_m=radius_m,
         length_m=STRIP_WIDTH_M,
-        profile=quadratic_profile(PROFILE_RADIUS_M),
+        profile=quadratic_profile(radius_m),
         element_count=128,
     )
     return np.interp(depth_m, RATE_M_PER_S * time_s, force)
@@ -224,10 +224,21 @@ def surface_profile(mesh: TetMesh, displacement_m: np.ndarray, depth_m: float) -
             "one_percent_of_depth_m": float(x[np.flatnonzero(settlement < 0.01 * depth_m)[0]])
             if np.any(settlement < 0.01 * depth_m)
             else None,
+            "eq6_best_radius_m": best_radius(x, settlement, depth_m),
             "largest_rise_m": float(max(0.0, -settlement.min())),
             "largest_rise_at_m": float(x[np.argmin(settlement)]),
         }
     return out
+
+
+def best_radius(x_m: np.ndarray, settlement_m: np.ndarray, depth_m: float) -> float:
+    """rho of Eq. 6 that fits a settlement profile best (least squares over the nodes)."""
+    from scipy.optimize import minimize_scalar
+
+    def cost(radius: float) -> float:
+        return float(np.sum((quadratic_profile(radius)(x_m, depth_m) - settlement_m) ** 2))
+
+    return float(minimize_scalar(cost, bounds=(1e-3, 0.1), method="bounded").x)
 
 
 def run_fe(mesh, material, tip_radius_m: float, steps: int, device: str) -> dict:
@@ -286,14 +297,14 @@ def _write(args: argparse.Namespace, mesh: TetMesh, report: dict, runs: list) ->
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="coarse strip, one tip, 12 steps")
+    parser.add_argument("--quick", action="store_true", help="coarse strip, one tip radius")
     parser.add_argument("--out", default=None, help="write the results as JSON here")
     parser.add_argument("--tip-radii-mm", type=float, nargs="+", default=None)
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args()
     radii = args.tip_radii_mm or ([0.5] if args.quick else [0.5, 1.0, 0.25])
-    steps = args.steps or (12 if args.quick else 24)
+    steps = args.steps or 24
 
     material, report = fit_material()
     hyper, qlv = report["hyperelastic_fit"], report["qlv_fit"]
@@ -324,7 +335,11 @@ def main() -> None:
             run["estimate_slope_N_per_m"] = _slope(depth, estimate).tolist()
         displacement = run.pop("_displacement_m")
         if radius_mm == radii[0] and displacement is not None and run["completed"]:
-            run["surface_profile"] = surface_profile(mesh, displacement, float(depth[-1]))
+            profile = surface_profile(mesh, displacement, float(depth[-1]))
+            run["surface_profile"] = profile
+            # The estimate again with the FE's own profile width (Eq. 6 fitted on y = 0).
+            rho = profile["centre"]["eq6_best_radius_m"]
+            run["wiechert_estimate_fe_radius_N"] = wiechert_estimate_N(depth, rho).tolist()
         runs.append(run)
         if args.out:
             _write(args, mesh, report, runs)
@@ -345,8 +360,17 @@ def main() -> None:
                     f"  surface ({label}): back to zero at x = "
                     f"{(p['zero_crossing_m'] or float('nan')) * 1e3:.1f} mm (Eq. 6: "
                     f"{PROFILE_RADIUS_M * 1e3:g} mm), largest rise {p['largest_rise_m'] * 1e3:.2f} "
-                    f"mm at x = {p['largest_rise_at_m'] * 1e3:.1f} mm"
+                    f"mm at x = {p['largest_rise_at_m'] * 1e3:.1f} mm; Eq. 6 fits it best with "
+                    f"rho = {p['eq6_best_radius_m'] * 1e3:.1f} mm"
                 )
+            print(
+                "  Wiechert estimate with the FE's rho, 1..6 mm: "
+                + ", ".join(
+                    f"{f:.4f}"
+                    for d, f in zip(depth, run["wiechert_estimate_fe_radius_N"], strict=True)
+                    if abs(d * 1e3 - round(d * 1e3)) < 1e-9
+                )
+            )
 
 
 if __name__ == "__main__":
