@@ -503,7 +503,7 @@ def test_wedge_quarter_strip_matches_the_half_strip(wedge_quarter_run):
     """The quarter model (symmetry planes x = 0 across the line, y = 0 along it) gives the
     force of the half strip on both sides of the line (x in [-L, L], no plane at x = 0; a
     different mesh, as the tets' split is not mirror-symmetric; measured 0.2-0.4 %), whose
-    line nodes stay on the line (no sideways slip of the wedge; measured 2 % of the depth)."""
+    line nodes stay on the line (no sideways slip of the wedge; measured 0.9 % of the depth)."""
     whole = _wedge_run(
         _wedge_strip(full=True), WEDGE, WEDGE_DEPTHS_M, symmetry_planes=("symmetry_y",)
     )
@@ -513,7 +513,7 @@ def test_wedge_quarter_strip_matches_the_half_strip(wedge_quarter_run):
     mesh = _wedge_strip(full=True)
     top = mesh.node_set("top")
     line = top[np.abs(mesh.points[top, 0]) < 1e-12]
-    assert np.abs(whole.displacement_m[-1][line, 0]).max() < 0.05 * WEDGE_DEPTHS_M[-1]
+    assert np.abs(whole.displacement_m[-1][line, 0]).max() < 0.03 * WEDGE_DEPTHS_M[-1]
 
 
 def test_wedge_force_grows_with_depth_and_equals_a_cylinder_on_its_tip(wedge_quarter_run):
