@@ -31,7 +31,7 @@ probe moves at 10 mm/min (the time of each depth is depth / rate).
 
 Usage:
     python scripts/examples/takacs_line_indenter.py [--quick] [--out JSON]
-        [--tip-radii-mm 0.5 1.0 0.25] [--device cpu]
+        [--tip-radii-mm 0.5 1.0 0.25] [--steps 24] [--penalty-factor 1000] [--device cpu]
 
 The full run (4320 tets, three tip radii, 24 load steps each) writes
 scripts/results/takacs_line_indenter_2core_cpu.json; docs/viscoelastic.md ("Line indenter:
@@ -48,6 +48,7 @@ import time
 import numpy as np
 
 from warptissue.fem import IndentationProblem, simulate_indentation
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
 from warptissue.fit.hyperelastic import HomogeneousTest, fit_hyperelastic
 from warptissue.indenter import Indenter
 from warptissue.materials import Viscoelastic
@@ -241,11 +242,13 @@ def best_radius(x_m: np.ndarray, settlement_m: np.ndarray, depth_m: float) -> fl
     return float(minimize_scalar(cost, bounds=(1e-3, 0.1), method="bounded").x)
 
 
-def run_fe(mesh, material, tip_radius_m: float, steps: int, device: str) -> dict:
+def run_fe(
+    mesh, material, tip_radius_m: float, steps: int, device: str, penalty_factor: float
+) -> dict:
     """The wedge pressed at 10 mm/min to 6 mm: the force (base reaction) at each step."""
     depths = np.linspace(MAX_DEPTH_M / steps, MAX_DEPTH_M, steps)
     wedge = Indenter("wedge", radius_m=tip_radius_m, angle_deg=WEDGE_ANGLE_DEG)
-    problem = IndentationProblem(mesh, material, wedge)
+    problem = IndentationProblem(mesh, material, wedge, penalty_factor=penalty_factor)
     start = time.perf_counter()
     result = simulate_indentation(
         problem, depths, times_s=depths / RATE_M_PER_S, device=device, progress=False
@@ -254,6 +257,7 @@ def run_fe(mesh, material, tip_radius_m: float, steps: int, device: str) -> dict
     count = len(result.depths_m)
     return {
         "tip_radius_m": tip_radius_m,
+        "penalty_factor": penalty_factor,
         "completed": bool(result.completed),
         "message": result.message,
         "seconds": seconds,
@@ -302,6 +306,9 @@ def main() -> None:
     parser.add_argument("--tip-radii-mm", type=float, nargs="+", default=None)
     parser.add_argument("--steps", type=int, default=None)
     parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--penalty-factor", type=float, default=DEFAULT_PENALTY_FACTOR, help="contact beta"
+    )
     args = parser.parse_args()
     radii = args.tip_radii_mm or ([0.5] if args.quick else [0.5, 1.0, 0.25])
     steps = args.steps or 24
@@ -324,7 +331,7 @@ def main() -> None:
     print(f"quarter strip: {mesh.node_count} TET10 nodes, {mesh.tet_count} tets")
     runs = []
     for radius_mm in radii:
-        run = run_fe(mesh, material, radius_mm * 1e-3, steps, args.device)
+        run = run_fe(mesh, material, radius_mm * 1e-3, steps, args.device, args.penalty_factor)
         depth = np.asarray(run["depths_m"])
         force = np.asarray(run["force_N"])
         estimate = wiechert_estimate_N(depth)
