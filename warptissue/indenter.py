@@ -5,12 +5,14 @@ A study's ``[indenter]`` table reads into an :class:`Indenter`
 into the specimen, and :func:`warptissue.usd.write_simulation_usd` draws it. This module
 imports neither Warp nor USD, so that reading a study stays light.
 
-Kinds: ``"flat_punch"`` (a flat-ended cylinder along z whose nodes are prescribed),
-``"sphere"`` (a rigid sphere of radius ``radius_m``) and ``"plate"`` (a rigid plane
-``z = top - depth``), which the finite elements simulate; ``"line"`` (a cylinder along y
-pressed sideways, drawn only) and ``"platen"`` (a square plate, drawn only). Contact under the
-probe: ``"bonded"`` (no slip; flat punch only) or ``"frictionless"`` (the only contact of a
-sphere or a plate: a penalty, :mod:`warptissue.fem.contact`).
+Kinds the finite elements simulate: ``"flat_punch"`` (a flat-ended cylinder along z: sharp,
+its nodes prescribed, or with a rounded edge ``edge_radius_m`` > 0, a rigid body in contact),
+``"sphere"`` (a rigid sphere of radius ``radius_m``), ``"plate"`` (a rigid plane
+``z = top - depth``) and ``"wedge"`` (a line indenter: a rigid wedge along y of opening angle
+``angle_deg`` whose tip is rounded with radius ``radius_m``; ``angle_deg = 0`` is a cylinder
+pressed sideways). ``"platen"`` (a square plate) is drawn only. Contact under the probe:
+``"bonded"`` (no slip; sharp flat punch only) or ``"frictionless"`` (the only contact of a
+rigid body: a penalty, :mod:`warptissue.fem.contact`).
 
 Example:
     >>> from warptissue.indenter import Indenter
@@ -30,12 +32,13 @@ from warptissue.errors import InputError
 
 __all__ = ["CONTACTS", "CONTACT_KINDS", "INDENTER_KINDS", "SIMULATED_KINDS", "Indenter"]
 
-INDENTER_KINDS: tuple[str, ...] = ("flat_punch", "sphere", "plate", "line", "platen")
+INDENTER_KINDS: tuple[str, ...] = ("flat_punch", "sphere", "plate", "wedge", "platen")
 """Every kind an :class:`Indenter` may be."""
-SIMULATED_KINDS: tuple[str, ...] = ("flat_punch", "sphere", "plate")
+SIMULATED_KINDS: tuple[str, ...] = ("flat_punch", "sphere", "plate", "wedge")
 """The kinds the finite elements (and so a study) simulate; the others are drawn only."""
-CONTACT_KINDS: tuple[str, ...] = ("sphere", "plate")
-"""Rigid indenters that touch the specimen through frictionless (penalty) contact."""
+CONTACT_KINDS: tuple[str, ...] = ("sphere", "plate", "wedge")
+"""Kinds that always touch the specimen through frictionless (penalty) contact (a flat punch
+does when its edge is rounded: :attr:`Indenter.is_rigid_contact`)."""
 CONTACTS: tuple[str, ...] = ("bonded", "frictionless")
 """Contact conditions under the probe."""
 
@@ -55,15 +58,18 @@ class Indenter:
     Args:
         kind: ``"flat_punch"`` (a flat-ended cylinder along z of radius ``radius_m``),
             ``"sphere"`` (a rigid sphere of radius ``radius_m``, its lowest point at the
-            contact point), ``"plate"`` (a rigid plane ``z = top - depth``), ``"line"``
-            (a cylinder along y of tip radius ``radius_m`` and length ``length_m``)
-            or ``"platen"`` (a thin square plate of side ``length_m``).
-        radius_m: Punch, sphere or line tip radius, m (0 where the kind has none).
-        contact: ``"bonded"`` (the nodes under a flat punch move with it in x, y and z) or
-            ``"frictionless"`` (only z is prescribed under the punch; a sphere or a plate
-            pushes the surface nodes along its normal). None: ``"bonded"`` for a flat punch,
-            ``"frictionless"`` for a sphere or a plate (their only contact).
-        length_m: Line length or platen side, m (0 where the kind has none).
+            contact point), ``"plate"`` (a rigid plane ``z = top - depth``), ``"wedge"``
+            (a wedge along y of opening angle ``angle_deg``, tip radius ``radius_m``, edge
+            length ``length_m``) or ``"platen"`` (a thin square plate of side ``length_m``).
+        radius_m: Punch, sphere or wedge tip radius, m (0 where the kind has none).
+        contact: ``"bonded"`` (the nodes under a sharp flat punch move with it in x, y and
+            z) or ``"frictionless"`` (only z is prescribed under a sharp punch; a rigid body
+            pushes the surface nodes along its normal). None: ``"bonded"`` for a sharp flat
+            punch, ``"frictionless"`` for a rigid body (its only contact).
+        length_m: Wedge edge length (0: it spans the specimen) or platen side, m.
+        edge_radius_m: A flat punch's edge radius, m, at most ``radius_m``: 0 (the default) is
+            a sharp punch whose nodes are prescribed; > 0 a rigid body in frictionless contact.
+        angle_deg: A wedge's opening angle, degrees, in [0, 180) (0: a cylinder).
         x_m: Contact point x, m. The finite elements need the probe on the axis, 0.
         y_m: Contact point y, m. The finite elements need the probe on the axis, 0.
         z_m: Contact point z (the specimen's top surface), m; None: the top of the mesh.
@@ -77,6 +83,8 @@ class Indenter:
     radius_m: float = field(default=0.0, kw_only=True)
     contact: str | None = field(default=None, kw_only=True)
     length_m: float = field(default=0.0, kw_only=True)
+    edge_radius_m: float = field(default=0.0, kw_only=True)
+    angle_deg: float = field(default=0.0, kw_only=True)
     x_m: float = field(default=0.0, kw_only=True)
     y_m: float = field(default=0.0, kw_only=True)
     z_m: float | None = field(default=None, kw_only=True)
@@ -88,8 +96,23 @@ class Indenter:
                 key="kind",
                 value=self.kind,
             )
+        for key, kind in (("edge_radius_m", "flat_punch"), ("angle_deg", "wedge")):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise InputError("must be a number", key=key, value=value)
+            if value != 0 and self.kind != kind:
+                raise InputError(f"only a {kind} has {key}", key=key, value=value)
+            if not (math.isfinite(value) and value >= 0):
+                raise InputError("must be finite and >= 0", key=key, value=value)
+            object.__setattr__(self, key, float(value))
+        if self.angle_deg >= 180.0:
+            raise InputError(
+                "a wedge's opening angle must be below 180 degrees (a plate is kind 'plate')",
+                key="angle_deg",
+                value=self.angle_deg,
+            )
         if self.contact is None:
-            contact = "frictionless" if self.kind in CONTACT_KINDS else "bonded"
+            contact = "frictionless" if self.is_rigid_contact else "bonded"
             object.__setattr__(self, "contact", contact)
         if self.contact not in CONTACTS:
             raise InputError(
@@ -97,16 +120,17 @@ class Indenter:
                 key="contact",
                 value=self.contact,
             )
-        if self.kind in CONTACT_KINDS and self.contact != "frictionless":
+        if self.is_rigid_contact and self.contact != "frictionless":
+            what = "flat punch with a rounded edge" if self.kind == "flat_punch" else self.kind
             raise InputError(
-                f"a {self.kind} touches through frictionless contact only (a bonded rigid "
+                f"a {what} touches through frictionless contact only (a bonded rigid "
                 "contact is not simulated)",
                 key="contact",
                 value=self.contact,
             )
         for key, needed in (
-            ("radius_m", self.kind in ("flat_punch", "sphere", "line")),
-            ("length_m", self.kind in ("line", "platen")),
+            ("radius_m", self.kind in ("flat_punch", "sphere", "wedge")),
+            ("length_m", self.kind == "platen"),
         ):
             value = getattr(self, key)
             if needed or value != 0:
@@ -115,6 +139,12 @@ class Indenter:
                         f"a {self.kind} indenter needs {key} > 0", key=key, value=value
                     )
                 object.__setattr__(self, key, _positive_length(value, key))
+        if self.edge_radius_m > self.radius_m:
+            raise InputError(
+                f"a flat punch's edge radius must not exceed its radius {self.radius_m} m",
+                key="edge_radius_m",
+                value=self.edge_radius_m,
+            )
         for key in ("x_m", "y_m", "z_m"):
             value = getattr(self, key)
             if value is None:
@@ -124,6 +154,13 @@ class Indenter:
             if not math.isfinite(value):
                 raise InputError("must be finite", key=key, value=value)
             object.__setattr__(self, key, float(value))
+
+    @property
+    def is_rigid_contact(self) -> bool:
+        """Whether the finite elements press this indenter as a rigid body through frictionless
+        penalty contact (a sphere, a plate, a wedge, or a flat punch with a rounded edge),
+        rather than prescribing the nodes under it (a sharp flat punch)."""
+        return self.kind in CONTACT_KINDS or (self.kind == "flat_punch" and self.edge_radius_m > 0)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Indenter:
@@ -152,7 +189,7 @@ class Indenter:
         if self.radius_m:
             table["radius_m"] = self.radius_m
         table["contact"] = self.contact
-        for key in ("length_m", "x_m", "y_m"):
+        for key in ("length_m", "edge_radius_m", "angle_deg", "x_m", "y_m"):
             if getattr(self, key):
                 table[key] = getattr(self, key)
         if self.z_m is not None:

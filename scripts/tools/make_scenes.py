@@ -282,7 +282,7 @@ def beef_liver_strip(out: Path) -> Path:
             "test": "line indenter (30 mm edge, 30 degree) to 6 mm at 5-40 mm/s",
         },
         density_kg_per_m3=1060.0,
-        indenter=Indenter("line", radius_m=0.5e-3, length_m=0.030),
+        indenter=Indenter("wedge", radius_m=0.5e-3, angle_deg=30.0, length_m=0.030),
     ).root
 
 

@@ -32,6 +32,8 @@ EXIT_STATUSES: dict[int, str] = {
     0: "success",
     2: "a file or folder the system cannot read or write (a folder given as a file, a path "
     "below a file, no permission, a full disk)",
+    6: "warptissue batch: one or more studies failed, the others ran (OUT/summary.csv says "
+    "which and why)",
     130: "interrupted (Ctrl-C)",
     141: "the reader of standard output closed it early (a broken pipe, as in `| head`)",
 }
@@ -48,6 +50,7 @@ COMMAND_MODULES: tuple[str, ...] = (
     "warptissue.cli.fit_indentation",
     "warptissue.cli.acquire",
     "warptissue.cli.simulate",
+    "warptissue.cli.batch",
 )
 """Modules that add commands, in the order they appear in ``--help``."""
 

@@ -18,7 +18,7 @@ import warp.sparse as wps
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
-from warptissue.fem.contact import RigidContact
+from warptissue.fem.contact import ContactState, RigidContact
 from warptissue.fem.elements import element_geometry
 from warptissue.fem.viscous import ViscousHistory, elastic_step
 from warptissue.materials import Material, Viscoelastic
@@ -198,6 +198,8 @@ class Assembler:
             self._contact_blocks = wp.array(
                 self._diagonal_blocks[nodes], dtype=wp.int32, device=self.device
             )
+            self._contact_node_force = wp.zeros(len(nodes), dtype=wp.vec3d, device=self.device)
+            self._contact_gap = wp.zeros(len(nodes), dtype=wp.float64, device=self.device)
         self.contact = contact
 
     def set_load(self, load: float) -> None:
@@ -208,20 +210,28 @@ class Assembler:
         if self.contact is not None:
             self.contact.depth_m = float(load)
 
-    def contact_force(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:
-        """The total contact force on the body at a displacement and the current depth, (3,), N
-        (zeros without contact). Leaves the assembler's residual, tangent and energy as
-        they were."""
+    def contact_state(self, displacement_m: np.ndarray | wp.array) -> ContactState:
+        """The rigid contact at a displacement and the current depth: each candidate node's gap
+        and contact force (:class:`warptissue.fem.contact.ContactState`). Leaves the
+        assembler's residual, tangent and energy as they were.
+
+        Raises:
+            InputError: No rigid contact is set.
+        """
         from warptissue.kernels import fem as kf
 
         if self.contact is None:
-            return np.zeros(3)
+            raise InputError("no rigid contact is set (a sharp flat punch has none)", key="kind")
         u = self.device_displacement(displacement_m)
         scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
         energy = wp.zeros(1, dtype=wp.float64, device=self.device)
         force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
         self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
-        return force.numpy()[0].copy()
+        return ContactState(
+            nodes=self.contact.nodes.copy(),
+            gap_m=self._contact_gap.numpy().copy(),
+            force_N=self._contact_node_force.numpy().copy(),
+        )
 
     def _launch_contact(
         self,
@@ -233,27 +243,21 @@ class Assembler:
         energy: wp.array,
         force: wp.array,
     ) -> None:
+        """One launch of ``rigid_contact_kernel`` at the contact's current depth."""
         contact = self.contact
-        stiffness = wp.float64(contact.stiffness_N_per_m)
-        if contact.indenter.kind == "sphere":
-            kernel = kf.sphere_contact_kernel
-            shape = [wp.vec3d(*contact.centre_m), wp.float64(contact.indenter.radius_m)]
-        else:
-            kernel = kf.plate_contact_kernel
-            shape = [wp.float64(contact.plane_z_m)]
         wp.launch(
-            kernel,
+            kf.rigid_contact_kernel,
             dim=len(contact.nodes),
             inputs=[
                 self._points,
                 u,
                 self._contact_nodes,
                 self._contact_blocks,
-                *shape,
-                stiffness,
+                contact.device_body(),
+                wp.float64(contact.stiffness_N_per_m),
                 with_tangent,
             ],
-            outputs=[residual, values, energy, force],
+            outputs=[residual, values, energy, force, self._contact_node_force, self._contact_gap],
             device=self.device,
         )
 

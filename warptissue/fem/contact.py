@@ -1,34 +1,49 @@
-"""Frictionless penalty contact of a rigid indenter (sphere or plate) with surface nodes.
+"""Frictionless penalty contact of a rigid indenter with the specimen's surface nodes.
 
 The indenter is an analytic rigid body positioned by the depth (the load of
-:func:`warptissue.fem.solve_quasistatic`): a sphere of radius ``r`` whose lowest point is at
-``top - depth`` on the axis ``(x_m, y_m)``, or the plane ``z = top - depth`` of a plate filling
-the half-space above it. Each candidate node (every node of the indented surface, TET10
-mid-edge nodes included) with signed distance ``g < 0`` to the indenter (penetration) gets the
-contact force ``f_c = -k g n`` along the indenter's outward normal ``n``; the residual becomes
-``R = f_int - f_c`` and the tangent gains ``k (n n^T + g/|x - c| (I - n n^T))`` on the node's
-diagonal block (sphere; the second term is the turning of the normal), ``k n n^T`` (plate).
-The energy gains ``k g^2 / 2``, so the line search sees one potential. The device code is
-``sphere_contact_kernel`` and ``plate_contact_kernel`` in ``kernels/fem.py``.
+:func:`warptissue.fem.solve_quasistatic`), its contact point at ``top - depth`` on the axis
+``(x_m, y_m)``: a sphere of radius ``r``; a plate (the plane ``z = top - depth``, filling the
+half-space above); a flat-ended cylinder of radius ``a`` whose edge is rounded with radius
+``rho`` (``edge_radius_m``); a wedge along y of opening angle ``2 alpha`` whose tip is rounded
+with radius ``rho``. Each candidate node (every node of the indented surface, TET10 mid-edge
+nodes included) with signed distance ``g < 0`` to the indenter (penetration) gets the contact
+force ``f_c = -k g n`` along the indenter's outward normal ``n``; the residual becomes
+``R = f_int - f_c`` and the node's diagonal tangent block gains ``k (n n^T + g dn/dx)`` (the
+second term is the turning of the normal over a curved surface). The energy gains
+``k g^2 / 2``, so the line search sees one potential. Device code: ``rigid_contact_point``
+and ``rigid_contact_kernel`` in ``kernels/fem.py``.
 
 Penalty stiffness per node: ``k = beta mu0 h``, ``mu0`` the material's initial shear modulus
 and ``h`` the mean edge length of the elements of the candidate nodes under the indenter
-(within its radius of the axis for a sphere, the whole surface for a plate); ``beta``
+(within its radius of the axis for a sphere or a punch, within the tip radius or one row of
+nodes of the line for a wedge, the whole surface for a plate); ``beta``
 (:data:`DEFAULT_PENALTY_FACTOR`) was chosen by measurement (docs/fe.md "Contact").
+
+Outputs (:class:`ContactSurface`): the contact area and the contact pressure on the indented
+surface's triangles (the boundary faces of the tets whose corners all lie in the surface's
+node set; a TET10 face is a 6-node triangle), in the current configuration.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+import warp as wp
 
 from warptissue.errors import InputError
-from warptissue.indenter import CONTACT_KINDS, Indenter
-from warptissue.mesh import TetMesh
+from warptissue.indenter import Indenter
+from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
 
-__all__ = ["DEFAULT_PENALTY_FACTOR", "RigidContact", "mean_edge_length"]
+__all__ = [
+    "DEFAULT_PENALTY_FACTOR",
+    "ContactState",
+    "ContactSurface",
+    "RigidContact",
+    "mean_edge_length",
+]
 
 DEFAULT_PENALTY_FACTOR = 1000.0
 """``beta`` of the penalty stiffness ``k = beta mu0 h`` (docs/fe.md "Contact": the force is
@@ -54,7 +69,7 @@ class RigidContact:
     """A rigid indenter pressed into a set of nodes through a frictionless penalty.
 
     Args:
-        indenter: A sphere or a plate (:data:`warptissue.indenter.CONTACT_KINDS`).
+        indenter: A rigid-contact indenter (:attr:`warptissue.indenter.Indenter.is_rigid_contact`).
         nodes: Candidate nodes (the indented surface), (k,) int.
         top_z_m: z of the contact point at depth 0 (the specimen's top), m.
         stiffness_N_per_m: Penalty stiffness per node ``k``, N/m.
@@ -68,9 +83,10 @@ class RigidContact:
     depth_m: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.indenter.kind not in CONTACT_KINDS:
+        if not self.indenter.is_rigid_contact:
             raise InputError(
-                f"rigid contact needs one of {', '.join(map(repr, CONTACT_KINDS))}",
+                "rigid contact needs a sphere, a plate, a wedge or a flat punch with "
+                "edge_radius_m > 0 (a sharp flat punch prescribes its nodes)",
                 key="kind",
                 value=self.indenter.kind,
             )
@@ -82,25 +98,33 @@ class RigidContact:
             raise InputError("the penalty stiffness must be positive", value=k)
 
     @property
-    def centre_m(self) -> np.ndarray:
-        """The sphere's centre at the current depth, (3,), m."""
-        radius = self.indenter.radius_m
-        return np.array(
-            [self.indenter.x_m, self.indenter.y_m, self.top_z_m - self.depth_m + radius]
-        )
-
-    @property
-    def plane_z_m(self) -> float:
-        """The plate's plane at the current depth, m."""
+    def contact_z_m(self) -> float:
+        """z of the indenter's lowest point at the current depth, m."""
         return self.top_z_m - self.depth_m
 
-    def gaps_m(self, points_m: np.ndarray) -> np.ndarray:
-        """Signed distances of the candidate nodes at current positions ``points_m`` (N, 3)
-        to the indenter (negative: penetration), (k,), m."""
-        x = np.asarray(points_m)[self.nodes]
-        if self.indenter.kind == "sphere":
-            return np.linalg.norm(x - self.centre_m, axis=1) - self.indenter.radius_m
-        return self.plane_z_m - x[:, 2]
+    def device_body(self) -> Any:
+        """The indenter at the current depth as the kernels' ``RigidBody`` struct."""
+        from warptissue.kernels import fem as kf
+
+        probe = self.indenter
+        body = kf.RigidBody()
+        body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m)
+        body.radius = wp.float64(probe.radius_m)
+        body.edge_radius = wp.float64(0.0)
+        body.half_angle = wp.float64(0.0)
+        if probe.kind == "sphere":
+            body.kind = int(kf.RIGID_SPHERE)
+            body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m + probe.radius_m)
+        elif probe.kind == "plate":
+            body.kind = int(kf.RIGID_PLATE)
+        elif probe.kind == "flat_punch":
+            body.kind = int(kf.RIGID_PUNCH)
+            body.edge_radius = wp.float64(probe.edge_radius_m)
+        else:
+            body.kind = int(kf.RIGID_WEDGE)
+            body.edge_radius = wp.float64(probe.radius_m)
+            body.half_angle = wp.float64(math.radians(0.5 * probe.angle_deg))
+        return body
 
     @classmethod
     def for_mesh(
@@ -129,15 +153,193 @@ class RigidContact:
         nodes = mesh.node_set(surface).astype(np.int64)
         top = float(mesh.points[nodes, 2].max()) if indenter.z_m is None else indenter.z_m
         under = nodes
-        if indenter.kind == "sphere":
+        if indenter.kind in ("sphere", "flat_punch"):
             xy = mesh.points[nodes, :2] - np.array([indenter.x_m, indenter.y_m])
             under = nodes[np.einsum("ij,ij->i", xy, xy) <= indenter.radius_m**2]
-            if under.size == 0:
-                raise InputError(
-                    f"no node of {surface!r} lies under the sphere (within {indenter.radius_m} m "
-                    f"of ({indenter.x_m}, {indenter.y_m}))",
-                    key="radius_m",
-                    value=indenter.radius_m,
-                )
+        elif indenter.kind == "wedge":
+            dx = np.abs(mesh.points[nodes, 0] - indenter.x_m)
+            under = nodes[dx <= max(indenter.radius_m, float(dx.min()))]
+        if under.size == 0:
+            raise InputError(
+                f"no node of {surface!r} lies under the {indenter.kind} (within "
+                f"{indenter.radius_m} m of ({indenter.x_m}, {indenter.y_m}))",
+                key="radius_m",
+                value=indenter.radius_m,
+            )
         h = mean_edge_length(mesh, under)
         return cls(indenter, nodes, top, float(penalty_factor) * shear_modulus_Pa * h)
+
+
+@dataclass(frozen=True)
+class ContactState:
+    """The contact at one displacement: per candidate node, its gap and the force on it.
+
+    Attributes:
+        nodes: Candidate nodes, (k,) int.
+        gap_m: Signed distance of each node to the indenter (negative: penetration), (k,), m.
+        force_N: Contact force on each node (zero where the gap is >= 0), (k, 3), N; of the
+            modelled part of the specimen (not scaled by a symmetry factor).
+    """
+
+    nodes: np.ndarray
+    gap_m: np.ndarray
+    force_N: np.ndarray
+
+    @property
+    def total_force_N(self) -> np.ndarray:
+        """The summed contact force on the modelled part, (3,), N."""
+        return self.force_N.sum(axis=0)
+
+    @property
+    def max_penetration_m(self) -> float:
+        """The largest penetration of a node into the indenter, m (0 out of contact)."""
+        return max(0.0, -float(self.gap_m.min()))
+
+
+@dataclass(frozen=True)
+class ContactSurface:
+    """The indented surface as triangles, for the contact area and pressure.
+
+    Tributary area of a node: ``w_i = integral of N_i dA`` over the surface triangles, with
+    the triangles' own shape functions (the row sums of the surface's consistent matrix
+    ``integral of N_i N_j dA``). A 3-node triangle (TET4 face) of area A gives each corner
+    ``A / 3``. A 6-node triangle (TET10 face) gives each mid-edge node ``A / 3`` and each
+    corner 0: ``integral of L (2 L - 1) dA = 0``. These are the weights of the nodal forces a
+    uniform pressure p puts on the nodes (``f_i = p w_i``), and so the forces the penalty
+    contact settles to at equilibrium (measured on the plate test: TET10 corner nodes carry
+    1e-4 of a mid-edge node's force, at a gap ~1e-4 of the mid-edge nodes'). Dividing those
+    forces by any positive lumping (the 4-sub-triangle one, corners ``A / 12``, mid-edge
+    ``A / 4``, or Hinton-Rock-Zienkiewicz's) gives a checkerboard, measured under a sphere
+    (docs/fe.md "Contact outputs"): corners 0-4 % of Hertz's pressure, mid-edge nodes
+    121-131 %. Hence:
+
+    - pressure ``p_i = |f_i| / w_i`` where ``w_i > 0``; the small force left on TET10 corner
+      nodes (0.01-1.2 % of the total, measured under a sphere) is first handed to the
+      mid-edge nodes of the triangles around them in proportion to their ``w``, so that the
+      integral of the interpolated pressure, ``sum_i p_i w_i``, equals the summed normal
+      contact force. A TET10 corner node, whose ``w`` is 0, shows the ``w``-weighted mean
+      pressure of the mid-edge nodes of its triangles (for display; it does not enter the
+      integral).
+    - contact area ``sum of w_i`` over the nodes that penetrate the indenter (gap < 0); TET10
+      corner nodes, without area and with a gap of no meaning, count nothing. The edge of
+      contact is resolved by whole nodes: the area is uncertain by a ring of nodes (half an
+      element) around the contact edge.
+
+    A TET10 triangle's area is that of its four sub-triangles (corner and mid-edge nodes),
+    which follows a curved face; a TET4 triangle's is the flat one.
+
+    Attributes:
+        triangles: Node indices, (F, 3) corners or (F, 6) corners then the mid-edge nodes of
+            the edges (0, 1), (1, 2), (2, 0).
+    """
+
+    triangles: np.ndarray
+
+    @classmethod
+    def for_mesh(cls, mesh: TetMesh, *, surface: str = "top") -> ContactSurface:
+        """The boundary triangles of ``mesh`` whose corners all lie in node set ``surface``.
+
+        Raises:
+            InputError: No boundary triangle lies on ``surface``.
+        """
+        member = np.zeros(mesh.node_count, dtype=bool)
+        member[np.asarray(mesh.node_set(surface), dtype=np.int64)] = True
+        corners = boundary_faces(mesh.tets).astype(np.int64)
+        corners = corners[member[corners].all(axis=1)]
+        if len(corners) == 0:
+            raise InputError(f"no boundary triangle lies on node set {surface!r}", key="surface")
+        if mesh.nodes_per_tet == 4:
+            return cls(corners)
+        # Mid-edge node of each tet edge, looked up by the edge's sorted corner pair.
+        n = np.int64(mesh.node_count)
+        tet_edges = np.sort(mesh.tets[:, :4][:, TET4_EDGES].reshape(-1, 2).astype(np.int64), 1)
+        keys = tet_edges[:, 0] * n + tet_edges[:, 1]
+        mids = mesh.tets[:, 4:10].reshape(-1).astype(np.int64)
+        order = np.argsort(keys)
+        keys, mids = keys[order], mids[order]
+        columns = []
+        for a, b in ((0, 1), (1, 2), (2, 0)):
+            pair = np.sort(corners[:, [a, b]], axis=1)
+            columns.append(mids[np.searchsorted(keys, pair[:, 0] * n + pair[:, 1])])
+        return cls(np.column_stack([corners, *columns]))
+
+    def triangle_areas_m2(self, points_m: np.ndarray) -> np.ndarray:
+        """Area of each triangle at node positions ``points_m`` (N, 3), m^2, shape (F,)."""
+        x = np.asarray(points_m, dtype=np.float64)
+        tri = self.triangles
+        if tri.shape[1] == 3:
+            pieces = [(0, 1, 2)]
+        else:  # the four sub-triangles: three at the corners, one of the mid-edge nodes
+            pieces = [(0, 3, 5), (3, 1, 4), (5, 4, 2), (3, 4, 5)]
+        area = np.zeros(len(tri))
+        for a, b, c in pieces:
+            cross = np.cross(x[tri[:, b]] - x[tri[:, a]], x[tri[:, c]] - x[tri[:, a]])
+            area += 0.5 * np.linalg.norm(cross, axis=1)
+        return area
+
+    def tributary_areas_m2(self, points_m: np.ndarray) -> np.ndarray:
+        """``w_i = integral of N_i dA`` of every node at positions ``points_m`` (N, 3), m^2,
+        shape (N,) (zero off the surface and at TET10 corner nodes)."""
+        weights = np.zeros(len(points_m))
+        third = self.triangle_areas_m2(points_m) / 3.0
+        holders = self.triangles[:, 3:] if self.triangles.shape[1] == 6 else self.triangles
+        for column in holders.T:
+            np.add.at(weights, column, third)
+        return weights
+
+    def contact_area_m2(self, state: ContactState, points_m: np.ndarray) -> float:
+        """Area of the surface in contact (nodes with gap < 0), m^2, of the modelled part.
+
+        Args:
+            state: The contact at ``points_m``.
+            points_m: Current node positions (reference plus displacement), (N, 3), m.
+        """
+        weights = self.tributary_areas_m2(points_m)
+        return float(weights[state.nodes[state.gap_m < 0.0]].sum())
+
+    def pressure_Pa(self, state: ContactState, points_m: np.ndarray) -> np.ndarray:
+        """Contact pressure at every node, Pa, shape (N,) (zero off the contact).
+
+        Args:
+            state: The contact at ``points_m``.
+            points_m: Current node positions (reference plus displacement), (N, 3), m.
+
+        Returns:
+            ``p_i = |f_i| / w_i`` (class docstring): its integral ``sum_i p_i w_i`` is the
+            summed normal contact force of the modelled part.
+        """
+        count = len(points_m)
+        weights = self.tributary_areas_m2(points_m)
+        force = np.zeros(count)
+        force[state.nodes] = np.linalg.norm(state.force_N, axis=1)
+        tri = self.triangles
+        if tri.shape[1] == 6:
+            # Hand the corners' force to the mid-edge nodes of their triangles, by weight.
+            share = np.zeros(count)
+            for corner in tri[:, :3].T:
+                for mid in tri[:, 3:].T:
+                    np.add.at(share, corner, weights[mid])
+            for corner in tri[:, :3].T:
+                for mid in tri[:, 3:].T:
+                    held = share[corner] > 0
+                    moved = np.zeros(count)
+                    np.add.at(
+                        moved,
+                        mid[held],
+                        force[corner[held]] * weights[mid[held]] / share[corner[held]],
+                    )
+                    force += moved
+            force[np.unique(tri[:, :3])] = 0.0
+        pressure = np.zeros(count)
+        loaded = weights > 0.0
+        pressure[loaded] = force[loaded] / weights[loaded]
+        if tri.shape[1] == 6:  # corners: the weighted mean of their mid-edge nodes
+            total, weight = np.zeros(count), np.zeros(count)
+            for corner in tri[:, :3].T:
+                for mid in tri[:, 3:].T:
+                    np.add.at(total, corner, (weights * pressure)[mid])
+                    np.add.at(weight, corner, weights[mid])
+            corners = np.unique(tri[:, :3])
+            corners = corners[weight[corners] > 0]
+            pressure[corners] = total[corners] / weight[corners]
+        return pressure

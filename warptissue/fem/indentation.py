@@ -34,7 +34,7 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
-from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, RigidContact
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, ContactSurface, RigidContact
 from warptissue.fem.sensitivity import ForceSensitivity, check_sensitivity_names
 from warptissue.fem.solvers import (
     DirichletConditions,
@@ -44,7 +44,7 @@ from warptissue.fem.solvers import (
     solve_quasistatic,
 )
 from warptissue.fem.timing import NewtonTimings
-from warptissue.indenter import CONTACT_KINDS, SIMULATED_KINDS, Indenter
+from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
@@ -82,7 +82,9 @@ class IndentationProblem:
         base: ``"fixed"`` or ``"sliding"``.
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
-        surface: Node set of the indented surface.
+        surface: Node set of the indented surface; under a rigid indenter its boundary
+            triangles carry the contact area and pressure
+            (:class:`warptissue.fem.contact.ContactSurface`: a set holding none is refused).
         penalty_factor: ``beta`` of the contact penalty ``k = beta mu0 h`` of a sphere or a
             plate (:mod:`warptissue.fem.contact`; unused by a flat punch).
     """
@@ -143,6 +145,8 @@ class IndentationProblem:
                 )
         if self.is_contact:
             self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
+            # The contact outputs need the surface's triangles: refused here, not after a run.
+            ContactSurface.for_mesh(self.mesh, surface=self.surface)
             return
         if self.punch_nodes.size == 0:
             raise InputError(
@@ -166,8 +170,9 @@ class IndentationProblem:
 
     @property
     def is_contact(self) -> bool:
-        """Whether the indenter touches through contact (sphere, plate), not prescribed nodes."""
-        return self.indenter.kind in CONTACT_KINDS
+        """Whether the indenter touches through contact (sphere, plate, wedge, rounded punch),
+        not prescribed nodes."""
+        return self.indenter.is_rigid_contact
 
     def rigid_contact(self) -> RigidContact | None:
         """The frictionless penalty contact of a sphere or a plate (None for a flat punch)."""
@@ -268,6 +273,15 @@ class IndentationResult:
             ``reaction_force_N`` at equilibrium); empty for a flat punch.
         max_penetration_m: Under a sphere or a plate: the largest penetration of a node into
             the indenter at each depth, (S,), m; empty for a flat punch.
+        contact_area_m2: Under a rigid indenter: the area of the surface in contact at each
+            depth, of the whole specimen (the modelled part's times the symmetry factor),
+            current configuration, (S,), m^2; empty for a sharp flat punch
+            (:class:`warptissue.fem.contact.ContactSurface`: the sum of the tributary areas of
+            the penetrating nodes, uncertain by a ring of nodes at the contact edge).
+        contact_pressure_Pa: Under a rigid indenter: the contact pressure at every node at
+            each depth, (S, N), Pa (zero off the contact; the normal contact force over the
+            node's tributary area, :class:`warptissue.fem.contact.ContactSurface`); shape
+            (0, N) for a sharp flat punch.
         timings: Where the load path's wall time went, per phase of the Newton iterations
             (:class:`warptissue.fem.NewtonTimings`), when run with ``profile=True``; else
             None.
@@ -293,6 +307,8 @@ class IndentationResult:
     times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     max_penetration_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     timings: NewtonTimings | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -324,6 +340,12 @@ class IndentationResult:
                 {
                     "contact_force_N": self.contact_force_N.tolist(),
                     "max_penetration_m": self.max_penetration_m.tolist(),
+                    "contact_area_m2": self.contact_area_m2.tolist(),
+                    "max_contact_pressure_Pa": (
+                        self.contact_pressure_Pa.max(axis=1).tolist()
+                        if self.contact_pressure_Pa.size
+                        else []
+                    ),
                 }
                 if self.contact_force_N.size
                 else {}
@@ -456,15 +478,21 @@ def _indentation_result(
     else:
         stress = np.zeros((0, 6))
     contact = assembler.contact
-    contact_force, penetration = np.zeros(0), np.zeros(0)
+    contact_force, penetration, area = np.zeros(0), np.zeros(0), np.zeros(0)
+    pressure = np.zeros((0, problem.mesh.node_count))
     if contact is not None:
-        contact_force = np.empty(len(path.loads))
-        penetration = np.empty(len(path.loads))
+        steps = len(path.loads)
+        surface = ContactSurface.for_mesh(problem.mesh, surface=problem.surface)
+        contact_force, penetration, area = np.empty(steps), np.empty(steps), np.empty(steps)
+        pressure = np.empty((steps, problem.mesh.node_count))
         for i, (depth, u) in enumerate(zip(path.loads, path.displacement_m, strict=True)):
             assembler.set_load(depth)
-            contact_force[i] = -problem.symmetry_factor * assembler.contact_force(u)[2]
-            gaps = contact.gaps_m(problem.mesh.points + u)
-            penetration[i] = max(0.0, -float(gaps.min()))
+            state = assembler.contact_state(u)
+            contact_force[i] = -problem.symmetry_factor * state.total_force_N[2]
+            penetration[i] = state.max_penetration_m
+            current = problem.mesh.points + u
+            area[i] = problem.symmetry_factor * surface.contact_area_m2(state, current)
+            pressure[i] = surface.pressure_Pa(state, current)
     return IndentationResult(
         depths_m=path.loads,
         reaction_force_N=path.reaction,
@@ -486,5 +514,7 @@ def _indentation_result(
         times_s=path.times_s,
         contact_force_N=contact_force,
         max_penetration_m=penetration,
+        contact_area_m2=area,
+        contact_pressure_Pa=pressure,
         timings=path.timings,
     )

@@ -1,0 +1,403 @@
+"""Tests of ``warptissue batch`` (warptissue.batch, warptissue.cli.batch).
+
+The studies are tiny versions of scenes/tutorial_punch.toml (a coarse mesh, 2 load steps) and
+a one-parameter inverse-FE fit (3 depth steps), written on the fly. The batch's files are
+compared with those of the single-study commands (``warptissue simulate``, ``warptissue fit
+indentation``) run on the same files; a broken study among good ones is one line and the
+others finish; a rerun skips complete studies and ``--force`` redoes them; and a Dask
+LocalCluster of 2 worker processes loses no study when one worker is killed in the middle of
+a task (the task is run again on a worker that lives).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from warptissue import batch
+from warptissue.cli import EXIT_STATUSES, main
+from warptissue.errors import InputError
+from warptissue.io import write_csv
+
+ROOT = Path(__file__).resolve().parents[1]
+
+FIT_STUDY = """\
+schema_version = 2
+name = "tiny_fit"
+
+[specimen]
+shape = "block"
+width_m = 0.008
+thickness_m = 0.004
+quarter = true
+element = "TET10"
+size_near_m = 0.001
+size_far_m = 0.002
+growth = 1.5
+
+[indenter]
+kind = "flat_punch"
+radius_m = 0.001
+
+[protocol]
+max_depth_m = 0.0003
+steps = 2
+
+[material]
+model = "neo_hookean"
+C10_Pa = 287.5
+bulk_modulus_Pa = 575000.0
+
+[solver]
+device = "cpu"
+
+[[data]]
+file = "ramp.csv"
+
+[fit]
+free = ["C10_Pa"]
+time_steps = 3
+"""
+
+
+def _tiny_simulation(c10_Pa: float = 287.5) -> str:
+    """scenes/tutorial_punch.toml with a coarser mesh, 2 load steps and the given C10."""
+    text = (ROOT / "scenes" / "tutorial_punch.toml").read_text(encoding="utf-8")
+    text = text.replace("steps = 5", "steps = 2").replace(
+        "size_near_m = 0.0005", "size_near_m = 0.001"
+    )
+    assert "steps = 2" in text and "size_near_m = 0.001" in text
+    return text.replace("C10_Pa = 287.5", f"C10_Pa = {c10_Pa!r}")
+
+
+def _write_studies(folder: Path) -> Path:
+    """A simulation, a fit (with its record) and a study with a misspelt key."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "punch.toml").write_text(_tiny_simulation(), encoding="utf-8")
+    (folder / "fit.toml").write_text(FIT_STUDY, encoding="utf-8")
+    depth = np.linspace(0.0, 3e-4, 7)
+    # A stiffening force-depth ramp (C10 about 400-600 Pa on this layer), 0.1 mm/s.
+    force = 2e-3 * 2400.0 * depth / 0.75 * 1.3 * (1.0 + 0.5 * depth / 3e-4)
+    write_csv(
+        folder / "ramp.csv", {"time_s": depth / 1e-4, "displacement_m": depth, "force_N": force}
+    )
+    broken = _tiny_simulation().replace("growth = 1.5", "growht = 1.5")
+    (folder / "broken.toml").write_text(broken, encoding="utf-8")
+    return folder
+
+
+def _summary(path: Path) -> dict[str, dict[str, str]]:
+    with path.open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == list(batch.SUMMARY_COLUMNS)
+    return {row["folder"]: row for row in rows}
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process runs (a zombie, dead but not yet reaped by its parent, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return True
+    return state not in ("Z", "X")
+
+
+def _curve(path: Path) -> np.ndarray:
+    return np.loadtxt(path, delimiter=",", skiprows=1)
+
+
+@pytest.fixture(scope="module")
+def first_batch(tmp_path_factory):
+    """The batch run once in this process (``--workers 0``): (studies, out, status, stderr)."""
+    root = tmp_path_factory.mktemp("batch")
+    studies = _write_studies(root / "studies")
+    out = root / "out"
+    import contextlib
+    import io
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        status = main(["batch", str(studies), "-o", str(out), "--workers", "0", "--quiet"])
+    return studies, out, status, err.getvalue()
+
+
+def test_batch_files_equal_the_single_study_commands(first_batch, tmp_path, capsys):
+    """Each study's folder holds what its own command writes, with the same numbers."""
+    studies, out, _, _ = first_batch
+    assert (
+        main(["simulate", str(studies / "punch.toml"), "--out", str(tmp_path / "s"), "--quiet"])
+        == 0
+    )
+    assert (
+        main(
+            ["fit", "indentation", str(studies / "fit.toml"), "-o", str(tmp_path / "f"), "--quiet"]
+        )
+        == 0
+    )
+    capsys.readouterr()
+    # The simulation: the same force curve (the same code in the same process).
+    batch_curve, single_curve = (
+        _curve(out / "punch" / "force_curve.csv"),
+        _curve(tmp_path / "s" / "force_curve.csv"),
+    )
+    assert batch_curve.shape == single_curve.shape == (3, 5)
+    np.testing.assert_allclose(batch_curve, single_curve, rtol=1e-12, atol=0.0)
+    assert {p.name for p in (tmp_path / "s").iterdir()} <= {
+        p.name for p in (out / "punch").iterdir()
+    }
+    # The fit: the same fitted parameter and curves, the same files.
+    batch_fit = json.loads((out / "fit" / "fit.json").read_text())
+    single_fit = json.loads((tmp_path / "f" / "fit.json").read_text())
+    assert batch_fit["status"] == single_fit["status"] == "converged"
+    c10 = batch_fit["parameters"]["C10_Pa"]["value"]
+    assert c10 == pytest.approx(single_fit["parameters"]["C10_Pa"]["value"], rel=1e-12)
+    assert c10 != pytest.approx(287.5, rel=0.05)  # it moved from the [material] value
+    np.testing.assert_allclose(
+        np.genfromtxt(out / "fit" / "fit_curves.csv", delimiter=",", skip_header=1)[:, 1:],
+        np.genfromtxt(tmp_path / "f" / "fit_curves.csv", delimiter=",", skip_header=1)[:, 1:],
+        rtol=1e-12,
+    )
+    # The summary's numbers are those of the files.
+    rows = _summary(out / "summary.csv")
+    assert rows["punch"]["kind"] == "simulation" and rows["punch"]["status"] == "completed"
+    assert float(rows["punch"]["peak_force_N"]) == pytest.approx(
+        single_curve[:, 2].max(), rel=1e-12
+    )
+    assert rows["punch"]["r_squared"] == "" and rows["punch"]["parameters"] == ""
+    assert rows["fit"]["kind"] == "fit" and rows["fit"]["exit_status"] == "0"
+    assert rows["fit"]["parameters"] == f"C10_Pa={c10!r}"
+    assert float(rows["fit"]["r_squared"]) == pytest.approx(batch_fit["r_squared"], rel=1e-12)
+    assert int(rows["fit"]["warnings"]) == len(batch_fit["warnings"])
+    for name in ("punch", "fit"):
+        marker = json.loads((out / name / batch.DONE_MARKER).read_text())
+        assert marker["status"] == rows[name]["status"] and marker["exit_status"] == 0
+
+
+def test_a_broken_study_is_one_line_and_the_others_finish(first_batch):
+    studies, out, status, stderr = first_batch
+    assert status == batch.FAILED_EXIT_CODE == 6 and 6 in EXIT_STATUSES
+    rows = _summary(out / "summary.csv")
+    assert [row["study"] for row in rows.values()] == [
+        str(studies / name) for name in ("broken.toml", "fit.toml", "punch.toml")
+    ]
+    broken = rows["broken"]
+    assert broken["status"] == "error" and broken["exit_status"] == "2" and broken["kind"] == ""
+    assert "broken.toml:" in broken["error"] and "specimen.growht" in broken["error"]
+    assert "\n" not in broken["error"]
+    assert rows["punch"]["status"] == "completed" and rows["fit"]["status"] == "converged"
+    assert not (out / "broken" / batch.DONE_MARKER).exists()
+    lines = [line for line in stderr.splitlines() if line.startswith("warptissue:")]
+    assert lines[0].startswith("warptissue: error: ") and "growht" in lines[0]
+    assert "Traceback" not in stderr
+    assert lines[-1] == f"warptissue: error: 1 of 3 studies failed (see {out / 'summary.csv'})"
+
+
+def test_resume_skips_complete_studies_and_force_redoes_them(tmp_path):
+    studies = tmp_path / "studies"
+    studies.mkdir()
+    (studies / "punch.toml").write_text(_tiny_simulation(), encoding="utf-8")
+    (studies / "stiff.toml").write_text(_tiny_simulation(400.0), encoding="utf-8")
+    out = tmp_path / "out"
+    first = batch.run_batch([studies], out=out, workers=0, progress=False)
+    assert first.exit_code == 0 and not first.skipped
+    curve_time = (out / "punch" / "force_curve.csv").stat().st_mtime_ns
+    # A rerun runs nothing: both rows come from the markers, their numbers unchanged.
+    second = batch.run_batch([studies / "*.toml"], out=out, workers=0, progress=False)
+    assert [o.skipped for o in second.outcomes] == [True, True]
+    assert [o.peak_force_N for o in second.outcomes] == [o.peak_force_N for o in first.outcomes]
+    assert (out / "punch" / "force_curve.csv").stat().st_mtime_ns == curve_time
+    assert _summary(out / "summary.csv")["punch"]["skipped"] == "True"
+    # A folder without its marker (a run that died before the end), or a study file that
+    # changed, runs again; the rest is still skipped.
+    (out / "punch" / batch.DONE_MARKER).unlink()
+    (studies / "stiff.toml").write_text(_tiny_simulation(500.0), encoding="utf-8")
+    third = batch.run_batch([studies], out=out, workers=0, progress=False)
+    assert [o.skipped for o in third.outcomes] == [False, False]
+    assert third.outcomes[1].peak_force_N > first.outcomes[1].peak_force_N
+    # --force runs a complete study again.
+    assert (
+        main(
+            [
+                "batch",
+                str(studies / "punch.toml"),
+                "-o",
+                str(out),
+                "--workers",
+                "0",
+                "--force",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
+    assert (out / "punch" / "force_curve.csv").stat().st_mtime_ns > curve_time
+    assert _summary(out / "summary.csv")["punch"]["skipped"] == "False"
+
+
+def test_study_sources_and_folder_names(tmp_path, capsys):
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "liver.toml").write_text("", encoding="utf-8")
+    (tmp_path / "a" / "kidney.toml").write_text("", encoding="utf-8")
+    (tmp_path / "a" / "notes.txt").write_text("", encoding="utf-8")
+    found = batch.collect_studies([tmp_path / "a", str(tmp_path / "**" / "liver.toml")])
+    assert found == [
+        tmp_path / "a" / "kidney.toml",
+        tmp_path / "a" / "liver.toml",
+        tmp_path / "b" / "liver.toml",
+    ]
+    names = batch.folder_names(found)
+    assert names[0] == "kidney"
+    assert re.fullmatch(r"liver-[0-9a-f]{8}", names[1]) and re.fullmatch(
+        r"liver-[0-9a-f]{8}", names[2]
+    )
+    assert names[1] != names[2]
+    # The same file gets the same folder whatever the rest of the batch and its order.
+    assert batch.folder_names([found[2], found[1]]) == [names[2], names[1]]
+    with pytest.raises(InputError, match="not found"):
+        batch.collect_studies([tmp_path / "missing.toml"])
+    with pytest.raises(InputError, match="no study file matches"):
+        batch.collect_studies([str(tmp_path / "*.nothing")])
+    assert main(["batch", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "study file not found" in err
+    assert (
+        main(
+            [
+                "batch",
+                str(tmp_path / "a"),
+                "-o",
+                str(tmp_path / "o"),
+                "--workers",
+                "1",
+                "--scheduler",
+                "tcp://127.0.0.1:1",
+            ]
+        )
+        == 2
+    )
+
+
+def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypatch):
+    """Must-show c of issue 23: 2 workers on loopback, one killed in the middle of a task."""
+    pytest.importorskip("distributed")
+    studies = tmp_path / "studies"
+    studies.mkdir()
+    for k, c10 in enumerate((250.0, 287.5, 325.0)):
+        (studies / f"punch{k}.toml").write_text(_tiny_simulation(c10), encoding="utf-8")
+    flag = tmp_path / "killed.pid"
+    # The first task to get there kills its own worker process (SIGKILL) after writing its
+    # files and before its marker: the scheduler must run it again elsewhere.
+    monkeypatch.setenv(batch._KILL_ONCE_ENV, str(flag))
+    result = batch.run_batch([studies], out=tmp_path / "out", workers=2, progress=False)
+    assert result.workers == 2
+    killed = int(flag.read_text())
+    assert not _alive(killed)
+    assert result.exit_code == 0 and len(result.outcomes) == 3
+    assert all(o.status == "completed" and not o.skipped for o in result.outcomes)
+    assert killed not in {o.pid for o in result.outcomes}
+    assert all(o.pid != os.getpid() for o in result.outcomes)  # they ran on the workers
+    assert len(_summary(result.summary_path)) == 3
+    # The same force curves as this process computes (another process: summation order of
+    # the threaded linear solver may differ in the last bits).
+    monkeypatch.delenv(batch._KILL_ONCE_ENV)
+    here = batch.run_batch([studies], out=tmp_path / "here", workers=0, progress=False)
+    assert here.exit_code == 0
+    for outcome in result.outcomes:
+        assert (tmp_path / "out" / outcome.folder / batch.DONE_MARKER).is_file()
+        np.testing.assert_allclose(
+            _curve(tmp_path / "out" / outcome.folder / "force_curve.csv"),
+            _curve(tmp_path / "here" / outcome.folder / "force_curve.csv"),
+            rtol=1e-10,
+            atol=1e-15,
+        )
+
+
+def test_a_running_scheduler_runs_the_batch(tmp_path):
+    """``--scheduler tcp://HOST:PORT``: the studies run on the workers of that cluster."""
+    distributed = pytest.importorskip("distributed")
+    import logging
+
+    (tmp_path / "punch.toml").write_text(_tiny_simulation(), encoding="utf-8")
+    with distributed.LocalCluster(
+        n_workers=1,
+        threads_per_worker=1,
+        host="127.0.0.1",
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+    ) as cluster:
+        worker_pids = set(distributed.Client(cluster).run(os.getpid).values())
+        status = main(
+            [
+                "batch",
+                str(tmp_path / "punch.toml"),
+                "-o",
+                str(tmp_path / "out"),
+                "--scheduler",
+                cluster.scheduler_address,
+                "--quiet",
+            ]
+        )
+    assert status == 0
+    marker = json.loads((tmp_path / "out" / "punch" / batch.DONE_MARKER).read_text())
+    assert marker["pid"] in worker_pids and marker["status"] == "completed"
+    assert _curve(tmp_path / "out" / "punch" / "force_curve.csv").shape == (3, 5)
+
+
+def test_run_batch_is_stopped_by_ctrl_c_with_the_summary_of_what_ended(tmp_path, monkeypatch):
+    """Ctrl-C in this process ends the batch (KeyboardInterrupt passes the study task)."""
+    studies = tmp_path / "studies"
+    studies.mkdir()
+    for k in range(2):
+        (studies / f"p{k}.toml").write_text(_tiny_simulation(), encoding="utf-8")
+    calls = []
+
+    def interrupt_second(*args, **kwargs):
+        calls.append(args)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    real = batch._simulate
+    monkeypatch.setattr(batch, "_simulate", interrupt_second)
+    with pytest.raises(KeyboardInterrupt):
+        batch.run_batch([studies], out=tmp_path / "out", workers=0, progress=False)
+    rows = _summary(tmp_path / "out" / "summary.csv")
+    assert list(rows) == ["p0"] and rows["p0"]["status"] == "completed"
+
+
+def test_outputs_inside_out_are_not_studies_and_workers_take_gpus_in_turn(tmp_path, monkeypatch):
+    """A pattern reaching into OUT leaves the batch's own files out; on a LocalCluster of a
+    machine with 2 GPUs, worker 3 takes cuda:1 for 'cuda' and 'auto', and an explicit
+    device or the CPU stays as it is."""
+    (tmp_path / "out" / "fit").mkdir(parents=True)
+    (tmp_path / "out" / "fit" / "fitted_study.toml").write_text("", encoding="utf-8")
+    with pytest.raises(InputError, match="inside the output folder"):
+        batch.run_batch([str(tmp_path / "**" / "*.toml")], out=tmp_path / "out", workers=0)
+    distributed = pytest.importorskip("distributed")
+    import types
+
+    import warp as wp
+
+    monkeypatch.setattr(distributed, "get_worker", lambda: types.SimpleNamespace(name=3))
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
+    study = types.SimpleNamespace(solver=types.SimpleNamespace(device="auto"))
+    assert batch._worker_device(None, study) == "cuda:1"
+    assert batch._worker_device("cuda", study) == "cuda:1"
+    assert batch._worker_device("cuda:0", study) == "cuda:0"
+    assert batch._worker_device("cpu", study) == "cpu"
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 1)
+    assert batch._worker_device("cuda", study) == "cuda"
+    monkeypatch.setattr(distributed, "get_worker", lambda: types.SimpleNamespace(name="w"))
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
+    assert batch._worker_device("cuda", study) == "cuda"  # a worker of `dask worker`

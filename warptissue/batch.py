@@ -1,0 +1,689 @@
+"""Batches of studies: many simulations and fits, one result folder each, on Dask.
+
+:func:`run_batch` is the Python API behind ``warptissue batch``. It takes study files (or
+folders of them, or glob patterns), decides for each what it is the way the single-study
+commands do (a study with ``[[data]]`` records and a ``[fit]`` table is an indentation fit,
+:func:`warptissue.fit.indentation.fit_indentation`; any other a simulation,
+:func:`warptissue.simulate.run_study`), and runs one task per study:
+
+- each study writes the files of its single-study command into ``OUT/<folder>``, the folder
+  named from the study file's stem (:func:`folder_names`), then, last and atomically, the
+  marker :data:`DONE_MARKER` (``batch_done.json``: the study's summary row and the SHA-256 of
+  its study file) when it succeeded;
+- a study that fails (bad input, a mesh that cannot be used, no convergence, a device
+  missing, any exception) is one row of the summary with its one-line error, and the others
+  go on;
+- the client writes ``OUT/summary.csv`` (:data:`SUMMARY_COLUMNS`), one row per study in the
+  order given, after every study that ends (atomically), so that it is current at any time;
+- on a rerun, a study whose folder holds the marker of a run of the same study file is
+  skipped (its row comes from the marker) unless ``force``.
+
+The tasks run on Dask distributed: by default a ``LocalCluster`` of worker processes on this
+machine, or a running cluster (``scheduler="tcp://HOST:PORT"``). A worker that dies (killed,
+out of memory, a crash in a native library) takes its task with it, and the scheduler runs
+the task again on another worker (up to Dask's ``distributed.scheduler.allowed-failures``,
+3 by default; ``retries`` re-runs a task that raised, which the study task does not: it
+turns its exceptions into a failed row). Each task writes its files itself, so the workers,
+the study files, their data and ``OUT`` must be on one file system at the same paths (this
+machine, or a shared disk). ``workers=0`` runs the studies one after another in this
+process, without Dask. Why Dask: docs/design-notes/batch.md.
+"""
+
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import os
+import signal
+import sys
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import DeviceError, InputError, WarpTissueError
+from warptissue.io import write_csv, write_json
+
+__all__ = [
+    "DONE_MARKER",
+    "FAILED_EXIT_CODE",
+    "SUMMARY_COLUMNS",
+    "BatchResult",
+    "StudyOutcome",
+    "collect_studies",
+    "folder_names",
+    "run_batch",
+]
+
+DONE_MARKER = "batch_done.json"
+"""The file a study's task writes last (atomically) into its folder when the study succeeded:
+its :class:`StudyOutcome` and the SHA-256 of its study file. Its presence makes a rerun skip
+the study."""
+SUMMARY_FILE = "summary.csv"
+"""The summary table the client writes into the batch's output folder."""
+SUMMARY_COLUMNS: tuple[str, ...] = (
+    "study",
+    "folder",
+    "kind",
+    "status",
+    "exit_status",
+    "seconds",
+    "peak_force_N",
+    "r_squared",
+    "parameters",
+    "warnings",
+    "skipped",
+    "error",
+)
+"""Columns of ``summary.csv``: the study file as given; its result folder under OUT; its kind
+(``simulation``, ``fit`` or empty when the file could not be read); its status (a
+simulation's ``completed``/``stopped_early``, a fit's ``converged``/
+``stopped_at_r_squared``/``max_iterations``/``failed``, or ``error``); the exit status its
+single-study command would have given (0 success); the task's wall time (s); the peak
+reaction force of a simulation (N); a fit's R^2 over all its records; the fitted parameters
+(``name=value`` separated by ``;``); the number of warnings; ``True`` for a study skipped
+because its folder holds a complete result of an earlier run (its numbers are that run's);
+the one-line error of a failed study."""
+FAILED_EXIT_CODE = 6
+"""Exit status of ``warptissue batch`` when one or more studies failed (the others ran)."""
+STUDY_KINDS: tuple[str, ...] = ("simulation", "fit")
+"""What a study is: a forward simulation, or an inverse-FE fit of its ``[[data]]`` records."""
+_KILL_ONCE_ENV = "WARPTISSUE_BATCH_TEST_KILL_ONCE"
+"""Test hook (tests/test_batch.py): names a file; the first Dask task to create it kills its
+own worker process (SIGKILL) after writing its results and before its marker."""
+_GLOB_CHARACTERS = frozenset("*?[")
+
+
+@dataclass(frozen=True)
+class StudyOutcome:
+    """One study's row of the batch summary.
+
+    Attributes:
+        study: The study file, as given (or found in a folder or by a pattern).
+        folder: Its result folder's name under the batch's output folder.
+        kind: ``"simulation"``, ``"fit"``, or ``""`` when the file could not be read.
+        status: The simulation's or the fit's status, or ``"error"`` (an exception).
+        exit_status: The exit status the single-study command would give (0: success;
+            2 input or a path the system refuses, 3 mesh, 4 convergence, 5 device, 1 anything else).
+        seconds: Wall time of the study's task, s.
+        peak_force_N: Largest reaction force of a simulation, N (None for a fit).
+        r_squared: R^2 of a fit over all its records (None for a simulation).
+        parameters: A fit's fitted parameters, name -> value in SI units (empty otherwise).
+        warnings: The study's warnings (implausible results, unidentified parameters,
+            Python warnings raised while it ran).
+        error: The one-line error of a failed study (empty otherwise).
+        skipped: True when the study was not run because its folder held a complete result
+            of the same study file (the numbers are that run's).
+        study_sha256: SHA-256 of the study file's bytes when it ran.
+        host: The machine the task ran on.
+        pid: The process the task ran in.
+    """
+
+    study: str
+    folder: str
+    kind: str = ""
+    status: str = "error"
+    exit_status: int = 1
+    seconds: float = 0.0
+    peak_force_N: float | None = None
+    r_squared: float | None = None
+    parameters: dict[str, float] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    error: str = ""
+    skipped: bool = False
+    study_sha256: str = ""
+    host: str = ""
+    pid: int = 0
+
+    @property
+    def failed(self) -> bool:
+        """True when the study did not succeed (its exit status is not 0)."""
+        return self.exit_status != 0
+
+    def to_dict(self) -> dict[str, Any]:
+        """The outcome as a JSON-ready mapping (the content of :data:`DONE_MARKER`)."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> StudyOutcome:
+        """The outcome :meth:`to_dict` gave (unknown keys are ignored)."""
+        known = {f for f in cls.__dataclass_fields__}
+        return cls(**{key: value for key, value in data.items() if key in known})
+
+    def summary_row(self) -> dict[str, Any]:
+        """The row of ``summary.csv`` (:data:`SUMMARY_COLUMNS`)."""
+        return {
+            "study": self.study,
+            "folder": self.folder,
+            "kind": self.kind,
+            "status": self.status,
+            "exit_status": int(self.exit_status),
+            "seconds": float(self.seconds),
+            "peak_force_N": self.peak_force_N,
+            "r_squared": self.r_squared,
+            "parameters": ";".join(f"{k}={float(v)!r}" for k, v in self.parameters.items()),
+            "warnings": len(self.warnings),
+            "skipped": bool(self.skipped),
+            "error": self.error,
+        }
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What :func:`run_batch` did.
+
+    Attributes:
+        out_dir: The batch's output folder.
+        outcomes: One :class:`StudyOutcome` per study, in the order of the studies.
+        summary_path: ``OUT/summary.csv``.
+        seconds: Wall time of the batch, s.
+        workers: The Dask workers the batch ran on (0: in this process, without Dask).
+    """
+
+    out_dir: Path
+    outcomes: tuple[StudyOutcome, ...]
+    summary_path: Path
+    seconds: float
+    workers: int = 0
+
+    @property
+    def failed(self) -> tuple[StudyOutcome, ...]:
+        """The studies that failed."""
+        return tuple(o for o in self.outcomes if o.failed)
+
+    @property
+    def skipped(self) -> tuple[StudyOutcome, ...]:
+        """The studies skipped because their folder held a complete result."""
+        return tuple(o for o in self.outcomes if o.skipped)
+
+    @property
+    def exit_code(self) -> int:
+        """0 when every study succeeded, else :data:`FAILED_EXIT_CODE`."""
+        return FAILED_EXIT_CODE if self.failed else 0
+
+
+@dataclass(frozen=True)
+class _Task:
+    """What a worker needs to run one study (sent to it by Dask)."""
+
+    path: str
+    study: str
+    out_dir: str
+    folder: str
+    device: str | None
+    on_dask: bool
+
+
+def collect_studies(sources: Sequence[str | Path]) -> list[Path]:
+    """The study files named by files, folders and glob patterns.
+
+    A file is taken as it is; a folder gives its ``*.toml`` files (not those of its
+    subfolders), sorted by name; a pattern with ``*``, ``?`` or ``[`` gives the files it
+    matches (``**`` reaches into subfolders), sorted. A file named twice is run once.
+
+    Args:
+        sources: Study files, folders and patterns.
+
+    Returns:
+        The study files, in the order of ``sources``.
+
+    Raises:
+        InputError: Nothing given, a path that does not exist, or a folder or pattern that
+            holds no study file.
+    """
+    if not sources:
+        raise InputError("no study files given")
+    found: list[Path] = []
+    for source in sources:
+        text = str(source)
+        path = Path(text)
+        if path.is_dir():
+            matches = sorted(p for p in path.glob("*.toml") if p.is_file())
+            if not matches:
+                raise InputError("this folder holds no study files (*.toml)", path=path)
+        elif path.exists():
+            matches = [path]
+        elif _GLOB_CHARACTERS & set(text):
+            matches = sorted(Path(p) for p in glob.glob(text, recursive=True) if Path(p).is_file())
+            if not matches:
+                raise InputError(f"no study file matches the pattern {text!r}")
+        else:
+            raise InputError("study file not found", path=path)
+        found.extend(matches)
+    unique: dict[str, Path] = {}
+    for path in found:
+        unique.setdefault(os.path.realpath(path), path)
+    return list(unique.values())
+
+
+def folder_names(paths: Sequence[str | Path]) -> list[str]:
+    """The result folder of each study: its file's stem, made unique.
+
+    Studies whose stems are unique keep them (``liver.toml`` -> ``liver``). Where several
+    files share a stem (``a/liver.toml``, ``b/liver.toml``), each gets the stem and the first
+    8 hexadecimal digits of the SHA-1 of its resolved path (``liver-3f2a9c01``): the same
+    file gets the same folder whatever the other studies of the batch and their order.
+
+    Args:
+        paths: The study files.
+
+    Returns:
+        One folder name per path, in order.
+    """
+    stems = [Path(p).stem for p in paths]
+    counts: dict[str, int] = {}
+    for stem in stems:
+        counts[stem] = counts.get(stem, 0) + 1
+    names = []
+    for path, stem in zip(paths, stems, strict=True):
+        if counts[stem] == 1:
+            names.append(stem)
+        else:
+            digest = hashlib.sha1(os.path.realpath(path).encode("utf-8")).hexdigest()[:8]
+            names.append(f"{stem}-{digest}")
+    return names
+
+
+def _sha256(path: str | Path) -> str:
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError:
+        return ""
+
+
+def _one_line(error: BaseException) -> str:
+    """An exception as one line (its message; the class name for an unexpected one)."""
+    text = " ".join(str(error).split())
+    if isinstance(error, WarpTissueError):
+        return text
+    if isinstance(error, OSError) and error.strerror:
+        path = error.filename2 if error.filename2 is not None else error.filename
+        return error.strerror if path is None else f"cannot use {str(path)!r}: {error.strerror}"
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
+
+
+def _completed_outcome(folder: Path, sha256: str) -> StudyOutcome | None:
+    """The outcome in a folder's marker when it is of a successful run of the same file."""
+    marker = folder / DONE_MARKER
+    try:
+        data = json.loads(marker.read_text(encoding="utf-8"))
+        outcome = StudyOutcome.from_dict(data)
+    except (OSError, ValueError, TypeError):
+        return None
+    if outcome.failed or not sha256 or outcome.study_sha256 != sha256:
+        return None
+    return outcome
+
+
+def _worker_device(device: str | None, study: Any) -> str | None:
+    """The device of a study on a Dask worker: LocalCluster names its workers 0, 1, ...;
+    on a machine with several GPUs, worker k takes GPU k mod (number of GPUs) when the device
+    is ``cuda`` or ``auto`` (given or the study's). Elsewhere ``device`` as it is."""
+    chosen = device if device is not None else study.solver.device
+    if chosen not in ("cuda", "auto"):
+        return device
+    try:
+        from distributed import get_worker
+
+        name = get_worker().name
+    except (ImportError, ValueError):
+        return device
+    if not isinstance(name, int):
+        return device
+    import warp as wp
+
+    wp.init()
+    count = wp.get_cuda_device_count()
+    return f"cuda:{name % count}" if count > 1 else device
+
+
+def _kill_once_hook() -> None:
+    """Test hook: the first task to create the file named by :data:`_KILL_ONCE_ENV` kills
+    its worker process."""
+    flag = os.environ.get(_KILL_ONCE_ENV)
+    if not flag:
+        return
+    try:
+        handle = os.open(flag, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:
+        return
+    os.write(handle, str(os.getpid()).encode())
+    os.close(handle)
+    os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
+
+
+def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
+    from warptissue.simulate import run_study
+
+    outputs = run_study(study, out_dir=out_dir, device=device, progress=False, announce=False)
+    forces = np.asarray(outputs.summary["force_curve"]["reaction_force_N"], dtype=np.float64)
+    return {
+        "status": outputs.status,
+        "exit_status": outputs.exit_code,
+        "peak_force_N": float(forces.max()) if forces.size else None,
+        "warnings": list(outputs.summary["warnings"]),
+        "error": "" if outputs.completed else f"stopped early: {outputs.message}",
+    }
+
+
+def _fit(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
+    from warptissue.fit.indentation import fit_indentation
+    from warptissue.report import write_indentation_fit_outputs
+
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("the output folder is a file", path=out_dir)
+    fit = fit_indentation(study, device=device, progress=False)
+    write_indentation_fit_outputs(out_dir, fit)
+    if fit.status == "interrupted":  # Ctrl-C in this process: stop the batch
+        raise KeyboardInterrupt
+    error = ""
+    if not fit.success:
+        what = "failed" if fit.status == "failed" else f"did not converge ({fit.status})"
+        error = f"the fit {what}: {fit.message}"
+    return {
+        "status": fit.status,
+        "exit_status": fit.exit_code,
+        "r_squared": fit.result.r_squared,
+        "parameters": {name: float(value) for name, value in fit.parameters.items()},
+        "warnings": list(fit.warnings),
+        "error": error,
+    }
+
+
+def run_study_task(task: _Task) -> StudyOutcome:
+    """Run one study of a batch and write its folder (the function each Dask task runs).
+
+    Loads the study, runs it as a simulation or a fit, writes the files of its single-study
+    command into the folder, and last, when it succeeded, the marker :data:`DONE_MARKER`
+    (atomically). An exception becomes a failed outcome with its one-line message; only
+    Ctrl-C (``KeyboardInterrupt``) passes.
+
+    Args:
+        task: The study file, its folder and the device.
+
+    Returns:
+        The study's :class:`StudyOutcome`.
+    """
+    import socket
+
+    from warptissue.device import quiet_warp
+    from warptissue.study import load_study
+
+    started = time.perf_counter()
+    out_dir = Path(task.out_dir) / task.folder
+    marker = out_dir / DONE_MARKER
+    outcome = StudyOutcome(
+        study=task.study,
+        folder=task.folder,
+        study_sha256=_sha256(task.path),
+        host=socket.gethostname(),
+        pid=os.getpid(),
+    )
+    caught: list[warnings.WarningMessage] = []
+    try:
+        if marker.is_file():
+            marker.unlink()  # the folder is about to change: it holds no complete result
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("default")
+            quiet_warp()
+            study = load_study(task.path)
+            kind = "fit" if study.data and study.fit is not None else "simulation"
+            outcome = replace(outcome, kind=kind)
+            device = _worker_device(task.device, study) if task.on_dask else task.device
+            run = _fit if kind == "fit" else _simulate
+            numbers = run(study, out_dir, device)
+        python_warnings = [" ".join(str(w.message).split()) for w in caught]
+        numbers["warnings"] = numbers["warnings"] + python_warnings
+        outcome = replace(outcome, **numbers)
+    except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
+        # As the command line: a project error's own status, 2 for a path the system
+        # refuses (a folder where a file goes, no permission, a full disk), else 1.
+        if isinstance(exc, WarpTissueError):
+            exit_status = exc.exit_code
+        else:
+            exit_status = 2 if isinstance(exc, OSError) else 1
+        outcome = replace(outcome, status="error", exit_status=exit_status, error=_one_line(exc))
+    outcome = replace(outcome, seconds=time.perf_counter() - started)
+    if task.on_dask:
+        _kill_once_hook()
+    if not outcome.failed:
+        write_json(marker, outcome.to_dict())
+    return outcome
+
+
+def write_summary(path: str | Path, outcomes: Sequence[StudyOutcome]) -> Path:
+    """Write the batch summary table (:data:`SUMMARY_COLUMNS`), atomically.
+
+    Args:
+        path: The CSV file.
+        outcomes: One row each; None cells (a simulation's R^2) are empty.
+
+    Returns:
+        The path written.
+    """
+    rows = [outcome.summary_row() for outcome in outcomes]
+    columns = {
+        name: np.array([row[name] for row in rows] or [], dtype=object) for name in SUMMARY_COLUMNS
+    }
+    return write_csv(path, columns)
+
+
+def _dask_client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
+    """A Dask client of a running scheduler, or of a new LocalCluster (returned to close)."""
+    try:
+        import logging
+
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise InputError(
+            "Dask distributed is not installed: pip install 'warptissue[batch]' (or "
+            "--workers 0 runs the studies one after another in this process)",
+            option="--scheduler" if scheduler else "--workers",
+        ) from None
+    if scheduler is not None:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise DeviceError(
+                f"cannot reach the Dask scheduler {scheduler!r}: {_one_line(exc)}"
+            ) from None
+    cluster = LocalCluster(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        host="127.0.0.1",
+        dashboard_address=None,
+        silence_logs=logging.CRITICAL,
+    )
+    return Client(cluster), cluster
+
+
+def _have_dask() -> bool:
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def run_batch(
+    paths: Sequence[str | Path],
+    *,
+    out: str | Path,
+    device: str | None = None,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    force: bool = False,
+    progress: bool = True,
+    retries: int = 1,
+    on_outcome: Callable[[StudyOutcome], None] | None = None,
+) -> BatchResult:
+    """Run every study of a batch, one result folder each, and write the summary table.
+
+    Args:
+        paths: Study files, folders of them and glob patterns (:func:`collect_studies`);
+            files inside ``out`` (the batch's own outputs) are left out.
+        out: The batch's output folder: one folder per study (:func:`folder_names`) and
+            ``summary.csv``.
+        device: Warp device of every study (``"cpu"``, ``"cuda"``, ``"cuda:N"``); None:
+            each study's ``solver.device``. On a LocalCluster of a machine with several GPUs
+            the workers take them in turn for ``cuda`` and ``auto``.
+        workers: Worker processes of the LocalCluster (default 1; 0 runs the studies in this
+            process, one after another, without Dask). Not with ``scheduler``.
+        scheduler: Address of a running Dask scheduler (``"tcp://HOST:PORT"``) to run the
+            studies on its workers instead of a LocalCluster.
+        force: Run the studies whose folder holds a complete result too.
+        progress: Show a progress bar over the studies (on standard error).
+        retries: Dask ``retries`` of a task that raised (a worker that dies is handled by
+            the scheduler: the task runs again elsewhere).
+        on_outcome: Called with each study's outcome as it ends (skipped ones first).
+
+    Returns:
+        The :class:`BatchResult`; its ``exit_code`` is :data:`FAILED_EXIT_CODE` when a study
+        failed.
+
+    Raises:
+        InputError: No study file, a missing one, an output folder that is a file, ``workers``
+            with ``scheduler``, or Dask not installed where it is asked for.
+        DeviceError: The scheduler cannot be reached.
+        KeyboardInterrupt: Ctrl-C; the summary then holds the studies that had ended.
+    """
+    started = time.perf_counter()
+    out_dir = Path(out)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("the output folder is a file", path=out_dir)
+    # The batch's own outputs (a fit's fitted_study.toml) are not studies of the batch, even
+    # where a pattern such as '**/*.toml' reaches into OUT.
+    inside = os.path.realpath(out_dir) + os.sep
+    studies = [p for p in collect_studies(paths) if not os.path.realpath(p).startswith(inside)]
+    if not studies:
+        raise InputError("every study file given lies inside the output folder", path=out_dir)
+    if scheduler is not None and workers is not None:
+        raise InputError(
+            "--workers sets the size of a LocalCluster; a running scheduler has its own "
+            "workers: give one of them",
+            option="--workers",
+            value=workers,
+        )
+    if workers is not None and workers < 0:
+        raise InputError("must be 0 or more", option="--workers", value=workers)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    summary_path = out_dir / SUMMARY_FILE
+    names = folder_names(studies)
+    outcomes: list[StudyOutcome | None] = [None] * len(studies)
+    pending: list[tuple[int, _Task]] = []
+    use_dask = scheduler is not None or workers != 0
+    if use_dask and scheduler is None and workers is None and not _have_dask():
+        warnings.warn(
+            "Dask distributed is not installed (pip install 'warptissue[batch]'): the studies "
+            "run one after another in this process",
+            stacklevel=2,
+        )
+        use_dask = False
+    for index, (path, name) in enumerate(zip(studies, names, strict=True)):
+        done = None if force else _completed_outcome(out_dir / name, _sha256(path))
+        if done is not None:
+            outcomes[index] = replace(done, study=str(path), folder=name, skipped=True)
+            continue
+        task = _Task(
+            path=os.path.abspath(path),
+            study=str(path),
+            out_dir=os.path.abspath(out_dir),
+            folder=name,
+            device=device,
+            on_dask=use_dask,
+        )
+        pending.append((index, task))
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(
+        total=len(studies),
+        desc="batch",
+        unit="study",
+        disable=not progress,
+        file=sys.stderr,
+    )
+
+    def finish(index: int | None, outcome: StudyOutcome | None) -> None:
+        if index is not None:
+            outcomes[index] = outcome
+        write_summary(summary_path, [o for o in outcomes if o is not None])
+        if outcome is not None:
+            bar.update(1)
+            if on_outcome is not None:
+                on_outcome(outcome)
+
+    for outcome in outcomes:
+        if outcome is not None:
+            finish(None, outcome)
+    worker_count = 0
+    try:
+        if not pending:
+            finish(None, None)
+        elif not use_dask:
+            for index, task in pending:
+                finish(index, run_study_task(task))
+        else:
+            worker_count = _run_on_dask(pending, scheduler, workers, retries, finish)
+    finally:
+        bar.close()
+    return BatchResult(
+        out_dir=out_dir,
+        outcomes=tuple(o for o in outcomes if o is not None),
+        summary_path=summary_path,
+        seconds=time.perf_counter() - started,
+        workers=worker_count,
+    )
+
+
+def _run_on_dask(
+    pending: Sequence[tuple[int, _Task]],
+    scheduler: str | None,
+    workers: int | None,
+    retries: int,
+    finish: Callable[[int | None, StudyOutcome | None], None],
+) -> int:
+    """Submit one task per study, record each as it ends; returns the number of workers."""
+    import uuid
+
+    from distributed import as_completed
+
+    client, cluster = _dask_client(scheduler, 1 if workers is None else workers)
+    futures: dict[Any, tuple[int, _Task]] = {}
+    try:
+        worker_count = len(client.scheduler_info().get("workers", {}))
+        token = uuid.uuid4().hex[:8]
+        for index, task in pending:
+            future = client.submit(
+                run_study_task,
+                task,
+                key=f"warptissue-batch-{task.folder}-{token}",
+                retries=retries,
+                pure=False,
+            )
+            futures[future] = (index, task)
+        for future in as_completed(list(futures)):
+            index, task = futures[future]
+            try:
+                outcome = future.result()
+            except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: its worker kept dying
+                outcome = StudyOutcome(
+                    study=task.study,
+                    folder=task.folder,
+                    error=f"the Dask task failed: {_one_line(exc)}",
+                )
+            finish(index, outcome)
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return worker_count
