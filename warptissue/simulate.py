@@ -20,7 +20,9 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
   ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,
   ``warnings`` (an implausible force curve: :func:`force_curve_warnings`; a penetration of
   the indenter beyond :data:`PENETRATION_WARNING_SHARE` of the depth), mesh statistics,
-  timings and software versions; under a rigid indenter in contact also, per step, the
+  timings, ``newton_profile`` (where the solve's time went, per phase of the Newton
+  iterations, when run with ``profile=True``; else null: :class:`warptissue.fem.NewtonTimings`)
+  and software versions; under a rigid indenter in contact also, per step, the
   contact force, the contact area, the largest penetration and the largest contact
   pressure in ``force_curve``, and the largest penetration of the run in ``contact``;
 - ``fields.vtu``: the mesh with nodal displacement (point data ``displacement_m``) and per-tet
@@ -395,6 +397,7 @@ def run_study(
     progress: bool = True,
     vtu_every_step: bool = False,
     announce: bool = True,
+    profile: bool = False,
 ) -> SimulationOutputs:
     """Run a study's indentation simulation and write its outputs.
 
@@ -407,6 +410,10 @@ def run_study(
         vtu_every_step: Also write ``fields_NNN.vtu`` with the displacement of every step.
         announce: Say on standard error, once, that Warp compiles its kernels where they are
             not in its cache yet (the first run on a machine; about a minute).
+        profile: Time each phase of the Newton iterations (assembly, factorization, solve,
+            line search, nonlinear elimination, host work) into ``result.timings`` and
+            ``result.json``'s ``newton_profile`` (:mod:`warptissue.fem.timing`; on a GPU
+            this synchronizes the device at every phase boundary).
 
     Returns:
         The outputs. ``status`` is ``"stopped_early"`` when the cutbacks ran out; the files
@@ -456,6 +463,7 @@ def run_study(
             progress=progress,
             options=study.solver.options,
             times_s=None if times is None else np.asarray(times, dtype=np.float64),
+            profile=profile,
         )
         status = "completed" if result.completed else "stopped_early"
     except SolveInterrupted as exc:
@@ -547,6 +555,7 @@ def run_study(
             "write_fields": written - solved,
             "total": written - started,
         },
+        "newton_profile": None if result.timings is None else result.timings.to_dict(),
         "files": {kind: path.name for kind, path in files.items()},
         "software": software_versions(),
     }

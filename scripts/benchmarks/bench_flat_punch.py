@@ -33,6 +33,7 @@ import argparse
 import itertools
 import json
 import math
+import os
 import platform
 import resource
 import sys
@@ -96,6 +97,8 @@ class RunRecord:
     damping: bool | None = None
     newton_tolerance: float | None = None
     relative_error: float | None = None
+    newton_profile: dict[str, Any] | None = None
+    assemblies: dict[str, int] | None = None
 
 
 def comma_separated(text: str) -> list[str]:
@@ -459,15 +462,19 @@ def run_warptissue(
     predictor: str = "linearized",
     damping: bool = True,
     tolerance: float = NEWTON_TOLERANCE,
+    profile: bool = False,
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
     steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
     from ``predictor``, with or without ``damping``, converged to the Newton ``tolerance``
-    (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`)."""
+    (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`); with
+    ``profile``, the time of each phase of the Newton iterations is recorded too
+    (``newton_profile``, :class:`warptissue.fem.NewtonTimings`), and the assemblies of the
+    run are counted (``assemblies``: ``with_tangent``, ``residual_only``)."""
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+    from warptissue.fem import Assembler, IndentationProblem, NewtonOptions, simulate_indentation
     from warptissue.indenter import Indenter
     from warptissue.materials import NeoHookean
 
@@ -482,6 +489,16 @@ def run_warptissue(
         formulation="mixed",
     )
     setup_s = time.perf_counter() - started
+    assembler = Assembler(problem.mesh, problem.material, device=warp_device)
+    assemblies = {"with_tangent": 0, "residual_only": 0}
+    if profile:  # count this run's assemblies (an instance attribute hides the method)
+        assemble = assembler.assemble
+
+        def counted(displacement: Any, *, with_tangent: bool = True) -> Any:
+            assemblies["with_tangent" if with_tangent else "residual_only"] += 1
+            return assemble(displacement, with_tangent=with_tangent)
+
+        assembler.assemble = counted
     started = time.perf_counter()
     cpu_started = time.process_time()
     result = simulate_indentation(
@@ -490,6 +507,8 @@ def run_warptissue(
         device=warp_device,
         progress=progress,
         options=NewtonOptions(tolerance=tolerance, predictor=predictor, damping=damping),
+        assembler=assembler,
+        profile=profile,
     )
     wp.synchronize_device(warp_device)
     solve_s = time.perf_counter() - started
@@ -527,6 +546,8 @@ def run_warptissue(
         predictor=predictor,
         damping=damping,
         newton_tolerance=tolerance,
+        newton_profile=None if result.timings is None else result.timings.to_dict(),
+        assemblies=assemblies if profile else None,
     )
 
 
@@ -588,8 +609,6 @@ def cheapest_run_within(records: list[RunRecord], target: float) -> dict[str, An
 
 
 def machine_description() -> dict[str, Any]:
-    import os
-
     model = platform.processor() or platform.machine()
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -718,6 +737,83 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
     return "\n".join(lines)
 
 
+PROFILE_COLUMNS = (
+    ("assembly", "assembly"),
+    ("line search", "line_search"),
+    ("elimination", "elimination"),
+    ("host", "host"),
+    ("analysis", "analysis"),
+    ("factorization", "factorization"),
+    ("solve", "solve"),
+)
+"""The per-phase columns of :func:`markdown_profile_table` (title, phase): the Newton loop's
+own first, then the linear solver's (the sensitivity phase, zero in this benchmark, is left
+out)."""
+
+
+def markdown_profile_table(paths: list[Path], *, only: list[str] = ()) -> str:
+    """A Markdown table of where the Newton iterations' time went, one row per profiled run.
+
+    Milliseconds per Newton iteration per phase (:mod:`warptissue.fem.timing`), and the share
+    of the run's wall time outside the linear solver (the Newton loop's own cost). A results
+    file written with ``--label`` names its runs in a first column.
+    """
+    runs = []
+    for path in paths:
+        report = json.loads(Path(path).read_text())
+        mesher = report.get("problem", {}).get("warptissue_mesher", "extruded")
+        load = report.get("notes", {}).get("load_average_at_end")
+        for run in report["runs"]:
+            if run.get("newton_profile"):
+                runs.append(
+                    {"label": report.get("label", ""), "mesher": mesher, "load": load, **run}
+                )
+    for condition in only:
+        key, _, value = condition.partition("=")
+        runs = [r for r in runs if str(r.get(key)) == value]
+    if not runs:
+        raise ValueError(f"no profiled run in {[str(p) for p in paths]} matches {list(only)}")
+    columns: list[tuple[str, Any]] = []
+    if any(r["label"] for r in runs):
+        columns.append(("run", lambda r: r["label"]))
+    columns += [
+        ("mesh", lambda r: r["mesher"]),
+        ("cells", lambda r: _grouped(r["cells"])),
+        ("DOFs", lambda r: _grouped(r["dofs"])),
+        ("Newton its", lambda r: str(r["newton_profile"]["newton_iterations"])),
+        ("total s", lambda r: _seconds(r["newton_profile"]["total_s"])),
+    ]
+    if any(r["load"] for r in runs):
+        columns.append(("load", lambda r: f"{r['load'][0]:.1f}" if r["load"] else "-"))
+    if any(r.get("assemblies") for r in runs):
+        columns.append(
+            (
+                "assemblies (tangent + residual)",
+                lambda r: (
+                    f"{r['assemblies']['with_tangent']} + {r['assemblies']['residual_only']}"
+                    if r.get("assemblies")
+                    else "-"
+                ),
+            )
+        )
+
+    def per_iteration_ms(run: dict[str, Any], phase: str) -> str:
+        return f"{1e3 * run['newton_profile']['seconds_per_newton_iteration'][phase]:.0f}"
+
+    for title, phase in (*PROFILE_COLUMNS, ("total", "total")):
+        columns.append((f"{title} (ms/it)", lambda r, phase=phase: per_iteration_ms(r, phase)))
+    columns += [
+        ("outside the solver", lambda r: f"{100 * r['newton_profile']['own_share']:.1f} %"),
+    ]
+    text_columns = {"run", "mesh"}
+    lines = [
+        "| " + " | ".join(title for title, _ in columns) + " |",
+        "|" + "|".join("---" if t in text_columns else "---:" for t, _ in columns) + "|",
+    ]
+    lines += ["| " + " | ".join(cell(r) for _, cell in columns) + " |" for r in runs]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="cpu", help="warptissue device: cpu, cuda, cuda:N")
@@ -776,6 +872,20 @@ def main(argv: list[str] | None = None) -> int:
         "each mesh runs once per tolerance; the first is the one the reference and the "
         f"equal-accuracy comparison use (FElupe always runs at {NEWTON_TOLERANCE:g})",
     )
+    parser.add_argument(
+        "--profile",
+        action="store_true",
+        help="time each phase of warptissue's Newton iterations (assembly, factorization, "
+        "solve, line search, elimination, host; on CUDA the device is synchronized at each "
+        "phase boundary) and print and record the table (newton_profile); with --markdown: "
+        "print the profiled runs' milliseconds per Newton iteration per phase instead",
+    )
+    parser.add_argument(
+        "--label",
+        default="",
+        help="a name for this results file's runs (e.g. the code version), recorded in the "
+        "JSON and shown by --markdown --profile",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     parser.add_argument(
         "--markdown",
@@ -795,8 +905,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.markdown:
+        table = markdown_profile_table if args.profile else markdown_table
         try:
-            print(markdown_table(args.markdown, only=args.only))
+            print(table(args.markdown, only=args.only))
         except (OSError, ValueError, KeyError) as exc:
             parser.error(f"--markdown: {exc}")
         return 0
@@ -827,7 +938,7 @@ def main(argv: list[str] | None = None) -> int:
         wp.config.quiet = True
         started = time.perf_counter()
         warm_mesh, warm_size = warptissue_mesh(500)
-        run_warptissue(warm_mesh, warm_size, args.device)
+        run_warptissue(warm_mesh, warm_size, args.device, profile=args.profile)
         notes["warptissue_warmup_s"] = time.perf_counter() - started
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
@@ -844,9 +955,14 @@ def main(argv: list[str] | None = None) -> int:
                     predictor=predictor,
                     damping=settings[damping],
                     tolerance=tolerance,
+                    profile=args.profile,
                 )
                 records.append(record)
                 print_table([record])
+                if record.newton_profile is not None:
+                    from warptissue.fem import NewtonTimings
+
+                    print(NewtonTimings.from_dict(record.newton_profile).table())
                 sys.stdout.flush()
     for level in [int(s) for s in comma_separated(args.felupe_levels)]:
         size_near_m = 0.5 * PROBE_RADIUS_M / 1.5**level
@@ -897,7 +1013,9 @@ def main(argv: list[str] | None = None) -> int:
     print("cheapest run within each relative force error:")
     for target, runs in equal_accuracy.items():
         print(f"  {target}: {json.dumps(runs)}")
+    notes["load_average_at_end"] = list(os.getloadavg())  # 1, 5 and 15 minutes
     report = {
+        **({"label": args.label} if args.label else {}),
         "problem": {
             "probe_radius_m": PROBE_RADIUS_M,
             "half_width_m": HALF_WIDTH_M,

@@ -54,6 +54,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="also write fields_NNN.vtu with the displacement of every load step",
     )
     parser.add_argument(
+        "--profile",
+        action="store_true",
+        help="time each phase of the Newton iterations (assembly, linear solver analysis, "
+        "factorization and solve, line search, nonlinear elimination, sensitivities, host "
+        "work) and print the table (seconds, share, ms per Newton iteration); result.json "
+        "holds it as newton_profile (null without this option). On a GPU it synchronizes "
+        "the device at every phase boundary, which slows the run a little",
+    )
+    parser.add_argument(
         "--usd",
         nargs="?",
         type=Path,
@@ -98,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
             progress=not (args.quiet or args.json),
             vtu_every_step=args.vtu_every_step,
             announce=not args.quiet,
+            profile=args.profile,
         )
     except SolveInterrupted as interrupted:
         outputs = interrupted.partial_result
@@ -117,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
         sys.stdout.write(outputs.files["result"].read_text(encoding="utf-8"))
     elif not args.quiet:
         _print_summary(outputs)
+    if args.profile and not args.json and outputs.result.timings is not None:
+        print(f"where the solve's time went:\n{outputs.result.timings.table()}")
     for warning in outputs.summary["warnings"]:
         print(f"warptissue: warning: {warning}", file=sys.stderr)
     if outputs.status == "stopped_early":

@@ -27,6 +27,7 @@ from warptissue.fem.solvers import (
     SolveInterrupted,
     solve_quasistatic,
 )
+from warptissue.fem.timing import NewtonTimings
 
 __all__ = [
     "FORMULATIONS",
@@ -40,6 +41,7 @@ __all__ = [
     "IndentationResult",
     "LinearSolver",
     "NewtonOptions",
+    "NewtonTimings",
     "QuasistaticResult",
     "SolveInterrupted",
     "element_geometry",

@@ -46,6 +46,7 @@ import warp.sparse as wps
 
 from warptissue.device import available_host_memory_bytes
 from warptissue.errors import DeviceError
+from warptissue.fem.timing import PhaseTimer
 
 __all__ = [
     "CUDSS_INSTALL_HINT",
@@ -385,6 +386,8 @@ class CudssSolver:
         hybrid_memory: Whether the factors are kept in host memory (hybrid memory mode).
         memory_estimates: cuDSS's memory estimates after the analysis, bytes, keyed by
             :data:`MEMORY_ESTIMATE_NAMES`.
+        timer: The :class:`warptissue.fem.timing.PhaseTimer` that its factorizations and
+            solves are charged to (a disabled one unless the Newton solver profiles).
 
     Raises:
         DeviceError: The matrix is not on a CUDA device, cuDSS could not be loaded, or the
@@ -414,6 +417,7 @@ class CudssSolver:
             )
         self.matrix = matrix
         self.device = device
+        self.timer = PhaseTimer(enabled=False)
         self.factorizations = 0
         self.row_count = 3 * matrix.nrow
         self._nvs = nvs
@@ -517,10 +521,12 @@ class CudssSolver:
         bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
         self._rhs.assign(rhs)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream:
-            self._solver.factorize()
+            with self.timer.phase("factorization"):
+                self._solver.factorize()
             self.factorizations += 1
-            x = self._solver.solve()
-            return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+            with self.timer.phase("solve"):
+                x = self._solver.solve()
+                return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
 
     def solve_factorized(self, rhs: np.ndarray) -> np.ndarray:
         """Solve with the factors of the last :meth:`solve`, without a new factorization.
@@ -535,7 +541,7 @@ class CudssSolver:
         if self.factorizations == 0:
             raise RuntimeError("solve_factorized needs a factorization: call solve first")
         self._rhs.assign(rhs)
-        with self._cupy.cuda.Device(self.device.ordinal), self._stream:
+        with self._cupy.cuda.Device(self.device.ordinal), self._stream, self.timer.phase("solve"):
             x = self._solver.solve()
             return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
 

@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import warp.sparse as wps
 
 from warptissue.errors import DeviceError
+from warptissue.fem.timing import PhaseTimer
 
 __all__ = [
     "CPU_DIRECT_METHODS",
@@ -137,6 +138,8 @@ class CpuDirectSolver:
     Attributes:
         analyses: Symbolic analyses (orderings) done so far (PARDISO: 1 per pattern).
         factorizations: Numerical factorizations done so far.
+        timer: The :class:`warptissue.fem.timing.PhaseTimer` that its factorizations and
+            solves are charged to (a disabled one unless the Newton solver profiles).
     """
 
     def __init__(self, matrix: wps.BsrMatrix, *, method: str) -> None:
@@ -146,6 +149,7 @@ class CpuDirectSolver:
             raise ValueError(f"CpuDirectSolver needs a CPU matrix; this one is on {matrix.device}")
         self.matrix = matrix
         self.method = method
+        self.timer = PhaseTimer(enabled=False)
         self.analyses = 0
         self.factorizations = 0
         self.row_count = 3 * matrix.nrow
@@ -248,13 +252,17 @@ class CpuDirectSolver:
         self.factorizations += 1
         if self.method == "superlu":
             self.analyses += 1
-            try:
-                self._lu = sp.linalg.splu(self._csc)
-            except RuntimeError:  # exactly singular
-                self._lu = None
+            with self.timer.phase("factorization"):
+                try:
+                    self._lu = sp.linalg.splu(self._csc)
+                except RuntimeError:  # exactly singular
+                    self._lu = None
+            if self._lu is None:
                 return np.full((self.row_count // 3, 3), np.nan)
-            return self._lu.solve(b).reshape(-1, 3)
-        self._factorized = self._pardiso(22) == 0
+            with self.timer.phase("solve"):
+                return self._lu.solve(b).reshape(-1, 3)
+        with self.timer.phase("factorization"):
+            self._factorized = self._pardiso(22) == 0
         if not self._factorized:
             return np.full((self.row_count // 3, 3), np.nan)
         return self.solve_factorized(rhs)
@@ -277,8 +285,15 @@ class CpuDirectSolver:
         failed = np.full((self.row_count // 3, 3), np.nan)
         if self.method == "superlu":
             lu = getattr(self, "_lu", None)
-            return failed if lu is None else lu.solve(b).reshape(-1, 3)
-        if not getattr(self, "_factorized", False) or self._pardiso(33, b) != 0:
+            if lu is None:
+                return failed
+            with self.timer.phase("solve"):
+                return lu.solve(b).reshape(-1, 3)
+        if not getattr(self, "_factorized", False):
+            return failed
+        with self.timer.phase("solve"):
+            error = self._pardiso(33, b)
+        if error != 0:
             return failed
         return self._x.reshape(-1, 3).copy()
 

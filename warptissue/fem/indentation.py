@@ -43,6 +43,7 @@ from warptissue.fem.solvers import (
     SolveInterrupted,
     solve_quasistatic,
 )
+from warptissue.fem.timing import NewtonTimings
 from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
@@ -281,6 +282,9 @@ class IndentationResult:
             each depth, (S, N), Pa (zero off the contact; the normal contact force over the
             node's tributary area, :class:`warptissue.fem.contact.ContactSurface`); shape
             (0, N) for a sharp flat punch.
+        timings: Where the load path's wall time went, per phase of the Newton iterations
+            (:class:`warptissue.fem.NewtonTimings`), when run with ``profile=True``; else
+            None.
     """
 
     depths_m: np.ndarray
@@ -305,6 +309,7 @@ class IndentationResult:
     max_penetration_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    timings: NewtonTimings | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
@@ -345,6 +350,7 @@ class IndentationResult:
                 if self.contact_force_N.size
                 else {}
             ),
+            **({} if self.timings is None else {"newton_profile": self.timings.to_dict()}),
         }
 
 
@@ -360,6 +366,7 @@ def simulate_indentation(
     sensitivities: Sequence[str] = (),
     sensitivity_factorization: str = "reuse",
     times_s: np.ndarray | None = None,
+    profile: bool = False,
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -388,6 +395,8 @@ def simulate_indentation(
             by a :class:`warptissue.materials.Viscoelastic` material (its history is carried
             forward in time, :mod:`warptissue.fem.viscous`; so are the sensitivities, Prony
             parameters included); an elastic material gives the same forces as without.
+        profile: Time each phase of the Newton iterations into ``result.timings`` (see
+            :func:`warptissue.fem.solve_quasistatic` and :mod:`warptissue.fem.timing`).
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -446,6 +455,7 @@ def simulate_indentation(
             load_name="depth (m)",
             sensitivity=sensitivity,
             times_s=times_s,
+            profile=profile,
         )
     except SolveInterrupted as interrupted:
         partial = _indentation_result(problem, assembler, interrupted.partial_result, names)
@@ -506,4 +516,5 @@ def _indentation_result(
         max_penetration_m=penetration,
         contact_area_m2=area,
         contact_pressure_Pa=pressure,
+        timings=path.timings,
     )

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
+from time import perf_counter
 from typing import Any
 
 import numpy as np
@@ -46,6 +47,7 @@ from warptissue.errors import InputError
 from warptissue.fem.assembly import Assembler, Assembly
 from warptissue.fem.cudss import CudssSolver, cudss_available
 from warptissue.fem.direct import CpuDirectSolver
+from warptissue.fem.timing import NewtonTimings, PhaseTimer
 
 __all__ = [
     "LINEAR_SOLVERS",
@@ -222,6 +224,10 @@ class LinearSolver:
         direct: The CPU direct solver of the last matrix (PARDISO or SuperLU), or None. It
             holds the matrix's scalar pattern and PARDISO's symbolic analysis, and is reused
             while the same matrix object (fixed pattern, new values) is passed in.
+        factorizations: Numerical factorizations so far (direct methods; 0 for CG).
+        timer: The :class:`warptissue.fem.timing.PhaseTimer` that the analysis,
+            factorizations and solves are charged to (disabled by default;
+            :func:`solve_quasistatic` sets its own when it profiles).
     """
 
     def __init__(
@@ -271,6 +277,8 @@ class LinearSolver:
             )
         self.method = method
         self.device = device
+        self.timer = PhaseTimer(enabled=False)
+        self.factorizations = 0
         self._cudss: CudssSolver | None = None
         self.direct: CpuDirectSolver | None = None
         self.tolerance = tolerance
@@ -289,12 +297,17 @@ class LinearSolver:
         """
         if self.method == "cg":
             return self._solve_cg(matrix, rhs)
+        self.factorizations += 1
         if self.method == "cudss":
             if self._cudss is None or self._cudss.matrix is not matrix:
-                self._cudss = CudssSolver(matrix)
+                with self.timer.phase("analysis"):
+                    self._cudss = CudssSolver(matrix)
+            self._cudss.timer = self.timer
             return self._cudss.solve(rhs), 1
         if self.direct is None or self.direct.matrix is not matrix:
-            self.direct = CpuDirectSolver(matrix, method=self.method)
+            with self.timer.phase("analysis"):
+                self.direct = CpuDirectSolver(matrix, method=self.method)
+        self.direct.timer = self.timer
         return self.direct.solve(rhs), 1
 
     def solve_factorized(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
@@ -316,9 +329,11 @@ class LinearSolver:
         if self.method == "cudss":
             if self._cudss is None or self._cudss.matrix is not matrix:
                 return self.solve(matrix, rhs)
+            self._cudss.timer = self.timer
             return self._cudss.solve_factorized(rhs), 1
         if self.direct is None or self.direct.matrix is not matrix:
             return self.solve(matrix, rhs)
+        self.direct.timer = self.timer
         return self.direct.solve_factorized(rhs), 1
 
     def _solve_cg(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
@@ -327,16 +342,17 @@ class LinearSolver:
         b = wp.array(rhs, dtype=wp.vec3d, device=self.device)
         x = wp.zeros_like(b)
         max_iterations = self.max_iterations or 30 * rhs.size
-        iterations, residual, tolerance = cg(
-            matrix,
-            b,
-            x,
-            tol=self.tolerance,
-            maxiter=max_iterations,
-            M=preconditioner(matrix, ptype=self.preconditioner),
-            use_cuda_graph=False,
-        )
-        return x.numpy(), int(iterations)
+        with self.timer.phase("solve"):
+            iterations, residual, tolerance = cg(
+                matrix,
+                b,
+                x,
+                tol=self.tolerance,
+                maxiter=max_iterations,
+                M=preconditioner(matrix, ptype=self.preconditioner),
+                use_cuda_graph=False,
+            )
+            return x.numpy(), int(iterations)
 
 
 @dataclass
@@ -361,6 +377,8 @@ class QuasistaticResult:
             for the n parameters of the ``sensitivity`` passed in (n = 0 without one).
         times_s: The time of each converged load of a timed path, s; else the load-step
             number 1..S, shape (S,).
+        timings: Where the wall time went, per phase (:class:`warptissue.fem.NewtonTimings`),
+            when the path was profiled (``profile=True``); else None.
     """
 
     loads: np.ndarray
@@ -376,6 +394,7 @@ class QuasistaticResult:
     history: list[dict] = field(default_factory=list)
     reaction_sensitivity: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    timings: NewtonTimings | None = None
 
 
 def _norm(values: np.ndarray) -> float:
@@ -390,6 +409,13 @@ def _norm(values: np.ndarray) -> float:
 
 @dataclass
 class _Step:
+    """Outcome of one load increment's Newton iterations.
+
+    ``residual`` is the internal force at ``displacement`` (N, 3), N, of a converged step:
+    a view of the assembler's residual where it lives on the CPU, valid until the next
+    assembly (the reaction is summed from it at once, without assembling again).
+    """
+
     converged: bool
     displacement: np.ndarray
     iterations: int
@@ -397,16 +423,22 @@ class _Step:
     reason: str
     local_iterations: int = 0
     from_guess: bool = False
+    residual: np.ndarray | None = None
 
 
 @dataclass
 class _Search:
-    """Outcome of a line search: the accepted state and its assembly (None if none)."""
+    """Outcome of a line search: the accepted state and its assembly (None if none).
+
+    ``current``: the assembler's residual buffer still holds ``assembly`` (the accepted state
+    was the last one assembled), so its residual needs no new assembly.
+    """
 
     alpha: float
     state: np.ndarray
     assembly: Assembly | None
     reason: str = ""
+    current: bool = False
 
 
 def _first_iteration_step(
@@ -422,7 +454,7 @@ def _first_iteration_step(
         trial = start + alpha * direction
         check = assembler.assemble(trial, with_tangent=False)
         if check.min_jacobian > 0.0 and math.isfinite(check.energy_J):
-            return _Search(alpha, trial, check)
+            return _Search(alpha, trial, check, current=True)
         alpha *= 0.5
     return _Search(alpha, start, None, "an element inverted (J <= 0)")
 
@@ -484,7 +516,7 @@ def _line_search(
                 or _norm(residual * free) < residual_norm
             )
             if decrease and (abs(g) <= curvature * abs(slope) or (g < 0.0 and alpha >= 1.0)):
-                return _Search(alpha, trial, check)
+                return _Search(alpha, trial, check, current=True)
             if decrease and check.energy_J < best_energy:
                 best, best_energy = _Search(alpha, trial, check), check.energy_J
             if g < 0.0 and decrease:
@@ -540,7 +572,10 @@ def _nonlinear_elimination(
         ratio: Stop when the patch's residual is this fraction of the rest's.
 
     Returns:
-        (displacement (N, 3), assembly of residual and tangent at it, local iterations taken).
+        (displacement (N, 3), its assembly, local iterations taken). The assembly's residual
+        is that of the returned displacement; after an accepted local step its tangent is
+        not assembled (``assembly.matrix`` is None): the caller assembles it where it needs
+        one, which it does not at a converged state.
 
     Notes:
         Nonlinear elimination (Lanzkron, Rose and Wilkes 1996; Cai and Li 2011, SIAM J. Sci.
@@ -598,14 +633,17 @@ def _nonlinear_elimination(
             assembly = assembler.assemble(u)
             break
         iterations += 1
-        u = accepted
-        assembly = assembler.assemble(u)
+        # The accepted trial was the last state assembled: its residual is the assembler's.
+        u, assembly = accepted, check
         residual = assembly.residual.numpy()
         energy = assembly.energy_J
         total = _norm(residual * free)
         local = _norm(residual[patch] * free[patch])
         if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
             break
+        if iterations < max_iterations:  # the next local step's patch tangent
+            assembly = assembler.assemble(u)
+            residual = assembly.residual.numpy()
     return u, assembly, iterations
 
 
@@ -650,6 +688,7 @@ def _newton_increment(
     nonlinear_elimination: bool,
     free_guess: np.ndarray | None = None,
     damping: bool = False,
+    timer: PhaseTimer | None = None,
 ) -> _Step:
     """Newton iterations for one load increment, starting from a converged state.
 
@@ -659,7 +698,12 @@ def _newton_increment(
 
     ``damping``: adaptive Levenberg-Marquardt damping of the tangent's free diagonal (see
     :data:`DAMPING_START`); off, every iteration solves with the plain tangent.
+
+    ``timer``: the :class:`warptissue.fem.timing.PhaseTimer` the phases are charged to
+    (None: not timed).
     """
+    if timer is None:
+        timer = PhaseTimer(enabled=False)
     u = u_start.copy()
     linear_total = 0
     local_total = 0
@@ -669,16 +713,25 @@ def _newton_increment(
     linearized = True
     if free_guess is not None:
         guess = u_start + prescribed_increment + free_guess * free
-        assembly = assembler.assemble(guess)
+        with timer.phase("assembly"):
+            assembly = assembler.assemble(guess)
         if assembly.min_jacobian > 0.0 and math.isfinite(assembly.energy_J):
             u, linearized = guess, False
     if linearized:
-        assembly = assembler.assemble(u)
+        with timer.phase("assembly"):
+            assembly = assembler.assemble(u)
     residual = assembly.residual.numpy()
 
     def outcome(converged: bool, iteration: int, reason: str) -> _Step:
         return _Step(
-            converged, u, iteration, linear_total, reason, local_total, from_guess=not linearized
+            converged,
+            u,
+            iteration,
+            linear_total,
+            reason,
+            local_total,
+            from_guess=not linearized,
+            residual=residual if converged else None,
         )
 
     factor = 0.0
@@ -689,29 +742,44 @@ def _newton_increment(
             rhs = -(residual + k_times_increment.numpy()) * free + prescribed_increment
         else:
             rhs = -residual * free
-        assembler.eliminate(constrained_wp, damping=factor)
+        with timer.phase("assembly"):
+            assembler.eliminate(constrained_wp, damping=factor)
         du, linear_iterations = solver.solve(assembly.matrix, rhs)
         linear_total += linear_iterations
         if not np.all(np.isfinite(du)):
             return outcome(False, iteration, "the linear solve gave non-finite values")
         old_norm = _norm(residual * free)
         slope = float(np.sum(residual * free * du))
-        if first:
-            search = _first_iteration_step(assembler, u + prescribed_increment, du * free)
-        else:
-            search = _line_search(assembler, u, du * free, free, assembly.energy_J, slope, old_norm)
+        with timer.phase("line_search"):
+            if first:
+                search = _first_iteration_step(assembler, u + prescribed_increment, du * free)
+            else:
+                search = _line_search(
+                    assembler, u, du * free, free, assembly.energy_J, slope, old_norm
+                )
         if search.assembly is None:
             return outcome(False, iteration, search.reason)
         u, alpha = search.state, search.alpha
         if damping and not first:
             factor = _next_damping(factor, alpha)
-        assembly = assembler.assemble(u)
+        if search.current:
+            # The line search's residual at u; the tangent only where another iteration
+            # (or the elimination) needs it, not at the converged state.
+            assembly = search.assembly
+        else:
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
         residual = assembly.residual.numpy()
         free_norm = _norm(residual * free)
         reaction_norm = _norm(residual * (1.0 - free))
         limit = max(tolerance * reaction_norm, force_floor)
         if nonlinear_elimination and free_norm > limit:
-            u, assembly, local = _nonlinear_elimination(assembler, assembly, u, free, limit)
+            if assembly.matrix is None:
+                with timer.phase("assembly"):
+                    assembly = assembler.assemble(u)
+                residual = assembly.residual.numpy()
+            with timer.phase("elimination"):
+                u, assembly, local = _nonlinear_elimination(assembler, assembly, u, free, limit)
             local_total += local
             if local:
                 residual = assembly.residual.numpy()
@@ -727,6 +795,10 @@ def _newton_increment(
             return outcome(True, iteration, "converged")
         if not math.isfinite(free_norm):
             return outcome(False, iteration, "the residual became non-finite")
+        if assembly.matrix is None:  # the next iteration's tangent
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
+            residual = assembly.residual.numpy()
     return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
 
 
@@ -773,6 +845,7 @@ def solve_quasistatic(
     initial_displacement_m: np.ndarray | None = None,
     sensitivity: Any = None,
     times_s: np.ndarray | None = None,
+    profile: bool = False,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -818,6 +891,10 @@ def solve_quasistatic(
             (``assembler.viscous``), whose history is advanced after every converged
             (sub)step (:mod:`warptissue.fem.viscous`); an elastic one ignores time. None: a
             quasi-static path.
+        profile: Time each phase of the Newton iterations (assembly, factorization, solve,
+            line search, nonlinear elimination, sensitivities, host work) into the result's
+            ``timings`` (:mod:`warptissue.fem.timing`). On a CUDA device this synchronizes
+            the device at every phase boundary; off, nothing is timed.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -826,6 +903,7 @@ def solve_quasistatic(
         InputError: Non-finite loads, mis-shaped weights, or options that are not a
             :class:`NewtonOptions`.
     """
+    started = perf_counter()
     loads = np.atleast_1d(np.asarray(loads, dtype=np.float64))
     if loads.ndim != 1 or not np.all(np.isfinite(loads)):
         raise InputError("loads must be a finite 1-D sequence", value=loads)
@@ -855,6 +933,8 @@ def solve_quasistatic(
             "a viscoelastic material needs the time of each load (times_s)", key="times_s"
         )
     solver = LinearSolver(method=options.linear_solver, device=assembler.device)
+    timer = PhaseTimer(enabled=profile, device=assembler.device)
+    solver.timer = timer
     mask = conditions.mask(n)
     free = 1.0 - mask
     constrained_wp = wp.array(mask, dtype=wp.vec3d, device=assembler.device)
@@ -891,6 +971,13 @@ def solve_quasistatic(
             history=history,
             reaction_sensitivity=np.array(sensitivities[:count]).reshape(count, sensitivity_count),
             times_s=(np.arange(1.0, count + 1.0) if times is None else np.array(times[:count])),
+            timings=(
+                timer.timings(
+                    total_s=perf_counter() - started, factorizations=solver.factorizations
+                )
+                if profile
+                else None
+            ),
         )
 
     if progress:
@@ -947,7 +1034,9 @@ def solve_quasistatic(
                     nonlinear_elimination=options.nonlinear_elimination,
                     free_guess=free_guess,
                     damping=options.damping,
+                    timer=timer,
                 )
+                timer.count_iterations(step.iterations)
                 step_newton += step.iterations
                 step_linear += step.linear_iterations
                 step_local += step.local_iterations
@@ -967,12 +1056,13 @@ def solve_quasistatic(
                     u, load, time, fraction = step.displacement, next_load, next_time, next_fraction
                     at_target = fraction == 1.0
                     if at_target:
-                        # With the step's frozen history: the force of the converged state.
-                        internal = assembler.assemble(u, with_tangent=False).residual.numpy()
-                        reaction = float(np.sum(weights * internal))
+                        # The internal force of the converged state (with the step's frozen
+                        # history), as Newton's last assembly left it.
+                        reaction = float(np.sum(weights * step.residual))
                     if sensitivity is not None and (at_target or viscous is not None):
                         # A viscous history needs its derivatives advanced at every substep.
-                        step_sensitivity = sensitivity.at_converged_state(solver, u)
+                        with timer.phase("sensitivity"):
+                            step_sensitivity = sensitivity.at_converged_state(solver, u)
                     if viscous is not None:
                         viscous.commit(assembler, assembler.device_displacement(u))
                     if at_target:
