@@ -24,8 +24,9 @@ delta defines the punch's effective radius a_eff (the sharp punch has a_eff = a)
 Usage:
     python scripts/examples/rounded_punch.py [--quick] [--out results.json]
 
-``--quick`` runs a coarse mesh (near size a/3) and two edge radii (under a minute of CPU); the full run writes
-``scripts/results/rounded_punch_2core_cpu.json`` when given that path as ``--out``.
+``--quick`` runs a coarse mesh (near size a/3) and two edge radii (under a minute of CPU);
+the full run writes ``scripts/results/rounded_punch_2core_cpu.json`` when given that path
+as ``--out``.
 """
 
 from __future__ import annotations
