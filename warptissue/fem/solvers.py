@@ -731,8 +731,9 @@ def _newton_increment(
 
 
 CONTACT_PENALTY_RAMP = 0.1
-"""Under rigid contact each load increment is first solved with the penalty stiffness times
-this factor (to :data:`CONTACT_RAMP_TOLERANCE`), then with the full stiffness from there
+"""Under rigid contact (a sphere, a wedge or a rounded punch; not a plate, whose contact
+covers the whole surface) each load increment is first solved with the penalty stiffness
+times this factor (to :data:`CONTACT_RAMP_TOLERANCE`), then with the full stiffness from there
 (:func:`_penalty_ramped_increment`); 1 solves with the full stiffness at once."""
 CONTACT_RAMP_TOLERANCE = 1.0e-3
 """Relative tolerance of the softened first stage of a contact increment."""
@@ -1007,7 +1008,10 @@ def solve_quasistatic(
                 set_load = getattr(assembler, "set_load", None)
                 if set_load is not None:  # a rigid contact's depth follows the load
                     set_load(next_load)
-                ramped = getattr(assembler, "contact", None) is not None
+                contact = getattr(assembler, "contact", None)
+                # A plate touches the whole surface: no contact edge crosses nodes, and the
+                # ramp would only repeat its iterations (4 -> 8-13 per step measured).
+                ramped = contact is not None and contact.indenter.kind != "plate"
                 increment = (
                     _penalty_ramped_increment
                     if ramped and CONTACT_PENALTY_RAMP < 1.0
