@@ -7,7 +7,9 @@ fitted. The fits must recover the truth (2 % for elastic parameters, 5 % for the
 terms, and within 3 standard errors); the Jacobian of the residuals must equal central
 differences of whole forward runs; the exact sensitivities must save forward runs against
 forward differences; Ctrl-C keeps the best point; bad input and non-identified parameters
-are said out loud.
+are said out loud. The contact point: records whose recorded depth is offset from the true
+depth (the probe touches at 0.15 mm) give the offset and C10 back when the offset is fitted
+(from a start 50 % off), and a C10 half the truth when it is not.
 
 The specimen is a quarter block 8 x 8 x 2 mm under a 1 mm flat punch (805 TET10 nodes).
 """
@@ -24,7 +26,8 @@ import pytest
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
-from warptissue.fit.indentation import _forward_model
+from warptissue.fit.indentation import _forward_model, depth_offset_start_m
+from warptissue.fit.result import RejectStep
 from warptissue.io import write_csv
 from warptissue.materials import material_from_dict
 from warptissue.simulate import build_mesh, build_problem, run_study
@@ -97,11 +100,13 @@ def make_study(
     seed: int = 1,
     drift_per_s: float = 0.0,
     solver: str = "",
+    recorded_depth: list[np.ndarray] | None = None,
 ):
     """Write record.csv (the FE force of ``truth`` along ``history`` plus Gaussian noise of
     ``noise`` times the peak force and a drift of ``drift_per_s`` times the peak force per
     second; a list of histories: record.csv, record2.csv, ...) and study.toml (material
-    ``start``, the ``[fit]`` text), and load the study."""
+    ``start``, the ``[fit]`` text), and load the study. ``recorded_depth`` (one per history):
+    the displacement column written instead of the history's depth (a depth offset)."""
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / "study.toml"
     path.write_text(GEOMETRY.format(material=_toml_table(truth), solver=solver))
@@ -118,11 +123,12 @@ def make_study(
         peak = float(np.max(force))
         noisy = force + rng.normal(0.0, noise * peak, force.size) + drift_per_s * peak * time
         name = "record.csv" if k == 0 else f"record{k + 1}.csv"
+        written = depth if recorded_depth is None else recorded_depth[k]
         write_csv(
             folder / name,
             {
                 "time_s": np.concatenate([[0.0], time]),
-                "displacement_m": np.concatenate([[0.0], depth]),
+                "displacement_m": np.concatenate([[0.0], written]),
                 "force_N": np.concatenate([[0.0], noisy]),
             },
         )
@@ -531,3 +537,345 @@ def test_the_fit_gives_the_same_parameters_on_every_device(neo_hookean_fit, devi
     np.testing.assert_allclose(
         fit.records[0].fitted_force_N, neo_hookean_fit.records[0].fitted_force_N, rtol=1e-6
     )
+
+
+# Contact point: a record whose recorded depth is offset from the true depth by d0.
+OFFSET_M = 0.15e-3
+"""The true contact of the offset records: the probe touches at a recorded depth of 0.15 mm."""
+
+
+def offset_ramp(
+    recorded_m: float = 0.45e-3, offset_m: float = OFFSET_M, samples: int = 45
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A ramp to the recorded depth ``recorded_m`` (samples 10 um apart by default) that
+    touches at ``offset_m``: ((time_s, true depth), recorded depth)."""
+    time = 0.1 * np.arange(1, samples + 1)
+    recorded = recorded_m * np.arange(1, samples + 1) / samples
+    return (time, np.clip(recorded - offset_m, 0.0, None)), recorded
+
+
+def offset_study(
+    folder: Path, fit: str, truth: dict = NEO_HOOKEAN, solver: str = "", **options
+) -> object:
+    history, recorded = offset_ramp(**options)
+    return make_study(
+        folder,
+        truth=truth,
+        start=truth,
+        fit=fit,
+        history=history,
+        recorded_depth=[recorded],
+        solver=solver,
+    )
+
+
+@pytest.fixture(scope="module")
+def offset_record(tmp_path_factory):
+    """The offset record's study (the contact given, as the lab recorded it)."""
+    return offset_study(tmp_path_factory.mktemp("offset"), 'free = ["C10_Pa"]\ntime_steps = 10\n')
+
+
+def with_fit(study, **changes):
+    return dataclasses.replace(study, fit=dataclasses.replace(study.fit, **changes))
+
+
+def test_the_contact_point_and_c10_are_recovered_jointly(offset_record):
+    # The offset's start is 50 % off (0.225 mm for 0.15 mm), C10 starts from the record.
+    study = with_fit(offset_record, contact_point="fit", start={"depth_offset_m": 0.225e-3})
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert fit.contact_point == "fit"
+    assert fit.result.parameter_names == ("C10_Pa", "depth_offset_m")
+    assert fit.result.parameter_units == ("Pa", "m")
+    assert fit.start["depth_offset_m"] == pytest.approx(0.225e-3)
+    d0, error = fit.parameters["depth_offset_m"], fit.result.standard_errors[1]
+    assert abs(d0 - OFFSET_M) < 5e-6, d0  # 5 um, half a sample spacing
+    assert abs(d0 - OFFSET_M) <= 3.0 * error
+    assert_recovered(fit, {"C10_Pa": 287.5, "depth_offset_m": OFFSET_M}, 0.05)
+    assert fit.parameters["C10_Pa"] == pytest.approx(287.5, rel=0.02)
+    assert fit.warnings == []
+    (record,) = fit.records
+    assert record.depth_offset_m == d0 and record.depth_offset_standard_error_m == error
+    # The FE depth is the recorded one less the offset; the FE ran in true depth.
+    assert record.fe_depth_m[-1] >= 0.45e-3 - d0 > record.fe_depth_m[-2]
+    before = record.depth_m < d0
+    np.testing.assert_array_equal(record.fitted_force_N[before], 0.0)
+    summary = json.loads(json.dumps(fit.to_dict()))
+    assert summary["contact_point"] == "fit"
+    assert summary["parameters"]["depth_offset_m"]["unit"] == "m"
+    assert summary["parameters"]["depth_offset_m"]["standard_error"] == pytest.approx(error)
+    assert summary["records"][0]["depth_offset_m"] == pytest.approx(d0)
+
+
+def test_without_the_contact_point_the_same_record_biases_c10(offset_record):
+    # The lab's depth counts 0.15 mm of air as indentation: the tissue looks much softer.
+    fit = fit_indentation(offset_record, progress=False)
+    assert fit.contact_point == "given" and fit.result.parameter_names == ("C10_Pa",)
+    assert fit.parameters["C10_Pa"] < 0.8 * 287.5, fit.parameters
+    assert any(
+        "Durbin-Watson" in m and "fit.contact_point = 'fit' fits it" in m for m in fit.warnings
+    ), fit.warnings
+    assert "depth_offset_m" not in fit.to_dict()["records"][0]
+
+
+def test_the_offset_start_comes_from_the_first_force_above_noise(offset_record):
+    (record,) = offset_record.data
+    start = depth_offset_start_m(record)
+    assert abs(start - OFFSET_M) <= 2e-5, start  # within two samples of the touch
+    # A record conditioned with a contact point counts its depth from it: start 0.
+    conditioned = dataclasses.replace(
+        record,
+        record=dataclasses.replace(record.record, summary={"contact": {"time_s": 0.0}}),
+    )
+    assert depth_offset_start_m(conditioned) == 0.0
+
+
+def test_an_offset_pinned_at_its_bound_is_reported(offset_record):
+    # The Python option, over the study's "given".
+    study = with_fit(
+        offset_record,
+        start={"depth_offset_m": 0.25e-3},
+        bounds={"depth_offset_m": (0.2e-3, 0.3e-3)},
+        max_iterations=8,
+    )
+    fit = fit_indentation(study, progress=False, contact_point="fit")
+    assert fit.contact_point == "fit"
+    assert fit.parameters["depth_offset_m"] == pytest.approx(0.2e-3)
+    assert any(
+        "depth_offset_m" in m and "lower bound" in m and "not identified" in m for m in fit.warnings
+    ), fit.warnings
+
+
+def test_the_offset_column_of_the_jacobian_equals_central_differences(tmp_path):
+    study = offset_study(
+        tmp_path,
+        'free = ["C10_Pa", "C20_Pa"]\nobjective = "relative"\ntime_steps = 6\n'
+        'contact_point = "fit"\n',
+        truth=REDUCED_POLYNOMIAL,
+        solver="tolerance = 1e-12",
+        samples=20,
+    )
+    free = ("C10_Pa", "C20_Pa")
+    model = _forward_model(
+        study, study.material, free, device="cpu", progress=False, offset_start=np.array([1e-4])
+    )
+    x = np.array([260.0, 380.0, 1.37e-4])
+    jacobian = model.jac(x)
+    assert jacobian.shape == (21, 3)
+    assert model.forward_solves == 1  # the offset's column costs no FE run
+    for j, step in enumerate((1e-6 * x[0], 1e-6 * x[1], 1e-10)):
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
+        scale = float(np.max(np.abs(central)))
+        assert scale > 0.0
+        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale)
+    # The FE lattice is fixed in true depth: a deeper trial adds steps of the same size.
+    assert model.depth_step_m == pytest.approx((0.45e-3 - 1e-4) / 6)
+    deeper = model.evaluate(np.array([260.0, 380.0, 0.2e-4]))
+    assert deeper.fe_curves[0][1][-1] >= 0.45e-3 - 0.2e-4
+
+
+def test_bad_contact_point_values_are_refused(offset_record, tmp_path):
+    with pytest.raises(InputError, match="contact_point") as raised:
+        fit_indentation(offset_record, progress=False, contact_point="guess")
+    assert "\n" not in str(raised.value)
+    # A start beyond the deepest recorded depth leaves nothing in contact.
+    study = with_fit(
+        offset_record, start={"depth_offset_m": 1e-3}, bounds={"depth_offset_m": (0, 2e-3)}
+    )
+    with pytest.raises(InputError, match=r"fit\.start\.depth_offset_m") as raised:
+        fit_indentation(study, progress=False, contact_point="fit")
+    assert "\n" not in str(raised.value)
+
+
+def offset_ramp_and_hold(
+    offset_m: float = 0.1e-3, depth_m: float = 0.3 * RADIUS_M
+) -> tuple[tuple[np.ndarray, np.ndarray], np.ndarray]:
+    """A 0.5 s ramp to the recorded depth ``offset_m + depth_m`` that touches at ``offset_m``
+    (a sample at the touch), then a 5 s hold in log time: ((time_s, true depth), recorded)."""
+    recorded_m = offset_m + depth_m
+    touch = 0.5 * offset_m / recorded_m
+    ramp = np.union1d(np.linspace(0.02, 0.5, 16), [touch])
+    time = np.concatenate([ramp, 0.5 + np.geomspace(0.05, 5.0, 24)])
+    recorded = np.where(time <= 0.5, recorded_m * time / 0.5, recorded_m)
+    return (time, np.clip(recorded - offset_m, 0.0, None)), recorded
+
+
+def viscous_offset_study(folder: Path, fit: str, **options):
+    history, recorded = offset_ramp_and_hold(**options)
+    return make_study(
+        folder,
+        truth=VISCOELASTIC,
+        start=VISCOELASTIC,
+        fit=fit,
+        history=history,
+        recorded_depth=[recorded],
+        solver="tolerance = 1e-12",
+    )
+
+
+def test_the_timed_offset_column_equals_central_differences(tmp_path):
+    # Viscoelastic: the FE run starts at the touch, which moves with the offset; the column
+    # is a one-sided difference (one more run), checked against central differences.
+    study = viscous_offset_study(
+        tmp_path, 'free = ["C10_Pa", "g1"]\ntime_steps = 6\ncontact_point = "fit"\n'
+    )
+    free = ("C10_Pa", "g1")
+    model = _forward_model(
+        study, study.material, free, device="cpu", progress=False, offset_start=np.array([1e-4])
+    )
+    x = np.array([270.0, 0.45, 0.93e-4])
+    jacobian = model.jac(x)
+    assert model.forward_solves == 2  # the record's run and the offset's difference
+    # The column against central differences of whole evaluations (each moves the touch).
+    up, down = x.copy(), x.copy()
+    up[2] += 1e-9
+    down[2] -= 1e-9
+    central = (model.fun(up) - model.fun(down)) / 2e-9
+    scale = float(np.max(np.abs(central)))
+    assert scale > 0.0
+    np.testing.assert_allclose(jacobian[:, 2], central, rtol=0, atol=1e-3 * scale)
+
+
+@pytest.mark.slow
+def test_a_viscoelastic_record_gives_its_contact_point_and_c10(tmp_path):
+    # A ramp and hold touching at 0.1 mm, the Prony term known; the offset starts 50 % off.
+    study = viscous_offset_study(
+        tmp_path,
+        'free = ["C10_Pa"]\ntime_steps = 12\ncontact_point = "fit"\n'
+        "[fit.start]\ndepth_offset_m = 0.15e-3\n",
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert fit.result.parameter_names == ("C10_Pa", "depth_offset_m")
+    assert abs(fit.parameters["depth_offset_m"] - 0.1e-3) < 5e-6
+    assert fit.parameters["C10_Pa"] == pytest.approx(287.5, rel=0.02)
+    assert fit.forward_solves == 2 * fit.result.nfev  # the record's run and the difference
+    assert fit.warnings == []
+
+
+def test_each_record_has_its_own_offset_and_all_share_one_fe_run(tmp_path):
+    first, recorded_first = offset_ramp()
+    second, recorded_second = offset_ramp(0.3e-3, 0.05e-3, 30)
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 10\ncontact_point = "fit"\n',
+        history=[first, second],
+        recorded_depth=[recorded_first, recorded_second],
+    )
+    fit = fit_indentation(study, progress=False)
+    assert fit.status == "converged", fit.message
+    assert fit.result.parameter_names == ("C10_Pa", "depth_offset1_m", "depth_offset2_m")
+    assert fit.forward_solves == fit.result.nfev  # one FE run per evaluation, both records
+    assert fit.parameters["C10_Pa"] == pytest.approx(287.5, rel=0.02)
+    assert abs(fit.parameters["depth_offset1_m"] - OFFSET_M) < 5e-6
+    assert abs(fit.parameters["depth_offset2_m"] - 0.05e-3) < 5e-6
+    assert [r.depth_offset_m for r in fit.records] == list(fit.result.x[1:])
+    assert fit.warnings == []
+
+
+def test_the_cli_reports_the_fitted_contact_point(offset_record, tmp_path, capsys):
+    from warptissue.cli import main
+
+    text = offset_record.path.read_text() + 'contact_point = "fit"\n'
+    path = offset_record.path.with_name("contact_fit.toml")
+    path.write_text(text)
+    status = main(["fit", "indentation", str(path), "-o", str(tmp_path / "out")])
+    captured = capsys.readouterr()
+    assert status == 0, captured.err
+    assert "depth_offset_m" in captured.out
+    assert "record.csv: R^2 =" in captured.out and "contact fitted at recorded depth 0.15" in (
+        captured.out
+    )
+    summary = json.loads((tmp_path / "out" / "fit.json").read_text())
+    assert summary["contact_point"] == "fit"
+    d0 = summary["records"][0]["depth_offset_m"]
+    assert abs(d0 - OFFSET_M) < 5e-6
+    assert summary["parameters"]["depth_offset_m"]["value"] == d0
+    with (tmp_path / "out" / "fit_curves.csv").open() as handle:
+        header = handle.readline().strip().split(",")
+        rows = [line.strip().split(",") for line in handle]
+    below = np.array([float(row[header.index("depth_below_fitted_contact_m")]) for row in rows])
+    depth = np.array([float(row[header.index("depth_m")]) for row in rows])
+    np.testing.assert_allclose(below, np.clip(depth - d0, 0.0, None), atol=1e-15)
+    # The fitted study keeps the records as given (the offset is in fit.json) and still fits
+    # the contact point when run again.
+    assert "contact_point" in (tmp_path / "out" / "fitted_study.toml").read_text()
+
+
+def test_the_cli_offers_the_study_keys_contact_points(capsys):
+    from warptissue.cli import fit_indentation as command
+    from warptissue.cli import main
+    from warptissue.study import CONTACT_POINTS
+
+    assert command.CONTACT_POINTS == CONTACT_POINTS
+    with pytest.raises(SystemExit):
+        main(["fit", "indentation", "--help"])
+    assert "--contact-point {given,fit}" in capsys.readouterr().out
+
+
+def test_the_touch_time_follows_the_offset_through_the_record():
+    from types import SimpleNamespace
+
+    from warptissue.acquisition.conditioning import FitRecord
+    from warptissue.fit.indentation import _ForwardModel
+    from warptissue.study import DataRecord
+
+    # As a conditioned record: depth 0 (clipped) until the contact at 1 s, then 0.1 mm/s.
+    time = np.arange(0.0, 4.01, 0.1)
+    depth = np.clip(time - 1.0, 0.0, None) * 1e-4
+    record = DataRecord(
+        file="r.csv",
+        path=Path("r.csv"),
+        record=FitRecord(time, depth, depth * 10.0, True, {}),
+    )
+    model = SimpleNamespace(records=(record,), steps=8)
+    touch, (times, depths) = _ForwardModel._touch(model, 0, 0.0)
+    assert touch == pytest.approx(1.0)  # the contact, not the first sample
+    assert times[-1] == pytest.approx(3.0) and depths[-1] == pytest.approx(3e-4)
+    touch, (times, depths) = _ForwardModel._touch(model, 0, 0.125e-4)
+    assert touch == pytest.approx(1.125)  # between samples
+    assert depths[-1] == pytest.approx(3e-4 - 0.125e-4)
+    with pytest.raises(RejectStep, match="never reaches"):
+        _ForwardModel._touch(model, 0, 4e-4)
+
+
+def test_an_offset_is_judged_against_its_record_not_its_value():
+    # A depth offset may be zero: its standard error is judged against a tenth of its
+    # record's depth span (standard_error_scales), a modulus against its own value.
+    from warptissue.fit.result import FitResult
+
+    def result(errors, scales):
+        x = np.array([287.5, 1e-7])
+        return FitResult(
+            x=x,
+            parameter_names=("C10_Pa", "depth_offset_m"),
+            parameter_units=("Pa", "m"),
+            cost=1.0,
+            residuals=np.ones(10),
+            jacobian=np.ones((10, 2)),
+            success=True,
+            status=1,
+            message="",
+            iterations=1,
+            nfev=1,
+            njev=1,
+            covariance=np.diag(np.square(errors)),
+            standard_errors=np.array(errors),
+            correlation=np.eye(2),
+            r_squared=None,
+            rmse=0.0,
+            standard_error_scales=scales,
+        )
+
+    scales = np.array([np.nan, 4.5e-5])
+    assert result([2.0, 1e-6], scales).identifiability == []
+    assert len(result([2.0, 1e-6], None).identifiability) == 1  # 1 um > 0.1 um: by value
+    (message,) = result([2.0, 5e-5], scales).identifiability
+    assert "depth_offset_m" in message and "larger than 4.5e-05 m" in message
+    (message,) = result([300.0, 1e-6], scales).identifiability
+    assert "C10_Pa" in message and "larger than its value" in message

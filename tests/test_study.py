@@ -351,7 +351,9 @@ def test_solver_table_keys_are_the_options_names(tmp_path):
     record["solver"].update(values)
     study = study_from_dict(record)
     assert study.solver.options == NewtonOptions(**values)
-    assert study.to_dict()["solver"] == dict(values, device="auto", formulation="mixed")
+    assert study.to_dict()["solver"] == dict(
+        values, device="auto", formulation="mixed", penalty_factor=1000.0
+    )
     path = write(tmp_path, tomli_w.dumps(study.to_dict()))
     assert load_study(path).solver == study.solver
 
@@ -471,6 +473,7 @@ def test_every_key_is_in_the_study_file_reference():
     fit_record = load_study(FIT_SCENE).to_dict()
     v2_keys = set(fit_record["data"][0]) | set(fit_record["fit"]) - {"start", "bounds"}
     v2_keys |= {"contact_position_m", "offset", "window_s", "relative_floor_N", "stop_r_squared"}
+    v2_keys |= {"contact_point", "depth_offset_m"}
     assert v2_keys <= documented, sorted(v2_keys - documented)
     for header in ("[[data]]", "[fit]", "[fit.start]", "[fit.bounds]"):
         assert f"| **`{header}`** |" in page, header
@@ -893,6 +896,38 @@ BAD_V2 = [
         "287.5",
         id="material-outside-bounds",
     ),
+    pytest.param(
+        'method = "salm"', 'contact_point = "guess"', "fit.contact_point", "'guess'", id="contact"
+    ),
+    pytest.param(
+        'method = "salm"',
+        "[fit.start]\ndepth_offset_m = 1e-4",
+        "fit.start.depth_offset_m",
+        "0.0001",
+        id="offset-start-without-fit",
+    ),
+    pytest.param(
+        'method = "salm"',
+        'contact_point = "fit"\n[fit.start]\ndepth_offset_m = "0.1 mm"',
+        "fit.start.depth_offset_m",
+        "'0.1 mm'",
+        id="offset-start-unit",
+    ),
+    pytest.param(
+        'method = "salm"',
+        'contact_point = "fit"\n[fit.bounds]\ndepth_offset_m = [2e-4, 1e-4]',
+        "fit.bounds.depth_offset_m",
+        "[0.0002, 0.0001]",
+        id="offset-bounds-backwards",
+    ),
+    pytest.param(
+        'method = "salm"',
+        'contact_point = "fit"\n[fit.bounds]\ndepth_offset_m = [0.0, 1e-4]\n'
+        "[fit.start]\ndepth_offset_m = 2e-4",
+        "fit.start.depth_offset_m",
+        "0.0002",
+        id="offset-start-outside-bounds",
+    ),
 ]
 
 
@@ -1227,6 +1262,25 @@ def test_fit_strategy_and_time_steps_defaults_and_round_trip(tmp_path):
 
 
 VISCO_MATERIAL = "C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\ng1 = 0.3\ntau1_s = 1.0\n"
+
+
+def test_contact_point_defaults_and_round_trips(tmp_path):
+    study = load_study(write_v2(tmp_path))
+    assert study.fit.contact_point == "given" and "contact_point" not in study.fit.to_dict()
+    text = V2.replace(
+        'method = "salm"',
+        'method = "salm"\ncontact_point = "fit"\n[fit.start]\ndepth_offset_m = -2e-5\n'
+        "[fit.bounds]\ndepth_offset_m = [-1e-4, 1e-4]",
+    )
+    study = load_study(write_v2(tmp_path, text))
+    assert study.fit.contact_point == "fit"
+    assert study.fit.start == {"depth_offset_m": -2e-5}
+    assert study.fit.bounds == {"depth_offset_m": (-1e-4, 1e-4)}
+    assert study.fit.to_dict()["contact_point"] == "fit"
+    assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
+    # A viscoelastic material takes it too (each record's FE run starts at its touch).
+    visco = text.replace("C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\n", VISCO_MATERIAL)
+    assert load_study(write_v2(tmp_path, visco)).fit.contact_point == "fit"
 
 
 def test_two_stage_needs_prony_terms_and_a_free_elastic_parameter(tmp_path):

@@ -514,3 +514,114 @@ def test_one_indenter_type_from_the_study_to_usd():
     rounded = Indenter("flat_punch", radius_m=1e-3, edge_radius_m=1e-4)
     assert rounded.contact == "frictionless" and rounded.is_rigid_contact
     assert Indenter.from_dict(rounded.to_dict()) == rounded
+
+
+# --- contact outputs (issue 21): pressure primvar, area attribute, the plate's size ---------
+
+
+def _contact_result(mesh: TetMesh, rng: np.random.Generator, steps: int = 3) -> dict:
+    result = _result(mesh, rng, steps)
+    result["contact_area_m2"] = np.linspace(1e-6, 3e-6, steps)
+    result["contact_pressure_Pa"] = rng.uniform(0.0, 100.0, size=(steps, mesh.node_count))
+    return result
+
+
+def _surface_pressure(stage, time_code):
+    from pxr import UsdGeom
+
+    surface = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Specimen/Surface"))
+    primvar = UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:contactPressure")
+    return primvar, (np.asarray(primvar.Get(time_code)) if primvar else None)
+
+
+def test_contact_pressure_and_area_are_sampled_per_step(tmp_path, specimen, rng):
+    """TET10 result: each surface point of the render Mesh carries, at time code k, the
+    pressure of the mesh node at its rest position (found by position, not by index), and
+    time code 0 none; the indenter carries the contact area per time code."""
+    from pxr import Usd, UsdGeom
+
+    quadratic = to_tet10(specimen)
+    result = _contact_result(quadratic, rng)
+    paths = write_simulation_usd(
+        tmp_path / "c.usda", quadratic, result=result, indenter=Indenter("sphere", radius_m=2e-3)
+    )
+    assert validate_stage(paths.root) == []
+    stage = Usd.Stage.Open(str(paths.root))
+    surface = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Specimen/Surface"))
+    rest = np.asarray(surface.GetPointsAttr().Get(0), dtype=np.float64)
+    node = np.argmin(
+        np.linalg.norm(quadratic.points[None, :, :] - rest[:, None, :], axis=2), axis=1
+    )
+    assert np.abs(quadratic.points[node] - rest).max() < 1e-9
+    primvar, values = _surface_pressure(stage, 0)
+    assert primvar.GetInterpolation() == "vertex"
+    assert primvar.GetAttr().GetCustomDataByKey("unit") == "Pa"
+    np.testing.assert_array_equal(values, 0.0)
+    for k in range(3):
+        np.testing.assert_array_equal(
+            _surface_pressure(stage, k + 1)[1], result["contact_pressure_Pa"][k, node]
+        )
+    area = stage.GetPrimAtPath("/World/Indenter").GetAttribute("tissue:probe:contactArea")
+    assert area.GetCustomDataByKey("unit") == "m2"
+    assert [area.Get(k) for k in range(4)] == [0.0, *result["contact_area_m2"].tolist()]
+    # The results layer holds the samples; the asset layer none.
+    from pxr import Sdf
+
+    assert Sdf.Layer.FindOrOpen(str(paths.results)).ListAllTimeSamples() == [0, 1, 2, 3]
+    assert not Sdf.Layer.FindOrOpen(str(paths.asset)).ListAllTimeSamples()
+
+
+def test_last_step_contact_pressure_and_empty_contact_results(tmp_path, specimen, rng):
+    """A (N,) pressure is the last step's (time codes 0 and S); a sharp flat punch's empty
+    contact arrays write no contact attribute; a wrong shape is refused by name."""
+    from pxr import Usd
+
+    result = _contact_result(specimen, rng)
+    last = result["contact_pressure_Pa"][-1]
+    paths = write_simulation_usd(
+        tmp_path / "l.usda", specimen, result={**result, "contact_pressure_Pa": last}
+    )
+    stage = Usd.Stage.Open(str(paths.root))
+    primvar, at_end = _surface_pressure(stage, 3)
+    assert primvar.GetAttr().GetTimeSamples() == [0.0, 3.0]
+    indices = np.asarray(
+        stage.GetPrimAtPath("/World/Specimen/Surface")
+        .GetAttribute("tissue:volumePointIndices")
+        .Get()
+    )
+    np.testing.assert_array_equal(at_end, last[indices])
+    empty = {
+        **_result(specimen, rng),
+        "contact_area_m2": np.zeros(0),
+        "contact_pressure_Pa": np.zeros((0, specimen.node_count)),
+    }
+    paths = write_simulation_usd(tmp_path / "e.usda", specimen, result=empty)
+    stage = Usd.Stage.Open(str(paths.root))
+    assert not _surface_pressure(stage, 1)[0]
+    assert not stage.GetPrimAtPath("/World/Indenter").GetAttribute("tissue:probe:contactArea")
+    bad = {**result, "contact_pressure_Pa": result["contact_pressure_Pa"][:, :5]}
+    with pytest.raises(InputError, match="contact_pressure_Pa"):
+        write_simulation_usd(tmp_path / "b.usda", specimen, result=bad)
+
+
+def test_a_plate_is_drawn_over_the_specimen_footprint(tmp_path, specimen):
+    """The rigid plate (no length of its own) covers the specimen's footprint, resting on its
+    top; a platen keeps its own side."""
+    from pxr import Usd, UsdGeom
+
+    for probe, expected in (
+        (Indenter("plate"), (specimen.points[:, :2].min(0), specimen.points[:, :2].max(0))),
+        (Indenter("platen", length_m=4e-3), (np.full(2, -2e-3), np.full(2, 2e-3))),
+    ):
+        paths = write_simulation_usd(tmp_path / f"{probe.kind}.usda", specimen, indenter=probe)
+        stage = Usd.Stage.Open(str(paths.root))
+        cache = UsdGeom.BBoxCache(Usd.TimeCode.Default(), [UsdGeom.Tokens.default_])
+        box = cache.ComputeWorldBound(
+            stage.GetPrimAtPath("/World/Indenter/Shape")
+        ).ComputeAlignedRange()
+        low, high = np.array(box.GetMin()), np.array(box.GetMax())
+        np.testing.assert_allclose(low[:2], expected[0], atol=1e-9)
+        np.testing.assert_allclose(high[:2], expected[1], atol=1e-9)
+        top = specimen.points[:, 2].max()
+        assert low[2] == pytest.approx(top, abs=1e-9) and high[2] > top
+        assert validate_stage(paths.root) == []

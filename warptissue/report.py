@@ -325,12 +325,13 @@ def indentation_fit_columns(fit: IndentationFit) -> dict[str, np.ndarray]:
         ``record`` (the record's file as the study names it), ``time_s``, ``depth_m``,
         ``measured_force_N``, ``fitted_force_N`` and ``residual_N`` (fitted - measured), each
         shape (m,) with m the samples of all records (conditioned: time and depth from the
-        contact).
+        contact); with a fitted contact point (``contact_point = "fit"``) also
+        ``depth_below_fitted_contact_m``: ``max(depth_m - d0, 0)``, the FE's depth.
     """
     records = fit.records
     measured = np.concatenate([np.asarray(r.measured_force_N, float) for r in records])
     fitted = np.concatenate([np.asarray(r.fitted_force_N, float) for r in records])
-    return {
+    columns = {
         "record": np.concatenate(
             [np.full(len(r.time_s), str(r.file), dtype=object) for r in records]
         ),
@@ -340,6 +341,11 @@ def indentation_fit_columns(fit: IndentationFit) -> dict[str, np.ndarray]:
         "fitted_force_N": fitted,
         "residual_N": fitted - measured,
     }
+    if getattr(fit, "contact_point", "given") == "fit":
+        columns["depth_below_fitted_contact_m"] = np.concatenate(
+            [np.clip(np.asarray(r.depth_m, float) - r.depth_offset_m, 0.0, None) for r in records]
+        )
+    return columns
 
 
 def plot_indentation_fit(
@@ -348,7 +354,8 @@ def plot_indentation_fit(
     """Plot an inverse-FE fit to a PNG, atomically: four panels.
 
     Force against depth and force against time (each record's measured samples as dots, the
-    fitted FE force as a line, one colour per record), the residuals (fitted - measured)
+    fitted FE force as a line, one colour per record; a fitted contact point as a dashed
+    line), the residuals (fitted - measured)
     against time, and the convergence history of the least-squares engine (the cost after
     each trial step from the start values' at step 0, with the cost of each refused or
     rejected trial marked).
@@ -395,6 +402,15 @@ def plot_indentation_fit(
             linewidth=1.5,
             label=f"{name}: fitted (R^2 = {r2})",
         )
+        offset = getattr(record, "depth_offset_m", None)
+        if offset is not None:
+            by_depth.axvline(
+                offset * 1e3,
+                color=colour,
+                linestyle="--",
+                linewidth=1,
+                label=f"{name}: fitted contact ({offset * 1e3:.4g} mm)",
+            )
         by_time.plot(time[keep], measured[keep], "o", color=colour, markersize=2.5, alpha=0.4)
         by_time.plot(time, fitted, "-", color=colour, linewidth=1.5)
         residuals.plot(

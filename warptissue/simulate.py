@@ -12,15 +12,24 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
   ``warptissue rig-sim --tissue curve --force-curve``). For a timed protocol
   (:attr:`warptissue.study.Protocol.timed`: ramp-and-hold, sine, a record's history)
   ``time_s`` is the time of each step (s), and a viscoelastic material relaxes; for a
-  quasi-static one (rate-independent) it is a pseudo-time, the load-step number;
+  quasi-static one (rate-independent) it is a pseudo-time, the load-step number. Under a
+  rigid indenter in contact (sphere, plate, wedge, rounded punch) a last column
+  ``contact_area_m2`` holds the contact area of the whole specimen
+  (:attr:`warptissue.fem.IndentationResult.contact_area_m2`);
 - ``result.json``: the study echoed back with every default, the force curve, iterations,
   ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,
-  ``warnings`` (an implausible force curve: :func:`force_curve_warnings`), mesh statistics,
-  timings and software versions;
+  ``warnings`` (an implausible force curve: :func:`force_curve_warnings`; a penetration of
+  the indenter beyond :data:`PENETRATION_WARNING_SHARE` of the depth), mesh statistics,
+  timings and software versions; under a rigid indenter in contact also, per step, the
+  contact force, the contact area, the largest penetration and the largest contact
+  pressure in ``force_curve``, and the largest penetration of the run in ``contact``;
 - ``fields.vtu``: the mesh with nodal displacement (point data ``displacement_m``) and per-tet
   Cauchy stress (cell data ``cauchy_stress_Pa``, Voigt order xx, yy, zz, yz, xz, xy) and von
-  Mises stress (``von_mises_Pa``) at the last converged load step;
-- ``fields_NNN.vtu`` (only when asked): the displacement of every converged load step NNN.
+  Mises stress (``von_mises_Pa``) at the last converged load step; under a rigid indenter
+  in contact also the contact pressure (point data ``contact_pressure_Pa``, Pa, zero off the
+  contact; :class:`warptissue.fem.contact.ContactSurface`);
+- ``fields_NNN.vtu`` (only when asked): the displacement (and under a rigid indenter the
+  contact pressure) of every converged load step NNN.
   Those of an earlier run in the same folder are removed first.
 
 A run that stops early (the load-step cutback is exhausted) or is interrupted (Ctrl-C) still
@@ -49,19 +58,29 @@ from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, wri
 from warptissue.study import Study
 
 __all__ = [
+    "CONTACT_CURVE_COLUMNS",
     "FORCE_CURVE_COLUMNS",
+    "PENETRATION_WARNING_SHARE",
     "SimulationOutputs",
     "build_mesh",
     "build_problem",
     "estimate_mesh",
     "force_curve_warnings",
     "kernels_need_compiling",
+    "penetration_warnings",
     "run_study",
 ]
 
 FORCE_CURVE_COLUMNS: tuple[str, ...] = (*INDENTATION_COLUMNS, "step", "newton_iterations")
 """Columns of ``force_curve.csv``: an indentation record's
 (:data:`warptissue.io.INDENTATION_COLUMNS`), then the solver's."""
+CONTACT_CURVE_COLUMNS: tuple[str, ...] = ("contact_area_m2",)
+"""Columns ``force_curve.csv`` adds after :data:`FORCE_CURVE_COLUMNS` under a rigid
+indenter in contact."""
+PENETRATION_WARNING_SHARE = 0.01
+"""A penetration of the indenter into the specimen beyond this share of the depth is said
+in ``result.json``'s warnings (the penalty is too soft; docs/fe.md "Contact" measures 1e-4
+with the default penalty factor)."""
 INTERRUPTED_EXIT_CODE = 130
 """Exit status of an interrupted run (Ctrl-C), as the shell gives a process ended by SIGINT."""
 COMPILE_NOTICE = "compiling Warp kernels (first run only, about a minute)..."
@@ -180,7 +199,27 @@ def build_problem(study: Study, mesh: Any) -> Any:
         base=study.boundary.base,
         symmetry_planes=("symmetry_x", "symmetry_y") if study.specimen.quarter else (),
         formulation=study.solver.formulation,
+        penalty_factor=study.solver.penalty_factor,
     )
+
+
+def penetration_warnings(depths_m: np.ndarray, max_penetration_m: np.ndarray) -> list[str]:
+    """A penetration of a rigid indenter beyond :data:`PENETRATION_WARNING_SHARE` of the
+    depth, said for the first step concerned (empty when none is, or without contact)."""
+    depths_m = np.asarray(depths_m, dtype=np.float64)
+    penetration = np.asarray(max_penetration_m, dtype=np.float64)
+    if penetration.size == 0:
+        return []
+    deep = np.flatnonzero(penetration > PENETRATION_WARNING_SHARE * np.abs(depths_m))
+    if deep.size == 0:
+        return []
+    step = int(deep[0])
+    return [
+        f"the indenter penetrates the specimen by {penetration[step]:.3g} m at step "
+        f"{step + 1} ({penetration[step] / max(abs(depths_m[step]), 1e-300):.2%} of the depth "
+        f"{depths_m[step]:.6g} m): the contact penalty is too soft for this material; "
+        "raise solver.penalty_factor"
+    ]
 
 
 def _mesh_statistics(mesh: Any) -> dict[str, Any]:
@@ -304,7 +343,9 @@ def kernels_need_compiling(device: Any) -> bool:
     return False
 
 
-def _write_fields(out_dir: Path, mesh: Any, result: Any, *, every_step: bool) -> dict[str, Path]:
+def _write_fields(
+    out_dir: Path, mesh: Any, result: Any, *, every_step: bool, contact: bool = False
+) -> dict[str, Path]:
     from warptissue.mesh import write_mesh
 
     files: dict[str, Path] = {}
@@ -318,18 +359,31 @@ def _write_fields(out_dir: Path, mesh: Any, result: Any, *, every_step: bool) ->
         final = np.zeros_like(mesh.points)
         stress = np.zeros((mesh.tet_count, 6))
         von_mises = np.zeros(mesh.tet_count)
+    pressure = np.asarray(result.contact_pressure_Pa, dtype=np.float64) if contact else None
+
+    def point_data(step: int | None) -> dict[str, np.ndarray]:
+        """The nodal fields of one step (None: the last converged one, or the rest state)."""
+        data = {"displacement_m": final if step is None else displacements[step]}
+        if pressure is not None:
+            if step is None:
+                last = pressure[converged - 1] if converged else np.zeros(mesh.node_count)
+                data["contact_pressure_Pa"] = last
+            else:
+                data["contact_pressure_Pa"] = pressure[step]
+        return data
+
     files["fields"] = out_dir / "fields.vtu"
     write_mesh(
         files["fields"],
         mesh,
-        point_data={"displacement_m": final},
+        point_data=point_data(None),
         cell_data={"cauchy_stress_Pa": stress, "von_mises_Pa": von_mises},
     )
     if every_step:
         for step in range(converged):
             name = f"fields_{step + 1:03d}"
             files[name] = out_dir / f"{name}.vtu"
-            write_mesh(files[name], mesh, point_data={"displacement_m": displacements[step]})
+            write_mesh(files[name], mesh, point_data=point_data(step))
     return files
 
 
@@ -420,20 +474,48 @@ def run_study(
         if times is not None
         else steps.astype(np.float64)
     )
+    is_contact = bool(problem.is_contact)
+    curve_columns = {
+        "time_s": np.concatenate([[0.0], step_times]),
+        "displacement_m": np.concatenate([[0.0], depths]),
+        "force_N": np.concatenate([[0.0], forces]),
+        "step": np.arange(converged + 1, dtype=np.int64),
+        "newton_iterations": np.concatenate([[0], newton]).astype(np.int64),
+    }
+    contact_curve: dict[str, Any] = {}
+    contact_summary: dict[str, Any] = {}
+    if is_contact:
+        area = np.asarray(result.contact_area_m2, dtype=np.float64)[:converged]
+        penetration = np.asarray(result.max_penetration_m, dtype=np.float64)[:converged]
+        pressure = np.asarray(result.contact_pressure_Pa, dtype=np.float64)[:converged]
+        curve_columns["contact_area_m2"] = np.concatenate([[0.0], area])
+        contact_curve = {
+            "contact_force_N": np.asarray(result.contact_force_N, dtype=np.float64)[:converged],
+            "contact_area_m2": area,
+            "max_penetration_m": penetration,
+            "max_contact_pressure_Pa": (
+                pressure.max(axis=1) if pressure.size else np.zeros(converged)
+            ),
+        }
+        contact_summary = {
+            "contact": {
+                "indenter": study.indenter.kind,
+                "penalty_factor": float(problem.penalty_factor),
+                "penalty_stiffness_N_per_m": float(problem.rigid_contact().stiffness_N_per_m),
+                "max_penetration_m": float(penetration.max()) if penetration.size else 0.0,
+                "max_penetration_step": (
+                    int(np.argmax(penetration)) + 1 if penetration.size else None
+                ),
+                "contact_area_m2": float(area[-1]) if area.size else 0.0,
+            }
+        }
     files: dict[str, Path] = {
         "result": out_path / "result.json",
-        "force_curve": write_csv(
-            out_path / "force_curve.csv",
-            {
-                "time_s": np.concatenate([[0.0], step_times]),
-                "displacement_m": np.concatenate([[0.0], depths]),
-                "force_N": np.concatenate([[0.0], forces]),
-                "step": np.arange(converged + 1, dtype=np.int64),
-                "newton_iterations": np.concatenate([[0], newton]).astype(np.int64),
-            },
-        ),
+        "force_curve": write_csv(out_path / "force_curve.csv", curve_columns),
     }
-    files.update(_write_fields(out_path, mesh, result, every_step=vtu_every_step))
+    files.update(
+        _write_fields(out_path, mesh, result, every_step=vtu_every_step, contact=is_contact)
+    )
     written = time.perf_counter()
     summary = {
         "study": {"path": study.path, **study.to_dict()},
@@ -451,10 +533,13 @@ def run_study(
             "newton_iterations": newton,
             "linear_iterations": np.asarray(result.linear_iterations, dtype=np.int64),
             "local_iterations": np.asarray(result.local_iterations, dtype=np.int64),
+            **contact_curve,
         },
+        **contact_summary,
         "steps_requested": study.protocol.step_count,
         "steps_converged": converged,
-        "warnings": force_curve_warnings(depths, forces),
+        "warnings": force_curve_warnings(depths, forces)
+        + (penetration_warnings(depths, contact_curve["max_penetration_m"]) if is_contact else []),
         "mesh": mesh_statistics,
         "timings_s": {
             "mesh_and_setup": meshed - started,

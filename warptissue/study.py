@@ -52,6 +52,8 @@ if TYPE_CHECKING:
 __all__ = [
     "FIT_METHODS",
     "FIT_OBJECTIVES",
+    "CONTACT_POINTS",
+    "DEPTH_OFFSET",
     "FIT_STRATEGIES",
     "PROTOCOL_KINDS",
     "SCHEMA_VERSION",
@@ -87,6 +89,12 @@ PRONY_NAME = re.compile(r"^(g\d+|tau\d+_s)$")
 """A Prony parameter of a viscoelastic ``[material]``: ``g<i>`` or ``tau<i>_s``."""
 START_FROM: tuple[str, ...] = ("record", "material")
 """``fit.start_from``: where a free parameter without a ``[fit.start]`` value starts."""
+CONTACT_POINTS: tuple[str, ...] = ("given", "fit")
+"""``fit.contact_point``: the records' depths as conditioned (``"given"``), or a depth offset
+of each record fitted with the material (``"fit"``, :mod:`warptissue.fit.indentation`)."""
+DEPTH_OFFSET: str = "depth_offset_m"
+"""The key of the depth offset in ``[fit.start]`` and ``[fit.bounds]`` (with
+``contact_point = "fit"``), and its parameter name in a fit of one record."""
 DEFAULT_COLUMNS: dict[str, str] = {
     "time_column": "time_s",
     "displacement_column": "displacement_m",
@@ -267,7 +275,7 @@ class Boundary:
 class Solver:
     """Solver settings: the ``[solver]`` table.
 
-    The table is flat: ``device``, ``formulation`` and the keys of
+    The table is flat: ``device``, ``formulation``, ``penalty_factor`` and the keys of
     :class:`warptissue.fem.NewtonOptions` under the same names (``linear_solver``,
     ``tolerance``, ``max_newton_iterations``, ``max_cutbacks``, ``nonlinear_elimination``,
     ``predictor``, ``damping``), each with its default there.
@@ -279,15 +287,26 @@ class Solver:
             ``"displacement"`` (pure displacement; locks when nearly incompressible).
         options: The Newton solver's settings, passed as they are to
             :func:`warptissue.fem.simulate_indentation`.
+        penalty_factor: ``beta`` of the rigid contact's penalty stiffness ``k = beta mu0 h``
+            (:class:`warptissue.fem.IndentationProblem`; default
+            :data:`warptissue.fem.contact.DEFAULT_PENALTY_FACTOR`); unused by a sharp flat
+            punch, whose nodes are prescribed.
     """
 
     device: str
     formulation: str
     options: NewtonOptions
+    penalty_factor: float
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``[solver]`` table (flat: device, formulation, then the Newton options)."""
-        return {"device": self.device, "formulation": self.formulation, **self.options.to_dict()}
+        """The ``[solver]`` table (flat: device, formulation, penalty factor, then the Newton
+        options)."""
+        return {
+            "device": self.device,
+            "formulation": self.formulation,
+            "penalty_factor": self.penalty_factor,
+            **self.options.to_dict(),
+        }
 
 
 @dataclass(frozen=True)
@@ -517,6 +536,12 @@ class FitSettings:
             ``[material]`` and a free parameter that is not one).
         time_steps: FE time steps per record: the grid of
             :meth:`DataRecord.load_history` (:func:`warptissue.loading.resample_history`).
+        contact_point: ``"given"``: the records' depths count from the contact as
+            conditioned; ``"fit"``: each record's depth offset d0 (the recorded depth at
+            first touch, m) is fitted with the material, F(d) = F_FE(max(d - d0, 0))
+            (docs/fitting.md "Contact point"). Its start and bounds
+            are ``start["depth_offset_m"]`` and ``bounds["depth_offset_m"]`` (each record's),
+            else from each record.
     """
 
     free: tuple[str, ...]
@@ -533,6 +558,7 @@ class FitSettings:
     stop_r_squared: float | None = None
     strategy: str = "joint"
     time_steps: int = 24
+    contact_point: str = "given"
 
     def parameter_bounds(self, material: Any) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the free parameters, each shape (n,), in ``free`` order.
@@ -565,6 +591,8 @@ class FitSettings:
             "strategy": self.strategy,
             "time_steps": self.time_steps,
         }
+        if self.contact_point != "given":
+            table["contact_point"] = self.contact_point
         if self.relative_floor_N is not None:
             table["relative_floor_N"] = self.relative_floor_N
         if self.stop_r_squared is not None:
@@ -1037,17 +1065,21 @@ def _read_boundary(table: _Table) -> Boundary:
 def _read_solver(table: _Table) -> Solver:
     # The solver's own modules: importing them does not start Warp (test_study checks).
     from warptissue.fem.assembly import FORMULATIONS
+    from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
     from warptissue.fem.solvers import NewtonOptions
 
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):
         raise table.error("device", "must be 'auto', 'cpu', 'cuda' or 'cuda:N'", device)
     formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
+    penalty_factor = table.number("penalty_factor", default=DEFAULT_PENALTY_FACTOR)
     options = table.build(
         lambda values: NewtonOptions(**values), table.present(NewtonOptions.keys())
     )
     table.finish()
-    return Solver(device=device, formulation=formulation, options=options)
+    return Solver(
+        device=device, formulation=formulation, options=options, penalty_factor=penalty_factor
+    )
 
 
 _RECORD_KEYS = (
@@ -1206,11 +1238,23 @@ def _free_name_problem(name: str, material: Any) -> str:
     )
 
 
-def _parameter_table(table: _Table, free: Sequence[str], material: Any) -> dict[str, Any]:
-    """The keys of ``[fit.start]`` or ``[fit.bounds]``: each must be a free parameter."""
+def _parameter_table(
+    table: _Table, free: Sequence[str], material: Any, *, contact_point: str = "given"
+) -> dict[str, Any]:
+    """The keys of ``[fit.start]`` or ``[fit.bounds]``: each must be a free parameter (or
+    the depth offset, with ``contact_point = "fit"``)."""
     for key in table.data:
         if key in free:
             continue
+        if key == DEPTH_OFFSET:
+            if contact_point == "fit":
+                continue
+            raise table.error(
+                key,
+                "applies only with fit.contact_point = 'fit' (the depth offset fitted with "
+                "the material)",
+                table.data[key],
+            )
         if key in material.parameter_names:
             raise table.error(
                 key,
@@ -1237,9 +1281,10 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         if free_raw.count(name) > 1:
             raise table.error("free", f"names {name!r} twice", free_raw)
     free = tuple(free_raw)
+    contact_point = table.string("contact_point", default="given", choices=CONTACT_POINTS)
     bounds_table = _optional_table(table, "bounds")
     bounds: dict[str, tuple[float, float]] = {}
-    for key in _parameter_table(bounds_table, free, material):
+    for key in _parameter_table(bounds_table, free, material, contact_point=contact_point):
         pair = bounds_table.raw(key)
         if not isinstance(pair, list) or len(pair) != 2:
             raise bounds_table.error(key, "must be [lower, upper]", pair)
@@ -1252,8 +1297,14 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
     start_table = _optional_table(table, "start")
     start = {
         key: start_table.number(key, positive=False)
-        for key in _parameter_table(start_table, free, material)
+        for key in _parameter_table(start_table, free, material, contact_point=contact_point)
     }
+    if DEPTH_OFFSET in start and DEPTH_OFFSET in bounds:
+        low, high = bounds[DEPTH_OFFSET]
+        if not low <= start[DEPTH_OFFSET] <= high:
+            raise start_table.error(
+                DEPTH_OFFSET, f"lies outside fit.bounds [{low:g}, {high:g}]", start[DEPTH_OFFSET]
+            )
     start_from = table.string("start_from", default="record", choices=START_FROM)
     method = table.string("method", default="lm", choices=FIT_METHODS)
     objective = table.string("objective", default="absolute", choices=FIT_OBJECTIVES)
@@ -1302,6 +1353,7 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         stop_r_squared=stop_r_squared,
         strategy=strategy,
         time_steps=time_steps,
+        contact_point=contact_point,
         **tolerances,
     )
     lower, upper = settings.parameter_bounds(material)
@@ -1320,13 +1372,14 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
                 else ("start_from", f"the [material] value of {name} lies outside its bounds")
             )
             raise where.error(key, f"{problem} [{lower[j]:g}, {upper[j]:g}]", value)
-    if start:
-        vector = np.array([start.get(name, current[name]) for name in material.parameter_names])
+    given = {name: value for name, value in start.items() if name != DEPTH_OFFSET}
+    if given:
+        vector = np.array([given.get(name, current[name]) for name in material.parameter_names])
         try:
             material.with_parameters(vector)
         except InputError as exc:
-            key = exc.column if exc.column in start else next(iter(start))
-            raise start_table.error(key, exc.message, start[key]) from None
+            key = exc.column if exc.column in given else next(iter(given))
+            raise start_table.error(key, exc.message, given[key]) from None
     return settings
 
 

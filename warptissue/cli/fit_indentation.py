@@ -31,6 +31,8 @@ __all__ = ["register_fit", "run", "summary"]
 
 STRATEGIES = ("joint", "two_stage")
 """``--strategy`` values: every free parameter at once, or Ahn & Kim's two stages."""
+CONTACT_POINTS = ("given", "fit")
+"""``--contact-point`` values: :data:`warptissue.study.CONTACT_POINTS`."""
 
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
@@ -46,7 +48,9 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
             "forward solve per iteration, whatever the number of parameters). --strategy "
             "two_stage is Ahn & Kim's method: the Prony series of each record from its "
             "relaxation first, then the remaining parameters by inverse FE with the Prony "
-            "terms fixed. Writes fit.json, fit_curves.csv, fit.png and fitted_study.toml (the "
+            "terms fixed. With [fit] contact_point = 'fit' each record's depth offset (the "
+            "recorded depth at first touch) is fitted with the material. Writes fit.json, "
+            "fit_curves.csv, fit.png and fitted_study.toml (the "
             "study with the fitted material; 'warptissue simulate' runs it as it is) to the "
             "output folder. Warnings (parameters not identified, systematic residuals, a "
             "parameter at its bound) go to stderr and to fit.json. Exit status: 0 fitted "
@@ -78,6 +82,14 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="joint: all free parameters at once; two_stage: Ahn & Kim (Prony terms from the "
         "relaxation, then the rest by inverse FE); default: the study's [fit] strategy",
+    )
+    parser.add_argument(
+        "--contact-point",
+        choices=CONTACT_POINTS,
+        default=None,
+        help="given: the records' depths count from the contact as conditioned; fit: each "
+        "record's depth offset (the recorded depth at first touch) is fitted with the "
+        "material; default: the study's [fit] contact_point",
     )
     parser.add_argument(
         "--device",
@@ -125,6 +137,7 @@ def run(args: argparse.Namespace) -> int:
         device=args.device,
         progress=not (args.quiet or args.json),
         strategy=args.strategy,
+        contact_point=args.contact_point,
     )
     files = write_indentation_fit_outputs(out_dir, fit, usd=args.usd)
     if args.json:
@@ -165,7 +178,8 @@ def _check_out_dir(out_dir: Path) -> None:
 
 def summary(fit: IndentationFit) -> str:
     """The fit as a short text table: parameters (value, standard error, unit), each record's
-    R^2 and RMSE, the totals, forward solves against forward differences, status and time."""
+    R^2 and RMSE (and its fitted contact point, with ``contact_point = "fit"``), the totals,
+    forward solves against forward differences, status and time."""
     result = fit.result
     errors = result.standard_errors
     lines = []
@@ -186,7 +200,14 @@ def summary(fit: IndentationFit) -> str:
         )
     for record in fit.records:
         r2 = "n/a" if record.r_squared is None else f"{record.r_squared:.5f}"
-        lines.append(f"  {record.file}: R^2 = {r2}, RMSE = {record.rmse_N:.4g} N")
+        touch = ""
+        if record.depth_offset_m is not None:
+            error = record.depth_offset_standard_error_m
+            spread = "" if error is None else f" +- {error * 1e3:.2g}"
+            touch = (
+                f", contact fitted at recorded depth {record.depth_offset_m * 1e3:.4g}{spread} mm"
+            )
+        lines.append(f"  {record.file}: R^2 = {r2}, RMSE = {record.rmse_N:.4g} N{touch}")
     r2 = "n/a" if result.r_squared is None else f"{result.r_squared:.5f}"
     unit = "" if result.objective == "relative" else " N"
     lines.append(

@@ -34,7 +34,7 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
-from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, RigidContact
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, ContactSurface, RigidContact
 from warptissue.fem.sensitivity import ForceSensitivity, check_sensitivity_names
 from warptissue.fem.solvers import (
     DirichletConditions,
@@ -81,7 +81,9 @@ class IndentationProblem:
         base: ``"fixed"`` or ``"sliding"``.
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
-        surface: Node set of the indented surface.
+        surface: Node set of the indented surface; under a rigid indenter its boundary
+            triangles carry the contact area and pressure
+            (:class:`warptissue.fem.contact.ContactSurface`: a set holding none is refused).
         penalty_factor: ``beta`` of the contact penalty ``k = beta mu0 h`` of a sphere or a
             plate (:mod:`warptissue.fem.contact`; unused by a flat punch).
     """
@@ -142,6 +144,8 @@ class IndentationProblem:
                 )
         if self.is_contact:
             self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
+            # The contact outputs need the surface's triangles: refused here, not after a run.
+            ContactSurface.for_mesh(self.mesh, surface=self.surface)
             return
         if self.punch_nodes.size == 0:
             raise InputError(
@@ -268,6 +272,15 @@ class IndentationResult:
             ``reaction_force_N`` at equilibrium); empty for a flat punch.
         max_penetration_m: Under a sphere or a plate: the largest penetration of a node into
             the indenter at each depth, (S,), m; empty for a flat punch.
+        contact_area_m2: Under a rigid indenter: the area of the surface in contact at each
+            depth, of the whole specimen (the modelled part's times the symmetry factor),
+            current configuration, (S,), m^2; empty for a sharp flat punch
+            (:class:`warptissue.fem.contact.ContactSurface`: the sum of the tributary areas of
+            the penetrating nodes, uncertain by a ring of nodes at the contact edge).
+        contact_pressure_Pa: Under a rigid indenter: the contact pressure at every node at
+            each depth, (S, N), Pa (zero off the contact; the normal contact force over the
+            node's tributary area, :class:`warptissue.fem.contact.ContactSurface`); shape
+            (0, N) for a sharp flat punch.
     """
 
     depths_m: np.ndarray
@@ -290,6 +303,8 @@ class IndentationResult:
     times_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     max_penetration_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
@@ -320,6 +335,12 @@ class IndentationResult:
                 {
                     "contact_force_N": self.contact_force_N.tolist(),
                     "max_penetration_m": self.max_penetration_m.tolist(),
+                    "contact_area_m2": self.contact_area_m2.tolist(),
+                    "max_contact_pressure_Pa": (
+                        self.contact_pressure_Pa.max(axis=1).tolist()
+                        if self.contact_pressure_Pa.size
+                        else []
+                    ),
                 }
                 if self.contact_force_N.size
                 else {}
@@ -447,15 +468,21 @@ def _indentation_result(
     else:
         stress = np.zeros((0, 6))
     contact = assembler.contact
-    contact_force, penetration = np.zeros(0), np.zeros(0)
+    contact_force, penetration, area = np.zeros(0), np.zeros(0), np.zeros(0)
+    pressure = np.zeros((0, problem.mesh.node_count))
     if contact is not None:
-        contact_force = np.empty(len(path.loads))
-        penetration = np.empty(len(path.loads))
+        steps = len(path.loads)
+        surface = ContactSurface.for_mesh(problem.mesh, surface=problem.surface)
+        contact_force, penetration, area = np.empty(steps), np.empty(steps), np.empty(steps)
+        pressure = np.empty((steps, problem.mesh.node_count))
         for i, (depth, u) in enumerate(zip(path.loads, path.displacement_m, strict=True)):
             assembler.set_load(depth)
             state = assembler.contact_state(u)
             contact_force[i] = -problem.symmetry_factor * state.total_force_N[2]
             penetration[i] = state.max_penetration_m
+            current = problem.mesh.points + u
+            area[i] = problem.symmetry_factor * surface.contact_area_m2(state, current)
+            pressure[i] = surface.pressure_Pa(state, current)
     return IndentationResult(
         depths_m=path.loads,
         reaction_force_N=path.reaction,
@@ -477,4 +504,6 @@ def _indentation_result(
         times_s=path.times_s,
         contact_force_N=contact_force,
         max_penetration_m=penetration,
+        contact_area_m2=area,
+        contact_pressure_Pa=pressure,
     )

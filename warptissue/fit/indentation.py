@@ -22,6 +22,23 @@ Notes:
     is the FE force interpolated linearly in time (with F = 0 at t = 0). The Jacobian is
     interpolated the same way from ``force_sensitivity_N_per_unit``.
 
+    Contact point (``fit.contact_point = "fit"``). Each record's depth offset d0 (its
+    recorded depth at first touch) is a parameter beside the material's:
+    F_model(d) = F_FE(max(d - d0, 0)). Elastic: the FE runs on a lattice of equal depth
+    steps fixed in true depth for the whole fit (``time_steps`` steps to the deepest true
+    depth at the start values; a trial that needs deeper adds steps of the same size), so
+    the FE force at a lattice depth does not depend on d0 and the model is the linear
+    interpolant of the FE curve at ``d - d0``. Its offset column of the Jacobian is exact
+    and costs no FE run: dF/dd0 = -(the slope of the interpolant's segment at ``d - d0``),
+    zero before the touch. Viscoelastic: the touch time t0 is where the recorded depth
+    first reaches d0, and each record's FE run starts there at depth 0 (no steps before the
+    touch, where the force is zero; the time steps are
+    :func:`warptissue.loading.resample_history` of ``(t - t0, d - d0)``, as from a given
+    contact), so t0, the steps and the depths all move with d0; the force is a hereditary
+    integral of the depth history, and its offset column is a one-sided difference: one
+    more run per record (without sensitivities) at ``d0 - h``, h =
+    :data:`OFFSET_DIFFERENCE_SHARE` of the record's depth span.
+
     Residuals, stacked over the records: ``F_model - F_measured`` (N, "absolute") or that
     divided by ``max(|F_measured|, floor)`` ("relative", Ahn & Kim Eq. 7), with ``floor`` =
     ``relative_floor_N`` or 1 % of the largest |force| of the records.
@@ -62,6 +79,8 @@ from warptissue.fit.engine import covariance_from_jacobian, least_squares
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import FitResult, IterationRecord, RejectStep
 from warptissue.study import (
+    CONTACT_POINTS,
+    DEPTH_OFFSET,
     FIT_STRATEGIES,
     DataRecord,
     Protocol,
@@ -72,10 +91,13 @@ from warptissue.study import (
 __all__ = [
     "CORRELATION_LIMIT",
     "DURBIN_WATSON_LIMIT",
+    "OFFSET_IDENTIFIED_SHARE",
     "STATUSES",
     "IndentationFit",
     "IndentationFitProgress",
     "RecordCurve",
+    "depth_offset_names",
+    "depth_offset_start_m",
     "fit_indentation",
 ]
 
@@ -98,6 +120,19 @@ CORRELATION_LIMIT = 0.995
 determine a combination of them rather than each."""
 RELATIVE_FLOOR_SHARE = 0.01
 """Default floor of the relative objective: this share of the largest |force| of the records."""
+OFFSET_IDENTIFIED_SHARE = 0.1
+"""A fitted depth offset whose standard error exceeds this share of its record's depth span
+is reported as not identified (an offset may well be zero, so not judged by its value)."""
+OFFSET_BOUND_SHARES = (0.5, 0.1)
+"""Default bounds of a record's depth offset: from its shallowest recorded depth less this
+first share of its depth span, to its deepest less the second share (the probe touches
+before its deepest point)."""
+OFFSET_DIFFERENCE_SHARE = 1e-4
+"""The step of the one-sided difference of a viscoelastic record's force by its depth offset,
+as a share of the record's depth span."""
+OFFSET_NOISE_SIGMA = 6.0
+"""The start of a depth offset without a contact point: where the force first exceeds this
+many noise standard deviations (and 1 % of the peak force)."""
 INTERRUPTED_EXIT_CODE = 130
 """Exit status of an interrupted fit (Ctrl-C), as the shell gives a process ended by SIGINT."""
 _CACHE_SIZE = 8
@@ -151,6 +186,9 @@ class RecordCurve:
         rmse_N: Root mean square error of this record's fit (N).
         durbin_watson: Durbin-Watson statistic of this record's residuals (about 2 for
             independent noise, near 0 for a systematic misfit; None for a perfect fit).
+        depth_offset_m: The fitted depth offset d0 (m; the recorded depth at first touch,
+            so the FE depth is ``depth_m - d0``), or None when the contact was given.
+        depth_offset_standard_error_m: Its standard error (m), or None.
     """
 
     file: str
@@ -164,10 +202,13 @@ class RecordCurve:
     r_squared: float | None
     rmse_N: float
     durbin_watson: float | None = None
+    depth_offset_m: float | None = None
+    depth_offset_standard_error_m: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (no sample arrays): file, samples, R^2, RMSE, Durbin-Watson."""
-        return {
+        """JSON-ready summary (no sample arrays): file, samples, R^2, RMSE, Durbin-Watson
+        (and the fitted depth offset with its standard error, when fitted)."""
+        summary = {
             "file": self.file,
             "samples": int(self.time_s.size),
             "r_squared": self.r_squared,
@@ -175,6 +216,10 @@ class RecordCurve:
             "durbin_watson": self.durbin_watson,
             "peak_force_N": float(np.max(np.abs(self.measured_force_N))),
         }
+        if self.depth_offset_m is not None:
+            summary["depth_offset_m"] = self.depth_offset_m
+            summary["depth_offset_standard_error_m"] = self.depth_offset_standard_error_m
+        return summary
 
 
 @dataclass
@@ -207,6 +252,8 @@ class IndentationFit:
         start: The start values of the free parameters (name -> value).
         start_cost: The cost at the start values (before the first trial step of the
             engine; the history lists the cost after each), or None.
+        contact_point: ``"given"`` or ``"fit"`` (each record's depth offset fitted: its
+            value in ``parameters`` and in its :class:`RecordCurve`).
     """
 
     study: Study
@@ -225,6 +272,7 @@ class IndentationFit:
     stage_one_prony: dict[str, float] = field(default_factory=dict)
     start: dict[str, float] = field(default_factory=dict)
     start_cost: float | None = None
+    contact_point: str = "given"
 
     @property
     def success(self) -> bool:
@@ -249,12 +297,14 @@ class IndentationFit:
         """A JSON-ready summary of the fit.
 
         Returns:
-            ``study`` (name and path), ``strategy``, ``status``, ``success``, ``message``,
-            ``parameters`` (name -> value, unit, standard error, start), ``correlation``
-            (``names`` and ``matrix``, or None), ``r_squared``, ``rmse_N``, ``iterations``,
+            ``study`` (name and path), ``strategy``, ``contact_point``, ``status``,
+            ``success``, ``message``, ``parameters`` (name -> value, unit, standard error,
+            start; the depth offsets too, when fitted), ``correlation`` (``names`` and
+            ``matrix``, or None), ``r_squared``, ``rmse_N``, ``iterations``,
             ``forward_solves``, ``finite_difference_solves``, ``method``, ``objective``,
             ``warnings``, ``identified``, ``records`` (per record: file, samples, R^2, RMSE,
-            Durbin-Watson), ``stage_one`` (None, or per record the Prony fit and the mean
+            Durbin-Watson, and ``depth_offset_m`` with its standard error when fitted),
+            ``stage_one`` (None, or per record the Prony fit and the mean
             used), ``fitted_material``, ``history`` (per trial step: x, cost, accepted...),
             ``seconds`` and ``software``.
         """
@@ -299,6 +349,7 @@ class IndentationFit:
                 "path": None if self.study.path is None else str(self.study.path),
             },
             "strategy": self.strategy,
+            "contact_point": self.contact_point,
             "status": self.status,
             "success": self.success,
             "message": self.message,
@@ -437,6 +488,10 @@ class _ForwardModel:
     One evaluation runs the FE (once for an elastic material, once per record for a
     viscoelastic one) with the sensitivities of the free parameters, and gives the
     residuals and the Jacobian together: ``fun`` and ``jac`` at one point share one run.
+
+    With ``offset_start`` (one depth offset per record, m) the parameter
+    vector is the free material parameters followed by the records' depth offsets, and the
+    FE depths are a lattice of steps fixed by the start (module docstring, "Contact point").
     """
 
     def __init__(
@@ -449,6 +504,7 @@ class _ForwardModel:
         names: tuple[str, ...],
         device: Any,
         progress: bool,
+        offset_start: np.ndarray | None = None,
     ) -> None:
         settings = study.fit
         self.study = study
@@ -484,8 +540,38 @@ class _ForwardModel:
         else:
             self.divisors = [np.ones_like(f) for f in self.measured]
         self.contact_s = [r.contact_time_s for r in self.records]
-        if self.viscoelastic:
+        self.offset_count = 0 if offset_start is None else len(self.records)
+        self.depth_step_m = 0.0
+        self.steps = steps
+        self.offset_differences = [
+            OFFSET_DIFFERENCE_SHARE * max(float(np.ptp(r.displacement_m)), 1e-12)
+            for r in self.records
+        ]
+        if self.viscoelastic and self.offset_count:
+            offsets = np.asarray(offset_start, dtype=np.float64)
+            try:
+                self.grids = [self._touch(k, offsets[k])[1] for k in range(len(self.records))]
+            except RejectStep as exc:
+                raise InputError(
+                    f"the start of the depth offsets {offsets.tolist()} m: {exc}; give "
+                    "fit.start.depth_offset_m below the deepest recorded depth",
+                    path=study.path,
+                    key=f"fit.start.{DEPTH_OFFSET}",
+                ) from None
+        elif self.viscoelastic:
             self.grids = [record.load_history(steps=steps) for record in self.records]
+        elif self.offset_count:
+            reach = self._reach(np.asarray(offset_start, dtype=np.float64))
+            if not reach > 0.0:
+                raise InputError(
+                    f"the start of the depth offsets {np.asarray(offset_start).tolist()} m "
+                    "leaves no record in contact: give fit.start.depth_offset_m below the "
+                    "deepest recorded depth",
+                    path=study.path,
+                    key=f"fit.start.{DEPTH_OFFSET}",
+                )
+            self.depth_step_m = reach / steps
+            self.grids = [(None, self._lattice(np.asarray(offset_start, dtype=np.float64)))]
         else:
             deepest = max(float(np.max(r.displacement_m)) for r in self.records)
             self.grids = [(None, deepest * np.arange(1, steps + 1) / steps)]
@@ -497,23 +583,97 @@ class _ForwardModel:
 
     def material_at(self, x: np.ndarray) -> Any:
         vector = self.material.parameter_vector.copy()
-        vector[self.index] = x
+        vector[self.index] = np.asarray(x)[: len(self.names)]
         return self.material.with_parameters(vector)
 
-    def _run(self, material: Any, times: np.ndarray | None, depths: np.ndarray) -> Any:
+    def offsets_at(self, x: np.ndarray) -> np.ndarray:
+        """The records' depth offsets (m) in ``x``: zeros when the contact is given."""
+        if not self.offset_count:
+            return np.zeros(len(self.records))
+        return np.asarray(x, dtype=np.float64)[len(self.names) :]
+
+    def _touch(self, k: int, offset: float) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
+        """Record ``k``'s touch time at a depth offset and its FE time steps from it.
+
+        The touch time t0 is where the record's recorded depth (its running maximum) first
+        passes ``offset`` (linear between samples; the first sample's time for a record
+        deeper than that from its start); the steps are
+        :func:`warptissue.loading.resample_history` of ``(time - t0, depth - offset)``, as
+        :meth:`DataRecord.load_history` does from a given contact.
+
+        Returns:
+            ``(t0, (times_s, depths_m))``: t0 on the record's clock (s); the FE times from
+            t0 (s) and true depths (m).
+
+        Raises:
+            RejectStep: The record never reaches the offset, or fewer than two samples
+                follow the touch.
+        """
+        record = self.records[k]
+        t = np.asarray(record.time_s, dtype=np.float64)
+        recorded = np.asarray(record.displacement_m, dtype=np.float64)
+        reached = np.maximum.accumulate(recorded)
+        # The first sample beyond the offset; the touch lies after the one before it (the
+        # last at or above the offset's level: a conditioned record's clipped zeros end at
+        # its contact).
+        i = int(np.searchsorted(reached, offset, side="right"))
+        if i >= reached.size:
+            raise RejectStep(
+                f"{record.file} never reaches the depth offset {offset:.6g} m (its deepest "
+                f"recorded depth is {reached[-1]:.6g} m)"
+            )
+        if i == 0:
+            touch = float(t[0])
+        else:
+            share = (offset - reached[i - 1]) / (reached[i] - reached[i - 1])
+            touch = float(t[i - 1] + share * (t[i] - t[i - 1]))
+        from warptissue.loading import resample_history
+
+        try:
+            grid = resample_history(t - touch, recorded - offset, steps=self.steps)
+        except InputError as exc:
+            raise RejectStep(f"{record.file}: {exc.message}") from exc
+        return touch, grid
+
+    def _reach(self, offsets: np.ndarray) -> float:
+        """The deepest true depth of the records at these offsets (m)."""
+        return max(
+            float(np.max(r.displacement_m)) - d0
+            for r, d0 in zip(self.records, offsets, strict=True)
+        )
+
+    def _lattice(self, offsets: np.ndarray) -> np.ndarray:
+        """FE depths: the fixed steps of ``depth_step_m`` to the deepest true depth."""
+        count = max(1, math.ceil(self._reach(offsets) / self.depth_step_m - 1e-9))
+        return self.depth_step_m * np.arange(1, count + 1)
+
+    def _run(
+        self,
+        material: Any,
+        times: np.ndarray | None,
+        depths: np.ndarray,
+        *,
+        sensitivities: bool = True,
+    ) -> Any:
         problem = dataclasses.replace(self.problem, material=material)
         extra = {} if times is None else {"times_s": times}
         self.forward_solves += 1
-        return _simulate()(
-            problem,
-            depths,
-            device=self.device,
-            progress=self.progress,
-            options=self.options,
-            assembler=self.assembler,
-            sensitivities=self.names,
-            **extra,
-        )
+        try:
+            result = _simulate()(
+                problem,
+                depths,
+                device=self.device,
+                progress=self.progress,
+                options=self.options,
+                assembler=self.assembler,
+                sensitivities=self.names if sensitivities else (),
+                **extra,
+            )
+        except ConvergenceError as exc:
+            raise RejectStep(f"the FE failed: {exc}") from exc
+        if not result.completed:
+            raise RejectStep(f"the FE did not converge: {result.message}")
+        return result
 
     def evaluate(self, x: np.ndarray) -> _Evaluation:
         key = np.asarray(x, dtype=np.float64).tobytes()
@@ -526,45 +686,53 @@ class _ForwardModel:
             raise RejectStep(str(exc)) from exc
         if float(material.initial_shear_modulus_Pa) <= 0.0:
             raise RejectStep("the initial shear modulus is not positive")
-        runs = []
-        for times, depths in self.grids:
-            try:
-                result = self._run(material, times, depths)
-            except ConvergenceError as exc:
-                raise RejectStep(f"the FE failed: {exc}") from exc
-            if not result.completed:
-                raise RejectStep(f"the FE did not converge: {result.message}")
-            runs.append(result)
+        offsets = self.offsets_at(x)
+        touches = list(self.contact_s)
+        if self.viscoelastic and self.offset_count:
+            timed = [self._touch(k, offsets[k]) for k in range(len(self.records))]
+            touches = [touch for touch, _ in timed]
+            grids = [grid for _, grid in timed]
+        elif self.offset_count:
+            grids = [(None, self._lattice(offsets))]
+        else:
+            grids = self.grids
+        runs = [self._run(material, times, depths) for times, depths in grids]
         predicted, jacobians, curves = [], [], []
         for k, record in enumerate(self.records):
             if self.viscoelastic:
                 run = runs[k]
-                fe_time = np.asarray(self.grids[k][0], dtype=np.float64)
+                fe_time = np.asarray(grids[k][0], dtype=np.float64)
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
                 where = np.concatenate([[0.0], fe_time])
-                at = record.time_s - self.contact_s[k]
+                at = record.time_s - touches[k]
             else:
                 run = runs[0]
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
                 where = np.concatenate([[0.0], fe_depth])
-                at = np.clip(record.displacement_m, 0.0, None)
-                fe_time = _first_passage_times(record, self.contact_s[k], fe_depth)
+                shifted = record.displacement_m - offsets[k]
+                at = np.clip(shifted, 0.0, None)
+                fe_time = _first_passage_times(record.time_s, shifted, self.contact_s[k], fe_depth)
             force = np.asarray(run.reaction_force_N, dtype=np.float64)
             sensitivity = np.asarray(run.force_sensitivity_N_per_unit, dtype=np.float64)
-            predicted.append(np.interp(at, where, np.concatenate([[0.0], force])))
-            jacobians.append(
-                np.column_stack(
-                    [
-                        np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
-                        for j in range(len(self.names))
-                    ]
-                )
-            )
+            curve = np.concatenate([[0.0], force])
+            predicted.append(np.interp(at, where, curve))
+            columns = [
+                np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
+                for j in range(len(self.names))
+            ]
+            for i in range(self.offset_count):
+                if i != k:
+                    columns.append(np.zeros(at.size))
+                elif self.viscoelastic:
+                    columns.append(self._timed_offset_column(k, material, offsets[k], predicted[k]))
+                else:
+                    columns.append(_offset_column(shifted, where, curve))
+            jacobians.append(np.column_stack(columns))
             if self.viscoelastic:
                 curves.append((fe_time, fe_depth, force))
             else:
                 # The FE steps up to the first one at or beyond the record's deepest point.
-                covered = int(np.searchsorted(fe_depth, float(np.max(record.displacement_m))))
+                covered = int(np.searchsorted(fe_depth, float(np.max(at))))
                 keep = slice(0, covered + 1)
                 curves.append((fe_time[keep], fe_depth[keep], force[keep]))
         residuals = np.concatenate(
@@ -584,6 +752,25 @@ class _ForwardModel:
             self.best = evaluation
         return evaluation
 
+    def _timed_offset_column(
+        self, k: int, material: Any, offset: float, force: np.ndarray
+    ) -> np.ndarray:
+        """dF/dd0 of record ``k`` with a viscoelastic material, by a one-sided difference.
+
+        The touch time, the FE time steps and the depths all move with the offset, and the
+        force is a hereditary integral of the depth history, not a function of the depth:
+        one more FE run (without sensitivities) at ``offset - h`` (the probe touching
+        earlier, so the record stays in contact), h = :data:`OFFSET_DIFFERENCE_SHARE` of the
+        record's depth span, gives (F(d0) - F(d0 - h)) / h at the samples.
+        """
+        step = self.offset_differences[k]
+        touch, (times, depths) = self._touch(k, offset - step)
+        run = self._run(material, times, depths, sensitivities=False)
+        where = np.concatenate([[0.0], np.asarray(times, dtype=np.float64)])
+        curve = np.concatenate([[0.0], np.asarray(run.reaction_force_N, dtype=np.float64)])
+        earlier = np.interp(self.records[k].time_s - touch, where, curve)
+        return (force - earlier) / step
+
     def fun(self, x: np.ndarray) -> np.ndarray:
         return self.evaluate(x).residuals
 
@@ -597,11 +784,25 @@ class _ForwardModel:
             return None
 
 
-def _first_passage_times(record: DataRecord, contact_s: float, depths: np.ndarray) -> np.ndarray:
-    """The times (from the contact) at which a record first reaches each depth (its loading
-    ramp); depths beyond its deepest point get its deepest point's time."""
-    t = record.time_s - contact_s
-    d = np.maximum.accumulate(np.clip(record.displacement_m, 0.0, None))
+def _offset_column(shifted: np.ndarray, where: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    """d F_model / d d0 at the samples: minus the slope of the interpolant's segment at the
+    true depth ``shifted`` = d - d0 (m, shape (m,)); zero before the touch and beyond the
+    last FE depth, where the interpolant is flat. ``where``, ``curve``: the FE depths and
+    forces with (0, 0) first."""
+    slopes = np.diff(curve) / np.diff(where)
+    segment = np.clip(np.searchsorted(where, shifted, side="right") - 1, 0, slopes.size - 1)
+    inside = (shifted > 0.0) & (shifted < where[-1])
+    return np.where(inside, -slopes[segment], 0.0)
+
+
+def _first_passage_times(
+    time_s: np.ndarray, depth_m: np.ndarray, contact_s: float, depths: np.ndarray
+) -> np.ndarray:
+    """The times (from the contact) at which a record of depth ``depth_m`` (below the
+    contact, m) first reaches each depth (its loading ramp); depths beyond its deepest point
+    get its deepest point's time."""
+    t = time_s - contact_s
+    d = np.maximum.accumulate(np.clip(depth_m, 0.0, None))
     rising = np.concatenate([[True], np.diff(d) > 0.0])
     return np.interp(depths, d[rising], t[rising])
 
@@ -674,9 +875,10 @@ def _forward_model(
     *,
     device: str | None,
     progress: bool,
+    offset_start: np.ndarray | None = None,
 ) -> _ForwardModel:
     """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
-    of the free parameters."""
+    of the free parameters (and of the records' depth offsets, with ``offset_start``)."""
     from warptissue.device import resolve_device
     from warptissue.fem import Assembler
     from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
@@ -696,7 +898,105 @@ def _forward_model(
         names=free,
         device=warp_device,
         progress=progress,
+        offset_start=offset_start,
     )
+
+
+def depth_offset_names(records: Sequence[DataRecord]) -> tuple[str, ...]:
+    """The parameter names of the records' depth offsets: ``depth_offset_m`` for one record,
+    ``depth_offset1_m``, ``depth_offset2_m``, ... (in ``[[data]]`` order) for several."""
+    if len(records) == 1:
+        return (DEPTH_OFFSET,)
+    return tuple(f"depth_offset{k}_m" for k in range(1, len(records) + 1))
+
+
+def depth_offset_start_m(record: DataRecord) -> float:
+    """A start value of a record's depth offset d0 (m), from the record.
+
+    A record conditioned with a contact point (``contact = "auto"``, detected by
+    :func:`warptissue.acquisition.conditioning.detect_contact`, or ``contact_position_m``)
+    has its depths counted from it: 0. A record used as recorded (``contact = "none"``):
+    where the force first exceeds :data:`OFFSET_NOISE_SIGMA` noise standard deviations and
+    1 % of the peak force, refined by a straight line through the next samples (to 4 times
+    that force) back to zero force, kept between the last sample below it and the first one
+    above; a record above it from its first sample: that line's zero, at most that sample.
+
+    Args:
+        record: A conditioned ``[[data]]`` record.
+
+    Returns:
+        The recorded depth at first touch (m).
+
+    Notes:
+        The noise is estimated from second differences of the force (1.4826 times their
+        median absolute value over sqrt(6)), which a smooth loading curve leaves to the
+        noise. The force is taken as zero before the touch (the model's too).
+    """
+    if record.conditioning.get("contact", "none") != "none":
+        return 0.0
+    d = np.asarray(record.displacement_m, dtype=np.float64)
+    f = np.asarray(record.force_N, dtype=np.float64)
+    peak = float(np.max(f)) if f.size else 0.0
+    if f.size < 3 or not peak > 0.0:
+        return float(d[0]) if d.size else 0.0
+    noise = 1.4826 * float(np.median(np.abs(np.diff(f, 2)))) / math.sqrt(6.0)
+    threshold = max(OFFSET_NOISE_SIGMA * noise, 0.01 * peak)
+    loading = int(np.argmax(d)) + 1  # up to the deepest point
+    above = np.flatnonzero(f[:loading] > threshold)
+    if not above.size:
+        return float(d[int(np.argmax(f))])
+    first = int(above[0])
+    upto = np.flatnonzero(f[first:loading] > 4.0 * threshold)
+    last = first + (int(upto[0]) if upto.size else loading - 1 - first)
+    last = max(last, min(first + 1, loading - 1))
+    pick = slice(first, last + 1)
+    guess = float(d[first])
+    if last > first and np.ptp(d[pick]) > 0.0:
+        slope, intercept = np.polyfit(d[pick], f[pick], 1)
+        if slope > 0.0:
+            guess = float(-intercept / slope)
+    if first > 0:
+        return float(np.clip(guess, d[first - 1], d[first]))
+    return min(guess, float(d[0]))
+
+
+def _offset_box(study: Study) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(start, lower, upper) of each record's depth offset (m), each shape (records,):
+    ``[fit.start]``/``[fit.bounds]`` ``depth_offset_m`` where given, else from the record
+    (:func:`depth_offset_start_m`, :data:`OFFSET_BOUND_SHARES`); the start clipped into the
+    bounds."""
+    settings = study.fit
+    starts, lowers, uppers = [], [], []
+    below, above = OFFSET_BOUND_SHARES
+    for record in study.data:
+        d = np.asarray(record.displacement_m, dtype=np.float64)
+        shallow, deep = float(np.min(d)), float(np.max(d))
+        span = deep - shallow
+        low, high = settings.bounds.get(DEPTH_OFFSET, (shallow - below * span, deep - above * span))
+        start = settings.start.get(DEPTH_OFFSET)
+        start = depth_offset_start_m(record) if start is None else float(start)
+        start = min(max(start, low), high)
+        if not start < deep:
+            key = "start" if DEPTH_OFFSET in settings.start else "bounds"
+            raise InputError(
+                f"{record.file}: a depth offset of {start:g} m leaves the record out of "
+                f"contact (its deepest recorded depth is {deep:g} m): give a start below it",
+                path=study.path,
+                key=f"fit.{key}.{DEPTH_OFFSET}",
+                value=start,
+            )
+        starts.append(start)
+        lowers.append(low)
+        uppers.append(high)
+    return np.array(starts), np.array(lowers), np.array(uppers)
+
+
+def _shifted(record: DataRecord, offset_m: float) -> DataRecord:
+    """The record with its depths counted from a depth offset (``d - d0``)."""
+    if offset_m == 0.0:
+        return record
+    samples = dataclasses.replace(record.record, displacement_m=record.displacement_m - offset_m)
+    return dataclasses.replace(record, record=samples)
 
 
 def fit_indentation(
@@ -706,6 +1006,7 @@ def fit_indentation(
     progress: bool = True,
     strategy: str | None = None,
     callback: Callable[[IndentationFitProgress], None] | None = None,
+    contact_point: str | None = None,
 ) -> IndentationFit:
     """Fit the study's free material parameters to its records by inverse FE.
 
@@ -720,6 +1021,11 @@ def fit_indentation(
             ``fit.strategy`` ("joint" by default).
         callback: Called after each trial step of the engine with an
             :class:`IndentationFitProgress`. It may raise ``KeyboardInterrupt`` to stop.
+        contact_point: ``"given"`` (depths as conditioned) or ``"fit"`` (each record's depth
+            offset fitted with the material: parameters :func:`depth_offset_names`, in m,
+            after the material's; with a viscoelastic material each record's FE run starts
+            at its touch, and the two-stage strategy's stage (i) takes the records as
+            conditioned); None: the study's ``fit.contact_point``.
 
     Returns:
         The :class:`IndentationFit`. Ctrl-C (``KeyboardInterrupt``, also inside an FE run)
@@ -730,7 +1036,8 @@ def fit_indentation(
 
     Raises:
         InputError: The study has no fit or no records, a record was measured with another
-            probe radius (its sidecar), an unknown strategy or free parameter.
+            probe radius (its sidecar), an unknown strategy, contact point or free
+            parameter.
         ConvergenceError: The FE does not converge at the start values (nothing to fit from).
         KeyboardInterrupt: Ctrl-C before the first forward run finished (nothing to keep).
         DeviceError: The device does not exist.
@@ -756,8 +1063,23 @@ def fit_indentation(
             key="fit.strategy",
             value=chosen_strategy,
         )
+    chosen_contact = contact_point if contact_point is not None else settings.contact_point
+    if chosen_contact not in CONTACT_POINTS:
+        raise InputError(
+            f"contact_point must be one of {', '.join(CONTACT_POINTS)}",
+            path=study.path,
+            key="fit.contact_point",
+            value=chosen_contact,
+        )
+    fit_offsets = chosen_contact == "fit"
     _check_probe_radius(study)
-    start = start_values_from_record(study)
+    offset_start: np.ndarray | None = None
+    offset_lower = offset_upper = np.zeros(0)
+    if fit_offsets:
+        offset_start, offset_lower, offset_upper = _offset_box(study)
+        start = start_values_from_record(study, _shifted(study.data[0], float(offset_start[0])))
+    else:
+        start = start_values_from_record(study)
     material = study.material
     free = tuple(settings.free)
     all_lower, all_upper = settings.parameter_bounds(material)
@@ -789,11 +1111,24 @@ def fit_indentation(
         free = tuple(free[j] for j in keep)
         all_lower, all_upper = all_lower[keep], all_upper[keep]
 
-    model = _forward_model(study, material, free, device=device, progress=progress)
+    model = _forward_model(
+        study, material, free, device=device, progress=progress, offset_start=offset_start
+    )
+    offset_names = depth_offset_names(study.data) if fit_offsets else ()
+    names = free + offset_names
     units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
+    units += ("m",) * len(offset_names)
     x0 = np.array([start[name] for name in free], dtype=np.float64)
     lower, upper = _positive_bounds(free, all_lower, all_upper)
     x0 = np.clip(x0, lower, upper)
+    spans = np.array([float(np.ptp(record.displacement_m)) for record in study.data])
+    if offset_start is not None:
+        x0 = np.concatenate([x0, offset_start])
+        lower = np.concatenate([lower, offset_lower])
+        upper = np.concatenate([upper, offset_upper])
+    x_scale = _x_scale(x0, units)
+    if offset_names:
+        x_scale[len(free) :] = spans  # an offset may start at 0: its record's depth span
     stage = "stage two" if chosen_strategy == "two_stage" else "joint"
     history: list[IterationRecord] = []
     stopped_at_r_squared = False
@@ -824,7 +1159,7 @@ def fit_indentation(
                 IndentationFitProgress(
                     stage=stage,
                     iteration=record.iteration,
-                    parameters=dict(zip(free, record.x.tolist(), strict=True)),
+                    parameters=dict(zip(names, record.x.tolist(), strict=True)),
                     cost=record.cost,
                     r_squared=r2,
                     forward_solves=model.forward_solves,
@@ -850,7 +1185,7 @@ def fit_indentation(
         except RejectStep as exc:
             raise ConvergenceError(
                 f"the FE does not converge at the start values "
-                f"{dict(zip(free, x0.tolist(), strict=True))}: {exc}; give other start "
+                f"{dict(zip(names, x0.tolist(), strict=True))}: {exc}; give other start "
                 "values in [fit.start]"
             ) from None
         engine_result = least_squares(
@@ -859,14 +1194,14 @@ def fit_indentation(
             jac=model.jac,
             bounds=(lower, upper),
             method=settings.method,
-            x_scale=None if settings.method == "lm" else _x_scale(x0, units),
+            x_scale=None if settings.method == "lm" else x_scale,
             max_iterations=settings.max_iterations,
             ftol=settings.ftol,
             xtol=settings.xtol,
             gtol=settings.gtol,
             callback=on_step,
             progress=False,
-            parameter_names=free,
+            parameter_names=names,
             parameter_units=units,
         )
     except KeyboardInterrupt:
@@ -878,9 +1213,13 @@ def fit_indentation(
 
     best = model.best if interrupted else model.evaluate(engine_result.x)
     result = _result_from(
-        engine_result, best, model, free, units, settings.method, lower, upper, history
+        engine_result, best, model, names, units, settings.method, lower, upper, history
     )
-    n = len(free)
+    if offset_names:
+        scales = np.full(len(names), np.nan)
+        scales[len(free) :] = OFFSET_IDENTIFIED_SHARE * spans
+        result.standard_error_scales = scales
+    n = len(names)
     if engine_result is not None:
         finite_difference = (engine_result.njev * n + engine_result.nfev) * (
             model.solves_per_evaluation
@@ -907,6 +1246,12 @@ def fit_indentation(
     else:
         status, message = "failed", engine_result.message
     records = _record_curves(model, best)
+    if offset_names:
+        errors = result.standard_errors
+        for k, curve in enumerate(records):
+            j = len(free) + k
+            curve.depth_offset_m = float(result.x[j])
+            curve.depth_offset_standard_error_m = None if errors is None else float(errors[j])
     warnings = _warnings(study, result, records, status, message)
     result.warnings.extend(warnings)
     fitted_material = model.material_at(best.x)
@@ -925,8 +1270,9 @@ def fit_indentation(
         warnings=result.all_warnings,
         stage_one_fits=stage_one_fits,
         stage_one_prony=prony,
-        start=dict(zip(free, x0.tolist(), strict=True)),
+        start=dict(zip(names, x0.tolist(), strict=True)),
         start_cost=start_cost,
+        contact_point=chosen_contact,
     )
 
 
@@ -1033,6 +1379,8 @@ def _warnings(
 ) -> list[str]:
     """Plausibility warnings of a fit (the identifiability ones are the result's own)."""
     messages: list[str] = []
+    fitted = any(record.depth_offset_m is not None for record in records)
+    hint = "" if fitted else " (fit.contact_point = 'fit' fits it)"
     if status not in ("converged", "stopped_at_r_squared"):
         messages.append(f"the fit did not converge ({status}): {message}")
     correlation = result.correlation
@@ -1054,7 +1402,7 @@ def _warnings(
                 f"{curve.file}: the residuals are systematic (Durbin-Watson statistic "
                 f"{curve.durbin_watson:.3g}, about 2 for noise; R^2 = "
                 f"{'n/a' if curve.r_squared is None else f'{curve.r_squared:.4g}'}): check "
-                "the probe radius, the contact point, a drifting force offset, or the "
-                "material model"
+                f"the probe radius, the contact point{hint}, a drifting force offset, or "
+                "the material model"
             )
     return messages

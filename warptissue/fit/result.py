@@ -145,6 +145,10 @@ class FitResult:
         warnings: Further warnings a caller adds (plausibility of the data or of the
             result: sign, magnitude, units); :attr:`all_warnings` lists them after the
             identifiability warnings.
+        standard_error_scales: Per parameter, the size its standard error is judged
+            against in :attr:`identifiability` (NaN: its own |value|), shape (n,), or None
+            (every parameter against its |value|). For a parameter whose true value may be
+            zero, such as a depth offset (judged against the record's depth span).
     """
 
     x: np.ndarray
@@ -171,6 +175,7 @@ class FitResult:
     lower_bounds: np.ndarray | None = None
     upper_bounds: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
+    standard_error_scales: np.ndarray | None = None
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -186,8 +191,9 @@ class FitResult:
 
         - it is pinned at a finite bound (within a relative 1e-9): the optimum lies outside
           the allowed range, or the data do not move the parameter;
-        - its standard error exceeds :data:`STANDARD_ERROR_BOUND_FACTOR` times |value|: the
-          data are consistent with a value of zero or of the opposite sign;
+        - its standard error exceeds :data:`STANDARD_ERROR_BOUND_FACTOR` times |value| (or
+          times its :attr:`standard_error_scales` entry): the data are consistent with a
+          value of zero or of the opposite sign (or with a wide range);
         - it lies within one standard error of a non-zero finite bound.
 
         For the fit as a whole, a line is added when the covariance is unavailable: no more
@@ -229,12 +235,16 @@ class FitResult:
                         f"{name} = {_number(value)}{unit} lies within one standard error "
                         f"({_number(error)}{unit}) of its {side} bound {_number(bound)}"
                     )
+            scales = self.standard_error_scales
+            scale = None if scales is None or not np.isfinite(scales[j]) else float(scales[j])
+            size = abs(value) if scale is None else scale
             if pinned is not None:
                 messages.append(pinned + ": it is not identified by the data")
-            elif error is not None and error > STANDARD_ERROR_BOUND_FACTOR * abs(value):
+            elif error is not None and error > STANDARD_ERROR_BOUND_FACTOR * size:
+                than = "its value" if scale is None else f"{_number(scale)}{unit}"
                 messages.append(
                     f"{name} = {_number(value)}{unit} has a standard error of "
-                    f"{_number(error)}{unit}, larger than its value: it is not identified "
+                    f"{_number(error)}{unit}, larger than {than}: it is not identified "
                     "by the data"
                 )
         return messages

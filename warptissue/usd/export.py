@@ -3,11 +3,13 @@
 ``warptissue simulate STUDY --out DIR`` writes ``DIR/result.json`` (the study echoed back,
 the force curve, completion status), ``DIR/force_curve.csv``, ``DIR/fields.vtu`` (mesh,
 node sets as ``node_set:<name>`` point data, ``tet_region`` cell data, the last step's
-``displacement_m``, ``cauchy_stress_Pa`` and ``von_mises_Pa``) and optionally
-``DIR/fields_NNN.vtu`` (the displacement of every step). :func:`export_result_dir` turns such
-a folder into a scene; :func:`export_study` writes a study's specimen and material without
-results. ``warptissue simulate --usd`` and ``warptissue fit ... --usd`` call
-:func:`export_result_dir`.
+``displacement_m``, ``cauchy_stress_Pa`` and ``von_mises_Pa``, and under a rigid indenter
+``contact_pressure_Pa``) and optionally ``DIR/fields_NNN.vtu`` (the displacement, and the
+contact pressure, of every step). :func:`export_result_dir` turns such a folder into a
+scene (the contact pressure and ``result.json``'s contact area become its
+``tissue:contactPressure`` primvar and ``tissue:probe:contactArea``); :func:`export_study`
+writes a study's specimen and material without results. ``warptissue simulate --usd`` and
+``warptissue fit ... --usd`` call :func:`export_result_dir`.
 """
 
 from __future__ import annotations
@@ -113,11 +115,13 @@ def _curve(summary: Mapping[str, Any], key: str, path: Path) -> np.ndarray:
     return array
 
 
-def _step_displacements(step_files: list[Path], node_count: int) -> np.ndarray:
-    """The ``displacement_m`` of each ``fields_NNN.vtu``, shape (S, N, 3)."""
-    steps = []
+def _step_fields(step_files: list[Path], node_count: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """The ``displacement_m`` of each ``fields_NNN.vtu``, shape (S, N, 3), and their
+    ``contact_pressure_Pa``, (S, N) (None where a file has none: no rigid contact)."""
+    steps, pressures = [], []
     for step_file in step_files:
-        displacement = read_fields_vtu(step_file)[1].get("displacement_m")
+        point_data = read_fields_vtu(step_file)[1]
+        displacement = point_data.get("displacement_m")
         if displacement is None or np.shape(displacement) != (node_count, 3):
             raise InputError(
                 f"no displacement_m of shape ({node_count}, 3) as in fields.vtu: "
@@ -125,7 +129,10 @@ def _step_displacements(step_files: list[Path], node_count: int) -> np.ndarray:
                 path=step_file,
             )
         steps.append(displacement)
-    return np.stack(steps)
+        pressures.append(point_data.get("contact_pressure_Pa"))
+    if any(p is None or np.shape(p) != (node_count,) for p in pressures):
+        return np.stack(steps), None
+    return np.stack(steps), np.stack(pressures)
 
 
 def _read_indenter(spec: Any, path: Path) -> Indenter | None:
@@ -178,11 +185,19 @@ def export_result_dir(
     result = None
     if depths.size:
         step_files = [result_dir / f"fields_{k:03d}.vtu" for k in range(1, depths.size + 1)]
+        pressure = point_data.get("contact_pressure_Pa")  # the last step's, or None
         if all(p.is_file() for p in step_files):
-            displacement = _step_displacements(step_files, mesh.node_count)
+            displacement, step_pressure = _step_fields(step_files, mesh.node_count)
+            pressure = step_pressure if step_pressure is not None else pressure
         else:
             displacement = point_data.get("displacement_m")
+        contact = {}
+        if pressure is not None:
+            contact["contact_pressure_Pa"] = pressure
+            if (summary.get("force_curve") or {}).get("contact_area_m2") is not None:
+                contact["contact_area_m2"] = _curve(summary, "contact_area_m2", summary_path)
         result = {
+            **contact,
             "depths_m": depths,
             "reaction_force_N": forces,
             "displacement_m": displacement,

@@ -15,6 +15,8 @@ Prims: ``/World`` (provenance in customData), ``/World/Specimen`` (deformable bo
 ``/World/Indenter``. A heterogeneous material field (per-tet Young's modulus and Poisson's
 ratio, :data:`MATERIAL_FIELD_PRIMVARS`) is written as uniform primvars of the TetMesh and of
 the surface Mesh (each face takes the value of the tet it bounds), in the asset layer.
+Under a rigid indenter in contact the results layer also samples the contact pressure on the
+surface Mesh and the contact area on the indenter (:data:`CONTACT_RESULTS`).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from warptissue.usd.schema import (
 )
 
 __all__ = [
+    "CONTACT_RESULTS",
     "FACE_SET_FAMILY",
     "MATERIAL_FIELD_PRIMVARS",
     "NODE_SET_FAMILY",
@@ -62,6 +65,12 @@ MATERIAL_FIELD_PRIMVARS = {
     "poissons_ratio": ("tissue:poissonsRatio", "1"),
 }
 """Per-tet material field: ``material_field`` key -> (uniform primvar name, unit customData)."""
+
+CONTACT_RESULTS = ("contact_area_m2", "contact_pressure_Pa")
+"""Optional results of a rigid indenter in contact: the contact area per step (S,), m^2,
+written as ``tissue:probe:contactArea`` on ``/World/Indenter``, and the nodal contact
+pressure (S, N) (or (N,): the last step), Pa, written as the vertex primvar
+``primvars:tissue:contactPressure`` of the surface Mesh."""
 
 WORLD = "/World"
 SPECIMEN = "/World/Specimen"
@@ -188,7 +197,17 @@ def _define_subsets(
     UsdGeom.Subset.SetFamilyType(geom, family, family_type)
 
 
-def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
+def _indenter_prims(
+    stage: Any, indenter: Indenter, top_z_m: float, footprint_m: np.ndarray | None = None
+) -> None:
+    """The indenter's Xform at its contact point and its shape (``/World/Indenter/Shape``).
+
+    A ``"plate"`` (a rigid plane in the FE) and a ``"platen"`` of ``length_m`` 0 are drawn as
+    a thin box over the specimen's footprint ``footprint_m`` (``[[x_min, y_min], [x_max,
+    y_max]]`` of the modelled part, m; a quarter model's quarter), a twentieth of its larger
+    side thick, resting on the top; a platen with ``length_m`` > 0 is a square of that side
+    centred on the probe.
+    """
     from pxr import Gf, Sdf, UsdGeom
 
     contact_z = top_z_m if indenter.z_m is None else indenter.z_m
@@ -220,12 +239,22 @@ def _indenter_prims(stage: Any, indenter: Indenter, top_z_m: float) -> None:
     elif indenter.kind == "wedge":
         _wedge_mesh(stage, indenter)
     else:
-        thickness = 0.05 * indenter.length_m
+        if indenter.length_m > 0 or footprint_m is None:
+            sides = (indenter.length_m, indenter.length_m)
+            centre = (0.0, 0.0)
+        else:
+            low, high = np.asarray(footprint_m, dtype=np.float64)
+            sides = (float(high[0] - low[0]), float(high[1] - low[1]))
+            centre = (
+                float(0.5 * (low[0] + high[0]) - indenter.x_m),
+                float(0.5 * (low[1] + high[1]) - indenter.y_m),
+            )
+        thickness = 0.05 * max(sides)
         shape = UsdGeom.Cube.Define(stage, f"{INDENTER}/Shape")
         shape.CreateSizeAttr(1.0)
         shape.CreateExtentAttr([(-0.5, -0.5, -0.5), (0.5, 0.5, 0.5)])
-        shape.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, thickness / 2))
-        shape.AddScaleOp().Set(Gf.Vec3f(indenter.length_m, indenter.length_m, thickness))
+        shape.AddTranslateOp().Set(Gf.Vec3d(centre[0], centre[1], thickness / 2))
+        shape.AddScaleOp().Set(Gf.Vec3f(sides[0], sides[1], thickness))
     for name, value, unit in (
         ("radius", indenter.radius_m, "m"),
         ("length", indenter.length_m, "m"),
@@ -417,10 +446,13 @@ def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str,
         if value is None:
             raise InputError(f"the result has no {name!r}", value=type(result).__name__)
         arrays[name] = np.asarray(value, dtype=np.float64)
-    for name in ("cauchy_stress_Pa", "von_mises_Pa", "time_s"):
+    for name in ("cauchy_stress_Pa", "von_mises_Pa", "time_s", *CONTACT_RESULTS):
         value = _field(result, name)
         if value is not None:
             arrays[name] = np.asarray(value, dtype=np.float64)
+    for name in CONTACT_RESULTS:  # a sharp flat punch's result holds them empty
+        if name in arrays and arrays[name].size == 0:
+            del arrays[name]
     step_count = arrays["depths_m"].shape[0] if arrays["depths_m"].ndim == 1 else -1
     expected = {
         "depths_m": (step_count,),
@@ -429,9 +461,13 @@ def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str,
         "displacement_m": (step_count, node_count, 3),
         "cauchy_stress_Pa": (tet_count, 6),
         "von_mises_Pa": (tet_count,),
+        "contact_area_m2": (step_count,),
+        "contact_pressure_Pa": (step_count, node_count),
     }
     if arrays["displacement_m"].ndim == 2:
         expected["displacement_m"] = (node_count, 3)
+    if "contact_pressure_Pa" in arrays and arrays["contact_pressure_Pa"].ndim == 1:
+        expected["contact_pressure_Pa"] = (node_count,)
     for name, array in arrays.items():
         if array.shape != expected[name]:
             raise InputError(
@@ -475,6 +511,15 @@ def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> 
                     "Pa",
                 )
             )
+    if "contact_pressure_Pa" in arrays:
+        declared.append(
+            (
+                surface.CreatePrimvar(
+                    "tissue:contactPressure", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.vertex
+                ),
+                "Pa",
+            )
+        )
     for primvar, unit in declared:
         primvar.GetAttr().SetCustomDataByKey("unit", unit)
     indenter = stage.GetPrimAtPath(INDENTER)
@@ -486,6 +531,8 @@ def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> 
     curves = [("depth", "m"), ("reactionForce", "N")] + (
         [("time", "s")] if "time_s" in arrays else []
     )
+    if "contact_area_m2" in arrays:
+        curves.append(("contactArea", "m2"))
     for name, unit in curves:
         attr = indenter.CreateAttribute(
             f"tissue:probe:{name}", Sdf.ValueTypeNames.Double, custom=True
@@ -539,6 +586,21 @@ def _write_results(
     if "time_s" in arrays:
         for k, time in enumerate(arrays["time_s"]):
             indenter.GetAttribute("tissue:probe:time").Set(float(time), k + 1)
+    if "contact_area_m2" in arrays:
+        area_attr = indenter.GetAttribute("tissue:probe:contactArea")
+        for time_code, area in enumerate(np.concatenate([[0.0], arrays["contact_area_m2"]])):
+            area_attr.Set(float(area), time_code)
+    if "contact_pressure_Pa" in arrays:
+        pressure = arrays["contact_pressure_Pa"]
+        pressure_attr = UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:contactPressure")
+        rest_pressure = np.zeros(len(surface_nodes))
+        if pressure.ndim == 1:
+            samples = {0: rest_pressure, step_count: pressure[kept][surface_nodes]}
+        else:
+            samples = {0: rest_pressure}
+            samples.update({k + 1: pressure[k, kept][surface_nodes] for k in range(step_count)})
+        for time_code, values in samples.items():
+            pressure_attr.Set(Vt.DoubleArray.FromNumpy(np.ascontiguousarray(values)), time_code)
     last = step_count
     if "cauchy_stress_Pa" in arrays:
         volume_api.GetPrimvar("tissue:cauchyStress").Set(
@@ -666,8 +728,11 @@ def write_simulation_usd(
         result: An ``IndentationResult`` or a mapping with ``depths_m`` (S,),
             ``reaction_force_N`` (S,), ``displacement_m`` (S, N, 3) (or (N, 3): the last
             step only, sampled at time code S) and optionally
-            ``cauchy_stress_Pa`` (M, 6) and ``von_mises_Pa`` (M,) at the last step, and
-            ``time_s`` (S,). Step k is written at time code k; time code 0 is the rest state.
+            ``cauchy_stress_Pa`` (M, 6) and ``von_mises_Pa`` (M,) at the last step,
+            ``time_s`` (S,), and under a rigid indenter in contact ``contact_area_m2`` (S,)
+            and ``contact_pressure_Pa`` (S, N) (or (N,): the last step only)
+            (:data:`CONTACT_RESULTS`; empty arrays are skipped). Step k is written at time
+            code k; time code 0 is the rest state.
         provenance: JSON-like metadata (data file, fit quality, ...) stored in ``/World``'s
             customData under ``warptissue``, with software versions added.
         density_kg_per_m3: Mass density written as ``physics:density``.
@@ -737,7 +802,9 @@ def write_simulation_usd(
             tissue, UsdShade.Tokens.fallbackStrength, "physics"
         )
     if indenter is not None:
-        _indenter_prims(stage, indenter, float(rest[:, 2].max()))
+        _indenter_prims(
+            stage, indenter, float(rest[:, 2].max()), np.stack([rest.min(0)[:2], rest.max(0)[:2]])
+        )
     arrays = None
     if result is not None:
         arrays = _result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
