@@ -33,6 +33,7 @@ def test_every_example_has_a_test():
         "verify_flat_punch.py",
         "ahn_kim_two_stage.py",
         "hertz_sphere.py",
+        "rounded_punch.py",
         "hertz_contact_pressure.py",
         "takacs_line_indenter.py",
     }
@@ -123,6 +124,27 @@ def test_hertz_sphere_quick_follows_the_layer_corrected_hertz(tmp_path):
         assert row["hertz_N"] == pytest.approx(hertz, rel=1e-12)
         assert row["force_over_corrected_hertz"] == pytest.approx(1.0, abs=0.08)
         assert row["contact_force_N"] == pytest.approx(row["force_N"], rel=1e-8)
+
+
+def test_rounded_punch_quick_lies_between_the_flat_face_and_the_sharp_punch(tmp_path):
+    """The rounded punch's quick form: its force lies below the sharp punch's on the same
+    mesh, the sharp punch of equal force has a radius between the flat face's a - rho and a,
+    the difference to the sharp punch falls with rho, and the contact holds the nodes to a
+    small fraction of the depth."""
+    run_example("rounded_punch.py", "--quick", "--out", "rounded.json", cwd=tmp_path)
+    (mesh,) = json.loads((tmp_path / "rounded.json").read_text())["meshes"]
+    rows = mesh["rows"]
+    assert {row["edge_radius_over_radius"] for row in rows} == {0.4, 0.1}
+    for row in rows:
+        rho = row["edge_radius_over_radius"]
+        assert row["force_N"] < row["sharp_force_N"]
+        assert 1.0 - rho < row["effective_radius_over_radius_fe"] < 1.0
+        assert row["max_penetration_over_depth"] < 1e-3
+    gap = {
+        rho: max(1 - r["force_over_sharp"] for r in rows if r["edge_radius_over_radius"] == rho)
+        for rho in (0.4, 0.1)
+    }
+    assert gap[0.1] < 0.4 * gap[0.4]
 
 
 def test_hertz_contact_pressure_quick_follows_hertz_and_shows_the_checkerboard(tmp_path):

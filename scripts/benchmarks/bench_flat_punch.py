@@ -17,6 +17,11 @@ liver, Ahn & Kim) and K / mu = 1000.
   accuracy: for an error target, the time each code needs is interpolated (log-log) between
   its runs.
 
+``--probe rounded --edge-radius-m RHO`` replaces warptissue's bonded punch by a rigid flat
+punch of the same radius whose edge is rounded with radius RHO, pressed in through
+frictionless penalty contact (issue 21, must-show f); the probe force is then the base
+reaction. FElupe always presses the bonded punch.
+
 ``--markdown RESULTS...`` runs nothing and prints the runs of earlier ``--out`` files as the
 Markdown tables of docs/performance.md.
 
@@ -25,6 +30,8 @@ Examples:
         --out bench.json
     python scripts/benchmarks/bench_flat_punch.py --device cuda --sizes 10k,100k,1m \\
         --out $OUT/bench.json
+    python scripts/benchmarks/bench_flat_punch.py --sizes 10k --probe rounded \\
+        --edge-radius-m 1e-4 --out rounded.json
 """
 
 from __future__ import annotations
@@ -99,6 +106,8 @@ class RunRecord:
     relative_error: float | None = None
     newton_profile: dict[str, Any] | None = None
     assemblies: dict[str, int] | None = None
+    probe: str = "bonded"
+    edge_radius_m: float = 0.0
 
 
 def comma_separated(text: str) -> list[str]:
@@ -463,6 +472,7 @@ def run_warptissue(
     damping: bool = True,
     tolerance: float = NEWTON_TOLERANCE,
     profile: bool = False,
+    edge_radius_m: float = 0.0,
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
     steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
@@ -470,7 +480,9 @@ def run_warptissue(
     (free-dof residual over reaction; see :func:`warptissue.fem.solve_quasistatic`); with
     ``profile``, the time of each phase of the Newton iterations is recorded too
     (``newton_profile``, :class:`warptissue.fem.NewtonTimings`), and the assemblies of the
-    run are counted (``assemblies``: ``with_tangent``, ``residual_only``)."""
+    run are counted (``assemblies``: ``with_tangent``, ``residual_only``). With
+    ``edge_radius_m`` > 0 the punch is rigid, its edge rounded with that radius, and pressed
+    in through frictionless penalty contact instead of bonded prescribed nodes."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -483,7 +495,11 @@ def run_warptissue(
     problem = IndentationProblem(
         mesh,
         NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA, bulk_modulus_Pa=BULK_MODULUS_PA),
-        Indenter("flat_punch", radius_m=PROBE_RADIUS_M, contact="bonded"),
+        (
+            Indenter("flat_punch", radius_m=PROBE_RADIUS_M, edge_radius_m=edge_radius_m)
+            if edge_radius_m > 0.0
+            else Indenter("flat_punch", radius_m=PROBE_RADIUS_M, contact="bonded")
+        ),
         base="fixed",
         symmetry_planes=("symmetry_x", "symmetry_y"),
         formulation="mixed",
@@ -548,6 +564,8 @@ def run_warptissue(
         newton_tolerance=tolerance,
         newton_profile=None if result.timings is None else result.timings.to_dict(),
         assemblies=assemblies if profile else None,
+        probe="rounded" if edge_radius_m > 0.0 else "bonded",
+        edge_radius_m=edge_radius_m,
     )
 
 
@@ -676,6 +694,7 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
             "predictor": "linearized",
             "damping": "off",
             "tolerance": f"{problem.get('newton_tolerance', NEWTON_TOLERANCE):g}",
+            "probe": "bonded",
         }
         for run in report["runs"]:
             row = defaults | {k: v for k, v in run.items() if v is not None}
@@ -683,6 +702,8 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
                 row["damping"] = "on" if row["damping"] else "off"
             if "newton_tolerance" in run and run["newton_tolerance"] is not None:
                 row["tolerance"] = f"{run['newton_tolerance']:g}"
+            if row["probe"] == "rounded":
+                row["probe"] = f"rounded, edge {1e6 * row['edge_radius_m']:g} um"
             if row["code"] != "warptissue":
                 row.update(mesher="O-grid", predictor="-", damping="-", tolerance="-")
             runs.append(row)
@@ -696,7 +717,7 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
     if len({r["code"] for r in runs}) > 1:
         columns.append(("code", lambda r: names.get(r["code"], r["code"])))
     columns.append(("mesh", lambda r: r["mesher"]))
-    for key in ("predictor", "damping", "tolerance"):
+    for key in ("probe", "predictor", "damping", "tolerance"):
         if len({r[key] for r in runs if r["code"] == "warptissue"}) > 1:
             columns.append((key, lambda r, key=key: r[key]))
     columns += [
@@ -708,6 +729,20 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
         columns.append(("load steps", lambda r: f"{r['steps_converged']} of {STEP_COUNT}"))
     columns += [
         ("Newton its", lambda r: str(r["newton_iterations"])),
+    ]
+    if any(r["probe"] != "bonded" for r in runs):
+        columns.append(
+            (
+                "its / step: mean, max",
+                lambda r: (
+                    f"{np.mean(r['newton_iterations_per_step']):.1f}, "
+                    f"{max(r['newton_iterations_per_step'])}"
+                    if r.get("newton_iterations_per_step")
+                    else "-"
+                ),
+            )
+        )
+    columns += [
         ("total s (wall)", lambda r: _seconds(r["solve_s"])),
         ("CPU s", lambda r: _seconds(r["solve_cpu_s"])),
         ("s / Newton it", lambda r: f"{r['seconds_per_newton_iteration']:.3g}"),
@@ -723,12 +758,12 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
             "vs 2.460 mN",
             lambda r: (
                 f"{100 * (r['final_force_N'] / REFERENCE_FORCE_N - 1):+.1f} %"
-                if r["completed"]
+                if r["completed"] and r["probe"] == "bonded"
                 else "-"
             ),
         ),
     ]
-    text_columns = {"code", "mesh", "predictor", "damping", "tolerance"}
+    text_columns = {"code", "mesh", "probe", "predictor", "damping", "tolerance"}
     lines = [
         "| " + " | ".join(title for title, _ in columns) + " |",
         "|" + "|".join("---" if t in text_columns else "---:" for t, _ in columns) + "|",
@@ -886,6 +921,20 @@ def main(argv: list[str] | None = None) -> int:
         help="a name for this results file's runs (e.g. the code version), recorded in the "
         "JSON and shown by --markdown --profile",
     )
+    parser.add_argument(
+        "--probe",
+        default="bonded",
+        choices=("bonded", "rounded"),
+        help="warptissue's punch: bonded prescribed nodes, or a rigid punch with a rounded "
+        "edge (--edge-radius-m) in frictionless penalty contact",
+    )
+    parser.add_argument(
+        "--edge-radius-m",
+        type=float,
+        default=0.0,
+        help="edge radius of the rounded punch, m (0 < RHO <= the punch radius "
+        f"{PROBE_RADIUS_M:g})",
+    )
     parser.add_argument("--out", type=Path, default=None, help="write the JSON here")
     parser.add_argument(
         "--markdown",
@@ -924,6 +973,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--tolerances takes numbers, got {args.tolerances!r}")
     if not tolerances or any(not 0.0 < t < 1.0 for t in tolerances):
         parser.error(f"--tolerances must lie in (0, 1), got {args.tolerances!r}")
+    edge_radius_m = args.edge_radius_m if args.probe == "rounded" else 0.0
+    if args.probe == "rounded" and not 0.0 < edge_radius_m <= PROBE_RADIUS_M:
+        parser.error(
+            f"--probe rounded needs 0 < --edge-radius-m <= {PROBE_RADIUS_M:g}, got "
+            f"{args.edge_radius_m!r}"
+        )
     settings = {"on": True, "off": False}
     dampings = comma_separated(args.damping)
     if not dampings or any(d not in settings for d in dampings):
@@ -938,7 +993,9 @@ def main(argv: list[str] | None = None) -> int:
         wp.config.quiet = True
         started = time.perf_counter()
         warm_mesh, warm_size = warptissue_mesh(500)
-        run_warptissue(warm_mesh, warm_size, args.device, profile=args.profile)
+        run_warptissue(
+            warm_mesh, warm_size, args.device, profile=args.profile, edge_radius_m=edge_radius_m
+        )
         notes["warptissue_warmup_s"] = time.perf_counter() - started
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
@@ -956,6 +1013,7 @@ def main(argv: list[str] | None = None) -> int:
                     damping=settings[damping],
                     tolerance=tolerance,
                     profile=args.profile,
+                    edge_radius_m=edge_radius_m,
                 )
                 records.append(record)
                 print_table([record])
@@ -1027,6 +1085,8 @@ def main(argv: list[str] | None = None) -> int:
             "newton_tolerance": NEWTON_TOLERANCE,
             "warptissue_newton_tolerances": tolerances,
             "warptissue_mesher": args.mesher,
+            "warptissue_probe": args.probe,
+            "warptissue_edge_radius_m": edge_radius_m,
             "sneddon_force_N": sneddon_force_N(FINAL_DEPTH_M),
         },
         "machine": machine_description(),
