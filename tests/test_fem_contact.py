@@ -364,7 +364,7 @@ def _inside(probe: Indenter, planar: np.ndarray) -> np.ndarray:
     return planar[:, 1] > np.interp(planar[:, 0], profile[:, 0], profile[:, 1], right=np.inf)
 
 
-def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0):
+def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0, device: str = "cpu"):
     import warp as wp
     from warptissue.kernels import fem as kf
 
@@ -372,32 +372,32 @@ def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0):
 
     contact = RigidContact(probe, np.arange(len(points)), 0.0, stiffness, CONTACT_DEPTH_M)
     count = len(points)
-    zeros = wp.zeros(count, dtype=wp.vec3d, device="cpu")
-    force_sum = wp.zeros(1, dtype=wp.vec3d, device="cpu")
-    node_force = wp.zeros(count, dtype=wp.vec3d, device="cpu")
-    gap = wp.zeros(count, dtype=wp.float64, device="cpu")
-    blocks = wp.zeros(count, dtype=wp.mat33d, device="cpu")
+    zeros = wp.zeros(count, dtype=wp.vec3d, device=device)
+    force_sum = wp.zeros(1, dtype=wp.vec3d, device=device)
+    node_force = wp.zeros(count, dtype=wp.vec3d, device=device)
+    gap = wp.zeros(count, dtype=wp.float64, device=device)
+    blocks = wp.zeros(count, dtype=wp.mat33d, device=device)
     wp.launch(
         kf.rigid_contact_kernel,
         dim=count,
         inputs=[
-            wp.array(points, dtype=wp.vec3d, device="cpu"),
+            wp.array(points, dtype=wp.vec3d, device=device),
             zeros,
-            wp.array(np.arange(count), dtype=wp.int32, device="cpu"),
-            wp.array(np.arange(count), dtype=wp.int32, device="cpu"),
+            wp.array(np.arange(count), dtype=wp.int32, device=device),
+            wp.array(np.arange(count), dtype=wp.int32, device=device),
             contact.device_body(),
             wp.float64(stiffness),
             1,
         ],
         outputs=[
-            wp.zeros(count, dtype=wp.vec3d, device="cpu"),
+            wp.zeros(count, dtype=wp.vec3d, device=device),
             blocks,
-            wp.zeros(1, dtype=wp.float64, device="cpu"),
+            wp.zeros(1, dtype=wp.float64, device=device),
             force_sum,
             node_force,
             gap,
         ],
-        device="cpu",
+        device=device,
     )
     return gap.numpy(), node_force.numpy(), blocks.numpy()
 
@@ -420,12 +420,12 @@ def _planar(probe: Indenter, points: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("name", list(BODIES))
-def test_rigid_body_gap_matches_the_sampled_outline(name):
+def test_rigid_body_gap_matches_the_sampled_outline(name, device):
     """The kernel's signed distance equals the distance to a densely sampled outline of the
     body (its sign from inside/outside), for points on both sides of the surface."""
     probe = BODIES[name]
     points = _sample_points(probe)
-    gap, _, _ = _launch(probe, points)
+    gap, _, _ = _launch(probe, points, device=device)
     planar = _planar(probe, points)
     profile = _profile(probe)
     distance = np.min(np.linalg.norm(planar[:, None, :] - profile[None, :, :], axis=2), axis=1)
@@ -436,20 +436,20 @@ def test_rigid_body_gap_matches_the_sampled_outline(name):
 
 
 @pytest.mark.parametrize("name", list(BODIES))
-def test_rigid_contact_tangent_matches_central_differences(name):
+def test_rigid_contact_tangent_matches_central_differences(name, device):
     """The kernel's tangent block k (n n^T + g dn/dx) is the derivative of -f_c = k g n with
     respect to the node's position (central differences), at penetrating points."""
     probe = BODIES[name]
     points = _sample_points(probe)
-    gap, _, blocks = _launch(probe, points)
+    gap, _, blocks = _launch(probe, points, device=device)
     points, blocks = points[gap < -1e-5], blocks[gap < -1e-5]
     step = 1e-8
     numeric = np.empty_like(blocks)
     for j in range(3):
         shift = np.zeros(3)
         shift[j] = step
-        _, plus, _ = _launch(probe, points + shift)
-        _, minus, _ = _launch(probe, points - shift)
+        _, plus, _ = _launch(probe, points + shift, device=device)
+        _, minus, _ = _launch(probe, points - shift, device=device)
         numeric[:, :, j] = -(plus - minus) / (2 * step)
     # Points within one step of a seam (a tip/flank or face/rim junction) are excluded.
     error = np.abs(blocks - numeric).max(axis=(1, 2))
@@ -807,3 +807,27 @@ def test_wedge_force_grows_with_depth_and_equals_a_cylinder_on_its_tip(wedge_qua
     np.testing.assert_allclose(cylinder.reaction_force_N, force, rtol=1e-6)
     # The penalty lets the wedge into the strip by a small fraction of the depth only.
     assert np.all(wedge_quarter_run.max_penetration_m < 2e-3 * WEDGE_DEPTHS_M)
+
+
+@pytest.mark.parametrize(
+    "probe",
+    [
+        Indenter("sphere", radius_m=RADIUS_M),
+        Indenter("flat_punch", radius_m=0.2 * RADIUS_M, edge_radius_m=0.05 * RADIUS_M),
+    ],
+    ids=["sphere", "rounded_punch"],
+)
+def test_rigid_contact_runs_on_every_device_with_the_cpu_force(sphere_mesh, probe, device):
+    """The same run through contact on each Warp device (CUDA where present) gives the CPU's
+    forces, contact force and penetration (the GPU's atomics only reorder the sums)."""
+    depths = [0.01 * RADIUS_M, 0.03 * RADIUS_M]
+    material = NeoHookean(C10_PA, 2000.0 * C10_PA)
+    runs = [
+        simulate_indentation(
+            IndentationProblem(sphere_mesh, material, probe), depths, device=d, progress=False
+        )
+        for d in ("cpu", device)
+    ]
+    assert all(run.completed for run in runs)
+    for field in ("reaction_force_N", "contact_force_N", "max_penetration_m"):
+        np.testing.assert_allclose(getattr(runs[1], field), getattr(runs[0], field), rtol=1e-6)
