@@ -102,6 +102,7 @@ class RunRecord:
     linear_solver: str = ""
     predictor: str = ""
     damping: bool | None = None
+    nonlinear_elimination: bool | None = None
     newton_tolerance: float | None = None
     relative_error: float | None = None
     newton_profile: dict[str, Any] | None = None
@@ -470,6 +471,7 @@ def run_warptissue(
     progress: bool = False,
     predictor: str = "linearized",
     damping: bool = True,
+    nonlinear_elimination: bool = True,
     tolerance: float = NEWTON_TOLERANCE,
     profile: bool = False,
     edge_radius_m: float = 0.0,
@@ -522,7 +524,12 @@ def run_warptissue(
         depths_m()[:steps],
         device=warp_device,
         progress=progress,
-        options=NewtonOptions(tolerance=tolerance, predictor=predictor, damping=damping),
+        options=NewtonOptions(
+            tolerance=tolerance,
+            predictor=predictor,
+            damping=damping,
+            nonlinear_elimination=nonlinear_elimination,
+        ),
         assembler=assembler,
         profile=profile,
     )
@@ -561,6 +568,7 @@ def run_warptissue(
         linear_solver=str(getattr(result, "linear_solver", "")),
         predictor=predictor,
         damping=damping,
+        nonlinear_elimination=nonlinear_elimination,
         newton_tolerance=tolerance,
         newton_profile=None if result.timings is None else result.timings.to_dict(),
         assemblies=assemblies if profile else None,
@@ -895,6 +903,12 @@ def main(argv: list[str] | None = None) -> int:
         "linearized, extrapolated: each mesh runs once per predictor",
     )
     parser.add_argument(
+        "--elimination",
+        default="on",
+        help="nonlinear elimination after each global Newton step: on, off, or on,off (each "
+        "mesh runs once per setting; recorded as nonlinear_elimination)",
+    )
+    parser.add_argument(
         "--damping",
         default="on",
         help="Levenberg-Marquardt damping after cut Newton steps: on, off, or on,off (each "
@@ -983,6 +997,9 @@ def main(argv: list[str] | None = None) -> int:
     dampings = comma_separated(args.damping)
     if not dampings or any(d not in settings for d in dampings):
         parser.error(f"--damping takes on and/or off, got {args.damping!r}")
+    eliminations = comma_separated(args.elimination)
+    if not eliminations or any(e not in settings for e in eliminations):
+        parser.error(f"--elimination takes on and/or off, got {args.elimination!r}")
 
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
@@ -1000,8 +1017,8 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
             mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
-            for predictor, damping, tolerance in itertools.product(
-                predictors, dampings, tolerances
+            for predictor, damping, tolerance, elimination in itertools.product(
+                predictors, dampings, tolerances, eliminations
             ):
                 record = run_warptissue(
                     mesh,
@@ -1011,6 +1028,7 @@ def main(argv: list[str] | None = None) -> int:
                     progress=args.progress,
                     predictor=predictor,
                     damping=settings[damping],
+                    nonlinear_elimination=settings[elimination],
                     tolerance=tolerance,
                     profile=args.profile,
                     edge_radius_m=edge_radius_m,
