@@ -20,7 +20,9 @@ from collections.abc import Callable
 from warptissue.errors import InputError
 
 __all__ = [
+    "device",
     "length_m",
+    "nonnegative_int",
     "nonnegative_length_m",
     "positive_int",
     "positive_length_m",
@@ -99,3 +101,23 @@ def positive_int(text: str) -> int:
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be positive (got {text!r})")
     return value
+
+
+def nonnegative_int(text: str) -> int:
+    """An integer, 0 or more (a seed, a count of workers or retries), for argparse ``type=``."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer (got {text!r})") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more (got {text!r})")
+    return value
+
+
+def device(text: str) -> str:
+    """A ``--device`` value: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (others: exit 2)."""
+    from warptissue.study import DEVICE_PATTERN
+
+    if not DEVICE_PATTERN.match(text):
+        raise argparse.ArgumentTypeError(f"expected auto, cpu, cuda or cuda:N, got {text!r}")
+    return text

@@ -12,6 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from warptissue.cli._args import device, nonnegative_int
+
 __all__ = ["register", "run"]
 
 
@@ -50,13 +52,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--device",
         default=None,
-        type=_device,
+        type=device,
         metavar="DEVICE",
         help="auto, cpu, cuda or cuda:N for every study (default: each study's solver.device)",
     )
     parser.add_argument(
         "--workers",
-        type=_nonnegative_int,
+        type=nonnegative_int,
         default=None,
         metavar="N",
         help="worker processes of the LocalCluster (default 1); 0 runs the studies in this "
@@ -70,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--retries",
-        type=_nonnegative_int,
+        type=nonnegative_int,
         default=1,
         metavar="N",
         help="Dask retries of a task that raised (default 1); a task whose worker dies runs "
@@ -81,26 +83,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     parser.set_defaults(handler=run)
-
-
-def _device(text: str) -> str:
-    """A ``--device`` value: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (others: exit 2)."""
-    from warptissue.study import DEVICE_PATTERN
-
-    if not DEVICE_PATTERN.match(text):
-        raise argparse.ArgumentTypeError(f"expected auto, cpu, cuda or cuda:N, got {text!r}")
-    return text
-
-
-def _nonnegative_int(text: str) -> int:
-    """A ``--workers`` or ``--retries`` value: an integer, 0 or more."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer (got {text!r})") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more (got {text!r})")
-    return value
 
 
 def run(args: argparse.Namespace) -> int:

@@ -29,20 +29,14 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from warptissue.cli._args import positive_int, positive_length_m, positive_number
+from warptissue.cli._args import (
+    nonnegative_int,
+    positive_int,
+    positive_length_m,
+    positive_number,
+)
 
 __all__ = ["register_fit"]
-
-
-def _seed(text: str) -> int:
-    """A random seed, an integer >= 0 (NumPy refuses negative seeds), for argparse."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer (got {text!r})") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more (got {text!r})")
-    return value
 
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
@@ -71,7 +65,10 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         "--test-markers", type=positive_int, default=50, help="markers held out for evaluation"
     )
     parser.add_argument(
-        "--seed", type=_seed, default=0, help="seed of the train/test split (an integer >= 0)"
+        "--seed",
+        type=nonnegative_int,
+        default=0,
+        help="seed of the train/test split (an integer >= 0)",
     )
     parser.add_argument("--objective", choices=("displacement", "force"), default="displacement")
     parser.add_argument(

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from warptissue.cli import EXIT_STATUSES
+from warptissue.cli._args import device
 from warptissue.errors import ConvergenceError, InputError
 
 if TYPE_CHECKING:
@@ -94,7 +95,7 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--device",
         default=None,
-        type=_device,
+        type=device,
         metavar="DEVICE",
         help="auto, cpu, cuda or cuda:N (default: the study's solver.device)",
     )
@@ -103,15 +104,6 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bars or summary")
     parser.set_defaults(handler=run)
-
-
-def _device(text: str) -> str:
-    """A ``--device`` value: ``auto``, ``cpu``, ``cuda`` or ``cuda:N`` (others: exit 2)."""
-    from warptissue.study import DEVICE_PATTERN
-
-    if not DEVICE_PATTERN.match(text):
-        raise argparse.ArgumentTypeError(f"expected auto, cpu, cuda or cuda:N, got {text!r}")
-    return text
 
 
 def run(args: argparse.Namespace) -> int:
