@@ -555,9 +555,17 @@ def offset_ramp(
 
 
 def offset_study(
-    folder: Path, fit: str, truth: dict = NEO_HOOKEAN, solver: str = "", **options
+    folder: Path,
+    fit: str,
+    truth: dict = NEO_HOOKEAN,
+    solver: str = "",
+    *,
+    ramp=offset_ramp,
+    **options,
 ) -> object:
-    history, recorded = offset_ramp(**options)
+    """A study of one FE record made by ``ramp(**options)`` (a depth history touching at an
+    offset), started at the truth."""
+    history, recorded = ramp(**options)
     return make_study(
         folder,
         truth=truth,
@@ -704,15 +712,8 @@ def offset_ramp_and_hold(
 
 
 def viscous_offset_study(folder: Path, fit: str, **options):
-    history, recorded = offset_ramp_and_hold(**options)
-    return make_study(
-        folder,
-        truth=VISCOELASTIC,
-        start=VISCOELASTIC,
-        fit=fit,
-        history=history,
-        recorded_depth=[recorded],
-        solver="tolerance = 1e-12",
+    return offset_study(
+        folder, fit, VISCOELASTIC, "tolerance = 1e-12", ramp=offset_ramp_and_hold, **options
     )
 
 
