@@ -103,6 +103,10 @@ class RunRecord:
     predictor: str = ""
     damping: bool | None = None
     nonlinear_elimination: bool | None = None
+    reuse_factorization: bool | None = None
+    reused_solves: int | None = None
+    krylov_iterations: int | None = None
+    factorizations: int | None = None
     newton_tolerance: float | None = None
     relative_error: float | None = None
     newton_profile: dict[str, Any] | None = None
@@ -472,6 +476,7 @@ def run_warptissue(
     predictor: str = "linearized",
     damping: bool = True,
     nonlinear_elimination: bool = True,
+    reuse_factorization: bool = True,
     tolerance: float = NEWTON_TOLERANCE,
     profile: bool = False,
     edge_radius_m: float = 0.0,
@@ -529,6 +534,7 @@ def run_warptissue(
             predictor=predictor,
             damping=damping,
             nonlinear_elimination=nonlinear_elimination,
+            reuse_factorization=reuse_factorization,
         ),
         assembler=assembler,
         profile=profile,
@@ -569,6 +575,10 @@ def run_warptissue(
         predictor=predictor,
         damping=damping,
         nonlinear_elimination=nonlinear_elimination,
+        reuse_factorization=reuse_factorization,
+        reused_solves=result.linear_solver_statistics.get("reused_solves"),
+        krylov_iterations=result.linear_solver_statistics.get("krylov_iterations"),
+        factorizations=result.linear_solver_statistics.get("factorizations"),
         newton_tolerance=tolerance,
         newton_profile=None if result.timings is None else result.timings.to_dict(),
         assemblies=assemblies if profile else None,
@@ -903,6 +913,12 @@ def main(argv: list[str] | None = None) -> int:
         "linearized, extrapolated: each mesh runs once per predictor",
     )
     parser.add_argument(
+        "--reuse",
+        default="on",
+        help="GMRES with the last factorization where it is cheaper than a new one: on, off, "
+        "or on,off (each mesh runs once per setting; recorded as reuse_factorization)",
+    )
+    parser.add_argument(
         "--elimination",
         default="on",
         help="nonlinear elimination after each global Newton step: on, off, or on,off (each "
@@ -1000,6 +1016,9 @@ def main(argv: list[str] | None = None) -> int:
     eliminations = comma_separated(args.elimination)
     if not eliminations or any(e not in settings for e in eliminations):
         parser.error(f"--elimination takes on and/or off, got {args.elimination!r}")
+    reuses = comma_separated(args.reuse)
+    if not reuses or any(r not in settings for r in reuses):
+        parser.error(f"--reuse takes on and/or off, got {args.reuse!r}")
 
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
@@ -1017,8 +1036,8 @@ def main(argv: list[str] | None = None) -> int:
         for size in sizes:
             target = SIZE_TARGETS.get(size) or parse_count(size)
             mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
-            for predictor, damping, tolerance, elimination in itertools.product(
-                predictors, dampings, tolerances, eliminations
+            for predictor, damping, tolerance, elimination, reuse in itertools.product(
+                predictors, dampings, tolerances, eliminations, reuses
             ):
                 record = run_warptissue(
                     mesh,
@@ -1029,6 +1048,7 @@ def main(argv: list[str] | None = None) -> int:
                     predictor=predictor,
                     damping=settings[damping],
                     nonlinear_elimination=settings[elimination],
+                    reuse_factorization=settings[reuse],
                     tolerance=tolerance,
                     profile=args.profile,
                     edge_radius_m=edge_radius_m,

@@ -425,6 +425,7 @@ class CudssSolver:
         self._csr_offsets, self._csr_columns, self._block_rows = bsr33_csr_pattern(matrix)
         self._csr_values = wp.zeros(self._csr_columns.shape[0], dtype=wp.float64, device=device)
         self._rhs = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=device)
+        self._rhs_view = _cupy_view(self._rhs, cupy)
         self._stream = cupy.cuda.Stream.from_external(device.stream)
         with cupy.cuda.Device(device.ordinal), self._stream:
             self._csr = cupyx.scipy.sparse.csr_matrix(
@@ -544,6 +545,24 @@ class CudssSolver:
         with self._cupy.cuda.Device(self.device.ordinal), self._stream, self.timer.phase("solve"):
             x = self._solver.solve()
             return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+
+    def apply_factors(self, rhs):
+        """Solve with the factors of the last :meth:`solve`, on the device.
+
+        For the GMRES of :meth:`warptissue.fem.LinearSolver.solve_newton`: the call runs on
+        the solver's stream (the caller enters ``cupy.cuda.Device`` and the stream), and
+        nothing is copied to the host.
+
+        Args:
+            rhs: Right-hand side, a CuPy float64 array of 3 N entries (any shape).
+
+        Returns:
+            x, a new CuPy array of ``rhs``'s shape.
+        """
+        if self.factorizations == 0:
+            raise RuntimeError("apply_factors needs a factorization: call solve first")
+        self._rhs_view[...] = rhs.reshape(self._rhs_view.shape)
+        return self._solver.solve().reshape(rhs.shape).copy()
 
     def _rhs_blocks(self, rhs: np.ndarray) -> np.ndarray:
         """``rhs`` as a contiguous float64 (N, 3) array; a ValueError for another size."""

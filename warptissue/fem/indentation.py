@@ -285,6 +285,10 @@ class IndentationResult:
         timings: Where the load path's wall time went, per phase of the Newton iterations
             (:class:`warptissue.fem.NewtonTimings`), when run with ``profile=True``; else
             None.
+        linear_solver_statistics: The linear solver's counts over the load path:
+            ``factorizations``, ``reused_solves`` (Newton solves by GMRES with earlier
+            factors), ``krylov_iterations``, ``failed_reuses``
+            (:class:`warptissue.fem.QuasistaticResult`).
     """
 
     depths_m: np.ndarray
@@ -310,6 +314,7 @@ class IndentationResult:
     contact_area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     timings: NewtonTimings | None = None
+    linear_solver_statistics: dict[str, int] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary: the curve, iteration counts and status (fields omitted)."""
@@ -517,4 +522,5 @@ def _indentation_result(
         contact_area_m2=area,
         contact_pressure_Pa=pressure,
         timings=path.timings,
+        linear_solver_statistics=path.linear_solver_statistics,
     )
