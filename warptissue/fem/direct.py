@@ -267,7 +267,7 @@ class CpuDirectSolver:
             return np.full((self.row_count // 3, 3), np.nan)
         return self.solve_factorized(rhs)
 
-    def solve_factorized(self, rhs: np.ndarray) -> np.ndarray:
+    def solve_factorized(self, rhs: np.ndarray, *, refine: bool = True) -> np.ndarray:
         """Solve with the factors of the last :meth:`solve`, without a new factorization.
 
         The matrix's values may have changed since: this solves with the matrix as it was
@@ -275,6 +275,9 @@ class CpuDirectSolver:
 
         Args:
             rhs: Right-hand side, shape (N, 3).
+            refine: Let PARDISO refine the solution iteratively (up to 2 steps, against the
+                factorized values); False for a preconditioner's solve, where the factorized
+                matrix is only an approximation anyway.
 
         Returns:
             x, shape (N, 3); all NaN when there is no factorization or the solve failed.
@@ -292,7 +295,14 @@ class CpuDirectSolver:
         if not getattr(self, "_factorized", False):
             return failed
         with self.timer.phase("solve"):
-            error = self._pardiso(33, b)
+            if refine:
+                error = self._pardiso(33, b)
+            else:
+                self._iparm[7] = 0
+                try:
+                    error = self._pardiso(33, b)
+                finally:
+                    self._iparm[7] = 2
         if error != 0:
             return failed
         return self._x.reshape(-1, 3).copy()

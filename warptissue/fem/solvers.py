@@ -446,7 +446,7 @@ class LinearSolver:
 
         return gmres(
             matvec,
-            direct.solve_factorized,
+            lambda v: direct.solve_factorized(v, refine=False),
             np.ascontiguousarray(rhs, dtype=np.float64),
             rtol=rtol,
             max_iterations=REUSE_MAX_ITERATIONS,
