@@ -131,7 +131,9 @@ def test_solve_matches_scipy_and_reuses_analysis(method, rng):
 
 @pytest.mark.skipif(not _pardiso_available(), reason="pypardiso not installed")
 def test_newton_path_analyses_once(monkeypatch):
-    """Along a whole load path PARDISO analyses once and factorizes once per Newton iteration."""
+    """Along a whole load path PARDISO analyses once; without factorization reuse it
+    factorizes once per Newton iteration, with it (the default) once per counted
+    factorization."""
     phases: list[int] = []
     original = CpuDirectSolver._pardiso
 
@@ -141,18 +143,23 @@ def test_newton_path_analyses_once(monkeypatch):
 
     monkeypatch.setattr(CpuDirectSolver, "_pardiso", recording)
     mesh = _mesh()
-    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
-    path = solve_quasistatic(
-        assembler,
-        _conditions(mesh),
-        [1e-3, 2e-3],
-        options=NewtonOptions(linear_solver="pardiso"),
-    )
-    assert path.completed, path.message
-    newton = int(path.newton_iterations.sum())
-    assert newton >= 4
-    assert phases.count(11) == 1
-    assert phases.count(22) == phases.count(33) == newton
+    for reuse in (False, True):
+        phases.clear()
+        assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+        path = solve_quasistatic(
+            assembler,
+            _conditions(mesh),
+            [1e-3, 2e-3],
+            options=NewtonOptions(linear_solver="pardiso", reuse_factorization=reuse),
+        )
+        assert path.completed, path.message
+        newton = int(path.newton_iterations.sum())
+        assert newton >= 4
+        assert phases.count(11) == 1
+        factorizations = path.linear_solver_statistics["factorizations"]
+        assert phases.count(22) == factorizations
+        if not reuse:
+            assert factorizations == phases.count(33) == newton
 
 
 def test_pardiso_that_does_not_load_is_a_one_line_device_error(monkeypatch):
