@@ -53,10 +53,11 @@ def test_gmres_keeps_block_shapes_and_stops_when_told(rng):
         b,
         rtol=1e-14,
         max_iterations=40,
-        keep_going=lambda k: calls.append(k) or k < 2,
+        keep_going=lambda k, relative: calls.append((k, relative)) or k < 2,
     )
     assert outcome.x.shape == (50, 3)
-    assert calls == [1, 2] and outcome.iterations == 2
+    assert [k for k, _ in calls] == [1, 2] and outcome.iterations == 2
+    assert 0.0 < calls[1][1] <= calls[0][1] < 1.0  # GMRES residuals never grow
     assert not outcome.converged
     assert outcome.relative_residual == pytest.approx(
         np.linalg.norm(b.reshape(-1) - a @ outcome.x.reshape(-1)) / np.linalg.norm(b)

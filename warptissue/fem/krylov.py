@@ -52,7 +52,7 @@ def gmres(
     rtol: float,
     max_iterations: int,
     xp: ModuleType = np,
-    keep_going: Callable[[int], bool] | None = None,
+    keep_going: Callable[[int, float], bool] | None = None,
 ) -> KrylovOutcome:
     """Solve ``A x = b`` by GMRES with right preconditioning, from ``x = 0``.
 
@@ -63,8 +63,9 @@ def gmres(
         rtol: Relative tolerance on the residual norm, in (0, 1).
         max_iterations: Most iterations (no restart), >= 1.
         xp: The array module of ``b`` (``numpy`` or ``cupy``).
-        keep_going: Called with the iteration count after each iteration; False stops the
-            run as unconverged (the caller's time budget).
+        keep_going: Called after each unconverged iteration with the iteration count and
+            the relative residual ``|b - A x_k| / |b|`` (from the recurrence); False stops the
+            run as unconverged (the caller's budget).
 
     Returns:
         A :class:`KrylovOutcome`; ``x`` is the minimal-residual iterate reached.
@@ -126,7 +127,7 @@ def gmres(
         residual = abs(g[k])
         if residual <= rtol * beta or norm == 0.0:
             break
-        if keep_going is not None and not keep_going(k):
+        if keep_going is not None and not keep_going(k, residual / beta):
             break
         basis[k] = w / norm
     if k == 0:

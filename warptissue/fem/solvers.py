@@ -65,6 +65,9 @@ PREDICTORS = ("linearized", "extrapolated")
 REUSE_BUDGET = 0.5
 """A GMRES solve with old factors (:meth:`LinearSolver.solve_newton`) gives up after this
 share of the measured wall time of the last factorization with its solve."""
+REUSE_PREDICT_AFTER = 3
+"""From this many GMRES iterations on, a solve with old factors also gives up when the mean
+residual reduction per iteration so far predicts that it would overrun its budget."""
 REUSE_MAX_ITERATIONS = 40
 """Most GMRES iterations of one solve with old factors (the basis is kept in memory)."""
 
@@ -354,7 +357,9 @@ class LinearSolver:
         Where ``matrix`` was factorized before (its values have changed since), GMRES solves
         it with the old factors as a right preconditioner (:func:`warptissue.fem.krylov.gmres`)
         to ``|rhs - matrix x| <= rtol |rhs|``, for at most :data:`REUSE_BUDGET` times the
-        measured wall time of the last factorization with its solve. Where it gets there,
+        measured wall time of the last factorization with its solve; from
+        :data:`REUSE_PREDICT_AFTER` iterations on it gives up as soon as its mean residual
+        reduction per iteration predicts an overrun. Where it gets there,
         no factorization is made; where not, the matrix is factorized and solved
         (:meth:`solve`), and the next iteration starts from those fresh factors.
 
@@ -387,13 +392,21 @@ class LinearSolver:
             return self.solve(matrix, rhs)
         budget_s = REUSE_BUDGET * self._factorization_s
         started = perf_counter()
+
+        def keep_going(iterations: int, relative_residual: float) -> bool:
+            # Go on while the iterations that the mean rate so far predicts fit the budget.
+            elapsed = perf_counter() - started
+            if elapsed >= budget_s:
+                return False
+            if iterations < REUSE_PREDICT_AFTER:
+                return True
+            if not 0.0 < relative_residual < 1.0:
+                return False
+            needed = iterations * math.log(rtol) / math.log(relative_residual)
+            return needed * elapsed / iterations <= budget_s
+
         with self.timer.phase("solve"):
-            outcome = self._gmres(
-                matrix,
-                rhs,
-                rtol=rtol,
-                keep_going=lambda _: perf_counter() - started < budget_s,
-            )
+            outcome = self._gmres(matrix, rhs, rtol=rtol, keep_going=keep_going)
         self.krylov_iterations += outcome.iterations
         if outcome.converged:
             self.reused_solves += 1
