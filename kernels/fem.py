@@ -129,6 +129,7 @@ def assemble_elements_kernel(
     quadrature_volumes: wp.array2d(dtype=wp.float64),
     displacement: wp.array(dtype=wp.vec3d),
     block_index: wp.array2d(dtype=wp.int32),
+    elements: wp.array(dtype=wp.int32),
     mixed: int,
     with_tangent: int,
     viscous: ViscousStep,
@@ -140,11 +141,12 @@ def assemble_elements_kernel(
 ):
     """Add element internal forces to ``residual`` and tangent blocks to ``matrix_values``.
 
+    One thread per entry of ``elements``, the tets to assemble (all of them, or a patch's).
     ``block_index[e, a * nodes_per_tet + b]`` is the BSR block of node pair (a, b) of tet e.
     ``energy[0]`` accumulates the stored energy (J) and ``min_jacobian[0]`` the smallest J.
     A viscoelastic step reads the frozen history stress ``frozen[e, q]`` (unused otherwise).
     """
-    e = wp.tid()
+    e = elements[wp.tid()]
     npe = tets.shape[1]
     nq = quadrature_volumes.shape[1]
 
@@ -223,6 +225,18 @@ def assemble_elements_kernel(
                     matrix_values, block_index[e, a * npe + b], (k_bar / volume) * wp.outer(ga, gb)
                 )
     wp.atomic_add(energy, 0, element_energy)
+
+
+@wp.kernel
+def zero_element_blocks_kernel(
+    elements: wp.array(dtype=wp.int32),
+    block_index: wp.array2d(dtype=wp.int32),
+    matrix_values: wp.array(dtype=wp.mat33d),
+):
+    """Zero every tangent block that the tets ``elements`` add to (thread (i, k): block k of
+    tet ``elements[i]``)."""
+    i, k = wp.tid()
+    matrix_values[block_index[elements[i], k]] = wp.mat33d()
 
 
 @wp.kernel

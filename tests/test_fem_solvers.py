@@ -271,8 +271,8 @@ def test_nonlinear_elimination_saves_newton_iterations_and_keeps_the_curve():
 
 def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
     """Whether a local step is taken or every trial is refused (here: trials made to look
-    inverted), the returned assembly's residual is that of the returned displacement, not of
-    the last trial, which shares the assembler's arrays."""
+    inverted), the returned assembly's residual is that of the returned displacement (to
+    roundoff: the elimination updates it from the patch's part), not of the last trial."""
     problem = _bonded_punch()
     mesh = problem.mesh
     conditions = problem.dirichlet_conditions()
@@ -296,28 +296,67 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
     assert not first.converged
     u = first.displacement
 
-    def inverted_trials(displacement, *, with_tangent=True):
-        result = Assembler.assemble(assembler, displacement, with_tangent=with_tangent)
-        if not with_tangent:
-            result.min_jacobian = -1.0
-        return result
+    def inverted_trials(displacement, elements, *, with_tangent=False):
+        part, energy, _ = Assembler.assemble_part(
+            assembler, displacement, elements, with_tangent=with_tangent
+        )
+        return part, energy, -1.0
 
     for refuse in (False, True):
         start = assembler.assemble(u)
         if refuse:
-            assembler.assemble = inverted_trials
+            assembler.assemble_part = inverted_trials
         returned, assembly, iterations = _nonlinear_elimination(
             assembler, start, u, free, limit=0.0
         )
         residual = assembly.residual.numpy().copy()
+        energy = assembly.energy_J
         if refuse:
-            del assembler.assemble
+            del assembler.assemble_part
             assert iterations == 0
             np.testing.assert_array_equal(returned, u)
         else:
             assert iterations > 0
-        fresh = assembler.assemble(returned, with_tangent=False).residual.numpy()
-        np.testing.assert_array_equal(residual, fresh)
+            assert assembly.matrix is None
+        fresh = assembler.assemble(returned, with_tangent=False)
+        scale = np.abs(fresh.residual.numpy()).max()
+        np.testing.assert_allclose(residual, fresh.residual.numpy(), rtol=0, atol=1e-12 * scale)
+        assert energy == pytest.approx(fresh.energy_J, rel=1e-12)
+
+
+def test_a_part_of_the_tets_adds_up_with_the_rest_to_the_whole_assembly(rng):
+    """The forces, energy and patch tangent blocks of some tets, with those of the other
+    tets, equal the whole mesh's."""
+    problem = _bonded_punch()
+    mesh = problem.mesh
+    assembler = Assembler(mesh, problem.material, device="cpu")
+    u = 1e-5 * rng.standard_normal((mesh.node_count, 3))
+    whole = assembler.assemble(u)
+    whole_residual = whole.residual.numpy().copy()
+    nodes = assembler.node_patch(np.array([5, 17]))
+    elements = assembler.node_elements(nodes)
+    tets = mesh.tets
+    assert np.all(np.isin(tets[elements], nodes).any(axis=1))
+    others = np.setdiff1d(np.arange(mesh.tet_count), elements)
+    assert not np.isin(tets[others], nodes).any()
+    patch_tangent = assembler.tangent_submatrix(nodes).toarray()
+    first, first_energy, first_jacobian = assembler.assemble_part(
+        u, wp.array(elements, dtype=wp.int32, device=assembler.device), with_tangent=True
+    )
+    rest, rest_energy, rest_jacobian = assembler.assemble_part(
+        u, wp.array(others.astype(np.int32), dtype=wp.int32, device=assembler.device)
+    )
+    scale = np.abs(whole_residual).max()
+    np.testing.assert_allclose(first + rest, whole_residual, rtol=0, atol=1e-12 * scale)
+    assert first_energy + rest_energy == pytest.approx(whole.energy_J, rel=1e-12)
+    assert min(first_jacobian, rest_jacobian) == pytest.approx(whole.min_jacobian, rel=1e-14)
+    # the patch's own blocks hold only its tets' contributions: all of them
+    np.testing.assert_allclose(
+        assembler.tangent_submatrix(nodes).toarray(),
+        patch_tangent,
+        rtol=0,
+        atol=1e-12 * np.abs(patch_tangent).max(),
+    )
 
 
 def _six_step_compression() -> tuple[Assembler, DirichletConditions, np.ndarray]:
@@ -413,11 +452,18 @@ def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_
 
     assembler, conditions, loads = _six_step_compression()
     linearized = solve_quasistatic(
-        assembler, conditions, loads, options=NewtonOptions(predictor="linearized")
+        assembler,
+        conditions,
+        loads,
+        # every Newton solve factorized, so that both paths are bitwise equal
+        options=NewtonOptions(predictor="linearized", reuse_factorization=False),
     )
     monkeypatch.setattr(solvers, "_newton_increment", one_iteration_from_a_guess)
     retried = solve_quasistatic(
-        assembler, conditions, loads, options=NewtonOptions(predictor="extrapolated")
+        assembler,
+        conditions,
+        loads,
+        options=NewtonOptions(predictor="extrapolated", reuse_factorization=False),
     )
     assert linearized.completed and retried.completed
     assert retried.cutbacks == linearized.cutbacks == 0

@@ -145,6 +145,12 @@ class Assembler:
             geometry.quadrature_volumes, dtype=wp.float64, device=dev
         )
         self._build_pattern(mesh.tets)
+        self._all_elements = wp.array(
+            np.arange(self.tet_count, dtype=np.int32), dtype=wp.int32, device=dev
+        )
+        self._node_elements: tuple[np.ndarray, np.ndarray] | None = None
+        self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
+        self._part_scalars = wp.zeros(2, dtype=wp.float64, device=dev)
         self._points = wp.array(mesh.points, dtype=wp.vec3d, device=dev)
         self.contact: RigidContact | None = None
         self._contact_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
@@ -347,6 +353,7 @@ class Assembler:
             inputs=[
                 *self._element_inputs(u),
                 self._block_index,
+                self._all_elements,
                 int(self.formulation == "mixed"),
                 int(with_tangent),
                 *self._viscous_inputs(),
@@ -420,6 +427,7 @@ class Assembler:
                 inputs=[
                     *inputs,
                     self._block_index,
+                    self._all_elements,
                     int(self.formulation == "mixed"),
                     0,
                     *self._viscous_inputs(zero_history=True),
@@ -495,6 +503,109 @@ class Assembler:
         nodes = self._node_indices(nodes)
         neighbours = self._pattern_columns[_block_ranges(self._pattern_offsets, nodes)]
         return np.union1d(nodes, neighbours)
+
+    def node_elements(self, nodes: np.ndarray) -> np.ndarray:
+        """The tets that hold at least one of ``nodes``.
+
+        Args:
+            nodes: Node indices, (k,).
+
+        Returns:
+            Sorted unique tet indices, (T,) int32.
+
+        Raises:
+            InputError: A node index is out of range.
+        """
+        nodes = self._node_indices(nodes)
+        if self._node_elements is None:  # node -> tets, built once
+            tets = self._tets.numpy()
+            owners = np.repeat(np.arange(self.tet_count, dtype=np.int32), tets.shape[1])
+            order = np.argsort(tets.reshape(-1), kind="stable")
+            offsets = np.zeros(self.node_count + 1, dtype=np.int64)
+            np.cumsum(np.bincount(tets.reshape(-1), minlength=self.node_count), out=offsets[1:])
+            self._node_elements = (offsets, owners[order])
+        offsets, owners = self._node_elements
+        return np.unique(owners[_block_ranges(offsets, nodes)]).astype(np.int32)
+
+    def assemble_part(
+        self,
+        displacement_m: np.ndarray | wp.array,
+        elements: wp.array,
+        *,
+        with_tangent: bool = False,
+    ) -> tuple[np.ndarray, float, float]:
+        """The internal forces and energy of some tets alone (and of the rigid contact).
+
+        For a local solve on a patch of nodes (the nonlinear elimination): where only the
+        patch's nodes move, only the tets that hold them change their forces and energy, so
+        the whole residual follows from the last one plus the change of this part. The rigid
+        contact, where there is one, is evaluated at every candidate node (its unchanged
+        nodes cancel in that difference).
+
+        Args:
+            displacement_m: Nodal displacements, (N, 3), m (NumPy or a vec3d Warp array).
+            elements: The tets, (T,) int32 Warp array on the assembler's device (see
+                :meth:`node_elements`).
+            with_tangent: Also assemble their tangent: every block that these tets add to is
+                zeroed first, so a block of two nodes whose tets all lie among ``elements``
+                (two nodes of the patch) is exact afterwards, and the others are not: the
+                assembler's matrix must be assembled again (:meth:`assemble`) before it is
+                used as a whole.
+
+        Returns:
+            (forces of these tets and of the contact at every node, (N, 3), N; their energy,
+            J; the smallest det F over their quadrature points).
+        """
+        from warptissue.kernels import fem as kf
+
+        u = self.device_displacement(displacement_m)
+        self._part_residual.zero_()
+        scalars = self._part_scalars
+        scalars.zero_()
+        energy, min_jacobian = scalars[0:1], scalars[1:2]
+        min_jacobian.fill_(np.inf)
+        if with_tangent:
+            wp.launch(
+                kf.zero_element_blocks_kernel,
+                dim=(elements.shape[0], self.nodes_per_tet**2),
+                inputs=[elements, self._block_index],
+                outputs=[self.matrix.values],
+                device=self.device,
+            )
+        wp.launch(
+            kf.assemble_elements_kernel,
+            dim=elements.shape[0],
+            inputs=[
+                *self._element_inputs(u),
+                self._block_index,
+                elements,
+                int(self.formulation == "mixed"),
+                int(with_tangent),
+                *self._viscous_inputs(),
+            ],
+            outputs=[self._part_residual, self.matrix.values, energy, min_jacobian],
+            device=self.device,
+        )
+        if self.contact is not None:
+            force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
+            self._launch_contact(
+                kf, u, int(with_tangent), self._part_residual, self.matrix.values, energy, force
+            )
+        values = scalars.numpy()
+        return self._part_residual.numpy().copy(), float(values[0]), float(values[1])
+
+    def set_residual(self, residual_N: np.ndarray) -> wp.array:
+        """Overwrite the assembler's residual buffer (the one :meth:`assemble` returns), e.g.
+        with a residual updated from a part (:meth:`assemble_part`).
+
+        Args:
+            residual_N: (N, 3), N.
+
+        Returns:
+            The buffer, a vec3d Warp array (N,).
+        """
+        self._residual.assign(np.ascontiguousarray(residual_N, dtype=np.float64))
+        return self._residual
 
     def tangent_submatrix(self, nodes: np.ndarray) -> scipy.sparse.csr_matrix:
         """The last assembled tangent restricted to the rows and columns of ``nodes``.

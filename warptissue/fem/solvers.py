@@ -735,8 +735,12 @@ def _nonlinear_elimination(
     Returns:
         (displacement (N, 3), its assembly, local iterations taken). The assembly's residual
         is that of the returned displacement; after an accepted local step its tangent is
-        not assembled (``assembly.matrix`` is None): the caller assembles it where it needs
-        one, which it does not at a converged state.
+        not assembled (``assembly.matrix`` is None, and the assembler's matrix holds only the
+        patch's blocks correctly): the caller assembles it where it needs one, which it does
+        not at a converged state. The trials and the patch's tangents assemble only the tets
+        that hold a patch node (:meth:`warptissue.fem.Assembler.assemble_part`); the whole
+        residual and energy are updated by their change, and ``min_jacobian`` is the
+        smaller of the one passed in and the patch's.
 
     Notes:
         Nonlinear elimination (Lanzkron, Rose and Wilkes 1996; Cai and Li 2011, SIAM J. Sci.
@@ -744,8 +748,8 @@ def _nonlinear_elimination(
         its quadratic model: after a global step the residual sits on a few dozen nodes there,
         and the next global step overshoots them (on the 86 400-tet benchmark the energy
         minimum along it lay at 0.2-0.6 of the step), costing extra factorizations. Relaxing
-        them locally costs a few assemblies and a small solve; the global convergence test is
-        unchanged, so the converged state is the same.
+        them locally costs a few assemblies of the patch's tets and a small solve; the global
+        convergence test is unchanged, so the converged state is the same.
     """
     residual = assembly.residual.numpy()
     free_residual = residual * free
@@ -760,10 +764,17 @@ def _nonlinear_elimination(
     if 4 * len(patch) > assembler.node_count:
         return u, assembly, 0
     patch_free = free[patch].reshape(-1) > 0.5
+    # Only the tets holding a patch node change: the whole residual and energy follow from
+    # the last ones and the change of that part (no assembly of the whole mesh).
+    elements = wp.array(assembler.node_elements(patch), dtype=wp.int32, device=assembler.device)
+    part, part_energy, _ = assembler.assemble_part(u, elements)
     energy = assembly.energy_J
+    min_jacobian = assembly.min_jacobian
     total = _norm(free_residual)
     iterations = 0
     for _ in range(max_iterations):
+        if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
+            part, part_energy, _ = assembler.assemble_part(u, elements, with_tangent=True)
         matrix = assembler.tangent_submatrix(patch)[patch_free][:, patch_free]
         local_residual = (residual[patch] * free[patch]).reshape(-1)[patch_free]
         try:
@@ -780,31 +791,39 @@ def _nonlinear_elimination(
         alpha, accepted = 1.0, None
         for _ in range(8):
             trial = u + alpha * direction
-            check = assembler.assemble(trial, with_tangent=False)
+            trial_part, trial_part_energy, trial_min_jacobian = assembler.assemble_part(
+                trial, elements
+            )
+            trial_residual = residual + (trial_part - part)
+            trial_energy = energy + (trial_part_energy - part_energy)
             if (
-                check.min_jacobian > 0.0
-                and check.energy_J <= energy + 1e-4 * alpha * slope
-                and _norm(check.residual.numpy() * free) < total
+                trial_min_jacobian > 0.0
+                and math.isfinite(trial_energy)
+                and trial_energy <= energy + 1e-4 * alpha * slope
+                and _norm(trial_residual * free) < total
             ):
                 accepted = trial
                 break
             alpha *= 0.5
         if accepted is None:
-            # The trials overwrote the assembler's residual: assemble at u again.
-            assembly = assembler.assemble(u)
             break
         iterations += 1
-        # The accepted trial was the last state assembled: its residual is the assembler's.
-        u, assembly = accepted, check
-        residual = assembly.residual.numpy()
-        energy = assembly.energy_J
+        u, residual, energy = accepted, trial_residual, trial_energy
+        part, part_energy = trial_part, trial_part_energy
+        min_jacobian = min(min_jacobian, trial_min_jacobian)
         total = _norm(residual * free)
         local = _norm(residual[patch] * free[patch])
         if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
             break
-        if iterations < max_iterations:  # the next local step's patch tangent
-            assembly = assembler.assemble(u)
-            residual = assembly.residual.numpy()
+    if iterations == 0:
+        # Nothing moved and the tangent is untouched (it is only reassembled after a step).
+        return u, assembly, 0
+    assembly = Assembly(
+        residual=assembler.set_residual(residual),
+        matrix=None,
+        energy_J=energy,
+        min_jacobian=min_jacobian,
+    )
     return u, assembly, iterations
 
 
