@@ -6,7 +6,8 @@ are. With ``start = offsets[r]`` and ``count = offsets[r + 1] - start``, entry `
 block ``start + s`` lands at CSR position ``9 start + 3 count i + 3 s + k``; row ``3 r + i``
 starts at ``9 start + 3 count i``.
 
-Also: copying selected blocks of a BSR matrix out (a submatrix's values).
+Also: copying selected blocks of a BSR matrix out (a submatrix's values), and selected
+entries of a vec3d array out or in (a patch of nodes).
 """
 
 import warp as wp
@@ -69,3 +70,25 @@ def gather_blocks_kernel(
     """One thread per requested block: ``gathered[i] = block_values[block_ids[i]]``."""
     i = wp.tid()
     gathered[i] = block_values[block_ids[i]]
+
+
+@wp.kernel
+def gather_vectors_kernel(
+    values: wp.array(dtype=wp.vec3d),
+    indices: wp.array(dtype=wp.int32),
+    gathered: wp.array(dtype=wp.vec3d),
+):
+    """One thread per requested entry: ``gathered[i] = values[indices[i]]``."""
+    i = wp.tid()
+    gathered[i] = values[indices[i]]
+
+
+@wp.kernel
+def scatter_vectors_kernel(
+    values: wp.array(dtype=wp.vec3d),
+    indices: wp.array(dtype=wp.int32),
+    target: wp.array(dtype=wp.vec3d),
+):
+    """One thread per entry: ``target[indices[i]] = values[i]`` (indices distinct)."""
+    i = wp.tid()
+    target[indices[i]] = values[i]

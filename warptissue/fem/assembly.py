@@ -24,7 +24,16 @@ from warptissue.fem.viscous import ViscousHistory, elastic_step
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
-__all__ = ["Assembler", "Assembly", "FORMULATIONS", "gather_bsr_blocks", "von_mises"]
+__all__ = [
+    "FORMULATIONS",
+    "Assembler",
+    "Assembly",
+    "ElementPart",
+    "gather_bsr_blocks",
+    "gather_vectors",
+    "scatter_vectors",
+    "von_mises",
+]
 
 FORMULATIONS = ("mixed", "displacement")
 """``mixed``: TET10 with element mean dilatation (P2/P0); ``displacement``: pure displacement."""
@@ -82,6 +91,67 @@ def gather_bsr_blocks(matrix: wps.BsrMatrix, block_ids: wp.array, gathered: wp.a
         outputs=[gathered],
         device=matrix.device,
     )
+
+
+def gather_vectors(values: wp.array, indices: wp.array, gathered: wp.array) -> None:
+    """``gathered[i] = values[indices[i]]`` for vec3d arrays on one device, in place.
+
+    Args:
+        values: (N,) vec3d.
+        indices: (k,) int32, each in [0, N).
+        gathered: Output, (k,) vec3d.
+    """
+    from warptissue.kernels import sparse as ks
+
+    if indices.shape[0] == 0:
+        return
+    wp.launch(
+        ks.gather_vectors_kernel,
+        dim=indices.shape[0],
+        inputs=[values, indices],
+        outputs=[gathered],
+        device=values.device,
+    )
+
+
+def scatter_vectors(values: wp.array, indices: wp.array, target: wp.array) -> None:
+    """``target[indices[i]] = values[i]`` for vec3d arrays on one device, in place.
+
+    Args:
+        values: (k,) vec3d.
+        indices: (k,) int32, distinct, each in [0, N).
+        target: (N,) vec3d, changed at ``indices`` only.
+    """
+    from warptissue.kernels import sparse as ks
+
+    if indices.shape[0] == 0:
+        return
+    wp.launch(
+        ks.scatter_vectors_kernel,
+        dim=indices.shape[0],
+        inputs=[values, indices],
+        outputs=[target],
+        device=target.device,
+    )
+
+
+@dataclass(frozen=True)
+class ElementPart:
+    """Some tets of a mesh and their nodes, on the assembler's device
+    (:meth:`Assembler.element_part`, :meth:`Assembler.assemble_part`).
+
+    Attributes:
+        elements: Tet indices, sorted, (T,) int32 Warp array.
+        nodes: The nodes of those tets, sorted, (R,) int64 NumPy array.
+        device_nodes: ``nodes`` as an int32 Warp array.
+        forces: The part's nodal forces of the last :meth:`Assembler.assemble_part`, (R,)
+            vec3d Warp array (its buffer).
+    """
+
+    elements: wp.array
+    nodes: np.ndarray
+    device_nodes: wp.array
+    forces: wp.array
 
 
 def _block_ranges(offsets: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -151,6 +221,8 @@ class Assembler:
         self._node_elements: tuple[np.ndarray, np.ndarray] | None = None
         self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
         self._part_scalars = wp.zeros(2, dtype=wp.float64, device=dev)
+        self._part_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
+        self._tets_host: np.ndarray | None = None
         self._points = wp.array(mesh.points, dtype=wp.vec3d, device=dev)
         self.contact: RigidContact | None = None
         self._contact_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
@@ -504,33 +576,55 @@ class Assembler:
         neighbours = self._pattern_columns[_block_ranges(self._pattern_offsets, nodes)]
         return np.union1d(nodes, neighbours)
 
-    def node_elements(self, nodes: np.ndarray) -> np.ndarray:
-        """The tets that hold at least one of ``nodes``.
+    def element_part(
+        self, *, nodes: np.ndarray | None = None, elements: np.ndarray | None = None
+    ) -> ElementPart:
+        """A part of the mesh for :meth:`assemble_part`: the tets that hold at least one of
+        ``nodes``, or the tets ``elements``; with their nodes.
 
         Args:
             nodes: Node indices, (k,).
+            elements: Tet indices, (T,) (instead of ``nodes``).
 
         Returns:
-            Sorted unique tet indices, (T,) int32.
+            An :class:`ElementPart`.
 
         Raises:
-            InputError: A node index is out of range.
+            InputError: Neither or both given, or an index out of range.
         """
-        nodes = self._node_indices(nodes)
-        if self._node_elements is None:  # node -> tets, built once
-            tets = self._tets.numpy()
-            owners = np.repeat(np.arange(self.tet_count, dtype=np.int32), tets.shape[1])
-            order = np.argsort(tets.reshape(-1), kind="stable")
-            offsets = np.zeros(self.node_count + 1, dtype=np.int64)
-            np.cumsum(np.bincount(tets.reshape(-1), minlength=self.node_count), out=offsets[1:])
-            self._node_elements = (offsets, owners[order])
-        offsets, owners = self._node_elements
-        return np.unique(owners[_block_ranges(offsets, nodes)]).astype(np.int32)
+        if (nodes is None) == (elements is None):
+            raise InputError("give the part's nodes or its elements, not both")
+        if elements is None:
+            nodes = self._node_indices(nodes)
+            if self._node_elements is None:  # node -> tets, built once
+                tets = self._tets.numpy()
+                owners = np.repeat(np.arange(self.tet_count, dtype=np.int32), tets.shape[1])
+                order = np.argsort(tets.reshape(-1), kind="stable")
+                offsets = np.zeros(self.node_count + 1, dtype=np.int64)
+                np.cumsum(np.bincount(tets.reshape(-1), minlength=self.node_count), out=offsets[1:])
+                self._node_elements = (offsets, owners[order])
+            offsets, owners = self._node_elements
+            elements = np.unique(owners[_block_ranges(offsets, nodes)])
+        else:
+            elements = np.unique(np.asarray(elements, dtype=np.int64).reshape(-1))
+            if elements.size and (elements[0] < 0 or elements[-1] >= self.tet_count):
+                raise InputError(
+                    f"element indices must lie in [0, {self.tet_count})", key="elements"
+                )
+        if self._tets_host is None:
+            self._tets_host = self._tets.numpy()
+        part_nodes = np.unique(self._tets_host[elements])
+        return ElementPart(
+            elements=wp.array(elements.astype(np.int32), dtype=wp.int32, device=self.device),
+            nodes=part_nodes.astype(np.int64),
+            device_nodes=wp.array(part_nodes.astype(np.int32), dtype=wp.int32, device=self.device),
+            forces=wp.zeros(len(part_nodes), dtype=wp.vec3d, device=self.device),
+        )
 
     def assemble_part(
         self,
         displacement_m: np.ndarray | wp.array,
-        elements: wp.array,
+        part: ElementPart,
         *,
         with_tangent: bool = False,
     ) -> tuple[np.ndarray, float, float]:
@@ -538,23 +632,24 @@ class Assembler:
 
         For a local solve on a patch of nodes (the nonlinear elimination): where only the
         patch's nodes move, only the tets that hold them change their forces and energy, so
-        the whole residual follows from the last one plus the change of this part. The rigid
-        contact, where there is one, is evaluated at every candidate node (its unchanged
-        nodes cancel in that difference).
+        the whole residual follows from the last one plus the change of this part, at the
+        part's nodes. The rigid contact, where there is one, is evaluated at every candidate
+        node (its unchanged nodes cancel in that difference; the forces returned hold its
+        share at the part's nodes).
 
         Args:
             displacement_m: Nodal displacements, (N, 3), m (NumPy or a vec3d Warp array).
-            elements: The tets, (T,) int32 Warp array on the assembler's device (see
-                :meth:`node_elements`).
+            part: The tets and their nodes (:meth:`element_part`).
             with_tangent: Also assemble their tangent: every block that these tets add to is
-                zeroed first, so a block of two nodes whose tets all lie among ``elements``
-                (two nodes of the patch) is exact afterwards, and the others are not: the
-                assembler's matrix must be assembled again (:meth:`assemble`) before it is
-                used as a whole.
+                zeroed first, so a block of two nodes whose tets all lie in the part (two
+                nodes of the patch the part was made for) is exact afterwards, and the
+                others are not: the assembler's matrix must be assembled again
+                (:meth:`assemble`) before it is used as a whole.
 
         Returns:
-            (forces of these tets and of the contact at every node, (N, 3), N; their energy,
-            J; the smallest det F over their quadrature points).
+            (forces of these tets and of the contact at ``part.nodes``, (R, 3), N; their
+            energy (with the contact's at every candidate node), J; the smallest det F over
+            their quadrature points).
         """
         from warptissue.kernels import fem as kf
 
@@ -567,18 +662,18 @@ class Assembler:
         if with_tangent:
             wp.launch(
                 kf.zero_element_blocks_kernel,
-                dim=(elements.shape[0], self.nodes_per_tet**2),
-                inputs=[elements, self._block_index],
+                dim=(part.elements.shape[0], self.nodes_per_tet**2),
+                inputs=[part.elements, self._block_index],
                 outputs=[self.matrix.values],
                 device=self.device,
             )
         wp.launch(
             kf.assemble_elements_kernel,
-            dim=elements.shape[0],
+            dim=part.elements.shape[0],
             inputs=[
                 *self._element_inputs(u),
                 self._block_index,
-                elements,
+                part.elements,
                 int(self.formulation == "mixed"),
                 int(with_tangent),
                 *self._viscous_inputs(),
@@ -587,12 +682,18 @@ class Assembler:
             device=self.device,
         )
         if self.contact is not None:
-            force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
             self._launch_contact(
-                kf, u, int(with_tangent), self._part_residual, self.matrix.values, energy, force
+                kf,
+                u,
+                int(with_tangent),
+                self._part_residual,
+                self.matrix.values,
+                energy,
+                self._part_force,
             )
+        gather_vectors(self._part_residual, part.device_nodes, part.forces)
         values = scalars.numpy()
-        return self._part_residual.numpy().copy(), float(values[0]), float(values[1])
+        return part.forces.numpy().copy(), float(values[0]), float(values[1])
 
     def set_residual(self, residual_N: np.ndarray) -> wp.array:
         """Overwrite the assembler's residual buffer (the one :meth:`assemble` returns), e.g.

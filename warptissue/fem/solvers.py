@@ -44,7 +44,7 @@ import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
-from warptissue.fem.assembly import Assembler, Assembly
+from warptissue.fem.assembly import Assembler, Assembly, scatter_vectors
 from warptissue.fem.cudss import CudssSolver, cudss_available
 from warptissue.fem.direct import CpuDirectSolver
 from warptissue.fem.timing import NewtonTimings, PhaseTimer
@@ -764,19 +764,32 @@ def _nonlinear_elimination(
     if 4 * len(patch) > assembler.node_count:
         return u, assembly, 0
     patch_free = free[patch].reshape(-1) > 0.5
-    # Only the tets holding a patch node change: the whole residual and energy follow from
-    # the last ones and the change of that part (no assembly of the whole mesh).
-    elements = wp.array(assembler.node_elements(patch), dtype=wp.int32, device=assembler.device)
-    part, part_energy, _ = assembler.assemble_part(u, elements)
+    # Only the tets holding a patch node change, and with them the residual at their nodes:
+    # the whole residual and energy follow from the last ones and the change of that part.
+    # The host works on the part's nodes alone (no array of the whole mesh per trial).
+    part = assembler.element_part(nodes=patch)
+    nodes = part.nodes
+    at_patch = np.searchsorted(nodes, patch)
+    device = assembler.device
+    patch_wp = wp.array(patch.astype(np.int32), dtype=wp.int32, device=device)
+    patch_values = wp.zeros(len(patch), dtype=wp.vec3d, device=device)
+    u_device = wp.array(u, dtype=wp.vec3d, device=device)
+    free_part = free[nodes]
+    residual_part = residual[nodes]
+    outside = np.ones(len(u), dtype=bool)
+    outside[nodes] = False
+    rest_squared = float(np.einsum("ij,ij->", free_residual[outside], free_residual[outside]))
+    forces, part_energy, _ = assembler.assemble_part(u_device, part)
+    u_patch = u[patch].copy()
     energy = assembly.energy_J
     min_jacobian = assembly.min_jacobian
     total = _norm(free_residual)
     iterations = 0
     for _ in range(max_iterations):
         if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
-            part, part_energy, _ = assembler.assemble_part(u, elements, with_tangent=True)
+            forces, part_energy, _ = assembler.assemble_part(u_device, part, with_tangent=True)
         matrix = assembler.tangent_submatrix(patch)[patch_free][:, patch_free]
-        local_residual = (residual[patch] * free[patch]).reshape(-1)[patch_free]
+        local_residual = (residual_part[at_patch] * free[patch]).reshape(-1)[patch_free]
         try:
             step = scipy.sparse.linalg.splu(matrix.tocsc()).solve(-local_residual)
         except RuntimeError:
@@ -786,21 +799,24 @@ def _nonlinear_elimination(
             break
         patch_step = np.zeros(3 * len(patch))
         patch_step[patch_free] = step
-        direction = np.zeros_like(u)
-        direction[patch] = patch_step.reshape(-1, 3)
+        direction = patch_step.reshape(-1, 3)
         alpha, accepted = 1.0, None
         for _ in range(8):
-            trial = u + alpha * direction
-            trial_part, trial_part_energy, trial_min_jacobian = assembler.assemble_part(
-                trial, elements
+            trial = u_patch + alpha * direction
+            patch_values.assign(trial)
+            scatter_vectors(patch_values, patch_wp, u_device)
+            trial_forces, trial_part_energy, trial_min_jacobian = assembler.assemble_part(
+                u_device, part
             )
-            trial_residual = residual + (trial_part - part)
+            trial_residual = residual_part + (trial_forces - forces)
             trial_energy = energy + (trial_part_energy - part_energy)
+            trial_free = trial_residual * free_part
+            trial_total = math.sqrt(rest_squared + np.einsum("ij,ij->", trial_free, trial_free))
             if (
                 trial_min_jacobian > 0.0
                 and math.isfinite(trial_energy)
                 and trial_energy <= energy + 1e-4 * alpha * slope
-                and _norm(trial_residual * free) < total
+                and trial_total < total
             ):
                 accepted = trial
                 break
@@ -808,16 +824,19 @@ def _nonlinear_elimination(
         if accepted is None:
             break
         iterations += 1
-        u, residual, energy = accepted, trial_residual, trial_energy
-        part, part_energy = trial_part, trial_part_energy
+        u_patch, residual_part, energy, total = accepted, trial_residual, trial_energy, trial_total
+        forces, part_energy = trial_forces, trial_part_energy
         min_jacobian = min(min_jacobian, trial_min_jacobian)
-        total = _norm(residual * free)
-        local = _norm(residual[patch] * free[patch])
+        local = _norm(residual_part[at_patch] * free[patch])
         if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
             break
     if iterations == 0:
         # Nothing moved and the tangent is untouched (it is only reassembled after a step).
         return u, assembly, 0
+    u = u.copy()
+    u[patch] = u_patch
+    residual = residual.copy()
+    residual[nodes] = residual_part
     assembly = Assembly(
         residual=assembler.set_residual(residual),
         matrix=None,
