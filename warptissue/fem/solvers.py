@@ -846,6 +846,46 @@ def _nonlinear_elimination(
     return u, assembly, iterations
 
 
+REUSE_STATE_CHANGE = 0.5
+"""A Newton solve tries the last factorization only where the state has moved less than this
+fraction of the last load increment's first Newton step since the factorized tangent was
+assembled (:class:`_ReuseTracker`)."""
+
+
+@dataclass
+class _ReuseTracker:
+    """Where the factorized tangent was assembled, for :meth:`LinearSolver.solve_newton`.
+
+    Measured on the flat-punch benchmark (2 471 tets, 3 Newton iterations per load step):
+    the first iteration of a step (its tangent at the last converged state, the factors of
+    the step before's second iteration) and the third (a small correction since the second)
+    were solved by GMRES in 2-4 iterations, while the second, after the first iteration's
+    long step, failed in every step. So a solve tries the old factors only where the state
+    has moved by less than :data:`REUSE_STATE_CHANGE` times the last first-iteration step
+    (``step_scale``) since the factorization, with the same damping; the time budget of
+    :meth:`LinearSolver.solve_newton` still decides the rest.
+
+    Attributes:
+        state: The displacement (N, 3) whose tangent was factorized last, or None.
+        damping: The Levenberg-Marquardt factor of that factorization.
+        step_scale: Norm of the free part of the last first Newton step of an increment, m.
+    """
+
+    state: np.ndarray | None = None
+    damping: float = 0.0
+    step_scale: float = math.inf
+
+    def promising(self, u: np.ndarray, damping: float) -> bool:
+        """Whether a solve at ``u`` with ``damping`` should try the old factors."""
+        if self.state is None or damping != self.damping:
+            return False
+        return _norm(u - self.state) <= REUSE_STATE_CHANGE * self.step_scale
+
+    def factorized(self, u: np.ndarray, damping: float) -> None:
+        """The tangent at ``u`` with ``damping`` was just factorized."""
+        self.state, self.damping = u, damping
+
+
 FORCING_MAX = 1.0e-3
 """Loosest relative residual of a Newton step solved by GMRES with old factors."""
 FORCING_MIN = 1.0e-10
@@ -909,6 +949,7 @@ def _newton_increment(
     free_guess: np.ndarray | None = None,
     damping: bool = False,
     reuse_factorization: bool = False,
+    reuse: _ReuseTracker | None = None,
     timer: PhaseTimer | None = None,
 ) -> _Step:
     """Newton iterations for one load increment, starting from a converged state.
@@ -922,13 +963,17 @@ def _newton_increment(
 
     ``reuse_factorization``: solve with the last factorization by GMRES where that is
     cheaper (:meth:`LinearSolver.solve_newton`, to the relative residual of
-    :func:`_forcing_term`); off, every iteration factorizes.
+    :func:`_forcing_term`), and where ``reuse`` (a :class:`_ReuseTracker` kept over the load
+    path; None: a new one) finds the state close to the factorized one; off, every
+    iteration factorizes.
 
     ``timer``: the :class:`warptissue.fem.timing.PhaseTimer` the phases are charged to
     (None: not timed).
     """
     if timer is None:
         timer = PhaseTimer(enabled=False)
+    if reuse is None:
+        reuse = _ReuseTracker()
     u = u_start.copy()
     linear_total = 0
     local_total = 0
@@ -970,12 +1015,17 @@ def _newton_increment(
             rhs = -residual * free
         with timer.phase("assembly"):
             assembler.eliminate(constrained_wp, damping=factor)
+        factorizations = solver.factorizations
         du, linear_iterations = solver.solve_newton(
             assembly.matrix,
             rhs,
             rtol=_forcing_term(limit, _norm(rhs)),
-            reuse=reuse_factorization,
+            reuse=reuse_factorization and reuse.promising(u, factor),
         )
+        if solver.factorizations > factorizations:
+            reuse.factorized(u, factor)
+        if first:
+            reuse.step_scale = _norm(du * free)
         linear_total += linear_iterations
         if not np.all(np.isfinite(du)):
             return outcome(False, iteration, "the linear solve gave non-finite values")
@@ -1238,6 +1288,7 @@ def solve_quasistatic(
             "a viscoelastic material needs the time of each load (times_s)", key="times_s"
         )
     solver = LinearSolver(method=options.linear_solver, device=assembler.device)
+    reuse = _ReuseTracker()
     timer = PhaseTimer(enabled=profile, device=assembler.device)
     solver.timer = timer
     mask = conditions.mask(n)
@@ -1350,6 +1401,7 @@ def solve_quasistatic(
                     free_guess=free_guess,
                     damping=options.damping,
                     reuse_factorization=options.reuse_factorization,
+                    reuse=reuse,
                     timer=timer,
                 )
                 timer.count_iterations(step.iterations)
