@@ -92,3 +92,20 @@ def scatter_vectors_kernel(
     """One thread per entry: ``target[indices[i]] = values[i]`` (indices distinct)."""
     i = wp.tid()
     target[indices[i]] = values[i]
+
+
+@wp.kernel
+def blocks_to_dense_kernel(
+    block_values: wp.array(dtype=wp.mat33d),
+    block_ids: wp.array(dtype=wp.int32),
+    rows: wp.array(dtype=wp.int32),
+    columns: wp.array(dtype=wp.int32),
+    dense: wp.array2d(dtype=wp.float64),
+):
+    """One thread per block: write block ``block_ids[i]`` at block row ``rows[i]`` and block
+    column ``columns[i]`` of the dense matrix."""
+    i = wp.tid()
+    block = block_values[block_ids[i]]
+    for a in range(3):
+        for b in range(3):
+            dense[3 * rows[i] + a, 3 * columns[i] + b] = block[a, b]

@@ -26,6 +26,7 @@ from warptissue.fem.solvers import (
     _next_damping,
     _nonlinear_elimination,
     _pardiso_available,
+    _patch_solve,
 )
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
@@ -322,6 +323,25 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
         scale = np.abs(fresh.residual.numpy()).max()
         np.testing.assert_allclose(residual, fresh.residual.numpy(), rtol=0, atol=1e-12 * scale)
         assert energy == pytest.approx(fresh.energy_J, rel=1e-12)
+
+
+def test_the_patch_step_is_the_solve_of_the_patch_tangent(device, rng):
+    """The nonlinear elimination's patch step (dense LU on a GPU with CuPy, SuperLU on the
+    CPU) solves the patch's free block of the tangent, which the dense copy on the device
+    holds as the sparse one does."""
+    problem = _bonded_punch()
+    mesh = problem.mesh
+    assembler = Assembler(mesh, problem.material, device=device)
+    assembler.assemble(1e-5 * rng.standard_normal((mesh.node_count, 3)))
+    patch = assembler.node_patch(np.array([5, 17, 40]))
+    sparse = assembler.tangent_submatrix(patch).toarray()
+    dense = assembler.tangent_submatrix_dense(patch).numpy()
+    np.testing.assert_array_equal(dense, sparse)
+    free = rng.random(3 * len(patch)) > 0.2
+    residual = rng.standard_normal(int(free.sum()))
+    step = _patch_solve(assembler, patch, free, residual)
+    reference = np.linalg.solve(sparse[free][:, free], -residual)
+    np.testing.assert_allclose(step, reference, rtol=1e-9, atol=1e-12 * np.abs(reference).max())
 
 
 def test_a_part_of_the_tets_adds_up_with_the_rest_to_the_whole_assembly(rng):

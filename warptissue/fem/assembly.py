@@ -708,6 +708,54 @@ class Assembler:
         self._residual.assign(np.ascontiguousarray(residual_N, dtype=np.float64))
         return self._residual
 
+    def _submatrix_blocks(self, nodes: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(local block rows, the blocks, local block columns) of the tangent's blocks among
+        ``nodes`` (sorted and unique, checked)."""
+        nodes = self._node_indices(nodes)
+        if np.any(np.diff(nodes) <= 0):
+            raise InputError("nodes must be sorted and unique", value=nodes.tolist()[:20])
+        local = np.full(self.node_count, -1, dtype=np.int64)
+        local[nodes] = np.arange(len(nodes))
+        counts = self._pattern_offsets[nodes + 1] - self._pattern_offsets[nodes]
+        rows = np.repeat(np.arange(len(nodes)), counts)
+        blocks = _block_ranges(self._pattern_offsets, nodes)
+        columns = local[self._pattern_columns[blocks]]
+        inside = columns >= 0
+        return rows[inside], blocks[inside], columns[inside]
+
+    def tangent_submatrix_dense(self, nodes: np.ndarray) -> wp.array:
+        """The last assembled tangent restricted to ``nodes``, as a dense matrix on the
+        assembler's device (for a small patch's solve there, without a copy to the host).
+
+        Args:
+            nodes: Sorted unique node indices, (P,).
+
+        Returns:
+            float64 Warp array (3P, 3P), N/m; dof ``3 i + c`` is component c of ``nodes[i]``.
+
+        Raises:
+            InputError: A node index is out of range, or the indices are not sorted and unique.
+        """
+        from warptissue.kernels import sparse as ks
+
+        rows, blocks, columns = self._submatrix_blocks(nodes)
+        size = 3 * len(self._node_indices(nodes))
+        dense = wp.zeros((size, size), dtype=wp.float64, device=self.device)
+        if len(blocks):
+            wp.launch(
+                ks.blocks_to_dense_kernel,
+                dim=len(blocks),
+                inputs=[
+                    self.matrix.values,
+                    wp.array(blocks.astype(np.int32), dtype=wp.int32, device=self.device),
+                    wp.array(rows.astype(np.int32), dtype=wp.int32, device=self.device),
+                    wp.array(columns.astype(np.int32), dtype=wp.int32, device=self.device),
+                ],
+                outputs=[dense],
+                device=self.device,
+            )
+        return dense
+
     def tangent_submatrix(self, nodes: np.ndarray) -> scipy.sparse.csr_matrix:
         """The last assembled tangent restricted to the rows and columns of ``nodes``.
 
@@ -722,17 +770,7 @@ class Assembler:
         Raises:
             InputError: A node index is out of range, or the indices are not sorted and unique.
         """
-        nodes = self._node_indices(nodes)
-        if np.any(np.diff(nodes) <= 0):
-            raise InputError("nodes must be sorted and unique", value=nodes.tolist()[:20])
-        local = np.full(self.node_count, -1, dtype=np.int64)
-        local[nodes] = np.arange(len(nodes))
-        counts = self._pattern_offsets[nodes + 1] - self._pattern_offsets[nodes]
-        rows = np.repeat(np.arange(len(nodes)), counts)
-        blocks = _block_ranges(self._pattern_offsets, nodes)
-        columns = local[self._pattern_columns[blocks]]
-        inside = columns >= 0
-        rows, blocks, columns = rows[inside], blocks[inside], columns[inside]
+        rows, blocks, columns = self._submatrix_blocks(nodes)
         gathered = wp.empty(len(blocks), dtype=wp.mat33d, device=self.device)
         gather_bsr_blocks(
             self.matrix, wp.array(blocks, dtype=wp.int32, device=self.device), gathered
@@ -749,7 +787,7 @@ class Assembler:
                     np.broadcast_to(column_dofs, shape).reshape(-1),
                 ),
             ),
-            shape=(3 * len(nodes), 3 * len(nodes)),
+            shape=(3 * len(np.asarray(nodes).reshape(-1)), 3 * len(np.asarray(nodes).reshape(-1))),
         )
 
     def _node_indices(self, nodes: np.ndarray) -> np.ndarray:

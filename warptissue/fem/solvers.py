@@ -33,6 +33,7 @@ local Newton solve with all other nodes fixed (nonlinear elimination, see
 
 from __future__ import annotations
 
+import importlib.util
 import math
 from dataclasses import dataclass, field, fields
 from time import perf_counter
@@ -788,11 +789,9 @@ def _nonlinear_elimination(
     for _ in range(max_iterations):
         if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
             forces, part_energy, _ = assembler.assemble_part(u_device, part, with_tangent=True)
-        matrix = assembler.tangent_submatrix(patch)[patch_free][:, patch_free]
         local_residual = (residual_part[at_patch] * free[patch]).reshape(-1)[patch_free]
-        try:
-            step = scipy.sparse.linalg.splu(matrix.tocsc()).solve(-local_residual)
-        except RuntimeError:
+        step = _patch_solve(assembler, patch, patch_free, local_residual)
+        if step is None:
             break
         slope = float(local_residual @ step)
         if not (np.all(np.isfinite(step)) and slope < 0.0):
@@ -905,6 +904,35 @@ def _forcing_term(limit: float, rhs_norm: float) -> float:
     if rhs_norm <= 0.0 or not math.isfinite(rhs_norm):
         return FORCING_MAX
     return min(FORCING_MAX, max(0.1 * limit / rhs_norm, FORCING_MIN))
+
+
+def _patch_solve(
+    assembler: Assembler, patch: np.ndarray, patch_free: np.ndarray, local_residual: np.ndarray
+) -> np.ndarray | None:
+    """The patch's Newton step ``-K_pp^-1 r_p`` on its free dofs, or None where singular.
+
+    On a CUDA device with CuPy the patch's tangent is written dense on the device and solved
+    there by LU (cuSOLVER; a patch holds at most a few thousand dofs), so nothing but the
+    step leaves the device; on the CPU its sparse block goes to SciPy's SuperLU.
+    """
+    if assembler.device.is_cuda and importlib.util.find_spec("cupy") is not None:
+        import cupy
+
+        stream = cupy.cuda.Stream.from_external(assembler.device.stream)
+        with cupy.cuda.Device(assembler.device.ordinal), stream:
+            dense = cupy.asarray(assembler.tangent_submatrix_dense(patch))
+            free_dofs = cupy.asarray(np.flatnonzero(patch_free))
+            matrix = dense[free_dofs[:, None], free_dofs[None, :]]
+            try:
+                step = cupy.linalg.solve(matrix, cupy.asarray(-local_residual))
+            except cupy.linalg.LinAlgError:
+                return None
+            return cupy.asnumpy(step, stream=stream)  # non-finite where singular: refused
+    matrix = assembler.tangent_submatrix(patch)[patch_free][:, patch_free]
+    try:
+        return scipy.sparse.linalg.splu(matrix.tocsc()).solve(-local_residual)
+    except RuntimeError:
+        return None
 
 
 DAMPING_START = 1.0
