@@ -151,9 +151,9 @@ def test_batch_files_equal_the_single_study_commands(first_batch, tmp_path, caps
         _curve(tmp_path / "s" / "force_curve.csv"),
     )
     assert batch_curve.shape == single_curve.shape == (3, 5)
-    # time, depth, force and step (the Newton counts may differ by one where the threaded
-    # linear solver's last bits do).
-    np.testing.assert_allclose(batch_curve[:, :4], single_curve[:, :4], rtol=1e-9, atol=0.0)
+    # time, depth, force and step, to the Newton tolerance (the Newton counts may differ
+    # where the threaded linear solver's last bits, or its reuse of factors, do).
+    np.testing.assert_allclose(batch_curve[:, :4], single_curve[:, :4], rtol=1e-7, atol=0.0)
     assert {p.name for p in (tmp_path / "s").iterdir()} <= {
         p.name for p in (out / "punch").iterdir()
     }
@@ -162,13 +162,15 @@ def test_batch_files_equal_the_single_study_commands(first_batch, tmp_path, caps
     single_fit = json.loads((tmp_path / "f" / "fit.json").read_text())
     assert batch_fit["status"] == single_fit["status"] == "converged"
     c10 = batch_fit["parameters"]["C10_Pa"]["value"]
-    assert c10 == pytest.approx(single_fit["parameters"]["C10_Pa"]["value"], rel=1e-12)
+    # The FE forces agree to the Newton tolerance (which Newton solves use earlier factors
+    # follows measured times), the fitted parameter to far within the fit's tolerance.
+    assert c10 == pytest.approx(single_fit["parameters"]["C10_Pa"]["value"], rel=1e-6)
     assert c10 != pytest.approx(287.5, rel=0.05)  # it moved from the [material] value
     batch_curves = np.genfromtxt(out / "fit" / "fit_curves.csv", delimiter=",", skip_header=1)
     single_curves = np.genfromtxt(tmp_path / "f" / "fit_curves.csv", delimiter=",", skip_header=1)
     # Residual columns pass through zero: their tolerance scales with each column's size.
     scale = np.nanmax(np.abs(single_curves[:, 1:]), axis=0)
-    assert np.all(np.abs(batch_curves[:, 1:] - single_curves[:, 1:]) <= 1e-9 * scale)
+    assert np.all(np.abs(batch_curves[:, 1:] - single_curves[:, 1:]) <= 1e-6 * scale)
     # The summary's numbers are those of the files.
     rows = _summary(out / "summary.csv")
     assert rows["punch"]["kind"] == "simulation" and rows["punch"]["status"] == "completed"
@@ -310,8 +312,9 @@ def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypa
     assert killed not in {o.pid for o in result.outcomes}
     assert all(o.pid != os.getpid() for o in result.outcomes)  # they ran on the workers
     assert len(_summary(result.summary_path)) == 3
-    # The same force curves as this process computes (another process: summation order of
-    # the threaded linear solver may differ in the last bits).
+    # The same force curves as this process computes, to the Newton tolerance (another
+    # process: the threaded linear solver's last bits, and which Newton solves use earlier
+    # factors, which follows measured times, may differ).
     monkeypatch.delenv(batch._KILL_ONCE_ENV)
     here = batch.run_batch([studies], out=tmp_path / "here", workers=0, progress=False)
     assert here.exit_code == 0
@@ -320,7 +323,7 @@ def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypa
         np.testing.assert_allclose(  # time, depth, force, step (not the Newton counts)
             _curve(tmp_path / "out" / outcome.folder / "force_curve.csv")[:, :4],
             _curve(tmp_path / "here" / outcome.folder / "force_curve.csv")[:, :4],
-            rtol=1e-9,
+            rtol=1e-7,
             atol=1e-15,
         )
 

@@ -345,6 +345,7 @@ def test_solver_table_keys_are_the_options_names(tmp_path):
         "nonlinear_elimination": False,
         "predictor": "extrapolated",
         "damping": False,
+        "reuse_factorization": False,
     }
     assert set(values) == set(NewtonOptions.keys())
     record = load_study(SCENE).to_dict()

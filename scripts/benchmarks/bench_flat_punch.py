@@ -867,6 +867,59 @@ def markdown_profile_table(paths: list[Path], *, only: list[str] = ()) -> str:
     return "\n".join(lines)
 
 
+def markdown_solver_table(paths: list[Path], *, only: list[str] = ()) -> str:
+    """A Markdown table of the linear solves of profiled runs: factorizations against solves
+    with earlier factors (``--reuse``) and the nonlinear elimination (``--elimination``).
+
+    One row per profiled run: Newton iterations, factorizations, Newton solves by GMRES with
+    earlier factors and their GMRES iterations, the seconds of the whole curve, of the
+    factorizations, of the solves and of the elimination, the share inside the linear solver
+    (analysis, factorization, solve), and the final force.
+    """
+    runs = []
+    for path in paths:
+        report = json.loads(Path(path).read_text())
+        for run in report["runs"]:
+            if run.get("newton_profile") and run.get("factorizations") is not None:
+                runs.append({"label": report.get("label", ""), **run})
+    for condition in only:
+        key, _, value = condition.partition("=")
+        runs = [r for r in runs if str(r.get(key)) == value]
+    if not runs:
+        raise ValueError(f"no profiled run with solver counts in {[str(p) for p in paths]}")
+    on_off = {True: "on", False: "off"}
+
+    def seconds(run: dict[str, Any], phase: str) -> str:
+        return _seconds(run["newton_profile"]["seconds"][phase])
+
+    columns: list[tuple[str, Any]] = [
+        ("run", lambda r: r["label"]),
+        ("cells", lambda r: _grouped(r["cells"])),
+        ("elimination", lambda r: on_off[bool(r["nonlinear_elimination"])]),
+        ("reuse", lambda r: on_off[bool(r["reuse_factorization"])]),
+        ("Newton its", lambda r: str(r["newton_iterations"])),
+        ("factorizations", lambda r: str(r["factorizations"])),
+        ("solves with old factors", lambda r: str(r["reused_solves"])),
+        ("GMRES its", lambda r: str(r["krylov_iterations"])),
+        ("total s", lambda r: _seconds(r["newton_profile"]["total_s"])),
+        ("factorization s", lambda r: seconds(r, "factorization")),
+        ("solve s", lambda r: seconds(r, "solve")),
+        ("elimination s", lambda r: seconds(r, "elimination")),
+        (
+            "inside the linear solver",
+            lambda r: f"{100 * (1 - r['newton_profile']['own_share']):.0f} %",
+        ),
+        ("final force (mN)", lambda r: f"{1e3 * r['final_force_N']:.6f}"),
+    ]
+    text_columns = {"run", "elimination", "reuse"}
+    lines = [
+        "| " + " | ".join(title for title, _ in columns) + " |",
+        "|" + "|".join("---" if t in text_columns else "---:" for t, _ in columns) + "|",
+    ]
+    lines += ["| " + " | ".join(cell(r) for _, cell in columns) + " |" for r in runs]
+    return "\n".join(lines)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="cpu", help="warptissue device: cpu, cuda, cuda:N")
@@ -982,9 +1035,21 @@ def main(argv: list[str] | None = None) -> int:
         help="with --markdown: only the runs with this value (damping=on, tolerance=1e-08, "
         "mesher=delaunay, ...); may be repeated",
     )
+    parser.add_argument(
+        "--solver",
+        action="store_true",
+        help="with --markdown: print the linear solves of the profiled runs (factorizations, "
+        "solves with earlier factors, elimination) instead",
+    )
     args = parser.parse_args(argv)
     if args.markdown:
-        table = markdown_profile_table if args.profile else markdown_table
+        table = (
+            markdown_solver_table
+            if args.solver
+            else markdown_profile_table
+            if args.profile
+            else markdown_table
+        )
         try:
             print(table(args.markdown, only=args.only))
         except (OSError, ValueError, KeyError) as exc:
