@@ -556,6 +556,7 @@ def run_study(
             "total": written - started,
         },
         "newton_profile": None if result.timings is None else result.timings.to_dict(),
+        "linear_solver_statistics": dict(result.linear_solver_statistics),
         "files": {kind: path.name for kind, path in files.items()},
         "software": software_versions(),
     }

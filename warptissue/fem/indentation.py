@@ -356,6 +356,7 @@ class IndentationResult:
                 else {}
             ),
             **({} if self.timings is None else {"newton_profile": self.timings.to_dict()}),
+            "linear_solver_statistics": dict(self.linear_solver_statistics),
         }
 
 
