@@ -210,6 +210,13 @@ BAD_INPUTS = [
     ),
     pytest.param(
         "thickness_m = 0.01",
+        "thickness_m = 0.01\nforce_accuracy = 0.02\nsize_far_m = 0.0005",
+        "specimen.force_accuracy",
+        "0.02",
+        id="accuracy-coarser-than-far",
+    ),
+    pytest.param(
+        "thickness_m = 0.01",
         'thickness_m = 0.01\nforce_accuracy = 0.02\nelement = "TET4"',
         "specimen.element",
         "'TET4'",

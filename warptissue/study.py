@@ -848,6 +848,13 @@ def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
             table, force_accuracy, indenter=indenter, probe_radius_m=probe_radius_m
         )
     size_far_m = table.number("size_far_m", default=min(thickness_m, half_size_m) / 4.0)
+    if size_near_m > size_far_m and force_accuracy is not None:
+        raise table.error(
+            "force_accuracy",
+            f"chooses size_near_m = {size_near_m!r} m, coarser than size_far_m "
+            f"({size_far_m!r} m): give a size_far_m of at least that, or size_near_m",
+            force_accuracy,
+        )
     if size_near_m > size_far_m:
         raise table.error(
             "size_near_m", f"must not exceed size_far_m ({size_far_m!r} m)", size_near_m
