@@ -762,8 +762,9 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
     that the code had then (predictor "linearized", damping "off", the problem's
     tolerance). ``only`` keeps the runs whose column has the given value (``"damping=on"``).
     The predictor, damping and tolerance columns appear only where the runs differ in them
-    (with the tolerance, the largest relative force change over the load steps from the run
-    of the smallest tolerance on the same mesh),
+    (with the tolerance, the factorizations where the runs counted them, and the largest
+    relative force change over the load steps from the run of the smallest tolerance on the
+    same mesh),
     the steps column only where a run stopped early, the GPU memory column only where a run
     recorded it. The force error is taken against :data:`REFERENCE_FORCE_N`.
     """
@@ -852,6 +853,8 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
         ),
     ]
     if any(title == "tolerance" for title, _ in columns):
+        if all(r.get("factorizations") is not None for r in runs):
+            columns.append(("factorizations", lambda r: str(r["factorizations"])))
         columns.append(("force change vs tightest", _force_change_column(runs)))
     text_columns = {"code", "mesh", "probe", "predictor", "damping", "tolerance"}
     lines = [
