@@ -81,6 +81,23 @@ def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):
     assert "| 2 of 20 |" in table
 
 
+def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
+    """--size-near-ratios meshes the block at a near size of R probe radii and the far size
+    of a study's default (2.5 mm); with two tolerances the table gives each run's largest
+    force change from the tighter one's curve."""
+    run_benchmark("bench_flat_punch.py", "--sizes", "", "--size-near-ratios", "1",
+                  "--tolerances", "1e-8,1e-4", "--out", "b.json", cwd=tmp_path)  # fmt: skip
+    report = json.loads((tmp_path / "b.json").read_text())
+    assert [run["size_far_m"] for run in report["runs"]] == [2.5e-3, 2.5e-3]
+    assert [run["size_near_m"] for run in report["runs"]] == [1e-3, 1e-3]
+    table = run_benchmark("bench_flat_punch.py", "--markdown", "b.json", cwd=tmp_path)
+    assert "| near size / a | far size (um) |" in table and "| 1 | 2 500 |" in table
+    first, second = table.splitlines()[2:]
+    assert first.endswith("| 0 |") and re.search(r"\| \d\.\de-\d\d \|$", second)
+    stderr = run_script(BENCHMARK, "--size-near-ratios", "2", cwd=tmp_path, expect_status=2)
+    assert "--size-near-ratios must lie in (0, 1]" in stderr
+
+
 @pytest.mark.parametrize(
     "name, args, expected",
     [

@@ -47,6 +47,22 @@ def test_generate_delaunay_block(tmp_path):
     assert set(delaunay.node_sets) == set(extruded.node_sets)
 
 
+def test_generate_for_a_force_accuracy(tmp_path, capsys):
+    """--force-accuracy replaces --size-near-m, says which size it chose, and refuses an
+    accuracy below the measured range as an error of that option."""
+    arguments = [
+        "mesh", "block", "--width-m", "0.02", "--thickness-m", "0.01",
+        "--probe-radius-m", "0.001", "--size-far-m", "0.0025", "--out", str(tmp_path / "b.vtu"),
+    ]  # fmt: skip
+    assert main([*arguments, "--force-accuracy", "0.02"]) == 0
+    assert "size_near_m = " in capsys.readouterr().out
+    assert main([*arguments, "--force-accuracy", "0.001"]) == 2
+    error = capsys.readouterr().err
+    assert "--force-accuracy" in error and "0.001" in error and len(error.splitlines()) == 1
+    with pytest.raises(SystemExit):  # argparse: not both
+        main([*arguments, "--force-accuracy", "0.02", "--size-near-m", "0.0005"])
+
+
 def test_errors_are_one_line_with_exit_codes(tmp_path, capsys):
     assert main(["mesh", "check", str(tmp_path / "missing.vtu")]) == 2
     assert "missing.vtu" in capsys.readouterr().err

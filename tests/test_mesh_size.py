@@ -1,13 +1,24 @@
 """The specimen size estimate: exact counts against generated meshes, and the refusal of a
-mesh that cannot fit in memory before any of it is allocated."""
+mesh that cannot fit in memory before any of it is allocated; the near size chosen for a
+force accuracy from the measured table."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
+import numpy as np
 import pytest
 
 from warptissue.cli import main
-from warptissue.errors import MeshError
-from warptissue.mesh import estimate_indentation_mesh, indentation_block, indentation_disc
+from warptissue.errors import InputError, MeshError
+from warptissue.mesh import (
+    estimate_indentation_mesh,
+    indentation_block,
+    indentation_disc,
+    near_size_choice,
+    size_near_for_force_accuracy,
+)
 from warptissue.mesh import size as mesh_size
 
 SPECIMEN = {
@@ -112,3 +123,98 @@ def test_mesh_block_that_cannot_fit_is_a_one_line_error(tmp_path, capsys, monkey
     assert status == 3
     assert "GiB is available" in capsys.readouterr().err
     assert not out.exists()
+
+
+# --------------------------------------------------------------------------- force accuracy
+
+ROOT = Path(__file__).resolve().parents[1]
+SIZE_RESULTS = {
+    mesher: sorted((ROOT / "scripts/results").glob(f"bench_flat_punch_size_near_{mesher}_*.json"))
+    for mesher in ("extruded", "delaunay")
+}
+REFERENCE_FORCE_N = 2.460e-3  # bench_flat_punch.REFERENCE_FORCE_N
+
+
+@pytest.mark.parametrize("mesher", ["extruded", "delaunay"])
+def test_the_force_error_table_is_the_benchmarks_measurement(mesher):
+    """FLAT_PUNCH_FORCE_ERRORS holds, per mesher, each completed run of the size-near
+    benchmark files: its near size over the punch radius and its force error."""
+    measured = []
+    for path in SIZE_RESULTS[mesher]:
+        report = json.loads(path.read_text())
+        assert report["problem"]["warptissue_mesher"] == mesher
+        radius = report["problem"]["probe_radius_m"]
+        measured += [
+            (
+                round(run["size_near_m"] / radius, 6),
+                round(abs(run["final_force_N"] / REFERENCE_FORCE_N - 1.0), 4),
+            )
+            for run in report["runs"]
+            if run["completed"] and run["size_far_m"] == pytest.approx(2.5 * radius)
+        ]
+    assert sorted(mesh_size.FLAT_PUNCH_FORCE_ERRORS[mesher]) == sorted(measured)
+
+
+@pytest.mark.parametrize("mesher", ["extruded", "delaunay"])
+def test_the_near_size_grows_with_the_accuracy(mesher):
+    accuracies = np.linspace(mesh_size.FORCE_ACCURACY_FLOOR, 0.5, 200)
+    sizes = [
+        size_near_for_force_accuracy(a, probe_radius_m=2e-3, mesher=mesher) for a in accuracies
+    ]
+    assert np.all(np.diff(sizes) >= 0)
+    assert min(sizes) > 0 and max(sizes) <= 2e-3  # never coarser than the probe
+
+
+@pytest.mark.parametrize("mesher", ["extruded", "delaunay"])
+def test_the_near_size_reproduces_the_measured_points(mesher):
+    """At each measured error that no finer size exceeded, the size is that point's own (or a
+    coarser one that also met it), and its measured error meets the accuracy."""
+    points = sorted(mesh_size.FLAT_PUNCH_FORCE_ERRORS[mesher])
+    for index, (ratio, error) in enumerate(points):
+        if error < mesh_size.FORCE_ACCURACY_FLOOR:
+            continue
+        if any(finer_error > error for _, finer_error in points[:index]):
+            continue
+        choice = near_size_choice(error, probe_radius_m=1e-3, mesher=mesher)
+        assert choice.size_ratio >= ratio
+        assert choice.size_near_m == pytest.approx(choice.size_ratio * 1e-3)
+        assert choice.measured_error <= error
+        # Every measured size at or below the chosen one met the accuracy.
+        assert all(e <= error for r, e in points if r <= choice.size_ratio)
+        assert "force_accuracy" in choice.reason() and mesher in choice.reason()
+
+
+@pytest.mark.parametrize(
+    "options, key, fragment",
+    [
+        ({"accuracy": 0.001}, "force_accuracy", "must lie in [0.01, 1)"),
+        ({"accuracy": 1.5}, "force_accuracy", "must lie in [0.01, 1)"),
+        ({"accuracy": float("nan")}, "force_accuracy", "must lie in"),
+        ({"accuracy": True}, "force_accuracy", "must be a number"),
+        ({"accuracy": 0.02, "mesher": "octree"}, "mesher", "must be one of"),
+        ({"accuracy": 0.02, "element": "TET4"}, "element", "TET10"),
+        ({"accuracy": 0.02, "indenter": "sphere"}, "indenter", "flat punch"),
+        ({"accuracy": 0.02, "probe_radius_m": 0.0}, "probe_radius_m", "positive"),
+    ],
+)
+def test_an_accuracy_outside_what_was_measured_is_refused(options, key, fragment):
+    options = {"probe_radius_m": 1e-3, **options}
+    accuracy = options.pop("accuracy")
+    with pytest.raises(InputError) as raised:
+        size_near_for_force_accuracy(accuracy, **options)
+    assert raised.value.column == key
+    assert fragment in str(raised.value)
+    if key == "force_accuracy" and "lie in" in fragment:
+        assert "range from" in str(raised.value)  # the measured range is named
+
+
+def test_a_generator_takes_the_accuracy_instead_of_the_near_size():
+    common = {"width_m": 0.02, "thickness_m": 0.01, "probe_radius_m": 1e-3, "size_far_m": 2.5e-3}
+    mesh = indentation_block(force_accuracy=0.02, **common)
+    size = size_near_for_force_accuracy(0.02, probe_radius_m=1e-3)
+    same = indentation_block(size_near_m=size, **common)
+    assert (mesh.tet_count, mesh.node_count) == (same.tet_count, same.node_count)
+    with pytest.raises(InputError, match="not both"):
+        indentation_block(force_accuracy=0.02, size_near_m=size, **common)
+    with pytest.raises(InputError, match="either size_near_m or force_accuracy"):
+        indentation_disc(radius_m=0.01, thickness_m=0.01, probe_radius_m=1e-3, size_far_m=2e-3)

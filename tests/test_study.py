@@ -17,6 +17,8 @@ from warptissue.fem.solvers import NewtonOptions
 from warptissue.fit import engine
 from warptissue.fit.punch import hayes_kappa
 from warptissue.io import write_csv
+from warptissue.mesh import size_near_for_force_accuracy
+from warptissue.simulate import size_near_reason
 from warptissue.study import (
     FIT_METHODS,
     SCHEMA_VERSION,
@@ -193,6 +195,34 @@ BAD_INPUTS = [
         id="near-coarser-than-probe",
     ),
     pytest.param(
+        "thickness_m = 0.01",
+        "thickness_m = 0.01\nsize_near_m = 0.0002\nforce_accuracy = 0.02",
+        "specimen.force_accuracy",
+        "0.02",
+        id="accuracy-and-near-size",
+    ),
+    pytest.param(
+        "thickness_m = 0.01",
+        "thickness_m = 0.01\nforce_accuracy = 0.001",
+        "specimen.force_accuracy",
+        "0.001",
+        id="accuracy-below-measured",
+    ),
+    pytest.param(
+        "thickness_m = 0.01",
+        "thickness_m = 0.01\nforce_accuracy = 0.02\nsize_far_m = 0.0005",
+        "specimen.force_accuracy",
+        "0.02",
+        id="accuracy-coarser-than-far",
+    ),
+    pytest.param(
+        "thickness_m = 0.01",
+        'thickness_m = 0.01\nforce_accuracy = 0.02\nelement = "TET4"',
+        "specimen.element",
+        "'TET4'",
+        id="accuracy-for-tet4",
+    ),
+    pytest.param(
         "width_m = 0.02",
         "width_m = 0.02\ngrowth = 0.8",
         "specimen.growth",
@@ -272,6 +302,60 @@ def test_bad_input_names_file_line_key_and_value(tmp_path, old, new, key_path, v
     with pytest.raises(InputError) as caught:
         load_study(path)
     assert_names_key_and_line(caught.value, text, path, key_path, value)
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "key_path", "value"),
+    [
+        pytest.param(
+            'kind = "flat_punch"',
+            'kind = "flat_punch"\nedge_radius_m = 0.0001',
+            "specimen.force_accuracy",
+            "0.02",
+            id="rounded-punch",
+        ),
+        pytest.param(
+            'kind = "flat_punch"\nradius_m = 0.001',
+            'kind = "sphere"\nradius_m = 0.001',
+            "specimen.force_accuracy",
+            "0.02",
+            id="sphere",
+        ),
+        pytest.param(
+            "[material]",
+            '[solver]\nformulation = "displacement"\n[material]',
+            "solver.formulation",
+            "'displacement'",
+            id="displacement-formulation",
+        ),
+    ],
+)
+def test_a_force_accuracy_outside_its_measurement_is_refused(tmp_path, old, new, key_path, value):
+    """specimen.force_accuracy was measured for the sharp bonded punch on TET10 mixed meshes."""
+    text = MINIMAL.replace("thickness_m = 0.01", "thickness_m = 0.01\nforce_accuracy = 0.02")
+    text = text.replace(old, new, 1)
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    assert_names_key_and_line(caught.value, text, path, key_path, value)
+    assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("mesher", ["extruded", "delaunay"])
+def test_a_force_accuracy_chooses_the_near_size(tmp_path, mesher):
+    text = MINIMAL.replace(
+        "thickness_m = 0.01", f'thickness_m = 0.01\nforce_accuracy = 0.02\nmesher = "{mesher}"'
+    )
+    study = load_study(write(tmp_path, text))
+    expected = size_near_for_force_accuracy(0.02, probe_radius_m=0.001, mesher=mesher)
+    assert study.specimen.size_near_m == pytest.approx(expected)
+    assert study.specimen.force_accuracy == 0.02
+    record = study.to_dict()
+    assert record["specimen"]["force_accuracy"] == 0.02 and "size_near_m" not in record["specimen"]
+    assert study_from_dict(record).to_dict() == record
+    reason = size_near_reason(study)
+    assert f"{expected:.4g}" in reason and "force_accuracy = 0.02" in reason
+    assert size_near_reason(load_study(write(tmp_path, MINIMAL))) is None
 
 
 def test_toml_syntax_error_names_the_line(tmp_path):

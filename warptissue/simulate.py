@@ -71,6 +71,7 @@ __all__ = [
     "kernels_need_compiling",
     "penetration_warnings",
     "run_study",
+    "size_near_reason",
 ]
 
 FORCE_CURVE_COLUMNS: tuple[str, ...] = (*INDENTATION_COLUMNS, "step", "newton_iterations")
@@ -152,6 +153,31 @@ def build_mesh(study: Study) -> Any:
     if specimen.shape == "block":
         return indentation_block(width_m=specimen.width_m, **common)
     return indentation_disc(radius_m=specimen.radius_m, **common)
+
+
+def size_near_reason(study: Study) -> str | None:
+    """Which near size ``specimen.force_accuracy`` chose, and why; None where the study gives
+    ``size_near_m`` (or leaves it at its default) instead.
+
+    Args:
+        study: The study.
+
+    Returns:
+        One sentence (:meth:`warptissue.mesh.NearSizeChoice.reason`), or None.
+    """
+    from warptissue.mesh import near_size_choice
+    from warptissue.study import mesh_probe_radius
+
+    specimen = study.specimen
+    if specimen.force_accuracy is None:
+        return None
+    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    return near_size_choice(
+        specimen.force_accuracy,
+        probe_radius_m=mesh_probe_radius(study.indenter, half_size_m),
+        mesher=specimen.mesher,
+        element=specimen.element,
+    ).reason()
 
 
 def estimate_mesh(study: Study) -> Any:
@@ -450,6 +476,11 @@ def run_study(
     started = time.perf_counter()
     mesh = build_mesh(study)
     mesh_statistics = _mesh_statistics(mesh)
+    mesh_statistics.update(
+        size_near_m=study.specimen.size_near_m,
+        size_far_m=study.specimen.size_far_m,
+        size_near_reason=size_near_reason(study),
+    )
     problem = build_problem(study, mesh)
     meshed = time.perf_counter()
     if announce and kernels_need_compiling(warp_device):

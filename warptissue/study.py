@@ -132,6 +132,9 @@ class Specimen:
         mesher: ``"extruded"`` (layers of split prisms) or ``"delaunay"`` (TetGen's quality
             tets inside the same graded surface); see
             :func:`warptissue.mesh.indentation_block`.
+        force_accuracy: The relative force accuracy that ``size_near_m`` was chosen for
+            (:func:`warptissue.mesh.size_near_for_force_accuracy`), or None when the near
+            size was given (or defaulted).
     """
 
     shape: str
@@ -144,23 +147,22 @@ class Specimen:
     size_far_m: float
     growth: float
     mesher: str = "extruded"
+    force_accuracy: float | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The ``[specimen]`` table, with every default filled in."""
+        """The ``[specimen]`` table, with every default filled in; a near size chosen for a
+        force accuracy is given as ``force_accuracy`` (which loads as the same size)."""
         table: dict[str, Any] = {"shape": self.shape}
         if self.width_m is not None:
             table["width_m"] = self.width_m
         if self.radius_m is not None:
             table["radius_m"] = self.radius_m
-        table.update(
-            thickness_m=self.thickness_m,
-            quarter=self.quarter,
-            element=self.element,
-            size_near_m=self.size_near_m,
-            size_far_m=self.size_far_m,
-            growth=self.growth,
-            mesher=self.mesher,
-        )
+        table.update(thickness_m=self.thickness_m, quarter=self.quarter, element=self.element)
+        if self.force_accuracy is None:
+            table["size_near_m"] = self.size_near_m
+        else:
+            table["force_accuracy"] = self.force_accuracy
+        table.update(size_far_m=self.size_far_m, growth=self.growth, mesher=self.mesher)
         return table
 
 
@@ -831,8 +833,28 @@ def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
         )
     quarter = table.boolean("quarter", default=True)
     element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
-    size_near_m = table.number("size_near_m", default=probe_radius_m / 4.0)
+    force_accuracy = table.number("force_accuracy", default=None)
+    if force_accuracy is not None and table.has("size_near_m"):
+        raise table.error(
+            "force_accuracy",
+            f"give either force_accuracy or size_near_m, not both (size_near_m = "
+            f"{table.raw('size_near_m')!r})",
+            force_accuracy,
+        )
+    if force_accuracy is None:
+        size_near_m = table.number("size_near_m", default=probe_radius_m / 4.0)
+    else:
+        size_near_m = _size_near_for_accuracy(
+            table, force_accuracy, indenter=indenter, probe_radius_m=probe_radius_m
+        )
     size_far_m = table.number("size_far_m", default=min(thickness_m, half_size_m) / 4.0)
+    if size_near_m > size_far_m and force_accuracy is not None:
+        raise table.error(
+            "force_accuracy",
+            f"chooses size_near_m = {size_near_m!r} m, coarser than size_far_m "
+            f"({size_far_m!r} m): give a size_far_m of at least that, or size_near_m",
+            force_accuracy,
+        )
     if size_near_m > size_far_m:
         raise table.error(
             "size_near_m", f"must not exceed size_far_m ({size_far_m!r} m)", size_near_m
@@ -860,7 +882,36 @@ def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
         size_far_m=size_far_m,
         growth=growth,
         mesher=mesher,
+        force_accuracy=force_accuracy,
     )
+
+
+def _size_near_for_accuracy(
+    table: _Table, accuracy: float, *, indenter: Indenter, probe_radius_m: float
+) -> float:
+    """``specimen.force_accuracy``'s near size (:func:`warptissue.mesh.size_near_for_force_
+    accuracy`), its errors placed at the key that is out of what was measured."""
+    from warptissue.mesh.size import size_near_for_force_accuracy
+
+    sharp = indenter.kind == "flat_punch" and indenter.edge_radius_m == 0.0
+    if not (sharp and indenter.contact == "bonded"):
+        raise table.error(
+            "force_accuracy",
+            "was measured for the sharp bonded flat punch only (indenter.kind = "
+            f"{indenter.kind!r}, edge_radius_m = {indenter.edge_radius_m!r}, contact = "
+            f"{indenter.contact!r}): give size_near_m",
+            accuracy,
+        )
+    # The element and mesher keys come after this one in the table; read them here.
+    element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
+    mesher = table.string("mesher", default="extruded", choices=MESHERS)
+    try:
+        return size_near_for_force_accuracy(
+            accuracy, probe_radius_m=probe_radius_m, mesher=mesher, element=element
+        )
+    except InputError as exc:
+        key = exc.column if exc.column in ("element", "mesher") else "force_accuracy"
+        raise table.error(key, exc.message, table.raw(key, None)) from exc
 
 
 def _read_indenter(table: _Table) -> Indenter:
@@ -1416,6 +1467,13 @@ def _build(data: Mapping[str, Any], source: _Source, default_name: str) -> Study
             f"formulation 'mixed' needs element 'TET10' (specimen.element is "
             f"{specimen.element!r}); TET4 takes formulation 'displacement', which locks when "
             "nearly incompressible",
+        )
+    if specimen.force_accuracy is not None and solver.formulation != "mixed":
+        raise source.error(
+            "solver.formulation",
+            "specimen.force_accuracy was measured with the 'mixed' formulation only: give "
+            "specimen.size_near_m",
+            solver.formulation,
         )
     records: tuple[DataRecord, ...] = ()
     fit = None

@@ -22,6 +22,11 @@ punch of the same radius whose edge is rounded with radius RHO, pressed in throu
 frictionless penalty contact (issue 21, must-show f); the probe force is then the base
 reaction. FElupe always presses the bonded punch.
 
+``--size-near-ratios R1,R2,...`` runs warptissue meshes whose near size is R times the punch
+radius and whose far size is fixed (``--size-far-m``, by default the study's default for this
+block, min(thickness, half width) / 4 = 2.5 mm): the force error against the near-edge size
+alone, which :func:`warptissue.mesh.size_near_for_force_accuracy` is read from (issue 22).
+
 ``--markdown RESULTS...`` runs nothing and prints the runs of earlier ``--out`` files as the
 Markdown tables of docs/performance.md.
 
@@ -32,6 +37,8 @@ Examples:
         --out $OUT/bench.json
     python scripts/benchmarks/bench_flat_punch.py --sizes 10k --probe rounded \\
         --edge-radius-m 1e-4 --out rounded.json
+    python scripts/benchmarks/bench_flat_punch.py --mesher delaunay --sizes "" \\
+        --size-near-ratios 1,0.5,0.25 --out size.json
 """
 
 from __future__ import annotations
@@ -58,6 +65,9 @@ SHEAR_MODULUS_PA = 575.0
 BULK_MODULUS_PA = 1000.0 * SHEAR_MODULUS_PA
 FINAL_DEPTH_M = 0.5 * PROBE_RADIUS_M
 STEP_COUNT = 20
+DEFAULT_SIZE_FAR_M = min(THICKNESS_M, HALF_WIDTH_M) / 4.0
+"""The far size of ``--size-near-ratios`` meshes by default: a study's default ``size_far_m``
+for this block (:mod:`warptissue.study`)."""
 NEWTON_TOLERANCE = 1.0e-8
 REFERENCE_FORCE_N = 2.460e-3
 """The converged force at a / 2: Richardson extrapolation of the three finest FElupe block runs
@@ -113,6 +123,7 @@ class RunRecord:
     assemblies: dict[str, int] | None = None
     probe: str = "bonded"
     edge_radius_m: float = 0.0
+    size_far_m: float | None = None
 
 
 def comma_separated(text: str) -> list[str]:
@@ -466,6 +477,22 @@ def warptissue_mesh(
     return mesh, size_near_m
 
 
+def warptissue_mesh_at(size_near_m: float, size_far_m: float, *, mesher: str = "extruded") -> Any:
+    """The benchmark's TET10 indentation block at the given near and far sizes (m)."""
+    from warptissue.mesh import indentation_block
+
+    return indentation_block(
+        width_m=2.0 * HALF_WIDTH_M,
+        thickness_m=THICKNESS_M,
+        probe_radius_m=PROBE_RADIUS_M,
+        quarter=True,
+        element="TET10",
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        mesher=mesher,
+    )
+
+
 def run_warptissue(
     mesh: Any,
     size_near_m: float,
@@ -480,6 +507,7 @@ def run_warptissue(
     tolerance: float = NEWTON_TOLERANCE,
     profile: bool = False,
     edge_radius_m: float = 0.0,
+    size_far_m: float | None = None,
 ) -> RunRecord:
     """warptissue TET10 mixed run of the benchmark on one mesh: its first ``steps`` load
     steps (all 20 by default; fewer make a partial run, ``completed`` False), each started
@@ -489,7 +517,8 @@ def run_warptissue(
     (``newton_profile``, :class:`warptissue.fem.NewtonTimings`), and the assemblies of the
     run are counted (``assemblies``: ``with_tangent``, ``residual_only``). With
     ``edge_radius_m`` > 0 the punch is rigid, its edge rounded with that radius, and pressed
-    in through frictionless penalty contact instead of bonded prescribed nodes."""
+    in through frictionless penalty contact instead of bonded prescribed nodes. ``size_far_m``
+    is the mesh's far size, recorded only."""
     import warp as wp
 
     from warptissue.device import resolve_device
@@ -584,6 +613,7 @@ def run_warptissue(
         assemblies=assemblies if profile else None,
         probe="rounded" if edge_radius_m > 0.0 else "bonded",
         edge_radius_m=edge_radius_m,
+        size_far_m=size_far_m,
     )
 
 
@@ -693,13 +723,48 @@ def _seconds(value: float) -> str:
     return f"{value:.3g}" if value < 10 else f"{value:.1f}"
 
 
+def _force_change_column(runs: list[dict[str, Any]]) -> Any:
+    """The cell function of the "force change vs tightest" column: the largest relative change
+    of a run's force over its load steps from the run of the smallest Newton tolerance on the
+    same mesh and settings ("0" for that run itself, "-" where no such run completed)."""
+
+    def same_case(run: dict[str, Any]) -> tuple[Any, ...]:
+        keys = ("code", "mesher", "cells", "probe", "predictor", "damping")
+        return (
+            *(run[k] for k in keys),
+            run.get("nonlinear_elimination"),
+            run.get("reuse_factorization"),
+        )
+
+    tightest: dict[tuple[Any, ...], dict[str, Any]] = {}
+    for run in runs:
+        if run["completed"] and run.get("newton_tolerance") is not None:
+            best = tightest.get(same_case(run))
+            if best is None or run["newton_tolerance"] < best["newton_tolerance"]:
+                tightest[same_case(run)] = run
+
+    def cell(run: dict[str, Any]) -> str:
+        base = tightest.get(same_case(run))
+        if base is None or not run["completed"] or run.get("newton_tolerance") is None:
+            return "-"
+        if base is run:
+            return "0"
+        change = np.abs(np.asarray(run["force_N"]) / np.asarray(base["force_N"]) - 1.0).max()
+        return f"{change:.1e}"
+
+    return cell
+
+
 def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
     """A Markdown table of the runs recorded in results files written by ``--out``.
 
     One row per run, in file order. Runs recorded before an option existed get the value
     that the code had then (predictor "linearized", damping "off", the problem's
     tolerance). ``only`` keeps the runs whose column has the given value (``"damping=on"``).
-    The predictor, damping and tolerance columns appear only where the runs differ in them,
+    The predictor, damping and tolerance columns appear only where the runs differ in them
+    (with the tolerance, the factorizations where the runs counted them, and the largest
+    relative force change over the load steps from the run of the smallest tolerance on the
+    same mesh),
     the steps column only where a run stopped early, the GPU memory column only where a run
     recorded it. The force error is taken against :data:`REFERENCE_FORCE_N`.
     """
@@ -730,6 +795,7 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
         runs = [r for r in runs if str(r.get(key)) == value]
     if not runs:
         raise ValueError(f"no run in {[str(p) for p in paths]} matches {list(only)}")
+    digits = 2 if all(r.get("size_far_m") for r in runs) else 1  # the size-near runs: 0.01 %
     names = {"warptissue": "warptissue TET10 mixed", "felupe": "FElupe Q1/P0 hex"}
     columns: list[tuple[str, Any]] = []
     if len({r["code"] for r in runs}) > 1:
@@ -743,6 +809,11 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
         ("DOFs", lambda r: _grouped(r["dofs"])),
         ("near size (um)", lambda r: _grouped(1e6 * r["size_near_m"])),
     ]
+    if all(r.get("size_far_m") for r in runs):
+        columns += [
+            ("near size / a", lambda r: f"{r['size_near_m'] / PROBE_RADIUS_M:.3g}"),
+            ("far size (um)", lambda r: _grouped(1e6 * r["size_far_m"])),
+        ]
     if not all(r["completed"] for r in runs):
         columns.append(("load steps", lambda r: f"{r['steps_converged']} of {STEP_COUNT}"))
     columns += [
@@ -775,12 +846,16 @@ def markdown_table(paths: list[Path], *, only: list[str] = ()) -> str:
         (
             "vs 2.460 mN",
             lambda r: (
-                f"{100 * (r['final_force_N'] / REFERENCE_FORCE_N - 1):+.1f} %"
+                f"{100 * (r['final_force_N'] / REFERENCE_FORCE_N - 1):+.{digits}f} %"
                 if r["completed"] and r["probe"] == "bonded"
                 else "-"
             ),
         ),
     ]
+    if any(title == "tolerance" for title, _ in columns):
+        if all(r.get("factorizations") is not None for r in runs):
+            columns.append(("factorizations", lambda r: str(r["factorizations"])))
+        columns.append(("force change vs tightest", _force_change_column(runs)))
     text_columns = {"code", "mesh", "probe", "predictor", "damping", "tolerance"}
     lines = [
         "| " + " | ".join(title for title, _ in columns) + " |",
@@ -928,6 +1003,20 @@ def main(argv: list[str] | None = None) -> int:
         default="10k,20k",
         help=f"warptissue mesh sizes, comma separated, from {list(SIZE_TARGETS)} or a tet "
         "count (empty: skip warptissue)",
+    )
+    parser.add_argument(
+        "--size-near-ratios",
+        default="",
+        help="warptissue meshes whose near size is each of these multiples of the punch "
+        "radius (comma separated, in (0, 1]), with the far size --size-far-m: the force error "
+        "against the near-edge size alone (empty: none)",
+    )
+    parser.add_argument(
+        "--size-far-m",
+        type=float,
+        default=DEFAULT_SIZE_FAR_M,
+        help="far size of the --size-near-ratios meshes, m (default: a study's default for "
+        f"this block, {DEFAULT_SIZE_FAR_M:g})",
     )
     parser.add_argument(
         "--felupe-levels",
@@ -1085,10 +1174,34 @@ def main(argv: list[str] | None = None) -> int:
     if not reuses or any(r not in settings for r in reuses):
         parser.error(f"--reuse takes on and/or off, got {args.reuse!r}")
 
+    try:
+        ratios = [float(r) for r in comma_separated(args.size_near_ratios)]
+    except ValueError:
+        parser.error(f"--size-near-ratios takes numbers, got {args.size_near_ratios!r}")
+    if any(not 0.0 < r <= 1.0 for r in ratios):
+        parser.error(f"--size-near-ratios must lie in (0, 1], got {args.size_near_ratios!r}")
+    if not 0.0 < args.size_far_m <= THICKNESS_M:
+        parser.error(f"--size-far-m must lie in (0, {THICKNESS_M:g}], got {args.size_far_m!r}")
+
     records: list[RunRecord] = []
     notes: dict[str, Any] = {}
     sizes = [size.lower() for size in comma_separated(args.sizes)]
-    if sizes:
+    meshes: list[tuple[Any, float, float]] = []  # mesh, near size, far size
+    for size in sizes:
+        target = SIZE_TARGETS.get(size) or parse_count(size)
+        mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
+        meshes.append((mesh, size_near_m, min(10.0 * size_near_m, 0.25 * THICKNESS_M)))
+    for ratio in ratios:
+        size_near_m = ratio * PROBE_RADIUS_M
+        size_far_m = max(args.size_far_m, size_near_m)
+        meshes.append(
+            (
+                warptissue_mesh_at(size_near_m, size_far_m, mesher=args.mesher),
+                size_near_m,
+                size_far_m,
+            )
+        )
+    if meshes:
         import warp as wp
 
         wp.config.quiet = True
@@ -1098,9 +1211,7 @@ def main(argv: list[str] | None = None) -> int:
             warm_mesh, warm_size, args.device, profile=args.profile, edge_radius_m=edge_radius_m
         )
         notes["warptissue_warmup_s"] = time.perf_counter() - started
-        for size in sizes:
-            target = SIZE_TARGETS.get(size) or parse_count(size)
-            mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
+        for mesh, size_near_m, size_far_m in meshes:
             for predictor, damping, tolerance, elimination, reuse in itertools.product(
                 predictors, dampings, tolerances, eliminations, reuses
             ):
@@ -1117,6 +1228,7 @@ def main(argv: list[str] | None = None) -> int:
                     tolerance=tolerance,
                     profile=args.profile,
                     edge_radius_m=edge_radius_m,
+                    size_far_m=size_far_m,
                 )
                 records.append(record)
                 print_table([record])

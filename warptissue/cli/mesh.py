@@ -40,7 +40,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             )
         generate.add_argument("--thickness-m", type=positive_length_m, required=True)
         generate.add_argument("--probe-radius-m", type=positive_length_m, required=True)
-        generate.add_argument("--size-near-m", type=positive_length_m, required=True)
+        near = generate.add_mutually_exclusive_group(required=True)
+        near.add_argument("--size-near-m", type=positive_length_m, help="size at the probe")
+        near.add_argument(
+            "--force-accuracy",
+            type=positive_number,
+            help="instead of --size-near-m: the relative force accuracy (0.01 is 1 %%) to "
+            "choose it for, from the flat-punch benchmark's measurement (TET10)",
+        )
         generate.add_argument("--size-far-m", type=positive_length_m, required=True)
         generate.add_argument("--growth", type=positive_number, default=1.2)
         generate.add_argument("--layer-max-m", type=positive_length_m, default=None)
@@ -102,8 +109,22 @@ def _read(path: Path, unit: str):
 
 
 def _generate(args: argparse.Namespace) -> int:
-    from warptissue.mesh import indentation_block, indentation_disc, write_mesh
+    from warptissue.mesh import (
+        indentation_block,
+        indentation_disc,
+        near_size_choice,
+        write_mesh,
+    )
 
+    if args.force_accuracy is not None:
+        choice = near_size_choice(
+            args.force_accuracy,
+            probe_radius_m=args.probe_radius_m,
+            mesher=args.mesher,
+            element=args.element,
+        )
+        print(choice.reason())
+        args.size_near_m = choice.size_near_m
     common = {
         "thickness_m": args.thickness_m,
         "probe_radius_m": args.probe_radius_m,

@@ -144,6 +144,8 @@ def _print_summary(outputs: SimulationOutputs) -> None:
         f"{outputs.summary['steps_converged']}/{outputs.summary['steps_requested']} load steps "
         f"in {outputs.summary['timings_s']['total']:.1f} s on {outputs.summary['device']}"
     )
+    if mesh.get("size_near_reason"):
+        print(mesh["size_near_reason"])
     timed = outputs.summary["study"]["protocol"].get("kind", "quasi_static") != "quasi_static"
     time_header = f" {'time_s':>11}" if timed else ""
     print(f"{'step':>4}{time_header} {'depth_m':>12} {'reaction_force_N':>17} {'newton':>6}")

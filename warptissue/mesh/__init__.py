@@ -30,14 +30,25 @@ from warptissue.mesh.quality import (
     radius_ratios,
     tet10_jacobian_determinants,
 )
-from warptissue.mesh.size import MeshSizeEstimate, estimate_indentation_mesh
+from warptissue.mesh.size import (
+    FLAT_PUNCH_FORCE_ERRORS,
+    FORCE_ACCURACY_FLOOR,
+    MeshSizeEstimate,
+    NearSizeChoice,
+    estimate_indentation_mesh,
+    near_size_choice,
+    size_near_for_force_accuracy,
+)
 from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 __all__ = [
+    "FLAT_PUNCH_FORCE_ERRORS",
+    "FORCE_ACCURACY_FLOOR",
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
     "MeshQuality",
     "MeshSizeEstimate",
+    "NearSizeChoice",
     "NODE_SET_PREFIX",
     "TET10_SWAP_1_2",
     "TET_REGION_KEY",
@@ -58,9 +69,11 @@ __all__ = [
     "hex_to_tets",
     "indentation_block",
     "indentation_disc",
+    "near_size_choice",
     "radius_ratios",
     "read_mesh",
     "signed_volumes",
+    "size_near_for_force_accuracy",
     "tetrahedralize_surface",
     "tet10_jacobian_determinants",
     "to_tet10",

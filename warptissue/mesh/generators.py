@@ -389,10 +389,11 @@ def indentation_block(
     probe_radius_m: float,
     quarter: bool = True,
     element: str = "TET10",
-    size_near_m: float,
+    size_near_m: float | None = None,
     size_far_m: float,
     growth: float = 1.2,
     layer_max_m: float | None = None,
+    force_accuracy: float | None = None,
     mesher: str = "extruded",
 ) -> TetMesh:
     """A square block for indentation, graded toward the probe at its top centre.
@@ -421,13 +422,18 @@ def indentation_block(
         probe_radius_m: Flat-punch radius, metres (< width_m / 2).
         quarter: Mesh the quarter x, y >= 0 (two symmetry planes) instead of the full block.
         element: ``"TET10"`` (straight-sided, mid-edge nodes) or ``"TET4"``.
-        size_near_m: Element size under the probe and at its edge, metres.
+        size_near_m: Element size under the probe and at its edge, metres (give it or
+            ``force_accuracy``).
         size_far_m: Largest element size, far from the probe, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
         layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
             times ``size_near_m`` bounds the vertical stretch of the cells below the probe.
         mesher: ``"extruded"`` (layers of split prisms) or ``"delaunay"`` (TetGen inside the
             extruded mesh's surface).
+        force_accuracy: Instead of ``size_near_m``: the relative force accuracy (0.01 is
+            1 %) that the near size is chosen for, the coarsest measured to reach it on the
+            flat-punch benchmark (:func:`warptissue.mesh.size_near_for_force_accuracy`;
+            TET10 only).
 
     Returns:
         A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
@@ -447,6 +453,7 @@ def indentation_block(
         layer_max_m=layer_max_m,
         curved_side=False,
         mesher=mesher,
+        force_accuracy=force_accuracy,
     )
 
 
@@ -457,10 +464,11 @@ def indentation_disc(
     probe_radius_m: float,
     quarter: bool = True,
     element: str = "TET10",
-    size_near_m: float,
+    size_near_m: float | None = None,
     size_far_m: float,
     growth: float = 1.2,
     layer_max_m: float | None = None,
+    force_accuracy: float | None = None,
     curved_side: bool = False,
     mesher: str = "extruded",
 ) -> TetMesh:
@@ -476,7 +484,8 @@ def indentation_disc(
         probe_radius_m: Flat-punch radius, metres (< radius_m).
         quarter: Mesh the quarter x, y >= 0 instead of the full disc.
         element: ``"TET10"`` or ``"TET4"``.
-        size_near_m: Element size under the probe and at its edge, metres.
+        size_near_m: Element size under the probe and at its edge, metres (give it or
+            ``force_accuracy``).
         size_far_m: Largest element size, metres.
         growth: Size ratio of neighbouring cells along the grading (>= 1).
         layer_max_m: Largest layer thickness in z, metres (default ``size_far_m``). A few
@@ -486,6 +495,8 @@ def indentation_disc(
             and the side is the inscribed polygonal prism.
         mesher: ``"extruded"`` or ``"delaunay"`` (see :func:`indentation_block`). With
             ``curved_side`` the Delaunay mesh's side nodes also move onto the cylinder.
+        force_accuracy: Instead of ``size_near_m``: the relative force accuracy it is chosen
+            for (see :func:`indentation_block`).
 
     Returns:
         A positively oriented, conforming mesh.
@@ -504,6 +515,7 @@ def indentation_disc(
         layer_max_m=layer_max_m,
         curved_side=curved_side,
         mesher=mesher,
+        force_accuracy=force_accuracy,
     )
 
 
@@ -528,14 +540,28 @@ def _indentation_specimen(
     probe_radius_m: float,
     quarter: bool,
     element: str,
-    size_near_m: float,
+    size_near_m: float | None,
     size_far_m: float,
     growth: float,
     layer_max_m: float | None,
     curved_side: bool,
     mesher: str,
+    force_accuracy: float | None = None,
 ) -> TetMesh:
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
+    if (size_near_m is None) == (force_accuracy is None):
+        raise InputError(
+            "give either size_near_m or force_accuracy"
+            + (", not both" if force_accuracy is not None else ""),
+            key="force_accuracy" if force_accuracy is not None else "size_near_m",
+            value=force_accuracy,
+        )
+    if force_accuracy is not None:
+        from warptissue.mesh.size import size_near_for_force_accuracy
+
+        size_near_m = size_near_for_force_accuracy(
+            force_accuracy, probe_radius_m=probe_radius_m, mesher=mesher, element=element
+        )
     _require_positive(probe_radius_m=probe_radius_m, size_near_m=size_near_m, size_far_m=size_far_m)
     if element not in ("TET4", "TET10"):
         raise InputError("element must be 'TET4' or 'TET10'", key="element", value=element)

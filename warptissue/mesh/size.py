@@ -9,10 +9,15 @@ simulation on it (tangent, direct solver's factors, Newton arrays; a law fitted 
 runs). :meth:`MeshSizeEstimate.require_fits` refuses, with the numbers, a mesh that would not
 fit in the memory available, before any of it is allocated: the generators call it
 themselves, and a simulation calls it with ``solve=True``.
+
+:func:`size_near_for_force_accuracy` chooses the near size itself: the coarsest near-probe
+element size whose flat-punch force was measured within a stated relative accuracy
+(:data:`FLAT_PUNCH_FORCE_ERRORS`, the study key ``specimen.force_accuracy``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -21,12 +26,17 @@ from warptissue.device import available_host_memory_bytes
 from warptissue.errors import InputError, MeshError
 
 __all__ = [
+    "FLAT_PUNCH_FORCE_ERRORS",
+    "FORCE_ACCURACY_FLOOR",
     "GENERATOR_BYTES_PER_TET",
     "MAX_INDEX",
     "SOLVE_BYTES_EXPONENT",
     "SOLVE_BYTES_REFERENCE",
     "MeshSizeEstimate",
+    "NearSizeChoice",
     "estimate_indentation_mesh",
+    "near_size_choice",
+    "size_near_for_force_accuracy",
 ]
 
 GENERATOR_BYTES_PER_TET = {"TET4": 1500, "TET10": 1800}
@@ -219,3 +229,215 @@ def _sized(tets: float, nodes: float, element: str) -> MeshSizeEstimate:
         mesh_bytes=int(min(GENERATOR_BYTES_PER_TET[element] * tets, 2.0**62)),
         solve_bytes=int(min(solve, 2.0**62)),
     )
+
+
+FLAT_PUNCH_FORCE_ERRORS: dict[str, tuple[tuple[float, float], ...]] = {
+    "extruded": (
+        (1.0, 0.0081),
+        (0.7, 0.0076),
+        (0.5, 0.0136),
+        (0.35, 0.0124),
+        (0.25, 0.0108),
+        (0.18, 0.0074),
+        (0.125, 0.0057),
+    ),
+    "delaunay": (
+        (1.0, 0.0022),
+        (0.7, 0.0050),
+        (0.5, 0.0041),
+        (0.35, 0.0014),
+        (0.25, 0.0006),
+        (0.18, 0.0051),
+        (0.125, 0.0036),
+    ),
+}
+"""Measured force errors of the flat-punch benchmark against the near-probe element size, by
+mesher: ``(size_near_m / probe radius, |F / F_ref - 1|)`` from coarse to fine.
+
+The benchmark (docs/performance.md, "The flat-punch benchmark"): a quarter of a 20 x 20 x
+10 mm block on a fixed base, a bonded flat punch of radius a = 1 mm pressed to a / 2 in 20
+load steps, neo-Hookean tissue with K / mu = 1000, TET10 mixed elements, Newton tolerance
+1e-8; the far size fixed at a study's default for that block, min(thickness, half width) / 4
+= 2.5 a; F_ref = 2.460 mN, the Richardson extrapolation of FElupe's hexahedral runs.
+Measured on the 2-core CPU on 2026-11-27 with ``bench_flat_punch.py --sizes ""
+--size-near-ratios 1,0.7,0.5,0.35,0.25,0.18,0.125 --mesher extruded|delaunay``
+(``scripts/results/bench_flat_punch_size_near_{extruded,extruded_fine,delaunay}_2core_cpu.json``;
+a test checks the table against those files).
+
+The errors are not monotone in the size: the extruded meshes are 0.8 % off at the probe
+radius, 1.4 % at half of it and 0.7 % and 0.6 % at 0.18 and 0.125 of it, and every Delaunay
+mesh is within 0.51 %, so :func:`size_near_for_force_accuracy` reads their running maximum
+from fine to coarse."""
+FORCE_ACCURACY_FLOOR = 0.01
+"""The smallest relative force accuracy :func:`size_near_for_force_accuracy` takes: the
+reference force itself is uncertain by about 1 % (the axisymmetric FElupe model of the round
+counterpart converges to 2.434 mN, 1.1 % below it), so a smaller error cannot be told from
+the measurement."""
+
+
+@dataclass(frozen=True)
+class NearSizeChoice:
+    """The near-probe element size chosen for a relative force accuracy, and why.
+
+    Attributes:
+        accuracy: The relative force accuracy asked for (0.01 is 1 %).
+        size_near_m: The chosen element size under the probe and at its edge, m.
+        size_ratio: ``size_near_m`` over the probe radius.
+        measured_error: The force error measured at that ratio on the flat-punch benchmark
+            (relative), at most ``accuracy``, as are those of all the finer measured sizes.
+        mesher: ``"extruded"`` or ``"delaunay"``.
+    """
+
+    accuracy: float
+    size_near_m: float
+    size_ratio: float
+    measured_error: float
+    mesher: str
+
+    def reason(self) -> str:
+        """One sentence: the size, and the measurement it was read from."""
+        return (
+            f"size_near_m = {self.size_near_m:.4g} m ({self.size_ratio:g} of the probe "
+            f"radius) for force_accuracy = {self.accuracy:g}: the coarsest near size whose "
+            f"flat-punch benchmark force, and that of every finer size measured, was within "
+            f"{100 * self.accuracy:g} % of the reference ({self.mesher} TET10 mixed mesh, far "
+            f"size 2.5 probe radii; measured {100 * self.measured_error:.2f} %)"
+        )
+
+
+def near_size_choice(
+    accuracy: float,
+    *,
+    probe_radius_m: float,
+    mesher: str = "extruded",
+    element: str = "TET10",
+    indenter: str = "flat_punch",
+) -> NearSizeChoice:
+    """The near-probe element size for a relative force accuracy, with the reason for it.
+
+    See :func:`size_near_for_force_accuracy`, which returns only the size.
+
+    Args:
+        accuracy: Relative force accuracy (0.01 is 1 %), at least :data:`FORCE_ACCURACY_FLOOR`
+            and below 1.
+        probe_radius_m: Probe (punch) radius, metres.
+        mesher: ``"extruded"`` or ``"delaunay"``.
+        element: ``"TET10"`` (the only element measured).
+        indenter: ``"flat_punch"`` (the only indenter measured).
+
+    Returns:
+        The choice.
+
+    Raises:
+        InputError: An accuracy that is not a number in [:data:`FORCE_ACCURACY_FLOOR`, 1)
+            (the message names the measured range), a radius that is not positive, or a
+            mesher, element or indenter that was not measured.
+    """
+    if isinstance(accuracy, bool) or not isinstance(accuracy, int | float):
+        raise InputError("must be a number", key="force_accuracy", value=accuracy)
+    if mesher not in FLAT_PUNCH_FORCE_ERRORS:
+        raise InputError(
+            f"must be one of {', '.join(map(repr, FLAT_PUNCH_FORCE_ERRORS))}",
+            key="mesher",
+            value=mesher,
+        )
+    if element != "TET10":
+        raise InputError(
+            "force_accuracy was measured for TET10 (mixed) elements only: give size_near_m",
+            key="element",
+            value=element,
+        )
+    if indenter != "flat_punch":
+        raise InputError(
+            "force_accuracy was measured for the sharp bonded flat punch only: give size_near_m",
+            key="indenter",
+            value=indenter,
+        )
+    if not (math.isfinite(probe_radius_m) and probe_radius_m > 0):
+        raise InputError("must be positive", key="probe_radius_m", value=probe_radius_m)
+    ratios, errors = _error_envelope(mesher)
+    if not (math.isfinite(accuracy) and FORCE_ACCURACY_FLOOR <= accuracy < 1.0):
+        raise InputError(
+            f"must lie in [{FORCE_ACCURACY_FLOOR:g}, 1): the force errors measured with the "
+            f"{mesher} mesher range from {errors[0]:.3g} to {errors[-1]:.3g}, and the "
+            f"reference force is uncertain by about {FORCE_ACCURACY_FLOOR:g}",
+            key="force_accuracy",
+            value=accuracy,
+        )
+    within = np.flatnonzero(errors <= accuracy)
+    if within.size == 0:  # no measured size was that accurate
+        raise InputError(
+            f"no measured near size of the {mesher} mesher was that accurate: the force "
+            f"errors measured range from {errors[0]:.3g} (size_near_m = {ratios[0]:g} probe "
+            f"radii) to {errors[-1]:.3g}; give size_near_m",
+            key="force_accuracy",
+            value=accuracy,
+        )
+    index = int(within[-1])
+    return NearSizeChoice(
+        accuracy=float(accuracy),
+        size_near_m=float(ratios[index] * probe_radius_m),
+        size_ratio=float(ratios[index]),
+        measured_error=float(_measured(mesher)[ratios[index]]),
+        mesher=mesher,
+    )
+
+
+def size_near_for_force_accuracy(
+    accuracy: float,
+    *,
+    probe_radius_m: float,
+    mesher: str = "extruded",
+    element: str = "TET10",
+    indenter: str = "flat_punch",
+) -> float:
+    """The coarsest near-probe element size measured to give a relative force accuracy.
+
+    Read from :data:`FLAT_PUNCH_FORCE_ERRORS` without interpolation: the largest measured
+    ratio ``size_near_m / probe_radius_m`` at which the benchmark's force, and the force of
+    every finer measured size, was within ``accuracy`` of the reference. (The error of a mesh
+    family does not fall monotonically with its size, so the finer sizes count too: the
+    relation is the errors' running maximum from fine to coarse, which is monotone.) An
+    accuracy above every measured error gives the coarsest size measured, the probe radius
+    itself.
+
+    The measurement is the flat-punch benchmark (:data:`FLAT_PUNCH_FORCE_ERRORS`): a block
+    10 probe radii thick, the far size 2.5 probe radii, nearly incompressible neo-Hookean
+    tissue pressed to half the probe radius. Other geometries, depths and far sizes scale
+    it by the probe radius only; a far size coarser than 2.5 probe radii, or a much
+    thinner or deeper-indented specimen, is outside what was measured.
+
+    Args:
+        accuracy: Relative force accuracy (0.01 is 1 %), at least :data:`FORCE_ACCURACY_FLOOR`
+            and below 1.
+        probe_radius_m: Probe (punch) radius, metres.
+        mesher: ``"extruded"`` or ``"delaunay"`` (see
+            :func:`warptissue.mesh.indentation_block`).
+        element: ``"TET10"`` (the only element measured, with the mixed formulation).
+        indenter: ``"flat_punch"`` (the only indenter measured: sharp and bonded).
+
+    Returns:
+        The near size, metres.
+
+    Raises:
+        InputError: See :func:`near_size_choice`.
+    """
+    return near_size_choice(
+        accuracy,
+        probe_radius_m=probe_radius_m,
+        mesher=mesher,
+        element=element,
+        indenter=indenter,
+    ).size_near_m
+
+
+def _measured(mesher: str) -> dict[float, float]:
+    return dict(FLAT_PUNCH_FORCE_ERRORS[mesher])
+
+
+def _error_envelope(mesher: str) -> tuple[np.ndarray, np.ndarray]:
+    """(ratios ascending, the running maximum of the errors from the finest ratio up)."""
+    points = sorted(FLAT_PUNCH_FORCE_ERRORS[mesher])
+    ratios = np.array([ratio for ratio, _ in points], dtype=np.float64)
+    errors = np.maximum.accumulate(np.array([error for _, error in points], dtype=np.float64))
+    return ratios, errors
