@@ -19,10 +19,11 @@ hyperelastic state depends on the load alone, not on the path, so each step is i
 The linear solve: Newton's last factorization is of the iterate before the converged one (the
 step that reached it was solved with it; the line search, nonlinear elimination and damping
 may change the state and matrix after it), or of an earlier one where Newton solved the later
-iterations with its factors (``NewtonOptions.reuse_factorization``). ``factorization="reuse"`` solves with those factors
-and refines iteratively against the tangent at the converged state (``x += K_old^-1 (b - K
-x)``: no new factorization; it converges fast because K_old is close to K), falling back to
-one factorization at the converged state where the refinement does not converge;
+iterations with its factors (``NewtonOptions.reuse_factorization``).
+``factorization="reuse"`` solves with those factors and refines iteratively against the
+tangent at the converged state (``x += K_old^-1 (b - K x)``: no new factorization; it
+converges fast because K_old is close to K), falling back to one factorization at the
+converged state where the refinement does not converge;
 ``"refactorize"`` factorizes the converged tangent once per step. Both agree with central
 differences of whole forward runs (tests/test_fem_sensitivity.py; docs/fe.md
 "Sensitivities").
