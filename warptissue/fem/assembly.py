@@ -154,6 +154,21 @@ class ElementPart:
     forces: wp.array
 
 
+@dataclass(frozen=True)
+class _SubmatrixBlocks:
+    """The tangent's blocks among some nodes: for block i, its index ``blocks[i]`` in the
+    BSR values, its local row ``rows[i]`` and column ``columns[i]`` (positions in ``nodes``),
+    on the host and as int32 Warp arrays on the assembler's device."""
+
+    nodes: np.ndarray
+    rows: np.ndarray
+    blocks: np.ndarray
+    columns: np.ndarray
+    device_rows: wp.array
+    device_blocks: wp.array
+    device_columns: wp.array
+
+
 def _block_ranges(offsets: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """Indices of all blocks of the given block rows of a BSR pattern, row after row."""
     starts = offsets[rows]
@@ -223,6 +238,7 @@ class Assembler:
         self._part_scalars = wp.zeros(2, dtype=wp.float64, device=dev)
         self._part_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
         self._tets_host: np.ndarray | None = None
+        self._last_submatrix: _SubmatrixBlocks | None = None
         self._points = wp.array(mesh.points, dtype=wp.vec3d, device=dev)
         self.contact: RigidContact | None = None
         self._contact_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
@@ -708,10 +724,14 @@ class Assembler:
         self._residual.assign(np.ascontiguousarray(residual_N, dtype=np.float64))
         return self._residual
 
-    def _submatrix_blocks(self, nodes: np.ndarray) -> tuple[np.ndarray, ...]:
-        """(local block rows, the blocks, local block columns) of the tangent's blocks among
-        ``nodes`` (sorted and unique, checked)."""
+    def _submatrix_blocks(self, nodes: np.ndarray) -> _SubmatrixBlocks:
+        """The tangent's blocks among ``nodes`` (sorted and unique, checked); the last
+        patch's are kept, since the nonlinear elimination asks for the same patch at each
+        of its local iterations."""
         nodes = self._node_indices(nodes)
+        last = self._last_submatrix
+        if last is not None and np.array_equal(last.nodes, nodes):
+            return last
         if np.any(np.diff(nodes) <= 0):
             raise InputError("nodes must be sorted and unique", value=nodes.tolist()[:20])
         local = np.full(self.node_count, -1, dtype=np.int64)
@@ -721,7 +741,21 @@ class Assembler:
         blocks = _block_ranges(self._pattern_offsets, nodes)
         columns = local[self._pattern_columns[blocks]]
         inside = columns >= 0
-        return rows[inside], blocks[inside], columns[inside]
+        rows, blocks, columns = rows[inside], blocks[inside], columns[inside]
+
+        def device(values: np.ndarray) -> wp.array:
+            return wp.array(values.astype(np.int32), dtype=wp.int32, device=self.device)
+
+        self._last_submatrix = _SubmatrixBlocks(
+            nodes=nodes.copy(),
+            rows=rows,
+            blocks=blocks,
+            columns=columns,
+            device_rows=device(rows),
+            device_blocks=device(blocks),
+            device_columns=device(columns),
+        )
+        return self._last_submatrix
 
     def tangent_submatrix_dense(self, nodes: np.ndarray) -> wp.array:
         """The last assembled tangent restricted to ``nodes``, as a dense matrix on the
@@ -738,18 +772,18 @@ class Assembler:
         """
         from warptissue.kernels import sparse as ks
 
-        rows, blocks, columns = self._submatrix_blocks(nodes)
-        size = 3 * len(self._node_indices(nodes))
+        part = self._submatrix_blocks(nodes)
+        size = 3 * len(part.nodes)
         dense = wp.zeros((size, size), dtype=wp.float64, device=self.device)
-        if len(blocks):
+        if len(part.blocks):
             wp.launch(
                 ks.blocks_to_dense_kernel,
-                dim=len(blocks),
+                dim=len(part.blocks),
                 inputs=[
                     self.matrix.values,
-                    wp.array(blocks.astype(np.int32), dtype=wp.int32, device=self.device),
-                    wp.array(rows.astype(np.int32), dtype=wp.int32, device=self.device),
-                    wp.array(columns.astype(np.int32), dtype=wp.int32, device=self.device),
+                    part.device_blocks,
+                    part.device_rows,
+                    part.device_columns,
                 ],
                 outputs=[dense],
                 device=self.device,
@@ -770,15 +804,14 @@ class Assembler:
         Raises:
             InputError: A node index is out of range, or the indices are not sorted and unique.
         """
-        rows, blocks, columns = self._submatrix_blocks(nodes)
-        gathered = wp.empty(len(blocks), dtype=wp.mat33d, device=self.device)
-        gather_bsr_blocks(
-            self.matrix, wp.array(blocks, dtype=wp.int32, device=self.device), gathered
-        )
+        part = self._submatrix_blocks(nodes)
+        rows, columns, size = part.rows, part.columns, 3 * len(part.nodes)
+        gathered = wp.empty(len(part.blocks), dtype=wp.mat33d, device=self.device)
+        gather_bsr_blocks(self.matrix, part.device_blocks, gathered)
         component = np.arange(3)
         row_dofs = 3 * rows[:, None, None] + component[None, :, None]
         column_dofs = 3 * columns[:, None, None] + component[None, None, :]
-        shape = (len(blocks), 3, 3)
+        shape = (len(part.blocks), 3, 3)
         return scipy.sparse.csr_matrix(
             (
                 gathered.numpy().reshape(-1),
@@ -787,7 +820,7 @@ class Assembler:
                     np.broadcast_to(column_dofs, shape).reshape(-1),
                 ),
             ),
-            shape=(3 * len(np.asarray(nodes).reshape(-1)), 3 * len(np.asarray(nodes).reshape(-1))),
+            shape=(size, size),
         )
 
     def _node_indices(self, nodes: np.ndarray) -> np.ndarray:
