@@ -711,17 +711,18 @@ class Assembler:
         values = scalars.numpy()
         return part.forces.numpy().copy(), float(values[0]), float(values[1])
 
-    def set_residual(self, residual_N: np.ndarray) -> wp.array:
+    def set_residual(self, residual_N: Any) -> wp.array:
         """Overwrite the assembler's residual buffer (the one :meth:`assemble` returns), e.g.
         with a residual updated from a part (:meth:`assemble_part`).
 
         Args:
-            residual_N: (N, 3), N.
+            residual_N: (N, 3), N: NumPy, or an array on the assembler's CUDA device (CuPy;
+                copied on the device).
 
         Returns:
             The buffer, a vec3d Warp array (N,).
         """
-        self._residual.assign(np.ascontiguousarray(residual_N, dtype=np.float64))
+        self._residual.assign(self._vec3_array(residual_N, "residual"))
         return self._residual
 
     def _submatrix_blocks(self, nodes: np.ndarray) -> _SubmatrixBlocks:
@@ -878,14 +879,28 @@ class Assembler:
         ]
 
     def device_displacement(self, displacement_m: Any) -> wp.array:
-        """The displacement as a vec3d Warp array on the assembler's device (NumPy (N, 3) is
-        copied into the assembler's own buffer, reused by the next call)."""
+        """The displacement as a vec3d Warp array on the assembler's device: a Warp array as
+        it is; NumPy (N, 3), or a CuPy (N, 3) array on the assembler's CUDA device, is copied
+        into the assembler's own buffer (reused by the next call; a device-to-device copy for
+        CuPy)."""
         if isinstance(displacement_m, wp.array):
             if displacement_m.shape != (self.node_count,) or displacement_m.dtype != wp.vec3d:
                 raise InputError("displacement must be a vec3d array of one entry per node")
             return displacement_m
-        u = np.asarray(displacement_m, dtype=np.float64)
-        if u.shape != (self.node_count, 3):
-            raise InputError(f"displacement must have shape ({self.node_count}, 3)", value=u.shape)
-        self._displacement.assign(u)
+        self._displacement.assign(self._vec3_array(displacement_m, "displacement"))
         return self._displacement
+
+    def _vec3_array(self, values: Any, name: str) -> np.ndarray | wp.array:
+        """An (N, 3) float64 array as NumPy or, for a CUDA array (``__cuda_array_interface__``,
+        e.g. CuPy) on this assembler's device, as a Warp view of it; the shape is checked."""
+        if self.device.is_cuda and hasattr(values, "__cuda_array_interface__"):
+            if tuple(values.shape) != (self.node_count, 3) or values.dtype != np.float64:
+                raise InputError(
+                    f"{name} must be float64 of shape ({self.node_count}, 3)",
+                    value=(tuple(values.shape), str(values.dtype)),
+                )
+            return wp.array(values, dtype=wp.vec3d, device=self.device)
+        array = np.ascontiguousarray(values, dtype=np.float64)
+        if array.shape != (self.node_count, 3):
+            raise InputError(f"{name} must have shape ({self.node_count}, 3)", value=array.shape)
+        return array

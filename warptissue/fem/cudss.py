@@ -39,6 +39,7 @@ import sys
 import warnings
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import warp as wp
@@ -509,42 +510,38 @@ class CudssSolver:
             name: int(value) for name, value in zip(MEMORY_ESTIMATE_NAMES, estimates, strict=False)
         }
 
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
+    def solve(self, rhs: Any) -> Any:
         """Factorize the matrix's current values and solve ``matrix x = rhs``.
 
         Args:
-            rhs: Right-hand side, shape (N, 3).
+            rhs: Right-hand side, shape (N, 3): NumPy, or a CuPy array on the device.
 
         Returns:
-            x, shape (N, 3).
+            x, shape (N, 3): NumPy for a NumPy ``rhs`` (copied to the host, which waits for
+            the device); a new CuPy array on the device for a CuPy one (nothing waits).
         """
-        rhs = self._rhs_blocks(rhs)
         bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
-        self._rhs.assign(rhs)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream:
+            on_host = self._set_rhs(rhs)
             with self.timer.phase("factorization"):
                 self._solver.factorize()
             self.factorizations += 1
             with self.timer.phase("solve"):
-                x = self._solver.solve()
-                return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+                return self._solution(on_host)
 
-    def solve_factorized(self, rhs: np.ndarray) -> np.ndarray:
+    def solve_factorized(self, rhs: Any) -> Any:
         """Solve with the factors of the last :meth:`solve`, without a new factorization.
 
         Args:
-            rhs: Right-hand side, shape (N, 3).
+            rhs: Right-hand side, shape (N, 3): NumPy, or a CuPy array on the device.
 
         Returns:
-            x, shape (N, 3).
+            x, shape (N, 3), of ``rhs``'s library (as :meth:`solve`).
         """
-        rhs = self._rhs_blocks(rhs)
         if self.factorizations == 0:
             raise RuntimeError("solve_factorized needs a factorization: call solve first")
-        self._rhs.assign(rhs)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream, self.timer.phase("solve"):
-            x = self._solver.solve()
-            return self._cupy.asnumpy(x, stream=self._stream).reshape(-1, 3)
+            return self._solution(self._set_rhs(rhs))
 
     def apply_factors(self, rhs):
         """Solve with the factors of the last :meth:`solve`, on the device.
@@ -564,12 +561,25 @@ class CudssSolver:
         self._rhs_view[...] = rhs.reshape(self._rhs_view.shape)
         return self._solver.solve().reshape(rhs.shape).copy()
 
-    def _rhs_blocks(self, rhs: np.ndarray) -> np.ndarray:
-        """``rhs`` as a contiguous float64 (N, 3) array; a ValueError for another size."""
-        rhs = np.ascontiguousarray(rhs, dtype=np.float64).reshape(-1, 3)
-        if rhs.shape != (self.row_count // 3, 3):
-            raise ValueError(f"rhs must have shape ({self.row_count // 3}, 3), got {rhs.shape}")
-        return rhs
+    def _set_rhs(self, rhs: Any) -> bool:
+        """Copy ``rhs`` into the solver's right-hand side (on its stream, which the caller has
+        entered); a ValueError for another size. Returns whether it came from the host."""
+        on_host = isinstance(rhs, np.ndarray) or not hasattr(rhs, "__cuda_array_interface__")
+        xp = np if on_host else self._cupy
+        values = xp.asarray(rhs, dtype=xp.float64)
+        if values.size != self.row_count:
+            raise ValueError(
+                f"rhs must have shape ({self.row_count // 3}, 3), got {tuple(values.shape)}"
+            )
+        self._rhs_view[...] = values.reshape(-1, 3)  # host to device, or on the device
+        return on_host
+
+    def _solution(self, on_host: bool) -> Any:
+        """The solve's result as (N, 3): NumPy (waits for the device) or a new CuPy array."""
+        x = self._solver.solve().reshape(-1, 3)
+        if on_host:
+            return self._cupy.asnumpy(x, stream=self._stream)
+        return x.copy()
 
     def free(self) -> None:
         """Release cuDSS's factors and workspace now (they are also freed with the object)."""

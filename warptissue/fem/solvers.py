@@ -45,6 +45,7 @@ import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
+from warptissue.fem.arrays import DeviceArrays
 from warptissue.fem.assembly import Assembler, Assembly, scatter_vectors
 from warptissue.fem.cudss import CudssSolver, cudss_available
 from warptissue.fem.direct import CpuDirectSolver
@@ -246,6 +247,9 @@ class LinearSolver:
             (:meth:`solve_newton`).
         krylov_iterations: GMRES iterations of those solves and of the attempts that gave up.
         failed_reuses: GMRES attempts that gave up (each followed by a factorization).
+        arrays: The array library of the Newton loop on ``device``
+            (:class:`warptissue.fem.arrays.DeviceArrays`): right-hand sides of that library
+            (CuPy on a CUDA device) are solved without leaving the device.
     """
 
     def __init__(
@@ -295,6 +299,7 @@ class LinearSolver:
             )
         self.method = method
         self.device = device
+        self.arrays = DeviceArrays(device)
         self.timer = PhaseTimer(enabled=False)
         self.factorizations = 0
         self._cudss: CudssSolver | None = None
@@ -309,15 +314,17 @@ class LinearSolver:
         self._factored_matrix: wps.BsrMatrix | None = None
         self._krylov: tuple[Any, ...] | None = None
 
-    def solve(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
+    def solve(self, matrix: wps.BsrMatrix, rhs: Any) -> tuple[Any, int]:
         """Solve ``matrix x = rhs``.
 
         Args:
             matrix: Square 3x3-block BSR matrix (N x N blocks).
-            rhs: Right-hand side, shape (N, 3).
+            rhs: Right-hand side, shape (N, 3): NumPy, or CuPy on the matrix's CUDA device.
 
         Returns:
-            (x of shape (N, 3), iterations): Krylov iterations, or 1 for a direct solve.
+            (x of shape (N, 3), of ``rhs``'s library; iterations): Krylov iterations, or 1
+            for a direct solve. cuDSS with a CuPy ``rhs`` returns without waiting for the
+            device.
         """
         if self.method == "cg":
             return self._solve_cg(matrix, rhs)
@@ -328,7 +335,7 @@ class LinearSolver:
                     self._cudss = CudssSolver(matrix)
             self._cudss.timer = self.timer
             started = perf_counter()
-            x = self._cudss.solve(rhs)  # ends on the host: the device is synchronized
+            x = self._cudss.solve(rhs)  # NumPy: ends on the host; CuPy: stays on the device
         else:
             if self.direct is None or self.direct.matrix is not matrix:
                 with self.timer.phase("analysis"):
@@ -351,8 +358,8 @@ class LinearSolver:
         }
 
     def solve_newton(
-        self, matrix: wps.BsrMatrix, rhs: np.ndarray, *, rtol: float, reuse: bool = True
-    ) -> tuple[np.ndarray, int]:
+        self, matrix: wps.BsrMatrix, rhs: Any, *, rtol: float, reuse: bool = True
+    ) -> tuple[Any, int]:
         """Newton's linear solve: with the last factorization where that is cheaper.
 
         Where ``matrix`` was factorized before (its values have changed since), GMRES solves
@@ -366,13 +373,14 @@ class LinearSolver:
 
         Args:
             matrix: Square 3x3-block BSR matrix (N x N blocks), the eliminated tangent.
-            rhs: Right-hand side, shape (N, 3).
+            rhs: Right-hand side, shape (N, 3): NumPy, or CuPy on the matrix's CUDA device.
             rtol: Relative residual the GMRES solve must reach, in (0, 1).
             reuse: Try the old factors first (False: :meth:`solve`).
 
         Returns:
-            (x of shape (N, 3), iterations): GMRES iterations of a solve with earlier
-            factors, or 1 for a factorization (with its GMRES attempt's iterations added).
+            (x of shape (N, 3), of ``rhs``'s library; iterations): GMRES iterations of a
+            solve with earlier factors, or 1 for a factorization (with its GMRES attempt's
+            iterations added).
 
         Notes:
             The budget makes the decision a measurement on the mesh and device at hand: a
@@ -416,8 +424,9 @@ class LinearSolver:
         x, _ = self.solve(matrix, rhs)
         return x, 1 + outcome.iterations
 
-    def _gmres(self, matrix: wps.BsrMatrix, rhs: np.ndarray, *, rtol: float, keep_going):
-        """GMRES on ``matrix`` preconditioned by the current factors; x as NumPy (N, 3)."""
+    def _gmres(self, matrix: wps.BsrMatrix, rhs: Any, *, rtol: float, keep_going):
+        """GMRES on ``matrix`` preconditioned by the current factors; x (N, 3) of ``rhs``'s
+        library (on CUDA the Krylov basis stays on the device either way)."""
         from warptissue.fem.krylov import KrylovOutcome, gmres
 
         n = matrix.nrow
@@ -440,13 +449,17 @@ class LinearSolver:
                 outcome = gmres(
                     matvec,
                     cudss.apply_factors,
-                    cupy.asarray(np.ascontiguousarray(rhs, dtype=np.float64)),
+                    cupy.ascontiguousarray(cupy.asarray(rhs, dtype=cupy.float64)),
                     rtol=rtol,
                     max_iterations=REUSE_MAX_ITERATIONS,
                     xp=cupy,
                     keep_going=keep_going,
                 )
-                x = cupy.asnumpy(outcome.x, stream=cudss._stream)
+                x = (
+                    cupy.asnumpy(outcome.x, stream=cudss._stream)
+                    if isinstance(rhs, np.ndarray)
+                    else outcome.x
+                )
             return KrylovOutcome(
                 x, outcome.iterations, outcome.converged, outcome.relative_residual
             )
@@ -493,10 +506,13 @@ class LinearSolver:
         self.direct.timer = self.timer
         return self.direct.solve_factorized(rhs), 1
 
-    def _solve_cg(self, matrix: wps.BsrMatrix, rhs: np.ndarray) -> tuple[np.ndarray, int]:
+    def _solve_cg(self, matrix: wps.BsrMatrix, rhs: Any) -> tuple[Any, int]:
         from warp.optim.linear import cg, preconditioner
 
+        on_host = isinstance(rhs, np.ndarray)
         b = wp.array(rhs, dtype=wp.vec3d, device=self.device)
+        if not on_host:
+            b = wp.clone(b)  # Warp's CG may work in b; keep the caller's array
         x = wp.zeros_like(b)
         max_iterations = self.max_iterations or 30 * rhs.size
         with self.timer.phase("solve"):
@@ -509,7 +525,7 @@ class LinearSolver:
                 M=preconditioner(matrix, ptype=self.preconditioner),
                 use_cuda_graph=False,
             )
-            return x.numpy(), int(iterations)
+            return (x.numpy() if on_host else self.arrays.view(x)), int(iterations)
 
 
 @dataclass
@@ -604,13 +620,16 @@ class _Search:
 
 
 def _first_iteration_step(
-    assembler: Assembler, start: np.ndarray, direction: np.ndarray
+    assembler: Assembler, start: Any, direction: Any, *, arrays: DeviceArrays | None = None
 ) -> _Search:
     """Step of a load increment's first iteration (prescribed increment applied whole).
 
     The state with only the prescribed dofs moved is no reference for a descent test, so the
-    free part of the step is only halved while an element inverts.
+    free part of the step is only halved while an element inverts. ``start`` and
+    ``direction`` (N, 3), m, are arrays of ``arrays`` (None: of the assembler's device).
     """
+    arrays = arrays or DeviceArrays(assembler.device)
+    start, direction = arrays.asarray(start), arrays.asarray(direction)
     alpha = 1.0
     for _ in range(8):
         trial = start + alpha * direction
@@ -623,15 +642,16 @@ def _first_iteration_step(
 
 def _line_search(
     assembler: Assembler,
-    u: np.ndarray,
-    direction: np.ndarray,
-    free: np.ndarray,
+    u: Any,
+    direction: Any,
+    free: Any,
     energy_J: float,
     slope: float,
     residual_norm: float,
     *,
     max_evaluations: int = 10,
     curvature: float = 0.5,
+    arrays: DeviceArrays | None = None,
 ) -> _Search:
     """Step length along a Newton direction of the free dofs.
 
@@ -653,11 +673,16 @@ def _line_search(
         residual_norm: Free residual norm at ``u``, N.
         max_evaluations: Residual assemblies allowed.
         curvature: The strong-Wolfe factor on ``|g|``.
+        arrays: The array library of ``u``, ``direction`` and ``free`` (None: that of the
+            assembler's device, :class:`warptissue.fem.arrays.DeviceArrays`); each trial
+            reads two scalars from the device.
 
     Returns:
         The accepted step, or the one with the lowest energy that passed the decrease test,
         or a failed :class:`_Search`.
     """
+    arrays = arrays or DeviceArrays(assembler.device)
+    u, direction, free = arrays.asarray(u), arrays.asarray(direction), arrays.asarray(free)
     low, g_low = 0.0, slope
     high, g_high = math.inf, math.nan
     alpha = 1.0
@@ -671,11 +696,13 @@ def _line_search(
             inverted = True
             high, g_high = alpha, math.nan
         else:
-            residual = check.residual.numpy()
-            g = float(np.sum(residual * free * direction))
+            free_residual = arrays.view(check.residual) * free
+            g, squared = arrays.floats(
+                arrays.dot(free_residual, direction), arrays.squared_norm(free_residual)
+            )
             decrease = (
                 check.energy_J <= energy_J + 1e-4 * alpha * slope
-                or _norm(residual * free) < residual_norm
+                or math.sqrt(squared) < residual_norm
             )
             if decrease and (abs(g) <= curvature * abs(slope) or (g < 0.0 and alpha >= 1.0)):
                 return _Search(alpha, trial, check, current=True)
@@ -704,14 +731,15 @@ def _line_search(
 def _nonlinear_elimination(
     assembler: Assembler,
     assembly: Assembly,
-    u: np.ndarray,
-    free: np.ndarray,
+    u: Any,
+    free: Any,
     limit: float,
     *,
     seed_count: int = 50,
     max_iterations: int = 4,
     ratio: float = 0.3,
-) -> tuple[np.ndarray, Assembly, int]:
+    arrays: DeviceArrays | None = None,
+) -> tuple[Any, Assembly, int]:
     """Relax the nodes that hold most of the residual, all other nodes fixed.
 
     The patch is the (up to) ``seed_count`` free nodes with the largest residual (at least
@@ -732,16 +760,20 @@ def _nonlinear_elimination(
         seed_count: Most nodes taken by residual size.
         max_iterations: Local Newton iterations.
         ratio: Stop when the patch's residual is this fraction of the rest's.
+        arrays: The array library of ``u`` and ``free`` (None: that of the assembler's
+            device, :class:`warptissue.fem.arrays.DeviceArrays`). The arrays of the whole
+            mesh stay there; only the patch's and its tets' nodes go to the host.
 
     Returns:
-        (displacement (N, 3), its assembly, local iterations taken). The assembly's residual
-        is that of the returned displacement; after an accepted local step its tangent is
-        not assembled (``assembly.matrix`` is None, and the assembler's matrix holds only the
-        patch's blocks correctly): the caller assembles it where it needs one, which it does
-        not at a converged state. The trials and the patch's tangents assemble only the tets
-        that hold a patch node (:meth:`warptissue.fem.Assembler.assemble_part`); the whole
-        residual and energy are updated by their change, and ``min_jacobian`` is the
-        smaller of the one passed in and the patch's.
+        (displacement (N, 3), an array of ``arrays``; its assembly; local iterations
+        taken). The assembly's residual is that of the returned displacement; after an
+        accepted local step its tangent is not assembled (``assembly.matrix`` is None, and
+        the assembler's matrix holds only the patch's blocks correctly): the caller
+        assembles it where it needs one, which it does not at a converged state. The trials
+        and the patch's tangents assemble only the tets that hold a patch node
+        (:meth:`warptissue.fem.Assembler.assemble_part`); the whole residual and energy are
+        updated by their change, and ``min_jacobian`` is the smaller of the one passed in
+        and the patch's.
 
     Notes:
         Nonlinear elimination (Lanzkron, Rose and Wilkes 1996; Cai and Li 2011, SIAM J. Sci.
@@ -752,44 +784,54 @@ def _nonlinear_elimination(
         them locally costs a few assemblies of the patch's tets and a small solve; the global
         convergence test is unchanged, so the converged state is the same.
     """
-    residual = assembly.residual.numpy()
+    arrays = arrays or DeviceArrays(assembler.device)
+    xp = arrays.xp
+    u, free = arrays.asarray(u), arrays.asarray(free)
+    residual = arrays.view(assembly.residual)
     free_residual = residual * free
-    norms = np.sqrt(np.einsum("ij,ij->i", free_residual, free_residual))
+    norms = arrays.row_norms(free_residual)
     count = min(seed_count, len(norms))
-    seeds = np.argpartition(norms, len(norms) - count)[len(norms) - count :]
-    largest = float(norms[seeds].max())
+    seeds = xp.argpartition(norms, len(norms) - count)[len(norms) - count :]
+    seeds, seed_norms = arrays.host(seeds), arrays.host(norms[seeds])
+    largest = float(seed_norms.max())
     if largest == 0.0:
         return u, assembly, 0
-    seeds = seeds[norms[seeds] >= 1e-3 * largest]
+    seeds = seeds[seed_norms >= 1e-3 * largest]
     patch = assembler.node_patch(seeds)
     if 4 * len(patch) > assembler.node_count:
         return u, assembly, 0
-    patch_free = free[patch].reshape(-1) > 0.5
     # Only the tets holding a patch node change, and with them the residual at their nodes:
     # the whole residual and energy follow from the last ones and the change of that part.
     # The host works on the part's nodes alone (no array of the whole mesh per trial).
     part = assembler.element_part(nodes=patch)
     nodes = part.nodes
+    nodes_at = xp.asarray(nodes)
+    patch_at = xp.asarray(patch)
     at_patch = np.searchsorted(nodes, patch)
+    free_part = arrays.host(free[nodes_at])
+    free_patch = free_part[at_patch]
+    patch_free = free_patch.reshape(-1) > 0.5
+    residual_part = arrays.host(residual[nodes_at])
     device = assembler.device
     patch_wp = wp.array(patch.astype(np.int32), dtype=wp.int32, device=device)
     patch_values = wp.zeros(len(patch), dtype=wp.vec3d, device=device)
-    u_device = wp.array(u, dtype=wp.vec3d, device=device)
-    free_part = free[nodes]
-    residual_part = residual[nodes]
-    outside = np.ones(len(u), dtype=bool)
-    outside[nodes] = False
-    rest_squared = float(np.einsum("ij,ij->", free_residual[outside], free_residual[outside]))
+    trial_state = u.copy()  # the trials are scattered into it
+    u_device = arrays.warp(trial_state)
+    outside = xp.ones(len(u), dtype=bool)
+    outside[nodes_at] = False
+    rest_squared, total_squared = arrays.floats(
+        arrays.squared_norm(free_residual[outside]), arrays.squared_norm(free_residual)
+    )
+    total = math.sqrt(total_squared)
     forces, part_energy, _ = assembler.assemble_part(u_device, part)
-    u_patch = u[patch].copy()
+    u_patch = arrays.host(u[patch_at])
     energy = assembly.energy_J
     min_jacobian = assembly.min_jacobian
-    total = _norm(free_residual)
     iterations = 0
     for _ in range(max_iterations):
         if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
             forces, part_energy, _ = assembler.assemble_part(u_device, part, with_tangent=True)
-        local_residual = (residual_part[at_patch] * free[patch]).reshape(-1)[patch_free]
+        local_residual = (residual_part[at_patch] * free_patch).reshape(-1)[patch_free]
         step = _patch_solve(assembler, patch, patch_free, local_residual)
         if step is None:
             break
@@ -826,16 +868,16 @@ def _nonlinear_elimination(
         u_patch, residual_part, energy, total = accepted, trial_residual, trial_energy, trial_total
         forces, part_energy = trial_forces, trial_part_energy
         min_jacobian = min(min_jacobian, trial_min_jacobian)
-        local = _norm(residual_part[at_patch] * free[patch])
+        local = _norm(residual_part[at_patch] * free_patch)
         if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
             break
     if iterations == 0:
         # Nothing moved and the tangent is untouched (it is only reassembled after a step).
         return u, assembly, 0
     u = u.copy()
-    u[patch] = u_patch
+    u[patch_at] = arrays.asarray(u_patch)
     residual = residual.copy()
-    residual[nodes] = residual_part
+    residual[nodes_at] = arrays.asarray(residual_part)
     assembly = Assembly(
         residual=assembler.set_residual(residual),
         matrix=None,
@@ -865,22 +907,24 @@ class _ReuseTracker:
     :meth:`LinearSolver.solve_newton` still decides the rest.
 
     Attributes:
-        state: The displacement (N, 3) whose tangent was factorized last, or None.
+        state: The displacement (N, 3) whose tangent was factorized last (an array of the
+            Newton loop's :class:`warptissue.fem.arrays.DeviceArrays`), or None.
         damping: The Levenberg-Marquardt factor of that factorization.
         step_scale: Norm of the free part of the last first Newton step of an increment, m.
     """
 
-    state: np.ndarray | None = None
+    state: Any = None
     damping: float = 0.0
     step_scale: float = math.inf
 
-    def promising(self, u: np.ndarray, damping: float) -> bool:
-        """Whether a solve at ``u`` with ``damping`` should try the old factors."""
+    def promising(self, u: Any, damping: float, arrays: DeviceArrays) -> bool:
+        """Whether a solve at ``u`` (an array of ``arrays``) with ``damping`` should try the
+        old factors."""
         if self.state is None or damping != self.damping:
             return False
-        return _norm(u - self.state) <= REUSE_STATE_CHANGE * self.step_scale
+        return arrays.norm(u - self.state) <= REUSE_STATE_CHANGE * self.step_scale
 
-    def factorized(self, u: np.ndarray, damping: float) -> None:
+    def factorized(self, u: Any, damping: float) -> None:
         """The tangent at ``u`` with ``damping`` was just factorized."""
         self.state, self.damping = u, damping
 
@@ -965,22 +1009,28 @@ def _next_damping(factor: float, alpha: float) -> float:
 def _newton_increment(
     assembler: Assembler,
     solver: LinearSolver,
-    u_start: np.ndarray,
-    prescribed_increment: np.ndarray,
-    free: np.ndarray,
+    u_start: Any,
+    prescribed_increment: Any,
+    free: Any,
     constrained_wp: wp.array,
     *,
     tolerance: float,
     force_floor: float,
     max_iterations: int,
     nonlinear_elimination: bool,
-    free_guess: np.ndarray | None = None,
+    free_guess: Any = None,
     damping: bool = False,
     reuse_factorization: bool = False,
     reuse: _ReuseTracker | None = None,
     timer: PhaseTimer | None = None,
 ) -> _Step:
     """Newton iterations for one load increment, starting from a converged state.
+
+    ``u_start``, ``prescribed_increment`` and ``free`` (N, 3): NumPy, or arrays of the
+    solver's :class:`warptissue.fem.arrays.DeviceArrays` (CuPy on a CUDA device), which the
+    iterations work in: on a GPU the state, residual, directions and trial states stay on
+    the device, and each iteration reads only scalars (norms, slopes, energies) from it.
+    The returned displacement and residual are arrays of that library.
 
     ``free_guess`` (N, 3), m: a predicted change of the free dofs over the increment. Where
     the state it gives (with the prescribed increment applied) has no inverted element, the
@@ -998,15 +1048,52 @@ def _newton_increment(
     ``timer``: the :class:`warptissue.fem.timing.PhaseTimer` the phases are charged to
     (None: not timed).
     """
-    if timer is None:
-        timer = PhaseTimer(enabled=False)
-    if reuse is None:
-        reuse = _ReuseTracker()
+    arrays = solver.arrays
+    with arrays.context():
+        return _newton_iterations(
+            assembler,
+            solver,
+            arrays.asarray(u_start),
+            arrays.asarray(prescribed_increment),
+            arrays.asarray(free),
+            constrained_wp,
+            tolerance=tolerance,
+            force_floor=force_floor,
+            max_iterations=max_iterations,
+            nonlinear_elimination=nonlinear_elimination,
+            free_guess=None if free_guess is None else arrays.asarray(free_guess),
+            damping=damping,
+            reuse_factorization=reuse_factorization,
+            reuse=_ReuseTracker() if reuse is None else reuse,
+            timer=PhaseTimer(enabled=False) if timer is None else timer,
+        )
+
+
+def _newton_iterations(
+    assembler: Assembler,
+    solver: LinearSolver,
+    u_start: Any,
+    prescribed_increment: Any,
+    free: Any,
+    constrained_wp: wp.array,
+    *,
+    tolerance: float,
+    force_floor: float,
+    max_iterations: int,
+    nonlinear_elimination: bool,
+    free_guess: Any,
+    damping: bool,
+    reuse_factorization: bool,
+    reuse: _ReuseTracker,
+    timer: PhaseTimer,
+) -> _Step:
+    """The iterations of :func:`_newton_increment`, on its arrays and inside their context."""
+    arrays = solver.arrays
     u = u_start.copy()
+    fixed = 1.0 - free
     linear_total = 0
     local_total = 0
-    dev = assembler.device
-    increment_wp = wp.array(prescribed_increment, dtype=wp.vec3d, device=dev)
+    increment_wp = arrays.warp(prescribed_increment)
     k_times_increment = wp.zeros_like(increment_wp)
     linearized = True
     if free_guess is not None:
@@ -1018,8 +1105,8 @@ def _newton_increment(
     if linearized:
         with timer.phase("assembly"):
             assembly = assembler.assemble(u)
-    residual = assembly.residual.numpy()
-    limit = max(tolerance * _norm(residual * (1.0 - free)), force_floor)
+    residual = arrays.view(assembly.residual)
+    limit = max(tolerance * arrays.norm(residual * fixed), force_floor)
 
     def outcome(converged: bool, iteration: int, reason: str) -> _Step:
         return _Step(
@@ -1038,7 +1125,8 @@ def _newton_increment(
         first = iteration == 1 and linearized
         if first:
             wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
-            rhs = -(residual + k_times_increment.numpy()) * free + prescribed_increment
+            k_du = arrays.view(k_times_increment)
+            rhs = -(residual + k_du) * free + prescribed_increment
         else:
             rhs = -residual * free
         with timer.phase("assembly"):
@@ -1047,24 +1135,40 @@ def _newton_increment(
         du, linear_iterations = solver.solve_newton(
             assembly.matrix,
             rhs,
-            rtol=_forcing_term(limit, _norm(rhs)),
-            reuse=reuse_factorization and reuse.promising(u, factor),
+            rtol=_forcing_term(limit, arrays.norm(rhs)),
+            reuse=reuse_factorization and reuse.promising(u, factor, arrays),
         )
         if solver.factorizations > factorizations:
             reuse.factorized(u, factor)
-        if first:
-            reuse.step_scale = _norm(du * free)
         linear_total += linear_iterations
-        if not np.all(np.isfinite(du)):
+        free_du = du * free
+        free_residual = residual * free
+        du_squared, old_squared, slope, free_du_squared = arrays.floats(
+            arrays.squared_norm(du),
+            arrays.squared_norm(free_residual),
+            arrays.dot(free_residual, du),
+            arrays.squared_norm(free_du),
+        )
+        if not math.isfinite(du_squared):
             return outcome(False, iteration, "the linear solve gave non-finite values")
-        old_norm = _norm(residual * free)
-        slope = float(np.sum(residual * free * du))
+        if first:
+            reuse.step_scale = math.sqrt(free_du_squared)
+        old_norm = math.sqrt(old_squared)
         with timer.phase("line_search"):
             if first:
-                search = _first_iteration_step(assembler, u + prescribed_increment, du * free)
+                search = _first_iteration_step(
+                    assembler, u + prescribed_increment, free_du, arrays=arrays
+                )
             else:
                 search = _line_search(
-                    assembler, u, du * free, free, assembly.energy_J, slope, old_norm
+                    assembler,
+                    u,
+                    free_du,
+                    free,
+                    assembly.energy_J,
+                    slope,
+                    old_norm,
+                    arrays=arrays,
                 )
         if search.assembly is None:
             return outcome(False, iteration, search.reason)
@@ -1078,28 +1182,29 @@ def _newton_increment(
         else:
             with timer.phase("assembly"):
                 assembly = assembler.assemble(u)
-        residual = assembly.residual.numpy()
-        free_norm = _norm(residual * free)
-        reaction_norm = _norm(residual * (1.0 - free))
+        residual = arrays.view(assembly.residual)
+        free_norm, reaction_norm = _residual_norms(arrays, residual, free, fixed)
         limit = max(tolerance * reaction_norm, force_floor)
         if nonlinear_elimination and free_norm > limit:
             if assembly.matrix is None:
                 with timer.phase("assembly"):
                     assembly = assembler.assemble(u)
-                residual = assembly.residual.numpy()
+                residual = arrays.view(assembly.residual)
             with timer.phase("elimination"):
-                u, assembly, local = _nonlinear_elimination(assembler, assembly, u, free, limit)
+                u, assembly, local = _nonlinear_elimination(
+                    assembler, assembly, u, free, limit, arrays=arrays
+                )
             local_total += local
             if local:
-                residual = assembly.residual.numpy()
-                free_norm = _norm(residual * free)
-                reaction_norm = _norm(residual * (1.0 - free))
+                residual = arrays.view(assembly.residual)
+                free_norm, reaction_norm = _residual_norms(arrays, residual, free, fixed)
                 limit = max(tolerance * reaction_norm, force_floor)
-        step_norm = _norm(alpha * du * free)
+        step_squared, increment_squared = arrays.floats(
+            arrays.squared_norm(alpha * free_du), arrays.squared_norm(u - u_start)
+        )
         # A correction at roundoff relative to the increment means the residual sits at its
         # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
-        increment_norm = _norm(u - u_start)
-        at_roundoff = step_norm <= 1e-10 * increment_norm
+        at_roundoff = math.sqrt(step_squared) <= 1e-10 * math.sqrt(increment_squared)
         if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
             return outcome(True, iteration, "converged")
         if not math.isfinite(free_norm):
@@ -1107,8 +1212,18 @@ def _newton_increment(
         if assembly.matrix is None:  # the next iteration's tangent
             with timer.phase("assembly"):
                 assembly = assembler.assemble(u)
-            residual = assembly.residual.numpy()
+            residual = arrays.view(assembly.residual)
     return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
+
+
+def _residual_norms(
+    arrays: DeviceArrays, residual: Any, free: Any, fixed: Any
+) -> tuple[float, float]:
+    """Norms of the free and of the prescribed part of a residual (one read), N."""
+    free_squared, fixed_squared = arrays.floats(
+        arrays.squared_norm(residual * free), arrays.squared_norm(residual * fixed)
+    )
+    return math.sqrt(free_squared), math.sqrt(fixed_squared)
 
 
 CONTACT_PENALTY_RAMP = 0.1
@@ -1172,7 +1287,7 @@ def _penalty_ramped_increment(
         assembler,
         solver,
         soft.displacement,
-        np.zeros_like(prescribed_increment),
+        0.0 * soft.displacement,
         free,
         constrained_wp,
         tolerance=tolerance,
@@ -1316,6 +1431,7 @@ def solve_quasistatic(
             "a viscoelastic material needs the time of each load (times_s)", key="times_s"
         )
     solver = LinearSolver(method=options.linear_solver, device=assembler.device)
+    arrays = solver.arrays
     reuse = _ReuseTracker()
     timer = PhaseTimer(enabled=profile, device=assembler.device)
     solver.timer = timer
@@ -1323,13 +1439,17 @@ def solve_quasistatic(
     free = 1.0 - mask
     constrained_wp = wp.array(mask, dtype=wp.vec3d, device=assembler.device)
     u = np.zeros((n, 3)) if initial_displacement_m is None else np.array(initial_displacement_m)
+    # The state stays in the Newton loop's arrays (on a GPU: on the device) along the path;
+    # the converged states come to the host once per requested load.
+    with arrays.context():
+        u, free_x, weights_x = arrays.asarray(u), arrays.asarray(free), arrays.asarray(weights)
     # Absolute floor of the residual norm: a roundoff-level force for this body and material.
     length = float(np.sum(assembler.tet_volumes)) ** (1.0 / 3.0)
     force_floor = 1e-13 * assembler.material.initial_shear_modulus_Pa * length**2
     load, time = 0.0, 0.0
     # The converged state before the current one (path coordinate, state), for the
     # extrapolated predictor; the path coordinate is the time of a timed path, else the load.
-    previous: tuple[float, np.ndarray] | None = None
+    previous: tuple[float, Any] | None = None
     reached, states, reactions = [], [], []
     newton_counts, linear_counts, local_counts = [], [], []
     sensitivities: list[np.ndarray] = []
@@ -1370,136 +1490,146 @@ def solve_quasistatic(
 
         bar = tqdm(total=len(loads), desc=progress_label, unit="step", leave=False)
     try:
-        for index, target in enumerate(loads):
-            target_time = time if times is None else float(times[index])
-            step_newton, step_linear, step_local, halvings = 0, 0, 0, 0
-            start_load, start_time = load, time
-            fraction, step_fraction = 0.0, 1.0
-            retry_linearized = False
-            while True:
-                next_fraction = fraction + step_fraction
-                if next_fraction >= 1.0 - 1e-12:
-                    next_fraction = 1.0
-                next_load = (
-                    target
-                    if next_fraction == 1.0
-                    else start_load + next_fraction * (target - start_load)
-                )
-                next_time = (
-                    target_time
-                    if next_fraction == 1.0
-                    else start_time + next_fraction * (target_time - start_time)
-                )
-                prescribed = conditions.values(next_load, n) - conditions.values(load, n)
-                if viscous is not None:
-                    viscous.begin_step(next_time - time)
-                here, there = (load, next_load) if times is None else (time, next_time)
-                free_guess = None
-                if (
-                    options.predictor == "extrapolated"
-                    and previous is not None
-                    and not retry_linearized
-                    and here != previous[0]
-                ):
-                    free_guess = (u - previous[1]) * ((there - here) / (here - previous[0]))
+        with arrays.context():
+            for index, target in enumerate(loads):
+                target_time = time if times is None else float(times[index])
+                step_newton, step_linear, step_local, halvings = 0, 0, 0, 0
+                start_load, start_time = load, time
+                fraction, step_fraction = 0.0, 1.0
                 retry_linearized = False
-                set_load = getattr(assembler, "set_load", None)
-                if set_load is not None:  # a rigid contact's depth follows the load
-                    set_load(next_load)
-                contact = getattr(assembler, "contact", None)
-                # A plate touches the whole surface: no contact edge crosses nodes, and the
-                # ramp would only repeat its iterations (4 -> 8-13 per step measured).
-                ramped = contact is not None and contact.indenter.kind != "plate"
-                increment = (
-                    _penalty_ramped_increment
-                    if ramped and CONTACT_PENALTY_RAMP < 1.0
-                    else _newton_increment
-                )
-                step = increment(
-                    assembler,
-                    solver,
-                    u,
-                    prescribed,
-                    free,
-                    constrained_wp,
-                    tolerance=options.tolerance,
-                    force_floor=force_floor,
-                    max_iterations=options.max_newton_iterations,
-                    nonlinear_elimination=options.nonlinear_elimination,
-                    free_guess=free_guess,
-                    damping=options.damping,
-                    reuse_factorization=options.reuse_factorization,
-                    reuse=reuse,
-                    timer=timer,
-                )
-                timer.count_iterations(step.iterations)
-                step_newton += step.iterations
-                step_linear += step.linear_iterations
-                step_local += step.local_iterations
-                history.append(
-                    {
-                        "load": next_load,
-                        **({} if times is None else {"time_s": next_time}),
-                        "converged": step.converged,
-                        "iterations": step.iterations,
-                        "local_iterations": step.local_iterations,
-                        "reason": step.reason,
-                    }
-                )
-                if step.converged:
-                    if there != here:
-                        previous = (here, u)
-                    u, load, time, fraction = step.displacement, next_load, next_time, next_fraction
-                    at_target = fraction == 1.0
-                    if at_target:
-                        # The internal force of the converged state (with the step's frozen
-                        # history), as Newton's last assembly left it.
-                        reaction = float(np.sum(weights * step.residual))
-                    if sensitivity is not None and (at_target or viscous is not None):
-                        # A viscous history needs its derivatives advanced at every substep.
-                        with timer.phase("sensitivity"):
-                            step_sensitivity = sensitivity.at_converged_state(solver, u)
-                    if viscous is not None:
-                        viscous.commit(assembler, assembler.device_displacement(u))
-                    if at_target:
-                        break
-                    step_fraction = min(2.0 * step_fraction, 1.0 - fraction)
-                    continue
-                if step.from_guess:
-                    # Retry the increment from the linearized predictor before cutting back.
-                    retry_linearized = True
-                    continue
-                halvings += 1
-                total_cutbacks += 1
-                if halvings > options.max_cutbacks:
-                    completed = False
-                    message = (
-                        f"stopped at {load_name} {load:.6g} on the way to {target:.6g}"
-                        + ("" if times is None else f" (t = {time:.6g} s)")
-                        + f": Newton failed ({step.reason}) after {options.max_cutbacks} "
-                        f"cutbacks (last increment {step_fraction * (target - start_load):.3g}"
-                        + (
-                            ""
-                            if times is None
-                            else f" over {step_fraction * (target_time - start_time):.3g} s"
-                        )
-                        + f"); the {len(reached)} converged steps are kept"
+                while True:
+                    next_fraction = fraction + step_fraction
+                    if next_fraction >= 1.0 - 1e-12:
+                        next_fraction = 1.0
+                    next_load = (
+                        target
+                        if next_fraction == 1.0
+                        else start_load + next_fraction * (target - start_load)
                     )
+                    next_time = (
+                        target_time
+                        if next_fraction == 1.0
+                        else start_time + next_fraction * (target_time - start_time)
+                    )
+                    prescribed = arrays.asarray(
+                        conditions.values(next_load, n) - conditions.values(load, n)
+                    )
+                    if viscous is not None:
+                        viscous.begin_step(next_time - time)
+                    here, there = (load, next_load) if times is None else (time, next_time)
+                    free_guess = None
+                    if (
+                        options.predictor == "extrapolated"
+                        and previous is not None
+                        and not retry_linearized
+                        and here != previous[0]
+                    ):
+                        free_guess = (u - previous[1]) * ((there - here) / (here - previous[0]))
+                    retry_linearized = False
+                    set_load = getattr(assembler, "set_load", None)
+                    if set_load is not None:  # a rigid contact's depth follows the load
+                        set_load(next_load)
+                    contact = getattr(assembler, "contact", None)
+                    # A plate touches the whole surface: no contact edge crosses nodes, and the
+                    # ramp would only repeat its iterations (4 -> 8-13 per step measured).
+                    ramped = contact is not None and contact.indenter.kind != "plate"
+                    increment = (
+                        _penalty_ramped_increment
+                        if ramped and CONTACT_PENALTY_RAMP < 1.0
+                        else _newton_increment
+                    )
+                    step = increment(
+                        assembler,
+                        solver,
+                        u,
+                        prescribed,
+                        free_x,
+                        constrained_wp,
+                        tolerance=options.tolerance,
+                        force_floor=force_floor,
+                        max_iterations=options.max_newton_iterations,
+                        nonlinear_elimination=options.nonlinear_elimination,
+                        free_guess=free_guess,
+                        damping=options.damping,
+                        reuse_factorization=options.reuse_factorization,
+                        reuse=reuse,
+                        timer=timer,
+                    )
+                    timer.count_iterations(step.iterations)
+                    step_newton += step.iterations
+                    step_linear += step.linear_iterations
+                    step_local += step.local_iterations
+                    history.append(
+                        {
+                            "load": next_load,
+                            **({} if times is None else {"time_s": next_time}),
+                            "converged": step.converged,
+                            "iterations": step.iterations,
+                            "local_iterations": step.local_iterations,
+                            "reason": step.reason,
+                        }
+                    )
+                    if step.converged:
+                        if there != here:
+                            previous = (here, u)
+                        u, load, time, fraction = (
+                            step.displacement,
+                            next_load,
+                            next_time,
+                            next_fraction,
+                        )
+                        at_target = fraction == 1.0
+                        if at_target:
+                            # The internal force of the converged state (with the step's frozen
+                            # history), as Newton's last assembly left it.
+                            (reaction,) = arrays.floats(arrays.dot(weights_x, step.residual))
+                        if sensitivity is not None and (at_target or viscous is not None):
+                            # A viscous history needs its derivatives advanced at every substep.
+                            with timer.phase("sensitivity"):
+                                step_sensitivity = sensitivity.at_converged_state(
+                                    solver, arrays.host(u)
+                                )
+                        if viscous is not None:
+                            viscous.commit(assembler, assembler.device_displacement(u))
+                        if at_target:
+                            break
+                        step_fraction = min(2.0 * step_fraction, 1.0 - fraction)
+                        continue
+                    if step.from_guess:
+                        # Retry the increment from the linearized predictor before cutting back.
+                        retry_linearized = True
+                        continue
+                    halvings += 1
+                    total_cutbacks += 1
+                    if halvings > options.max_cutbacks:
+                        completed = False
+                        message = (
+                            f"stopped at {load_name} {load:.6g} on the way to {target:.6g}"
+                            + ("" if times is None else f" (t = {time:.6g} s)")
+                            + f": Newton failed ({step.reason}) after {options.max_cutbacks} "
+                            f"cutbacks (last increment {step_fraction * (target - start_load):.3g}"
+                            + (
+                                ""
+                                if times is None
+                                else f" over {step_fraction * (target_time - start_time):.3g} s"
+                            )
+                            + f"); the {len(reached)} converged steps are kept"
+                        )
+                        break
+                    step_fraction *= 0.5
+                if not completed:
                     break
-                step_fraction *= 0.5
-            if not completed:
-                break
-            reached.append(target)
-            states.append(u.copy())
-            reactions.append(reaction)
-            if sensitivity is not None:
-                sensitivities.append(step_sensitivity)
-            newton_counts.append(step_newton)
-            linear_counts.append(step_linear)
-            local_counts.append(step_local)
-            if bar is not None:
-                bar.set_postfix(newton_iterations=step_newton, refresh=False)
-                bar.update(1)
+                reached.append(target)
+                states.append(arrays.host(u).copy())
+                reactions.append(reaction)
+                if sensitivity is not None:
+                    sensitivities.append(step_sensitivity)
+                newton_counts.append(step_newton)
+                linear_counts.append(step_linear)
+                local_counts.append(step_local)
+                if bar is not None:
+                    bar.set_postfix(newton_iterations=step_newton, refresh=False)
+                    bar.update(1)
     except KeyboardInterrupt as exc:
         # The lists grow in step; the last one appended bounds the consistent prefix.
         count = len(local_counts)
