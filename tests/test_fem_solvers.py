@@ -19,6 +19,7 @@ from warptissue.fem import (
     simulate_indentation,
     solve_quasistatic,
 )
+from warptissue.fem.arrays import DeviceArrays
 from warptissue.fem.solvers import (
     DAMPING_START,
     _line_search,
@@ -323,6 +324,59 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
         scale = np.abs(fresh.residual.numpy()).max()
         np.testing.assert_allclose(residual, fresh.residual.numpy(), rtol=0, atol=1e-12 * scale)
         assert energy == pytest.approx(fresh.energy_J, rel=1e-12)
+
+
+@pytest.mark.skipif(
+    not (wp.is_cuda_available() and DeviceArrays(wp.get_device("cuda:0")).resident),
+    reason="needs a CUDA device and CuPy",
+)
+def test_no_nodal_array_leaves_the_gpu_inside_a_load_increment(monkeypatch):
+    """On a GPU the Newton iterations (line search, nonlinear elimination and linear solves
+    included) read scalars and the elimination's patch from the device, never an array of
+    the whole mesh; the converged curve is that of the CPU."""
+    import cupy
+
+    from warptissue.fem import solvers
+
+    problem = _bonded_punch()
+    node_count = problem.mesh.node_count
+    depths = PUNCH_RADIUS_M * np.array([0.05, 0.1])
+    reference = simulate_indentation(
+        problem, depths, device="cpu", progress=False, options=NewtonOptions(tolerance=1e-10)
+    )
+    inside, copied = [False], []
+    numpy_of_warp, asnumpy, iterations = wp.array.numpy, cupy.asnumpy, solvers._newton_iterations
+
+    def record(values):
+        if inside[0] and values.shape and values.shape[0] == node_count:
+            copied.append(values.shape)
+
+    def warp_to_numpy(self):
+        if self.device.is_cuda:
+            record(self)
+        return numpy_of_warp(self)
+
+    def cupy_to_numpy(values, *args, **kwargs):
+        record(values)
+        return asnumpy(values, *args, **kwargs)
+
+    def watched(*args, **kwargs):
+        inside[0] = True
+        try:
+            return iterations(*args, **kwargs)
+        finally:
+            inside[0] = False
+
+    monkeypatch.setattr(wp.array, "numpy", warp_to_numpy)
+    monkeypatch.setattr(cupy, "asnumpy", cupy_to_numpy)
+    monkeypatch.setattr(solvers, "_newton_iterations", watched)
+    result = simulate_indentation(
+        problem, depths, device="cuda:0", progress=False, options=NewtonOptions(tolerance=1e-10)
+    )
+    assert result.completed, result.message
+    assert result.local_iterations.sum() > 0  # the elimination ran
+    assert copied == []
+    np.testing.assert_allclose(result.reaction_force_N, reference.reaction_force_N, rtol=1e-8)
 
 
 def test_the_patch_step_is_the_solve_of_the_patch_tangent(device, rng):
