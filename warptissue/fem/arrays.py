@@ -45,9 +45,16 @@ class DeviceArrays:
             import cupy
 
             self.xp: Any = cupy
-            self._stream = cupy.cuda.Stream.from_external(device.stream)
         else:
             self.xp = np
+        self._cupy_stream: Any = None
+
+    @property
+    def _stream(self) -> Any:
+        """Warp's stream of the device as a CuPy stream (made at first use)."""
+        if self._cupy_stream is None:
+            self._cupy_stream = self.xp.cuda.Stream.from_external(self.device.stream)
+        return self._cupy_stream
 
     def context(self) -> contextlib.AbstractContextManager:
         """Enter the device and Warp's stream for the array module's work (nothing on NumPy).

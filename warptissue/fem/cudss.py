@@ -571,7 +571,10 @@ class CudssSolver:
             raise ValueError(
                 f"rhs must have shape ({self.row_count // 3}, 3), got {tuple(values.shape)}"
             )
-        self._rhs_view[...] = values.reshape(-1, 3)  # host to device, or on the device
+        if on_host:
+            self._rhs_view.set(np.ascontiguousarray(values.reshape(-1, 3)), stream=self._stream)
+        else:
+            self._rhs_view[...] = values.reshape(-1, 3)
         return on_host
 
     def _solution(self, on_host: bool) -> Any:
