@@ -123,7 +123,8 @@ def quadrature_point_response(
 
 @wp.kernel
 def assemble_elements_kernel(
-    params: MaterialParams,
+    problem_params: wp.array(dtype=MaterialParams),
+    element_problem: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     quadrature_volumes: wp.array2d(dtype=wp.float64),
@@ -142,11 +143,17 @@ def assemble_elements_kernel(
     """Add element internal forces to ``residual`` and tangent blocks to ``matrix_values``.
 
     One thread per entry of ``elements``, the tets to assemble (all of them, or a patch's).
+    Tet e belongs to problem ``k = element_problem[e]`` and has its material
+    ``problem_params[k]`` (one problem: all zeros; packed problems: one per problem,
+    :mod:`warptissue.fem.packing`).
     ``block_index[e, a * nodes_per_tet + b]`` is the BSR block of node pair (a, b) of tet e.
-    ``energy[0]`` accumulates the stored energy (J) and ``min_jacobian[0]`` the smallest J.
-    A viscoelastic step reads the frozen history stress ``frozen[e, q]`` (unused otherwise).
+    ``energy[k]`` accumulates problem k's stored energy (J) and ``min_jacobian[k]`` its
+    smallest J. A viscoelastic step reads the frozen history stress ``frozen[e, q]`` (unused
+    otherwise).
     """
     e = elements[wp.tid()]
+    problem = element_problem[e]
+    params = problem_params[problem]
     npe = tets.shape[1]
     nq = quadrature_volumes.shape[1]
 
@@ -157,7 +164,7 @@ def assemble_elements_kernel(
     for q in range(nq):
         f = deformation_gradient(e, q, tets, shape_gradients, displacement)
         j = wp.determinant(f)
-        wp.atomic_min(min_jacobian, 0, j)
+        wp.atomic_min(min_jacobian, problem, j)
         dv = quadrature_volumes[e, q]
         volume += dv
         deformed_volume += j * dv
@@ -224,7 +231,7 @@ def assemble_elements_kernel(
                 wp.atomic_add(
                     matrix_values, block_index[e, a * npe + b], (k_bar / volume) * wp.outer(ga, gb)
                 )
-    wp.atomic_add(energy, 0, element_energy)
+    wp.atomic_add(energy, problem, element_energy)
 
 
 @wp.kernel

@@ -8,6 +8,7 @@ precomputed element-block to BSR-block map, so the topology is never rebuilt.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,14 +50,20 @@ class Assembly:
         matrix: Tangent stiffness d f_int / d u as a 3x3-block BSR matrix (N/m), or None when
             only the residual was assembled. Shared with the assembler: the next assembly
             overwrites it.
-        energy_J: Stored strain energy, J.
+        energy_J: Stored strain energy, J (of every packed problem together).
         min_jacobian: Smallest det F over all quadrature points (<= 0 means inverted).
+        problem_energies_J: The energy of each packed problem, (K,), J; None where not
+            assembled (one entry for an assembler of one problem).
+        problem_min_jacobians: The smallest det F of each packed problem, (K,); None where
+            not assembled.
     """
 
     residual: wp.array
     matrix: wps.BsrMatrix | None
     energy_J: float
     min_jacobian: float
+    problem_energies_J: np.ndarray | None = None
+    problem_min_jacobians: np.ndarray | None = None
 
 
 def von_mises(cauchy_stress_Pa: np.ndarray) -> np.ndarray:
@@ -182,23 +189,33 @@ class Assembler:
 
     Args:
         mesh: TET4 or TET10 mesh (metres).
-        material: Any :mod:`warptissue.materials` material.
+        material: Any :mod:`warptissue.materials` material; or, for K independent problems
+            packed into one mesh (:func:`warptissue.fem.packing.pack_meshes`), one elastic
+            material per problem.
         formulation: ``"mixed"`` (TET10 only: element mean dilatation, locking free) or
             ``"displacement"``.
         device: Warp device; None for Warp's default.
+        element_problem: The problem of each tet, (tet_count,), integers in [0, K) (None:
+            all 0, one problem). With K problems each assembly launch covers all of them;
+            energies and smallest J come per problem as well
+            (:attr:`Assembly.problem_energies_J`).
 
     Attributes:
-        node_count, tet_count, device, formulation, material.
+        node_count, tet_count, device, formulation.
+        material: The material (None where K > 1).
+        materials: One material per problem, (K,).
+        problem_count: K.
         tet_volumes: Reference element volumes, shape (tet_count,), m^3.
     """
 
     def __init__(
         self,
         mesh: TetMesh,
-        material: Material,
+        material: Material | Sequence[Material],
         *,
         formulation: str = "mixed",
         device: str | None = None,
+        element_problem: np.ndarray | None = None,
     ) -> None:
         if formulation not in FORMULATIONS:
             raise InputError(
@@ -235,7 +252,17 @@ class Assembler:
         )
         self._node_elements: tuple[np.ndarray, np.ndarray] | None = None
         self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
-        self._part_scalars = wp.zeros(2, dtype=wp.float64, device=dev)
+        self.problem_count = 1 if isinstance(material, Material) else len(material)
+        self._element_problem = wp.array(
+            _element_problems(element_problem, mesh.tet_count, self.problem_count),
+            dtype=wp.int32,
+            device=dev,
+        )
+        count = self.problem_count
+        # Energy and smallest J per problem, in one array so that one copy reads both.
+        self._scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
+        self._energy, self._min_jacobian = self._scalars[:count], self._scalars[count:]
+        self._part_scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
         self._part_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
         self._tets_host: np.ndarray | None = None
         self._last_submatrix: _SubmatrixBlocks | None = None
@@ -244,23 +271,48 @@ class Assembler:
         self._contact_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
-        self._energy = wp.zeros(1, dtype=wp.float64, device=dev)
-        self._min_jacobian = wp.zeros(1, dtype=wp.float64, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
         self._elastic_step = elastic_step()
         self.viscous: ViscousHistory | None = None
         self._zero_history: wp.array | None = None
         self.set_material(material)
 
-    def set_material(self, material: Material) -> None:
+    def set_material(self, material: Material | Sequence[Material]) -> None:
         """Use new material parameters from the next assembly on (same mesh and pattern).
 
         A :class:`warptissue.materials.Viscoelastic` material gets a
         :class:`warptissue.fem.viscous.ViscousHistory` (:attr:`viscous`) at the undeformed,
-        unloaded state; otherwise :attr:`viscous` is None.
+        unloaded state; otherwise :attr:`viscous` is None. An assembler of K packed problems
+        takes a sequence of K elastic materials.
         """
-        if not isinstance(material, Material):
-            raise InputError("material must be a warptissue.materials material", value=material)
+        from warptissue.kernels.materials import MaterialParams
+
+        materials = (material,) if isinstance(material, Material) else tuple(material)
+        if len(materials) != self.problem_count:
+            raise InputError(
+                f"one material per packed problem: {self.problem_count} expected",
+                key="material",
+                value=len(materials),
+            )
+        for each in materials:
+            if not isinstance(each, Material):
+                raise InputError("material must be a warptissue.materials material", value=each)
+            if self.problem_count > 1 and isinstance(each, Viscoelastic):
+                raise InputError(
+                    "packed problems take elastic materials (a viscoelastic history is "
+                    "kept for one problem per assembler)",
+                    key="material",
+                    value=type(each).__name__,
+                )
+        self.materials = materials
+        self._problem_params = wp.array(
+            [each.device_params() for each in materials], dtype=MaterialParams, device=self.device
+        )
+        if self.problem_count > 1:
+            self.material = None
+            self._params = materials[0].device_params()
+            return
+        material = materials[0]
         params = material.device_params()
         if isinstance(material, Viscoelastic):
             if self.viscous is not None and self.viscous.material.term_count == material.term_count:
@@ -285,6 +337,7 @@ class Assembler:
         the tangent's diagonal blocks and the energy; :meth:`set_load` moves the indenter.
         """
         if contact is not None:
+            self._one_problem("a rigid contact")
             nodes = contact.nodes
             if nodes.min() < 0 or nodes.max() >= self.node_count:
                 raise InputError("contact nodes must be nodes of the mesh", key="mesh")
@@ -439,7 +492,7 @@ class Assembler:
             kf.assemble_elements_kernel,
             dim=self.tet_count,
             inputs=[
-                *self._element_inputs(u),
+                *self._assembly_inputs(u),
                 self._block_index,
                 self._all_elements,
                 int(self.formulation == "mixed"),
@@ -460,11 +513,15 @@ class Assembler:
                 self._energy,
                 self._contact_force,
             )
+        scalars = self._scalars.numpy()
+        energies, min_jacobians = scalars[: self.problem_count], scalars[self.problem_count :]
         return Assembly(
             residual=self._residual,
             matrix=self.matrix if with_tangent else None,
-            energy_J=float(self._energy.numpy()[0]),
-            min_jacobian=float(self._min_jacobian.numpy()[0]),
+            energy_J=float(energies.sum()),
+            min_jacobian=float(min_jacobians.min()),
+            problem_energies_J=energies.copy(),
+            problem_min_jacobians=min_jacobians.copy(),
         )
 
     def parameter_residual(self, displacement_m: np.ndarray | wp.array, name: str) -> np.ndarray:
@@ -486,7 +543,9 @@ class Assembler:
             residual buffer is reused).
         """
         from warptissue.kernels import fem as kf
+        from warptissue.kernels.materials import MaterialParams
 
+        self._one_problem("parameter derivatives")
         derivative, alpha_term = self.material.device_params_derivative(name)
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
@@ -507,13 +566,12 @@ class Assembler:
         else:
             self._energy.zero_()
             self._min_jacobian.fill_(np.inf)
-            inputs = self._element_inputs(u)
-            inputs[0] = derivative
+            derivative_params = wp.array([derivative], dtype=MaterialParams, device=self.device)
             wp.launch(
                 kf.assemble_elements_kernel,
                 dim=self.tet_count,
                 inputs=[
-                    *inputs,
+                    *self._assembly_inputs(u, problem_params=derivative_params),
                     self._block_index,
                     self._all_elements,
                     int(self.formulation == "mixed"),
@@ -673,7 +731,8 @@ class Assembler:
         self._part_residual.zero_()
         scalars = self._part_scalars
         scalars.zero_()
-        energy, min_jacobian = scalars[0:1], scalars[1:2]
+        count = self.problem_count
+        energy, min_jacobian = scalars[:count], scalars[count:]
         min_jacobian.fill_(np.inf)
         if with_tangent:
             wp.launch(
@@ -687,7 +746,7 @@ class Assembler:
             kf.assemble_elements_kernel,
             dim=part.elements.shape[0],
             inputs=[
-                *self._element_inputs(u),
+                *self._assembly_inputs(u),
                 self._block_index,
                 part.elements,
                 int(self.formulation == "mixed"),
@@ -709,7 +768,11 @@ class Assembler:
             )
         gather_vectors(self._part_residual, part.device_nodes, part.forces)
         values = scalars.numpy()
-        return part.forces.numpy().copy(), float(values[0]), float(values[1])
+        return (
+            part.forces.numpy().copy(),
+            float(values[:count].sum()),
+            float(values[count:].min()),
+        )
 
     def set_residual(self, residual_N: Any) -> wp.array:
         """Overwrite the assembler's residual buffer (the one :meth:`assemble` returns), e.g.
@@ -841,6 +904,7 @@ class Assembler:
         """
         from warptissue.kernels import fem as kf
 
+        self._one_problem("the stress")
         u = self.device_displacement(displacement_m)
         stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
         wp.launch(
@@ -859,6 +923,28 @@ class Assembler:
             device=self.device,
         )
         return stress.numpy()
+
+    def _one_problem(self, what: str) -> None:
+        """Refuse ``what`` on an assembler of several packed problems (InputError)."""
+        if self.problem_count > 1:
+            raise InputError(
+                f"{what} is available for one problem per assembler; this one packs "
+                f"{self.problem_count}",
+                key="material",
+                value=self.problem_count,
+            )
+
+    def _assembly_inputs(
+        self, displacement: wp.array, *, problem_params: wp.array | None = None
+    ) -> list[Any]:
+        """The leading inputs of ``assemble_elements_kernel``: ``[problem_params,
+        element_problem, tets, shape_gradients, quadrature_volumes, displacement]``
+        (``problem_params``: the materials' by default)."""
+        return [
+            self._problem_params if problem_params is None else problem_params,
+            self._element_problem,
+            *self._element_inputs(displacement)[1:],
+        ]
 
     def _element_inputs(self, displacement: wp.array) -> list[Any]:
         """The leading inputs of every element kernel of ``kernels/fem.py``.
@@ -904,3 +990,28 @@ class Assembler:
         if array.shape != (self.node_count, 3):
             raise InputError(f"{name} must have shape ({self.node_count}, 3)", value=array.shape)
         return array
+
+
+def _element_problems(element_problem: Any, tet_count: int, problem_count: int) -> np.ndarray:
+    """The problem of each tet, checked: (tet_count,) integers in [0, problem_count)."""
+    if element_problem is None:
+        if problem_count != 1:
+            raise InputError(
+                f"{problem_count} materials need element_problem, the problem of each tet",
+                key="element_problem",
+            )
+        return np.zeros(tet_count, dtype=np.int32)
+    problems = np.asarray(element_problem)
+    if problems.shape != (tet_count,) or not np.issubdtype(problems.dtype, np.integer):
+        raise InputError(
+            f"element_problem must hold one integer per tet ({tet_count})",
+            key="element_problem",
+            value=(problems.shape, str(problems.dtype)),
+        )
+    if problems.size and (problems.min() < 0 or problems.max() >= problem_count):
+        raise InputError(
+            f"element_problem must lie in [0, {problem_count})",
+            key="element_problem",
+            value=(int(problems.min()), int(problems.max())),
+        )
+    return problems.astype(np.int32)

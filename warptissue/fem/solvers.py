@@ -1445,7 +1445,8 @@ def solve_quasistatic(
         u, free_x, weights_x = arrays.asarray(u), arrays.asarray(free), arrays.asarray(weights)
     # Absolute floor of the residual norm: a roundoff-level force for this body and material.
     length = float(np.sum(assembler.tet_volumes)) ** (1.0 / 3.0)
-    force_floor = 1e-13 * assembler.material.initial_shear_modulus_Pa * length**2
+    shear_modulus = min(material.initial_shear_modulus_Pa for material in assembler.materials)
+    force_floor = 1e-13 * shear_modulus * length**2
     load, time = 0.0, 0.0
     # The converged state before the current one (path coordinate, state), for the
     # extrapolated predictor; the path coordinate is the time of a timed path, else the load.
