@@ -306,7 +306,8 @@ def eliminate_dirichlet_kernel(
 
 @wp.kernel
 def cauchy_stress_kernel(
-    params: MaterialParams,
+    problem_params: wp.array(dtype=MaterialParams),
+    element_problem: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     quadrature_volumes: wp.array2d(dtype=wp.float64),
@@ -320,9 +321,11 @@ def cauchy_stress_kernel(
 
     sigma = P F^T / J at each quadrature point; in the mixed formulation the pressure part is
     U'(Jbar) I, constant over the element. A viscoelastic state passes ``gamma = g_inf`` and
-    ``frozen = sum_i H_i`` (the committed stress).
+    ``frozen = sum_i H_i`` (the committed stress). Tet e has the material
+    ``problem_params[element_problem[e]]`` (as in ``assemble_elements_kernel``).
     """
     e = wp.tid()
+    params = problem_params[element_problem[e]]
     nq = quadrature_volumes.shape[1]
     volume = wp.float64(0.0)
     deformed_volume = wp.float64(0.0)

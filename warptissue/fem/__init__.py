@@ -7,10 +7,12 @@ Public API (CONVENTIONS.md): :class:`IndentationProblem` (a mesh, a material and
 :class:`IndentationResult`, with the Newton solver's settings in one :class:`NewtonOptions`;
 lower level: :class:`Assembler`, :class:`DirichletConditions`, :func:`solve_quasistatic`,
 :class:`LinearSolver`; exact force sensitivities to material parameters:
-:class:`ForceSensitivity` (``simulate_indentation(..., sensitivities=...)``).
+:class:`ForceSensitivity` (``simulate_indentation(..., sensitivities=...)``); many
+problems in the same launches: :func:`simulate_indentation_batch` (:mod:`warptissue.fem.batched`).
 """
 
 from warptissue.fem.assembly import FORMULATIONS, Assembler, Assembly, von_mises
+from warptissue.fem.batched import simulate_indentation_batch, solve_quasistatic_batch
 from warptissue.fem.elements import ElementGeometry, element_geometry
 from warptissue.fem.indentation import (
     IndentationProblem,
@@ -46,6 +48,8 @@ __all__ = [
     "SolveInterrupted",
     "element_geometry",
     "simulate_indentation",
+    "simulate_indentation_batch",
     "solve_quasistatic",
+    "solve_quasistatic_batch",
     "von_mises",
 ]

@@ -900,18 +900,18 @@ class Assembler:
     def cauchy_stress(self, displacement_m: np.ndarray | wp.array) -> np.ndarray:
         """Volume-averaged Cauchy stress per tet (xx, yy, zz, yz, xz, xy), shape (M, 6), Pa.
 
-        A viscoelastic material gives the stress of its last committed step.
+        A viscoelastic material gives the stress of its last committed step; packed problems
+        each their own material's.
         """
         from warptissue.kernels import fem as kf
 
-        self._one_problem("the stress")
         u = self.device_displacement(displacement_m)
         stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
         wp.launch(
             kf.cauchy_stress_kernel,
             dim=self.tet_count,
             inputs=[
-                *self._element_inputs(u),
+                *self._assembly_inputs(u),
                 int(self.formulation == "mixed"),
                 *(
                     self._viscous_inputs()

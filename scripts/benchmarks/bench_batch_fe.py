@@ -1,0 +1,195 @@
+"""Throughput of batched FE: K flat-punch curves solved together against one after another.
+
+K problems share the flat-punch benchmark's quarter block (``bench_flat_punch.py``, the same
+20 depths to half the punch radius) and differ in their material: C10 spread over
+0.8-1.2 times the benchmark's, as the trials of a fit or a tissue bank's specimens would.
+
+- ``batched``: :func:`warptissue.fem.batched.simulate_indentation_batch`, all K at once.
+- ``sequential``: :func:`warptissue.fem.simulate_indentation`, one after another, with one
+  assembler (the defaults of a single run). Its rate is measured on the first
+  ``--sequential-limit`` problems (a rate does not need all K).
+
+Both times include building the assembler (and packing the meshes); a one-step run of one
+problem warms up the kernels and libraries first.
+
+Each row records curves per minute of both, their ratio, and the largest relative difference
+of a batched force from the sequential one of the same problem.
+
+Usage::
+
+    python scripts/benchmarks/bench_batch_fe.py --device cuda --counts 1,8,32,128 \
+        --out $OUT/bench_batch_fe.json
+    python scripts/benchmarks/bench_batch_fe.py --markdown scripts/results/bench_batch_fe_*.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np  # noqa: E402
+from bench_flat_punch import (  # noqa: E402
+    BULK_MODULUS_PA,
+    NEWTON_TOLERANCE,
+    PROBE_RADIUS_M,
+    SHEAR_MODULUS_PA,
+    depths_m,
+    machine_description,
+    parse_count,
+    warptissue_mesh,
+)
+
+
+def problems_for(mesh: Any, count: int) -> list[Any]:
+    """``count`` flat-punch problems on ``mesh``, C10 from 0.8 to 1.2 times the benchmark's."""
+    from warptissue.fem import IndentationProblem
+    from warptissue.indenter import Indenter
+    from warptissue.materials import NeoHookean
+
+    factors = np.linspace(0.8, 1.2, count) if count > 1 else np.ones(1)
+    return [
+        IndentationProblem(
+            mesh,
+            NeoHookean(C10_Pa=0.5 * SHEAR_MODULUS_PA * factor, bulk_modulus_Pa=BULK_MODULUS_PA),
+            Indenter("flat_punch", radius_m=PROBE_RADIUS_M, contact="bonded"),
+            base="fixed",
+            symmetry_planes=("symmetry_x", "symmetry_y"),
+            formulation="mixed",
+        )
+        for factor in factors
+    ]
+
+
+def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int) -> dict:
+    """One row: K problems batched, and the first ``sequential_limit`` of them alone."""
+    import warp as wp
+
+    from warptissue.device import resolve_device
+    from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
+    from warptissue.fem.batched import simulate_indentation_batch
+
+    warp_device = resolve_device(device)
+    options = NewtonOptions(tolerance=NEWTON_TOLERANCE)
+    problems = problems_for(mesh, count)
+    depths = depths_m()[:steps]
+    started = time.perf_counter()
+    batched = simulate_indentation_batch(
+        problems, [depths] * count, device=warp_device, options=options
+    )
+    wp.synchronize_device(warp_device)
+    batched_s = time.perf_counter() - started
+    alone_count = min(count, sequential_limit)
+    started = time.perf_counter()
+    assembler = Assembler(mesh, problems[0].material, device=warp_device)
+    alone = [
+        simulate_indentation(
+            problem,
+            depths,
+            device=warp_device,
+            progress=False,
+            options=options,
+            assembler=assembler,
+        )
+        for problem in problems[:alone_count]
+    ]
+    wp.synchronize_device(warp_device)
+    sequential_s = time.perf_counter() - started
+    difference = max(
+        float(np.max(np.abs(b.reaction_force_N / a.reaction_force_N - 1.0)))
+        for a, b in zip(alone, batched, strict=False)
+    )
+    batched_rate = 60.0 * count / batched_s
+    sequential_rate = 60.0 * alone_count / sequential_s
+    return {
+        "device": str(warp_device),
+        "cells": mesh.tet_count,
+        "dofs": 3 * mesh.node_count,
+        "problems": count,
+        "steps": steps,
+        "batched_s": batched_s,
+        "batched_completed": sum(result.completed for result in batched),
+        "batched_newton_iterations": int(sum(r.newton_iterations.sum() for r in batched)),
+        "sequential_problems": alone_count,
+        "sequential_s": sequential_s,
+        "batched_curves_per_minute": batched_rate,
+        "sequential_curves_per_minute": sequential_rate,
+        "speedup": batched_rate / sequential_rate,
+        "max_force_difference": difference,
+    }
+
+
+def markdown(paths: list[Path]) -> str:
+    """The rows of earlier ``--out`` files as a Markdown table."""
+    lines = [
+        "| run | device | cells | problems | batched s | batched curves/min "
+        "| sequential curves/min (measured on) | batched / sequential | largest force difference |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for path in paths:
+        results = json.loads(path.read_text(encoding="utf-8"))
+        for row in results["runs"]:
+            cells = f"{row['cells']:,}".replace(",", " ")
+            lines.append(
+                f"| {results['label']} | {row['device']} | {cells} | {row['problems']} "
+                f"| {row['batched_s']:.3g} | {row['batched_curves_per_minute']:.3g} "
+                f"| {row['sequential_curves_per_minute']:.3g} ({row['sequential_problems']}) "
+                f"| {row['speedup']:.2f} | {row['max_force_difference']:.1e} |"
+            )
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--device", default="cpu", help="Warp device: cpu, cuda, cuda:N")
+    parser.add_argument("--counts", default="1,8", help="problem counts K, comma separated")
+    parser.add_argument(
+        "--tets", default="9k", help="tets of the shared mesh (about; e.g. 9k, 2000)"
+    )
+    parser.add_argument("--mesher", choices=("extruded", "delaunay"), default="delaunay")
+    parser.add_argument("--steps", type=int, default=20, help="the first STEPS of the 20 depths")
+    parser.add_argument(
+        "--sequential-limit", type=int, default=8, help="problems run alone to measure the rate"
+    )
+    parser.add_argument("--label", default="", help="name of this machine in the tables")
+    parser.add_argument("--out", type=Path, help="write the results as JSON here")
+    parser.add_argument(
+        "--markdown", type=Path, nargs="+", help="print earlier --out files as a table"
+    )
+    args = parser.parse_args(argv)
+    if args.markdown:
+        print(markdown(args.markdown))
+        return 0
+    try:
+        counts = [int(text) for text in args.counts.split(",") if text]
+        target = parse_count(args.tets)
+    except ValueError as exc:
+        print(f"bench_batch_fe.py: {exc}", file=sys.stderr)
+        return 2
+    if not counts or min(counts) < 1 or not 1 <= args.steps <= 20:
+        print("bench_batch_fe.py: counts must be >= 1 and steps in [1, 20]", file=sys.stderr)
+        return 2
+    mesh, _ = warptissue_mesh(target, mesher=args.mesher)
+    run(mesh, 1, args.device, steps=1, sequential_limit=1)  # warm-up: kernels, libraries
+    rows = []
+    for count in counts:
+        row = run(
+            mesh, count, args.device, steps=args.steps, sequential_limit=args.sequential_limit
+        )
+        rows.append(row)
+        print(json.dumps(row))
+    results = {"label": args.label or args.device, "machine": machine_description(), "runs": rows}
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=1), encoding="utf-8")
+    print(markdown([args.out]) if args.out else "")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

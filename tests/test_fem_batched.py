@@ -1,0 +1,121 @@
+"""K flat-punch indentations solved together (:mod:`warptissue.fem.batched`): every problem's
+curve equals the one :func:`warptissue.fem.simulate_indentation` gives it alone, with its own
+cutbacks, and a failing problem stops without holding the others."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+from warptissue.fem.batched import simulate_indentation_batch
+from warptissue.indenter import Indenter
+from warptissue.materials import MooneyRivlin, NeoHookean, Viscoelastic
+from warptissue.mesh import indentation_block
+
+RADIUS_M = 1e-3
+TOLERANCE = 1e-10
+"""Tight, so that batched and sequential runs (different paths to the solution) agree far
+below the 1e-8 the tests ask."""
+
+
+def _punch(size_near_m: float, material, *, contact: str = "bonded", width_m: float = 0.008):
+    mesh = indentation_block(
+        width_m=width_m,
+        thickness_m=0.004,
+        probe_radius_m=RADIUS_M,
+        quarter=True,
+        size_near_m=size_near_m,
+        size_far_m=2.5e-3,
+    )
+    return IndentationProblem(
+        mesh,
+        material,
+        Indenter("flat_punch", radius_m=RADIUS_M, contact=contact),
+        symmetry_planes=("symmetry_x", "symmetry_y"),
+    )
+
+
+def _problems():
+    return [
+        _punch(RADIUS_M / 2.0, NeoHookean(287.5, 575e3)),
+        _punch(RADIUS_M / 3.0, MooneyRivlin(200.0, 60.0, 2e5), width_m=0.01),
+        _punch(RADIUS_M / 2.0, NeoHookean(500.0, 5e5), contact="frictionless"),
+    ]
+
+
+def test_batched_curves_equal_sequential_ones(device):
+    """Three problems (different meshes, materials, contact conditions and depths, one of
+    them cut back) give each the curve and displacements of its own run, to 1e-8."""
+    problems = _problems()
+    depths = [
+        RADIUS_M * np.array([0.05, 0.1]),
+        RADIUS_M * np.array([0.02, 0.04, 0.3]),  # a large last increment: cut back
+        RADIUS_M * np.array([0.08]),
+    ]
+    options = NewtonOptions(tolerance=TOLERANCE)
+    batched = simulate_indentation_batch(problems, depths, device=device, options=options)
+    cut = 0
+    for problem, path, result in zip(problems, depths, batched, strict=True):
+        alone = simulate_indentation(problem, path, device=device, progress=False, options=options)
+        assert result.completed and alone.completed, (result.message, alone.message)
+        np.testing.assert_allclose(result.depths_m, path)
+        np.testing.assert_allclose(result.reaction_force_N, alone.reaction_force_N, rtol=1e-8)
+        scale = np.abs(alone.displacement_m).max()
+        np.testing.assert_allclose(
+            result.displacement_m, alone.displacement_m, rtol=0, atol=1e-8 * scale
+        )
+        np.testing.assert_allclose(
+            result.von_mises_Pa, alone.von_mises_Pa, rtol=0, atol=1e-6 * alone.von_mises_Pa.max()
+        )
+        assert result.newton_iterations.min() >= 1
+        cut += result.cutbacks
+    assert batched[1].cutbacks > 0 and cut == batched[1].cutbacks
+
+
+def test_a_failing_problem_stops_alone():
+    """With no cutback allowed, the problem whose increment is too large for its Newton
+    iterations stops with what converged; the others complete as alone."""
+    problems = _problems()[:2]
+    depths = [RADIUS_M * np.array([0.05, 0.1]), RADIUS_M * np.array([0.02, 0.4])]
+    options = NewtonOptions(tolerance=TOLERANCE, max_cutbacks=0, max_newton_iterations=8)
+    easy, hard = simulate_indentation_batch(problems, depths, device="cpu", options=options)
+    assert easy.completed
+    assert not hard.completed and len(hard.depths_m) == 1
+    assert "Newton failed" in hard.message
+    alone = simulate_indentation(
+        problems[0],
+        depths[0],
+        device="cpu",
+        progress=False,
+        options=NewtonOptions(tolerance=TOLERANCE),
+    )
+    np.testing.assert_allclose(easy.reaction_force_N, alone.reaction_force_N, rtol=1e-8)
+
+
+def test_the_batch_refuses_what_it_cannot_take():
+    problem = _problems()[0]
+    depths = [RADIUS_M * np.array([0.05])]
+    with pytest.raises(InputError, match="at least one problem"):
+        simulate_indentation_batch([], [])
+    with pytest.raises(InputError, match="one depth sequence per problem"):
+        simulate_indentation_batch([problem], depths * 2)
+    with pytest.raises(InputError, match="strictly increasing"):
+        simulate_indentation_batch([problem], [np.array([2e-4, 1e-4])])
+    viscous = IndentationProblem(
+        problem.mesh,
+        Viscoelastic(problem.material, (0.3,), (1.0,)),
+        problem.indenter,
+        symmetry_planes=problem.symmetry_planes,
+    )
+    with pytest.raises(InputError, match="elastic materials"):
+        simulate_indentation_batch([viscous], depths)
+    sphere = IndentationProblem(
+        problem.mesh,
+        problem.material,
+        Indenter("sphere", radius_m=RADIUS_M),
+        symmetry_planes=problem.symmetry_planes,
+    )
+    with pytest.raises(InputError, match="flat punches"):
+        simulate_indentation_batch([sphere], depths)
