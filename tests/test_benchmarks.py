@@ -110,6 +110,11 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
             r"4 parameter\(s\): exact",
         ),
         ("bench_inverse_fit.py", ("--quick", "--parts", "mesh"), r"\| 2.5 mm \| \d+ \|"),
+        (
+            "bench_batch_fe.py",
+            ("--tets", "300", "--counts", "1,2", "--steps", "1", "--label", "tiny"),
+            r"\| tiny \| cpu \| \d+ \| 2 \| .* \| \d\.\de-\d\d \|",
+        ),
     ],
 )
 def test_a_quick_benchmark_runs(name, args, expected, tmp_path):

@@ -126,13 +126,17 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
 
 def markdown(paths: list[Path]) -> str:
     """The rows of earlier ``--out`` files as a Markdown table."""
+    return markdown_table([json.loads(path.read_text(encoding="utf-8")) for path in paths])
+
+
+def markdown_table(all_results: list[dict]) -> str:
+    """The rows of results (as ``--out`` writes them) as a Markdown table."""
     lines = [
         "| run | device | cells | problems | batched s | batched curves/min "
         "| sequential curves/min (measured on) | batched / sequential | largest force difference |",
         "|---|---|---:|---:|---:|---:|---:|---:|---:|",
     ]
-    for path in paths:
-        results = json.loads(path.read_text(encoding="utf-8"))
+    for results in all_results:
         for row in results["runs"]:
             cells = f"{row['cells']:,}".replace(",", " ")
             lines.append(
@@ -187,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(results, indent=1), encoding="utf-8")
-    print(markdown([args.out]) if args.out else "")
+    print(markdown_table([results]))
     return 0
 
 
