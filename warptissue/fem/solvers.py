@@ -628,7 +628,10 @@ def _first_iteration_step(
     free part of the step is only halved while an element inverts. ``start`` and
     ``direction`` (N, 3), m, are arrays of ``arrays`` (None: of the assembler's device).
     """
-    arrays = arrays or DeviceArrays(assembler.device)
+    if arrays is None:  # called alone: the device's arrays, on Warp's stream
+        arrays = DeviceArrays(assembler.device)
+        with arrays.context():
+            return _first_iteration_step(assembler, start, direction, arrays=arrays)
     start, direction = arrays.asarray(start), arrays.asarray(direction)
     alpha = 1.0
     for _ in range(8):
@@ -681,7 +684,21 @@ def _line_search(
         The accepted step, or the one with the lowest energy that passed the decrease test,
         or a failed :class:`_Search`.
     """
-    arrays = arrays or DeviceArrays(assembler.device)
+    if arrays is None:  # called alone: the device's arrays, on Warp's stream
+        arrays = DeviceArrays(assembler.device)
+        with arrays.context():
+            return _line_search(
+                assembler,
+                u,
+                direction,
+                free,
+                energy_J,
+                slope,
+                residual_norm,
+                max_evaluations=max_evaluations,
+                curvature=curvature,
+                arrays=arrays,
+            )
     u, direction, free = arrays.asarray(u), arrays.asarray(direction), arrays.asarray(free)
     low, g_low = 0.0, slope
     high, g_high = math.inf, math.nan
@@ -784,7 +801,20 @@ def _nonlinear_elimination(
         them locally costs a few assemblies of the patch's tets and a small solve; the global
         convergence test is unchanged, so the converged state is the same.
     """
-    arrays = arrays or DeviceArrays(assembler.device)
+    if arrays is None:  # called alone: the device's arrays, on Warp's stream
+        arrays = DeviceArrays(assembler.device)
+        with arrays.context():
+            return _nonlinear_elimination(
+                assembler,
+                assembly,
+                u,
+                free,
+                limit,
+                seed_count=seed_count,
+                max_iterations=max_iterations,
+                ratio=ratio,
+                arrays=arrays,
+            )
     xp = arrays.xp
     u, free = arrays.asarray(u), arrays.asarray(free)
     residual = arrays.view(assembly.residual)
