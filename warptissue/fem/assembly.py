@@ -937,9 +937,9 @@ class Assembler:
     def _assembly_inputs(
         self, displacement: wp.array, *, problem_params: wp.array | None = None
     ) -> list[Any]:
-        """The leading inputs of ``assemble_elements_kernel``: ``[problem_params,
-        element_problem, tets, shape_gradients, quadrature_volumes, displacement]``
-        (``problem_params``: the materials' by default)."""
+        """The leading inputs of ``assemble_elements_kernel`` and ``cauchy_stress_kernel``:
+        ``[problem_params, element_problem, tets, shape_gradients, quadrature_volumes,
+        displacement]`` (``problem_params``: the materials' by default)."""
         return [
             self._problem_params if problem_params is None else problem_params,
             self._element_problem,
@@ -947,7 +947,9 @@ class Assembler:
         ]
 
     def _element_inputs(self, displacement: wp.array) -> list[Any]:
-        """The leading inputs of every element kernel of ``kernels/fem.py``.
+        """The leading inputs of the element kernels of ``kernels/fem.py`` that take one
+        material (``ogden_alpha_residual_kernel``; the others take one per problem,
+        :meth:`_assembly_inputs`).
 
         Args:
             displacement: Nodal displacements on the assembler's device, vec3d (N,), metres.

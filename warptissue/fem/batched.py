@@ -202,16 +202,22 @@ def _batched_increment(
     for iteration in range(1, max_iterations + 1):
         first = iteration == 1
         on = segments.per_node(iterating.astype(np.float64))
-        frozen = xp.maximum(constrained, 1.0 - on)
+        frozen = xp.ascontiguousarray(xp.maximum(constrained, 1.0 - on))  # kept alive
         if first:
             wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
             rhs = (-(residual + arrays.view(k_times_increment)) * free + prescribed_increment) * on
         else:
             rhs = -residual * free * on
-        assembler.eliminate(arrays.warp(xp.ascontiguousarray(frozen)))
+        assembler.eliminate(arrays.warp(frozen))
         du, _ = solver.solve(assembly.matrix, rhs)
-        direction = du * free * on
         iterations[iterating] += 1
+        (du_squared,) = segments.sums(du * du * on)
+        broken = iterating & ~np.isfinite(du_squared)
+        for k in np.flatnonzero(broken):
+            reasons[k] = "the linear solve gave non-finite values"
+        iterating &= ~broken
+        on = segments.per_node(iterating.astype(np.float64))
+        direction = xp.nan_to_num(du) * free * on
         if first:
             start = u + prescribed_increment * on
             alpha = np.where(iterating, 1.0, 0.0)
