@@ -11,7 +11,7 @@ from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.fem.batched import simulate_indentation_batch
 from warptissue.indenter import Indenter
-from warptissue.materials import MooneyRivlin, NeoHookean, Viscoelastic
+from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, Viscoelastic
 from warptissue.mesh import indentation_block
 
 RADIUS_M = 1e-3
@@ -74,6 +74,31 @@ def test_batched_curves_equal_sequential_ones(device):
     assert batched[1].cutbacks > 0 and cut == batched[1].cutbacks
 
 
+def test_batched_force_sensitivities_equal_sequential_ones(device):
+    """dF/dC10 and dF/dK of each problem, by its own parameters, equal those of its own run
+    (exact sensitivities, tests/test_fem_sensitivity.py), to 1e-7."""
+    problems = _problems()
+    depths = [
+        RADIUS_M * np.array([0.05, 0.1]),
+        RADIUS_M * np.array([0.04, 0.12]),
+        RADIUS_M * np.array([0.08]),
+    ]
+    names = ("C10_Pa", "bulk_modulus_Pa")
+    options = NewtonOptions(tolerance=TOLERANCE)
+    batched = simulate_indentation_batch(
+        problems, depths, device=device, options=options, sensitivities=names
+    )
+    for problem, path, result in zip(problems, depths, batched, strict=True):
+        alone = simulate_indentation(
+            problem, path, device=device, progress=False, options=options, sensitivities=names
+        )
+        assert result.sensitivity_names == names
+        assert result.force_sensitivity_N_per_unit.shape == (len(path), 2)
+        np.testing.assert_allclose(
+            result.force_sensitivity_N_per_unit, alone.force_sensitivity_N_per_unit, rtol=1e-7
+        )
+
+
 def test_a_failing_problem_stops_alone():
     """With no cutback allowed, the problem whose increment is too large for its Newton
     iterations stops with what converged; the others complete as alone."""
@@ -119,3 +144,11 @@ def test_the_batch_refuses_what_it_cannot_take():
     )
     with pytest.raises(InputError, match="flat punches"):
         simulate_indentation_batch([sphere], depths)
+    ogden = IndentationProblem(
+        problem.mesh,
+        Ogden((120.0, -30.0), (5.0, -2.0), 1.8e5),
+        problem.indenter,
+        symmetry_planes=problem.symmetry_planes,
+    )
+    with pytest.raises(InputError, match="Ogden exponents"):
+        simulate_indentation_batch([ogden, problem], depths * 2, sensitivities=("alpha1",))

@@ -533,10 +533,15 @@ class Assembler:
         the parameter to the device fields included); for ``alpha_i`` it is
         ``ogden_alpha_residual_kernel``.
 
+        Packed problems (K > 1) are differentiated each by its own parameter of that name in
+        one launch: the rows of problem k hold ``dR_k / d theta_k`` (the Ogden exponents,
+        which need their own kernel, are refused there).
+
         Args:
             displacement_m: Nodal displacements, (N, 3) or a vec3d Warp array, metres.
             name: A parameter of :attr:`material` (``C10_Pa``, ``alpha1``, ``bulk_modulus_Pa``,
-                ...; :attr:`warptissue.materials.Material.sensitivity_names`).
+                ...; :attr:`warptissue.materials.Material.sensitivity_names`); of every
+                problem's material where K > 1.
 
         Returns:
             dR/d theta, shape (N, 3), N per unit of the parameter (a copy: the assembler's
@@ -545,7 +550,8 @@ class Assembler:
         from warptissue.kernels import fem as kf
         from warptissue.kernels.materials import MaterialParams
 
-        self._one_problem("parameter derivatives")
+        if self.problem_count > 1:
+            return self._packed_parameter_residual(displacement_m, name)
         derivative, alpha_term = self.material.device_params_derivative(name)
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
@@ -588,6 +594,45 @@ class Assembler:
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
+
+    def _packed_parameter_residual(self, displacement_m: Any, name: str) -> np.ndarray:
+        """:meth:`parameter_residual` of K packed problems, each by its own ``name``."""
+        from warptissue.kernels import fem as kf
+        from warptissue.kernels.materials import MaterialParams
+
+        derivatives = []
+        for k, material in enumerate(self.materials):
+            derivative, alpha_term = material.device_params_derivative(name)
+            if alpha_term >= 0:
+                raise InputError(
+                    f"problem {k}: the derivative by an Ogden exponent is available for one "
+                    "problem per assembler",
+                    key="sensitivities",
+                    value=name,
+                )
+            derivatives.append(derivative)
+        u = self.device_displacement(displacement_m)
+        self._residual.zero_()
+        self._energy.zero_()
+        self._min_jacobian.fill_(np.inf)
+        wp.launch(
+            kf.assemble_elements_kernel,
+            dim=self.tet_count,
+            inputs=[
+                *self._assembly_inputs(
+                    u,
+                    problem_params=wp.array(derivatives, dtype=MaterialParams, device=self.device),
+                ),
+                self._block_index,
+                self._all_elements,
+                int(self.formulation == "mixed"),
+                0,
+                *self._viscous_inputs(zero_history=True),
+            ],
+            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
+            device=self.device,
+        )
+        return self._residual.numpy().copy()
 
     def _contact_parameter_residual(self, u: wp.array, d_shear: float) -> np.ndarray | float:
         """The rigid contact's part of ``dR/dtheta``: its penalty ``k = beta mu0 h`` follows

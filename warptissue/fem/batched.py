@@ -33,6 +33,7 @@ from warptissue.fem.indentation import (
     _indentation_result,
 )
 from warptissue.fem.packing import PackedMeshes, pack_meshes
+from warptissue.fem.sensitivity import check_sensitivity_names
 from warptissue.fem.solvers import (
     DirichletConditions,
     LinearSolver,
@@ -292,6 +293,50 @@ def _batched_increment(
     return _Increment(displacement, converged, iterations, reactions, reasons)
 
 
+def _batched_sensitivities(
+    assembler: Assembler,
+    solver: LinearSolver,
+    segments: _Segments,
+    u: Any,
+    names: Sequence[str],
+    free: Any,
+    constrained: Any,
+    weights: Any,
+    reached: np.ndarray,
+) -> np.ndarray:
+    """``dF_k / d theta_k`` of the problems ``reached`` (K,) at their converged states in
+    ``u``, for every name: ``(K, len(names))`` (rows of the others are zero).
+
+    As :class:`warptissue.fem.ForceSensitivity` with ``factorization="refactorize"``: the
+    tangent at the converged state is factorized once (the other problems' rows made
+    identity rows), ``K du = -dR/dtheta`` is solved per name, and
+    ``dF/dtheta = w . (dR/dtheta + K du)`` summed per problem. The tangent is block
+    diagonal, so the problems do not see each other.
+    """
+    arrays = segments.arrays
+    xp = arrays.xp
+    matrix = assembler.assemble(u).matrix
+    full_values = wp.clone(matrix.values)
+    derivatives = [arrays.asarray(assembler.parameter_residual(u, name)) for name in names]
+    on = segments.per_node(reached.astype(np.float64))
+    frozen = xp.ascontiguousarray(xp.maximum(constrained, 1.0 - on))  # kept alive
+    assembler.eliminate(arrays.warp(frozen))
+    steps = []
+    for i, derivative in enumerate(derivatives):
+        rhs = -derivative * free * on
+        du, _ = solver.solve(matrix, rhs) if i == 0 else solver.solve_factorized(matrix, rhs)
+        steps.append(xp.ascontiguousarray(du * free * on))
+    # K du on the prescribed rows needs the tangent before elimination.
+    matrix.values.assign(full_values)
+    product = wp.zeros(assembler.node_count, dtype=wp.vec3d, device=assembler.device)
+    out = np.zeros((segments.count, len(names)))
+    for i, (derivative, du) in enumerate(zip(derivatives, steps, strict=True)):
+        wps.bsr_mv(matrix, arrays.warp(du), product, alpha=1.0, beta=0.0)
+        (sums,) = segments.sums(weights * (derivative + arrays.view(product)) * on)
+        out[:, i] = sums
+    return out
+
+
 @dataclass
 class _Path:
     """One problem's place on its load path, and what it has converged so far."""
@@ -312,6 +357,7 @@ class _Path:
     reactions: list[float] = field(default_factory=list)
     iterations: list[int] = field(default_factory=list)
     history: list[dict] = field(default_factory=list)
+    sensitivities: list[np.ndarray] = field(default_factory=list)
 
     def next_load(self) -> tuple[float, float]:
         """(the load the next increment goes to, its fraction of the current step)."""
@@ -333,6 +379,7 @@ def solve_quasistatic_batch(
     reaction_weights: Sequence[np.ndarray],
     options: NewtonOptions | None = None,
     load_name: str = "load",
+    sensitivities: Sequence[str] = (),
 ) -> list[QuasistaticResult]:
     """Follow K displacement-controlled load paths together, one per packed problem.
 
@@ -356,6 +403,11 @@ def solve_quasistatic_batch(
             its ``reaction``.
         options: The Newton settings (tolerance, iterations, cutbacks, linear solver).
         load_name: What the load is called in messages (e.g. ``"depth (m)"``).
+        sensitivities: Material parameters to differentiate each reaction by, exactly, at
+            each requested load (each problem by its own parameters of these names; see
+            :mod:`warptissue.fem.sensitivity`): one factorization of the converged tangents
+            of the problems that reached a requested load in the same increment, and one
+            solve per name, for all of them.
 
     Returns:
         One :class:`warptissue.fem.QuasistaticResult` per problem.
@@ -365,6 +417,15 @@ def solve_quasistatic_batch(
     """
     options = _checked_options(options)
     count = packed.problem_count
+    names = check_sensitivity_names(sensitivities)
+    for k, material in enumerate(assembler.materials):
+        for name in names:
+            if material.device_params_derivative(name)[1] >= 0:
+                raise InputError(
+                    f"problem {k}: a batch differentiates by moduli, not by Ogden exponents",
+                    key="sensitivities",
+                    value=name,
+                )
     for name, values in (
         ("conditions", conditions),
         ("loads", loads),
@@ -429,6 +490,15 @@ def solve_quasistatic_batch(
             )
             u = step.displacement
             host = None
+            reached = (
+                active
+                & step.converged
+                & np.array([targets[k][1] == 1.0 if k in targets else False for k in range(count)])
+            )
+            if names and reached.any():
+                derivatives_now = _batched_sensitivities(
+                    assembler, solver, segments, u, names, free_x, constrained_x, weights_x, reached
+                )
             for k in np.flatnonzero(active):
                 path = paths[k]
                 load, fraction = targets[k]
@@ -452,6 +522,8 @@ def solve_quasistatic_batch(
                     path.reached.append(float(path.loads[path.index]))
                     path.states.append(host[packed.nodes(k)].copy())
                     path.reactions.append(float(step.reactions[k]))
+                    if names:
+                        path.sensitivities.append(derivatives_now[k])
                     path.iterations.append(path.step_iterations)
                     path.index += 1
                     path.fraction, path.step_fraction = 0.0, 1.0
@@ -491,7 +563,7 @@ def solve_quasistatic_batch(
                 cutbacks=path.cutbacks,
                 linear_solver=solver.method,
                 history=path.history,
-                reaction_sensitivity=np.zeros((steps, 0)),
+                reaction_sensitivity=np.array(path.sensitivities).reshape(steps, len(names)),
                 times_s=np.arange(1.0, steps + 1.0),
                 linear_solver_statistics=solver.statistics(),
             )
@@ -505,6 +577,7 @@ def simulate_indentation_batch(
     *,
     device: str | None = None,
     options: NewtonOptions | None = None,
+    sensitivities: Sequence[str] = (),
 ) -> list[IndentationResult]:
     """K flat-punch indentations solved together on one device.
 
@@ -514,6 +587,9 @@ def simulate_indentation_batch(
         depths_m: Each problem's depths, positive and strictly increasing, m.
         device: Warp device; None for Warp's default.
         options: The Newton settings (:func:`solve_quasistatic_batch` says which apply).
+        sensitivities: Material parameters (``C10_Pa``, ``bulk_modulus_Pa``, ...; moduli,
+            not Ogden exponents) to differentiate each problem's force by, exactly, at each
+            depth: ``result.force_sensitivity_N_per_unit``.
 
     Returns:
         One :class:`warptissue.fem.IndentationResult` per problem, as
@@ -578,11 +654,12 @@ def simulate_indentation_batch(
         reaction_weights=[problem.reaction_weights() for problem in problems],
         options=options,
         load_name="depth (m)",
+        sensitivities=sensitivities,
     )
     results = []
     for k, (problem, path) in enumerate(zip(problems, paths, strict=True)):
         alone = _ProblemView(assembler, packed, k)
-        results.append(_indentation_result(problem, alone, path))
+        results.append(_indentation_result(problem, alone, path, tuple(sensitivities)))
     return results
 
 
