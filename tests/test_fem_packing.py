@@ -1,6 +1,7 @@
 """Independent problems packed into one mesh (:mod:`warptissue.fem.packing`) and assembled in
-the same launches: each problem's residual, tangent, energy, smallest J and stress equal
-those of its own assembler, on every Warp device."""
+the same launches: each problem's residual, tangent, energy, smallest J, stress and
+derivative by a material parameter equal those of its own assembler, on every Warp
+device."""
 
 from __future__ import annotations
 
@@ -79,7 +80,9 @@ def test_packed_problems_assemble_as_each_alone(device, rng):
     )
     assert together.material is None and together.materials == MATERIALS
     displacements = [1e-4 * rng.standard_normal((m.node_count, 3)) for m in meshes]
-    assembly = together.assemble(np.concatenate(displacements))
+    union = np.concatenate(displacements)
+    derivative = together.parameter_residual(union, "bulk_modulus_Pa")
+    assembly = together.assemble(union)
     residual = assembly.residual.numpy().copy()
     blocks = 0
     for k, (mesh, material, u) in enumerate(zip(meshes, MATERIALS, displacements, strict=True)):
@@ -89,6 +92,14 @@ def test_packed_problems_assemble_as_each_alone(device, rng):
         np.testing.assert_allclose(
             residual[packed.nodes(k)], own.residual.numpy(), rtol=0, atol=1e-12 * scale
         )
+        own_derivative = alone.parameter_residual(u, "bulk_modulus_Pa")
+        np.testing.assert_allclose(
+            derivative[packed.nodes(k)],
+            own_derivative,
+            rtol=0,
+            atol=1e-12 * np.abs(own_derivative).max(),
+        )
+        own = alone.assemble(u)
         assert assembly.problem_energies_J[k] == pytest.approx(own.energy_J, rel=1e-12)
         assert assembly.problem_min_jacobians[k] == pytest.approx(own.min_jacobian, rel=1e-14)
         nodes = np.arange(packed.node_offsets[k], packed.node_offsets[k + 1])
@@ -136,8 +147,9 @@ def test_packed_assemblers_refuse_what_they_cannot_do():
     together = Assembler(packed.mesh, MATERIALS, device="cpu", element_problem=problems)
     with pytest.raises(InputError, match="one material per packed problem"):
         together.set_material(MATERIALS[:2])
-    with pytest.raises(InputError, match="packs 3"):
-        together.parameter_residual(np.zeros((packed.mesh.node_count, 3)), "C10_Pa")
+    ogden = Assembler(packed.mesh, (MATERIALS[2],) * 3, device="cpu", element_problem=problems)
+    with pytest.raises(InputError, match="Ogden exponent"):
+        ogden.parameter_residual(np.zeros((packed.mesh.node_count, 3)), "alpha1")
     contact = RigidContact(
         Indenter("sphere", radius_m=1e-3), nodes=np.arange(3), top_z_m=0.0, stiffness_N_per_m=1.0
     )
