@@ -113,7 +113,7 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
         (
             "bench_batch_fe.py",
             ("--tets", "300", "--counts", "1,2", "--steps", "1", "--label", "tiny"),
-            r"\| tiny \| cpu \| \d+ \| 2 \| .* \| \d\.\de-\d\d \|",
+            r"\| tiny \| cpu \| \d+ \| curves \| 2 \| .* \| \d\.\de-\d\d \(force\) \|",
         ),
     ],
 )

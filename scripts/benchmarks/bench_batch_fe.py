@@ -1,4 +1,5 @@
-"""Throughput of batched FE: K flat-punch curves solved together against one after another.
+"""Throughput of batched FE: K flat-punch curves (or fits) solved together against one after
+another.
 
 K problems share the flat-punch benchmark's quarter block (``bench_flat_punch.py``, the same
 20 depths to half the punch radius) and differ in their material: C10 spread over
@@ -13,7 +14,11 @@ Both times include building the assembler (and packing the meshes); a one-step r
 problem warms up the kernels and libraries first.
 
 Each row records curves per minute of both, their ratio, and the largest relative difference
-of a batched force from the sequential one of the same problem.
+of a batched force from the sequential one of the same problem. With ``--what fits``, K
+inverse fits of C10 (synthetic curves made at each problem's C10, fitted from 0.8 times it):
+:func:`warptissue.fit.batched.fit_indentation_batch` against the fit engine's
+``least_squares`` over single runs, in fits per minute, and the largest relative difference
+of a fitted C10.
 
 Usage::
 
@@ -117,10 +122,118 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
         "batched_newton_iterations": int(sum(r.newton_iterations.sum() for r in batched)),
         "sequential_problems": alone_count,
         "sequential_s": sequential_s,
-        "batched_curves_per_minute": batched_rate,
-        "sequential_curves_per_minute": sequential_rate,
+        "kind": "curves",
+        "batched_per_minute": batched_rate,
+        "sequential_per_minute": sequential_rate,
         "speedup": batched_rate / sequential_rate,
         "max_force_difference": difference,
+    }
+
+
+def run_fits(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int) -> dict:
+    """One row of fits: K synthetic curves (made at each problem's C10) fitted for C10 from
+    0.8 times it, batched (:func:`warptissue.fit.batched.fit_indentation_batch`), and the
+    first ``sequential_limit`` fitted alone (the engine's ``least_squares`` over
+    ``simulate_indentation`` with its sensitivities, one assembler)."""
+    import dataclasses
+
+    import warp as wp
+
+    from warptissue.device import resolve_device
+    from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
+    from warptissue.fem.batched import simulate_indentation_batch
+    from warptissue.fit import least_squares
+    from warptissue.fit.batched import fit_indentation_batch
+
+    warp_device = resolve_device(device)
+    options = NewtonOptions(tolerance=NEWTON_TOLERANCE)
+    tolerances = {"ftol": 1e-8, "xtol": 1e-8, "gtol": 1e-8}
+    truths = problems_for(mesh, count)
+    depths = depths_m()[:steps]
+    curves = simulate_indentation_batch(
+        truths, [depths] * count, device=warp_device, options=options
+    )
+    forces = [curve.reaction_force_N for curve in curves]
+    starts = []
+    for truth in truths:
+        vector = truth.material.parameter_vector
+        vector[0] *= 0.8
+        starts.append(dataclasses.replace(truth, material=truth.material.with_parameters(vector)))
+    started = time.perf_counter()
+    fits = fit_indentation_batch(
+        starts,
+        [depths] * count,
+        forces,
+        ("C10_Pa",),
+        device=warp_device,
+        options=options,
+        **tolerances,
+    )
+    wp.synchronize_device(warp_device)
+    batched_s = time.perf_counter() - started
+    alone_count = min(count, sequential_limit)
+    started = time.perf_counter()
+    assembler = Assembler(mesh, starts[0].material, device=warp_device)
+    alone = []
+    for start, measured in zip(starts[:alone_count], forces, strict=False):
+        cache: dict[bytes, Any] = {}
+
+        def forward(x, start=start, cache=cache):
+            # One run per trial point for both residuals and Jacobian (as the batched fit).
+            key = np.asarray(x, dtype=np.float64).tobytes()
+            if key in cache:
+                return cache[key]
+            cache.clear()
+            vector = start.material.parameter_vector
+            vector[0] = x[0]
+            problem = dataclasses.replace(start, material=start.material.with_parameters(vector))
+            cache[key] = simulate_indentation(
+                problem,
+                depths,
+                device=warp_device,
+                progress=False,
+                options=options,
+                assembler=assembler,
+                sensitivities=("C10_Pa",),
+            )
+            return cache[key]
+
+        scale = float(np.abs(measured).max())
+        alone.append(
+            least_squares(
+                lambda x, f=forward, m=measured, s=scale: (f(x).reaction_force_N - m) / s,
+                start.material.parameter_vector[:1],
+                jac=lambda x, f=forward, s=scale: f(x).force_sensitivity_N_per_unit / s,
+                bounds=(0.0, np.inf),
+                x_scale=start.material.parameter_vector[:1],
+                **tolerances,
+            )
+        )
+    wp.synchronize_device(warp_device)
+    sequential_s = time.perf_counter() - started
+    difference = max(abs(float(b.x[0] / a.x[0]) - 1.0) for a, b in zip(alone, fits, strict=False))
+    batched_rate = 60.0 * count / batched_s
+    sequential_rate = 60.0 * alone_count / sequential_s
+    return {
+        "device": str(warp_device),
+        "cells": mesh.tet_count,
+        "dofs": 3 * mesh.node_count,
+        "problems": count,
+        "steps": steps,
+        "kind": "fits",
+        "batched_s": batched_s,
+        "batched_completed": sum(fit.success for fit in fits),
+        "batched_lm_iterations": int(sum(fit.iterations for fit in fits)),
+        "sequential_problems": alone_count,
+        "sequential_s": sequential_s,
+        "batched_per_minute": batched_rate,
+        "sequential_per_minute": sequential_rate,
+        "speedup": batched_rate / sequential_rate,
+        "max_parameter_difference": difference,
+        "max_truth_error": max(
+            abs(float(fit.x[0] / truth.material.parameter_vector[0]) - 1.0)
+            for fit, truth in zip(fits, truths, strict=True)
+        ),
     }
 
 
@@ -132,18 +245,23 @@ def markdown(paths: list[Path]) -> str:
 def markdown_table(all_results: list[dict]) -> str:
     """The rows of results (as ``--out`` writes them) as a Markdown table."""
     lines = [
-        "| run | device | cells | problems | batched s | batched curves/min "
-        "| sequential curves/min (measured on) | batched / sequential | largest force difference |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---:|",
+        "| run | device | cells | what | problems | batched s | batched per min "
+        "| sequential per min (measured on) | batched / sequential "
+        "| largest difference from sequential |",
+        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
     ]
     for results in all_results:
         for row in results["runs"]:
+            if row["kind"] == "fits":
+                difference, what = row["max_parameter_difference"], "C10"
+            else:
+                difference, what = row["max_force_difference"], "force"
             cells = f"{row['cells']:,}".replace(",", " ")
             lines.append(
-                f"| {results['label']} | {row['device']} | {cells} | {row['problems']} "
-                f"| {row['batched_s']:.3g} | {row['batched_curves_per_minute']:.3g} "
-                f"| {row['sequential_curves_per_minute']:.3g} ({row['sequential_problems']}) "
-                f"| {row['speedup']:.2f} | {row['max_force_difference']:.1e} |"
+                f"| {results['label']} | {row['device']} | {cells} | {row['kind']} "
+                f"| {row['problems']} | {row['batched_s']:.3g} | {row['batched_per_minute']:.3g} "
+                f"| {row['sequential_per_minute']:.3g} ({row['sequential_problems']}) "
+                f"| {row['speedup']:.2f} | {difference:.1e} ({what}) |"
             )
     return "\n".join(lines)
 
@@ -157,6 +275,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--mesher", choices=("extruded", "delaunay"), default="delaunay")
     parser.add_argument("--steps", type=int, default=20, help="the first STEPS of the 20 depths")
+    parser.add_argument(
+        "--what",
+        default="curves",
+        help="curves, fits, or curves,fits: forward curves, and inverse fits of C10 to "
+        "synthetic curves from 0.8 times it",
+    )
     parser.add_argument(
         "--sequential-limit", type=int, default=8, help="problems run alone to measure the rate"
     )
@@ -180,13 +304,18 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     mesh, _ = warptissue_mesh(target, mesher=args.mesher)
     run(mesh, 1, args.device, steps=1, sequential_limit=1)  # warm-up: kernels, libraries
+    kinds = [text for text in args.what.split(",") if text]
+    if not kinds or set(kinds) - {"curves", "fits"}:
+        print("bench_batch_fe.py: --what takes curves, fits or both", file=sys.stderr)
+        return 2
     rows = []
-    for count in counts:
-        row = run(
-            mesh, count, args.device, steps=args.steps, sequential_limit=args.sequential_limit
-        )
-        rows.append(row)
-        print(json.dumps(row))
+    for kind in kinds:
+        for count in counts:
+            row = (run if kind == "curves" else run_fits)(
+                mesh, count, args.device, steps=args.steps, sequential_limit=args.sequential_limit
+            )
+            rows.append(row)
+            print(json.dumps(row))
     results = {"label": args.label or args.device, "machine": machine_description(), "runs": rows}
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
