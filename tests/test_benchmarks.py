@@ -115,6 +115,11 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
             ("--tets", "300", "--counts", "1,2", "--steps", "1", "--label", "tiny"),
             r"\| tiny \| cpu \| \d+ \| curves \| 2 \| .* \| \d\.\de-\d\d \(force\) \|",
         ),
+        (
+            "bench_batch_fe.py",
+            ("--tets", "300", "--counts", "2", "--steps", "2", "--what", "fits", "--label", "t"),
+            r"\| t \| cpu \| \d+ \| fits \| 2 \| .* \| \d\.\de-\d\d \(C10\) \|",
+        ),
     ],
 )
 def test_a_quick_benchmark_runs(name, args, expected, tmp_path):
