@@ -55,7 +55,5 @@ def test_scalar_reductions_equal_numpy(device, rng):
         np.testing.assert_allclose(
             arrays.host(arrays.row_norms(x)), np.linalg.norm(a, axis=1), rtol=1e-14
         )
-        assert arrays.all_finite(x)
         x[4, 1] = math.nan
-        assert not arrays.all_finite(x)
         assert math.isnan(arrays.floats(arrays.squared_norm(x))[0])

@@ -127,7 +127,3 @@ class DeviceArrays:
         if self.resident:
             return self.xp.sqrt(self.xp.sum(values * values, axis=1))
         return np.sqrt(np.einsum("ij,ij->i", values, values))
-
-    def all_finite(self, values: Any) -> bool:
-        """Whether every entry is finite (one scalar read)."""
-        return bool(self.xp.all(self.xp.isfinite(values)))

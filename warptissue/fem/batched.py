@@ -656,25 +656,16 @@ def simulate_indentation_batch(
         load_name="depth (m)",
         sensitivities=sensitivities,
     )
+    # Every problem's stress at its last converged state, in one launch over the union.
+    last = np.zeros((packed.mesh.node_count, 3))
+    for k, path in enumerate(paths):
+        if len(path.loads):
+            last[packed.nodes(k)] = path.displacement_m[-1]
+    stress = assembler.cauchy_stress(last)
     results = []
     for k, (problem, path) in enumerate(zip(problems, paths, strict=True)):
-        alone = _ProblemView(assembler, packed, k)
-        results.append(_indentation_result(problem, alone, path, tuple(sensitivities)))
+        tets = slice(int(packed.tet_offsets[k]), int(packed.tet_offsets[k + 1]))
+        results.append(
+            _indentation_result(problem, None, path, tuple(sensitivities), stress_Pa=stress[tets])
+        )
     return results
-
-
-class _ProblemView:
-    """One packed problem as :func:`warptissue.fem.indentation._indentation_result` needs its
-    assembler: its stress, and no contact."""
-
-    contact = None
-
-    def __init__(self, assembler: Assembler, packed: PackedMeshes, problem: int) -> None:
-        self._assembler, self._packed, self._problem = assembler, packed, problem
-
-    def cauchy_stress(self, displacement_m: np.ndarray) -> np.ndarray:
-        packed, k = self._packed, self._problem
-        union = np.zeros((packed.mesh.node_count, 3))
-        union[packed.nodes(k)] = displacement_m
-        stress = self._assembler.cauchy_stress(union)
-        return stress[int(packed.tet_offsets[k]) : int(packed.tet_offsets[k + 1])]

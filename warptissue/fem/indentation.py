@@ -474,16 +474,23 @@ def simulate_indentation(
 
 def _indentation_result(
     problem: IndentationProblem,
-    assembler: Assembler,
+    assembler: Assembler | None,
     path: QuasistaticResult,
     sensitivity_names: tuple[str, ...] = (),
+    *,
+    stress_Pa: np.ndarray | None = None,
 ) -> IndentationResult:
-    """The indentation result of a load path: the curve, the fields at its last state."""
-    if len(path.loads):
-        stress = assembler.cauchy_stress(path.displacement_m[-1])
-    else:
+    """The indentation result of a load path: the curve, the fields at its last state.
+
+    ``stress_Pa``: the Cauchy stress (M, 6) at the last state where the caller has it (a
+    batch computes all problems' at once; ``assembler`` is then None: no contact)."""
+    if not len(path.loads):
         stress = np.zeros((0, 6))
-    contact = assembler.contact
+    elif stress_Pa is not None:
+        stress = stress_Pa
+    else:
+        stress = assembler.cauchy_stress(path.displacement_m[-1])
+    contact = None if assembler is None else assembler.contact
     contact_force, penetration, area = np.zeros(0), np.zeros(0), np.zeros(0)
     pressure = np.zeros((0, problem.mesh.node_count))
     if contact is not None:
