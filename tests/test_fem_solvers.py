@@ -345,7 +345,7 @@ def test_no_nodal_array_leaves_the_gpu_inside_a_load_increment(monkeypatch):
         problem, depths, device="cpu", progress=False, options=NewtonOptions(tolerance=1e-10)
     )
     inside, copied = [False], []
-    numpy_of_warp, asnumpy, iterations = wp.array.numpy, cupy.asnumpy, solvers._newton_iterations
+    numpy_of_warp, asnumpy, increment = wp.array.numpy, cupy.asnumpy, solvers._newton_increment
 
     def record(values):
         if inside[0] and values.shape and values.shape[0] == node_count:
@@ -363,13 +363,13 @@ def test_no_nodal_array_leaves_the_gpu_inside_a_load_increment(monkeypatch):
     def watched(*args, **kwargs):
         inside[0] = True
         try:
-            return iterations(*args, **kwargs)
+            return increment(*args, **kwargs)
         finally:
             inside[0] = False
 
     monkeypatch.setattr(wp.array, "numpy", warp_to_numpy)
     monkeypatch.setattr(cupy, "asnumpy", cupy_to_numpy)
-    monkeypatch.setattr(solvers, "_newton_iterations", watched)
+    monkeypatch.setattr(solvers, "_newton_increment", watched)
     result = simulate_indentation(
         problem, depths, device="cuda:0", progress=False, options=NewtonOptions(tolerance=1e-10)
     )

@@ -1079,171 +1079,141 @@ def _newton_increment(
     (None: not timed).
     """
     arrays = solver.arrays
+    if reuse is None:
+        reuse = _ReuseTracker()
+    if timer is None:
+        timer = PhaseTimer(enabled=False)
     with arrays.context():
-        return _newton_iterations(
-            assembler,
-            solver,
-            arrays.asarray(u_start),
-            arrays.asarray(prescribed_increment),
-            arrays.asarray(free),
-            constrained_wp,
-            tolerance=tolerance,
-            force_floor=force_floor,
-            max_iterations=max_iterations,
-            nonlinear_elimination=nonlinear_elimination,
-            free_guess=None if free_guess is None else arrays.asarray(free_guess),
-            damping=damping,
-            reuse_factorization=reuse_factorization,
-            reuse=_ReuseTracker() if reuse is None else reuse,
-            timer=PhaseTimer(enabled=False) if timer is None else timer,
+        u_start, prescribed_increment, free = (
+            arrays.asarray(values) for values in (u_start, prescribed_increment, free)
         )
-
-
-def _newton_iterations(
-    assembler: Assembler,
-    solver: LinearSolver,
-    u_start: Any,
-    prescribed_increment: Any,
-    free: Any,
-    constrained_wp: wp.array,
-    *,
-    tolerance: float,
-    force_floor: float,
-    max_iterations: int,
-    nonlinear_elimination: bool,
-    free_guess: Any,
-    damping: bool,
-    reuse_factorization: bool,
-    reuse: _ReuseTracker,
-    timer: PhaseTimer,
-) -> _Step:
-    """The iterations of :func:`_newton_increment`, on its arrays and inside their context."""
-    arrays = solver.arrays
-    u = u_start.copy()
-    fixed = 1.0 - free
-    linear_total = 0
-    local_total = 0
-    increment_wp = arrays.warp(prescribed_increment)
-    k_times_increment = wp.zeros_like(increment_wp)
-    linearized = True
-    if free_guess is not None:
-        guess = u_start + prescribed_increment + free_guess * free
-        with timer.phase("assembly"):
-            assembly = assembler.assemble(guess)
-        if assembly.min_jacobian > 0.0 and math.isfinite(assembly.energy_J):
-            u, linearized = guess, False
-    if linearized:
-        with timer.phase("assembly"):
-            assembly = assembler.assemble(u)
-    residual = arrays.view(assembly.residual)
-    limit = max(tolerance * arrays.norm(residual * fixed), force_floor)
-
-    def outcome(converged: bool, iteration: int, reason: str) -> _Step:
-        return _Step(
-            converged,
-            u,
-            iteration,
-            linear_total,
-            reason,
-            local_total,
-            from_guess=not linearized,
-            residual=residual if converged else None,
-        )
-
-    factor = 0.0
-    for iteration in range(1, max_iterations + 1):
-        first = iteration == 1 and linearized
-        if first:
-            wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
-            k_du = arrays.view(k_times_increment)
-            rhs = -(residual + k_du) * free + prescribed_increment
-        else:
-            rhs = -residual * free
-        with timer.phase("assembly"):
-            assembler.eliminate(constrained_wp, damping=factor)
-        factorizations = solver.factorizations
-        du, linear_iterations = solver.solve_newton(
-            assembly.matrix,
-            rhs,
-            rtol=_forcing_term(limit, arrays.norm(rhs)),
-            reuse=reuse_factorization and reuse.promising(u, factor, arrays),
-        )
-        if solver.factorizations > factorizations:
-            reuse.factorized(u, factor)
-        linear_total += linear_iterations
-        free_du = du * free
-        free_residual = residual * free
-        du_squared, old_squared, slope, free_du_squared = arrays.floats(
-            arrays.squared_norm(du),
-            arrays.squared_norm(free_residual),
-            arrays.dot(free_residual, du),
-            arrays.squared_norm(free_du),
-        )
-        if not math.isfinite(du_squared):
-            return outcome(False, iteration, "the linear solve gave non-finite values")
-        if first:
-            reuse.step_scale = math.sqrt(free_du_squared)
-        old_norm = math.sqrt(old_squared)
-        with timer.phase("line_search"):
-            if first:
-                search = _first_iteration_step(
-                    assembler, u + prescribed_increment, free_du, arrays=arrays
-                )
-            else:
-                search = _line_search(
-                    assembler,
-                    u,
-                    free_du,
-                    free,
-                    assembly.energy_J,
-                    slope,
-                    old_norm,
-                    arrays=arrays,
-                )
-        if search.assembly is None:
-            return outcome(False, iteration, search.reason)
-        u, alpha = search.state, search.alpha
-        if damping and not first:
-            factor = _next_damping(factor, alpha)
-        if search.current:
-            # The line search's residual at u; the tangent only where another iteration
-            # (or the elimination) needs it, not at the converged state.
-            assembly = search.assembly
-        else:
+        if free_guess is not None:
+            free_guess = arrays.asarray(free_guess)
+        u = u_start.copy()
+        fixed = 1.0 - free
+        linear_total = 0
+        local_total = 0
+        increment_wp = arrays.warp(prescribed_increment)
+        k_times_increment = wp.zeros_like(increment_wp)
+        linearized = True
+        if free_guess is not None:
+            guess = u_start + prescribed_increment + free_guess * free
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(guess)
+            if assembly.min_jacobian > 0.0 and math.isfinite(assembly.energy_J):
+                u, linearized = guess, False
+        if linearized:
             with timer.phase("assembly"):
                 assembly = assembler.assemble(u)
         residual = arrays.view(assembly.residual)
-        free_norm, reaction_norm = _residual_norms(arrays, residual, free, fixed)
-        limit = max(tolerance * reaction_norm, force_floor)
-        if nonlinear_elimination and free_norm > limit:
-            if assembly.matrix is None:
+        limit = max(tolerance * arrays.norm(residual * fixed), force_floor)
+
+        def outcome(converged: bool, iteration: int, reason: str) -> _Step:
+            return _Step(
+                converged,
+                u,
+                iteration,
+                linear_total,
+                reason,
+                local_total,
+                from_guess=not linearized,
+                residual=residual if converged else None,
+            )
+
+        factor = 0.0
+        for iteration in range(1, max_iterations + 1):
+            first = iteration == 1 and linearized
+            if first:
+                wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
+                k_du = arrays.view(k_times_increment)
+                rhs = -(residual + k_du) * free + prescribed_increment
+            else:
+                rhs = -residual * free
+            with timer.phase("assembly"):
+                assembler.eliminate(constrained_wp, damping=factor)
+            factorizations = solver.factorizations
+            du, linear_iterations = solver.solve_newton(
+                assembly.matrix,
+                rhs,
+                rtol=_forcing_term(limit, arrays.norm(rhs)),
+                reuse=reuse_factorization and reuse.promising(u, factor, arrays),
+            )
+            if solver.factorizations > factorizations:
+                reuse.factorized(u, factor)
+            linear_total += linear_iterations
+            free_du = du * free
+            free_residual = residual * free
+            du_squared, old_squared, slope, free_du_squared = arrays.floats(
+                arrays.squared_norm(du),
+                arrays.squared_norm(free_residual),
+                arrays.dot(free_residual, du),
+                arrays.squared_norm(free_du),
+            )
+            if not math.isfinite(du_squared):
+                return outcome(False, iteration, "the linear solve gave non-finite values")
+            if first:
+                reuse.step_scale = math.sqrt(free_du_squared)
+            old_norm = math.sqrt(old_squared)
+            with timer.phase("line_search"):
+                if first:
+                    search = _first_iteration_step(
+                        assembler, u + prescribed_increment, free_du, arrays=arrays
+                    )
+                else:
+                    search = _line_search(
+                        assembler,
+                        u,
+                        free_du,
+                        free,
+                        assembly.energy_J,
+                        slope,
+                        old_norm,
+                        arrays=arrays,
+                    )
+            if search.assembly is None:
+                return outcome(False, iteration, search.reason)
+            u, alpha = search.state, search.alpha
+            if damping and not first:
+                factor = _next_damping(factor, alpha)
+            if search.current:
+                # The line search's residual at u; the tangent only where another iteration
+                # (or the elimination) needs it, not at the converged state.
+                assembly = search.assembly
+            else:
+                with timer.phase("assembly"):
+                    assembly = assembler.assemble(u)
+            residual = arrays.view(assembly.residual)
+            free_norm, reaction_norm = _residual_norms(arrays, residual, free, fixed)
+            limit = max(tolerance * reaction_norm, force_floor)
+            if nonlinear_elimination and free_norm > limit:
+                if assembly.matrix is None:
+                    with timer.phase("assembly"):
+                        assembly = assembler.assemble(u)
+                    residual = arrays.view(assembly.residual)
+                with timer.phase("elimination"):
+                    u, assembly, local = _nonlinear_elimination(
+                        assembler, assembly, u, free, limit, arrays=arrays
+                    )
+                local_total += local
+                if local:
+                    residual = arrays.view(assembly.residual)
+                    free_norm, reaction_norm = _residual_norms(arrays, residual, free, fixed)
+                    limit = max(tolerance * reaction_norm, force_floor)
+            step_squared, increment_squared = arrays.floats(
+                arrays.squared_norm(alpha * free_du), arrays.squared_norm(u - u_start)
+            )
+            # A correction at roundoff relative to the increment means the residual sits at its
+            # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
+            at_roundoff = math.sqrt(step_squared) <= 1e-10 * math.sqrt(increment_squared)
+            if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
+                return outcome(True, iteration, "converged")
+            if not math.isfinite(free_norm):
+                return outcome(False, iteration, "the residual became non-finite")
+            if assembly.matrix is None:  # the next iteration's tangent
                 with timer.phase("assembly"):
                     assembly = assembler.assemble(u)
                 residual = arrays.view(assembly.residual)
-            with timer.phase("elimination"):
-                u, assembly, local = _nonlinear_elimination(
-                    assembler, assembly, u, free, limit, arrays=arrays
-                )
-            local_total += local
-            if local:
-                residual = arrays.view(assembly.residual)
-                free_norm, reaction_norm = _residual_norms(arrays, residual, free, fixed)
-                limit = max(tolerance * reaction_norm, force_floor)
-        step_squared, increment_squared = arrays.floats(
-            arrays.squared_norm(alpha * free_du), arrays.squared_norm(u - u_start)
-        )
-        # A correction at roundoff relative to the increment means the residual sits at its
-        # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
-        at_roundoff = math.sqrt(step_squared) <= 1e-10 * math.sqrt(increment_squared)
-        if free_norm <= limit or (at_roundoff and free_norm <= 1e-6 * reaction_norm):
-            return outcome(True, iteration, "converged")
-        if not math.isfinite(free_norm):
-            return outcome(False, iteration, "the residual became non-finite")
-        if assembly.matrix is None:  # the next iteration's tangent
-            with timer.phase("assembly"):
-                assembly = assembler.assemble(u)
-            residual = arrays.view(assembly.residual)
-    return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
+        return outcome(False, max_iterations, f"no convergence in {max_iterations} iterations")
 
 
 def _residual_norms(
