@@ -71,6 +71,35 @@ def problems_for(mesh: Any, count: int) -> list[Any]:
     ]
 
 
+def _common(
+    device: Any,
+    mesh: Any,
+    kind: str,
+    count: int,
+    steps: int,
+    batched_s: float,
+    sequential_count: int,
+    sequential_s: float,
+) -> dict:
+    """The fields every row has: the case, both times and both rates (per minute)."""
+    batched_rate = 60.0 * count / batched_s
+    sequential_rate = 60.0 * sequential_count / sequential_s
+    return {
+        "device": str(device),
+        "cells": mesh.tet_count,
+        "dofs": 3 * mesh.node_count,
+        "problems": count,
+        "steps": steps,
+        "kind": kind,
+        "batched_s": batched_s,
+        "sequential_problems": sequential_count,
+        "sequential_s": sequential_s,
+        "batched_per_minute": batched_rate,
+        "sequential_per_minute": sequential_rate,
+        "speedup": batched_rate / sequential_rate,
+    }
+
+
 def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int) -> dict:
     """One row: K problems batched, and the first ``sequential_limit`` of them alone."""
     import warp as wp
@@ -109,23 +138,10 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
         float(np.max(np.abs(b.reaction_force_N / a.reaction_force_N - 1.0)))
         for a, b in zip(alone, batched, strict=False)
     )
-    batched_rate = 60.0 * count / batched_s
-    sequential_rate = 60.0 * alone_count / sequential_s
     return {
-        "device": str(warp_device),
-        "cells": mesh.tet_count,
-        "dofs": 3 * mesh.node_count,
-        "problems": count,
-        "steps": steps,
-        "batched_s": batched_s,
+        **_common(warp_device, mesh, "curves", count, steps, batched_s, alone_count, sequential_s),
         "batched_completed": sum(result.completed for result in batched),
         "batched_newton_iterations": int(sum(r.newton_iterations.sum() for r in batched)),
-        "sequential_problems": alone_count,
-        "sequential_s": sequential_s,
-        "kind": "curves",
-        "batched_per_minute": batched_rate,
-        "sequential_per_minute": sequential_rate,
-        "speedup": batched_rate / sequential_rate,
         "max_force_difference": difference,
     }
 
@@ -212,23 +228,10 @@ def run_fits(mesh: Any, count: int, device: str, *, steps: int, sequential_limit
     wp.synchronize_device(warp_device)
     sequential_s = time.perf_counter() - started
     difference = max(abs(float(b.x[0] / a.x[0]) - 1.0) for a, b in zip(alone, fits, strict=False))
-    batched_rate = 60.0 * count / batched_s
-    sequential_rate = 60.0 * alone_count / sequential_s
     return {
-        "device": str(warp_device),
-        "cells": mesh.tet_count,
-        "dofs": 3 * mesh.node_count,
-        "problems": count,
-        "steps": steps,
-        "kind": "fits",
-        "batched_s": batched_s,
+        **_common(warp_device, mesh, "fits", count, steps, batched_s, alone_count, sequential_s),
         "batched_completed": sum(fit.success for fit in fits),
         "batched_lm_iterations": int(sum(fit.iterations for fit in fits)),
-        "sequential_problems": alone_count,
-        "sequential_s": sequential_s,
-        "batched_per_minute": batched_rate,
-        "sequential_per_minute": sequential_rate,
-        "speedup": batched_rate / sequential_rate,
         "max_parameter_difference": difference,
         "max_truth_error": max(
             abs(float(fit.x[0] / truth.material.parameter_vector[0]) - 1.0)
