@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import warp as wp
 
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
-from warptissue.fem.batched import simulate_indentation_batch
+from warptissue.fem.arrays import DeviceArrays
+from warptissue.fem.batched import _Segments, simulate_indentation_batch
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, Viscoelastic
 from warptissue.mesh import indentation_block
@@ -43,6 +45,24 @@ def _problems():
         _punch(RADIUS_M / 3.0, MooneyRivlin(200.0, 60.0, 2e5), width_m=0.01),
         _punch(RADIUS_M / 2.0, NeoHookean(500.0, 5e5), contact="frictionless"),
     ]
+
+
+def test_per_problem_sums_and_spreads_follow_the_node_ranges(device, rng):
+    """Sums over each problem's node range (of different lengths, one of a single node)
+    equal NumPy's sums of the slices, and a per-problem value spreads to its own nodes."""
+    offsets = np.array([0, 5, 6, 13])
+    vectors, scalars = rng.standard_normal((13, 3)), rng.standard_normal(13)
+    arrays = DeviceArrays(wp.get_device(device))
+    with arrays.context():
+        segments = _Segments(arrays, offsets)
+        vector_sums, scalar_sums = segments.sums(arrays.asarray(vectors), arrays.asarray(scalars))
+        spread = arrays.host(segments.per_node(np.array([1.0, 2.0, 3.0])))
+    for k in range(3):
+        nodes = slice(offsets[k], offsets[k + 1])
+        assert vector_sums[k] == pytest.approx(vectors[nodes].sum(), rel=1e-14, abs=1e-14)
+        assert scalar_sums[k] == pytest.approx(scalars[nodes].sum(), rel=1e-14, abs=1e-14)
+        np.testing.assert_array_equal(spread[nodes, 0], k + 1.0)
+    assert segments.count == 3 and spread.shape == (13, 1)
 
 
 def test_batched_curves_equal_sequential_ones(device):

@@ -63,33 +63,40 @@ class _Increment:
 
 
 class _Segments:
-    """Sums over each problem's nodes of the union, in the Newton loop's array library."""
+    """Sums over each problem's nodes of the union, in the Newton loop's array library.
 
-    def __init__(self, arrays: Any, node_problem: np.ndarray, count: int) -> None:
+    Each problem's nodes are one contiguous range of the union (``node_offsets``). A sum
+    gathers every problem's range into one row of a (K, longest range) array, zero-padded,
+    and reduces the rows: one gather and one row reduction for all problems and arrays.
+    (A weighted ``bincount`` over the node-to-problem map, the first version, adds every
+    node into K bins with atomics; on an H100 that took 64 % of a 16-problem run.)
+    """
+
+    def __init__(self, arrays: Any, node_offsets: np.ndarray) -> None:
         self.arrays = arrays
-        self.count = count
-        self.node_problem = arrays.xp.asarray(node_problem)
+        offsets = np.asarray(node_offsets, dtype=np.int64)
+        self.count = offsets.size - 1
+        sizes = np.diff(offsets)
+        node_count = int(offsets[-1])
+        rows = np.full((self.count, int(sizes.max())), node_count, dtype=np.int64)
+        for k in range(self.count):
+            rows[k, : sizes[k]] = np.arange(offsets[k], offsets[k + 1])
+        self._rows = arrays.xp.asarray(rows)
+        self._node_problem = arrays.xp.asarray(np.repeat(np.arange(self.count), sizes))
 
     def sums(self, *rowwise: Any) -> list[np.ndarray]:
         """Per-problem sums of nodal arrays of shape (N,) or (N, 3), read in one copy."""
         xp = self.arrays.xp
-        stacked = xp.stack(
-            [
-                xp.bincount(
-                    self.node_problem,
-                    weights=values.sum(axis=1) if values.ndim == 2 else values,
-                    minlength=self.count,
-                )
-                for values in rowwise
-            ]
-        )
-        host = self.arrays.host(stacked)
+        columns = [values.sum(axis=1) if values.ndim == 2 else values for values in rowwise]
+        padded = xp.zeros((len(columns), columns[0].shape[0] + 1))
+        padded[:, :-1] = xp.stack(columns)
+        host = self.arrays.host(padded[:, self._rows].sum(axis=2))
         return [host[i] for i in range(len(rowwise))]
 
     def per_node(self, values: np.ndarray) -> Any:
         """A per-problem array (K,) spread to the nodes, as an (N, 1) array of the library."""
         xp = self.arrays.xp
-        return xp.asarray(values, dtype=xp.float64)[self.node_problem][:, None]
+        return xp.asarray(values, dtype=xp.float64)[self._node_problem][:, None]
 
 
 def _batched_line_search(
@@ -173,7 +180,6 @@ def _batched_increment(
     prescribed_increment: Any,
     free: Any,
     constrained: Any,
-    node_problem: np.ndarray,
     active: np.ndarray,
     weights: Any,
     *,
@@ -436,7 +442,6 @@ def solve_quasistatic_batch(
     if assembler.node_count != packed.mesh.node_count or assembler.problem_count != count:
         raise InputError("the assembler was not built for these packed meshes", key="assembler")
     n = packed.mesh.node_count
-    node_problem = packed.node_problem
     offsets = packed.node_offsets
     paths = []
     for k, values in enumerate(loads):
@@ -457,7 +462,7 @@ def solve_quasistatic_batch(
     for k, material in enumerate(assembler.materials):
         floors[k] = 1e-13 * material.initial_shear_modulus_Pa * volumes[k] ** (2.0 / 3.0)
     with arrays.context():
-        segments = _Segments(arrays, node_problem, count)
+        segments = _Segments(arrays, offsets)
         u = arrays.asarray(np.zeros((n, 3)))
         free_x, weights_x = arrays.asarray(free), arrays.asarray(weights)
         constrained_x = arrays.asarray(constrained)
@@ -481,7 +486,6 @@ def solve_quasistatic_batch(
                 arrays.asarray(increment),
                 free_x,
                 constrained_x,
-                node_problem,
                 active,
                 weights_x,
                 tolerance=options.tolerance,
