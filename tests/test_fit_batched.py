@@ -5,10 +5,14 @@ parameters that made its synthetic curve."""
 from __future__ import annotations
 
 import dataclasses
+import threading
+import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+import warptissue.fit.batched as batched
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.fit import least_squares
@@ -96,3 +100,58 @@ def test_batched_fits_refuse_bad_input():
         fit_indentation_batch(truths, depths, forces, ("C42_Pa",))
     with pytest.raises(InputError, match="one finite force per depth"):
         fit_indentation_batch(truths, depths, [f[:1] for f in forces], ("C10_Pa",))
+
+
+def _linear_forward(calls: list, interrupt_at: int | None = None):
+    """A stand-in for the batched FE: force = C10 * depth (N per Pa m), exact sensitivity;
+    it records the thread of each call and raises Ctrl-C at call ``interrupt_at``."""
+
+    def run(problems, depths, **kwargs):
+        calls.append((threading.current_thread(), len(problems)))
+        if len(calls) == interrupt_at:
+            raise KeyboardInterrupt
+        return [
+            SimpleNamespace(
+                completed=True,
+                reaction_force_N=p.material.parameter_vector[0] * d,
+                force_sensitivity_N_per_unit=d[:, None],
+            )
+            for p, d in zip(problems, depths, strict=True)
+        ]
+
+    return run
+
+
+def _linear_fits():
+    problem = _punch(RADIUS_M, NeoHookean(287.5, 575e3))
+    truths = (300.0, 450.0, 600.0)
+    depths = [RADIUS_M * np.array([0.1, 0.2])] * 3
+    return [problem] * 3, depths, [c * d for c, d in zip(truths, depths, strict=True)], truths
+
+
+def test_the_batched_fe_runs_in_the_callers_thread(monkeypatch):
+    """Each batch is solved in the thread that called the fit (the GPU libraries keep
+    per-thread handles), once per round of trial points, and every fit finds its truth."""
+    calls: list = []
+    monkeypatch.setattr(batched, "simulate_indentation_batch", _linear_forward(calls))
+    problems, depths, forces, truths = _linear_fits()
+    fits = fit_indentation_batch(problems, depths, forces, ("C10_Pa",), device="cpu")
+    assert {thread for thread, _ in calls} == {threading.current_thread()}
+    assert calls[0][1] == 3
+    for fit, truth in zip(fits, truths, strict=True):
+        assert fit.success and fit.x[0] == pytest.approx(truth, rel=1e-8)
+
+
+def test_ctrl_c_in_a_batch_stops_every_fit(monkeypatch):
+    calls: list = []
+    monkeypatch.setattr(batched, "simulate_indentation_batch", _linear_forward(calls, 2))
+    problems, depths, forces, _ = _linear_fits()
+    with pytest.raises(KeyboardInterrupt):
+        fit_indentation_batch(problems, depths, forces, ("C10_Pa",), device="cpu")
+    deadline = time.monotonic() + 10.0
+    while time.monotonic() < deadline and any(
+        t.name.startswith("warptissue-fit-") for t in threading.enumerate()
+    ):
+        time.sleep(0.01)
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("warptissue-fit-")]
+    assert len(calls) == 2

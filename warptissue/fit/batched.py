@@ -10,7 +10,7 @@ GPU does one batch of K curves where it did K curves one after another. A fit th
 stopped leaves the batch; the others go on.
 
 The fits run in threads that meet at the forward model (only the batched FE does work; the
-engine's steps are small dense solves).
+engine's steps are small dense solves); the batched FE itself runs in the caller's thread.
 """
 
 from __future__ import annotations
@@ -43,11 +43,13 @@ class _Evaluation:
 
 
 class _BatchedForward:
-    """Collects the fits' trial points and solves them in one batched FE run.
+    """Collects the fits' trial points; the caller's thread solves them in one batched FE run.
 
-    A fit's thread calls :meth:`evaluate` and waits; the thread that completes the set of
-    running fits runs the batch (the others are woken with their results). :meth:`leave`
-    takes a stopped fit out of the set.
+    A fit's thread calls :meth:`evaluate` and waits. :meth:`serve`, in the thread that called
+    :func:`fit_indentation_batch`, runs a batch whenever every fit still running has a trial
+    point waiting, and hands each its result. :meth:`leave` takes a stopped fit out of the
+    set. The FE runs in one thread because the GPU's libraries keep per-thread state (nvmath's
+    cuDSS handles fail in a thread other than the one that first used them).
     """
 
     def __init__(self, count: int, run: Any) -> None:
@@ -56,37 +58,62 @@ class _BatchedForward:
         self._live = set(range(count))
         self._pending: dict[int, np.ndarray] = {}
         self._results: dict[int, _Evaluation] = {}
-        self._generation = 0
+        self._stopped: BaseException | None = None
         self.batches = 0
         self.batch_sizes: list[int] = []
 
     def evaluate(self, k: int, x: np.ndarray) -> _Evaluation:
         with self._condition:
+            if self._stopped is not None:
+                return _Evaluation(x, None, None, self._stopped)
             self._pending[k] = x
-            generation = self._generation
-            if set(self._pending) >= self._live:
-                self._run_pending()
-            else:
-                self._condition.wait_for(lambda: self._generation != generation)
+            self._condition.notify_all()
+            self._condition.wait_for(lambda: k in self._results)
             return self._results.pop(k)
 
     def leave(self, k: int) -> None:
         with self._condition:
             self._live.discard(k)
-            if self._pending and set(self._pending) >= self._live:
-                self._run_pending()
+            self._condition.notify_all()
 
-    def _run_pending(self) -> None:
-        batch, self._pending = self._pending, {}
+    def serve(self) -> None:
+        """Run batches in this thread until every fit has left.
+
+        An exception of a batch is handed to each fit of that batch. An interrupt (Ctrl-C)
+        is handed to every waiting fit and to every later trial point, so that the fit
+        threads end, and raised here.
+        """
+        batch: dict[int, np.ndarray] = {}
         try:
-            results = self._run(batch)
-        except Exception as exc:  # every waiting fit gets the error
-            results = {k: _Evaluation(x, None, None, exc) for k, x in batch.items()}
-        self._results.update(results)
-        self.batches += 1
-        self.batch_sizes.append(len(batch))
-        self._generation += 1
-        self._condition.notify_all()
+            while True:
+                with self._condition:
+                    self._condition.wait_for(
+                        lambda: not self._live or (bool(self._pending) and self._ready())
+                    )
+                    if not self._live:
+                        return
+                    batch, self._pending = self._pending, {}
+                try:
+                    results = self._run(batch)
+                except Exception as exc:  # every fit of the batch gets the error
+                    results = {k: _Evaluation(x, None, None, exc) for k, x in batch.items()}
+                with self._condition:
+                    self._results.update(results)
+                    self.batches += 1
+                    self.batch_sizes.append(len(batch))
+                    batch = {}
+                    self._condition.notify_all()
+        except BaseException as exc:  # Ctrl-C: every fit stops
+            with self._condition:
+                self._stopped = exc
+                for k, x in {**batch, **self._pending}.items():
+                    self._results[k] = _Evaluation(x, None, None, exc)
+                self._pending = {}
+                self._condition.notify_all()
+            raise
+
+    def _ready(self) -> bool:
+        return set(self._pending) >= self._live
 
 
 def fit_indentation_batch(
@@ -226,9 +253,13 @@ def fit_indentation_batch(
         finally:
             forward.leave(k)
 
-    threads = [threading.Thread(target=fit, args=(k,), daemon=True) for k in range(count)]
+    threads = [
+        threading.Thread(target=fit, args=(k,), name=f"warptissue-fit-{k}", daemon=True)
+        for k in range(count)
+    ]
     for thread in threads:
         thread.start()
+    forward.serve()
     for thread in threads:
         thread.join()
     for outcome in outcomes:
