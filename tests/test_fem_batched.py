@@ -11,7 +11,7 @@ import warp as wp
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.fem.arrays import DeviceArrays
-from warptissue.fem.batched import _Segments, simulate_indentation_batch
+from warptissue.fem.batched import _Segments, batch_assembler, simulate_indentation_batch
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, Viscoelastic
 from warptissue.mesh import indentation_block
@@ -137,6 +137,32 @@ def test_a_failing_problem_stops_alone():
         options=NewtonOptions(tolerance=TOLERANCE),
     )
     np.testing.assert_allclose(easy.reaction_force_N, alone.reaction_force_N, rtol=1e-8)
+
+
+def test_a_reused_assembler_takes_each_calls_materials():
+    """An assembler from batch_assembler, reused with new materials (a fit's next trial
+    points), gives the curves of a run that builds its own; one of other meshes is refused."""
+    problems = _problems()[:2]
+    depths = [RADIUS_M * np.array([0.05, 0.1]), RADIUS_M * np.array([0.08])]
+    options = NewtonOptions(tolerance=TOLERANCE)
+    stiffer = [
+        IndentationProblem(
+            p.mesh,
+            p.material.with_parameters(p.material.parameter_vector * 1.5),
+            p.indenter,
+            symmetry_planes=p.symmetry_planes,
+        )
+        for p in problems
+    ]
+    assembler = batch_assembler(problems, device="cpu")
+    first = simulate_indentation_batch(problems, depths, options=options, assembler=assembler)
+    second = simulate_indentation_batch(stiffer, depths, options=options, assembler=assembler)
+    fresh = simulate_indentation_batch(stiffer, depths, device="cpu", options=options)
+    for reused, own, soft in zip(second, fresh, first, strict=True):
+        np.testing.assert_allclose(reused.reaction_force_N, own.reaction_force_N, rtol=1e-12)
+        assert np.all(np.abs(reused.reaction_force_N) > 1.4 * np.abs(soft.reaction_force_N))
+    with pytest.raises(InputError, match="assembler was built for other meshes"):
+        simulate_indentation_batch(problems[:1], depths[:1], assembler=assembler)
 
 
 def test_the_batch_refuses_what_it_cannot_take():

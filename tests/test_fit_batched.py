@@ -131,13 +131,18 @@ def _linear_fits():
 
 def test_the_batched_fe_runs_in_the_callers_thread(monkeypatch):
     """Each batch is solved in the thread that called the fit (the GPU libraries keep
-    per-thread handles), once per round of trial points, and every fit finds its truth."""
+    per-thread handles), once per round of trial points, with the assembler built once per
+    set of running fits, and every fit finds its truth."""
     calls: list = []
     monkeypatch.setattr(batched, "simulate_indentation_batch", _linear_forward(calls))
+    builds: list = []
+    monkeypatch.setattr(batched, "batch_assembler", lambda problems, **kw: builds.append(1))
     problems, depths, forces, truths = _linear_fits()
     fits = fit_indentation_batch(problems, depths, forces, ("C10_Pa",), device="cpu")
     assert {thread for thread, _ in calls} == {threading.current_thread()}
     assert calls[0][1] == 3
+    # One assembler per set of running fits (a set only shrinks), not one per batch.
+    assert len(builds) == len({size for _, size in calls}) < len(calls)
     for fit, truth in zip(fits, truths, strict=True):
         assert fit.success and fit.x[0] == pytest.approx(truth, rel=1e-8)
 

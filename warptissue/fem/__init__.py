@@ -12,7 +12,11 @@ problems in the same launches: :func:`simulate_indentation_batch` (:mod:`warptis
 """
 
 from warptissue.fem.assembly import FORMULATIONS, Assembler, Assembly, von_mises
-from warptissue.fem.batched import simulate_indentation_batch, solve_quasistatic_batch
+from warptissue.fem.batched import (
+    batch_assembler,
+    simulate_indentation_batch,
+    solve_quasistatic_batch,
+)
 from warptissue.fem.elements import ElementGeometry, element_geometry
 from warptissue.fem.indentation import (
     IndentationProblem,
@@ -46,6 +50,7 @@ __all__ = [
     "NewtonTimings",
     "QuasistaticResult",
     "SolveInterrupted",
+    "batch_assembler",
     "element_geometry",
     "simulate_indentation",
     "simulate_indentation_batch",

@@ -43,7 +43,7 @@ from warptissue.fem.solvers import (
 )
 from warptissue.materials import Viscoelastic
 
-__all__ = ["simulate_indentation_batch", "solve_quasistatic_batch"]
+__all__ = ["batch_assembler", "simulate_indentation_batch", "solve_quasistatic_batch"]
 
 LINE_SEARCH_EVALUATIONS = 10
 """Residual assemblies of one batched line search (as the single-problem line search)."""
@@ -582,6 +582,7 @@ def simulate_indentation_batch(
     device: str | None = None,
     options: NewtonOptions | None = None,
     sensitivities: Sequence[str] = (),
+    assembler: Assembler | None = None,
 ) -> list[IndentationResult]:
     """K flat-punch indentations solved together on one device.
 
@@ -594,6 +595,10 @@ def simulate_indentation_batch(
         sensitivities: Material parameters (``C10_Pa``, ``bulk_modulus_Pa``, ...; moduli,
             not Ogden exponents) to differentiate each problem's force by, exactly, at each
             depth: ``result.force_sensitivity_N_per_unit``.
+        assembler: An assembler of these problems' meshes, in this order, from
+            :func:`batch_assembler`, to reuse across calls that change only the materials
+            (a batched fit's trial points); it takes the problems' materials, and the run
+            uses its device. None builds one on ``device``.
 
     Returns:
         One :class:`warptissue.fem.IndentationResult` per problem, as
@@ -602,7 +607,8 @@ def simulate_indentation_batch(
 
     Raises:
         InputError: No problem, a problem this batch cannot take (rigid contact, a
-            viscoelastic material, another element type or formulation), or bad depths.
+            viscoelastic material, another element type or formulation), bad depths, or an
+            assembler of other meshes or another formulation.
     """
     problems = list(problems)
     if not problems:
@@ -643,13 +649,28 @@ def simulate_indentation_batch(
             )
         depths.append(path)
     packed = pack_meshes([problem.mesh for problem in problems])
-    assembler = Assembler(
-        packed.mesh,
-        [problem.material for problem in problems],
-        formulation=formulation,
-        device=device,
-        element_problem=packed.element_problem,
-    )
+    if assembler is None:
+        assembler = _packed_assembler(problems, packed, device)
+    else:
+        if (
+            assembler.problem_count != len(problems)
+            or assembler.node_count != packed.mesh.node_count
+            or assembler.tet_count != packed.mesh.tet_count
+            or assembler.formulation != formulation
+        ):
+            raise InputError(
+                f"the assembler was built for other meshes or another formulation "
+                f"({len(problems)} problems, {packed.mesh.node_count} nodes, "
+                f"{packed.mesh.tet_count} tets, {formulation!r} expected)",
+                key="assembler",
+                value=(
+                    assembler.problem_count,
+                    assembler.node_count,
+                    assembler.tet_count,
+                    assembler.formulation,
+                ),
+            )
+        assembler.set_material([problem.material for problem in problems])
     paths = solve_quasistatic_batch(
         assembler,
         packed,
@@ -673,3 +694,37 @@ def simulate_indentation_batch(
             _indentation_result(problem, None, path, tuple(sensitivities), stress_Pa=stress[tets])
         )
     return results
+
+
+def batch_assembler(
+    problems: Sequence[IndentationProblem], *, device: str | None = None
+) -> Assembler:
+    """The assembler of K problems' packed meshes, for :func:`simulate_indentation_batch`.
+
+    Building it (element geometry and the sparsity pattern of the union) costs about as much
+    as a few Newton iterations; a caller that solves the same meshes with other materials
+    (the trial points of batched fits) builds it once and passes it to every call.
+
+    Args:
+        problems: The problems, in the order of the calls that will use it.
+        device: Warp device; None for Warp's default.
+
+    Returns:
+        An :class:`warptissue.fem.Assembler` of the packed meshes, one material per problem.
+    """
+    problems = list(problems)
+    if not problems:
+        raise InputError("at least one problem is needed", key="problems", value=0)
+    return _packed_assembler(problems, pack_meshes([p.mesh for p in problems]), device)
+
+
+def _packed_assembler(
+    problems: list[IndentationProblem], packed: PackedMeshes, device: str | None
+) -> Assembler:
+    return Assembler(
+        packed.mesh,
+        [problem.material for problem in problems],
+        formulation=problems[0].formulation,
+        device=device,
+        element_problem=packed.element_problem,
+    )

@@ -25,7 +25,7 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions
-from warptissue.fem.batched import simulate_indentation_batch
+from warptissue.fem.batched import batch_assembler, simulate_indentation_batch
 from warptissue.fit.engine import least_squares
 from warptissue.fit.result import FitResult, RejectStep
 
@@ -193,8 +193,15 @@ def fit_indentation_batch(
         bounds.append((lower[position], upper[position]))
     scales = [max(float(np.abs(f).max()), np.finfo(float).tiny) for f in forces]
 
+    # The assembler of the running fits' meshes, built again only when a fit has stopped.
+    assemblers: dict[tuple[int, ...], Any] = {}
+
     def run(batch: dict[int, np.ndarray]) -> dict[int, _Evaluation]:
         order = sorted(batch)
+        key = tuple(order)
+        if key not in assemblers:
+            assemblers.clear()
+            assemblers[key] = batch_assembler([problems[k] for k in order], device=device)
         trial = []
         for k in order:
             material = problems[k].material
@@ -204,7 +211,11 @@ def fit_indentation_batch(
                 dataclasses.replace(problems[k], material=material.with_parameters(vector))
             )
         results = simulate_indentation_batch(
-            trial, [depths[k] for k in order], device=device, options=options, sensitivities=names
+            trial,
+            [depths[k] for k in order],
+            options=options,
+            sensitivities=names,
+            assembler=assemblers[key],
         )
         out = {}
         for k, result in zip(order, results, strict=True):
