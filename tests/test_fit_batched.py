@@ -50,26 +50,26 @@ def _synthetic():
     return truths, depths, forces
 
 
-def test_batched_fits_equal_single_fits_and_find_the_truth():
+def test_batched_fits_equal_single_fits_and_find_the_truth(device):
     truths, depths, forces = _synthetic()
     starts = []
     for truth in truths:
         vector = truth.material.parameter_vector
         vector[0] *= 0.8  # C10 80 % of the truth
         starts.append(dataclasses.replace(truth, material=truth.material.with_parameters(vector)))
-    fits = fit_indentation_batch(starts, depths, forces, ("C10_Pa",), device="cpu", options=OPTIONS)
+    fits = fit_indentation_batch(starts, depths, forces, ("C10_Pa",), device=device, options=OPTIONS)
     for start, truth, path, measured, fit in zip(starts, truths, depths, forces, fits, strict=True):
         assert fit.success, fit.message
         assert fit.x[0] == pytest.approx(truth.material.parameter_vector[0], rel=1e-6)
 
-        def forward(x, start=start, path=path):
+        def forward(x, start=start, path=path, device=device):
             vector = start.material.parameter_vector
             vector[0] = x[0]
             problem = dataclasses.replace(start, material=start.material.with_parameters(vector))
             return simulate_indentation(
                 problem,
                 path,
-                device="cpu",
+                device=device,
                 progress=False,
                 options=OPTIONS,
                 sensitivities=("C10_Pa",),
