@@ -1,5 +1,6 @@
-"""The benchmarks run, and the tables of docs/performance.md are what the flat-punch benchmark
-prints from the results files the page names, against the reference force those files hold."""
+"""The benchmarks run, and the tables of docs/performance.md are what the flat-punch,
+inverse-fit and batched-FE benchmarks print from the results files the page names (the
+flat-punch ones against the reference force those files hold)."""
 
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ BENCHMARK = "scripts/benchmarks/bench_flat_punch.py"
 
 
 INVERSE_FIT = "scripts/benchmarks/bench_inverse_fit.py"
+BATCH = "scripts/benchmarks/bench_batch_fe.py"
 
 
 def generated_tables(benchmark: str = BENCHMARK) -> list[tuple[str, str]]:
@@ -32,11 +34,12 @@ def generated_tables(benchmark: str = BENCHMARK) -> list[tuple[str, str]]:
 def test_the_page_has_generated_tables():
     assert len(generated_tables()) >= 4
     assert len(generated_tables(INVERSE_FIT)) >= 5
+    assert len(generated_tables(BATCH)) >= 2
 
 
 @pytest.mark.parametrize(
     "command, table",
-    generated_tables() + generated_tables(INVERSE_FIT),
+    generated_tables() + generated_tables(INVERSE_FIT) + generated_tables(BATCH),
     ids=lambda x: str(x)[:40],
 )
 def test_a_performance_table_is_the_benchmarks_output(command, table):
@@ -125,3 +128,53 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
 def test_a_quick_benchmark_runs(name, args, expected, tmp_path):
     """The benchmarks without a test of their numbers still run on a small case."""
     assert re.search(expected, run_benchmark(name, *args, cwd=tmp_path))
+
+
+def test_the_cudss_batch_benchmark_runs_on_a_gpu_and_says_why_not_elsewhere(tmp_path):
+    """On a GPU with the ``gpu`` extra it times the three linear solves of a tiny batch and
+    their solutions agree; elsewhere it says what it needs, in one line, with status 5."""
+    import importlib.util
+
+    import warp as wp
+
+    usable = wp.is_cuda_available() and all(
+        importlib.util.find_spec(name) for name in ("cupy", "nvmath")
+    )
+    args = ("--tets", "300", "--counts", "1,2", "--repeat", "1", "--label", "tiny")
+    if not usable:
+        stderr = run_script(
+            "scripts/benchmarks/bench_cudss_batch.py", *args, cwd=tmp_path, expect_status=5
+        )
+        assert len(stderr.strip().splitlines()) == 1
+        assert stderr.startswith("bench_cudss_batch: needs")
+        return
+    table = run_benchmark("bench_cudss_batch.py", *args, "--out", "r.json", cwd=tmp_path)
+    rows = json.loads((tmp_path / "r.json").read_text())["runs"]
+    assert [row["problems"] for row in rows] == [1, 2]
+    for row in rows:
+        assert row["block_diagonal_factor_solve_s"] > 0.0 and row["loop_difference"] < 1e-10
+        assert row.get("batch_difference", 0.0) < 1e-10, row.get("batch_error")
+    assert re.search(r"\| tiny \| \d+ \| 2 \| \d+ \| [\d.]+ \| ", table)
+
+
+def test_the_cudss_batch_benchmark_tables_a_failed_solve(tmp_path):
+    results = {
+        "label": "h100",
+        "runs": [
+            {
+                "cells": 7885,
+                "problems": 8,
+                "dofs": 319968,
+                "block_diagonal_analysis_s": 0.52,
+                "block_diagonal_factor_solve_s": 0.0412,
+                "block_diagonal_difference": 0.0,
+                "batch_error": "RuntimeError: not supported",
+                "loop_analysis_s": 1.6,
+                "loop_factor_solve_s": 0.136,
+                "loop_difference": 2e-15,
+            }
+        ],
+    }
+    (tmp_path / "r.json").write_text(json.dumps(results))
+    table = run_benchmark("bench_cudss_batch.py", "--markdown", "r.json", cwd=tmp_path)
+    assert "| h100 | 7 885 | 8 | 319 968 | 41.2 | failed | 136 | 0.52, -, 1.6 | 2.0e-15 |" in table
