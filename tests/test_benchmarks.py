@@ -178,3 +178,60 @@ def test_the_cudss_batch_benchmark_tables_a_failed_solve(tmp_path):
     (tmp_path / "r.json").write_text(json.dumps(results))
     table = run_benchmark("bench_cudss_batch.py", "--markdown", "r.json", cwd=tmp_path)
     assert "| h100 | 7 885 | 8 | 319 968 | 41.2 | failed | 136 | 0.52, -, 1.6 | 2.0e-15 |" in table
+
+
+def test_the_cudss_batch_benchmark_splits_the_union_into_each_problems_tangent():
+    """The batch it hands cuDSS is each problem's own eliminated tangent: the diagonal blocks
+    of the packed problems' CSR matrix (two meshes of different sizes), and nothing else."""
+    import importlib.util
+
+    import numpy as np
+    import scipy.sparse
+    import warp as wp
+
+    from warptissue.fem import IndentationProblem
+    from warptissue.fem.cudss import bsr33_csr_pattern, bsr33_csr_values
+    from warptissue.indenter import Indenter
+    from warptissue.materials import NeoHookean
+    from warptissue.mesh import indentation_block
+
+    path = ROOT / "scripts/benchmarks/bench_cudss_batch.py"
+    spec = importlib.util.spec_from_file_location("bench_cudss_batch", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+
+    def csr(assembler):
+        matrix = assembler.matrix
+        offsets, columns, rows = bsr33_csr_pattern(matrix)
+        values = wp.zeros(columns.shape[0], dtype=wp.float64, device="cpu")
+        bsr33_csr_values(matrix, rows, values)
+        return offsets.numpy(), columns.numpy(), values.numpy()
+
+    problems = [
+        IndentationProblem(
+            indentation_block(
+                width_m=0.008,
+                thickness_m=0.004,
+                probe_radius_m=1e-3,
+                quarter=True,
+                size_near_m=near,
+                size_far_m=2.5e-3,
+            ),
+            NeoHookean(c10, 2000.0 * c10),
+            Indenter("flat_punch", radius_m=1e-3),
+            symmetry_planes=("symmetry_x", "symmetry_y"),
+        )
+        for near, c10 in ((5e-4, 250.0), (3.5e-4, 400.0))
+    ]
+    assembler, packed = module.eliminated_tangent(problems, "cpu")
+    offsets, columns, values = csr(assembler)
+    blocks = module.diagonal_blocks(
+        offsets, offsets, columns, values, packed.node_offsets, scipy.sparse.csr_matrix
+    )
+    assert packed.mesh.node_count > 0 and len(blocks) == 2
+    assert sum(block.nnz for block in blocks) == values.size  # nothing off the blocks
+    for problem, block in zip(problems, blocks, strict=True):
+        own_offsets, own_columns, own_values = csr(module.eliminated_tangent([problem], "cpu")[0])
+        own = scipy.sparse.csr_matrix((own_values, own_columns, own_offsets), shape=block.shape)
+        assert block.shape == (3 * problem.mesh.node_count,) * 2
+        np.testing.assert_array_equal(block.toarray(), own.toarray())

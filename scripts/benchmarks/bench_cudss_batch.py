@@ -87,6 +87,44 @@ def block_diagonal(assembler: Any, rhs: Any, repeat: int, synchronize: Any) -> d
     return {"analysis_s": analysis, "factor_solve_s": seconds, "x": solver.solve(rhs)}
 
 
+def diagonal_blocks(
+    offsets: Any,
+    host_offsets: np.ndarray,
+    columns: Any,
+    values: Any,
+    node_offsets: np.ndarray,
+    csr_matrix: Any,
+) -> list[Any]:
+    """The K diagonal blocks of a block-diagonal scalar CSR matrix, as K CSR matrices.
+
+    Args:
+        offsets, columns, values: The matrix's CSR arrays (3 N + 1,), (nnz,), (nnz,), in one
+            array library (NumPy or CuPy); the blocks' values are slices of ``values``.
+        host_offsets: ``offsets`` as a NumPy array.
+        node_offsets: First node of each problem, and the node count at the end, (K + 1,).
+        csr_matrix: The library's CSR class (``scipy.sparse.csr_matrix`` or
+            ``cupyx.scipy.sparse.csr_matrix``).
+
+    Returns:
+        Problem k's rows and columns ``3 node_offsets[k] : 3 node_offsets[k + 1]``, for each k.
+    """
+    blocks = []
+    for first_node, last_node in zip(node_offsets[:-1], node_offsets[1:], strict=True):
+        first, last = 3 * int(first_node), 3 * int(last_node)
+        start, stop = int(host_offsets[first]), int(host_offsets[last])
+        blocks.append(
+            csr_matrix(
+                (
+                    values[start:stop],
+                    columns[start:stop] - first,
+                    offsets[first : last + 1] - start,
+                ),
+                shape=(last - first, last - first),
+            )
+        )
+    return blocks
+
+
 def batch(assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any) -> dict[str, Any]:
     """The K diagonal blocks of the union's CSR matrix as one batch of nvmath matrices."""
     import cupy
@@ -103,22 +141,18 @@ def batch(assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any) 
     bsr33_csr_values(matrix, block_rows, values_wp)
     offsets, columns = cupy.asarray(offsets_wp), cupy.asarray(columns_wp)
     values, right = cupy.asarray(values_wp), cupy.asarray(rhs).reshape(-1)
-    host_offsets = cupy.asnumpy(offsets)
-    matrices, sides = [], []
-    for k in range(packed.problem_count):
-        first, last = 3 * int(packed.node_offsets[k]), 3 * int(packed.node_offsets[k + 1])
-        start, stop = int(host_offsets[first]), int(host_offsets[last])
-        matrices.append(
-            cupyx.scipy.sparse.csr_matrix(
-                (
-                    values[start:stop],
-                    columns[start:stop] - first,
-                    offsets[first : last + 1] - start,
-                ),
-                shape=(last - first, last - first),
-            )
-        )
-        sides.append(cupy.ascontiguousarray(right[first:last]))
+    matrices = diagonal_blocks(
+        offsets,
+        cupy.asnumpy(offsets),
+        columns,
+        values,
+        packed.node_offsets,
+        cupyx.scipy.sparse.csr_matrix,
+    )
+    sides = [
+        cupy.ascontiguousarray(right[3 * int(first) : 3 * int(last)])
+        for first, last in zip(packed.node_offsets[:-1], packed.node_offsets[1:], strict=True)
+    ]
     options = nvs.DirectSolverOptions(
         sparse_system_type=nvs.DirectSolverMatrixType.SYMMETRIC,
         sparse_system_view=nvs.DirectSolverMatrixViewType.LOWER,
