@@ -246,18 +246,15 @@ class Assembler:
         self._quadrature_volumes = wp.array(
             geometry.quadrature_volumes, dtype=wp.float64, device=dev
         )
-        self._build_pattern(mesh.tets)
+        self.problem_count = 1 if isinstance(material, Material) else len(material)
+        problems = _element_problems(element_problem, mesh.tet_count, self.problem_count)
+        self._build_pattern(mesh.tets, problems)
         self._all_elements = wp.array(
             np.arange(self.tet_count, dtype=np.int32), dtype=wp.int32, device=dev
         )
         self._node_elements: tuple[np.ndarray, np.ndarray] | None = None
         self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
-        self.problem_count = 1 if isinstance(material, Material) else len(material)
-        self._element_problem = wp.array(
-            _element_problems(element_problem, mesh.tet_count, self.problem_count),
-            dtype=wp.int32,
-            device=dev,
-        )
+        self._element_problem = wp.array(problems, dtype=wp.int32, device=dev)
         count = self.problem_count
         # Energy and smallest J per problem, in one array so that one copy reads both.
         self._scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
@@ -423,32 +420,17 @@ class Assembler:
             return [self.viscous.step, self._zero_history]
         return [self.viscous.step, self.viscous.frozen]
 
-    def _build_pattern(self, tets: np.ndarray) -> None:
-        npe = tets.shape[1]
+    def _build_pattern(self, tets: np.ndarray, element_problems: np.ndarray) -> None:
         n = self.node_count
-        rows = np.repeat(tets, npe, axis=1).astype(np.int64)  # (M, npe*npe): a-major
-        cols = np.tile(tets, (1, npe)).astype(np.int64)
-        keys = (rows * n + cols).reshape(-1)
-        # One sort gives the distinct node pairs and each element block's place among them
-        # (NumPy's hash-based np.unique took 4x longer on these keys).
-        order = np.argsort(keys)
-        sorted_keys = keys[order]
-        first = np.empty(len(keys), dtype=bool)
-        first[0] = True
-        np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
-        unique_keys = sorted_keys[first]
-        block_index = np.empty(len(keys), dtype=np.int32)
-        block_index[order] = np.cumsum(first) - 1
-        self._block_index_host = block_index.reshape(rows.shape)
+        block_rows, block_cols, block_index = _sparsity_pattern(tets, n, element_problems)
+        self._block_index_host = block_index
         self._block_index = wp.array(self._block_index_host, dtype=wp.int32, device=self.device)
-        block_rows = (unique_keys // n).astype(np.int32)
-        block_cols = (unique_keys % n).astype(np.int32)
         self.matrix = wps.bsr_zeros(n, n, block_type=wp.mat33d, device=self.device)
         wps.bsr_set_from_triplets(
             self.matrix,
             wp.array(block_rows, dtype=wp.int32, device=self.device),
             wp.array(block_cols, dtype=wp.int32, device=self.device),
-            wp.zeros(len(unique_keys), dtype=wp.mat33d, device=self.device),
+            wp.zeros(len(block_rows), dtype=wp.mat33d, device=self.device),
             prune_numerical_zeros=False,
         )
         offsets = np.concatenate([[0], np.cumsum(np.bincount(block_rows, minlength=n))])
@@ -458,7 +440,7 @@ class Assembler:
         if len(diagonal) != n:
             raise InputError("every node must belong to an element", key="mesh")
         self._diagonal_blocks = diagonal.astype(np.int32)
-        nnz = len(unique_keys)
+        nnz = len(block_rows)
         if not (
             np.array_equal(self.matrix.offsets.numpy()[: n + 1], offsets)
             and np.array_equal(self.matrix.columns.numpy()[:nnz], block_cols)
@@ -1037,6 +1019,96 @@ class Assembler:
         if array.shape != (self.node_count, 3):
             raise InputError(f"{name} must have shape ({self.node_count}, 3)", value=array.shape)
         return array
+
+
+def _sparsity_pattern(
+    tets: np.ndarray, node_count: int, element_problems: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The distinct node pairs of the element blocks, row-major, and each block's place.
+
+    Packed problems (:func:`warptissue.fem.packing.pack_meshes`: each problem's tets and
+    nodes one contiguous range, in problem order) have a block-diagonal pattern: each
+    problem's own pattern, shifted. It is computed once per distinct mesh (several rates or
+    sites on one specimen's mesh share it), instead of sorting the node pairs of the union.
+
+    Args:
+        tets: Element connectivity, (M, npe).
+        node_count: N.
+        element_problems: The problem of each tet, (M,).
+
+    Returns:
+        (block rows (B,), block columns (B,), block index (M, npe * npe)), int32: the
+        distinct (row, column) node pairs in row-major order, and for each element block
+        ``(a, b)`` (row-major over the element's nodes) its index among them.
+    """
+    ranges = _packed_ranges(tets, node_count, element_problems)
+    if ranges is None:
+        return _element_pattern(tets, node_count)
+    rows, cols = [], []
+    index = np.empty((tets.shape[0], tets.shape[1] ** 2), dtype=np.int32)
+    known: dict[tuple[int, int, int], tuple[np.ndarray, ...]] = {}
+    blocks = 0
+    for first_tet, last_tet, first_node, last_node in ranges:
+        local = tets[first_tet:last_tet] - first_node
+        key = (last_node - first_node, local.shape[0], hash(local.tobytes()))
+        found = known.get(key)
+        if found is None or not np.array_equal(found[0], local):
+            found = (local, *_element_pattern(local, last_node - first_node))
+            known[key] = found
+        _, local_rows, local_cols, local_index = found
+        rows.append(local_rows + first_node)
+        cols.append(local_cols + first_node)
+        index[first_tet:last_tet] = local_index + blocks
+        blocks += local_rows.shape[0]
+    return np.concatenate(rows), np.concatenate(cols), index
+
+
+def _packed_ranges(
+    tets: np.ndarray, node_count: int, element_problems: np.ndarray
+) -> list[tuple[int, int, int, int]] | None:
+    """(first tet, end tet, first node, end node) of each problem where the problems are
+    packed (contiguous, ordered, disjoint tet and node ranges covering the mesh); else None
+    (and for a single problem)."""
+    if element_problems.size == 0 or element_problems[-1] == element_problems[0]:
+        return None
+    if np.any(np.diff(element_problems) < 0):
+        return None
+    starts = np.flatnonzero(np.diff(element_problems)) + 1
+    bounds = np.concatenate([[0], starts, [len(element_problems)]])
+    ranges = []
+    next_node = 0
+    for first_tet, last_tet in zip(bounds[:-1], bounds[1:], strict=True):
+        part = tets[first_tet:last_tet]
+        if int(part.min()) != next_node:
+            return None
+        end_node = int(part.max()) + 1
+        ranges.append((int(first_tet), int(last_tet), next_node, end_node))
+        next_node = end_node
+    return ranges if next_node == node_count else None
+
+
+def _element_pattern(tets: np.ndarray, node_count: int) -> tuple[np.ndarray, ...]:
+    """:func:`_sparsity_pattern` of one mesh, by one sort of the element blocks' node pairs."""
+    npe = tets.shape[1]
+    n = node_count
+    rows = np.repeat(tets, npe, axis=1).astype(np.int64)  # (M, npe*npe): a-major
+    cols = np.tile(tets, (1, npe)).astype(np.int64)
+    keys = (rows * n + cols).reshape(-1)
+    # One sort gives the distinct node pairs and each element block's place among them
+    # (NumPy's hash-based np.unique took 4x longer on these keys).
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    first = np.empty(len(keys), dtype=bool)
+    first[0] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
+    unique_keys = sorted_keys[first]
+    block_index = np.empty(len(keys), dtype=np.int32)
+    block_index[order] = np.cumsum(first) - 1
+    return (
+        (unique_keys // n).astype(np.int32),
+        (unique_keys % n).astype(np.int32),
+        block_index.reshape(rows.shape),
+    )
 
 
 def _element_problems(element_problem: Any, tet_count: int, problem_count: int) -> np.ndarray:
