@@ -439,8 +439,7 @@ def solve_quasistatic_batch(
     ):
         if len(values) != count:
             raise InputError(f"one entry per packed problem ({count})", key=name, value=len(values))
-    if assembler.node_count != packed.mesh.node_count or assembler.problem_count != count:
-        raise InputError("the assembler was not built for these packed meshes", key="assembler")
+    _check_assembler(assembler, packed)
     n = packed.mesh.node_count
     offsets = packed.node_offsets
     paths = []
@@ -652,24 +651,7 @@ def simulate_indentation_batch(
     if assembler is None:
         assembler = _packed_assembler(problems, packed, device)
     else:
-        if (
-            assembler.problem_count != len(problems)
-            or assembler.node_count != packed.mesh.node_count
-            or assembler.tet_count != packed.mesh.tet_count
-            or assembler.formulation != formulation
-        ):
-            raise InputError(
-                f"the assembler was built for other meshes or another formulation "
-                f"({len(problems)} problems, {packed.mesh.node_count} nodes, "
-                f"{packed.mesh.tet_count} tets, {formulation!r} expected)",
-                key="assembler",
-                value=(
-                    assembler.problem_count,
-                    assembler.node_count,
-                    assembler.tet_count,
-                    assembler.formulation,
-                ),
-            )
+        _check_assembler(assembler, packed, formulation)
         assembler.set_material([problem.material for problem in problems])
     paths = solve_quasistatic_batch(
         assembler,
@@ -716,6 +698,31 @@ def batch_assembler(
     if not problems:
         raise InputError("at least one problem is needed", key="problems", value=0)
     return _packed_assembler(problems, pack_meshes([p.mesh for p in problems]), device)
+
+
+def _check_assembler(
+    assembler: Assembler, packed: PackedMeshes, formulation: str | None = None
+) -> None:
+    """Refuse an assembler of other packed meshes (or of another ``formulation``)."""
+    expected = formulation if formulation is not None else assembler.formulation
+    if (
+        assembler.problem_count != packed.problem_count
+        or assembler.node_count != packed.mesh.node_count
+        or assembler.tet_count != packed.mesh.tet_count
+        or assembler.formulation != expected
+    ):
+        raise InputError(
+            f"the assembler was built for other meshes or another formulation "
+            f"({packed.problem_count} problems, {packed.mesh.node_count} nodes, "
+            f"{packed.mesh.tet_count} tets, {expected!r} expected)",
+            key="assembler",
+            value=(
+                assembler.problem_count,
+                assembler.node_count,
+                assembler.tet_count,
+                assembler.formulation,
+            ),
+        )
 
 
 def _packed_assembler(
