@@ -59,8 +59,6 @@ class _BatchedForward:
         self._pending: dict[int, np.ndarray] = {}
         self._results: dict[int, _Evaluation] = {}
         self._stopped: BaseException | None = None
-        self.batches = 0
-        self.batch_sizes: list[int] = []
 
     def evaluate(self, k: int, x: np.ndarray) -> _Evaluation:
         with self._condition:
@@ -88,7 +86,10 @@ class _BatchedForward:
             while True:
                 with self._condition:
                     self._condition.wait_for(
-                        lambda: not self._live or (bool(self._pending) and self._ready())
+                        lambda: (
+                            not self._live
+                            or (bool(self._pending) and set(self._pending) >= self._live)
+                        )
                     )
                     if not self._live:
                         return
@@ -99,8 +100,6 @@ class _BatchedForward:
                     results = {k: _Evaluation(x, None, None, exc) for k, x in batch.items()}
                 with self._condition:
                     self._results.update(results)
-                    self.batches += 1
-                    self.batch_sizes.append(len(batch))
                     batch = {}
                     self._condition.notify_all()
         except BaseException as exc:  # Ctrl-C: every fit stops
@@ -111,9 +110,6 @@ class _BatchedForward:
                 self._pending = {}
                 self._condition.notify_all()
             raise
-
-    def _ready(self) -> bool:
-        return set(self._pending) >= self._live
 
 
 def fit_indentation_batch(
