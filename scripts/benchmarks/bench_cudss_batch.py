@@ -159,7 +159,10 @@ def batch(assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any) 
     )
     start = time.perf_counter()
     solver = nvs.DirectSolver(
-        matrices, sides, options=options, execution=nvs.ExecutionCUDA(device_id=0)
+        matrices,
+        sides,
+        options=options,
+        execution=nvs.ExecutionCUDA(device_id=matrix.device.ordinal),
     )
     solver.plan()
     synchronize()
@@ -211,7 +214,7 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
     target = parse_count(args.tets)
     mesh, _ = warptissue_mesh(target, mesher="delaunay")
     rows = []
-    synchronize = cupy.cuda.Device(0).synchronize
+    synchronize = cupy.cuda.Device(wp.get_device(args.device).ordinal).synchronize
     for count in (parse_count(c) for c in args.counts.split(",")):
         problems = problems_for(mesh, count)
         assembler, packed = eliminated_tangent(problems, args.device)
