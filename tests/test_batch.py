@@ -208,6 +208,63 @@ def test_a_broken_study_is_one_line_and_the_others_finish(first_batch):
     assert lines[-1] == f"warptissue: error: 1 of 3 studies failed (see {out / 'summary.csv'})"
 
 
+def test_together_solves_a_task_s_simulations_in_one_batched_run(first_batch, tmp_path):
+    """``--together 4``: one task holds a broken study, a fit and two simulations; the two
+    simulations are solved in one batched FE run (``solved_together`` 2) with the forces of
+    the same study alone to the Newton tolerance, the fit runs alone, the broken study is
+    its one-line row. A batched run that fails is said, and its studies run alone."""
+    studies, alone_out, _, _ = first_batch
+    group = _write_studies(tmp_path / "studies")
+    (group / "stiff.toml").write_text(_tiny_simulation(400.0), encoding="utf-8")
+    out = tmp_path / "out"
+    status = main(["batch", str(group), "-o", str(out), "--workers", "0", "--together", "4"])
+    assert status == batch.FAILED_EXIT_CODE
+    rows = _summary(out / "summary.csv")
+    assert list(rows) == ["broken", "fit", "punch", "stiff"]
+    assert rows["broken"]["status"] == "error" and "growht" in rows["broken"]["error"]
+    assert rows["fit"]["status"] == "converged" and rows["fit"]["solved_together"] == "1"
+    for name in ("punch", "stiff"):
+        assert rows[name]["status"] == "completed" and rows[name]["solved_together"] == "2"
+        assert json.loads((out / name / "result.json").read_text())["solved_together"] == 2
+        marker = json.loads((out / name / batch.DONE_MARKER).read_text())
+        assert marker["solved_together"] == 2
+    np.testing.assert_allclose(  # time, depth, force, step
+        _curve(out / "punch" / "force_curve.csv")[:, :4],
+        _curve(alone_out / "punch" / "force_curve.csv")[:, :4],
+        rtol=1e-7,
+        atol=0.0,
+    )
+    assert float(rows["stiff"]["peak_force_N"]) > 1.3 * float(rows["punch"]["peak_force_N"])
+    fit = json.loads((out / "fit" / "fit.json").read_text())
+    single_fit = json.loads((alone_out / "fit" / "fit.json").read_text())
+    assert fit["parameters"]["C10_Pa"]["value"] == pytest.approx(
+        single_fit["parameters"]["C10_Pa"]["value"], rel=1e-6
+    )
+    with pytest.raises(InputError, match="--together"):
+        batch.run_batch([group], out=out, workers=0, together=0)
+
+
+def test_a_batched_run_that_fails_leaves_its_studies_to_run_alone(tmp_path, monkeypatch):
+    import warptissue.simulate
+
+    def fail(setups):
+        raise RuntimeError("the device ran out of memory")
+
+    monkeypatch.setattr(warptissue.simulate, "run_studies_together", fail)
+    for name, c10 in (("punch", 287.5), ("stiff", 400.0)):
+        (tmp_path / f"{name}.toml").write_text(_tiny_simulation(c10), encoding="utf-8")
+    result = batch.run_batch(
+        [tmp_path], out=tmp_path / "out", workers=0, together=2, progress=False
+    )
+    assert result.exit_code == 0
+    for outcome in result.outcomes:
+        assert outcome.status == "completed" and outcome.solved_together == 1
+        assert outcome.warnings == [
+            "solved alone: the batched run failed: RuntimeError: the device ran out of memory"
+        ]
+        assert (tmp_path / "out" / outcome.folder / batch.DONE_MARKER).is_file()
+
+
 def test_resume_skips_complete_studies_and_force_redoes_them(tmp_path):
     studies = tmp_path / "studies"
     studies.mkdir()
@@ -331,11 +388,13 @@ def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypa
 
 
 def test_a_running_scheduler_runs_the_batch(tmp_path):
-    """``--scheduler tcp://HOST:PORT``: the studies run on the workers of that cluster."""
+    """``--scheduler tcp://HOST:PORT``: the studies run on the workers of that cluster, two
+    of them in one task with ``--together 2``."""
     distributed = pytest.importorskip("distributed")
     import logging
 
     (tmp_path / "punch.toml").write_text(_tiny_simulation(), encoding="utf-8")
+    (tmp_path / "stiff.toml").write_text(_tiny_simulation(400.0), encoding="utf-8")
     with distributed.LocalCluster(
         n_workers=1,
         threads_per_worker=1,
@@ -347,18 +406,23 @@ def test_a_running_scheduler_runs_the_batch(tmp_path):
         status = main(
             [
                 "batch",
-                str(tmp_path / "punch.toml"),
+                str(tmp_path / "*.toml"),
                 "-o",
                 str(tmp_path / "out"),
                 "--scheduler",
                 cluster.scheduler_address,
+                "--together",
+                "2",
                 "--quiet",
             ]
         )
     assert status == 0
-    marker = json.loads((tmp_path / "out" / "punch" / batch.DONE_MARKER).read_text())
-    assert marker["pid"] in worker_pids and marker["status"] == "completed"
-    assert _curve(tmp_path / "out" / "punch" / "force_curve.csv").shape == (3, 5)
+    # One task, both studies in one batched FE run on the cluster's worker.
+    for name in ("punch", "stiff"):
+        marker = json.loads((tmp_path / "out" / name / batch.DONE_MARKER).read_text())
+        assert marker["pid"] in worker_pids and marker["status"] == "completed"
+        assert marker["solved_together"] == 2
+        assert _curve(tmp_path / "out" / name / "force_curve.csv").shape == (3, 5)
 
 
 def test_run_batch_is_stopped_by_ctrl_c_with_the_summary_of_what_ended(tmp_path, monkeypatch):

@@ -57,7 +57,9 @@ def test_batched_fits_equal_single_fits_and_find_the_truth(device):
         vector = truth.material.parameter_vector
         vector[0] *= 0.8  # C10 80 % of the truth
         starts.append(dataclasses.replace(truth, material=truth.material.with_parameters(vector)))
-    fits = fit_indentation_batch(starts, depths, forces, ("C10_Pa",), device=device, options=OPTIONS)
+    fits = fit_indentation_batch(
+        starts, depths, forces, ("C10_Pa",), device=device, options=OPTIONS
+    )
     for start, truth, path, measured, fit in zip(starts, truths, depths, forces, fits, strict=True):
         assert fit.success, fit.message
         assert fit.x[0] == pytest.approx(truth.material.parameter_vector[0], rel=1e-6)

@@ -656,3 +656,67 @@ def test_penetration_beyond_a_share_of_the_depth_is_said():
     assert penetration_warnings([1e-4], []) == []
     (warning,) = penetration_warnings([1e-4, 2e-4], [1e-8, 4e-6])
     assert "step 2" in warning and "solver.penalty_factor" in warning and "2.00%" in warning
+
+
+def test_studies_solved_together_equal_each_alone_and_refuse_what_they_cannot_share(
+    api_run, tiny_record, sphere_record, tmp_path
+):
+    """run_studies_together: the tiny study and a stiffer one on a finer mesh, in one
+    batched FE run, write the files run_study writes, with the forces of each run alone to
+    the Newton tolerance; a rigid sphere, a timed protocol or other solver settings are
+    refused in one line naming the study file."""
+    from warptissue.errors import InputError
+    from warptissue.simulate import prepare_study, run_studies_together, together_refusal
+
+    stiff = json.loads(json.dumps(tiny_record))
+    stiff["material"]["C10_Pa"] *= 1.5
+    stiff["specimen"]["size_near_m"] = 4.0e-4
+    studies = [study_from_dict(tiny_record), study_from_dict(stiff)]
+    setups = [
+        prepare_study(study, out_dir=tmp_path / name, announce=False)
+        for study, name in zip(studies, ("tiny", "stiff"), strict=True)
+    ]
+    assert [together_refusal(setup) for setup in setups] == [None, None]
+    assert setups[0].mesh.tet_count < setups[1].mesh.tet_count
+    together = run_studies_together(setups)
+    stiff_alone = run_study(studies[1], out_dir=tmp_path / "alone", progress=False)
+    for outputs, alone in zip(together, (api_run[1], stiff_alone), strict=True):
+        assert outputs.completed and outputs.summary["solved_together"] == 2
+        assert alone.summary["solved_together"] == 1
+        assert {p.name for p in outputs.out_dir.iterdir()} >= {
+            "force_curve.csv",
+            "result.json",
+            "fields.vtu",
+        }
+        header, rows = read_csv(outputs.out_dir / "force_curve.csv")
+        assert header == list(FORCE_CURVE_COLUMNS)
+        np.testing.assert_allclose(
+            np.asarray(rows)[:, 2],
+            np.concatenate([[0.0], alone.result.reaction_force_N]),
+            rtol=1e-7,
+            atol=0.0,
+        )
+        saved = json.loads((outputs.out_dir / "result.json").read_text())
+        assert saved["solved_together"] == 2 and saved["status"] == "completed"
+    # A stiffer material gives a larger force: the results are not swapped.
+    assert together[1].result.reaction_force_N[-1] > 1.3 * together[0].result.reaction_force_N[-1]
+
+    sphere = prepare_study(study_from_dict(sphere_record), out_dir=tmp_path / "s", announce=False)
+    assert "rigid sphere" in together_refusal(sphere)
+    with pytest.raises(InputError, match="cannot be solved with other studies: a rigid sphere"):
+        run_studies_together([setups[0], sphere])
+    timed = json.loads(json.dumps(tiny_record))
+    timed["schema_version"] = 2
+    timed["protocol"] = {"depths_m": DEPTHS_M, "times_s": [1.0, 2.0, 3.0]}
+    ramp = prepare_study(study_from_dict(timed), out_dir=tmp_path / "t", announce=False)
+    assert together_refusal(ramp) == (
+        "a timed protocol (kind = 'timed') is solved one study at a time"
+    )
+    other = json.loads(json.dumps(tiny_record))
+    other["solver"]["tolerance"] = 1e-8
+    loose = prepare_study(study_from_dict(other), out_dir=tmp_path / "o", announce=False)
+    with pytest.raises(InputError, match="need one solver") as caught:
+        run_studies_together([setups[0], loose])
+    assert "\n" not in str(caught.value)
+    with pytest.raises(InputError, match="at least one study"):
+        run_studies_together([])

@@ -4,7 +4,9 @@
 folders of them, or glob patterns), decides for each what it is the way the single-study
 commands do (a study with ``[[data]]`` records and a ``[fit]`` table is an indentation fit,
 :func:`warptissue.fit.indentation.fit_indentation`; any other a simulation,
-:func:`warptissue.simulate.run_study`), and runs one task per study:
+:func:`warptissue.simulate.run_study`), and runs one task per study, or per group of up
+to ``together`` studies whose simulations that can share launches are solved in one
+batched FE run (:func:`run_group_task`, :func:`warptissue.simulate.run_studies_together`):
 
 - each study writes the files of its single-study command into ``OUT/<folder>``, the folder
   named from the study file's stem (:func:`folder_names`), then, last and atomically, the
@@ -31,6 +33,7 @@ process, without Dask. Why Dask: docs/design-notes/batch.md.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import hashlib
 import json
@@ -39,7 +42,7 @@ import signal
 import sys
 import time
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -73,6 +76,7 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
     "status",
     "exit_status",
     "seconds",
+    "solved_together",
     "peak_force_N",
     "r_squared",
     "parameters",
@@ -84,7 +88,8 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
 (``simulation``, ``fit`` or empty when the file could not be read); its status (a
 simulation's ``completed``/``stopped_early``, a fit's ``converged``/
 ``stopped_at_r_squared``/``max_iterations``/``failed``, or ``error``); the exit status its
-single-study command would have given (0 success); the task's wall time (s); the peak
+single-study command would have given (0 success); the task's wall time (s); how many
+studies its load steps were solved with in one batched FE run (1: alone); the peak
 reaction force of a simulation (N); a fit's R^2 over all its records; the fitted parameters
 (``name=value`` separated by ``;``); the number of warnings; ``True`` for a study skipped
 because its folder holds a complete result of an earlier run (its numbers are that run's);
@@ -110,7 +115,10 @@ class StudyOutcome:
         status: The simulation's or the fit's status, or ``"error"`` (an exception).
         exit_status: The exit status the single-study command would give (0: success;
             2 input or a path the system refuses, 3 mesh, 4 convergence, 5 device, 1 anything else).
-        seconds: Wall time of the study's task, s.
+        seconds: Wall time of the study's task, s (for studies solved together, its own
+            setup plus the whole batched run, load steps and outputs).
+        solved_together: How many studies its load steps were solved with in one batched
+            FE run, itself included (1: alone).
         peak_force_N: Largest reaction force of a simulation, N (None for a fit).
         r_squared: R^2 of a fit over all its records (None for a simulation).
         parameters: A fit's fitted parameters, name -> value in SI units (empty otherwise).
@@ -130,6 +138,7 @@ class StudyOutcome:
     status: str = "error"
     exit_status: int = 1
     seconds: float = 0.0
+    solved_together: int = 1
     peak_force_N: float | None = None
     r_squared: float | None = None
     parameters: dict[str, float] = field(default_factory=dict)
@@ -164,6 +173,7 @@ class StudyOutcome:
             "status": self.status,
             "exit_status": int(self.exit_status),
             "seconds": float(self.seconds),
+            "solved_together": int(self.solved_together),
             "peak_force_N": self.peak_force_N,
             "r_squared": self.r_squared,
             "parameters": ";".join(f"{k}={float(v)!r}" for k, v in self.parameters.items()),
@@ -357,18 +367,24 @@ def _kill_once_hook() -> None:
     os.kill(os.getpid(), getattr(signal, "SIGKILL", signal.SIGTERM))
 
 
-def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
-    from warptissue.simulate import run_study
-
-    outputs = run_study(study, out_dir=out_dir, device=device, progress=False, announce=False)
+def _simulation_numbers(outputs: Any) -> dict[str, Any]:
+    """A simulation's numbers of its outcome, from its :class:`SimulationOutputs`."""
     forces = np.asarray(outputs.summary["force_curve"]["reaction_force_N"], dtype=np.float64)
     return {
         "status": outputs.status,
         "exit_status": outputs.exit_code,
+        "solved_together": int(outputs.summary["solved_together"]),
         "peak_force_N": float(forces.max()) if forces.size else None,
         "warnings": list(outputs.summary["warnings"]),
         "error": "" if outputs.completed else f"stopped early: {outputs.message}",
     }
+
+
+def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
+    from warptissue.simulate import run_study
+
+    outputs = run_study(study, out_dir=out_dir, device=device, progress=False, announce=False)
+    return _simulation_numbers(outputs)
 
 
 def _fit(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
@@ -409,51 +425,210 @@ def run_study_task(task: _Task) -> StudyOutcome:
     Returns:
         The study's :class:`StudyOutcome`.
     """
-    import socket
-
     from warptissue.device import quiet_warp
     from warptissue.study import load_study
 
     started = time.perf_counter()
     out_dir = Path(task.out_dir) / task.folder
-    marker = out_dir / DONE_MARKER
-    outcome = StudyOutcome(
+    outcome = _start_outcome(task)
+    caught: list[str] = []
+    try:
+        with _recorded(caught):
+            quiet_warp()
+            study = load_study(task.path)
+            kind = _kind(study)
+            outcome = replace(outcome, kind=kind)
+            device = _worker_device(task.device, study) if task.on_dask else task.device
+            run = _fit if kind == "fit" else _simulate
+            numbers = run(study, out_dir, device)
+        numbers["warnings"] = numbers["warnings"] + caught
+        outcome = replace(outcome, **numbers)
+    except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
+        outcome = replace(outcome, **_error_numbers(exc))
+    outcome = replace(outcome, seconds=time.perf_counter() - started)
+    if task.on_dask:
+        _kill_once_hook()
+    _write_marker(task, outcome)
+    return outcome
+
+
+def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
+    """Run a group of studies of a batch, the simulations that can be solved together in
+    one batched FE run (the function each Dask task runs when ``together`` > 1).
+
+    Each study is loaded and set up (:func:`warptissue.simulate.prepare_study`) on its own.
+    The simulations that :func:`warptissue.simulate.together_refusal` accepts, with equal
+    device, formulation and ``[solver]`` settings, are solved together
+    (:func:`warptissue.simulate.run_studies_together`); the others (fits, rigid contact,
+    viscoelastic materials, timed protocols, a setting shared with no other study of the
+    group) run alone, as :func:`run_study_task` runs them. A batched run that raises is
+    said in its studies' warnings and they run alone instead. Each study's folder, marker
+    and outcome are those :func:`run_study_task` would give, with ``solved_together``.
+
+    Args:
+        tasks: The studies of the group.
+
+    Returns:
+        One :class:`StudyOutcome` per task, in order.
+    """
+    from warptissue.device import quiet_warp
+    from warptissue.simulate import prepare_study, run_studies_together, together_refusal
+    from warptissue.study import load_study
+
+    outcomes = [_start_outcome(task) for task in tasks]
+    notes: list[list[str]] = [[] for _ in tasks]
+    seconds = [0.0] * len(tasks)
+    studies: list[Any] = [None] * len(tasks)
+    ready: list[tuple[int, Any]] = []
+    for index, task in enumerate(tasks):
+        started = time.perf_counter()
+        try:
+            with _recorded(notes[index]):
+                quiet_warp()
+                study = load_study(task.path)
+                studies[index] = study
+                outcomes[index] = replace(outcomes[index], kind=_kind(study))
+                if outcomes[index].kind == "simulation":
+                    device = _worker_device(task.device, study) if task.on_dask else task.device
+                    out_dir = Path(task.out_dir) / task.folder
+                    setup = prepare_study(study, out_dir=out_dir, device=device, announce=False)
+                    ready.append((index, setup))
+        except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
+            outcomes[index] = replace(outcomes[index], **_error_numbers(exc))
+        seconds[index] = time.perf_counter() - started
+
+    # The simulations that can share launches, by device, formulation and solver settings.
+    parts: list[list[tuple[int, Any]]] = []
+    for index, setup in ready:
+        if together_refusal(setup) is not None:
+            parts.append([(index, setup)])
+            continue
+        for part in parts:
+            other = part[0][1]
+            if (
+                together_refusal(other) is None
+                and str(other.device) == str(setup.device)
+                and other.problem.formulation == setup.problem.formulation
+                and other.study.solver.options == setup.study.solver.options
+            ):
+                part.append((index, setup))
+                break
+        else:
+            parts.append([(index, setup)])
+    alone: list[tuple[int, Any]] = []
+    for part in parts:
+        if len(part) == 1:
+            alone.extend(part)
+            continue
+        started = time.perf_counter()
+        shared: list[str] = []
+        try:
+            with _recorded(shared):
+                solved = run_studies_together([setup for _, setup in part])
+        except Exception as exc:  # noqa: BLE001 - they run alone instead
+            for index, _setup in part:
+                notes[index].append(f"solved alone: the batched run failed: {_one_line(exc)}")
+            alone.extend(part)
+            continue
+        spent = time.perf_counter() - started
+        for (index, _), outputs in zip(part, solved, strict=True):
+            numbers = _simulation_numbers(outputs)
+            numbers["warnings"] = numbers["warnings"] + notes[index] + shared
+            outcomes[index] = replace(outcomes[index], **numbers)
+            seconds[index] += spent
+    for index, setup in sorted(alone, key=lambda item: item[0]):
+        started = time.perf_counter()
+        outcomes[index] = _run_alone(outcomes[index], notes[index], setup=setup)
+        seconds[index] += time.perf_counter() - started
+    for index, task in enumerate(tasks):
+        if outcomes[index].kind == "fit":
+            started = time.perf_counter()
+            device = _worker_device(task.device, studies[index]) if task.on_dask else task.device
+            outcomes[index] = _run_alone(
+                outcomes[index],
+                notes[index],
+                fit=(studies[index], Path(task.out_dir) / task.folder, device),
+            )
+            seconds[index] += time.perf_counter() - started
+    outcomes = [replace(o, seconds=t) for o, t in zip(outcomes, seconds, strict=True)]
+    if tasks and tasks[0].on_dask:
+        _kill_once_hook()
+    for task, outcome in zip(tasks, outcomes, strict=True):
+        _write_marker(task, outcome)
+    return outcomes
+
+
+def _run_alone(
+    outcome: StudyOutcome,
+    notes: list[str],
+    *,
+    setup: Any = None,
+    fit: tuple[Any, Path, str | None] | None = None,
+) -> StudyOutcome:
+    """One study of a group run alone: a prepared simulation, or a fit."""
+    from warptissue.simulate import solve_study
+
+    caught: list[str] = []
+    try:
+        with _recorded(caught):
+            if setup is not None:
+                numbers = _simulation_numbers(solve_study(setup, progress=False))
+            else:
+                assert fit is not None
+                numbers = _fit(*fit)
+        numbers["warnings"] = numbers["warnings"] + notes + caught
+        return replace(outcome, **numbers)
+    except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
+        return replace(outcome, **_error_numbers(exc), warnings=notes + caught)
+
+
+def _kind(study: Any) -> str:
+    """What a study is: a fit when it has ``[[data]]`` records and a ``[fit]`` table."""
+    return "fit" if study.data and study.fit is not None else "simulation"
+
+
+def _start_outcome(task: _Task) -> StudyOutcome:
+    """A study's outcome before it runs; removes its folder's marker (the folder is about
+    to change: it holds no complete result)."""
+    import socket
+
+    marker = Path(task.out_dir) / task.folder / DONE_MARKER
+    if marker.is_file():
+        marker.unlink()
+    return StudyOutcome(
         study=task.study,
         folder=task.folder,
         study_sha256=_sha256(task.path),
         host=socket.gethostname(),
         pid=os.getpid(),
     )
-    caught: list[warnings.WarningMessage] = []
-    try:
-        if marker.is_file():
-            marker.unlink()  # the folder is about to change: it holds no complete result
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("default")
-            quiet_warp()
-            study = load_study(task.path)
-            kind = "fit" if study.data and study.fit is not None else "simulation"
-            outcome = replace(outcome, kind=kind)
-            device = _worker_device(task.device, study) if task.on_dask else task.device
-            run = _fit if kind == "fit" else _simulate
-            numbers = run(study, out_dir, device)
-        python_warnings = [" ".join(str(w.message).split()) for w in caught]
-        numbers["warnings"] = numbers["warnings"] + python_warnings
-        outcome = replace(outcome, **numbers)
-    except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
-        # As the command line: a project error's own status, 2 for a path the system
-        # refuses (a folder where a file goes, no permission, a full disk), else 1.
-        if isinstance(exc, WarpTissueError):
-            exit_status = exc.exit_code
-        else:
-            exit_status = 2 if isinstance(exc, OSError) else 1
-        outcome = replace(outcome, status="error", exit_status=exit_status, error=_one_line(exc))
-    outcome = replace(outcome, seconds=time.perf_counter() - started)
-    if task.on_dask:
-        _kill_once_hook()
+
+
+def _write_marker(task: _Task, outcome: StudyOutcome) -> None:
+    """Write a successful study's marker, last and atomically."""
     if not outcome.failed:
-        write_json(marker, outcome.to_dict())
-    return outcome
+        write_json(Path(task.out_dir) / task.folder / DONE_MARKER, outcome.to_dict())
+
+
+def _error_numbers(exc: Exception) -> dict[str, Any]:
+    """A failed study's numbers. As the command line: a project error's own status, 2 for a
+    path the system refuses (a folder where a file goes, no permission, a full disk), else 1."""
+    if isinstance(exc, WarpTissueError):
+        exit_status = exc.exit_code
+    else:
+        exit_status = 2 if isinstance(exc, OSError) else 1
+    return {"status": "error", "exit_status": exit_status, "error": _one_line(exc)}
+
+
+@contextlib.contextmanager
+def _recorded(into: list[str]) -> Iterator[None]:
+    """Record the Python warnings raised inside, one line each, into ``into``."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        try:
+            yield
+        finally:
+            into.extend(" ".join(str(w.message).split()) for w in caught)
 
 
 def write_summary(path: str | Path, outcomes: Sequence[StudyOutcome]) -> Path:
@@ -521,6 +696,7 @@ def run_batch(
     force: bool = False,
     progress: bool = True,
     retries: int = 1,
+    together: int = 1,
     on_outcome: Callable[[StudyOutcome], None] | None = None,
 ) -> BatchResult:
     """Run every study of a batch, one result folder each, and write the summary table.
@@ -541,6 +717,10 @@ def run_batch(
         progress: Show a progress bar over the studies (on standard error).
         retries: Dask ``retries`` of a task that raised (a worker that dies is handled by
             the scheduler: the task runs again elsewhere).
+        together: Studies per task (default 1). Above 1, the studies are taken in groups of
+            up to ``together``, in the order given, one task each, and the simulations of a
+            group that can share launches are solved in one batched FE run
+            (:func:`run_group_task`); the others of the group run alone in the same task.
         on_outcome: Called with each study's outcome as it ends (skipped ones first).
 
     Returns:
@@ -572,6 +752,8 @@ def run_batch(
         )
     if workers is not None and workers < 0:
         raise InputError("must be 0 or more", option="--workers", value=workers)
+    if together < 1:
+        raise InputError("must be 1 or more", option="--together", value=together)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary_path = out_dir / SUMMARY_FILE
     names = folder_names(studies)
@@ -627,10 +809,12 @@ def run_batch(
         if not pending:
             finish(None, None)
         elif not use_dask:
-            for index, task in pending:
-                finish(index, run_study_task(task))
+            for group in _groups(pending, together):
+                for (index, _), outcome in zip(group, _run_group(group), strict=True):
+                    finish(index, outcome)
         else:
-            worker_count = _run_on_dask(pending, scheduler, workers, retries, finish)
+            groups = _groups(pending, together)
+            worker_count = _run_on_dask(groups, scheduler, workers, retries, finish)
     finally:
         bar.close()
     return BatchResult(
@@ -642,43 +826,59 @@ def run_batch(
     )
 
 
+def _groups(pending: Sequence[tuple[int, _Task]], together: int) -> list[list[tuple[int, _Task]]]:
+    """The pending studies in groups of up to ``together``, in order: one task each."""
+    return [list(pending[i : i + together]) for i in range(0, len(pending), together)]
+
+
+def _run_group(group: Sequence[tuple[int, _Task]]) -> list[StudyOutcome]:
+    """Run one group's task: a single study alone, several as :func:`run_group_task`."""
+    tasks = [task for _, task in group]
+    return [run_study_task(tasks[0])] if len(tasks) == 1 else run_group_task(tasks)
+
+
 def _run_on_dask(
-    pending: Sequence[tuple[int, _Task]],
+    groups: Sequence[Sequence[tuple[int, _Task]]],
     scheduler: str | None,
     workers: int | None,
     retries: int,
     finish: Callable[[int | None, StudyOutcome | None], None],
 ) -> int:
-    """Submit one task per study, record each as it ends; returns the number of workers."""
+    """Submit one task per group of studies, record each study as its task ends; returns
+    the number of workers."""
     import uuid
 
     from distributed import as_completed
 
     client, cluster = _dask_client(scheduler, 1 if workers is None else workers)
-    futures: dict[Any, tuple[int, _Task]] = {}
+    futures: dict[Any, Sequence[tuple[int, _Task]]] = {}
     try:
         worker_count = len(client.scheduler_info().get("workers", {}))
         token = uuid.uuid4().hex[:8]
-        for index, task in pending:
+        for group in groups:
             future = client.submit(
-                run_study_task,
-                task,
-                key=f"warptissue-batch-{task.folder}-{token}",
+                _run_group,
+                list(group),
+                key=f"warptissue-batch-{group[0][1].folder}-{token}",
                 retries=retries,
                 pure=False,
             )
-            futures[future] = (index, task)
+            futures[future] = group
         for future in as_completed(list(futures)):
-            index, task = futures[future]
+            group = futures[future]
             try:
-                outcome = future.result()
+                outcomes = future.result()
             except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: its worker kept dying
-                outcome = StudyOutcome(
-                    study=task.study,
-                    folder=task.folder,
-                    error=f"the Dask task failed: {_one_line(exc)}",
-                )
-            finish(index, outcome)
+                outcomes = [
+                    StudyOutcome(
+                        study=task.study,
+                        folder=task.folder,
+                        error=f"the Dask task failed: {_one_line(exc)}",
+                    )
+                    for _, task in group
+                ]
+            for (index, _), outcome in zip(group, outcomes, strict=True):
+                finish(index, outcome)
     except KeyboardInterrupt:
         client.cancel(list(futures))
         raise

@@ -20,7 +20,8 @@ the load steps with :func:`warptissue.fem.simulate_indentation`, and writes (ato
   ``status`` (``"completed"``, ``"stopped_early"`` or ``"interrupted"``) and message,
   ``warnings`` (an implausible force curve: :func:`force_curve_warnings`; a penetration of
   the indenter beyond :data:`PENETRATION_WARNING_SHARE` of the depth), mesh statistics,
-  timings, ``newton_profile`` (where the solve's time went, per phase of the Newton
+  timings, ``solved_together`` (the number of studies solved in one batched FE run, 1
+  alone), ``newton_profile`` (where the solve's time went, per phase of the Newton
   iterations, when run with ``profile=True``; else null: :class:`warptissue.fem.NewtonTimings`)
   and software versions; under a rigid indenter in contact also, per step, the
   contact force, the contact area, the largest penetration and the largest contact
@@ -39,6 +40,11 @@ writes all of this for the steps that converged: the first returns ``completed =
 with the solver's message, the second raises :class:`warptissue.fem.SolveInterrupted`
 carrying the :class:`SimulationOutputs`.
 
+:func:`run_studies_together` solves several studies' load steps in one batched FE run
+(:func:`warptissue.fem.batched.simulate_indentation_batch`) and writes each study's files as
+:func:`run_study` does (``warptissue batch --together``); :func:`prepare_study`,
+:func:`solve_study` and :func:`write_study_outputs` are :func:`run_study`'s three parts.
+
 Before meshing, a study whose mesh would not fit in memory is refused with the estimate
 (:func:`warptissue.mesh.estimate_indentation_mesh`), and the first run on a machine says
 once, on standard error, that Warp is compiling its kernels.
@@ -49,6 +55,7 @@ from __future__ import annotations
 import re
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -64,14 +71,20 @@ __all__ = [
     "FORCE_CURVE_COLUMNS",
     "PENETRATION_WARNING_SHARE",
     "SimulationOutputs",
+    "StudySetup",
     "build_mesh",
     "build_problem",
     "estimate_mesh",
     "force_curve_warnings",
     "kernels_need_compiling",
     "penetration_warnings",
+    "prepare_study",
+    "run_studies_together",
     "run_study",
     "size_near_reason",
+    "solve_study",
+    "together_refusal",
+    "write_study_outputs",
 ]
 
 FORCE_CURVE_COLUMNS: tuple[str, ...] = (*INDENTATION_COLUMNS, "step", "newton_iterations")
@@ -256,6 +269,33 @@ def _mesh_statistics(mesh: Any) -> dict[str, Any]:
 
     quality = check_mesh(mesh)
     return {**asdict(quality), "displacement_dof_count": 3 * mesh.node_count}
+
+
+@dataclass(frozen=True)
+class StudySetup:
+    """A simulation study made ready to solve (:func:`prepare_study`).
+
+    Attributes:
+        study: The study.
+        out_dir: Its output folder (created, writable).
+        device: The Warp device it runs on.
+        mesh: The specimen mesh (:func:`build_mesh`).
+        mesh_statistics: ``result.json``'s ``mesh``.
+        problem: The :class:`warptissue.fem.IndentationProblem` (:func:`build_problem`).
+        depths_m: The protocol's depths, (S,), m.
+        times_s: The protocol's times, (S,), s; None for a quasi-static one.
+        setup_s: Wall time of meshing and setting up, s.
+    """
+
+    study: Study
+    out_dir: Path
+    device: Any
+    mesh: Any
+    mesh_statistics: dict[str, Any]
+    problem: Any
+    depths_m: np.ndarray
+    times_s: np.ndarray | None
+    setup_s: float
 
 
 def _prepare_out_dir(out_path: Path) -> None:
@@ -455,8 +495,93 @@ def run_study(
             steps were written (``status`` ``"interrupted"``); its ``partial_result`` is the
             :class:`SimulationOutputs`.
     """
-    from warptissue.device import resolve_device
+    setup = prepare_study(study, out_dir=out_dir, device=device, announce=announce)
+    return solve_study(setup, progress=progress, vtu_every_step=vtu_every_step, profile=profile)
+
+
+def solve_study(
+    setup: StudySetup,
+    *,
+    progress: bool = True,
+    vtu_every_step: bool = False,
+    profile: bool = False,
+) -> SimulationOutputs:
+    """Run a prepared study's load steps alone and write its outputs.
+
+    The part of :func:`run_study` after :func:`prepare_study`; the arguments and what it
+    returns and raises are :func:`run_study`'s.
+
+    Args:
+        setup: The study's :class:`StudySetup`.
+        progress: Show a progress bar over the load steps.
+        vtu_every_step: Also write ``fields_NNN.vtu`` for every converged step.
+        profile: Time each phase of the Newton iterations into ``result.json``.
+
+    Returns:
+        The :class:`SimulationOutputs`.
+
+    Raises:
+        SolveInterrupted: Ctrl-C during the load steps, after the outputs of the converged
+            steps were written.
+    """
     from warptissue.fem import SolveInterrupted, simulate_indentation
+
+    started = time.perf_counter()
+    interrupted = None
+    try:
+        result = simulate_indentation(
+            setup.problem,
+            setup.depths_m,
+            device=setup.device,
+            progress=progress,
+            options=setup.study.solver.options,
+            times_s=setup.times_s,
+            profile=profile,
+        )
+        status = "completed" if result.completed else "stopped_early"
+    except SolveInterrupted as exc:
+        interrupted, result, status = exc, exc.partial_result, "interrupted"
+    message = interrupted.message if interrupted is not None else str(result.message)
+    outputs = write_study_outputs(
+        setup,
+        result,
+        status=status,
+        message=message,
+        solve_s=time.perf_counter() - started,
+        vtu_every_step=vtu_every_step,
+    )
+    if interrupted is not None:
+        raise SolveInterrupted(message, partial_result=outputs) from interrupted
+    return outputs
+
+
+def prepare_study(
+    study: Study, *, out_dir: str | Path, device: str | None = None, announce: bool = True
+) -> StudySetup:
+    """Check a simulation study, make its output folder, mesh and set up its problem.
+
+    The part of :func:`run_study` before the load steps; :func:`run_studies_together` takes
+    several of these.
+
+    Args:
+        study: A validated study (see :func:`warptissue.study.load_study`).
+        out_dir: Output folder, created if needed (its per-step fields of an earlier run
+            are removed).
+        device: Warp device; None uses the study's ``solver.device``.
+        announce: Say on standard error, once, that Warp compiles its kernels where they are
+            not in its cache yet.
+
+    Returns:
+        The :class:`StudySetup`.
+
+    Raises:
+        InputError: A viscoelastic material under a quasi-static protocol, a linear solver
+            that does not run on the device, a study that cannot be meshed, or an output
+            folder that cannot be written.
+        MeshError: The mesh would not fit in memory, or the generated mesh is invalid.
+        DeviceError: The device does not exist.
+    """
+    from warptissue.device import resolve_device
 
     times = study.protocol.times_s
     if times is None and _is_viscoelastic(study.material):
@@ -482,26 +607,49 @@ def run_study(
         size_near_reason=size_near_reason(study),
     )
     problem = build_problem(study, mesh)
-    meshed = time.perf_counter()
     if announce and kernels_need_compiling(warp_device):
         print(f"warptissue: {COMPILE_NOTICE}", file=sys.stderr, flush=True)
-    interrupted = None
-    try:
-        result = simulate_indentation(
-            problem,
-            np.asarray(study.protocol.depths_m, dtype=np.float64),
-            device=warp_device,
-            progress=progress,
-            options=study.solver.options,
-            times_s=None if times is None else np.asarray(times, dtype=np.float64),
-            profile=profile,
-        )
-        status = "completed" if result.completed else "stopped_early"
-    except SolveInterrupted as exc:
-        interrupted, result, status = exc, exc.partial_result, "interrupted"
-    solved = time.perf_counter()
-    message = interrupted.message if interrupted is not None else str(result.message)
+    return StudySetup(
+        study=study,
+        out_dir=out_path,
+        device=warp_device,
+        mesh=mesh,
+        mesh_statistics=mesh_statistics,
+        problem=problem,
+        depths_m=np.asarray(study.protocol.depths_m, dtype=np.float64),
+        times_s=None if times is None else np.asarray(times, dtype=np.float64),
+        setup_s=time.perf_counter() - started,
+    )
 
+
+def write_study_outputs(
+    setup: StudySetup,
+    result: Any,
+    *,
+    status: str,
+    message: str,
+    solve_s: float,
+    vtu_every_step: bool = False,
+    solved_together: int = 1,
+) -> SimulationOutputs:
+    """Write a solved study's ``force_curve.csv``, fields and ``result.json`` (atomically).
+
+    Args:
+        setup: The study's :class:`StudySetup`.
+        result: Its :class:`warptissue.fem.IndentationResult` (the converged steps).
+        status: ``"completed"``, ``"stopped_early"`` or ``"interrupted"``.
+        message: The solver's one-line status message.
+        solve_s: Wall time of the load steps, s (of the whole batched run when the study
+            was solved together with others).
+        vtu_every_step: Also write ``fields_NNN.vtu`` for every converged step.
+        solved_together: How many studies the load steps were solved with, this one
+            included (``result.json``'s ``solved_together``; 1 alone).
+
+    Returns:
+        The :class:`SimulationOutputs`.
+    """
+    study, problem, out_path, mesh = setup.study, setup.problem, setup.out_dir, setup.mesh
+    times = setup.times_s
     converged = len(result.depths_m)
     steps = np.arange(1, converged + 1, dtype=np.int64)
     newton = np.asarray(result.newton_iterations, dtype=np.int64)
@@ -548,6 +696,7 @@ def run_study(
                 "contact_area_m2": float(area[-1]) if area.size else 0.0,
             }
         }
+    writing = time.perf_counter()
     files: dict[str, Path] = {
         "result": out_path / "result.json",
         "force_curve": write_csv(out_path / "force_curve.csv", curve_columns),
@@ -561,7 +710,7 @@ def run_study(
         "status": status,
         "completed": status == "completed",
         "message": message,
-        "device": str(warp_device),
+        "device": str(setup.device),
         "linear_solver": str(result.linear_solver),
         "cutbacks": int(result.cutbacks),
         "force_curve": {
@@ -579,12 +728,13 @@ def run_study(
         "steps_converged": converged,
         "warnings": force_curve_warnings(depths, forces)
         + (penetration_warnings(depths, contact_curve["max_penetration_m"]) if is_contact else []),
-        "mesh": mesh_statistics,
+        "mesh": setup.mesh_statistics,
+        "solved_together": int(solved_together),
         "timings_s": {
-            "mesh_and_setup": meshed - started,
-            "solve": solved - meshed,
-            "write_fields": written - solved,
-            "total": written - started,
+            "mesh_and_setup": setup.setup_s,
+            "solve": solve_s,
+            "write_fields": written - writing,
+            "total": setup.setup_s + solve_s + (written - writing),
         },
         "newton_profile": None if result.timings is None else result.timings.to_dict(),
         "linear_solver_statistics": dict(result.linear_solver_statistics),
@@ -592,7 +742,7 @@ def run_study(
         "software": software_versions(),
     }
     write_json(files["result"], summary)
-    outputs = SimulationOutputs(
+    return SimulationOutputs(
         status=status,
         message=message,
         result=result,
@@ -600,6 +750,98 @@ def run_study(
         out_dir=out_path,
         files=files,
     )
-    if interrupted is not None:
-        raise SolveInterrupted(message, partial_result=outputs) from interrupted
-    return outputs
+
+
+def together_refusal(setup: StudySetup) -> str | None:
+    """Why a study cannot be solved together with others (:func:`run_studies_together`).
+
+    Args:
+        setup: The study's :class:`StudySetup`.
+
+    Returns:
+        None when it can; else the reason, one line.
+    """
+    if setup.problem.is_contact:
+        return f"a rigid {setup.study.indenter.kind} in contact is solved one study at a time"
+    if _is_viscoelastic(setup.study.material):
+        return "a viscoelastic material is solved one study at a time"
+    if setup.times_s is not None:
+        kind = setup.study.protocol.kind
+        return f"a timed protocol (kind = {kind!r}) is solved one study at a time"
+    return None
+
+
+def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs]:
+    """Solve several simulation studies in the same launches and write each one's outputs.
+
+    The load steps of all the studies run as one batched FE run
+    (:func:`warptissue.fem.batched.simulate_indentation_batch`: one assembly launch and one
+    factorization of the block-diagonal tangent per Newton iteration, each study with its
+    own increments, convergence and cutbacks); then each study's folder gets what
+    :func:`run_study` writes, with ``solved_together`` = the number of studies in
+    ``result.json``.
+
+    Args:
+        setups: The studies, from :func:`prepare_study`: flat punches (bonded or
+            frictionless), elastic materials, quasi-static protocols
+            (:func:`together_refusal`), on one device, with one formulation and equal
+            ``[solver]`` settings.
+
+    Returns:
+        One :class:`SimulationOutputs` per study, in order.
+
+    Raises:
+        InputError: No study, a study that cannot be solved with others (naming its file
+            and why), or one whose device, formulation or solver settings differ from the
+            first study's (quoting both).
+
+    Notes:
+        The forces equal those of :func:`run_study` to the Newton tolerance: the batched
+        Newton loop leaves out the single run's nonlinear elimination, damping and
+        factorization reuse, which change the path to the solution, not the converged
+        state (docs/design-notes/batched-fe.md).
+    """
+    from warptissue.fem.batched import simulate_indentation_batch
+
+    setups = list(setups)
+    if not setups:
+        raise InputError("at least one study is needed", key="studies", value=0)
+    for setup in setups:
+        reason = together_refusal(setup)
+        if reason is not None:
+            raise InputError(
+                f"cannot be solved with other studies: {reason}", path=setup.study.path
+            )
+    first = setups[0]
+    for setup in setups[1:]:
+        for key, mine, theirs in (
+            ("device", str(setup.device), str(first.device)),
+            ("solver.formulation", setup.problem.formulation, first.problem.formulation),
+            ("solver", setup.study.solver.options, first.study.solver.options),
+        ):
+            if mine != theirs:
+                raise InputError(
+                    f"studies solved together need one {key}; {first.study.path} has {theirs!r}",
+                    path=setup.study.path,
+                    key=key,
+                    value=mine,
+                )
+    started = time.perf_counter()
+    results = simulate_indentation_batch(
+        [setup.problem for setup in setups],
+        [setup.depths_m for setup in setups],
+        device=str(first.device),
+        options=first.study.solver.options,
+    )
+    solve_s = time.perf_counter() - started
+    return [
+        write_study_outputs(
+            setup,
+            result,
+            status="completed" if result.completed else "stopped_early",
+            message=str(result.message),
+            solve_s=solve_s,
+            solved_together=len(setups),
+        )
+        for setup, result in zip(setups, results, strict=True)
+    ]

@@ -12,7 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from warptissue.cli._args import device, nonnegative_int
+from warptissue.cli._args import device, nonnegative_int, positive_int
 
 __all__ = ["register", "run"]
 
@@ -79,6 +79,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "again elsewhere in any case",
     )
     parser.add_argument(
+        "--together",
+        type=positive_int,
+        default=1,
+        metavar="K",
+        help="studies per task (default 1); above 1, the simulations of a task that can "
+        "share launches (flat punch, elastic, quasi-static, equal [solver] settings) are "
+        "solved in one batched FE run, the others alone",
+    )
+    parser.add_argument(
         "--force", action="store_true", help="run the studies with a complete result too"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -106,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
         force=args.force,
         progress=not args.quiet,
         retries=args.retries,
+        together=args.together,
         on_outcome=report,
     )
     counts = len(result.outcomes), len(result.failed), len(result.skipped)
