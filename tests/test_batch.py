@@ -351,26 +351,34 @@ def test_study_sources_and_folder_names(tmp_path, capsys):
     )
 
 
-def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypatch):
-    """Must-show c of issue 23: 2 workers on loopback, one killed in the middle of a task."""
+@pytest.mark.parametrize("together", [1, 2])
+def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypatch, together):
+    """Must-show c of issue 23: 2 workers on loopback, one killed in the middle of a task;
+    with ``together=2`` the killed task holds two studies solved in one batched run, and
+    the task is run again whole."""
     pytest.importorskip("distributed")
     studies = tmp_path / "studies"
     studies.mkdir()
-    for k, c10 in enumerate((250.0, 287.5, 325.0)):
+    # With together=2, 4 studies make 2 tasks of 2: whichever is killed holds two.
+    stiffnesses = (250.0, 287.5, 325.0) if together == 1 else (250.0, 287.5, 325.0, 362.5)
+    for k, c10 in enumerate(stiffnesses):
         (studies / f"punch{k}.toml").write_text(_tiny_simulation(c10), encoding="utf-8")
     flag = tmp_path / "killed.pid"
     # The first task to get there kills its own worker process (SIGKILL) after writing its
     # files and before its marker: the scheduler must run it again elsewhere.
     monkeypatch.setenv(batch._KILL_ONCE_ENV, str(flag))
-    result = batch.run_batch([studies], out=tmp_path / "out", workers=2, progress=False)
+    result = batch.run_batch(
+        [studies], out=tmp_path / "out", workers=2, together=together, progress=False
+    )
     assert result.workers == 2
     killed = int(flag.read_text())
     assert not _alive(killed)
-    assert result.exit_code == 0 and len(result.outcomes) == 3
+    assert result.exit_code == 0 and len(result.outcomes) == len(stiffnesses)
     assert all(o.status == "completed" and not o.skipped for o in result.outcomes)
+    assert [o.solved_together for o in result.outcomes] == [together] * len(stiffnesses)
     assert killed not in {o.pid for o in result.outcomes}
     assert all(o.pid != os.getpid() for o in result.outcomes)  # they ran on the workers
-    assert len(_summary(result.summary_path)) == 3
+    assert len(_summary(result.summary_path)) == len(stiffnesses)
     # The same force curves as this process computes, to the Newton tolerance (another
     # process: the threaded linear solver's last bits, and which Newton solves use earlier
     # factors, which follows measured times, may differ).
