@@ -34,6 +34,7 @@ process, without Dask. Why Dask: docs/design-notes/batch.md.
 from __future__ import annotations
 
 import contextlib
+import functools
 import glob
 import hashlib
 import json
@@ -472,54 +473,47 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         One :class:`StudyOutcome` per task, in order.
     """
     from warptissue.device import quiet_warp
-    from warptissue.simulate import prepare_study, run_studies_together, together_refusal
+    from warptissue.simulate import (
+        prepare_study,
+        run_studies_together,
+        together_refusal,
+        together_settings,
+    )
     from warptissue.study import load_study
 
     outcomes = [_start_outcome(task) for task in tasks]
     notes: list[list[str]] = [[] for _ in tasks]
     seconds = [0.0] * len(tasks)
-    studies: list[Any] = [None] * len(tasks)
-    ready: list[tuple[int, Any]] = []
+    alone: dict[int, Callable[[], dict[str, Any]]] = {}  # index -> what runs it alone
+    parts: list[list[tuple[int, Any]]] = []  # simulations that share their settings
     for index, task in enumerate(tasks):
         started = time.perf_counter()
         try:
             with _recorded(notes[index]):
                 quiet_warp()
                 study = load_study(task.path)
-                studies[index] = study
                 outcomes[index] = replace(outcomes[index], kind=_kind(study))
-                if outcomes[index].kind == "simulation":
-                    device = _worker_device(task.device, study) if task.on_dask else task.device
-                    out_dir = Path(task.out_dir) / task.folder
+                device = _worker_device(task.device, study) if task.on_dask else task.device
+                out_dir = Path(task.out_dir) / task.folder
+                if outcomes[index].kind == "fit":
+                    alone[index] = functools.partial(_fit, study, out_dir, device)
+                else:
                     setup = prepare_study(study, out_dir=out_dir, device=device, announce=False)
-                    ready.append((index, setup))
+                    alone[index] = functools.partial(_solve_alone, setup)
+                    if together_refusal(setup) is None:
+                        settings = together_settings(setup)
+                        part = next(
+                            (p for p in parts if together_settings(p[0][1]) == settings), None
+                        )
+                        if part is None:
+                            parts.append([(index, setup)])
+                        else:
+                            part.append((index, setup))
         except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
             outcomes[index] = replace(outcomes[index], **_error_numbers(exc))
         seconds[index] = time.perf_counter() - started
 
-    # The simulations that can share launches, by device, formulation and solver settings.
-    parts: list[list[tuple[int, Any]]] = []
-    for index, setup in ready:
-        if together_refusal(setup) is not None:
-            parts.append([(index, setup)])
-            continue
-        for part in parts:
-            other = part[0][1]
-            if (
-                together_refusal(other) is None
-                and str(other.device) == str(setup.device)
-                and other.problem.formulation == setup.problem.formulation
-                and other.study.solver.options == setup.study.solver.options
-            ):
-                part.append((index, setup))
-                break
-        else:
-            parts.append([(index, setup)])
-    alone: list[tuple[int, Any]] = []
-    for part in parts:
-        if len(part) == 1:
-            alone.extend(part)
-            continue
+    for part in (part for part in parts if len(part) > 1):
         started = time.perf_counter()
         shared: list[str] = []
         try:
@@ -528,7 +522,6 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         except Exception as exc:  # noqa: BLE001 - they run alone instead
             for index, _setup in part:
                 notes[index].append(f"solved alone: the batched run failed: {_one_line(exc)}")
-            alone.extend(part)
             continue
         spent = time.perf_counter() - started
         for (index, _), outputs in zip(part, solved, strict=True):
@@ -536,20 +529,20 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
             numbers["warnings"] = numbers["warnings"] + notes[index] + shared
             outcomes[index] = replace(outcomes[index], **numbers)
             seconds[index] += spent
-    for index, setup in sorted(alone, key=lambda item: item[0]):
+            del alone[index]
+    for index in sorted(alone):
         started = time.perf_counter()
-        outcomes[index] = _run_alone(outcomes[index], notes[index], setup=setup)
-        seconds[index] += time.perf_counter() - started
-    for index, task in enumerate(tasks):
-        if outcomes[index].kind == "fit":
-            started = time.perf_counter()
-            device = _worker_device(task.device, studies[index]) if task.on_dask else task.device
-            outcomes[index] = _run_alone(
-                outcomes[index],
-                notes[index],
-                fit=(studies[index], Path(task.out_dir) / task.folder, device),
+        caught: list[str] = []
+        try:
+            with _recorded(caught):
+                numbers = alone[index]()
+            numbers["warnings"] = numbers["warnings"] + notes[index] + caught
+            outcomes[index] = replace(outcomes[index], **numbers)
+        except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
+            outcomes[index] = replace(
+                outcomes[index], **_error_numbers(exc), warnings=notes[index] + caught
             )
-            seconds[index] += time.perf_counter() - started
+        seconds[index] += time.perf_counter() - started
     outcomes = [replace(o, seconds=t) for o, t in zip(outcomes, seconds, strict=True)]
     if tasks and tasks[0].on_dask:
         _kill_once_hook()
@@ -558,28 +551,11 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     return outcomes
 
 
-def _run_alone(
-    outcome: StudyOutcome,
-    notes: list[str],
-    *,
-    setup: Any = None,
-    fit: tuple[Any, Path, str | None] | None = None,
-) -> StudyOutcome:
-    """One study of a group run alone: a prepared simulation, or a fit."""
+def _solve_alone(setup: Any) -> dict[str, Any]:
+    """A prepared simulation of a group solved alone: its outcome's numbers."""
     from warptissue.simulate import solve_study
 
-    caught: list[str] = []
-    try:
-        with _recorded(caught):
-            if setup is not None:
-                numbers = _simulation_numbers(solve_study(setup, progress=False))
-            else:
-                assert fit is not None
-                numbers = _fit(*fit)
-        numbers["warnings"] = numbers["warnings"] + notes + caught
-        return replace(outcome, **numbers)
-    except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
-        return replace(outcome, **_error_numbers(exc), warnings=notes + caught)
+    return _simulation_numbers(solve_study(setup, progress=False))
 
 
 def _kind(study: Any) -> str:

@@ -84,6 +84,7 @@ __all__ = [
     "size_near_reason",
     "solve_study",
     "together_refusal",
+    "together_settings",
     "write_study_outputs",
 ]
 
@@ -771,6 +772,23 @@ def together_refusal(setup: StudySetup) -> str | None:
     return None
 
 
+def together_settings(setup: StudySetup) -> dict[str, Any]:
+    """What studies solved together must share (:func:`run_studies_together`).
+
+    Args:
+        setup: The study's :class:`StudySetup`.
+
+    Returns:
+        ``device`` (its name), ``solver.formulation`` and ``solver`` (the Newton options),
+        to compare with ``==``.
+    """
+    return {
+        "device": str(setup.device),
+        "solver.formulation": setup.problem.formulation,
+        "solver": setup.study.solver.options,
+    }
+
+
 def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs]:
     """Solve several simulation studies in the same launches and write each one's outputs.
 
@@ -814,10 +832,8 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
             )
     first = setups[0]
     for setup in setups[1:]:
-        for key, mine, theirs in (
-            ("device", str(setup.device), str(first.device)),
-            ("solver.formulation", setup.problem.formulation, first.problem.formulation),
-            ("solver", setup.study.solver.options, first.study.solver.options),
+        for (key, mine), theirs in zip(
+            together_settings(setup).items(), together_settings(first).values(), strict=True
         ):
             if mine != theirs:
                 raise InputError(
