@@ -279,16 +279,19 @@ def eliminate_dirichlet_kernel(
     offsets: wp.array(dtype=wp.int32),
     columns: wp.array(dtype=wp.int32),
     constrained: wp.array(dtype=wp.vec3d),
-    damping: wp.float64,
+    node_problem: wp.array(dtype=wp.int32),
+    problem_damping: wp.array(dtype=wp.float64),
     matrix_values: wp.array(dtype=wp.mat33d),
 ):
     """Zero the rows and columns of constrained dofs and put 1 on their diagonal; add
-    ``damping |K_ii|`` to the diagonal of the free dofs (Levenberg-Marquardt, 0 for none).
+    ``damping |K_ii|`` to the diagonal of the free dofs (Levenberg-Marquardt, 0 for none),
+    with the damping of the row's problem (``problem_damping[node_problem[row]]``).
 
     ``constrained[n][i]`` is 1 where component i of node n is prescribed, else 0.
     """
     row = wp.tid()
     row_mask = constrained[row]
+    damping = problem_damping[node_problem[row]]
     for idx in range(offsets[row], offsets[row + 1]):
         col = columns[idx]
         col_mask = constrained[col]

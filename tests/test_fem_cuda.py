@@ -30,7 +30,7 @@ from warptissue.fem import (
     cudss,
     simulate_indentation,
 )
-from warptissue.fem.cudss import (
+from warptissue.fem.linear.cudss import (
     MEMORY_ESTIMATE_NAMES,
     CudssSolver,
     bsr33_csr_pattern,

@@ -19,7 +19,7 @@ from warptissue.fem import (
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem.sensitivity import ForceSensitivity
+from warptissue.fem import ForceSensitivity
 from warptissue.indenter import Indenter
 from warptissue.materials import NeoHookean, Ogden, Viscoelastic, material_from_dict
 from warptissue.mesh import block_mesh, indentation_block, to_tet10

@@ -13,7 +13,7 @@ import tomli_w
 
 from warptissue.acquisition.conditioning import condition_for_fit
 from warptissue.errors import InputError
-from warptissue.fem.solvers import NewtonOptions
+from warptissue.fem.newton import NewtonOptions
 from warptissue.fit import engine
 from warptissue.fit.punch import hayes_kappa
 from warptissue.io import write_csv

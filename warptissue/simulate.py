@@ -41,7 +41,7 @@ with the solver's message, the second raises :class:`warptissue.fem.SolveInterru
 carrying the :class:`SimulationOutputs`.
 
 :func:`run_studies_together` solves several studies' load steps in one batched FE run
-(:func:`warptissue.fem.batched.simulate_indentation_batch`) and writes each study's files as
+(:func:`warptissue.fem.simulate_indentation_batch`) and writes each study's files as
 :func:`run_study` does (``warptissue batch --together``); :func:`prepare_study`,
 :func:`solve_study` and :func:`write_study_outputs` are :func:`run_study`'s three parts.
 
@@ -793,7 +793,7 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
     """Solve several simulation studies in the same launches and write each one's outputs.
 
     The load steps of all the studies run as one batched FE run
-    (:func:`warptissue.fem.batched.simulate_indentation_batch`: one assembly launch and one
+    (:func:`warptissue.fem.simulate_indentation_batch`: one assembly launch and one
     factorization of the block-diagonal tangent per Newton iteration, each study with its
     own increments, convergence and cutbacks); then each study's folder gets what
     :func:`run_study` writes, with ``solved_together`` = the number of studies in
@@ -819,7 +819,7 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
         factorization reuse, which change the path to the solution, not the converged
         state (docs/design-notes/batched-fe.md).
     """
-    from warptissue.fem.batched import simulate_indentation_batch
+    from warptissue.fem import simulate_indentation_batch
 
     setups = list(setups)
     if not setups:

@@ -47,7 +47,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from warptissue.acquisition.conditioning import FitRecord
-    from warptissue.fem.solvers import NewtonOptions
+    from warptissue.fem.newton import NewtonOptions
 
 __all__ = [
     "FIT_METHODS",
@@ -1117,7 +1117,7 @@ def _read_solver(table: _Table) -> Solver:
     # The solver's own modules: importing them does not start Warp (test_study checks).
     from warptissue.fem.assembly import FORMULATIONS
     from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
-    from warptissue.fem.solvers import NewtonOptions
+    from warptissue.fem.newton import NewtonOptions
 
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):

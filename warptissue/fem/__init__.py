@@ -12,26 +12,23 @@ problems in the same launches: :func:`simulate_indentation_batch` (:mod:`warptis
 """
 
 from warptissue.fem.assembly import FORMULATIONS, Assembler, Assembly, von_mises
-from warptissue.fem.batched import (
-    batch_assembler,
-    simulate_indentation_batch,
-    solve_quasistatic_batch,
-)
 from warptissue.fem.elements import ElementGeometry, element_geometry
 from warptissue.fem.indentation import (
     IndentationProblem,
     IndentationResult,
+    batch_assembler,
     simulate_indentation,
+    simulate_indentation_batch,
 )
-from warptissue.fem.sensitivity import ForceSensitivity
-from warptissue.fem.solvers import (
-    LINEAR_SOLVERS,
+from warptissue.fem.linear import LINEAR_SOLVERS, LinearSolver
+from warptissue.fem.newton import (
     DirichletConditions,
-    LinearSolver,
+    ForceSensitivity,
     NewtonOptions,
     QuasistaticResult,
     SolveInterrupted,
     solve_quasistatic,
+    solve_quasistatic_batch,
 )
 from warptissue.fem.timing import NewtonTimings
 

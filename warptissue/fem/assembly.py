@@ -256,6 +256,12 @@ class Assembler:
         self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
         self._element_problem = wp.array(problems, dtype=wp.int32, device=dev)
         count = self.problem_count
+        node_problem = np.zeros(self.node_count, dtype=np.int32)
+        node_problem[mesh.tets] = problems[:, None]
+        self._node_problem = wp.array(node_problem, dtype=wp.int32, device=dev)
+        # The damping of each problem's tangent (eliminate), copied only when it changes.
+        self._damping_host = np.zeros(count)
+        self._damping = wp.zeros(count, dtype=wp.float64, device=dev)
         # Energy and smallest J per problem, in one array so that one copy reads both.
         self._scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
         self._energy, self._min_jacobian = self._scalars[:count], self._scalars[count:]
@@ -637,26 +643,41 @@ class Assembler:
         self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
         return share * scratch.numpy()
 
-    def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
+    def eliminate(self, constrained: wp.array, *, damping: Any = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
         in place; optionally damp the free dofs' diagonal.
 
         Args:
             constrained: Warp vec3d array (N,), 1.0 where a component is prescribed.
-            damping: Levenberg-Marquardt factor lambda >= 0: each free diagonal entry K_ii
-                becomes ``K_ii + lambda |K_ii|`` (0: the tangent unchanged).
+            damping: Levenberg-Marquardt factor lambda >= 0, one for all problems or one per
+                packed problem, (K,): each free diagonal entry K_ii of a problem becomes
+                ``K_ii + lambda |K_ii|`` (0: the tangent unchanged).
 
         Raises:
-            InputError: A negative or non-finite ``damping``.
+            InputError: A negative or non-finite ``damping``, or not one per problem.
         """
         from warptissue.kernels import fem as kf
 
-        if not (math.isfinite(damping) and damping >= 0.0):
-            raise InputError("damping must be finite and >= 0", value=damping)
+        factors = np.asarray(damping, dtype=np.float64)
+        if factors.ndim == 0:
+            factors = np.full(self.problem_count, float(factors))
+        if factors.shape != (self.problem_count,) or not (
+            np.all(np.isfinite(factors)) and np.all(factors >= 0.0)
+        ):
+            raise InputError("damping must be finite and >= 0, one per problem", value=damping)
+        if not np.array_equal(factors, self._damping_host):
+            self._damping_host = factors.copy()
+            self._damping.assign(self._damping_host)
         wp.launch(
             kf.eliminate_dirichlet_kernel,
             dim=self.node_count,
-            inputs=[self.matrix.offsets, self.matrix.columns, constrained, wp.float64(damping)],
+            inputs=[
+                self.matrix.offsets,
+                self.matrix.columns,
+                constrained,
+                self._node_problem,
+                self._damping,
+            ],
             outputs=[self.matrix.values],
             device=self.device,
         )

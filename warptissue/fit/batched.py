@@ -25,7 +25,7 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions
-from warptissue.fem.batched import batch_assembler, simulate_indentation_batch
+from warptissue.fem import batch_assembler, simulate_indentation_batch
 from warptissue.fit.engine import least_squares
 from warptissue.fit.result import FitResult, RejectStep
 
