@@ -9,9 +9,14 @@ import pytest
 import warp as wp
 
 from warptissue.errors import InputError
-from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+from warptissue.fem import (
+    IndentationProblem,
+    NewtonOptions,
+    batch_assembler,
+    simulate_indentation,
+    simulate_indentation_batch,
+)
 from warptissue.fem.arrays import DeviceArrays
-from warptissue.fem import batch_assembler, simulate_indentation_batch
 from warptissue.fem.newton.problems import Problems
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, Viscoelastic
@@ -52,7 +57,7 @@ def test_per_problem_sums_and_spreads_follow_the_node_ranges(device, rng):
     """Sums over each problem's node range (of different lengths, one of a single node)
     equal NumPy's sums of the slices, and a per-problem value spreads to its own nodes."""
     offsets = np.array([0, 5, 6, 13])
-    vectors, scalars = rng.standard_normal((13, 3)), rng.standard_normal(13)
+    vectors = rng.standard_normal((13, 3))
     arrays = DeviceArrays(wp.get_device(device))
     others = rng.standard_normal((13, 3))
     with arrays.context():

@@ -27,9 +27,9 @@ from warptissue.fem import (
     IndentationProblem,
     LinearSolver,
     NewtonOptions,
-    cudss,
     simulate_indentation,
 )
+from warptissue.fem.linear import cudss
 from warptissue.fem.linear.cudss import (
     MEMORY_ESTIMATE_NAMES,
     CudssSolver,

@@ -16,8 +16,12 @@ from warptissue.fem import (
     NewtonOptions,
     solve_quasistatic,
 )
-from warptissue.fem.linear.direct import CPU_DIRECT_METHODS, CpuDirectSolver, bsr33_scalar_pattern
-from warptissue.fem.linear.direct import pardiso_available
+from warptissue.fem.linear.direct import (
+    CPU_DIRECT_METHODS,
+    CpuDirectSolver,
+    bsr33_scalar_pattern,
+    pardiso_available,
+)
 from warptissue.materials import NeoHookean
 from warptissue.mesh import block_mesh, to_tet10
 

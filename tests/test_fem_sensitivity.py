@@ -16,12 +16,12 @@ import pytest
 from warptissue.errors import InputError
 from warptissue.fem import (
     Assembler,
+    ForceSensitivity,
     IndentationProblem,
     NewtonOptions,
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem import ForceSensitivity
 from warptissue.fem.linear.direct import pardiso_available
 from warptissue.indenter import Indenter
 from warptissue.materials import (

@@ -338,9 +338,7 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
         start = assembler.assemble(u)
         if refuse:
             assembler.assemble_part = inverted_trials
-        returned, assembly, iterations = nonlinear_elimination(
-            assembler, start, u, free, limit=0.0
-        )
+        returned, assembly, iterations = nonlinear_elimination(assembler, start, u, free, limit=0.0)
         residual = assembly.residual.numpy().copy()
         energy = assembly.energy_J
         if refuse:

@@ -105,8 +105,12 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
-    from warptissue.fem import simulate_indentation_batch
+    from warptissue.fem import (
+        Assembler,
+        NewtonOptions,
+        simulate_indentation,
+        simulate_indentation_batch,
+    )
 
     warp_device = resolve_device(device)
     options = NewtonOptions(tolerance=NEWTON_TOLERANCE)
@@ -156,8 +160,12 @@ def run_fits(mesh: Any, count: int, device: str, *, steps: int, sequential_limit
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
-    from warptissue.fem import simulate_indentation_batch
+    from warptissue.fem import (
+        Assembler,
+        NewtonOptions,
+        simulate_indentation,
+        simulate_indentation_batch,
+    )
     from warptissue.fit import least_squares
     from warptissue.fit.batched import fit_indentation_batch
 

@@ -7,7 +7,6 @@ precomputed element-block to BSR-block map, so the topology is never rebuilt.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any

@@ -51,7 +51,6 @@ REUSE_MAX_ITERATIONS = 40
 """Most GMRES iterations of one solve with old factors (the basis is kept in memory)."""
 
 
-
 class LinearSolver:
     """Solves the eliminated tangent system on the assembler's device.
 
@@ -192,12 +191,12 @@ class LinearSolver:
         """Newton's linear solve: with the last factorization where that is cheaper.
 
         Where ``matrix`` was factorized before (its values have changed since), GMRES solves
-        it with the old factors as a right preconditioner (:func:`warptissue.fem.linear.krylov.gmres`)
-        to ``|rhs - matrix x| <= rtol |rhs|``, for at most :data:`REUSE_BUDGET` times the
-        measured wall time of the last factorization with its solve; from
-        :data:`REUSE_PREDICT_AFTER` iterations on it gives up as soon as its mean residual
-        reduction per iteration predicts an overrun. Where it gets there,
-        no factorization is made; where not, the matrix is factorized and solved
+        it with the old factors as a right preconditioner
+        (:func:`warptissue.fem.linear.krylov.gmres`) to ``|rhs - matrix x| <= rtol |rhs|``,
+        for at most :data:`REUSE_BUDGET` times the measured wall time of the last
+        factorization with its solve; from :data:`REUSE_PREDICT_AFTER` iterations on it gives
+        up as soon as its mean residual reduction per iteration predicts an overrun. Where it
+        gets there, no factorization is made; where not, the matrix is factorized and solved
         (:meth:`solve`), and the next iteration starts from those fresh factors.
 
         Args:

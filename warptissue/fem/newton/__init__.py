@@ -11,14 +11,14 @@ sensitivities at converged states (:mod:`~warptissue.fem.newton.sensitivity`).
 """
 
 from warptissue.fem.newton.options import PREDICTORS, NewtonOptions
-from warptissue.fem.newton.problems import DirichletConditions
-from warptissue.fem.newton.sensitivity import ForceSensitivity
 from warptissue.fem.newton.path import (
     QuasistaticResult,
     SolveInterrupted,
     solve_quasistatic,
     solve_quasistatic_batch,
 )
+from warptissue.fem.newton.problems import DirichletConditions
+from warptissue.fem.newton.sensitivity import ForceSensitivity
 
 __all__ = [
     "PREDICTORS",

@@ -216,8 +216,6 @@ def nonlinear_elimination(
     return u, assembly, iterations
 
 
-
-
 def patch_solve(
     assembler: Assembler, patch: np.ndarray, patch_free: np.ndarray, local_residual: np.ndarray
 ) -> np.ndarray | None:

@@ -189,9 +189,7 @@ def newton_increment(
         rtol = forcing_term(limits, np.sqrt(rhs_squared), iterating)
         factorizations = solver.factorizations
         try_old = reuse_factorization and reuse.promising(u, factor, problems, iterating)
-        du, linear_iterations = solver.solve_newton(
-            assembly.matrix, rhs, rtol=rtol, reuse=try_old
-        )
+        du, linear_iterations = solver.solve_newton(assembly.matrix, rhs, rtol=rtol, reuse=try_old)
         if solver.factorizations > factorizations:
             reuse.factorized(u, factor)
         iterations[iterating] += 1

@@ -25,9 +25,9 @@ from warptissue.fem.linear import LinearSolver
 from warptissue.fem.newton import increment
 from warptissue.fem.newton.options import NewtonOptions, checked_options
 from warptissue.fem.newton.problems import DirichletConditions, Problems
+from warptissue.fem.newton.sensitivity import ForceSensitivity
 from warptissue.fem.newton.steering import ReuseTracker
 from warptissue.fem.packing import PackedMeshes
-from warptissue.fem.newton.sensitivity import ForceSensitivity
 from warptissue.fem.timing import NewtonTimings, PhaseTimer
 
 __all__ = [
@@ -401,17 +401,13 @@ def _follow_paths(
                     )
                     if step.converged[k]:
                         here, there = (
-                            (path.load, next_load)
-                            if path.times is None
-                            else (path.time, next_time)
+                            (path.load, next_load) if path.times is None else (path.time, next_time)
                         )
                         if there != here:
                             path.previous = (here, u)
                         path.load, path.time, path.fraction = next_load, next_time, fraction
                         if derivatives is not None:
-                            path.step_sensitivity = (
-                                derivatives if count == 1 else derivatives[k]
-                            )
+                            path.step_sensitivity = derivatives if count == 1 else derivatives[k]
                         if not at_target[k]:
                             path.step_fraction = min(2.0 * path.step_fraction, 1.0 - fraction)
                             continue
@@ -558,8 +554,7 @@ def solve_quasistatic(
     n = assembler.node_count
     if assembler.problem_count != 1:
         raise InputError(
-            f"the assembler packs {assembler.problem_count} problems: use "
-            "solve_quasistatic_batch",
+            f"the assembler packs {assembler.problem_count} problems: use solve_quasistatic_batch",
             key="assembler",
             value=assembler.problem_count,
         )
