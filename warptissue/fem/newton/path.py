@@ -331,11 +331,15 @@ def _follow_paths(
                             guess[path.nodes] = change[path.nodes]
                         guessed[k] = True
                     path.retry_linearized = False
-                if count == 1:  # a viscous history and a rigid contact: one problem
-                    fraction, next_load, next_time = steps[0]
-                    if viscous is not None:
-                        viscous.begin_step(next_time - paths[0].time)
-                    assembler.set_load(next_load)  # a rigid contact's depth follows the load
+                # Each problem's viscous step and rigid indenter depth for this increment
+                # (a finished problem keeps its load; its rows stay frozen).
+                next_loads = np.array([path.load for path in paths])
+                time_steps = np.ones(count)
+                for k, (_, next_load, next_time) in steps.items():
+                    next_loads[k], time_steps[k] = next_load, next_time - paths[k].time
+                if viscous is not None:
+                    viscous.begin_step(time_steps if count > 1 else float(time_steps[0]))
+                assembler.set_load(next_loads if count > 1 else float(next_loads[0]))
                 advance = (
                     increment.penalty_ramped_increment if ramped else increment.newton_increment
                 )
