@@ -128,7 +128,9 @@ class ViscousHistory:
         self.materials = materials
         self.device = device
         self._shape = (tet_count, quadrature_points)
-        problems = np.zeros(tet_count, dtype=np.int32) if element_problem is None else element_problem
+        problems = (
+            np.zeros(tet_count, dtype=np.int32) if element_problem is None else element_problem
+        )
         self._element_problem = wp.array(np.asarray(problems, dtype=np.int32), device=device)
         self._terms = max(_term_count(material) for material in materials)
         self.history = wp.zeros((*self._shape, self._terms), dtype=wp.mat33d, device=device)
@@ -194,9 +196,7 @@ class ViscousHistory:
         self.names = tuple(names)
         count = max(len(self.names), 1)
         dev = self.device
-        self._d_history = wp.zeros(
-            (count, *self._shape, self._terms), dtype=wp.mat33d, device=dev
-        )
+        self._d_history = wp.zeros((count, *self._shape, self._terms), dtype=wp.mat33d, device=dev)
         self._d_elastic_stress = wp.zeros((count, *self._shape), dtype=wp.mat33d, device=dev)
 
     def begin_step(self, dt_s: float | np.ndarray) -> None:
@@ -282,9 +282,7 @@ class ViscousHistory:
         from warptissue.kernels import fem as kf
 
         structs = []
-        for material, terms, dt in zip(
-            self.materials, self.term_counts(), self.dt_s, strict=True
-        ):
+        for material, terms, dt in zip(self.materials, self.term_counts(), self.dt_s, strict=True):
             d_gamma, d_a, d_b = 0.0, np.zeros(terms), np.zeros(terms)
             which = material.prony_derivative(name) if isinstance(material, Viscoelastic) else None
             if which is not None:
