@@ -529,9 +529,10 @@ def solve_quasistatic(
             fails from it, the increment runs again from the linearized predictor before any
             cutback. ``options.nonlinear_elimination`` relaxes, after each global Newton step,
             the nodes that hold most of the residual with the others fixed
-            (:func:`_nonlinear_elimination`). ``options.damping``: where the line search cuts
-            a Newton step below a quarter of its length, the next iterations' tangent is
-            damped (Levenberg-Marquardt, :func:`_next_damping`) until steps are taken whole
+            (:func:`warptissue.fem.newton.elimination.nonlinear_elimination`).
+            ``options.damping``: where the line search cuts a Newton step below a quarter of
+            its length, the next iterations' tangent is damped (Levenberg-Marquardt,
+            :func:`warptissue.fem.newton.steering.next_damping`) until steps are taken whole
             again. These three change the path to the solution, not the convergence test.
         progress: Show a tqdm bar over the requested loads.
         progress_label: The bar's label.
