@@ -764,11 +764,6 @@ def together_refusal(setup: StudySetup) -> str | None:
     """
     if setup.problem.is_contact:
         return f"a rigid {setup.study.indenter.kind} in contact is solved one study at a time"
-    if _is_viscoelastic(setup.study.material):
-        return "a viscoelastic material is solved one study at a time"
-    if setup.times_s is not None:
-        kind = setup.study.protocol.kind
-        return f"a timed protocol (kind = {kind!r}) is solved one study at a time"
     return None
 
 
@@ -801,9 +796,9 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
 
     Args:
         setups: The studies, from :func:`prepare_study`: flat punches (bonded or
-            frictionless), elastic materials, quasi-static protocols
-            (:func:`together_refusal`), on one device, with one formulation and equal
-            ``[solver]`` settings.
+            frictionless; :func:`together_refusal`), elastic or viscoelastic, quasi-static
+            or timed protocols, on one device, with one formulation and equal ``[solver]``
+            settings.
 
     Returns:
         One :class:`SimulationOutputs` per study, in order.
@@ -814,10 +809,10 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
             first study's (quoting both).
 
     Notes:
-        The forces equal those of :func:`run_study` to the Newton tolerance: the batched
-        Newton loop leaves out the single run's nonlinear elimination, damping and
-        factorization reuse, which change the path to the solution, not the converged
-        state (docs/design-notes/batched-fe.md).
+        The forces equal those of :func:`run_study` to the Newton tolerance: every study
+        runs the one Newton loop with its own decisions; only the shared factorization's
+        reuse is decided for all at once, which changes the path to the solution, not the
+        converged state (docs/design-notes/batched-fe.md).
     """
     from warptissue.fem import simulate_indentation_batch
 
@@ -848,6 +843,7 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
         [setup.depths_m for setup in setups],
         device=str(first.device),
         options=first.study.solver.options,
+        times_s=[setup.times_s for setup in setups],
     )
     solve_s = time.perf_counter() - started
     return [
