@@ -30,6 +30,7 @@ from warptissue.fem import (
     batch_assembler,
     simulate_indentation_batch,
 )
+from warptissue.fit._forward import FitMeeting
 from warptissue.fit.engine import least_squares
 from warptissue.fit.result import FitResult, RejectStep
 
@@ -41,79 +42,8 @@ class _Evaluation:
     """One fit's forward run at a trial point: residuals (m,) and Jacobian (m, n)."""
 
     x: np.ndarray
-    residuals: np.ndarray | None
-    jacobian: np.ndarray | None
-    error: BaseException | None = None
-
-
-class _BatchedForward:
-    """Collects the fits' trial points; the caller's thread solves them in one batched FE run.
-
-    A fit's thread calls :meth:`evaluate` and waits. :meth:`serve`, in the thread that called
-    :func:`fit_indentation_batch`, runs a batch whenever every fit still running has a trial
-    point waiting, and hands each its result. :meth:`leave` takes a stopped fit out of the
-    set. The FE runs in one thread because the GPU's libraries keep per-thread state (nvmath's
-    cuDSS handles fail in a thread other than the one that first used them).
-    """
-
-    def __init__(self, count: int, run: Any) -> None:
-        self._condition = threading.Condition()
-        self._run = run
-        self._live = set(range(count))
-        self._pending: dict[int, np.ndarray] = {}
-        self._results: dict[int, _Evaluation] = {}
-        self._stopped: BaseException | None = None
-
-    def evaluate(self, k: int, x: np.ndarray) -> _Evaluation:
-        with self._condition:
-            if self._stopped is not None:
-                return _Evaluation(x, None, None, self._stopped)
-            self._pending[k] = x
-            self._condition.notify_all()
-            self._condition.wait_for(lambda: k in self._results)
-            return self._results.pop(k)
-
-    def leave(self, k: int) -> None:
-        with self._condition:
-            self._live.discard(k)
-            self._condition.notify_all()
-
-    def serve(self) -> None:
-        """Run batches in this thread until every fit has left.
-
-        An exception of a batch is handed to each fit of that batch. An interrupt (Ctrl-C)
-        is handed to every waiting fit and to every later trial point, so that the fit
-        threads end, and raised here.
-        """
-        batch: dict[int, np.ndarray] = {}
-        try:
-            while True:
-                with self._condition:
-                    self._condition.wait_for(
-                        lambda: (
-                            not self._live
-                            or (bool(self._pending) and set(self._pending) >= self._live)
-                        )
-                    )
-                    if not self._live:
-                        return
-                    batch, self._pending = self._pending, {}
-                try:
-                    results = self._run(batch)
-                except Exception as exc:  # every fit of the batch gets the error
-                    results = {k: _Evaluation(x, None, None, exc) for k, x in batch.items()}
-                with self._condition:
-                    self._results.update(results)
-                    batch = {}
-                    self._condition.notify_all()
-        except BaseException as exc:  # Ctrl-C: every fit stops
-            with self._condition:
-                self._stopped = exc
-                for k, x in {**batch, **self._pending}.items():
-                    self._results[k] = _Evaluation(x, None, None, exc)
-                self._pending = {}
-                self._condition.notify_all()
-            raise
+    residuals: np.ndarray
+    jacobian: np.ndarray
 
 
 def fit_indentation_batch(
@@ -217,10 +147,10 @@ def fit_indentation_batch(
             sensitivities=names,
             assembler=assemblers[key],
         )
-        out = {}
+        out: dict[int, Any] = {}
         for k, result in zip(order, results, strict=True):
             if not result.completed:
-                out[k] = _Evaluation(batch[k], None, None, RejectStep(result.message))
+                out[k] = RejectStep(result.message)
                 continue
             out[k] = _Evaluation(
                 batch[k],
@@ -229,7 +159,7 @@ def fit_indentation_batch(
             )
         return out
 
-    forward = _BatchedForward(count, run)
+    forward = FitMeeting(count, run)
     outcomes: list[FitResult | BaseException | None] = [None] * count
 
     def fit(k: int) -> None:
@@ -238,10 +168,8 @@ def fit_indentation_batch(
         def evaluate(x: np.ndarray) -> _Evaluation:
             if last and np.array_equal(last[0].x, x):
                 return last[0]
-            evaluation = forward.evaluate(k, np.array(x, dtype=np.float64))
+            evaluation = forward.request(k, np.array(x, dtype=np.float64))
             last[:] = [evaluation]
-            if evaluation.error is not None:
-                raise evaluation.error
             return evaluation
 
         try:
