@@ -1,12 +1,15 @@
 """K indentations solved together (the one Newton loop with K > 1): every problem's
 curve equals the one :func:`warptissue.fem.simulate_indentation` gives it alone, with its own
-cutbacks, and a failing problem stops without holding the others."""
+cutbacks, and a failing problem stops without holding the others; rigid indenters in contact
+(sphere, rounded punch, wedge, plate) mix with flat punches, each with its own contact
+outputs."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import warp as wp
+from test_fem_contact import WEDGE, _plate_cube, _wedge_strip
 
 from warptissue.errors import InputError
 from warptissue.fem import (
@@ -198,14 +201,6 @@ def test_the_batch_refuses_what_it_cannot_take():
     )
     with pytest.raises(InputError, match="elastic materials"):
         simulate_indentation_batch([viscous], depths)
-    sphere = IndentationProblem(
-        problem.mesh,
-        problem.material,
-        Indenter("sphere", radius_m=RADIUS_M),
-        symmetry_planes=problem.symmetry_planes,
-    )
-    with pytest.raises(InputError, match="flat punches"):
-        simulate_indentation_batch([sphere], depths)
     ogden = IndentationProblem(
         problem.mesh,
         Ogden((120.0, -30.0), (5.0, -2.0), 1.8e5),
@@ -214,3 +209,99 @@ def test_the_batch_refuses_what_it_cannot_take():
     )
     with pytest.raises(InputError, match="Ogden exponents"):
         simulate_indentation_batch([ogden, problem], depths * 2, sensitivities=("alpha1",))
+
+
+# --- rigid contact in a batch ---------------------------------------------------------------
+
+CONTACT_FIELDS = ("reaction_force_N", "contact_force_N", "contact_area_m2", "max_penetration_m")
+
+
+def _contact_block():
+    """A coarse quarter block 3 R x 1.5 R under indenters of radius about 0.2 R (1 463 TET10
+    nodes)."""
+    return indentation_block(
+        width_m=3.0 * RADIUS_M,
+        thickness_m=1.5 * RADIUS_M,
+        probe_radius_m=0.2 * RADIUS_M,
+        size_near_m=0.2 * RADIUS_M,
+        size_far_m=0.75 * RADIUS_M,
+    )
+
+
+def _contact_problems():
+    """A sphere, a rounded flat punch, a wedge, a plate and a bonded flat punch, with their
+    own meshes, materials and depths."""
+    block = _contact_block()
+    problems = [
+        IndentationProblem(block, NeoHookean(287.5, 575e3), Indenter("sphere", radius_m=RADIUS_M)),
+        IndentationProblem(
+            block,
+            NeoHookean(400.0, 4e5),
+            Indenter("flat_punch", radius_m=0.2 * RADIUS_M, edge_radius_m=0.05 * RADIUS_M),
+        ),
+        IndentationProblem(_wedge_strip(full=False), NeoHookean(287.5, 575e3), WEDGE),
+        IndentationProblem(
+            _plate_cube(), NeoHookean(100.0, 1e5), Indenter("plate"), base="sliding"
+        ),
+        IndentationProblem(
+            block, MooneyRivlin(200.0, 60.0, 2e5), Indenter("flat_punch", radius_m=0.2 * RADIUS_M)
+        ),
+    ]
+    depths = [
+        RADIUS_M * np.array([0.01, 0.03]),
+        RADIUS_M * np.array([0.02]),
+        np.array([0.1e-3, 0.2e-3]),
+        1e-2 * np.array([0.05, 0.1]),
+        RADIUS_M * np.array([0.01, 0.02]),
+    ]
+    return problems, depths
+
+
+def test_batched_rigid_contacts_equal_their_single_runs(device):
+    """A sphere, a rounded punch, a wedge, a plate and a bonded flat punch solved together
+    (one contact launch over all their candidate nodes, each problem with its own body,
+    depth and penalty) give each the force curve and contact outputs of its own run, to
+    1e-8 (measured 1e-12 - 1e-10), and the sphere's exact sensitivities (the penalty's
+    dependence on mu0 included) those of its own run, to 1e-7."""
+    problems, depths = _contact_problems()
+    names = ("C10_Pa", "bulk_modulus_Pa")
+    options = NewtonOptions(tolerance=TOLERANCE)
+    batched = simulate_indentation_batch(
+        problems, depths, device=device, options=options, sensitivities=names
+    )
+    for k, (problem, path, result) in enumerate(zip(problems, depths, batched, strict=True)):
+        alone = simulate_indentation(
+            problem,
+            path,
+            device=device,
+            progress=False,
+            options=options,
+            sensitivities=names if k == 0 else (),
+        )
+        assert result.completed and alone.completed, (result.message, alone.message)
+        np.testing.assert_allclose(result.depths_m, path)
+        for name in CONTACT_FIELDS:
+            mine, theirs = getattr(result, name), getattr(alone, name)
+            assert mine.shape == theirs.shape, name
+            np.testing.assert_allclose(mine, theirs, rtol=1e-8, err_msg=name)
+        assert result.contact_pressure_Pa.shape == alone.contact_pressure_Pa.shape
+        if problem.is_contact:
+            np.testing.assert_allclose(
+                result.contact_pressure_Pa,
+                alone.contact_pressure_Pa,
+                rtol=0,
+                atol=1e-8 * alone.contact_pressure_Pa.max(),
+            )
+            np.testing.assert_allclose(result.contact_force_N, result.reaction_force_N, rtol=1e-6)
+        else:
+            assert result.contact_force_N.size == 0
+        scale = np.abs(alone.displacement_m).max()
+        np.testing.assert_allclose(
+            result.displacement_m, alone.displacement_m, rtol=0, atol=1e-8 * scale
+        )
+        assert result.force_sensitivity_N_per_unit.shape == (len(path), len(names))
+        if k == 0:  # the sphere: through the contact's penalty
+            assert np.all(result.force_sensitivity_N_per_unit[:, 0] > 0.0)
+            np.testing.assert_allclose(
+                result.force_sensitivity_N_per_unit, alone.force_sensitivity_N_per_unit, rtol=1e-7
+            )
