@@ -266,18 +266,17 @@ class Assembler:
         self._node_problem = wp.array(node_problem, dtype=wp.int32, device=dev)
         self._node_problem_host = node_problem
         self._element_problem_host = problems
-        ranges = _packed_ranges(mesh.tets, self.node_count, problems)
         # First node of each problem and the node count at the end, where the problems are
-        # packed (pack_meshes); a contact's nodes are given in its problem's own numbering.
-        self._node_offsets: np.ndarray | None = (
-            np.array([0, self.node_count], dtype=np.int64)
-            if count == 1
-            else (
+        # packed (pack_meshes; None where not): a contact's nodes are in its problem's own
+        # numbering (set_contact).
+        self._node_offsets: np.ndarray | None = np.array([0, self.node_count], dtype=np.int64)
+        if count > 1:
+            ranges = _packed_ranges(mesh.tets, self.node_count, problems)
+            self._node_offsets = (
                 None
                 if ranges is None
                 else np.array([r[2] for r in ranges] + [self.node_count], dtype=np.int64)
             )
-        )
         # The damping of each problem's tangent (eliminate), copied only when it changes.
         self._damping_host = np.zeros(count)
         self._damping = wp.zeros(count, dtype=wp.float64, device=dev)
