@@ -205,7 +205,7 @@ def test_the_batch_refuses_what_it_cannot_take():
         problem.indenter,
         symmetry_planes=problem.symmetry_planes,
     )
-    with pytest.raises(InputError, match="elastic materials"):
+    with pytest.raises(InputError, match="needs the time of each load"):
         simulate_indentation_batch([viscous], depths)
     ogden = IndentationProblem(
         problem.mesh,
@@ -215,6 +215,78 @@ def test_the_batch_refuses_what_it_cannot_take():
     )
     with pytest.raises(InputError, match="Ogden exponents"):
         simulate_indentation_batch([ogden, problem], depths * 2, sensitivities=("alpha1",))
+
+
+def test_viscoelastic_ramp_and_hold_batch_equals_single_runs(device):
+    """A ramp-and-hold of two viscoelastic problems (different Prony series, time steps and
+    meshes) and an elastic one, solved together with their exact sensitivities (a Prony
+    parameter included), equals each problem's own run: forces to 1e-8, sensitivities to
+    1e-7."""
+    base = _problems()
+    problems = [
+        IndentationProblem(
+            base[0].mesh,
+            Viscoelastic(base[0].material, (0.35, 0.3), (1.0, 20.0)),
+            base[0].indenter,
+            symmetry_planes=base[0].symmetry_planes,
+        ),
+        IndentationProblem(
+            base[1].mesh,
+            Viscoelastic(base[1].material, (0.5,), (2.0,)),
+            base[1].indenter,
+            symmetry_planes=base[1].symmetry_planes,
+        ),
+        base[2],
+    ]
+    depths = [
+        RADIUS_M * np.array([0.05, 0.1, 0.1, 0.1]),
+        RADIUS_M * np.array([0.04, 0.08, 0.08]),
+        RADIUS_M * np.array([0.05, 0.08]),
+    ]
+    times = [np.array([0.5, 1.0, 3.0, 9.0]), np.array([0.2, 0.4, 5.0]), None]
+    names = ("C10_Pa", "g1")
+    options = NewtonOptions(tolerance=TOLERANCE)
+    batched = simulate_indentation_batch(
+        problems,
+        depths,
+        device=device,
+        options=options,
+        sensitivities=names[:1],
+        times_s=times,
+    )
+    viscous = simulate_indentation_batch(
+        problems[:2],
+        depths[:2],
+        device=device,
+        options=options,
+        sensitivities=names,
+        times_s=times[:2],
+    )
+    for k, (problem, path, time) in enumerate(zip(problems, depths, times, strict=True)):
+        alone = simulate_indentation(
+            problem,
+            path,
+            device=device,
+            progress=False,
+            options=options,
+            sensitivities=names if k < 2 else names[:1],
+            times_s=time,
+        )
+        assert batched[k].completed and alone.completed
+        np.testing.assert_allclose(batched[k].reaction_force_N, alone.reaction_force_N, rtol=1e-8)
+        np.testing.assert_allclose(
+            batched[k].force_sensitivity_N_per_unit,
+            alone.force_sensitivity_N_per_unit[:, :1],
+            rtol=1e-7,
+        )
+        if k < 2:
+            np.testing.assert_allclose(
+                viscous[k].force_sensitivity_N_per_unit,
+                alone.force_sensitivity_N_per_unit,
+                rtol=1e-7,
+            )
+    # The hold relaxes: the viscoelastic forces fall at constant depth.
+    assert batched[0].reaction_force_N[-1] < 0.9 * batched[0].reaction_force_N[1]
 
 
 # --- rigid contact in a batch ---------------------------------------------------------------

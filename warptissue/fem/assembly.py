@@ -297,7 +297,12 @@ class Assembler:
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
-        self._elastic_step = elastic_step()
+        from warptissue.kernels import fem as kf
+
+        # Every problem's step of an elastic material (inactive), one per problem.
+        self._elastic_steps = wp.array(
+            [elastic_step()] * self.problem_count, dtype=kf.ViscousStep, device=dev
+        )
         self.viscous: ViscousHistory | None = None
         self._zero_history: wp.array | None = None
         self.set_material(material)
@@ -305,10 +310,10 @@ class Assembler:
     def set_material(self, material: Material | Sequence[Material]) -> None:
         """Use new material parameters from the next assembly on (same mesh and pattern).
 
-        A :class:`warptissue.materials.Viscoelastic` material gets a
+        Where a material is :class:`warptissue.materials.Viscoelastic`, the problems get a
         :class:`warptissue.fem.viscous.ViscousHistory` (:attr:`viscous`) at the undeformed,
         unloaded state; otherwise :attr:`viscous` is None. An assembler of K packed problems
-        takes a sequence of K elastic materials.
+        takes a sequence of K materials.
         """
         from warptissue.kernels.materials import MaterialParams
 
@@ -322,37 +327,28 @@ class Assembler:
         for each in materials:
             if not isinstance(each, Material):
                 raise InputError("material must be a warptissue.materials material", value=each)
-            if self.problem_count > 1 and isinstance(each, Viscoelastic):
-                raise InputError(
-                    "packed problems take elastic materials (a viscoelastic history is "
-                    "kept for one problem per assembler)",
-                    key="material",
-                    value=type(each).__name__,
-                )
         self.materials = materials
         self._problem_params = wp.array(
             [each.device_params() for each in materials], dtype=MaterialParams, device=self.device
         )
-        if self.problem_count > 1:
-            self.material = None
-            self._params = materials[0].device_params()
-            return
-        material = materials[0]
-        params = material.device_params()
-        if isinstance(material, Viscoelastic):
-            if self.viscous is not None and self.viscous.material.term_count == material.term_count:
-                self.viscous.reset(material)
+        if any(isinstance(each, Viscoelastic) for each in materials):
+            counts = tuple(
+                each.term_count if isinstance(each, Viscoelastic) else 0 for each in materials
+            )
+            if self.viscous is not None and self.viscous.term_counts() == counts:
+                self.viscous.reset(materials)
             else:
                 self.viscous = ViscousHistory(
-                    material,
+                    materials,
+                    element_problem=self._element_problem.numpy(),
                     tet_count=self.tet_count,
                     quadrature_points=self._quadrature_volumes.shape[1],
                     device=self.device,
                 )
         else:
             self.viscous = None
-        self.material = material
-        self._params = params
+        self.material = materials[0] if self.problem_count == 1 else None
+        self._params = materials[0].device_params()
 
     def set_contact(self, contact: RigidContact | Sequence[RigidContact | None] | None) -> None:
         """Press rigid indenters into the bodies from the next assembly on (None: no contact).
@@ -599,12 +595,12 @@ class Assembler:
     def _viscous_inputs(self, *, zero_history: bool = False) -> list[Any]:
         """The ``viscous, frozen`` inputs of the element kernels for the current step."""
         if self.viscous is None:
-            return [self._elastic_step, self._no_history]
+            return [self._elastic_steps, self._no_history]
         if zero_history:
             if self._zero_history is None or self._zero_history.shape != self.viscous.frozen.shape:
                 self._zero_history = wp.zeros_like(self.viscous.frozen)
-            return [self.viscous.step, self._zero_history]
-        return [self.viscous.step, self.viscous.frozen]
+            return [self.viscous.steps, self._zero_history]
+        return [self.viscous.steps, self.viscous.frozen]
 
     def _build_pattern(self, tets: np.ndarray, element_problems: np.ndarray) -> None:
         n = self.node_count
@@ -718,15 +714,21 @@ class Assembler:
         from warptissue.kernels import fem as kf
         from warptissue.kernels.materials import MaterialParams
 
-        if self.problem_count > 1:
-            return self._packed_parameter_residual(displacement_m, name)
-        derivative, alpha_term = self.material.device_params_derivative(name)
+        derivatives, alpha_term = [], -1
+        for k, material in enumerate(self.materials):
+            derivative, alpha_term = material.device_params_derivative(name)
+            if alpha_term >= 0 and self.problem_count > 1:
+                raise InputError(
+                    f"problem {k}: the derivative by an Ogden exponent is available for one "
+                    "problem per assembler",
+                    key="sensitivities",
+                    value=name,
+                )
+            derivatives.append(derivative)
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
         viscous = self.viscous
-        if viscous is not None and viscous.material.prony_derivative(name) is not None:
-            explicit = np.zeros((self.node_count, 3))
-        elif alpha_term >= 0:
+        if alpha_term >= 0:
             wp.launch(
                 kf.ogden_alpha_residual_kernel,
                 dim=self.tet_count,
@@ -736,11 +738,13 @@ class Assembler:
             )
             explicit = self._residual.numpy().copy()
             if viscous is not None:  # the deviatoric stress of a step is gamma P0 + F Q
-                explicit *= viscous.step.gamma
+                explicit *= viscous.gamma(0)
         else:
+            # Linear in the parameters: the residual of the derivative parameters (zero for
+            # a Prony parameter), its deviatoric part scaled by each step's gamma.
             self._energy.zero_()
             self._min_jacobian.fill_(np.inf)
-            derivative_params = wp.array([derivative], dtype=MaterialParams, device=self.device)
+            derivative_params = wp.array(derivatives, dtype=MaterialParams, device=self.device)
             wp.launch(
                 kf.assemble_elements_kernel,
                 dim=self.tet_count,
@@ -756,55 +760,13 @@ class Assembler:
                 device=self.device,
             )
             explicit = self._residual.numpy().copy()
-        explicit = explicit + self._contact_parameter_residual(
-            u, np.array([float(derivative.shear_modulus)])
-        )
+        d_shears = np.array([float(derivative.shear_modulus) for derivative in derivatives])
+        explicit = explicit + self._contact_parameter_residual(u, d_shears)
         if viscous is None or name not in viscous.names:
             return explicit
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
-
-    def _packed_parameter_residual(self, displacement_m: Any, name: str) -> np.ndarray:
-        """:meth:`parameter_residual` of K packed problems, each by its own ``name``."""
-        from warptissue.kernels import fem as kf
-        from warptissue.kernels.materials import MaterialParams
-
-        derivatives = []
-        for k, material in enumerate(self.materials):
-            derivative, alpha_term = material.device_params_derivative(name)
-            if alpha_term >= 0:
-                raise InputError(
-                    f"problem {k}: the derivative by an Ogden exponent is available for one "
-                    "problem per assembler",
-                    key="sensitivities",
-                    value=name,
-                )
-            derivatives.append(derivative)
-        u = self.device_displacement(displacement_m)
-        self._residual.zero_()
-        self._energy.zero_()
-        self._min_jacobian.fill_(np.inf)
-        wp.launch(
-            kf.assemble_elements_kernel,
-            dim=self.tet_count,
-            inputs=[
-                *self._assembly_inputs(
-                    u,
-                    problem_params=wp.array(derivatives, dtype=MaterialParams, device=self.device),
-                ),
-                self._block_index,
-                self._all_elements,
-                int(self.formulation == "mixed"),
-                0,
-                *self._viscous_inputs(zero_history=True),
-            ],
-            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
-            device=self.device,
-        )
-        explicit = self._residual.numpy().copy()
-        d_shears = np.array([float(derivative.shear_modulus) for derivative in derivatives])
-        return explicit + self._contact_parameter_residual(u, d_shears)
 
     def _contact_parameter_residual(self, u: wp.array, d_shears: np.ndarray) -> np.ndarray | float:
         """The rigid contacts' part of ``dR/dtheta``: each problem's penalty ``k = beta mu0 h``

@@ -590,17 +590,20 @@ def simulate_indentation_batch(
     options: NewtonOptions | None = None,
     sensitivities: Sequence[str] = (),
     assembler: Assembler | None = None,
+    times_s: Sequence[np.ndarray | None] | None = None,
 ) -> list[IndentationResult]:
-    """K indentations solved together on one device.
+    """K indentations solved together on one device, in one Newton loop.
 
     Args:
-        problems: Problems with elastic materials, all of one element type and formulation
-            (meshes, materials, indenters and their contact conditions may differ: bonded or
-            frictionless flat punches, and rigid indenters in contact, each with its own
-            penalty stiffness; :mod:`warptissue.fem.contact`).
-        depths_m: Each problem's depths, positive and strictly increasing, m.
+        problems: Problems all of one element type and formulation (meshes, materials,
+            viscoelastic histories, indenters and their contact conditions may differ:
+            bonded or frictionless flat punches, and rigid indenters in contact, each with
+            its own penalty stiffness; :mod:`warptissue.fem.contact`).
+        depths_m: Each problem's depths, m: positive and strictly increasing, or with its
+            times any depths >= 0 (as :func:`simulate_indentation`).
         device: Warp device; None for Warp's default.
-        options: The Newton settings (:func:`solve_quasistatic_batch` says which apply).
+        options: The Newton settings (every one applies per problem,
+            :func:`warptissue.fem.solve_quasistatic_batch`).
         sensitivities: Material parameters (``C10_Pa``, ``bulk_modulus_Pa``, ...; moduli,
             not Ogden exponents) to differentiate each problem's force by, exactly, at each
             depth: ``result.force_sensitivity_N_per_unit``.
@@ -608,6 +611,8 @@ def simulate_indentation_batch(
             :func:`batch_assembler`, to reuse across calls that change only the materials
             (a batched fit's trial points); it takes the problems' materials, and the run
             uses its device. None builds one on ``device``.
+        times_s: Each problem's times, s (None entries, or None: quasi-static paths); a
+            viscoelastic material needs them.
 
     Returns:
         One :class:`warptissue.fem.IndentationResult` per problem, as
@@ -619,9 +624,9 @@ def simulate_indentation_batch(
         solution changes, not the converged state.
 
     Raises:
-        InputError: No problem, a problem this batch cannot take (a viscoelastic material,
-            another element type or formulation), bad depths, or an assembler of other
-            meshes or another formulation.
+        InputError: No problem, a problem this batch cannot take (another element type or
+            formulation), bad depths or times, or an assembler of other meshes or another
+            formulation.
     """
     problems = list(problems)
     if not problems:
@@ -632,24 +637,31 @@ def simulate_indentation_batch(
         )
     formulation = problems[0].formulation
     for k, problem in enumerate(problems):
-        if isinstance(problem.material, Viscoelastic):
-            raise InputError(
-                f"problem {k}: a batch takes elastic materials",
-                key="material",
-                value=type(problem.material).__name__,
-            )
         if problem.formulation != formulation:
             raise InputError(
                 f"problem {k}: every problem of a batch has one formulation ({formulation!r})",
                 key="formulation",
                 value=problem.formulation,
             )
+    times_list = [None] * len(problems) if times_s is None else list(times_s)
+    if len(times_list) != len(problems):
+        raise InputError(
+            f"one time sequence per problem ({len(problems)})", key="times_s", value=len(times_list)
+        )
     depths = []
     for k, values in enumerate(depths_m):
         path = np.atleast_1d(np.asarray(values, dtype=np.float64))
-        if path.ndim != 1 or path.size == 0 or np.any(path <= 0) or np.any(np.diff(path) <= 0):
+        timed = times_list[k] is not None
+        if (
+            path.ndim != 1
+            or path.size == 0
+            or not np.all(np.isfinite(path))
+            or (not timed and (np.any(path <= 0) or np.any(np.diff(path) <= 0)))
+            or (timed and np.any(path < 0))
+        ):
             raise InputError(
-                f"problem {k}: depths_m must be positive and strictly increasing",
+                f"problem {k}: depths_m must be positive and strictly increasing (or >= 0 "
+                "with times_s)",
                 key="depths_m",
                 value=path.tolist(),
             )
@@ -671,6 +683,7 @@ def simulate_indentation_batch(
         options=options,
         load_name="depth (m)",
         sensitivities=sensitivities,
+        times_s=times_list,
     )
     # Every problem's stress at its last converged state, in one launch over the union.
     last = np.zeros((packed.mesh.node_count, 3))
@@ -703,10 +716,9 @@ def _packed_contact_states(
     states: list[list[ContactState] | None] = [
         None if contact is None else [] for contact in assembler.contacts
     ]
-    steps = max((len(path.loads) for path in paths), default=0)
     if not assembler.has_contact:
         return states
-    for i in range(steps):
+    for i in range(max(len(path.loads) for path in paths)):
         u = np.zeros((packed.mesh.node_count, 3))
         depths = np.zeros(len(paths))
         for k, path in enumerate(paths):

@@ -29,6 +29,7 @@ from warptissue.fem.newton.sensitivity import ForceSensitivity
 from warptissue.fem.newton.steering import ReuseTracker
 from warptissue.fem.packing import PackedMeshes
 from warptissue.fem.timing import NewtonTimings, PhaseTimer
+from warptissue.materials import Viscoelastic
 
 __all__ = [
     "QuasistaticResult",
@@ -334,7 +335,9 @@ def _follow_paths(
                 next_loads = np.array([path.load for path in paths])
                 time_steps = np.ones(count)
                 for k, (_, next_load, next_time) in steps.items():
-                    next_loads[k], time_steps[k] = next_load, next_time - paths[k].time
+                    next_loads[k] = next_load
+                    if paths[k].times is not None:  # an elastic problem ignores time
+                        time_steps[k] = next_time - paths[k].time
                 if viscous is not None:
                     viscous.begin_step(time_steps if count > 1 else float(time_steps[0]))
                 assembler.set_load(next_loads if count > 1 else float(next_loads[0]))
@@ -380,8 +383,12 @@ def _follow_paths(
                                 arrays.host(step.displacement),
                                 reached=None if count == 1 else wanted,
                             )
-                if viscous is not None and step.converged[0]:
-                    viscous.commit(assembler, assembler.device_displacement(step.displacement))
+                if viscous is not None and step.converged.any():
+                    viscous.commit(
+                        assembler,
+                        assembler.device_displacement(step.displacement),
+                        problems=None if count == 1 else step.converged,
+                    )
                 host = None
                 for k in np.flatnonzero(active):
                     path = paths[k]
@@ -611,10 +618,9 @@ def solve_quasistatic_batch(
 
     Args:
         assembler: An assembler of ``packed.mesh`` with one material per problem
-            (``element_problem=packed.element_problem``); elastic materials
-            (:meth:`warptissue.fem.Assembler.set_material` refuses the others); each
-            problem's rigid contact, where it has one, set by
-            :meth:`warptissue.fem.Assembler.set_contact` (its depth is the problem's load).
+            (``element_problem=packed.element_problem``), and each problem's rigid contact
+            where it has one (:meth:`warptissue.fem.Assembler.set_contact`; its depth is the
+            problem's load).
         packed: The packed meshes.
         conditions: Each problem's prescribed dofs, (K,).
         loads: Each problem's load factors, (K,) arrays of shape (S_k,).
@@ -652,6 +658,12 @@ def solve_quasistatic_batch(
         if len(values) != count:
             raise InputError(f"one entry per packed problem ({count})", key=name, value=len(values))
     check_packed_assembler(assembler, packed)
+    for k, material in enumerate(assembler.materials):
+        if isinstance(material, Viscoelastic) and times_list[k] is None:
+            raise InputError(
+                f"problem {k}: a viscoelastic material needs the time of each load (times_s)",
+                key="times_s",
+            )
     n = packed.mesh.node_count
     weights = np.zeros((n, 3))
     paths = []

@@ -109,9 +109,9 @@ class ForceSensitivity:
                         key="sensitivities",
                         value=name,
                     )
-        if (self.node_offsets is None) != (self.assembler.problem_count == 1):
+        if self.node_offsets is None and self.assembler.problem_count > 1:
             raise InputError(
-                "node_offsets are needed exactly where the assembler packs several problems",
+                "node_offsets are needed where the assembler packs several problems",
                 key="node_offsets",
                 value=self.assembler.problem_count,
             )
@@ -197,7 +197,7 @@ class ForceSensitivity:
         if viscous is not None:  # advance the history's derivatives with du/dtheta
             u_device = wp.array(displacement_m, dtype=wp.vec3d, device=assembler.device)
             for name, du in zip(self.names, steps, strict=True):
-                viscous.commit_sensitivity(assembler, u_device, du, name)
+                viscous.commit_sensitivity(assembler, u_device, du, name, problems=reached)
         # K du on the prescribed rows needs the tangent before elimination.
         matrix.values.assign(full_values)
         product = wp.zeros(assembler.node_count, dtype=wp.vec3d, device=assembler.device)
