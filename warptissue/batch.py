@@ -458,13 +458,12 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     one batched FE run (the function each Dask task runs when ``together`` > 1).
 
     Each study is loaded and set up (:func:`warptissue.simulate.prepare_study`) on its own.
-    The simulations that :func:`warptissue.simulate.together_refusal` accepts, with equal
-    device, formulation and ``[solver]`` settings, are solved together
-    (:func:`warptissue.simulate.run_studies_together`); the others (fits, rigid contact,
-    viscoelastic materials, timed protocols, a setting shared with no other study of the
-    group) run alone, as :func:`run_study_task` runs them. A batched run that raises is
-    said in its studies' warnings and they run alone instead. Each study's folder, marker
-    and outcome are those :func:`run_study_task` would give, with ``solved_together``.
+    The simulations with equal device, formulation and ``[solver]`` settings are solved
+    together (:func:`warptissue.simulate.run_studies_together`); the others (fits, a
+    setting shared with no other study of the group) run alone, as :func:`run_study_task`
+    runs them. A batched run that raises is said in its studies' warnings and they run
+    alone instead. Each study's folder, marker and outcome are those :func:`run_study_task`
+    would give, with ``solved_together``.
 
     Args:
         tasks: The studies of the group.
@@ -476,7 +475,6 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     from warptissue.simulate import (
         prepare_study,
         run_studies_together,
-        together_refusal,
         together_settings,
     )
     from warptissue.study import load_study
@@ -500,15 +498,14 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
                 else:
                     setup = prepare_study(study, out_dir=out_dir, device=device, announce=False)
                     alone[index] = functools.partial(_solve_alone, setup)
-                    if together_refusal(setup) is None:
-                        settings = together_settings(setup)
-                        part = next(
-                            (p for p in parts if together_settings(p[0][1]) == settings), None
-                        )
-                        if part is None:
-                            parts.append([(index, setup)])
-                        else:
-                            part.append((index, setup))
+                    settings = together_settings(setup)
+                    part = next(
+                        (p for p in parts if together_settings(p[0][1]) == settings), None
+                    )
+                    if part is None:
+                        parts.append([(index, setup)])
+                    else:
+                        part.append((index, setup))
         except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
             outcomes[index] = replace(outcomes[index], **_error_numbers(exc))
         seconds[index] = time.perf_counter() - started

@@ -968,24 +968,23 @@ def _forward_model(
         progress=progress,
         offset_start=offset_start,
         batch_records=(
-            batches_records(problem, warp_device) if batch_records is None else batch_records
+            batches_records(warp_device) if batch_records is None else batch_records
         ),
     )
 
 
-def batches_records(problem: Any, device: Any) -> bool:
+def batches_records(device: Any) -> bool:
     """Whether a fit solves its records' FE runs (one per record of a viscoelastic material)
     together in one batched run (:func:`warptissue.fem.simulate_indentation_batch`) rather
     than one after another.
 
     Args:
-        problem: The study's :class:`warptissue.fem.IndentationProblem`.
         device: The Warp device of the fit.
 
     Returns:
         True where that was measured to pay: see docs/design-notes/batched-fe.md.
     """
-    return RECORD_BATCHING[device.is_cuda] and not problem.is_contact
+    return RECORD_BATCHING[device.is_cuda]
 
 
 RECORD_BATCHING = {False: False, True: True}
