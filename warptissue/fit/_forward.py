@@ -17,7 +17,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["FitMeeting"]
+__all__ = ["FitMeeting", "run_fits"]
 
 
 class FitMeeting:
@@ -93,3 +93,43 @@ class FitMeeting:
                 self._pending = {}
                 self._condition.notify_all()
             raise
+
+
+def run_fits(
+    count: int,
+    solve: Callable[[dict[int, Any]], dict[int, Any]],
+    fit: Callable[[int, FitMeeting], Any],
+) -> list[Any]:
+    """Run ``fit(k, meeting)`` for k = 0 .. count - 1, each in its own thread, meeting at one
+    :class:`FitMeeting` whose batches ``solve`` answers in this thread.
+
+    Returns:
+        Each fit's return value, or the exception it raised, in order. Ctrl-C while serving
+        is handed to every fit at its next request (:meth:`FitMeeting.serve`): each ends
+        with what it makes of it (a ``KeyboardInterrupt``, or its best point so far).
+    """
+    meeting = FitMeeting(count, solve)
+    outcomes: list[Any] = [None] * count
+
+    def one(k: int) -> None:
+        try:
+            outcomes[k] = fit(k, meeting)
+        except BaseException as exc:  # handed back to the caller's thread
+            outcomes[k] = exc
+        finally:
+            meeting.leave(k)
+
+    threads = [
+        threading.Thread(target=one, args=(k,), name=f"warptissue-fit-{k}", daemon=True)
+        for k in range(count)
+    ]
+    for thread in threads:
+        thread.start()
+    try:
+        meeting.serve()
+    except KeyboardInterrupt:
+        pass  # handed to every fit: their outcomes say what they made of it
+    finally:
+        for thread in threads:
+            thread.join()
+    return outcomes

@@ -16,7 +16,6 @@ engine's steps are small dense solves); the batched FE itself runs in the caller
 from __future__ import annotations
 
 import dataclasses
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -30,7 +29,7 @@ from warptissue.fem import (
     batch_assembler,
     simulate_indentation_batch,
 )
-from warptissue.fit._forward import FitMeeting
+from warptissue.fit._forward import FitMeeting, run_fits
 from warptissue.fit.engine import least_squares
 from warptissue.fit.result import FitResult, RejectStep
 
@@ -159,49 +158,33 @@ def fit_indentation_batch(
             )
         return out
 
-    forward = FitMeeting(count, run)
-    outcomes: list[FitResult | BaseException | None] = [None] * count
-
-    def fit(k: int) -> None:
+    def fit(k: int, meeting: FitMeeting) -> FitResult:
         last: list[_Evaluation] = []
 
         def evaluate(x: np.ndarray) -> _Evaluation:
             if last and np.array_equal(last[0].x, x):
                 return last[0]
-            evaluation = forward.request(k, np.array(x, dtype=np.float64))
+            evaluation = meeting.request(k, np.array(x, dtype=np.float64))
             last[:] = [evaluation]
             return evaluation
 
-        try:
-            outcomes[k] = least_squares(
-                lambda x: evaluate(x).residuals,
-                starts[k],
-                jac=lambda x: evaluate(x).jacobian,
-                bounds=bounds[k],
-                method=method,
-                x_scale=np.abs(starts[k]) + (starts[k] == 0.0),
-                max_iterations=max_iterations,
-                ftol=ftol,
-                xtol=xtol,
-                gtol=gtol,
-                parameter_names=names,
-                parameter_units=tuple(problems[k].material.parameter_units[i] for i in columns[k]),
-            )
-        except BaseException as exc:  # reported below, in the caller's thread
-            outcomes[k] = exc
-        finally:
-            forward.leave(k)
+        return least_squares(
+            lambda x: evaluate(x).residuals,
+            starts[k],
+            jac=lambda x: evaluate(x).jacobian,
+            bounds=bounds[k],
+            method=method,
+            x_scale=np.abs(starts[k]) + (starts[k] == 0.0),
+            max_iterations=max_iterations,
+            ftol=ftol,
+            xtol=xtol,
+            gtol=gtol,
+            parameter_names=names,
+            parameter_units=tuple(problems[k].material.parameter_units[i] for i in columns[k]),
+        )
 
-    threads = [
-        threading.Thread(target=fit, args=(k,), name=f"warptissue-fit-{k}", daemon=True)
-        for k in range(count)
-    ]
-    for thread in threads:
-        thread.start()
-    forward.serve()
-    for thread in threads:
-        thread.join()
+    outcomes = run_fits(count, run, fit)
     for outcome in outcomes:
         if isinstance(outcome, BaseException):
             raise outcome
-    return outcomes  # type: ignore[return-value]
+    return outcomes

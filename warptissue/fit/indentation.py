@@ -67,7 +67,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -76,7 +75,7 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit._forward import FitMeeting
+from warptissue.fit._forward import FitMeeting, run_fits
 from warptissue.fit.engine import covariance_from_jacobian, least_squares
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import FitResult, IterationRecord, RejectStep
@@ -967,9 +966,7 @@ def _forward_model(
         device=warp_device,
         progress=progress,
         offset_start=offset_start,
-        batch_records=(
-            batches_records(warp_device) if batch_records is None else batch_records
-        ),
+        batch_records=(batches_records(warp_device) if batch_records is None else batch_records),
     )
 
 
@@ -1221,32 +1218,13 @@ def fit_indentation(
     studies = list(study)
     if not studies or not all(isinstance(each, Study) for each in studies):
         raise InputError("give a study or a non-empty sequence of studies", key="study")
-    meeting = FitMeeting(len(studies), _SharedRuns())
-    outcomes: list[Any] = [None] * len(studies)
-
-    def fit(k: int) -> None:
-        try:
-            outcomes[k] = _fit_one(
-                studies[k], device=device, progress=False, meeting=(meeting, k), **options
-            )
-        except BaseException as exc:  # raised below, in the caller's thread
-            outcomes[k] = exc
-        finally:
-            meeting.leave(k)
-
-    threads = [
-        threading.Thread(target=fit, args=(k,), name=f"warptissue-fit-{k}", daemon=True)
-        for k in range(len(studies))
-    ]
-    for thread in threads:
-        thread.start()
-    try:
-        meeting.serve()
-    except KeyboardInterrupt:
-        pass  # each fit keeps its best point, or raises below
-    finally:
-        for thread in threads:
-            thread.join()
+    outcomes = run_fits(
+        len(studies),
+        _SharedRuns(),
+        lambda k, meeting: _fit_one(
+            studies[k], device=device, progress=False, meeting=(meeting, k), **options
+        ),
+    )
     for outcome in outcomes:
         if isinstance(outcome, BaseException):
             raise outcome
