@@ -13,13 +13,11 @@ indentation data and results), :mod:`~warptissue.fit.punch` (Sneddon, Hertz and 
 contact formulas and the punch-modulus fit), :mod:`~warptissue.fit.hyperelastic`
 (homogeneous hyperelastic tests), :mod:`~warptissue.fit.metrics` (R², RMSE),
 :mod:`~warptissue.fit.indentation` (inverse FE: :func:`fit_indentation` of a study's material
-parameters to its indentation records, with the FE's exact sensitivities),
-:mod:`~warptissue.fit.batched` (many flat-punch fits with their forward runs batched on one
-device: :func:`fit_indentation_batch`).
+parameters to its indentation records, with the FE's exact sensitivities; of several
+studies together, their forward runs batched on one device).
 """
 
 from warptissue.fit import metrics
-from warptissue.fit.batched import fit_indentation_batch
 from warptissue.fit.engine import fit_curve, least_squares
 from warptissue.fit.indentation import (
     IndentationFit,
@@ -39,7 +37,6 @@ __all__ = [
     "RejectStep",
     "fit_curve",
     "fit_indentation",
-    "fit_indentation_batch",
     "least_squares",
     "metrics",
 ]

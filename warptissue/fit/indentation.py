@@ -1113,7 +1113,7 @@ class _SharedRuns:
         from warptissue.fem import batch_assembler, simulate_indentation_batch
 
         groups: dict[tuple, list[int]] = {}
-        for fit, request in batch.items():
+        for fit, request in sorted(batch.items()):  # in fit order: one assembler per set
             key = (
                 request.names,
                 request.options,
@@ -1127,12 +1127,13 @@ class _SharedRuns:
             grids = [grid for fit in fits for grid in batch[fit].grids]
             meshes = (key, tuple(id(problem.mesh) for problem in problems))
             try:
-                assembler = self._assemblers.get(meshes)
-                if assembler is None:
+                if meshes not in self._assemblers:
                     if len(self._assemblers) >= self.KEPT:
                         self._assemblers.pop(next(iter(self._assemblers)))
-                    assembler = batch_assembler(problems, device=batch[fits[0]].device)
-                    self._assemblers[meshes] = assembler
+                    self._assemblers[meshes] = batch_assembler(
+                        problems, device=batch[fits[0]].device
+                    )
+                assembler = self._assemblers[meshes]
                 results = simulate_indentation_batch(
                     problems,
                     [depths for _, depths in grids],
