@@ -11,6 +11,7 @@ waits frozen for the others where it has finished.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from time import perf_counter
@@ -152,6 +153,106 @@ class _Path:
         load = self.start_load + fraction * (target - self.start_load)
         time = self.start_time + fraction * (target_time - self.start_time)
         return fraction, load, time
+
+    def prescribed_increment(self, load: float) -> np.ndarray:
+        """The prescribed dofs' increment from the current load to ``load``, (N_k, 3), m."""
+        size = self.node_count
+        return self.conditions.values(load, size) - self.conditions.values(self.load, size)
+
+    def extrapolation(self, step: tuple[float, float, float], predictor: str) -> float | None:
+        """The factor of the last converged change that predicts the free dofs of the
+        increment to ``step`` (the extrapolated predictor), or None: none to make."""
+        _, load, time = step
+        here, there = (self.load, load) if self.times is None else (self.time, time)
+        guess = (
+            predictor == "extrapolated"
+            and self.previous is not None
+            and not self.retry_linearized
+            and here != self.previous[0]
+        )
+        self.retry_linearized = False
+        return (there - here) / (here - self.previous[0]) if guess else None
+
+    def finish_increment(
+        self,
+        step: tuple[float, float, float],
+        *,
+        converged: bool,
+        counts: tuple[int, int, int],
+        reason: str,
+        from_guess: bool,
+        state: Any,
+        at_target: bool,
+        reaction: float,
+        derivative: np.ndarray | None,
+        states: Any,
+        max_cutbacks: int,
+        load_name: str,
+    ) -> bool:
+        """Take an increment's outcome: its history, and on success the new place on the
+        path (and the requested load reached, with its state from ``states()``, reaction
+        and derivatives); on failure a retry from the linearized predictor, a cutback, or
+        the end of the path. ``state``: the converged state the increment started from.
+
+        Returns:
+            Whether a requested load was reached.
+        """
+        fraction, load, time = step
+        self.step_counts += counts
+        self.history.append(
+            {
+                "load": load,
+                **({} if self.times is None else {"time_s": time}),
+                "converged": converged,
+                "iterations": int(counts[0]),
+                "local_iterations": int(counts[2]),
+                "reason": reason,
+            }
+        )
+        if converged:
+            here, there = (self.load, load) if self.times is None else (self.time, time)
+            if there != here:
+                self.previous = (here, state)
+            self.load, self.time, self.fraction = load, time, fraction
+            if derivative is not None:
+                self.step_sensitivity = derivative
+            if not at_target:
+                self.step_fraction = min(2.0 * self.step_fraction, 1.0 - fraction)
+                return False
+            self.reached.append(float(self.loads[self.index]))
+            self.states.append(states()[self.nodes].copy())
+            self.reactions.append(reaction)
+            if self.step_sensitivity is not None:
+                self.sensitivities.append(self.step_sensitivity)
+            self.counts.append(self.step_counts.copy())
+            self.step_counts[:] = 0
+            self.index += 1
+            self.start_load, self.start_time = self.load, self.time
+            self.fraction, self.step_fraction, self.halvings = 0.0, 1.0, 0
+            self.finished = self.index == len(self.loads)
+            return True
+        if from_guess:  # retry the increment from the linearized predictor before cutting back
+            self.retry_linearized = True
+            return False
+        self.halvings += 1
+        self.cutbacks += 1
+        if self.halvings <= max_cutbacks:
+            self.step_fraction *= 0.5
+            return False
+        self.finished, self.completed = True, False
+        target = float(self.loads[self.index])
+        timed = "" if self.times is None else f" (t = {self.time:.6g} s)"
+        span = ""
+        if self.times is not None:
+            duration = self.step_fraction * (float(self.times[self.index]) - self.start_time)
+            span = f" over {duration:.3g} s"
+        self.message = (
+            f"stopped at {load_name} {self.load:.6g} on the way to {target:.6g}{timed}: Newton "
+            f"failed ({reason}) after {max_cutbacks} cutbacks (last increment "
+            f"{self.step_fraction * (target - self.start_load):.3g}{span}); the "
+            f"{len(self.reached)} converged steps are kept"
+        )
+        return False
 
     def result(
         self, completed: bool, message: str, count: int, sensitivity_count: int, **common: Any
@@ -305,22 +406,10 @@ def _follow_paths(
                 steps = {}
                 for k in np.flatnonzero(active):
                     path = paths[k]
-                    fraction, next_load, next_time = path.next_step()
-                    steps[k] = (fraction, next_load, next_time)
-                    size = path.node_count
-                    prescribed[path.nodes] = path.conditions.values(
-                        next_load, size
-                    ) - path.conditions.values(path.load, size)
-                    here, there = (
-                        (path.load, next_load) if path.times is None else (path.time, next_time)
-                    )
-                    if (
-                        options.predictor == "extrapolated"
-                        and path.previous is not None
-                        and not path.retry_linearized
-                        and here != path.previous[0]
-                    ):
-                        ratio = (there - here) / (here - path.previous[0])
+                    steps[k] = path.next_step()
+                    prescribed[path.nodes] = path.prescribed_increment(steps[k][1])
+                    ratio = path.extrapolation(steps[k], options.predictor)
+                    if ratio is not None:
                         change = (u - path.previous[1]) * ratio
                         if count == 1:
                             guess = change
@@ -329,7 +418,6 @@ def _follow_paths(
                                 guess = arrays.xp.zeros_like(u)
                             guess[path.nodes] = change[path.nodes]
                         guessed[k] = True
-                    path.retry_linearized = False
                 # Each problem's viscous step and rigid indenter depth for this increment
                 # (a finished problem keeps its load; its rows stay frozen).
                 next_loads = np.array([path.load for path in paths])
@@ -389,83 +477,34 @@ def _follow_paths(
                         assembler.device_displacement(step.displacement),
                         problems=None if count == 1 else step.converged,
                     )
-                host = None
+                # The converged states on the host, read once where a requested load is reached.
+                states = functools.cache(functools.partial(arrays.host, step.displacement))
                 for k in np.flatnonzero(active):
                     path = paths[k]
-                    fraction, next_load, next_time = steps[k]
-                    path.step_counts += (
-                        step.iterations[k],
-                        step.linear_iterations[k],
-                        step.local_iterations[k],
+                    derivative = None
+                    if derivatives is not None:
+                        derivative = derivatives if count == 1 else derivatives[k]
+                    reached = path.finish_increment(
+                        steps[k],
+                        converged=bool(step.converged[k]),
+                        counts=(
+                            step.iterations[k],
+                            step.linear_iterations[k],
+                            step.local_iterations[k],
+                        ),
+                        reason=step.reasons[k],
+                        from_guess=bool(step.from_guess[k]),
+                        state=u,
+                        at_target=bool(at_target[k]),
+                        reaction=float(reactions[k]) if at_target[k] else 0.0,
+                        derivative=derivative,
+                        states=states,
+                        max_cutbacks=options.max_cutbacks,
+                        load_name=load_name,
                     )
-                    path.history.append(
-                        {
-                            "load": next_load,
-                            **({} if path.times is None else {"time_s": next_time}),
-                            "converged": bool(step.converged[k]),
-                            "iterations": int(step.iterations[k]),
-                            "local_iterations": int(step.local_iterations[k]),
-                            "reason": step.reasons[k],
-                        }
-                    )
-                    if step.converged[k]:
-                        here, there = (
-                            (path.load, next_load) if path.times is None else (path.time, next_time)
-                        )
-                        if there != here:
-                            path.previous = (here, u)
-                        path.load, path.time, path.fraction = next_load, next_time, fraction
-                        if derivatives is not None:
-                            path.step_sensitivity = derivatives if count == 1 else derivatives[k]
-                        if not at_target[k]:
-                            path.step_fraction = min(2.0 * path.step_fraction, 1.0 - fraction)
-                            continue
-                        if host is None:
-                            host = arrays.host(step.displacement)
-                        path.reached.append(float(path.loads[path.index]))
-                        path.states.append(host[path.nodes].copy())
-                        path.reactions.append(float(reactions[k]))
-                        if sensitivity is not None:
-                            path.sensitivities.append(path.step_sensitivity)
-                        path.counts.append(path.step_counts.copy())
-                        path.step_counts[:] = 0
-                        path.index += 1
-                        path.start_load, path.start_time = path.load, path.time
-                        path.fraction, path.step_fraction, path.halvings = 0.0, 1.0, 0
-                        path.finished = path.index == len(path.loads)
-                        if bar is not None:
-                            bar.set_postfix(
-                                newton_iterations=int(path.counts[-1][0]), refresh=False
-                            )
-                            bar.update(1)
-                        continue
-                    if step.from_guess[k]:
-                        # Retry the increment from the linearized predictor before cutting back.
-                        path.retry_linearized = True
-                        continue
-                    path.halvings += 1
-                    path.cutbacks += 1
-                    if path.halvings > options.max_cutbacks:
-                        path.finished, path.completed = True, False
-                        target, target_time = float(path.loads[path.index]), next_time
-                        if path.times is not None:
-                            target_time = float(path.times[path.index])
-                        path.message = (
-                            f"stopped at {load_name} {path.load:.6g} on the way to {target:.6g}"
-                            + ("" if path.times is None else f" (t = {path.time:.6g} s)")
-                            + f": Newton failed ({step.reasons[k]}) after "
-                            f"{options.max_cutbacks} cutbacks (last increment "
-                            f"{path.step_fraction * (target - path.start_load):.3g}"
-                            + (
-                                ""
-                                if path.times is None
-                                else " over "
-                                f"{path.step_fraction * (target_time - path.start_time):.3g} s"
-                            )
-                            + f"); the {len(path.reached)} converged steps are kept"
-                        )
-                        continue
-                    path.step_fraction *= 0.5
+                    if reached and bar is not None:
+                        bar.set_postfix(newton_iterations=int(path.counts[-1][0]), refresh=False)
+                        bar.update(1)
                 u = step.displacement
     except KeyboardInterrupt as exc:
         partial = results(interrupted=True)
