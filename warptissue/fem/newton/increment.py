@@ -138,28 +138,17 @@ def newton_increment(
     linear = np.zeros(count, dtype=np.int64)
     local = np.zeros(count, dtype=np.int64)
     reasons = [""] * count
-    u = u_start.copy()
     fixed = constrained
-    linearized = np.ones(count, dtype=bool)
-    if free_guess is not None:
-        guessed = iterating.copy() if guessed is None else iterating & guessed
-        guess = u_start + prescribed_increment + free_guess * free
-        with timer.phase("assembly"):
-            assembly = assembler.assemble(guess)
-        ok = (
-            guessed
-            & (np.asarray(assembly.problem_min_jacobians) > 0.0)
-            & np.isfinite(assembly.problem_energies_J)
-        )
-        linearized = ~ok
-        if ok.any():
-            u = problems.where(ok, guess, u)
-        if not ok.all():
-            with timer.phase("assembly"):
-                assembly = assembler.assemble(u)
-    else:
-        with timer.phase("assembly"):
-            assembly = assembler.assemble(u)
+    u, assembly, linearized = _start(
+        assembler,
+        problems,
+        u_start,
+        prescribed_increment,
+        free,
+        free_guess,
+        iterating if guessed is None else iterating & guessed,
+        timer,
+    )
     residual = arrays.view(assembly.residual)
     (reaction_squared,) = problems.read(problems.squared(residual * fixed))
     limits = np.maximum(tolerance * np.sqrt(reaction_squared), force_floors)
@@ -251,27 +240,12 @@ def newton_increment(
         limits = np.maximum(tolerance * reaction_norms, force_floors)
         relax = iterating & (free_norms > limits) if nonlinear_elimination_on else None
         if relax is not None and relax.any():
-            if assembly.matrix is None:
-                with timer.phase("assembly"):
-                    assembly = assembler.assemble(u)
-                residual = arrays.view(assembly.residual)
-            relaxed = False
-            with timer.phase("elimination"):
-                for k in np.flatnonzero(relax):
-                    u, assembly, steps = nonlinear_elimination(
-                        assembler,
-                        assembly,
-                        u,
-                        free,
-                        float(limits[k]),
-                        problem=int(k),
-                        nodes=problems.nodes(int(k)),
-                        arrays=arrays,
-                    )
-                    local[k] += steps
-                    relaxed |= steps > 0
-            if relaxed:
-                residual = arrays.view(assembly.residual)
+            u, assembly, steps = _relax(
+                assembler, problems, assembly, u, free, limits, relax, timer
+            )
+            local += steps
+            residual = arrays.view(assembly.residual)
+            if steps.any():
                 free_squared, reaction_squared = problems.read(
                     problems.squared(residual * free), problems.squared(residual * fixed)
                 )
@@ -404,3 +378,75 @@ def penalty_ramped_increment(
     stiff.displacement = problems.where(stiff.converged, stiff.displacement, u_start)
     stiff.last_iterate = problems.where(soft.converged, stiff.last_iterate, soft.last_iterate)
     return stiff
+
+
+def _start(
+    assembler: Assembler,
+    problems: Problems,
+    u_start: Any,
+    prescribed_increment: Any,
+    free: Any,
+    free_guess: Any,
+    guessed: np.ndarray,
+    timer: PhaseTimer,
+) -> tuple[Any, Any, np.ndarray]:
+    """Where an increment's iterations start: each ``guessed`` problem at its extrapolated
+    state where that inverts none of its elements, the others at ``u_start`` (the
+    linearized predictor follows in the first iteration).
+
+    Returns:
+        (the start state, its assembly with tangent, which problems start linearized (K,)).
+    """
+    u = u_start.copy()
+    if free_guess is None:
+        with timer.phase("assembly"):
+            return u, assembler.assemble(u), np.ones(problems.count, dtype=bool)
+    guess = u_start + prescribed_increment + free_guess * free
+    with timer.phase("assembly"):
+        assembly = assembler.assemble(guess)
+    ok = (
+        guessed
+        & (np.asarray(assembly.problem_min_jacobians) > 0.0)
+        & np.isfinite(assembly.problem_energies_J)
+    )
+    if ok.any():
+        u = problems.where(ok, guess, u)
+    if not ok.all():
+        with timer.phase("assembly"):
+            assembly = assembler.assemble(u)
+    return u, assembly, ~ok
+
+
+def _relax(
+    assembler: Assembler,
+    problems: Problems,
+    assembly: Any,
+    u: Any,
+    free: Any,
+    limits: np.ndarray,
+    relax: np.ndarray,
+    timer: PhaseTimer,
+) -> tuple[Any, Any, np.ndarray]:
+    """The nonlinear elimination of each problem ``relax`` (K,) on its own patch, from
+    ``u`` and its assembly (the tangent assembled first where it is not).
+
+    Returns:
+        (the state, its assembly, each problem's local iterations (K,)).
+    """
+    if assembly.matrix is None:
+        with timer.phase("assembly"):
+            assembly = assembler.assemble(u)
+    steps = np.zeros(problems.count, dtype=np.int64)
+    with timer.phase("elimination"):
+        for k in np.flatnonzero(relax):
+            u, assembly, steps[k] = nonlinear_elimination(
+                assembler,
+                assembly,
+                u,
+                free,
+                float(limits[k]),
+                problem=int(k),
+                nodes=problems.nodes(int(k)),
+                arrays=problems.arrays,
+            )
+    return u, assembly, steps
