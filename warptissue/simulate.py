@@ -64,6 +64,7 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
+from warptissue.materials import prony_term
 from warptissue.study import Study
 
 __all__ = [
@@ -334,7 +335,7 @@ def _check_linear_solver(study: Study, device: Any) -> None:
 
 def _is_viscoelastic(material: Any) -> bool:
     """True for a material with a Prony series (its parameters hold ``g1``, ``tau1_s``...)."""
-    return any(re.match(r"^(g\d+|tau\d+_s)$", name) for name in material.parameter_names)
+    return any(prony_term(name) is not None for name in material.parameter_names)
 
 
 def force_curve_warnings(depths_m: np.ndarray, forces_N: np.ndarray) -> list[str]:

@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 from warptissue.errors import InputError
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
+from warptissue.materials import material_from_dict, prony_term
 from warptissue.mesh.generators import MESHERS
 
 if TYPE_CHECKING:
@@ -85,8 +86,6 @@ FIT_STRATEGIES: tuple[str, ...] = ("joint", "two_stage")
 """``fit.strategy``: all free parameters at once, or Ahn & Kim's Prony-first two stages."""
 PROTOCOL_KINDS: tuple[str, ...] = ("quasi_static", "timed", "ramp_hold", "sine", "record")
 """``protocol.kind``: depths only, explicit depths and times, or a generated history."""
-PRONY_NAME = re.compile(r"^(g\d+|tau\d+_s)$")
-"""A Prony parameter of a viscoelastic ``[material]``: ``g<i>`` or ``tau<i>_s``."""
 START_FROM: tuple[str, ...] = ("record", "material")
 """``fit.start_from``: where a free parameter without a ``[fit.start]`` value starts."""
 CONTACT_POINTS: tuple[str, ...] = ("given", "fit")
@@ -1101,8 +1100,6 @@ def _read_quasi_static(table: _Table, thickness_m: float) -> Protocol:
 
 
 def _read_material(table: _Table) -> Any:
-    from warptissue.materials import material_from_dict
-
     values = table.present(list(table.data))
     return table.build(material_from_dict, values)
 
@@ -1371,7 +1368,7 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         raise table.error("stop_r_squared", "must lie between 0 and 1", stop_r_squared)
     strategy = table.string("strategy", default="joint", choices=FIT_STRATEGIES)
     if strategy == "two_stage":
-        prony = [name for name in material.parameter_names if PRONY_NAME.match(name)]
+        prony = [name for name in material.parameter_names if prony_term(name) is not None]
         if not prony:
             raise table.error(
                 "strategy",
@@ -1380,7 +1377,7 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
                 "'joint'",
                 strategy,
             )
-        if all(PRONY_NAME.match(name) for name in free):
+        if all(prony_term(name) is not None for name in free):
             raise table.error(
                 "strategy",
                 "'two_stage' fits the Prony terms in stage (i) and the other free parameters "
@@ -1629,22 +1626,6 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
     return float(result.x[0])
 
 
-_SHEAR_WEIGHTS = {"C10_Pa": 2.0, "C01_Pa": 2.0, "shear_modulus_Pa": 1.0}
-"""d mu0 / d parameter of the parameters that set the initial shear modulus mu0 (with the
-Ogden mu_i, weight 1, and Young's modulus, weight 1 / (2 (1 + nu)))."""
-
-
-def _shear_weight(name: str, material: Any) -> float:
-    """d mu0 / d ``name`` (0 for a parameter that does not set the initial shear modulus)."""
-    if name in _SHEAR_WEIGHTS:
-        return _SHEAR_WEIGHTS[name]
-    if re.fullmatch(r"mu\d+_Pa", name):
-        return 1.0
-    if name == "youngs_modulus_Pa":
-        return 1.0 / (2.0 * (1.0 + material.poissons_ratio))
-    return 0.0
-
-
 def start_values_from_record(study: Study, record: DataRecord | None = None) -> dict[str, float]:
     """The start of every free parameter of the study's fit.
 
@@ -1682,16 +1663,16 @@ def start_values_from_record(study: Study, record: DataRecord | None = None) -> 
     scaled = [
         name
         for name in settings.free
-        if name not in settings.start and _shear_weight(name, material) != 0.0
+        if name not in settings.start and material.shear_modulus_weight(name) != 0.0
     ]
     if settings.start_from == "record" and scaled:
         record = study.data[0] if record is None else record
         youngs_Pa = record_youngs_modulus_Pa(study, record)
         nu = min(material.small_strain_equivalent()[1], 0.5)
         target = youngs_Pa / (2.0 * (1.0 + nu))
-        free_part = sum(_shear_weight(name, material) * current[name] for name in scaled)
+        free_part = sum(material.shear_modulus_weight(name) * current[name] for name in scaled)
         fixed_part = sum(
-            _shear_weight(name, material) * start.get(name, value)
+            material.shear_modulus_weight(name) * start.get(name, value)
             for name, value in current.items()
             if name not in scaled
         )

@@ -66,7 +66,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -78,6 +77,7 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.fit.engine import covariance_from_jacobian, least_squares
 from warptissue.fit.metrics import r_squared, rmse
 from warptissue.fit.result import FitResult, IterationRecord, RejectStep
+from warptissue.materials import positive_bounds, prony_term
 from warptissue.study import (
     CONTACT_POINTS,
     DEPTH_OFFSET,
@@ -136,12 +136,6 @@ many noise standard deviations (and 1 % of the peak force)."""
 INTERRUPTED_EXIT_CODE = 130
 """Exit status of an interrupted fit (Ctrl-C), as the shell gives a process ended by SIGINT."""
 _CACHE_SIZE = 8
-
-
-def _is_prony(name: str) -> bool:
-    from warptissue.materials import PRONY_KEY
-
-    return bool(PRONY_KEY.match(name))
 
 
 @dataclass(frozen=True)
@@ -822,27 +816,12 @@ def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
     return scale
 
 
-def _positive_bounds(
-    names: Sequence[str], lower: np.ndarray, upper: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Moduli that must be positive get lower bound 0 where the model leaves them free."""
-    lower, upper = lower.copy(), upper.copy()
-    for j, name in enumerate(names):
-        if name in ("C10_Pa", "shear_modulus_Pa", "youngs_modulus_Pa", "bulk_modulus_Pa"):
-            lower[j] = max(lower[j], 0.0)
-        elif name.startswith("tau") and name.endswith("_s"):
-            lower[j] = max(lower[j], 0.0)
-        elif _is_prony(name):
-            lower[j] = max(lower[j], 0.0)
-            upper[j] = min(upper[j], 1.0)
-    return lower, upper
-
-
 def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitResult, ...], dict]:
     """Ahn & Kim's stage (i): fit_qlv on every record; the mean Prony terms."""
     from warptissue.viscoelastic.fitting import fit_qlv
 
-    terms = sum(1 for name in material.parameter_names if re.fullmatch(r"g\d+", name))
+    kinds = [term[0] for term in map(prony_term, material.parameter_names) if term is not None]
+    terms = kinds.count("g")
     if terms == 0:
         raise InputError(
             "strategy two_stage fits a Prony series first: the material has none (add g1, "
@@ -1099,7 +1078,7 @@ def fit_indentation(
                 path=study.path,
                 value=prony,
             ) from None
-        keep = [j for j, name in enumerate(free) if not _is_prony(name)]
+        keep = [j for j, name in enumerate(free) if prony_term(name) is None]
         if not keep:
             raise InputError(
                 "strategy two_stage fits the Prony terms in stage (i) and the other free "
@@ -1119,7 +1098,7 @@ def fit_indentation(
     units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
     units += ("m",) * len(offset_names)
     x0 = np.array([start[name] for name in free], dtype=np.float64)
-    lower, upper = _positive_bounds(free, all_lower, all_upper)
+    lower, upper = positive_bounds(free, all_lower, all_upper)
     x0 = np.clip(x0, lower, upper)
     spans = np.array([float(np.ptp(record.displacement_m)) for record in study.data])
     if offset_start is not None:
