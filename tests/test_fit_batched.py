@@ -15,9 +15,9 @@ import pytest
 import warptissue.fit.batched as batched
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
-from warptissue.fit import least_squares
 from warptissue.fit.batched import fit_indentation_batch
 from warptissue.indenter import Indenter
+from warptissue.lsq import least_squares
 from warptissue.materials import MooneyRivlin, NeoHookean
 from warptissue.mesh import indentation_block
 

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from warptissue.errors import InputError
-from warptissue.fit.result import FitResult
 from warptissue.io import atomic_path, write_csv, write_json
+from warptissue.lsq.result import FitResult
 
 if TYPE_CHECKING:
     from warptissue.fit.indentation import IndentationFit

@@ -41,6 +41,7 @@ from typing import TYPE_CHECKING, Any
 
 from warptissue.errors import InputError
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
+from warptissue.lsq.engine import METHODS
 from warptissue.materials import material_from_dict, prony_term
 from warptissue.mesh.generators import MESHERS
 
@@ -78,8 +79,8 @@ SCHEMA_VERSION: int = 2
 """The newest study schema version: the one with ``[[data]]`` and ``[fit]``."""
 SCHEMA_VERSIONS: tuple[int, ...] = (1, 2)
 """The versions this module reads (1: a simulation; 2: a simulation that may hold a fit)."""
-FIT_METHODS: tuple[str, ...] = ("lm", "salm")
-"""``fit.method``: the methods of :func:`warptissue.fit.least_squares`."""
+FIT_METHODS: tuple[str, ...] = METHODS
+"""``fit.method``: the methods of :func:`warptissue.lsq.least_squares` (its ``METHODS``)."""
 FIT_OBJECTIVES: tuple[str, ...] = ("absolute", "relative")
 """``fit.objective``: force residuals (N), or residuals divided by the measured force."""
 FIT_STRATEGIES: tuple[str, ...] = ("joint", "two_stage")
@@ -519,7 +520,7 @@ class FitSettings:
             initial shear modulus start from the first record's small-depth stiffness
             (:func:`start_values_from_record`), the others from ``[material]``;
             ``"material"``: from ``[material]``.
-        method: ``"lm"`` or ``"salm"`` (:func:`warptissue.fit.least_squares`).
+        method: ``"lm"`` or ``"salm"`` (:func:`warptissue.lsq.least_squares`).
         objective: ``"absolute"`` (force residuals, N) or ``"relative"`` (divided by the
             measured force).
         relative_floor_N: With the relative objective, the smallest |force| used as a

@@ -158,8 +158,8 @@ def run_fits(mesh: Any, count: int, device: str, *, steps: int, sequential_limit
     from warptissue.device import resolve_device
     from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
     from warptissue.fem.batched import simulate_indentation_batch
-    from warptissue.fit import least_squares
     from warptissue.fit.batched import fit_indentation_batch
+    from warptissue.lsq import least_squares
 
     warp_device = resolve_device(device)
     options = NewtonOptions(tolerance=NEWTON_TOLERANCE)

@@ -370,8 +370,8 @@ def fit_rig_dynamics(
     Raises:
         InputError: Shapes, non-finite values, unknown parameter names.
     """
-    from warptissue.fit.engine import least_squares
-    from warptissue.fit.result import RejectStep
+    from warptissue.lsq.engine import least_squares
+    from warptissue.lsq.result import RejectStep
 
     f = np.asarray(frequency_Hz, dtype=np.float64)
     measured = np.asarray(response, dtype=np.complex128)

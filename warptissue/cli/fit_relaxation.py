@@ -33,8 +33,8 @@ from warptissue.errors import InputError
 if TYPE_CHECKING:
     import numpy as np
 
-    from warptissue.fit import FitResult
     from warptissue.io import ExperimentData
+    from warptissue.lsq import FitResult
 
 __all__ = ["parse_model", "register_fit"]
 
@@ -351,8 +351,8 @@ def _predict(
     args: argparse.Namespace, result: FitResult, out_dir: Path, label: str
 ) -> tuple[list[dict[str, Any]], dict[str, Path], list[str]]:
     """Predict every ``--predict`` record; write its CSV and PNG; R^2 and RMSE."""
-    from warptissue.fit.metrics import r_squared, rmse
     from warptissue.io import write_csv
+    from warptissue.lsq.metrics import r_squared, rmse
     from warptissue.report import plot_fit
 
     reports, files, lines = [], {}, []
@@ -487,8 +487,8 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
     """Fit E to a force-depth curve, write JSON + CSV + PNG; return the exit status."""
     import numpy as np
 
-    from warptissue.fit.plausibility import check_indentation_record, elastic_curve_warnings
     from warptissue.fit.punch import fit_punch_modulus
+    from warptissue.lsq.plausibility import check_indentation_record, elastic_curve_warnings
     from warptissue.report import write_fit_outputs
 
     record = _read(args.data, args, required=("displacement_m", "force_N"))

@@ -1,7 +1,7 @@
 """Inverse-FE fits of many flat-punch curves at once, their forward runs batched.
 
 K fits (one per specimen, site or rate: its own mesh, material, depths and measured forces)
-run the fit engine's Levenberg-Marquardt (:func:`warptissue.fit.least_squares`), each with its
+run the fit engine's Levenberg-Marquardt (:func:`warptissue.lsq.least_squares`), each with its
 own damping, accepted and rejected steps and stopping test, exactly as K separate fits would.
 What they share is the forward model: whenever every fit still running has asked for its
 next trial point, the K trial curves are solved together in one batched FE run
@@ -26,8 +26,8 @@ import numpy as np
 from warptissue.errors import InputError
 from warptissue.fem import IndentationProblem, NewtonOptions
 from warptissue.fem.batched import batch_assembler, simulate_indentation_batch
-from warptissue.fit.engine import least_squares
-from warptissue.fit.result import FitResult, RejectStep
+from warptissue.lsq.engine import least_squares
+from warptissue.lsq.result import FitResult, RejectStep
 
 __all__ = ["fit_indentation_batch"]
 
@@ -143,11 +143,11 @@ def fit_indentation_batch(
             Ogden exponents), e.g. ``("C10_Pa",)``.
         device: Warp device; None for Warp's default.
         options: The forward runs' Newton settings.
-        method, max_iterations, ftol, xtol, gtol: As :func:`warptissue.fit.least_squares`.
+        method, max_iterations, ftol, xtol, gtol: As :func:`warptissue.lsq.least_squares`.
 
     Returns:
-        One :class:`warptissue.fit.FitResult` per problem, as
-        :func:`warptissue.fit.least_squares` gives it for that fit alone.
+        One :class:`warptissue.lsq.FitResult` per problem, as
+        :func:`warptissue.lsq.least_squares` gives it for that fit alone.
 
     Raises:
         InputError: Lists of different lengths, a name a material cannot fit, or forces that

@@ -7,7 +7,7 @@ measured force of every ``[[data]]`` record, jointly. It is the Python API behin
 
 Every forward run also gives the exact force sensitivities dF/dtheta (``K du/dtheta =
 -dR/dtheta`` at each converged step, docs/fe.md "Sensitivities"), so the least-squares engine
-(:func:`warptissue.fit.least_squares`, Levenberg-Marquardt or Tong et al.'s self-adapting LM)
+(:func:`warptissue.lsq.least_squares`, Levenberg-Marquardt or Tong et al.'s self-adapting LM)
 gets its Jacobian from the same run as its residuals: one forward run per trial point, where
 forward differences need 1 + n (FEBio's optimizer).
 
@@ -58,7 +58,7 @@ Notes:
     ``probe_radius_m``) is refused before fitting; systematic residuals (Durbin-Watson
     statistic below :data:`DURBIN_WATSON_LIMIT`), a force that rises during a hold or does
     not return to zero after unloading, a drift removed by the conditioning, non-identified
-    parameters (:attr:`warptissue.fit.FitResult.identifiability`) and a fit that did not
+    parameters (:attr:`warptissue.lsq.FitResult.identifiability`) and a fit that did not
     converge are warnings of the result.
 """
 
@@ -74,9 +74,9 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit.engine import covariance_from_jacobian, least_squares
-from warptissue.fit.metrics import r_squared, rmse
-from warptissue.fit.result import FitResult, IterationRecord, RejectStep
+from warptissue.lsq.engine import covariance_from_jacobian, least_squares
+from warptissue.lsq.metrics import r_squared, rmse
+from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
 from warptissue.materials import positive_bounds, prony_term
 from warptissue.study import (
     CONTACT_POINTS,
@@ -1024,7 +1024,7 @@ def fit_indentation(
     Notes:
         Ahn & Kim (2010), the two-stage method and the relative objective (Eq. 7); the
         engine: Levenberg-Marquardt with Marquardt's scaling or Tong et al.'s self-adapting
-        LM (:mod:`warptissue.fit.engine`). See the module docstring for the model force,
+        LM (:mod:`warptissue.lsq.engine`). See the module docstring for the model force,
         the residuals and the warnings.
     """
     started = time.perf_counter()

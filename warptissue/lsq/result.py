@@ -1,7 +1,7 @@
 """The result of a least-squares fit, its status table, and the step-refusal signal.
 
-A :class:`FitResult` is what :func:`warptissue.fit.least_squares` and
-:func:`warptissue.fit.fit_curve` return, in the style of ``scipy.optimize.OptimizeResult``:
+A :class:`FitResult` is what :func:`warptissue.lsq.least_squares` and
+:func:`warptissue.lsq.fit_curve` return, in the style of ``scipy.optimize.OptimizeResult``:
 the parameters, the final residuals and Jacobian, an integer ``status`` with a message from
 :data:`STATUS_MESSAGES`, the iteration history, and the statistics of the fit (covariance,
 standard errors, correlation, R², RMSE). It never holds NaN: quantities that are undefined
