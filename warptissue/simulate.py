@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from warptissue.errors import ConvergenceError, InputError
+from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
 from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
 from warptissue.materials import prony_term
 from warptissue.study import Study
@@ -99,8 +99,6 @@ PENETRATION_WARNING_SHARE = 0.01
 """A penetration of the indenter into the specimen beyond this share of the depth is said
 in ``result.json``'s warnings (the penalty is too soft; docs/fe.md "Contact" measures 1e-4
 with the default penalty factor)."""
-INTERRUPTED_EXIT_CODE = 130
-"""Exit status of an interrupted run (Ctrl-C), as the shell gives a process ended by SIGINT."""
 COMPILE_NOTICE = "compiling Warp kernels (first run only, about a minute)..."
 """Said once on standard error before a run whose kernels are not in Warp's cache."""
 _STEP_FIELDS = re.compile(r"^fields_\d{3,}\.vtu$")
@@ -154,7 +152,7 @@ def build_mesh(study: Study) -> Any:
     from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
-    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    half_size_m = specimen.half_size_m
     common = {
         "thickness_m": specimen.thickness_m,
         "probe_radius_m": mesh_probe_radius(study.indenter, half_size_m),
@@ -186,7 +184,7 @@ def size_near_reason(study: Study) -> str | None:
     specimen = study.specimen
     if specimen.force_accuracy is None:
         return None
-    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    half_size_m = specimen.half_size_m
     return near_size_choice(
         specimen.force_accuracy,
         probe_radius_m=mesh_probe_radius(study.indenter, half_size_m),
@@ -209,7 +207,7 @@ def estimate_mesh(study: Study) -> Any:
     from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
-    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    half_size_m = specimen.half_size_m
     return estimate_indentation_mesh(
         shape=specimen.shape,
         half_extent_m=half_size_m,

@@ -149,6 +149,11 @@ class Specimen:
     mesher: str = "extruded"
     force_accuracy: float | None = None
 
+    @property
+    def half_size_m(self) -> float:
+        """The specimen's extent from the probe axis, m (:func:`specimen_half_size_m`)."""
+        return specimen_half_size_m(self.shape, self.width_m, self.radius_m)
+
     def to_dict(self) -> dict[str, Any]:
         """The ``[specimen]`` table, with every default filled in; a near size chosen for a
         force accuracy is given as ``force_accuracy`` (which loads as the same size)."""
@@ -808,6 +813,20 @@ class _Table:
             )
 
 
+def specimen_half_size_m(shape: str, width_m: float | None, radius_m: float | None) -> float:
+    """The specimen's extent from the probe axis: half a block's width, or a disc's radius.
+
+    Args:
+        shape: ``"block"`` or ``"disc"``.
+        width_m: The block's full edge length, m (block only).
+        radius_m: The disc's radius, m (disc only).
+
+    Returns:
+        The half size, m.
+    """
+    return width_m / 2.0 if shape == "block" else radius_m
+
+
 def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
     probe_radius_m = indenter.radius_m
     shape = table.string("shape", choices=SPECIMEN_SHAPES)
@@ -821,7 +840,7 @@ def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
         )
     width_m = table.number("width_m") if shape == "block" else None
     radius_m = table.number("radius_m") if shape == "disc" else None
-    half_size_m = width_m / 2.0 if shape == "block" else radius_m
+    half_size_m = specimen_half_size_m(shape, width_m, radius_m)
     probe_radius_m = mesh_probe_radius(indenter, half_size_m)
     size_key = "width_m" if shape == "block" else "radius_m"
     if half_size_m <= probe_radius_m:

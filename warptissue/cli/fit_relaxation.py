@@ -38,9 +38,6 @@ if TYPE_CHECKING:
 
 __all__ = ["parse_model", "register_fit"]
 
-RELATIVE_FLOOR_SHARE = 0.01
-"""``--relative-floor auto``: the floor is this share of the largest |force| of the records."""
-
 
 def parse_model(text: str) -> tuple[str, int]:
     """Split a model name such as ``prony:3`` into (model, terms); InputError when unknown."""
@@ -184,8 +181,8 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         default="auto",
         metavar="auto|FORCE",
         help="relative objective: smallest |force| used as a divisor, so that a record that "
-        f"starts at zero force can be fitted (N, e.g. 1mN; auto: {RELATIVE_FLOOR_SHARE:g} of "
-        "the largest |force|)",
+        "starts at zero force can be fitted (N, e.g. 1mN; auto: the share "
+        "warptissue.lsq.engine.RELATIVE_FLOOR_SHARE of the largest |force|)",
     )
     relaxation.add_argument(
         "--predict",
@@ -338,6 +335,8 @@ def _finish(
 def _floor(args: argparse.Namespace, records: list[_Record]) -> float | None:
     """The relative objective's floor (N), or None for the absolute objective."""
     import numpy as np
+
+    from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE
 
     if args.objective != "relative":
         return None

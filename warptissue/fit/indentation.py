@@ -73,8 +73,8 @@ from typing import Any
 
 import numpy as np
 
-from warptissue.errors import ConvergenceError, InputError
-from warptissue.lsq.engine import covariance_from_jacobian, least_squares
+from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
+from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE, covariance_from_jacobian, least_squares
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
 from warptissue.materials import positive_bounds, prony_term
@@ -118,8 +118,6 @@ DRIFT_SHARE = 0.02
 CORRELATION_LIMIT = 0.995
 """Two parameters whose correlation exceeds this in magnitude are reported: the data
 determine a combination of them rather than each."""
-RELATIVE_FLOOR_SHARE = 0.01
-"""Default floor of the relative objective: this share of the largest |force| of the records."""
 OFFSET_IDENTIFIED_SHARE = 0.1
 """A fitted depth offset whose standard error exceeds this share of its record's depth span
 is reported as not identified (an offset may well be zero, so not judged by its value)."""
@@ -133,8 +131,6 @@ as a share of the record's depth span."""
 OFFSET_NOISE_SIGMA = 6.0
 """The start of a depth offset without a contact point: where the force first exceeds this
 many noise standard deviations (and 1 % of the peak force)."""
-INTERRUPTED_EXIT_CODE = 130
-"""Exit status of an interrupted fit (Ctrl-C), as the shell gives a process ended by SIGINT."""
 _CACHE_SIZE = 8
 
 

@@ -80,6 +80,9 @@ __all__ = ["covariance_from_jacobian", "fit_curve", "least_squares"]
 _EPS = float(np.finfo(np.float64).eps)
 METHODS: tuple[str, ...] = ("lm", "salm")
 """The methods of :func:`least_squares`: Levenberg-Marquardt and self-adapting LM."""
+RELATIVE_FLOOR_SHARE = 0.01
+"""The default floor of a relative objective (``relative_floor`` of :func:`fit_curve`) that
+the fits choose for the user: this share of the largest |force| of the records."""
 _OPTION_DEFAULTS: Mapping[str, Mapping[str, float]] = {
     "lm": {"initial_damping": 1e-3, "p0": 1e-4},
     "salm": {"theta": 0.5, "c": 1e-8, "p0": 1e-4, "eta0": 1.0},
