@@ -15,6 +15,7 @@ from warptissue.acquisition.conditioning import condition_for_fit
 from warptissue.errors import InputError
 from warptissue.fem.solvers import NewtonOptions
 from warptissue.fit.punch import hayes_kappa
+from warptissue.fit.start import record_youngs_modulus_Pa, start_values_from_record
 from warptissue.io import write_csv
 from warptissue.lsq import engine
 from warptissue.mesh import size_near_for_force_accuracy
@@ -23,9 +24,7 @@ from warptissue.study import (
     FIT_METHODS,
     SCHEMA_VERSION,
     load_study,
-    record_youngs_modulus_Pa,
     save_study,
-    start_values_from_record,
     study_from_dict,
 )
 

@@ -20,12 +20,16 @@ prefix first.
 
 ====  =====================================================================================
 0     ``warptissue`` (the package root), ``errors``, ``device``, ``kernels``
-1     ``materials``, ``indenter``, ``mesh``, ``io``, ``loading``, ``lsq`` (least squares)
-2     ``study`` (the study schema and its TOML reader and writer), ``viscoelastic``
+1     ``materials``, ``indenter``, ``mesh``, ``io``, ``loading``, ``lsq`` (the least-squares
+      engine under every fit)
+2     ``viscoelastic`` (lumped models and their fits), ``acquisition`` (rig, recorder,
+      conditioning: upstream of the data files)
 3     ``fem``
-4     ``simulate``, ``fit``, ``field``, ``acquisition``
-5     ``usd``, ``report``, ``batch``
-6     ``cli``
+4     ``study`` (the study schema and its TOML reader and writer: it names fem's solver
+      options and acquisition's conditioning, so it sits above both)
+5     ``simulate``, ``fit``, ``field``
+6     ``usd``, ``report``, ``batch``
+7     ``cli``
 ====  =====================================================================================
 
 Usage::
@@ -55,17 +59,17 @@ FLOORS: dict[str, int] = {
     "warptissue.io": 1,
     "warptissue.loading": 1,
     "warptissue.lsq": 1,
-    "warptissue.study": 2,
     "warptissue.viscoelastic": 2,
+    "warptissue.acquisition": 2,
     "warptissue.fem": 3,
-    "warptissue.simulate": 4,
-    "warptissue.fit": 4,
-    "warptissue.field": 4,
-    "warptissue.acquisition": 4,
-    "warptissue.usd": 5,
-    "warptissue.report": 5,
-    "warptissue.batch": 5,
-    "warptissue.cli": 6,
+    "warptissue.study": 4,
+    "warptissue.simulate": 5,
+    "warptissue.fit": 5,
+    "warptissue.field": 5,
+    "warptissue.usd": 6,
+    "warptissue.report": 6,
+    "warptissue.batch": 6,
+    "warptissue.cli": 7,
 }
 
 

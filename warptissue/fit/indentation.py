@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
+from warptissue.fit.start import start_values_from_record
 from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE, covariance_from_jacobian, least_squares
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
@@ -85,7 +86,6 @@ from warptissue.study import (
     DataRecord,
     Protocol,
     Study,
-    start_values_from_record,
 )
 
 __all__ = [
