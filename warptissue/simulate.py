@@ -75,6 +75,7 @@ __all__ = [
     "StudySetup",
     "build_mesh",
     "build_problem",
+    "check_linear_solver",
     "estimate_mesh",
     "force_curve_warnings",
     "kernels_need_compiling",
@@ -317,8 +318,16 @@ def _prepare_out_dir(out_path: Path) -> None:
             stale.unlink()
 
 
-def _check_linear_solver(study: Study, device: Any) -> None:
-    """Refuse, before any work, a linear solver that does not run on the device."""
+def check_linear_solver(study: Study, device: Any) -> None:
+    """Refuse, before any work, a linear solver that does not run on the device.
+
+    Args:
+        study: The study (its ``solver.linear_solver``).
+        device: The Warp device the study runs on.
+
+    Raises:
+        InputError: The linear solver is unknown or does not run on ``device``.
+    """
     from warptissue.fem import LinearSolver
 
     try:
@@ -596,7 +605,7 @@ def prepare_study(
     _prepare_out_dir(out_path)
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
-    _check_linear_solver(study, warp_device)
+    check_linear_solver(study, warp_device)
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     started = time.perf_counter()
     mesh = build_mesh(study)

@@ -856,11 +856,11 @@ def _forward_model(
     of the free parameters (and of the records' depth offsets, with ``offset_start``)."""
     from warptissue.device import resolve_device
     from warptissue.fem import Assembler
-    from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
+    from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
 
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
-    _check_linear_solver(study, warp_device)
+    check_linear_solver(study, warp_device)
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     mesh = build_mesh(study)
     problem = build_problem(dataclasses.replace(study, material=material), mesh)
