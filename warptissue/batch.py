@@ -40,8 +40,10 @@ import hashlib
 import json
 import os
 import signal
+import socket
 import sys
 import time
+import uuid
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -49,9 +51,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import warp as wp
 
+from warptissue.device import quiet_warp
 from warptissue.errors import DeviceError, InputError, WarpTissueError
+from warptissue.fit.indentation import fit_indentation
 from warptissue.io import write_csv, write_json
+from warptissue.report import write_indentation_fit_outputs
+from warptissue.simulate import (
+    prepare_study,
+    run_studies_together,
+    run_study,
+    solve_study,
+    together_refusal,
+    together_settings,
+)
+from warptissue.study import load_study
 
 __all__ = [
     "DONE_MARKER",
@@ -346,7 +361,6 @@ def _worker_device(device: str | None, study: Any) -> str | None:
         return device
     if not isinstance(name, int):
         return device
-    import warp as wp
 
     wp.init()
     count = wp.get_cuda_device_count()
@@ -382,16 +396,11 @@ def _simulation_numbers(outputs: Any) -> dict[str, Any]:
 
 
 def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
-    from warptissue.simulate import run_study
-
     outputs = run_study(study, out_dir=out_dir, device=device, progress=False, announce=False)
     return _simulation_numbers(outputs)
 
 
 def _fit(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
-    from warptissue.fit.indentation import fit_indentation
-    from warptissue.report import write_indentation_fit_outputs
-
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("the output folder is a file", path=out_dir)
     fit = fit_indentation(study, device=device, progress=False)
@@ -426,8 +435,6 @@ def run_study_task(task: _Task) -> StudyOutcome:
     Returns:
         The study's :class:`StudyOutcome`.
     """
-    from warptissue.device import quiet_warp
-    from warptissue.study import load_study
 
     started = time.perf_counter()
     out_dir = Path(task.out_dir) / task.folder
@@ -472,14 +479,6 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     Returns:
         One :class:`StudyOutcome` per task, in order.
     """
-    from warptissue.device import quiet_warp
-    from warptissue.simulate import (
-        prepare_study,
-        run_studies_together,
-        together_refusal,
-        together_settings,
-    )
-    from warptissue.study import load_study
 
     outcomes = [_start_outcome(task) for task in tasks]
     notes: list[list[str]] = [[] for _ in tasks]
@@ -553,7 +552,6 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
 
 def _solve_alone(setup: Any) -> dict[str, Any]:
     """A prepared simulation of a group solved alone: its outcome's numbers."""
-    from warptissue.simulate import solve_study
 
     return _simulation_numbers(solve_study(setup, progress=False))
 
@@ -566,7 +564,6 @@ def _kind(study: Any) -> str:
 def _start_outcome(task: _Task) -> StudyOutcome:
     """A study's outcome before it runs; removes its folder's marker (the folder is about
     to change: it holds no complete result)."""
-    import socket
 
     marker = Path(task.out_dir) / task.folder / DONE_MARKER
     if marker.is_file():
@@ -822,7 +819,6 @@ def _run_on_dask(
 ) -> int:
     """Submit one task per group of studies, record each study as its task ends; returns
     the number of workers."""
-    import uuid
 
     from distributed import as_completed
 

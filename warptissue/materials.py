@@ -79,6 +79,8 @@ import warp as wp
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
+from warptissue.kernels import fem as kf
+from warptissue.kernels import materials as km
 
 __all__ = [
     "HOMOGENEOUS_MODES",
@@ -274,7 +276,6 @@ class Material:
         Raises:
             InputError: The model is incompressible (no bulk modulus).
         """
-        from warptissue.kernels import materials as km
 
         if math.isinf(self.bulk_modulus):
             raise InputError(
@@ -329,7 +330,6 @@ class Material:
         Raises:
             InputError: ``name`` is not a parameter of this model.
         """
-        from warptissue.kernels import materials as km
 
         names = self.sensitivity_names
         if name not in names:
@@ -1192,7 +1192,6 @@ class Viscoelastic(Material):
 
 def _zeroed(params: Any) -> Any:
     """A copy of a ``MaterialParams`` with every coefficient zero (model and counts kept)."""
-    from warptissue.kernels import materials as km
 
     params.c_i0 = km.vec6d()
     params.c01 = 0.0
@@ -1356,8 +1355,6 @@ def evaluate_material(
     Returns:
         A :class:`MaterialEvaluation` with arrays of leading size n.
     """
-    from warptissue.kernels import fem as kf
-    from warptissue.kernels import materials as km
 
     f = np.asarray(deformation_gradients, dtype=np.float64)
     if f.shape == (3, 3):

@@ -52,6 +52,7 @@ once, on standard error, that Warp is compiling its kernels.
 
 from __future__ import annotations
 
+import os
 import re
 import sys
 import time
@@ -61,11 +62,25 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import warp as wp
 
+import warptissue.kernels.fem
+import warptissue.kernels.sparse
+from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
+from warptissue.fem import IndentationProblem, LinearSolver, SolveInterrupted, simulate_indentation
+from warptissue.fem.batched import simulate_indentation_batch
 from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
 from warptissue.materials import prony_term
-from warptissue.study import Study
+from warptissue.mesh import (
+    check_mesh,
+    estimate_indentation_mesh,
+    indentation_block,
+    indentation_disc,
+    near_size_choice,
+    write_mesh,
+)
+from warptissue.study import Study, mesh_probe_radius
 
 __all__ = [
     "CONTACT_CURVE_COLUMNS",
@@ -149,8 +164,6 @@ def build_mesh(study: Study) -> Any:
     Returns:
         A :class:`warptissue.mesh.TetMesh` with the standard indentation node sets.
     """
-    from warptissue.mesh import indentation_block, indentation_disc
-    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
     half_size_m = specimen.half_size_m
@@ -179,8 +192,6 @@ def size_near_reason(study: Study) -> str | None:
     Returns:
         One sentence (:meth:`warptissue.mesh.NearSizeChoice.reason`), or None.
     """
-    from warptissue.mesh import near_size_choice
-    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
     if specimen.force_accuracy is None:
@@ -204,8 +215,6 @@ def estimate_mesh(study: Study) -> Any:
         A :class:`warptissue.mesh.MeshSizeEstimate` (tets, nodes, bytes to generate and to
         solve on the CPU).
     """
-    from warptissue.mesh import estimate_indentation_mesh
-    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
     half_size_m = specimen.half_size_m
@@ -232,7 +241,6 @@ def build_problem(study: Study, mesh: Any) -> Any:
     Returns:
         A :class:`warptissue.fem.IndentationProblem`.
     """
-    from warptissue.fem import IndentationProblem
 
     return IndentationProblem(
         mesh,
@@ -266,7 +274,6 @@ def penetration_warnings(depths_m: np.ndarray, max_penetration_m: np.ndarray) ->
 
 def _mesh_statistics(mesh: Any) -> dict[str, Any]:
     """Size and shape quality of the mesh (raises MeshError on an inverted or flat tet)."""
-    from warptissue.mesh import check_mesh
 
     quality = check_mesh(mesh)
     return {**asdict(quality), "displacement_dof_count": 3 * mesh.node_count}
@@ -328,7 +335,6 @@ def check_linear_solver(study: Study, device: Any) -> None:
     Raises:
         InputError: The linear solver is unknown or does not run on ``device``.
     """
-    from warptissue.fem import LinearSolver
 
     try:
         LinearSolver(method=study.solver.options.linear_solver, device=device)
@@ -396,12 +402,6 @@ def kernels_need_compiling(device: Any) -> bool:
         no compiled binary for ``device`` in ``warp.config.kernel_cache_dir`` (so the first
         launch compiles it, about a minute on the CPU).
     """
-    import os
-
-    import warp as wp
-
-    import warptissue.kernels.fem
-    import warptissue.kernels.sparse
 
     for kernels in (warptissue.kernels.fem, warptissue.kernels.sparse):
         module = wp.get_module(kernels.__name__)
@@ -423,8 +423,6 @@ def kernels_need_compiling(device: Any) -> bool:
 def _write_fields(
     out_dir: Path, mesh: Any, result: Any, *, every_step: bool, contact: bool = False
 ) -> dict[str, Path]:
-    from warptissue.mesh import write_mesh
-
     files: dict[str, Path] = {}
     converged = len(result.depths_m)
     displacements = np.asarray(result.displacement_m, dtype=np.float64)
@@ -533,7 +531,6 @@ def solve_study(
         SolveInterrupted: Ctrl-C during the load steps, after the outputs of the converged
             steps were written.
     """
-    from warptissue.fem import SolveInterrupted, simulate_indentation
 
     started = time.perf_counter()
     interrupted = None
@@ -590,7 +587,6 @@ def prepare_study(
         MeshError: The mesh would not fit in memory, or the generated mesh is invalid.
         DeviceError: The device does not exist.
     """
-    from warptissue.device import resolve_device
 
     times = study.protocol.times_s
     if times is None and _is_viscoelastic(study.material):
@@ -827,7 +823,6 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
         factorization reuse, which change the path to the solution, not the converged
         state (docs/design-notes/batched-fe.md).
     """
-    from warptissue.fem.batched import simulate_indentation_batch
 
     setups = list(setups)
     if not setups:

@@ -39,11 +39,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+import tomli_w
+
+from warptissue.acquisition.conditioning import CONTACT_MODES, OFFSET_MODES, condition_for_fit
 from warptissue.errors import InputError
+from warptissue.fem.assembly import FORMULATIONS
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
+from warptissue.fem.solvers import NewtonOptions
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
+from warptissue.io import atomic_path, read_experiment_csv
+from warptissue.loading import ramp_hold, resample_history, sine
 from warptissue.lsq.engine import METHODS
 from warptissue.materials import material_from_dict, prony_term
 from warptissue.mesh.generators import MESHERS
+from warptissue.mesh.size import size_near_for_force_accuracy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -457,7 +467,6 @@ class DataRecord:
             InputError: Fewer than two samples after the contact, or ``steps`` below 2
                 (naming the record's file).
         """
-        from warptissue.loading import resample_history
 
         try:
             return resample_history(
@@ -567,7 +576,6 @@ class FitSettings:
 
         Given bounds, else the material model's own box (+-inf where it has none).
         """
-        import numpy as np
 
         names = list(material.parameter_names)
         lower, upper = material.parameter_bounds
@@ -905,7 +913,6 @@ def _size_near_for_accuracy(
 ) -> float:
     """``specimen.force_accuracy``'s near size (:func:`warptissue.mesh.size_near_for_force_
     accuracy`), its errors placed at the key that is out of what was measured."""
-    from warptissue.mesh.size import size_near_for_force_accuracy
 
     sharp = indenter.kind == "flat_punch" and indenter.edge_radius_m == 0.0
     if not (sharp and indenter.contact == "bonded"):
@@ -1027,8 +1034,6 @@ def _read_protocol(table: _Table, thickness_m: float, *, version: int, base: Pat
                 )
         depth_key = "depths_m"
     elif kind == "ramp_hold":
-        from warptissue.loading import ramp_hold
-
         settings = {
             "max_depth_m": table.number("max_depth_m"),
             "speed_m_per_s": table.number("speed_m_per_s"),
@@ -1039,8 +1044,6 @@ def _read_protocol(table: _Table, thickness_m: float, *, version: int, base: Pat
         times, depths = table.build(lambda values: ramp_hold(**values), settings)
         depth_key = "max_depth_m"
     elif kind == "sine":
-        from warptissue.loading import sine
-
         settings = {
             "preload_depth_m": table.number("preload_depth_m"),
             "amplitude_m": table.number("amplitude_m"),
@@ -1127,9 +1130,6 @@ def _read_boundary(table: _Table) -> Boundary:
 
 def _read_solver(table: _Table) -> Solver:
     # The solver's own modules: importing them does not start Warp (test_study checks).
-    from warptissue.fem.assembly import FORMULATIONS
-    from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
-    from warptissue.fem.solvers import NewtonOptions
 
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):
@@ -1159,7 +1159,6 @@ _RECORD_KEYS = (
 
 def _record_options(table: _Table, base: Path) -> dict[str, Any]:
     """The keys of a record (``[[data]]``, or a ``"record"`` protocol), validated."""
-    from warptissue.acquisition.conditioning import CONTACT_MODES, OFFSET_MODES
 
     file = table.string("file")
     if not file.strip():
@@ -1219,10 +1218,6 @@ def _condition_record(
     depth-time history needs none); the contact must then be given (``"none"`` or a
     position): detecting it needs the force.
     """
-    import numpy as np
-
-    from warptissue.acquisition.conditioning import condition_for_fit
-    from warptissue.io import read_experiment_csv
 
     path, file, contact = options["path"], options["file"], options["contact"]
     names = {key: options[key] for key in DEFAULT_COLUMNS}
@@ -1329,8 +1324,6 @@ def _parameter_table(
 
 
 def _read_fit(table: _Table, material: Any) -> FitSettings:
-    import numpy as np
-
     free_raw = table.raw("free")
     if (
         not isinstance(free_raw, list)
@@ -1587,9 +1580,6 @@ def save_study(study: Study, path: str | Path) -> Path:
     Returns:
         The path written.
     """
-    import tomli_w
-
-    from warptissue.io import atomic_path
 
     target = Path(path)
     text = tomli_w.dumps(study.to_dict(relative_to=os.path.abspath(target.parent)))

@@ -73,12 +73,17 @@ from typing import Any
 
 import numpy as np
 
+from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
+from warptissue.fem import Assembler, simulate_indentation
 from warptissue.fit.start import start_values_from_record
+from warptissue.io import read_sidecar, software_versions
+from warptissue.loading import resample_history
 from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE, covariance_from_jacobian, least_squares
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
-from warptissue.materials import positive_bounds, prony_term
+from warptissue.materials import Viscoelastic, positive_bounds, prony_term
+from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
 from warptissue.study import (
     CONTACT_POINTS,
     DEPTH_OFFSET,
@@ -87,6 +92,7 @@ from warptissue.study import (
     Protocol,
     Study,
 )
+from warptissue.viscoelastic.fitting import fit_qlv
 
 __all__ = [
     "CORRELATION_LIMIT",
@@ -298,7 +304,6 @@ class IndentationFit:
             used), ``fitted_material``, ``history`` (per trial step: x, cost, accepted...),
             ``seconds`` and ``software``.
         """
-        from warptissue.io import software_versions
 
         result = self.result
         errors = result.standard_errors
@@ -444,7 +449,6 @@ def _record_drift_warnings(record: DataRecord) -> list[str]:
 
 def _check_probe_radius(study: Study) -> None:
     """Refuse a record whose sidecar names another probe radius than the study's."""
-    from warptissue.io import read_sidecar
 
     radius = study.indenter.radius_m
     for record in study.data:
@@ -516,7 +520,6 @@ class _ForwardModel:
                 value=missing[0],
             )
         self.index = [self.all_names.index(name) for name in names]
-        from warptissue.materials import Viscoelastic
 
         self.viscoelastic = isinstance(material, Viscoelastic)
         self.records = study.data
@@ -617,7 +620,6 @@ class _ForwardModel:
         else:
             share = (offset - reached[i - 1]) / (reached[i] - reached[i - 1])
             touch = float(t[i - 1] + share * (t[i] - t[i - 1]))
-        from warptissue.loading import resample_history
 
         try:
             grid = resample_history(t - touch, recorded - offset, steps=self.steps)
@@ -798,8 +800,6 @@ def _first_passage_times(
 
 
 def _simulate() -> Callable[..., Any]:
-    from warptissue.fem import simulate_indentation
-
     return simulate_indentation
 
 
@@ -814,7 +814,6 @@ def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
 
 def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitResult, ...], dict]:
     """Ahn & Kim's stage (i): fit_qlv on every record; the mean Prony terms."""
-    from warptissue.viscoelastic.fitting import fit_qlv
 
     kinds = [term[0] for term in map(prony_term, material.parameter_names) if term is not None]
     terms = kinds.count("g")
@@ -854,9 +853,6 @@ def _forward_model(
 ) -> _ForwardModel:
     """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
     of the free parameters (and of the records' depth offsets, with ``offset_start``)."""
-    from warptissue.device import resolve_device
-    from warptissue.fem import Assembler
-    from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
 
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
@@ -1307,7 +1303,6 @@ def _fitted_study(study: Study, material: Any) -> Study:
     """The study with the fitted material; a viscoelastic one whose study has a quasi-static
     protocol replays the first record's history instead (``warptissue simulate`` needs time
     steps for it)."""
-    from warptissue.materials import Viscoelastic
 
     fitted = dataclasses.replace(study, material=material)
     if isinstance(material, Viscoelastic) and not study.protocol.timed:

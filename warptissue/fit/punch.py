@@ -13,6 +13,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from warptissue.errors import ConvergenceError, InputError
+from warptissue.lsq import fit_curve
+from warptissue.lsq.plausibility import modulus_warnings
 
 if TYPE_CHECKING:
     from warptissue.lsq import FitResult
@@ -307,8 +309,6 @@ def fit_punch_modulus(
         InputError: Bad data or options, or a layer outside the range of the Hayes
             correction (:data:`HAYES_MAX_RADIUS_OVER_THICKNESS`).
     """
-    from warptissue.lsq import fit_curve
-    from warptissue.lsq.plausibility import modulus_warnings
 
     depth = _depth(depth_m)
     force = np.asarray(force_N, dtype=np.float64)

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from warptissue.io import software_versions
+
 __all__ = [
     "STANDARD_ERROR_BOUND_FACTOR",
     "STATUS_MESSAGES",
@@ -272,7 +274,6 @@ class FitResult:
             "software"}`` (and ``"history"`` when asked). ``identifiability`` lists the
             messages of :attr:`identifiability`; ``warnings`` lists :attr:`all_warnings`.
         """
-        from warptissue.io import software_versions
 
         errors = self.standard_errors
         parameters = {

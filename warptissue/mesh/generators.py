@@ -21,6 +21,7 @@ from warptissue.mesh.core import (
     unique_sorted_rows,
 )
 from warptissue.mesh.size import estimate_indentation_mesh, size_near_for_force_accuracy
+from warptissue.mesh.surface import tetrahedralize_surface
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
@@ -579,7 +580,6 @@ _DELAUNAY_MIN_DIHEDRAL_DEG = 12.0
 def _delaunay_refill(extruded: TetMesh) -> TetMesh:
     """TetGen quality tets inside the boundary surface of an extruded specimen, with its
     named face and node sets carried over (``top`` holds the ``probe`` faces too)."""
-    from warptissue.mesh.surface import tetrahedralize_surface
 
     faces = boundary_faces(extruded.tets)
     keys = {tuple(face): index for index, face in enumerate(np.sort(faces, axis=1))}
