@@ -24,6 +24,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 
+from warptissue import __version__
 from warptissue.errors import INTERRUPTED_EXIT_CODE, InputError, WarpTissueError
 
 __all__ = ["EXIT_STATUSES", "build_parser", "main"]
@@ -57,7 +58,6 @@ COMMAND_MODULES: tuple[str, ...] = (
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the full argument parser from the command modules."""
-    from warptissue import __version__
 
     parser = argparse.ArgumentParser(
         prog="warptissue",
