@@ -48,7 +48,6 @@ import warp.sparse as wps
 from warptissue.device import available_host_memory_bytes
 from warptissue.errors import DeviceError
 from warptissue.fem.timing import PhaseTimer
-from warptissue.kernels import sparse as ks
 
 __all__ = [
     "CUDSS_INSTALL_HINT",
@@ -283,6 +282,7 @@ def bsr33_csr_pattern(matrix: wps.BsrMatrix) -> tuple[wp.array, wp.array, wp.arr
         (csr_offsets (3 n + 1,), csr_columns (9 b,), block_rows (b,)), int32 Warp arrays;
         ``block_rows`` is each block's row, for :func:`bsr33_csr_values`.
     """
+    from warptissue.kernels import sparse as ks
 
     device = matrix.device
     block_count = matrix.nnz_sync()
@@ -309,6 +309,7 @@ def bsr33_csr_values(matrix: wps.BsrMatrix, block_rows: wp.array, csr_values: wp
         block_rows: Each block's row, (b,) int32, from :func:`bsr33_csr_pattern`.
         csr_values: Output, (9 b,) float64 Warp array on the matrix's device.
     """
+    from warptissue.kernels import sparse as ks
 
     if block_rows.shape[0] == 0:
         return

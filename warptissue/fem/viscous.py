@@ -44,7 +44,6 @@ import numpy as np
 import warp as wp
 
 from warptissue.errors import InputError
-from warptissue.kernels import fem as kf
 from warptissue.materials import Viscoelastic
 
 __all__ = ["ViscousHistory", "elastic_step"]
@@ -52,6 +51,7 @@ __all__ = ["ViscousHistory", "elastic_step"]
 
 def elastic_step() -> object:
     """The ``ViscousStep`` struct of an elastic material (``active = 0``)."""
+    from warptissue.kernels import fem as kf
 
     step = kf.ViscousStep()
     step.active = 0
@@ -63,6 +63,8 @@ def elastic_step() -> object:
 
 
 def _step_struct(gamma: float, a: Sequence[float], b: Sequence[float]) -> object:
+    from warptissue.kernels import fem as kf
+
     step = kf.ViscousStep()
     step.active = 1
     step.terms = len(a)
@@ -151,6 +153,7 @@ class ViscousHistory:
 
     def begin_step(self, dt_s: float) -> None:
         """Set the coefficients of a step of length ``dt_s`` and its frozen history stress."""
+        from warptissue.kernels import fem as kf
 
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise InputError("a time step must be positive and finite", key="times_s", value=dt_s)
@@ -168,6 +171,7 @@ class ViscousHistory:
     def stress_state(self) -> tuple[object, wp.array]:
         """``(step, frozen)`` giving the committed stress ``g_inf S0 + sum_i H_i`` (for the
         stress output after a step: the assembly kernels read it as ``gamma S0 + Q``)."""
+        from warptissue.kernels import fem as kf
 
         terms = self.material.term_count
         step = _step_struct(self.material.long_term_factor, [1.0] * terms, [0.0] * terms)
@@ -183,6 +187,7 @@ class ViscousHistory:
 
     def commit(self, assembler: object, displacement: wp.array) -> None:
         """Advance H_i and S0_prev to a converged step (after its sensitivities)."""
+        from warptissue.kernels import fem as kf
 
         wp.launch(
             kf.viscous_commit_kernel,
@@ -222,6 +227,7 @@ class ViscousHistory:
         self, assembler: object, displacement: wp.array, name: str, residual: wp.array
     ) -> None:
         """Add the history's part of ``dR/d name`` at fixed u into ``residual`` (N)."""
+        from warptissue.kernels import fem as kf
 
         wp.launch(
             kf.viscous_history_residual_kernel,
@@ -249,6 +255,7 @@ class ViscousHistory:
     ) -> None:
         """Advance the history's derivatives by ``name`` with the step's ``du/d name``
         (before :meth:`commit`)."""
+        from warptissue.kernels import fem as kf
 
         d_params, alpha_term = self.material.device_params_derivative(name)
         explicit = int(self.material.prony_derivative(name) is None)
