@@ -133,7 +133,7 @@ def assemble_elements_kernel(
     elements: wp.array(dtype=wp.int32),
     mixed: int,
     with_tangent: int,
-    viscous: ViscousStep,
+    viscous: wp.array(dtype=ViscousStep),
     frozen: wp.array2d(dtype=wp.mat33d),
     residual: wp.array(dtype=wp.vec3d),
     matrix_values: wp.array(dtype=wp.mat33d),
@@ -148,12 +148,13 @@ def assemble_elements_kernel(
     :mod:`warptissue.fem.packing`).
     ``block_index[e, a * nodes_per_tet + b]`` is the BSR block of node pair (a, b) of tet e.
     ``energy[k]`` accumulates problem k's stored energy (J) and ``min_jacobian[k]`` its
-    smallest J. A viscoelastic step reads the frozen history stress ``frozen[e, q]`` (unused
-    otherwise).
+    smallest J. Problem k's time step is ``viscous[k]``: a viscoelastic one reads the frozen
+    history stress ``frozen[e, q]`` (unused otherwise).
     """
     e = elements[wp.tid()]
     problem = element_problem[e]
     params = problem_params[problem]
+    step = viscous[problem]
     npe = tets.shape[1]
     nq = quadrature_volumes.shape[1]
 
@@ -190,10 +191,10 @@ def assemble_elements_kernel(
             continue
         dv = quadrature_volumes[e, q]
         history = wp.mat33d()
-        if viscous.active != 0:
+        if step.active != 0:
             history = frozen[e, q]
         psi, p, a_mat = quadrature_point_response(
-            params, f, j, mixed, p_bar, with_tangent, viscous, history
+            params, f, j, mixed, p_bar, with_tangent, step, history
         )
         element_energy += psi * dv
         for a in range(npe):
@@ -279,16 +280,19 @@ def eliminate_dirichlet_kernel(
     offsets: wp.array(dtype=wp.int32),
     columns: wp.array(dtype=wp.int32),
     constrained: wp.array(dtype=wp.vec3d),
-    damping: wp.float64,
+    node_problem: wp.array(dtype=wp.int32),
+    problem_damping: wp.array(dtype=wp.float64),
     matrix_values: wp.array(dtype=wp.mat33d),
 ):
     """Zero the rows and columns of constrained dofs and put 1 on their diagonal; add
-    ``damping |K_ii|`` to the diagonal of the free dofs (Levenberg-Marquardt, 0 for none).
+    ``damping |K_ii|`` to the diagonal of the free dofs (Levenberg-Marquardt, 0 for none),
+    with the damping of the row's problem (``problem_damping[node_problem[row]]``).
 
     ``constrained[n][i]`` is 1 where component i of node n is prescribed, else 0.
     """
     row = wp.tid()
     row_mask = constrained[row]
+    damping = problem_damping[node_problem[row]]
     for idx in range(offsets[row], offsets[row + 1]):
         col = columns[idx]
         col_mask = constrained[col]
@@ -313,7 +317,7 @@ def cauchy_stress_kernel(
     quadrature_volumes: wp.array2d(dtype=wp.float64),
     displacement: wp.array(dtype=wp.vec3d),
     mixed: int,
-    viscous: ViscousStep,
+    viscous: wp.array(dtype=ViscousStep),
     frozen: wp.array2d(dtype=wp.mat33d),
     stress: wp.array2d(dtype=wp.float64),
 ):
@@ -326,6 +330,7 @@ def cauchy_stress_kernel(
     """
     e = wp.tid()
     params = problem_params[element_problem[e]]
+    step = viscous[element_problem[e]]
     nq = quadrature_volumes.shape[1]
     volume = wp.float64(0.0)
     deformed_volume = wp.float64(0.0)
@@ -341,9 +346,9 @@ def cauchy_stress_kernel(
         j = wp.determinant(f)
         dv = quadrature_volumes[e, q]
         history = wp.mat33d()
-        if viscous.active != 0:
+        if step.active != 0:
             history = frozen[e, q]
-        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, 0, viscous, history)
+        psi, p, a_mat = quadrature_point_response(params, f, j, mixed, p_bar, 0, step, history)
         sigma += (dv / (j * volume)) * (p @ wp.transpose(f))
     stress[e, 0] = sigma[0, 0]
     stress[e, 1] = sigma[1, 1]
@@ -386,7 +391,8 @@ def deviatoric_pk2(params: MaterialParams, f: wp.mat33d) -> wp.mat33d:
 
 @wp.kernel
 def viscous_frozen_kernel(
-    viscous: ViscousStep,
+    element_problem: wp.array(dtype=wp.int32),
+    viscous: wp.array(dtype=ViscousStep),
     history: wp.array3d(dtype=wp.mat33d),
     elastic_stress: wp.array2d(dtype=wp.mat33d),
     frozen: wp.array2d(dtype=wp.mat33d),
@@ -394,48 +400,58 @@ def viscous_frozen_kernel(
     """The history stress held fixed over a step: ``Q = sum_i (a_i H_i - b_i S0_prev)`` (Pa).
 
     ``history[e, q, i]`` is H_i and ``elastic_stress[e, q]`` the deviatoric elastic stress S0
-    of the last converged step. Launched over (elements, quadrature points).
+    of the last converged step; tet e's step is ``viscous[element_problem[e]]``. Launched
+    over (elements, quadrature points).
     """
     e, q = wp.tid()
+    step = viscous[element_problem[e]]
     total = wp.mat33d()
-    for i in range(viscous.terms):
-        total += viscous.a[i] * history[e, q, i] - viscous.b[i] * elastic_stress[e, q]
+    for i in range(step.terms):
+        total += step.a[i] * history[e, q, i] - step.b[i] * elastic_stress[e, q]
     frozen[e, q] = total
 
 
 @wp.kernel
 def viscous_commit_kernel(
-    params: MaterialParams,
+    problem_params: wp.array(dtype=MaterialParams),
+    element_problem: wp.array(dtype=wp.int32),
+    committed: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     displacement: wp.array(dtype=wp.vec3d),
-    viscous: ViscousStep,
+    viscous: wp.array(dtype=ViscousStep),
     history: wp.array3d(dtype=wp.mat33d),
     elastic_stress: wp.array2d(dtype=wp.mat33d),
 ):
     """Advance the history to a converged step: ``H_i <- a_i H_i + b_i (S0_n - S0_prev)``,
-    ``S0_prev <- S0_n``, with ``S0_n`` the deviatoric elastic stress at ``displacement``.
+    ``S0_prev <- S0_n``, with ``S0_n`` the deviatoric elastic stress at ``displacement``, in
+    the tets of the problems k with ``committed[k] != 0`` (the others keep theirs).
 
     Launched over (elements, quadrature points).
     """
     e, q = wp.tid()
+    problem = element_problem[e]
+    step = viscous[problem]
+    if committed[problem] == 0 or step.active == 0:
+        return
     f = deformation_gradient(e, q, tets, shape_gradients, displacement)
-    current = deviatoric_pk2(params, f)
+    current = deviatoric_pk2(problem_params[problem], f)
     change = current - elastic_stress[e, q]
-    for i in range(viscous.terms):
-        history[e, q, i] = viscous.a[i] * history[e, q, i] + viscous.b[i] * change
+    for i in range(step.terms):
+        history[e, q, i] = step.a[i] * history[e, q, i] + step.b[i] * change
     elastic_stress[e, q] = current
 
 
 @wp.kernel
 def viscous_history_residual_kernel(
-    params: MaterialParams,
+    problem_params: wp.array(dtype=MaterialParams),
+    element_problem: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     quadrature_volumes: wp.array2d(dtype=wp.float64),
     displacement: wp.array(dtype=wp.vec3d),
-    viscous: ViscousStep,
-    d_viscous: ViscousStep,
+    viscous: wp.array(dtype=ViscousStep),
+    d_viscous: wp.array(dtype=ViscousStep),
     history: wp.array3d(dtype=wp.mat33d),
     elastic_stress: wp.array2d(dtype=wp.mat33d),
     d_history: wp.array4d(dtype=wp.mat33d),
@@ -449,20 +465,27 @@ def viscous_history_residual_kernel(
     ``d_viscous`` holds ``dgamma, da_i, db_i`` by the parameter; ``d_history[parameter]`` and
     ``d_elastic_stress[parameter]`` the derivatives of H_i and S0_prev carried from the earlier
     steps. The elastic part ``gamma dP0/dtheta`` is the assembly kernel's (with derivative
-    parameters).
+    parameters). Tet e belongs to problem ``k = element_problem[e]``, with the material
+    ``problem_params[k]`` and the steps ``viscous[k]``, ``d_viscous[k]``.
     """
     e = wp.tid()
+    problem = element_problem[e]
+    step = viscous[problem]
+    d_step = d_viscous[problem]
+    if step.active == 0:
+        return
+    params = problem_params[problem]
     for q in range(quadrature_volumes.shape[1]):
         f = deformation_gradient(e, q, tets, shape_gradients, displacement)
         if wp.determinant(f) <= wp.float64(0.0):
             continue
-        d_stress = d_viscous.gamma * deviatoric_pk2(params, f)
-        for i in range(viscous.terms):
+        d_stress = d_step.gamma * deviatoric_pk2(params, f)
+        for i in range(step.terms):
             d_stress += (
-                d_viscous.a[i] * history[e, q, i]
-                + viscous.a[i] * d_history[parameter, e, q, i]
-                - d_viscous.b[i] * elastic_stress[e, q]
-                - viscous.b[i] * d_elastic_stress[parameter, e, q]
+                d_step.a[i] * history[e, q, i]
+                + step.a[i] * d_history[parameter, e, q, i]
+                - d_step.b[i] * elastic_stress[e, q]
+                - step.b[i] * d_elastic_stress[parameter, e, q]
             )
         dp = f @ d_stress
         dv = quadrature_volumes[e, q]
@@ -472,16 +495,18 @@ def viscous_history_residual_kernel(
 
 @wp.kernel
 def viscous_sensitivity_commit_kernel(
-    params: MaterialParams,
-    d_params: MaterialParams,
-    with_explicit: int,
+    problem_params: wp.array(dtype=MaterialParams),
+    d_params: wp.array(dtype=MaterialParams),
+    with_explicit: wp.array(dtype=wp.int32),
     alpha_term: int,
+    element_problem: wp.array(dtype=wp.int32),
+    committed: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     displacement: wp.array(dtype=wp.vec3d),
     d_displacement: wp.array(dtype=wp.vec3d),
-    viscous: ViscousStep,
-    d_viscous: ViscousStep,
+    viscous: wp.array(dtype=ViscousStep),
+    d_viscous: wp.array(dtype=ViscousStep),
     history: wp.array3d(dtype=wp.mat33d),
     elastic_stress: wp.array2d(dtype=wp.mat33d),
     d_history: wp.array4d(dtype=wp.mat33d),
@@ -495,9 +520,18 @@ def viscous_sensitivity_commit_kernel(
     ``dS0_n = F^-1 (dP0 - dF S0_n)``, then
     ``dH_i <- da_i H_i + a_i dH_i + db_i (S0_n - S0_prev) + b_i (dS0_n - dS0_prev)`` and
     ``dS0_prev <- dS0_n``. Must run before :func:`viscous_commit_kernel` (it reads the
-    previous H_i and S0_prev). Launched over (elements, quadrature points).
+    previous H_i and S0_prev). Per problem k of tet e (``element_problem[e]``): its material
+    ``problem_params[k]``, derivative ``d_params[k]``, ``with_explicit[k]`` and steps
+    ``viscous[k]``, ``d_viscous[k]``; only problems with ``committed[k] != 0`` advance.
+    Launched over (elements, quadrature points).
     """
     e, q = wp.tid()
+    problem = element_problem[e]
+    step = viscous[problem]
+    d_step = d_viscous[problem]
+    if committed[problem] == 0 or step.active == 0:
+        return
+    params = problem_params[problem]
     f = deformation_gradient(e, q, tets, shape_gradients, displacement)
     df = wp.mat33d()
     for a in range(tets.shape[1]):
@@ -513,21 +547,21 @@ def viscous_sensitivity_commit_kernel(
                 for ll in range(3):
                     value += a_mat[flat(i, jj), flat(k, ll)] * df[k, ll]
             dp[i, jj] = value
-    if with_explicit != 0:
+    if with_explicit[problem] != 0:
         if alpha_term >= 0:
             dp += ogden_alpha_stress_derivative(params, f, alpha_term)
         else:
-            psi_d, p_d, a_d = deviatoric_response(d_params, f, 0)
+            psi_d, p_d, a_d = deviatoric_response(d_params[problem], f, 0)
             dp += p_d
     d_current = f_inv @ (dp - df @ current)
     change = current - elastic_stress[e, q]
     d_change = d_current - d_elastic_stress[parameter, e, q]
-    for i in range(viscous.terms):
+    for i in range(step.terms):
         d_history[parameter, e, q, i] = (
-            d_viscous.a[i] * history[e, q, i]
-            + viscous.a[i] * d_history[parameter, e, q, i]
-            + d_viscous.b[i] * change
-            + viscous.b[i] * d_change
+            d_step.a[i] * history[e, q, i]
+            + step.a[i] * d_history[parameter, e, q, i]
+            + d_step.b[i] * change
+            + step.b[i] * d_change
         )
     d_elastic_stress[parameter, e, q] = d_current
 

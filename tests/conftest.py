@@ -40,9 +40,9 @@ def ctrl_c_at_newton_increment(monkeypatch: pytest.MonkeyPatch):
     """Arm a Ctrl-C: ``arm(n)`` makes the n-th Newton increment from then on raise
     KeyboardInterrupt, as Ctrl-C during a load step would (one increment per load step while
     no step is cut back)."""
-    import warptissue.fem.solvers as solvers
+    from warptissue.fem.newton import increment
 
-    original = solvers._newton_increment
+    original = increment.newton_increment
 
     def arm(number: int) -> None:
         calls: list[int] = []
@@ -53,6 +53,6 @@ def ctrl_c_at_newton_increment(monkeypatch: pytest.MonkeyPatch):
                 raise KeyboardInterrupt
             return original(*args, **kwargs)
 
-        monkeypatch.setattr(solvers, "_newton_increment", interrupted)
+        monkeypatch.setattr(increment, "newton_increment", interrupted)
 
     return arm

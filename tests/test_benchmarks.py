@@ -190,7 +190,7 @@ def test_the_cudss_batch_benchmark_splits_the_union_into_each_problems_tangent()
     import warp as wp
 
     from warptissue.fem import IndentationProblem
-    from warptissue.fem.cudss import bsr33_csr_pattern, bsr33_csr_values
+    from warptissue.fem.linear.cudss import bsr33_csr_pattern, bsr33_csr_values
     from warptissue.indenter import Indenter
     from warptissue.materials import NeoHookean
     from warptissue.mesh import indentation_block

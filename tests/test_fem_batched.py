@@ -1,4 +1,4 @@
-"""K flat-punch indentations solved together (:mod:`warptissue.fem.batched`): every problem's
+"""K indentations solved together (the one Newton loop with K > 1): every problem's
 curve equals the one :func:`warptissue.fem.simulate_indentation` gives it alone, with its own
 cutbacks, and a failing problem stops without holding the others."""
 
@@ -9,9 +9,15 @@ import pytest
 import warp as wp
 
 from warptissue.errors import InputError
-from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
+from warptissue.fem import (
+    IndentationProblem,
+    NewtonOptions,
+    batch_assembler,
+    simulate_indentation,
+    simulate_indentation_batch,
+)
 from warptissue.fem.arrays import DeviceArrays
-from warptissue.fem.batched import _Segments, batch_assembler, simulate_indentation_batch
+from warptissue.fem.newton.problems import Problems
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, Viscoelastic
 from warptissue.mesh import indentation_block
@@ -51,18 +57,27 @@ def test_per_problem_sums_and_spreads_follow_the_node_ranges(device, rng):
     """Sums over each problem's node range (of different lengths, one of a single node)
     equal NumPy's sums of the slices, and a per-problem value spreads to its own nodes."""
     offsets = np.array([0, 5, 6, 13])
-    vectors, scalars = rng.standard_normal((13, 3)), rng.standard_normal(13)
+    vectors = rng.standard_normal((13, 3))
     arrays = DeviceArrays(wp.get_device(device))
+    others = rng.standard_normal((13, 3))
     with arrays.context():
-        segments = _Segments(arrays, offsets)
-        vector_sums, scalar_sums = segments.sums(arrays.asarray(vectors), arrays.asarray(scalars))
-        spread = arrays.host(segments.per_node(np.array([1.0, 2.0, 3.0])))
+        problems = Problems(arrays, offsets)
+        x, y = arrays.asarray(vectors), arrays.asarray(others)
+        dots, squares = problems.read(problems.dot(x, y), problems.squared(x))
+        spread = arrays.host(problems.per_node(np.array([1.0, 2.0, 3.0])))
+        chosen = arrays.host(problems.where(np.array([True, False, True]), x, y))
+        single = Problems(arrays, [0, 13])
+        (whole,) = single.read(single.squared(x))
     for k in range(3):
         nodes = slice(offsets[k], offsets[k + 1])
-        assert vector_sums[k] == pytest.approx(vectors[nodes].sum(), rel=1e-14, abs=1e-14)
-        assert scalar_sums[k] == pytest.approx(scalars[nodes].sum(), rel=1e-14, abs=1e-14)
+        assert problems.nodes(k) == nodes
+        expected = np.sum(vectors[nodes] * others[nodes])
+        assert dots[k] == pytest.approx(expected, rel=1e-13, abs=1e-14)
+        assert squares[k] == pytest.approx(np.sum(vectors[nodes] ** 2), rel=1e-13)
         np.testing.assert_array_equal(spread[nodes, 0], k + 1.0)
-    assert segments.count == 3 and spread.shape == (13, 1)
+        np.testing.assert_array_equal(chosen[nodes], (vectors if k != 1 else others)[nodes])
+    assert problems.count == 3 and spread.shape == (13, 1)
+    assert whole[0] == pytest.approx(np.sum(vectors**2), rel=1e-14)
 
 
 def test_batched_curves_equal_sequential_ones(device):
@@ -74,7 +89,8 @@ def test_batched_curves_equal_sequential_ones(device):
         RADIUS_M * np.array([0.02, 0.04, 0.3]),  # a large last increment: cut back
         RADIUS_M * np.array([0.08]),
     ]
-    options = NewtonOptions(tolerance=TOLERANCE)
+    # Few iterations per increment, so that the large one is cut back.
+    options = NewtonOptions(tolerance=TOLERANCE, max_newton_iterations=5)
     batched = simulate_indentation_batch(problems, depths, device=device, options=options)
     cut = 0
     for problem, path, result in zip(problems, depths, batched, strict=True):
@@ -180,7 +196,7 @@ def test_the_batch_refuses_what_it_cannot_take():
         problem.indenter,
         symmetry_planes=problem.symmetry_planes,
     )
-    with pytest.raises(InputError, match="elastic materials"):
+    with pytest.raises(InputError, match="needs the time of each load"):
         simulate_indentation_batch([viscous], depths)
     sphere = IndentationProblem(
         problem.mesh,
@@ -198,3 +214,75 @@ def test_the_batch_refuses_what_it_cannot_take():
     )
     with pytest.raises(InputError, match="Ogden exponents"):
         simulate_indentation_batch([ogden, problem], depths * 2, sensitivities=("alpha1",))
+
+
+def test_viscoelastic_ramp_and_hold_batch_equals_single_runs(device):
+    """A ramp-and-hold of two viscoelastic problems (different Prony series, time steps and
+    meshes) and an elastic one, solved together with their exact sensitivities (a Prony
+    parameter included), equals each problem's own run: forces to 1e-8, sensitivities to
+    1e-7."""
+    base = _problems()
+    problems = [
+        IndentationProblem(
+            base[0].mesh,
+            Viscoelastic(base[0].material, (0.35, 0.3), (1.0, 20.0)),
+            base[0].indenter,
+            symmetry_planes=base[0].symmetry_planes,
+        ),
+        IndentationProblem(
+            base[1].mesh,
+            Viscoelastic(base[1].material, (0.5,), (2.0,)),
+            base[1].indenter,
+            symmetry_planes=base[1].symmetry_planes,
+        ),
+        base[2],
+    ]
+    depths = [
+        RADIUS_M * np.array([0.05, 0.1, 0.1, 0.1]),
+        RADIUS_M * np.array([0.04, 0.08, 0.08]),
+        RADIUS_M * np.array([0.05, 0.08]),
+    ]
+    times = [np.array([0.5, 1.0, 3.0, 9.0]), np.array([0.2, 0.4, 5.0]), None]
+    names = ("C10_Pa", "g1")
+    options = NewtonOptions(tolerance=TOLERANCE)
+    batched = simulate_indentation_batch(
+        problems,
+        depths,
+        device=device,
+        options=options,
+        sensitivities=names[:1],
+        times_s=times,
+    )
+    viscous = simulate_indentation_batch(
+        problems[:2],
+        depths[:2],
+        device=device,
+        options=options,
+        sensitivities=names,
+        times_s=times[:2],
+    )
+    for k, (problem, path, time) in enumerate(zip(problems, depths, times, strict=True)):
+        alone = simulate_indentation(
+            problem,
+            path,
+            device=device,
+            progress=False,
+            options=options,
+            sensitivities=names if k < 2 else names[:1],
+            times_s=time,
+        )
+        assert batched[k].completed and alone.completed
+        np.testing.assert_allclose(batched[k].reaction_force_N, alone.reaction_force_N, rtol=1e-8)
+        np.testing.assert_allclose(
+            batched[k].force_sensitivity_N_per_unit,
+            alone.force_sensitivity_N_per_unit[:, :1],
+            rtol=1e-7,
+        )
+        if k < 2:
+            np.testing.assert_allclose(
+                viscous[k].force_sensitivity_N_per_unit,
+                alone.force_sensitivity_N_per_unit,
+                rtol=1e-7,
+            )
+    # The hold relaxes: the viscoelastic forces fall at constant depth.
+    assert batched[0].reaction_force_N[-1] < 0.9 * batched[0].reaction_force_N[1]

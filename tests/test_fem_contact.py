@@ -538,12 +538,12 @@ def test_rounded_punch_converges_to_the_prescribed_frictionless_punch(rounded_pu
 def test_penalty_ramp_keeps_the_force_and_saves_newton_iterations(
     punch_block, rounded_punch_runs, monkeypatch
 ):
-    """The penalty ramp of a contact increment (warptissue.fem.solvers.CONTACT_PENALTY_RAMP)
+    """The penalty ramp of a contact increment (``newton.increment.CONTACT_PENALTY_RAMP``)
     changes the path, not the converged state: the force of the full penalty at once equals
     it to the Newton tolerance, in more iterations."""
-    from warptissue.fem import solvers
+    from warptissue.fem.newton import increment
 
-    monkeypatch.setattr(solvers, "CONTACT_PENALTY_RAMP", 1.0)
+    monkeypatch.setattr(increment, "CONTACT_PENALTY_RAMP", 1.0)
     plain = _punch_run(punch_block, 0.4 * PUNCH_RADIUS_M)
     ramped = rounded_punch_runs[0.4]
     np.testing.assert_allclose(ramped.reaction_force_N, plain.reaction_force_N, rtol=1e-6)

@@ -27,10 +27,10 @@ from warptissue.fem import (
     IndentationProblem,
     LinearSolver,
     NewtonOptions,
-    cudss,
     simulate_indentation,
 )
-from warptissue.fem.cudss import (
+from warptissue.fem.linear import cudss
+from warptissue.fem.linear.cudss import (
     MEMORY_ESTIMATE_NAMES,
     CudssSolver,
     bsr33_csr_pattern,

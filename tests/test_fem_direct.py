@@ -16,8 +16,12 @@ from warptissue.fem import (
     NewtonOptions,
     solve_quasistatic,
 )
-from warptissue.fem.direct import CPU_DIRECT_METHODS, CpuDirectSolver, bsr33_scalar_pattern
-from warptissue.fem.solvers import _pardiso_available
+from warptissue.fem.linear.direct import (
+    CPU_DIRECT_METHODS,
+    CpuDirectSolver,
+    bsr33_scalar_pattern,
+    pardiso_available,
+)
 from warptissue.materials import NeoHookean
 from warptissue.mesh import block_mesh, to_tet10
 
@@ -26,7 +30,7 @@ METHODS = [
     pytest.param(
         method,
         marks=pytest.mark.skipif(
-            method == "pardiso" and not _pardiso_available(), reason="pypardiso not installed"
+            method == "pardiso" and not pardiso_available(), reason="pypardiso not installed"
         ),
     )
     for method in CPU_DIRECT_METHODS
@@ -129,7 +133,7 @@ def test_solve_matches_scipy_and_reuses_analysis(method, rng):
     assert solver.direct.analyses == (1 if method == "pardiso" else 3)
 
 
-@pytest.mark.skipif(not _pardiso_available(), reason="pypardiso not installed")
+@pytest.mark.skipif(not pardiso_available(), reason="pypardiso not installed")
 def test_newton_path_analyses_once(monkeypatch):
     """Along a whole load path PARDISO analyses once; without factorization reuse it
     factorizes once per Newton iteration, with it (the default) once per counted
@@ -166,7 +170,7 @@ def test_pardiso_that_does_not_load_is_a_one_line_device_error(monkeypatch):
     """pypardiso imports but MKL's mkl_rt is missing: a DeviceError naming the reason and
     the fix, not an ImportError from inside pypardiso."""
     from warptissue.errors import DeviceError
-    from warptissue.fem import direct
+    from warptissue.fem.linear import direct
 
     def missing_mkl():
         raise ImportError("Shared library mkl_rt not found.")

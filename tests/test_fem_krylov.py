@@ -10,8 +10,9 @@ import scipy.sparse.linalg
 import warp as wp
 from fem_cases import compression_conditions
 
-from warptissue.fem import Assembler, LinearSolver, NewtonOptions, solve_quasistatic, solvers
-from warptissue.fem.krylov import gmres
+from warptissue.fem import Assembler, LinearSolver, NewtonOptions, solve_quasistatic
+from warptissue.fem.linear import solver as linear_solver
+from warptissue.fem.linear.krylov import gmres
 from warptissue.materials import NeoHookean
 from warptissue.mesh import block_mesh, to_tet10
 
@@ -132,7 +133,7 @@ def test_a_newton_solve_factorizes_when_gmres_would_cost_more(device, rng):
 def test_reusing_factorizations_keeps_the_load_path(device, monkeypatch):
     """A compressed TET10 cube, with and without reuse (with a budget that always lets GMRES
     try): the same converged forces, and most Newton solves without a factorization."""
-    monkeypatch.setattr(solvers, "REUSE_BUDGET", 1e6)
+    monkeypatch.setattr(linear_solver, "REUSE_BUDGET", 1e6)
     grid = np.linspace(0.0, 1e-2, 3)
     mesh = to_tet10(block_mesh(grid, grid, grid))
     weights = np.zeros((mesh.node_count, 3))

@@ -16,13 +16,13 @@ import pytest
 from warptissue.errors import InputError
 from warptissue.fem import (
     Assembler,
+    ForceSensitivity,
     IndentationProblem,
     NewtonOptions,
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem.sensitivity import ForceSensitivity
-from warptissue.fem.solvers import _pardiso_available
+from warptissue.fem.linear.direct import pardiso_available
 from warptissue.indenter import Indenter
 from warptissue.materials import (
     CompressibleNeoHookean,
@@ -251,7 +251,7 @@ def test_superlu_reuses_its_factors(mesh):
     weights = np.zeros((mesh.node_count, 3))
     weights[problem.punch_nodes, 2] = -float(problem.symmetry_factor)
     jacobians = []
-    reference = "pardiso" if _pardiso_available() else "superlu"
+    reference = "pardiso" if pardiso_available() else "superlu"
     for solver, factorization in (("superlu", "reuse"), (reference, "refactorize")):
         assembler = Assembler(mesh, material, device="cpu")  # both solvers run on the CPU
         sensitivity = ForceSensitivity(

@@ -20,15 +20,12 @@ from warptissue.fem import (
     solve_quasistatic,
 )
 from warptissue.fem.arrays import DeviceArrays
-from warptissue.fem.solvers import (
-    DAMPING_START,
-    _line_search,
-    _newton_increment,
-    _next_damping,
-    _nonlinear_elimination,
-    _pardiso_available,
-    _patch_solve,
-)
+from warptissue.fem.linear.direct import pardiso_available
+from warptissue.fem.newton import increment as newton_increments
+from warptissue.fem.newton.elimination import nonlinear_elimination, patch_solve
+from warptissue.fem.newton.problems import Problems
+from warptissue.fem.newton.search import search_steps
+from warptissue.fem.newton.steering import DAMPING_START, next_damping
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, ReducedPolynomial
 from warptissue.mesh import block_mesh, indentation_block, to_tet10
@@ -102,7 +99,7 @@ def test_linear_solvers_agree(rng):
         wp.array(conditions.mask(mesh.node_count), dtype=wp.vec3d, device=assembler.device)
     )
     rhs = rng.standard_normal((mesh.node_count, 3))
-    methods = ["superlu", "cg"] + (["pardiso"] if _pardiso_available() else [])
+    methods = ["superlu", "cg"] + (["pardiso"] if pardiso_available() else [])
     solutions = {}
     for method in methods:
         solver = LinearSolver(method=method, device=assembler.device, tolerance=1e-13)
@@ -174,17 +171,54 @@ def test_line_search_finds_the_energy_minimum_along_an_overshooting_direction(rn
     g0 = slope_at(u, direction, 0.0)
     assert g0 < 0.0
     search = _line_search(assembler, u, direction, free, energy_J, g0, residual_norm)
-    assert search.assembly is not None
-    assert abs(slope_at(u, direction, search.alpha)) <= 0.5 * abs(g0)
-    assert abs(search.alpha - 0.3) < 0.1
+    assert search.found[0] and search.assembly is not None
+    alpha = float(search.alpha[0])
+    assert abs(slope_at(u, direction, alpha)) <= 0.5 * abs(g0)
+    assert abs(alpha - 0.3) < 0.1
     assert search.assembly.energy_J < energy_J
-    np.testing.assert_allclose(search.state, u + search.alpha * direction)
+    np.testing.assert_allclose(search.state, u + alpha * direction)
 
     u, energy_J, residual_norm, newton = state(1e-8)
     exact = _line_search(
         assembler, u, newton, free, energy_J, slope_at(u, newton, 0.0), residual_norm
     )
-    assert exact.alpha == 1.0
+    assert exact.alpha[0] == 1.0
+
+
+def _line_search(assembler, u, direction, free, energy_J, slope, residual_norm):
+    """The step search of one problem at a later (not first) Newton iteration."""
+    problems = Problems(DeviceArrays(assembler.device), [0, assembler.node_count])
+    return search_steps(
+        assembler,
+        problems,
+        u,
+        direction,
+        free,
+        searching=np.array([True]),
+        first=np.array([False]),
+        prescribed_increment=np.zeros_like(u),
+        energies_J=np.array([energy_J]),
+        slopes=np.array([slope]),
+        residual_norms=np.array([residual_norm]),
+    )
+
+
+def _one_increment(assembler, u_start, prescribed, free, **options):
+    """One load increment of one problem (:func:`newton_increment` with K = 1)."""
+    arrays = DeviceArrays(assembler.device)
+    return newton_increments.newton_increment(
+        assembler,
+        LinearSolver(method="superlu", device=assembler.device),
+        Problems(arrays, [0, assembler.node_count]),
+        u_start,
+        prescribed,
+        free,
+        1.0 - free,
+        active=np.array([True]),
+        tolerance=1e-8,
+        force_floors=np.zeros(1),
+        **options,
+    )
 
 
 def test_conditions_validate():
@@ -283,20 +317,16 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
     assembler = Assembler(mesh, problem.material, device="cpu")
     # The state after the first Newton iteration of a step (plain Newton stopped there):
     # prescribed depth, free dofs at the linear prediction, residual at the punch edge.
-    first = _newton_increment(
+    first = _one_increment(
         assembler,
-        LinearSolver(method="superlu", device=assembler.device),
         np.zeros((mesh.node_count, 3)),
         conditions.values(0.1 * PUNCH_RADIUS_M, mesh.node_count),
         free,
-        wp.array(mask, dtype=wp.vec3d, device=assembler.device),
-        tolerance=1e-8,
-        force_floor=0.0,
         max_iterations=1,
-        nonlinear_elimination=False,
+        nonlinear_elimination_on=False,
     )
-    assert not first.converged
-    u = first.displacement
+    assert not first.converged[0]
+    u = first.last_iterate
 
     def inverted_trials(displacement, part, *, with_tangent=False):
         forces, energy, _ = Assembler.assemble_part(
@@ -308,9 +338,7 @@ def test_nonlinear_elimination_returns_the_assembly_of_the_state_it_returns():
         start = assembler.assemble(u)
         if refuse:
             assembler.assemble_part = inverted_trials
-        returned, assembly, iterations = _nonlinear_elimination(
-            assembler, start, u, free, limit=0.0
-        )
+        returned, assembly, iterations = nonlinear_elimination(assembler, start, u, free, limit=0.0)
         residual = assembly.residual.numpy().copy()
         energy = assembly.energy_J
         if refuse:
@@ -336,8 +364,6 @@ def test_no_nodal_array_leaves_the_gpu_inside_a_load_increment(monkeypatch):
     the whole mesh; the converged curve is that of the CPU."""
     import cupy
 
-    from warptissue.fem import solvers
-
     problem = _bonded_punch()
     node_count = problem.mesh.node_count
     depths = PUNCH_RADIUS_M * np.array([0.05, 0.1])
@@ -345,7 +371,8 @@ def test_no_nodal_array_leaves_the_gpu_inside_a_load_increment(monkeypatch):
         problem, depths, device="cpu", progress=False, options=NewtonOptions(tolerance=1e-10)
     )
     inside, copied = [False], []
-    numpy_of_warp, asnumpy, increment = wp.array.numpy, cupy.asnumpy, solvers._newton_increment
+    numpy_of_warp, asnumpy = wp.array.numpy, cupy.asnumpy
+    increment = newton_increments.newton_increment
 
     def record(values):
         if inside[0] and values.shape and values.shape[0] == node_count:
@@ -369,7 +396,7 @@ def test_no_nodal_array_leaves_the_gpu_inside_a_load_increment(monkeypatch):
 
     monkeypatch.setattr(wp.array, "numpy", warp_to_numpy)
     monkeypatch.setattr(cupy, "asnumpy", cupy_to_numpy)
-    monkeypatch.setattr(solvers, "_newton_increment", watched)
+    monkeypatch.setattr(newton_increments, "newton_increment", watched)
     result = simulate_indentation(
         problem, depths, device="cuda:0", progress=False, options=NewtonOptions(tolerance=1e-10)
     )
@@ -393,7 +420,7 @@ def test_the_patch_step_is_the_solve_of_the_patch_tangent(device, rng):
     np.testing.assert_array_equal(dense, sparse)
     free = rng.random(3 * len(patch)) > 0.2
     residual = rng.standard_normal(int(free.sum()))
-    step = _patch_solve(assembler, patch, free, residual)
+    step = patch_solve(assembler, patch, free, residual)
     reference = np.linalg.solve(sparse[free][:, free], -residual)
     np.testing.assert_allclose(step, reference, rtol=1e-9, atol=1e-12 * np.abs(reference).max())
 
@@ -493,22 +520,18 @@ def test_an_extrapolation_that_inverts_an_element_falls_back_to_the_linearized_p
     folding[:, 2] = -2.0 * mesh.points[:, 2]  # mirrors the block through its base
     runs = []
     for guess in (None, folding):
-        step = _newton_increment(
+        step = _one_increment(
             assembler,
-            LinearSolver(method="superlu", device=assembler.device),
             np.zeros((mesh.node_count, 3)),
             conditions.values(0.05 * PUNCH_RADIUS_M, mesh.node_count),
             1.0 - mask,
-            wp.array(mask, dtype=wp.vec3d, device=assembler.device),
-            tolerance=1e-8,
-            force_floor=0.0,
             max_iterations=25,
-            nonlinear_elimination=True,
+            nonlinear_elimination_on=True,
             free_guess=guess,
         )
-        assert step.converged, step.reason
+        assert step.converged[0], step.reasons
         runs.append(step)
-    assert runs[0].iterations == runs[1].iterations
+    assert runs[0].iterations[0] == runs[1].iterations[0]
     np.testing.assert_array_equal(runs[0].displacement, runs[1].displacement)
 
 
@@ -519,9 +542,7 @@ def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_
     a guess), the increment runs again from the linearized predictor, with no cutback. From
     the same converged state that retry is the linearized run's own step, so the path equals
     the linearized predictor's to the last bit, at one extra iteration per retried step."""
-    import warptissue.fem.solvers as solvers
-
-    newton_increment = solvers._newton_increment
+    newton_increment = newton_increments.newton_increment
 
     def one_iteration_from_a_guess(*args, free_guess=None, max_iterations, **kwargs):
         if free_guess is not None:
@@ -538,7 +559,7 @@ def test_newton_failing_from_the_extrapolated_state_retries_from_the_linearized_
         # every Newton solve factorized, so that both paths are bitwise equal
         options=NewtonOptions(predictor="linearized", reuse_factorization=False),
     )
-    monkeypatch.setattr(solvers, "_newton_increment", one_iteration_from_a_guess)
+    monkeypatch.setattr(newton_increments, "newton_increment", one_iteration_from_a_guess)
     retried = solve_quasistatic(
         assembler,
         conditions,
@@ -629,18 +650,18 @@ def test_damping_saves_newton_iterations_on_a_large_depth_increment():
 
 def test_damping_rises_on_cut_steps_and_falls_back_to_zero_after_full_ones():
     factor = 0.0
-    factor = _next_damping(factor, 1.0)
+    factor = next_damping(factor, 1.0)
     assert factor == 0.0  # full steps: no damping
-    factor = _next_damping(factor, 0.5)
+    factor = next_damping(factor, 0.5)
     assert factor == 0.0  # a mild cut: unchanged
-    factor = _next_damping(factor, 0.01)
+    factor = next_damping(factor, 0.01)
     assert factor == DAMPING_START
-    factor = _next_damping(factor, 0.1)
+    factor = next_damping(factor, 0.1)
     assert factor == 4.0 * DAMPING_START
-    factor = _next_damping(factor, 0.5)
+    factor = next_damping(factor, 0.5)
     assert factor == 4.0 * DAMPING_START
     history = []
     while factor > 0.0:
-        factor = _next_damping(factor, 1.0)
+        factor = next_damping(factor, 1.0)
         history.append(factor)
     assert history == [DAMPING_START, DAMPING_START / 4.0, DAMPING_START / 16.0, 0.0]

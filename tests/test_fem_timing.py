@@ -26,7 +26,7 @@ from warptissue.fem import (
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem.cudss import cudss_available
+from warptissue.fem.linear.cudss import cudss_available
 from warptissue.fem.timing import LINEAR_SOLVER_PHASES, PHASES, PhaseTimer
 from warptissue.indenter import Indenter
 from warptissue.materials import NeoHookean

@@ -14,12 +14,12 @@ from warptissue.errors import InputError
 from warptissue.fem import (
     Assembler,
     DirichletConditions,
+    ForceSensitivity,
     IndentationProblem,
     NewtonOptions,
     simulate_indentation,
     solve_quasistatic,
 )
-from warptissue.fem.sensitivity import ForceSensitivity
 from warptissue.indenter import Indenter
 from warptissue.materials import NeoHookean, Ogden, Viscoelastic, material_from_dict
 from warptissue.mesh import block_mesh, indentation_block, to_tet10

@@ -880,3 +880,45 @@ def test_an_offset_is_judged_against_its_record_not_its_value():
     assert "depth_offset_m" in message and "larger than 4.5e-05 m" in message
     (message,) = result([300.0, 1e-6], scales).identifiability
     assert "C10_Pa" in message and "larger than its value" in message
+
+
+def test_batched_record_runs_equal_runs_one_after_another(tmp_path):
+    """A viscoelastic fit of two records with fitted contact points: its forward model with
+    the records' FE runs (and the offset columns' extra runs) batched gives the residuals
+    and Jacobian of the runs one after another, to 1e-8."""
+    study = viscous_offset_study(
+        tmp_path, 'free = ["C10_Pa", "g1"]\ntime_steps = 6\ncontact_point = "fit"\n'
+    )
+    record = study.data[0]
+    samples = record.record
+    shorter = dataclasses.replace(
+        record,
+        record=dataclasses.replace(
+            samples,
+            time_s=samples.time_s[:-6],
+            displacement_m=samples.displacement_m[:-6],
+            force_N=samples.force_N[:-6],
+        ),
+    )
+    study = dataclasses.replace(study, data=(record, shorter))
+    x = np.array([270.0, 0.45, 0.93e-4, 1.1e-4])
+    evaluations = {}
+    for batch in (False, True):
+        model = _forward_model(
+            study,
+            study.material,
+            ("C10_Pa", "g1"),
+            device="cpu",
+            progress=False,
+            offset_start=np.array([1e-4, 1e-4]),
+            batch_records=batch,
+        )
+        assert model.batch_records is batch
+        evaluations[batch] = model.evaluate(x)
+        assert model.forward_solves == 4  # two records, each with its offset's difference
+    single, batched = evaluations[False], evaluations[True]
+    scale = np.abs(single.residuals).max()
+    np.testing.assert_allclose(batched.residuals, single.residuals, rtol=0, atol=1e-8 * scale)
+    np.testing.assert_allclose(
+        batched.jacobian, single.jacobian, rtol=1e-7, atol=1e-8 * np.abs(single.jacobian).max()
+    )

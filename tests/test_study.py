@@ -13,7 +13,7 @@ import tomli_w
 
 from warptissue.acquisition.conditioning import condition_for_fit
 from warptissue.errors import InputError
-from warptissue.fem.solvers import NewtonOptions
+from warptissue.fem.newton import NewtonOptions
 from warptissue.fit.punch import hayes_kappa
 from warptissue.fit.start import record_youngs_modulus_Pa, start_values_from_record
 from warptissue.io import write_csv

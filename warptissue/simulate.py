@@ -41,7 +41,7 @@ with the solver's message, the second raises :class:`warptissue.fem.SolveInterru
 carrying the :class:`SimulationOutputs`.
 
 :func:`run_studies_together` solves several studies' load steps in one batched FE run
-(:func:`warptissue.fem.batched.simulate_indentation_batch`) and writes each study's files as
+(:func:`warptissue.fem.simulate_indentation_batch`) and writes each study's files as
 :func:`run_study` does (``warptissue batch --together``); :func:`prepare_study`,
 :func:`solve_study` and :func:`write_study_outputs` are :func:`run_study`'s three parts.
 
@@ -68,8 +68,13 @@ import warptissue.kernels.fem
 import warptissue.kernels.sparse
 from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
-from warptissue.fem import IndentationProblem, LinearSolver, SolveInterrupted, simulate_indentation
-from warptissue.fem.batched import simulate_indentation_batch
+from warptissue.fem import (
+    IndentationProblem,
+    LinearSolver,
+    SolveInterrupted,
+    simulate_indentation,
+    simulate_indentation_batch,
+)
 from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
 from warptissue.materials import prony_term
 from warptissue.mesh import (
@@ -797,7 +802,7 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
     """Solve several simulation studies in the same launches and write each one's outputs.
 
     The load steps of all the studies run as one batched FE run
-    (:func:`warptissue.fem.batched.simulate_indentation_batch`: one assembly launch and one
+    (:func:`warptissue.fem.simulate_indentation_batch`: one assembly launch and one
     factorization of the block-diagonal tangent per Newton iteration, each study with its
     own increments, convergence and cutbacks); then each study's folder gets what
     :func:`run_study` writes, with ``solved_together`` = the number of studies in

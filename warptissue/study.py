@@ -46,7 +46,7 @@ from warptissue.acquisition.conditioning import CONTACT_MODES, OFFSET_MODES, con
 from warptissue.errors import InputError
 from warptissue.fem.assembly import FORMULATIONS
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
-from warptissue.fem.solvers import NewtonOptions
+from warptissue.fem.newton import NewtonOptions
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
 from warptissue.io import atomic_path, read_experiment_csv
 from warptissue.loading import ramp_hold, resample_history, sine
@@ -59,7 +59,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from warptissue.acquisition.conditioning import FitRecord
-    from warptissue.fem.solvers import NewtonOptions
+    from warptissue.fem.newton import NewtonOptions
 
 __all__ = [
     "FIT_METHODS",

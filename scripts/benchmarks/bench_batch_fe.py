@@ -5,7 +5,7 @@ K problems share the flat-punch benchmark's quarter block (``bench_flat_punch.py
 20 depths to half the punch radius) and differ in their material: C10 spread over
 0.8-1.2 times the benchmark's, as the trials of a fit or a tissue bank's specimens would.
 
-- ``batched``: :func:`warptissue.fem.batched.simulate_indentation_batch`, all K at once.
+- ``batched``: :func:`warptissue.fem.simulate_indentation_batch`, all K at once.
 - ``sequential``: :func:`warptissue.fem.simulate_indentation`, one after another, with one
   assembler (the defaults of a single run). Its rate is measured on the first
   ``--sequential-limit`` problems (a rate does not need all K).
@@ -105,8 +105,12 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
-    from warptissue.fem.batched import simulate_indentation_batch
+    from warptissue.fem import (
+        Assembler,
+        NewtonOptions,
+        simulate_indentation,
+        simulate_indentation_batch,
+    )
 
     warp_device = resolve_device(device)
     options = NewtonOptions(tolerance=NEWTON_TOLERANCE)
@@ -156,8 +160,12 @@ def run_fits(mesh: Any, count: int, device: str, *, steps: int, sequential_limit
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import Assembler, NewtonOptions, simulate_indentation
-    from warptissue.fem.batched import simulate_indentation_batch
+    from warptissue.fem import (
+        Assembler,
+        NewtonOptions,
+        simulate_indentation,
+        simulate_indentation_batch,
+    )
     from warptissue.fit.batched import fit_indentation_batch
     from warptissue.lsq import least_squares
 

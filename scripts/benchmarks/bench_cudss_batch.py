@@ -7,10 +7,10 @@ assembles their tangents at the undeformed state with the punch and symmetry con
 eliminated, and times a factorization with a solve, three ways:
 
 - ``block_diagonal``: the packed problems' one block-diagonal matrix, through
-  :class:`warptissue.fem.cudss.CudssSolver` (what :mod:`warptissue.fem.batched` does);
+  :class:`warptissue.fem.linear.cudss.CudssSolver` (what :mod:`warptissue.fem.batched` does);
 - ``batch``: the K diagonal blocks as a sequence of CSR matrices in one nvmath-python
   ``DirectSolver`` (cuDSS's batch API), with the same options;
-- ``loop``: one :class:`~warptissue.fem.cudss.CudssSolver` per problem, one after another
+- ``loop``: one :class:`~warptissue.fem.linear.cudss.CudssSolver` per problem, one after another
   (timed on the first ``--loop-limit`` problems and scaled to K).
 
 Each is timed over ``--repeat`` factorizations with solves after a warm-up, the device
@@ -77,7 +77,7 @@ def timed(step: Any, repeat: int, synchronize: Any) -> float:
 
 
 def block_diagonal(assembler: Any, rhs: Any, repeat: int, synchronize: Any) -> dict[str, Any]:
-    from warptissue.fem.cudss import CudssSolver
+    from warptissue.fem.linear.cudss import CudssSolver
 
     start = time.perf_counter()
     solver = CudssSolver(assembler.matrix)
@@ -132,7 +132,7 @@ def batch(assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any) 
     import nvmath.sparse.advanced as nvs
     import warp as wp
 
-    from warptissue.fem.cudss import bsr33_csr_pattern, bsr33_csr_values, preload_cudss
+    from warptissue.fem.linear.cudss import bsr33_csr_pattern, bsr33_csr_values, preload_cudss
 
     preload_cudss()
     matrix = assembler.matrix
@@ -186,7 +186,7 @@ def loop(
     """One solver per problem for the given (first) problems; times are for those alone."""
     import cupy
 
-    from warptissue.fem.cudss import CudssSolver
+    from warptissue.fem.linear.cudss import CudssSolver
 
     solvers, sides = [], []
     start = time.perf_counter()

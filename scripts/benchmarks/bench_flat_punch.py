@@ -1146,7 +1146,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not 1 <= args.steps <= STEP_COUNT:
         parser.error(f"--steps must be between 1 and {STEP_COUNT}, got {args.steps}")
-    from warptissue.fem.solvers import PREDICTORS
+    from warptissue.fem.newton import PREDICTORS
 
     predictors = comma_separated(args.predictors)
     if not predictors or not set(predictors) <= set(PREDICTORS):

@@ -228,9 +228,9 @@ def main() -> None:
     )
     args = parser.parse_args()
     if args.no_penalty_ramp:
-        from warptissue.fem import solvers
+        from warptissue.fem.newton import increment
 
-        solvers.CONTACT_PENALTY_RAMP = 1.0
+        increment.CONTACT_PENALTY_RAMP = 1.0
     sizes = args.size_near_over_radius or ([1.0 / 3.0] if args.quick else [0.25, 1.0 / 6.0])
     if args.edge_radii is None:
         args.edge_radii = [0.4, 0.1] if args.quick else [0.4, 0.2, 0.1, 0.05, 0.025]

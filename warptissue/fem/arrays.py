@@ -1,7 +1,7 @@
 """The array library of the Newton loop: CuPy on a CUDA device, NumPy on the CPU.
 
-The Newton loop (:func:`warptissue.fem.solvers.solve_quasistatic`) keeps its state,
-residual, directions and masks as arrays of one library, chosen by the assembler's device:
+The Newton loop (:mod:`warptissue.fem.newton`) keeps its state, residual, directions and
+masks as arrays of one library, chosen by the assembler's device:
 
 - On a CUDA device where CuPy imports, CuPy arrays on that device, run on Warp's stream.
   The assembler's Warp arrays are viewed without a copy (``__cuda_array_interface__``) and

@@ -7,7 +7,6 @@ precomputed element-block to BSR-block map, so the topology is never rebuilt.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -256,6 +255,12 @@ class Assembler:
         self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
         self._element_problem = wp.array(problems, dtype=wp.int32, device=dev)
         count = self.problem_count
+        node_problem = np.zeros(self.node_count, dtype=np.int32)
+        node_problem[mesh.tets] = problems[:, None]
+        self._node_problem = wp.array(node_problem, dtype=wp.int32, device=dev)
+        # The damping of each problem's tangent (eliminate), copied only when it changes.
+        self._damping_host = np.zeros(count)
+        self._damping = wp.zeros(count, dtype=wp.float64, device=dev)
         # Energy and smallest J per problem, in one array so that one copy reads both.
         self._scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
         self._energy, self._min_jacobian = self._scalars[:count], self._scalars[count:]
@@ -269,7 +274,12 @@ class Assembler:
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
-        self._elastic_step = elastic_step()
+        from warptissue.kernels import fem as kf
+
+        # Every problem's step of an elastic material (inactive), one per problem.
+        self._elastic_steps = wp.array(
+            [elastic_step()] * self.problem_count, dtype=kf.ViscousStep, device=dev
+        )
         self.viscous: ViscousHistory | None = None
         self._zero_history: wp.array | None = None
         self.set_material(material)
@@ -277,10 +287,10 @@ class Assembler:
     def set_material(self, material: Material | Sequence[Material]) -> None:
         """Use new material parameters from the next assembly on (same mesh and pattern).
 
-        A :class:`warptissue.materials.Viscoelastic` material gets a
+        Where a material is :class:`warptissue.materials.Viscoelastic`, the problems get a
         :class:`warptissue.fem.viscous.ViscousHistory` (:attr:`viscous`) at the undeformed,
         unloaded state; otherwise :attr:`viscous` is None. An assembler of K packed problems
-        takes a sequence of K elastic materials.
+        takes a sequence of K materials.
         """
         from warptissue.kernels.materials import MaterialParams
 
@@ -294,37 +304,28 @@ class Assembler:
         for each in materials:
             if not isinstance(each, Material):
                 raise InputError("material must be a warptissue.materials material", value=each)
-            if self.problem_count > 1 and isinstance(each, Viscoelastic):
-                raise InputError(
-                    "packed problems take elastic materials (a viscoelastic history is "
-                    "kept for one problem per assembler)",
-                    key="material",
-                    value=type(each).__name__,
-                )
         self.materials = materials
         self._problem_params = wp.array(
             [each.device_params() for each in materials], dtype=MaterialParams, device=self.device
         )
-        if self.problem_count > 1:
-            self.material = None
-            self._params = materials[0].device_params()
-            return
-        material = materials[0]
-        params = material.device_params()
-        if isinstance(material, Viscoelastic):
-            if self.viscous is not None and self.viscous.material.term_count == material.term_count:
-                self.viscous.reset(material)
+        if any(isinstance(each, Viscoelastic) for each in materials):
+            counts = tuple(
+                each.term_count if isinstance(each, Viscoelastic) else 0 for each in materials
+            )
+            if self.viscous is not None and self.viscous.term_counts() == counts:
+                self.viscous.reset(materials)
             else:
                 self.viscous = ViscousHistory(
-                    material,
+                    materials,
+                    element_problem=self._element_problem.numpy(),
                     tet_count=self.tet_count,
                     quadrature_points=self._quadrature_volumes.shape[1],
                     device=self.device,
                 )
         else:
             self.viscous = None
-        self.material = material
-        self._params = params
+        self.material = materials[0] if self.problem_count == 1 else None
+        self._params = materials[0].device_params()
 
     def set_contact(self, contact: RigidContact | None) -> None:
         """Press a rigid indenter into the body from the next assembly on (None: no contact).
@@ -413,12 +414,12 @@ class Assembler:
     def _viscous_inputs(self, *, zero_history: bool = False) -> list[Any]:
         """The ``viscous, frozen`` inputs of the element kernels for the current step."""
         if self.viscous is None:
-            return [self._elastic_step, self._no_history]
+            return [self._elastic_steps, self._no_history]
         if zero_history:
             if self._zero_history is None or self._zero_history.shape != self.viscous.frozen.shape:
                 self._zero_history = wp.zeros_like(self.viscous.frozen)
-            return [self.viscous.step, self._zero_history]
-        return [self.viscous.step, self.viscous.frozen]
+            return [self.viscous.steps, self._zero_history]
+        return [self.viscous.steps, self.viscous.frozen]
 
     def _build_pattern(self, tets: np.ndarray, element_problems: np.ndarray) -> None:
         n = self.node_count
@@ -532,15 +533,21 @@ class Assembler:
         from warptissue.kernels import fem as kf
         from warptissue.kernels.materials import MaterialParams
 
-        if self.problem_count > 1:
-            return self._packed_parameter_residual(displacement_m, name)
-        derivative, alpha_term = self.material.device_params_derivative(name)
+        derivatives, alpha_term = [], -1
+        for k, material in enumerate(self.materials):
+            derivative, alpha_term = material.device_params_derivative(name)
+            if alpha_term >= 0 and self.problem_count > 1:
+                raise InputError(
+                    f"problem {k}: the derivative by an Ogden exponent is available for one "
+                    "problem per assembler",
+                    key="sensitivities",
+                    value=name,
+                )
+            derivatives.append(derivative)
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
         viscous = self.viscous
-        if viscous is not None and viscous.material.prony_derivative(name) is not None:
-            explicit = np.zeros((self.node_count, 3))
-        elif alpha_term >= 0:
+        if alpha_term >= 0:
             wp.launch(
                 kf.ogden_alpha_residual_kernel,
                 dim=self.tet_count,
@@ -550,11 +557,13 @@ class Assembler:
             )
             explicit = self._residual.numpy().copy()
             if viscous is not None:  # the deviatoric stress of a step is gamma P0 + F Q
-                explicit *= viscous.step.gamma
+                explicit *= viscous.gamma(0)
         else:
+            # Linear in the parameters: the residual of the derivative parameters (zero for
+            # a Prony parameter), its deviatoric part scaled by each step's gamma.
             self._energy.zero_()
             self._min_jacobian.fill_(np.inf)
-            derivative_params = wp.array([derivative], dtype=MaterialParams, device=self.device)
+            derivative_params = wp.array(derivatives, dtype=MaterialParams, device=self.device)
             wp.launch(
                 kf.assemble_elements_kernel,
                 dim=self.tet_count,
@@ -570,51 +579,14 @@ class Assembler:
                 device=self.device,
             )
             explicit = self._residual.numpy().copy()
-        explicit = explicit + self._contact_parameter_residual(u, float(derivative.shear_modulus))
+        if self.problem_count == 1:
+            shear = float(derivatives[0].shear_modulus)
+            explicit = explicit + self._contact_parameter_residual(u, shear)
         if viscous is None or name not in viscous.names:
             return explicit
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
-
-    def _packed_parameter_residual(self, displacement_m: Any, name: str) -> np.ndarray:
-        """:meth:`parameter_residual` of K packed problems, each by its own ``name``."""
-        from warptissue.kernels import fem as kf
-        from warptissue.kernels.materials import MaterialParams
-
-        derivatives = []
-        for k, material in enumerate(self.materials):
-            derivative, alpha_term = material.device_params_derivative(name)
-            if alpha_term >= 0:
-                raise InputError(
-                    f"problem {k}: the derivative by an Ogden exponent is available for one "
-                    "problem per assembler",
-                    key="sensitivities",
-                    value=name,
-                )
-            derivatives.append(derivative)
-        u = self.device_displacement(displacement_m)
-        self._residual.zero_()
-        self._energy.zero_()
-        self._min_jacobian.fill_(np.inf)
-        wp.launch(
-            kf.assemble_elements_kernel,
-            dim=self.tet_count,
-            inputs=[
-                *self._assembly_inputs(
-                    u,
-                    problem_params=wp.array(derivatives, dtype=MaterialParams, device=self.device),
-                ),
-                self._block_index,
-                self._all_elements,
-                int(self.formulation == "mixed"),
-                0,
-                *self._viscous_inputs(zero_history=True),
-            ],
-            outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
-            device=self.device,
-        )
-        return self._residual.numpy().copy()
 
     def _contact_parameter_residual(self, u: wp.array, d_shear: float) -> np.ndarray | float:
         """The rigid contact's part of ``dR/dtheta``: its penalty ``k = beta mu0 h`` follows
@@ -637,26 +609,41 @@ class Assembler:
         self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
         return share * scratch.numpy()
 
-    def eliminate(self, constrained: wp.array, *, damping: float = 0.0) -> None:
+    def eliminate(self, constrained: wp.array, *, damping: Any = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
         in place; optionally damp the free dofs' diagonal.
 
         Args:
             constrained: Warp vec3d array (N,), 1.0 where a component is prescribed.
-            damping: Levenberg-Marquardt factor lambda >= 0: each free diagonal entry K_ii
-                becomes ``K_ii + lambda |K_ii|`` (0: the tangent unchanged).
+            damping: Levenberg-Marquardt factor lambda >= 0, one for all problems or one per
+                packed problem, (K,): each free diagonal entry K_ii of a problem becomes
+                ``K_ii + lambda |K_ii|`` (0: the tangent unchanged).
 
         Raises:
-            InputError: A negative or non-finite ``damping``.
+            InputError: A negative or non-finite ``damping``, or not one per problem.
         """
         from warptissue.kernels import fem as kf
 
-        if not (math.isfinite(damping) and damping >= 0.0):
-            raise InputError("damping must be finite and >= 0", value=damping)
+        factors = np.asarray(damping, dtype=np.float64)
+        if factors.ndim == 0:
+            factors = np.full(self.problem_count, float(factors))
+        if factors.shape != (self.problem_count,) or not (
+            np.all(np.isfinite(factors)) and np.all(factors >= 0.0)
+        ):
+            raise InputError("damping must be finite and >= 0, one per problem", value=damping)
+        if not np.array_equal(factors, self._damping_host):
+            self._damping_host = factors.copy()
+            self._damping.assign(self._damping_host)
         wp.launch(
             kf.eliminate_dirichlet_kernel,
             dim=self.node_count,
-            inputs=[self.matrix.offsets, self.matrix.columns, constrained, wp.float64(damping)],
+            inputs=[
+                self.matrix.offsets,
+                self.matrix.columns,
+                constrained,
+                self._node_problem,
+                self._damping,
+            ],
             outputs=[self.matrix.values],
             device=self.device,
         )

@@ -20,7 +20,7 @@ the punch nodes, times the symmetry factor (2 per symmetry plane), positive when
 pushes in. Under a sphere or a plate it is the base's: the sum of the z internal forces of the
 "bottom" nodes times the symmetry factor, which equals the contact force at equilibrium (the
 result reports both); as it is a reaction of prescribed dofs, the exact sensitivities
-(:mod:`warptissue.fem.sensitivity`) hold unchanged: the penalty's tangent enters through
+(:mod:`warptissue.fem.newton.sensitivity`) hold unchanged: the penalty's tangent enters through
 ``K``, and its one dependence on the material (``k`` follows ``mu0``) through ``dR/dtheta``.
 """
 
@@ -35,20 +35,30 @@ import numpy as np
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, ContactSurface, RigidContact
-from warptissue.fem.sensitivity import ForceSensitivity, check_sensitivity_names
-from warptissue.fem.solvers import (
+from warptissue.fem.newton import (
     DirichletConditions,
+    ForceSensitivity,
     NewtonOptions,
     QuasistaticResult,
     SolveInterrupted,
     solve_quasistatic,
+    solve_quasistatic_batch,
 )
+from warptissue.fem.newton.path import check_packed_assembler
+from warptissue.fem.newton.sensitivity import check_sensitivity_names
+from warptissue.fem.packing import PackedMeshes, pack_meshes
 from warptissue.fem.timing import NewtonTimings
 from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
-__all__ = ["IndentationProblem", "IndentationResult", "simulate_indentation"]
+__all__ = [
+    "IndentationProblem",
+    "IndentationResult",
+    "batch_assembler",
+    "simulate_indentation",
+    "simulate_indentation_batch",
+]
 
 BASES = ("fixed", "sliding")
 
@@ -395,7 +405,7 @@ def simulate_indentation(
             force by, exactly, at each depth: ``result.force_sensitivity_N_per_unit``.
         sensitivity_factorization: ``"reuse"`` (Newton's last factors with iterative
             refinement; no new factorization) or ``"refactorize"`` (one factorization of the
-            converged tangent per depth); see :mod:`warptissue.fem.sensitivity`.
+            converged tangent per depth); see :mod:`warptissue.fem.newton.sensitivity`.
         times_s: The time of each depth, shape (S,), s, strictly increasing; the probe
             starts at depth 0 at t = 0 and its depth is linear in time between steps. Needed
             by a :class:`warptissue.materials.Viscoelastic` material (its history is carried
@@ -531,4 +541,155 @@ def _indentation_result(
         contact_pressure_Pa=pressure,
         timings=path.timings,
         linear_solver_statistics=path.linear_solver_statistics,
+    )
+
+
+def simulate_indentation_batch(
+    problems: Sequence[IndentationProblem],
+    depths_m: Sequence[np.ndarray],
+    *,
+    device: str | None = None,
+    options: NewtonOptions | None = None,
+    sensitivities: Sequence[str] = (),
+    assembler: Assembler | None = None,
+    times_s: Sequence[np.ndarray | None] | None = None,
+) -> list[IndentationResult]:
+    """K indentations solved together on one device, in one Newton loop.
+
+    Args:
+        problems: Bonded or frictionless flat-punch problems, all of one element type and
+            formulation (meshes, materials and viscoelastic histories may differ).
+        depths_m: Each problem's depths, m: positive and strictly increasing, or with its
+            times any depths >= 0 (as :func:`simulate_indentation`).
+        device: Warp device; None for Warp's default.
+        options: The Newton settings (every one applies per problem,
+            :func:`warptissue.fem.solve_quasistatic_batch`).
+        sensitivities: Material parameters (``C10_Pa``, ``bulk_modulus_Pa``, ...; moduli,
+            not Ogden exponents) to differentiate each problem's force by, exactly, at each
+            depth: ``result.force_sensitivity_N_per_unit``.
+        assembler: An assembler of these problems' meshes, in this order, from
+            :func:`batch_assembler`, to reuse across calls that change only the materials
+            (a batched fit's trial points); it takes the problems' materials, and the run
+            uses its device. None builds one on ``device``.
+        times_s: Each problem's times, s (None entries, or None: quasi-static paths); a
+            viscoelastic material needs them.
+
+    Returns:
+        One :class:`warptissue.fem.IndentationResult` per problem, as
+        :func:`warptissue.fem.simulate_indentation` gives it (equal forces to the Newton
+        tolerance).
+
+    Raises:
+        InputError: No problem, a problem this batch cannot take (rigid contact, another
+            element type or formulation), bad depths or times, or an assembler of other
+            meshes or another formulation.
+    """
+    problems = list(problems)
+    if not problems:
+        raise InputError("at least one problem is needed", key="problems", value=0)
+    if len(depths_m) != len(problems):
+        raise InputError(
+            f"one depth sequence per problem ({len(problems)})", key="depths_m", value=len(depths_m)
+        )
+    formulation = problems[0].formulation
+    for k, problem in enumerate(problems):
+        if problem.is_contact:
+            raise InputError(
+                f"problem {k}: a batch takes flat punches (rigid contact runs one problem per "
+                "assembler)",
+                key="indenter",
+                value=problem.indenter.kind,
+            )
+        if problem.formulation != formulation:
+            raise InputError(
+                f"problem {k}: every problem of a batch has one formulation ({formulation!r})",
+                key="formulation",
+                value=problem.formulation,
+            )
+    times_list = [None] * len(problems) if times_s is None else list(times_s)
+    if len(times_list) != len(problems):
+        raise InputError(
+            f"one time sequence per problem ({len(problems)})", key="times_s", value=len(times_list)
+        )
+    depths = []
+    for k, values in enumerate(depths_m):
+        path = np.atleast_1d(np.asarray(values, dtype=np.float64))
+        timed = times_list[k] is not None
+        if (
+            path.ndim != 1
+            or path.size == 0
+            or not np.all(np.isfinite(path))
+            or (not timed and (np.any(path <= 0) or np.any(np.diff(path) <= 0)))
+            or (timed and np.any(path < 0))
+        ):
+            raise InputError(
+                f"problem {k}: depths_m must be positive and strictly increasing (or >= 0 "
+                "with times_s)",
+                key="depths_m",
+                value=path.tolist(),
+            )
+        depths.append(path)
+    packed = pack_meshes([problem.mesh for problem in problems])
+    if assembler is None:
+        assembler = _packed_assembler(problems, packed, device)
+    else:
+        check_packed_assembler(assembler, packed, formulation)
+        assembler.set_material([problem.material for problem in problems])
+    paths = solve_quasistatic_batch(
+        assembler,
+        packed,
+        [problem.dirichlet_conditions() for problem in problems],
+        depths,
+        reaction_weights=[problem.reaction_weights() for problem in problems],
+        options=options,
+        load_name="depth (m)",
+        sensitivities=sensitivities,
+        times_s=times_list,
+    )
+    # Every problem's stress at its last converged state, in one launch over the union.
+    last = np.zeros((packed.mesh.node_count, 3))
+    for k, path in enumerate(paths):
+        if len(path.loads):
+            last[packed.nodes(k)] = path.displacement_m[-1]
+    stress = assembler.cauchy_stress(last)
+    results = []
+    for k, (problem, path) in enumerate(zip(problems, paths, strict=True)):
+        tets = slice(int(packed.tet_offsets[k]), int(packed.tet_offsets[k + 1]))
+        results.append(
+            _indentation_result(problem, None, path, tuple(sensitivities), stress_Pa=stress[tets])
+        )
+    return results
+
+
+def batch_assembler(
+    problems: Sequence[IndentationProblem], *, device: str | None = None
+) -> Assembler:
+    """The assembler of K problems' packed meshes, for :func:`simulate_indentation_batch`.
+
+    Building it (element geometry and the sparsity pattern of the union) costs about as much
+    as a few Newton iterations; a caller that solves the same meshes with other materials
+    (the trial points of batched fits) builds it once and passes it to every call.
+
+    Args:
+        problems: The problems, in the order of the calls that will use it.
+        device: Warp device; None for Warp's default.
+
+    Returns:
+        An :class:`warptissue.fem.Assembler` of the packed meshes, one material per problem.
+    """
+    problems = list(problems)
+    if not problems:
+        raise InputError("at least one problem is needed", key="problems", value=0)
+    return _packed_assembler(problems, pack_meshes([p.mesh for p in problems]), device)
+
+
+def _packed_assembler(
+    problems: list[IndentationProblem], packed: PackedMeshes, device: str | None
+) -> Assembler:
+    return Assembler(
+        packed.mesh,
+        [problem.material for problem in problems],
+        formulation=problems[0].formulation,
+        device=device,
+        element_problem=packed.element_problem,
     )

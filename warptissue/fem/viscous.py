@@ -44,7 +44,7 @@ import numpy as np
 import warp as wp
 
 from warptissue.errors import InputError
-from warptissue.materials import Viscoelastic
+from warptissue.materials import Material, Viscoelastic
 
 __all__ = ["ViscousHistory", "elastic_step"]
 
@@ -87,35 +87,53 @@ def _coefficients(material: Viscoelastic, dt: float) -> tuple[float, np.ndarray,
 
 
 class ViscousHistory:
-    """Internal variables of a viscoelastic material on a tet mesh, on a Warp device.
+    """Internal variables of viscoelastic materials on a tet mesh, on a Warp device.
+
+    One problem, or K problems packed into one mesh (:mod:`warptissue.fem.packing`), each
+    with its own material (a viscoelastic one, or an elastic one whose step is inactive) and
+    its own time step.
 
     Args:
-        material: The viscoelastic material.
+        materials: One material per problem, (K,); at least one viscoelastic.
+        element_problem: The problem of each tet, (M,) (None: one problem).
         tet_count: Elements M.
         quadrature_points: Quadrature points per element Q.
         device: The Warp device of the assembler.
 
     Attributes:
-        material: The material.
-        history: H_i per quadrature point, Warp array (M, Q, terms) of mat33d, Pa.
+        materials: The materials, (K,).
+        history: H_i per quadrature point, Warp array (M, Q, terms) of mat33d, Pa (terms: the
+            most of any problem).
         elastic_stress: S0 of the last converged step, Warp array (M, Q) of mat33d, Pa.
         frozen: The step's fixed history stress Q, Warp array (M, Q) of mat33d, Pa.
-        step: The current step's ``ViscousStep`` struct (``gamma``, ``a_i``, ``b_i``).
-        dt_s: The current step's length, s.
+        steps: Each problem's current ``ViscousStep`` (``gamma``, ``a_i``, ``b_i``), a Warp
+            array (K,).
+        dt_s: Each problem's current step length, (K,), s.
         names: The parameters whose history derivatives are carried
             (:meth:`track_sensitivities`).
     """
 
     def __init__(
-        self, material: Viscoelastic, *, tet_count: int, quadrature_points: int, device: object
+        self,
+        materials: Material | Sequence[Material],
+        *,
+        element_problem: np.ndarray | None = None,
+        tet_count: int,
+        quadrature_points: int,
+        device: object,
     ) -> None:
-        if not isinstance(material, Viscoelastic):
-            raise InputError("a viscous history needs a viscoelastic material", value=material)
-        self.material = material
+        materials = (materials,) if isinstance(materials, Material) else tuple(materials)
+        if not any(isinstance(material, Viscoelastic) for material in materials):
+            raise InputError("a viscous history needs a viscoelastic material", value=materials)
+        self.materials = materials
         self.device = device
         self._shape = (tet_count, quadrature_points)
-        terms = material.term_count
-        self.history = wp.zeros((*self._shape, terms), dtype=wp.mat33d, device=device)
+        problems = (
+            np.zeros(tet_count, dtype=np.int32) if element_problem is None else element_problem
+        )
+        self._element_problem = wp.array(np.asarray(problems, dtype=np.int32), device=device)
+        self._terms = max(_term_count(material) for material in materials)
+        self.history = wp.zeros((*self._shape, self._terms), dtype=wp.mat33d, device=device)
         self.elastic_stress = wp.zeros(self._shape, dtype=wp.mat33d, device=device)
         self.frozen = wp.zeros(self._shape, dtype=wp.mat33d, device=device)
         self.names: tuple[str, ...] = ()
@@ -123,105 +141,164 @@ class ViscousHistory:
         self._d_elastic_stress = wp.zeros((1, 1, 1), dtype=wp.mat33d, device=device)
         self.reset()
 
-    def reset(self, material: Viscoelastic | None = None) -> None:
-        """Back to the undeformed, unloaded state at t = 0 (optionally with new parameters
-        of the same number of terms)."""
-        if material is not None:
-            if material.term_count != self.material.term_count:
+    @property
+    def material(self) -> Material:
+        """The material of a history of one problem."""
+        if len(self.materials) != 1:
+            raise InputError(
+                f"this history holds {len(self.materials)} problems' materials",
+                key="materials",
+                value=len(self.materials),
+            )
+        return self.materials[0]
+
+    def term_counts(self) -> tuple[int, ...]:
+        """Each problem's number of Prony terms (0 for an elastic material)."""
+        return tuple(_term_count(material) for material in self.materials)
+
+    def reset(self, materials: Material | Sequence[Material] | None = None) -> None:
+        """Back to the undeformed, unloaded state at t = 0 (optionally with new materials of
+        the same numbers of terms)."""
+        if materials is not None:
+            materials = (materials,) if isinstance(materials, Material) else tuple(materials)
+            counts = tuple(_term_count(material) for material in materials)
+            if counts != self.term_counts():
                 raise InputError(
-                    "the new material has another number of Prony terms",
-                    value=(material.term_count, self.material.term_count),
+                    "the new materials have other numbers of Prony terms",
+                    value=(counts, self.term_counts()),
                 )
-            self.material = material
+            self.materials = materials
         self.history.zero_()
         self.elastic_stress.zero_()
         self.frozen.zero_()
         self._d_history.zero_()
         self._d_elastic_stress.zero_()
-        self.dt_s = math.nan
-        terms = self.material.term_count
-        self.step = _step_struct(1.0, [1.0] * terms, [0.0] * terms)
+        self.dt_s = np.full(len(self.materials), math.nan)
+        self._set_steps(
+            [
+                _step_struct(1.0, [1.0] * terms, [0.0] * terms) if terms else elastic_step()
+                for terms in self.term_counts()
+            ]
+        )
+
+    def _set_steps(self, steps: list[object]) -> None:
+        from warptissue.kernels import fem as kf
+
+        self._step_list = steps
+        self.steps = wp.array(steps, dtype=kf.ViscousStep, device=self.device)
+
+    def gamma(self, problem: int = 0) -> float:
+        """The weight ``gamma`` of the current elastic stress in problem ``problem``'s step."""
+        return float(self._step_list[problem].gamma)
 
     def track_sensitivities(self, names: Sequence[str]) -> None:
         """Carry the history's derivatives by these parameters from now on (zero now)."""
         self.names = tuple(names)
         count = max(len(self.names), 1)
-        terms = self.material.term_count
         dev = self.device
-        self._d_history = wp.zeros((count, *self._shape, terms), dtype=wp.mat33d, device=dev)
+        self._d_history = wp.zeros((count, *self._shape, self._terms), dtype=wp.mat33d, device=dev)
         self._d_elastic_stress = wp.zeros((count, *self._shape), dtype=wp.mat33d, device=dev)
 
-    def begin_step(self, dt_s: float) -> None:
-        """Set the coefficients of a step of length ``dt_s`` and its frozen history stress."""
+    def begin_step(self, dt_s: float | np.ndarray) -> None:
+        """Set the coefficients of a step of length ``dt_s`` (one per problem, (K,), or one
+        for all) and its frozen history stress."""
         from warptissue.kernels import fem as kf
 
-        if not (math.isfinite(dt_s) and dt_s > 0.0):
+        steps = np.broadcast_to(np.asarray(dt_s, dtype=np.float64), (len(self.materials),))
+        if not (np.all(np.isfinite(steps)) and np.all(steps > 0.0)):
             raise InputError("a time step must be positive and finite", key="times_s", value=dt_s)
-        gamma, a, b = _coefficients(self.material, dt_s)
-        self.dt_s = float(dt_s)
-        self.step = _step_struct(gamma, a, b)
+        structs = []
+        for material, dt in zip(self.materials, steps, strict=True):
+            if isinstance(material, Viscoelastic):
+                structs.append(_step_struct(*_coefficients(material, float(dt))))
+            else:
+                structs.append(elastic_step())
+        self.dt_s = steps.copy()
+        self._set_steps(structs)
         wp.launch(
             kf.viscous_frozen_kernel,
             dim=self._shape,
-            inputs=[self.step, self.history, self.elastic_stress],
+            inputs=[self._element_problem, self.steps, self.history, self.elastic_stress],
             outputs=[self.frozen],
             device=self.device,
         )
 
-    def stress_state(self) -> tuple[object, wp.array]:
-        """``(step, frozen)`` giving the committed stress ``g_inf S0 + sum_i H_i`` (for the
+    def stress_state(self) -> tuple[wp.array, wp.array]:
+        """``(steps, frozen)`` giving the committed stress ``g_inf S0 + sum_i H_i`` (for the
         stress output after a step: the assembly kernels read it as ``gamma S0 + Q``)."""
         from warptissue.kernels import fem as kf
 
-        terms = self.material.term_count
-        step = _step_struct(self.material.long_term_factor, [1.0] * terms, [0.0] * terms)
+        structs = [
+            _step_struct(material.long_term_factor, [1.0] * terms, [0.0] * terms)
+            if isinstance(material, Viscoelastic)
+            else elastic_step()
+            for material, terms in zip(self.materials, self.term_counts(), strict=True)
+        ]
+        steps = wp.array(structs, dtype=kf.ViscousStep, device=self.device)
         total = wp.zeros(self._shape, dtype=wp.mat33d, device=self.device)
         wp.launch(
             kf.viscous_frozen_kernel,
             dim=self._shape,
-            inputs=[step, self.history, self.elastic_stress],
+            inputs=[self._element_problem, steps, self.history, self.elastic_stress],
             outputs=[total],
             device=self.device,
         )
-        return step, total
+        return steps, total
 
-    def commit(self, assembler: object, displacement: wp.array) -> None:
-        """Advance H_i and S0_prev to a converged step (after its sensitivities)."""
+    def _committed(self, problems: np.ndarray | None) -> wp.array:
+        """The problems to advance as a Warp int32 mask (None: all)."""
+        mask = np.ones(len(self.materials), dtype=np.int32)
+        if problems is not None:
+            mask = np.asarray(problems, dtype=bool).astype(np.int32)
+        return wp.array(mask, dtype=wp.int32, device=self.device)
+
+    def commit(
+        self, assembler: object, displacement: wp.array, problems: np.ndarray | None = None
+    ) -> None:
+        """Advance H_i and S0_prev to a converged step (after its sensitivities), in the
+        problems ``problems`` ((K,) booleans; None: all)."""
         from warptissue.kernels import fem as kf
 
         wp.launch(
             kf.viscous_commit_kernel,
             dim=self._shape,
             inputs=[
-                assembler._params,
+                assembler._problem_params,
+                self._element_problem,
+                self._committed(problems),
                 assembler._tets,
                 assembler._shape_gradients,
                 displacement,
-                self.step,
+                self.steps,
                 self.history,
                 self.elastic_stress,
             ],
             device=self.device,
         )
 
-    def step_derivative(self, name: str) -> object:
-        """``ViscousStep`` holding ``dgamma, da_i, db_i`` by one parameter for this step."""
-        terms = self.material.term_count
-        d_gamma, d_a, d_b = 0.0, np.zeros(terms), np.zeros(terms)
-        which = self.material.prony_derivative(name)
-        if which is not None:
-            kind, i = which
-            g, tau, dt = self.material.g[i], self.material.tau_s[i], self.dt_s
-            x = dt / tau
-            a = math.exp(-x)
-            if kind == "g":
-                d_b[i] = -math.expm1(-x) / x if x > 1e-8 else 1.0 - 0.5 * x
-                d_gamma = d_b[i] - 1.0
-            else:
-                d_a[i] = a * x / tau
-                d_b[i] = g * (-math.expm1(-x) / dt - a / tau)
-                d_gamma = d_b[i]
-        return _step_struct(d_gamma, d_a, d_b)
+    def step_derivatives(self, name: str) -> wp.array:
+        """Each problem's ``ViscousStep`` holding ``dgamma, da_i, db_i`` by one parameter for
+        this step, a Warp array (K,) (zero where ``name`` is not a Prony parameter)."""
+        from warptissue.kernels import fem as kf
+
+        structs = []
+        for material, terms, dt in zip(self.materials, self.term_counts(), self.dt_s, strict=True):
+            d_gamma, d_a, d_b = 0.0, np.zeros(terms), np.zeros(terms)
+            which = material.prony_derivative(name) if isinstance(material, Viscoelastic) else None
+            if which is not None:
+                kind, i = which
+                g, tau = material.g[i], material.tau_s[i]
+                x = dt / tau
+                a = math.exp(-x)
+                if kind == "g":
+                    d_b[i] = -math.expm1(-x) / x if x > 1e-8 else 1.0 - 0.5 * x
+                    d_gamma = d_b[i] - 1.0
+                else:
+                    d_a[i] = a * x / tau
+                    d_b[i] = g * (-math.expm1(-x) / dt - a / tau)
+                    d_gamma = d_b[i]
+            structs.append(_step_struct(d_gamma, d_a, d_b) if terms else elastic_step())
+        return wp.array(structs, dtype=kf.ViscousStep, device=self.device)
 
     def history_residual(
         self, assembler: object, displacement: wp.array, name: str, residual: wp.array
@@ -233,13 +310,14 @@ class ViscousHistory:
             kf.viscous_history_residual_kernel,
             dim=self._shape[0],
             inputs=[
-                assembler._params,
+                assembler._problem_params,
+                self._element_problem,
                 assembler._tets,
                 assembler._shape_gradients,
                 assembler._quadrature_volumes,
                 displacement,
-                self.step,
-                self.step_derivative(name),
+                self.steps,
+                self.step_derivatives(name),
                 self.history,
                 self.elastic_stress,
                 self._d_history,
@@ -251,28 +329,40 @@ class ViscousHistory:
         )
 
     def commit_sensitivity(
-        self, assembler: object, displacement: wp.array, d_displacement: np.ndarray, name: str
+        self,
+        assembler: object,
+        displacement: wp.array,
+        d_displacement: np.ndarray,
+        name: str,
+        problems: np.ndarray | None = None,
     ) -> None:
         """Advance the history's derivatives by ``name`` with the step's ``du/d name``
-        (before :meth:`commit`)."""
+        (before :meth:`commit`), in the problems ``problems`` ((K,); None: all)."""
         from warptissue.kernels import fem as kf
+        from warptissue.kernels.materials import MaterialParams
 
-        d_params, alpha_term = self.material.device_params_derivative(name)
-        explicit = int(self.material.prony_derivative(name) is None)
+        derivatives, explicit, alpha_term = [], [], -1
+        for material in self.materials:
+            d_params, alpha_term = material.device_params_derivative(name)
+            derivatives.append(d_params)
+            prony = isinstance(material, Viscoelastic) and material.prony_derivative(name)
+            explicit.append(int(not prony))
         wp.launch(
             kf.viscous_sensitivity_commit_kernel,
             dim=self._shape,
             inputs=[
-                assembler._params,
-                d_params,
-                explicit,
+                assembler._problem_params,
+                wp.array(derivatives, dtype=MaterialParams, device=self.device),
+                wp.array(explicit, dtype=wp.int32, device=self.device),
                 alpha_term,
+                self._element_problem,
+                self._committed(problems),
                 assembler._tets,
                 assembler._shape_gradients,
                 displacement,
                 wp.array(d_displacement, dtype=wp.vec3d, device=self.device),
-                self.step,
-                self.step_derivative(name),
+                self.steps,
+                self.step_derivatives(name),
                 self.history,
                 self.elastic_stress,
                 self._d_history,
@@ -281,3 +371,8 @@ class ViscousHistory:
             ],
             device=self.device,
         )
+
+
+def _term_count(material: Material) -> int:
+    """Prony terms of a material (0 for an elastic one)."""
+    return material.term_count if isinstance(material, Viscoelastic) else 0

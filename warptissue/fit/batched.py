@@ -24,8 +24,12 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
-from warptissue.fem import IndentationProblem, NewtonOptions
-from warptissue.fem.batched import batch_assembler, simulate_indentation_batch
+from warptissue.fem import (
+    IndentationProblem,
+    NewtonOptions,
+    batch_assembler,
+    simulate_indentation_batch,
+)
 from warptissue.lsq.engine import least_squares
 from warptissue.lsq.result import FitResult, RejectStep
 

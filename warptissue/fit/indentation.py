@@ -75,7 +75,12 @@ import numpy as np
 
 from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
-from warptissue.fem import Assembler, simulate_indentation
+from warptissue.fem import (
+    Assembler,
+    batch_assembler,
+    simulate_indentation,
+    simulate_indentation_batch,
+)
 from warptissue.fit.start import start_values_from_record
 from warptissue.io import read_sidecar, software_versions
 from warptissue.loading import resample_history
@@ -499,8 +504,11 @@ class _ForwardModel:
         device: Any,
         progress: bool,
         offset_start: np.ndarray | None = None,
+        batch_records: bool = False,
     ) -> None:
         settings = study.fit
+        self.batch_records = batch_records
+        self._packed_assembler: Any = None
         self.study = study
         self.problem = problem
         self.assembler = assembler
@@ -667,6 +675,39 @@ class _ForwardModel:
             raise RejectStep(f"the FE did not converge: {result.message}")
         return result
 
+    def _runs(
+        self,
+        material: Any,
+        grids: Sequence[tuple[np.ndarray | None, np.ndarray]],
+        *,
+        sensitivities: bool = True,
+    ) -> list[Any]:
+        """The FE runs of several load paths (``(times, depths)`` each) of one material: in
+        one batched run (:func:`warptissue.fem.simulate_indentation_batch`) where
+        ``batch_records`` and there are several, else one after another."""
+        if not (self.batch_records and len(grids) > 1):
+            return [
+                self._run(material, times, depths, sensitivities=sensitivities)
+                for times, depths in grids
+            ]
+
+        problems = [dataclasses.replace(self.problem, material=material)] * len(grids)
+        if self._packed_assembler is None or self._packed_assembler.problem_count != len(grids):
+            self._packed_assembler = batch_assembler(problems, device=self.device)
+        self.forward_solves += len(grids)
+        results = simulate_indentation_batch(
+            problems,
+            [depths for _, depths in grids],
+            options=self.options,
+            sensitivities=self.names if sensitivities else (),
+            assembler=self._packed_assembler,
+            times_s=[times for times, _ in grids],
+        )
+        for result in results:
+            if not result.completed:
+                raise RejectStep(f"the FE did not converge: {result.message}")
+        return results
+
     def evaluate(self, x: np.ndarray) -> _Evaluation:
         key = np.asarray(x, dtype=np.float64).tobytes()
         if key in self.cache:  # least recently used out: the current point stays
@@ -688,7 +729,10 @@ class _ForwardModel:
             grids = [(None, self._lattice(offsets))]
         else:
             grids = self.grids
-        runs = [self._run(material, times, depths) for times, depths in grids]
+        runs = self._runs(material, grids)
+        earlier = None
+        if self.viscoelastic and self.offset_count:
+            earlier = self._earlier_touches(material, offsets)
         predicted, jacobians, curves = [], [], []
         for k, record in enumerate(self.records):
             if self.viscoelastic:
@@ -716,7 +760,7 @@ class _ForwardModel:
                 if i != k:
                     columns.append(np.zeros(at.size))
                 elif self.viscoelastic:
-                    columns.append(self._timed_offset_column(k, material, offsets[k], predicted[k]))
+                    columns.append((predicted[k] - earlier[k]) / self.offset_differences[k])
                 else:
                     columns.append(_offset_column(shifted, where, curve))
             jacobians.append(np.column_stack(columns))
@@ -744,24 +788,28 @@ class _ForwardModel:
             self.best = evaluation
         return evaluation
 
-    def _timed_offset_column(
-        self, k: int, material: Any, offset: float, force: np.ndarray
-    ) -> np.ndarray:
-        """dF/dd0 of record ``k`` with a viscoelastic material, by a one-sided difference.
+    def _earlier_touches(self, material: Any, offsets: np.ndarray) -> list[np.ndarray]:
+        """Each record's force at its samples with the probe touching earlier, for dF/dd0 of
+        a viscoelastic material by a one-sided difference.
 
         The touch time, the FE time steps and the depths all move with the offset, and the
         force is a hereditary integral of the depth history, not a function of the depth:
-        one more FE run (without sensitivities) at ``offset - h`` (the probe touching
-        earlier, so the record stays in contact), h = :data:`OFFSET_DIFFERENCE_SHARE` of the
-        record's depth span, gives (F(d0) - F(d0 - h)) / h at the samples.
+        one more FE run per record (without sensitivities, all records batched where the
+        forward runs are) at ``offset - h`` (the probe touching earlier, so the record stays
+        in contact), h = :data:`OFFSET_DIFFERENCE_SHARE` of the record's depth span, gives
+        (F(d0) - F(d0 - h)) / h at the samples.
         """
-        step = self.offset_differences[k]
-        touch, (times, depths) = self._touch(k, offset - step)
-        run = self._run(material, times, depths, sensitivities=False)
-        where = np.concatenate([[0.0], np.asarray(times, dtype=np.float64)])
-        curve = np.concatenate([[0.0], np.asarray(run.reaction_force_N, dtype=np.float64)])
-        earlier = np.interp(self.records[k].time_s - touch, where, curve)
-        return (force - earlier) / step
+        timed = [
+            self._touch(k, offsets[k] - self.offset_differences[k])
+            for k in range(len(self.records))
+        ]
+        runs = self._runs(material, [grid for _, grid in timed], sensitivities=False)
+        forces = []
+        for record, (touch, (times, _)), run in zip(self.records, timed, runs, strict=True):
+            where = np.concatenate([[0.0], np.asarray(times, dtype=np.float64)])
+            curve = np.concatenate([[0.0], np.asarray(run.reaction_force_N, dtype=np.float64)])
+            forces.append(np.interp(record.time_s - touch, where, curve))
+        return forces
 
     def fun(self, x: np.ndarray) -> np.ndarray:
         return self.evaluate(x).residuals
@@ -850,9 +898,11 @@ def _forward_model(
     device: str | None,
     progress: bool,
     offset_start: np.ndarray | None = None,
+    batch_records: bool | None = None,
 ) -> _ForwardModel:
     """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
-    of the free parameters (and of the records' depth offsets, with ``offset_start``)."""
+    of the free parameters (and of the records' depth offsets, with ``offset_start``);
+    ``batch_records`` (None: :func:`batches_records`) solves the records' runs together."""
 
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
@@ -870,7 +920,30 @@ def _forward_model(
         device=warp_device,
         progress=progress,
         offset_start=offset_start,
+        batch_records=(
+            batches_records(problem, warp_device) if batch_records is None else batch_records
+        ),
     )
+
+
+def batches_records(problem: Any, device: Any) -> bool:
+    """Whether a fit solves its records' FE runs (one per record of a viscoelastic material)
+    together in one batched run (:func:`warptissue.fem.simulate_indentation_batch`) rather
+    than one after another.
+
+    Args:
+        problem: The study's :class:`warptissue.fem.IndentationProblem`.
+        device: The Warp device of the fit.
+
+    Returns:
+        True where that was measured to pay: see docs/design-notes/batched-fe.md.
+    """
+    return RECORD_BATCHING[device.is_cuda] and not problem.is_contact
+
+
+RECORD_BATCHING = {False: False, True: True}
+"""Whether a fit batches its records' FE runs, by device (CPU: False, CUDA: True), as
+measured (docs/design-notes/batched-fe.md, "A fit's records")."""
 
 
 def depth_offset_names(records: Sequence[DataRecord]) -> tuple[str, ...]:

@@ -42,7 +42,8 @@ import warp.sparse as wps
 
 from warptissue.errors import InputError
 from warptissue.fem.assembly import Assembler
-from warptissue.fem.solvers import DirichletConditions, LinearSolver
+from warptissue.fem.linear import LinearSolver
+from warptissue.fem.newton.problems import DirichletConditions
 
 __all__ = ["SENSITIVITY_FACTORIZATIONS", "ForceSensitivity", "check_sensitivity_names"]
 
@@ -65,6 +66,11 @@ class ForceSensitivity:
         refinement_tolerance: Relative residual of the refined solves (``"reuse"``).
         max_refinements: Refinement steps before falling back to a factorization; 0 uses
             Newton's last factors as they are (no refinement, no fallback: for measuring).
+        node_offsets: For K problems packed into the assembler's mesh
+            (:func:`warptissue.fem.packing.pack_meshes`), the first node of each and the
+            node count at the end, (K + 1,): each problem's reaction is differentiated by its
+            own material's parameters, and :meth:`at_converged_state` gives one row per
+            problem. None: one problem.
 
     Attributes:
         solves: Linear solves with existing factors so far.
@@ -83,6 +89,7 @@ class ForceSensitivity:
     factorization: str = "reuse"
     refinement_tolerance: float = 1e-12
     max_refinements: int = 20
+    node_offsets: np.ndarray | None = None
     solves: int = field(default=0, init=False)
     factorizations: int = field(default=0, init=False)
     refinement_steps: int = field(default=0, init=False)
@@ -92,8 +99,24 @@ class ForceSensitivity:
         self.names = check_sensitivity_names(self.names)
         if len(set(self.names)) != len(self.names):
             raise InputError("sensitivities must be distinct parameter names", value=self.names)
-        for name in self.names:
-            self.assembler.material.device_params_derivative(name)  # names a bad one
+        for k, material in enumerate(self.assembler.materials):
+            for name in self.names:
+                exponent = material.device_params_derivative(name)[1] >= 0  # names a bad one
+                if exponent and self.assembler.problem_count > 1:
+                    raise InputError(
+                        f"problem {k}: packed problems are differentiated by moduli, not by "
+                        "Ogden exponents",
+                        key="sensitivities",
+                        value=name,
+                    )
+        if self.node_offsets is None and self.assembler.problem_count > 1:
+            raise InputError(
+                "node_offsets are needed where the assembler packs several problems",
+                key="node_offsets",
+                value=self.assembler.problem_count,
+            )
+        if self.node_offsets is not None:
+            self.node_offsets = np.asarray(self.node_offsets, dtype=np.int64)
         if self.factorization not in SENSITIVITY_FACTORIZATIONS:
             raise InputError(
                 f"must be one of {', '.join(map(repr, SENSITIVITY_FACTORIZATIONS))}",
@@ -112,7 +135,13 @@ class ForceSensitivity:
         self._free = 1.0 - mask
         self._constrained = wp.array(mask, dtype=wp.vec3d, device=self.assembler.device)
 
-    def at_converged_state(self, solver: LinearSolver, displacement_m: np.ndarray) -> np.ndarray:
+    def at_converged_state(
+        self,
+        solver: LinearSolver,
+        displacement_m: np.ndarray,
+        *,
+        reached: np.ndarray | None = None,
+    ) -> np.ndarray:
         """``dF/dtheta`` for every name at a converged state.
 
         Assembles the tangent at the state (overwriting the assembler's matrix and residual).
@@ -120,29 +149,40 @@ class ForceSensitivity:
         Args:
             solver: The linear solver that Newton used (its last factorization is reused).
             displacement_m: The converged nodal displacements, (N, 3), m.
+            reached: Of packed problems, those at a converged state, (K,) (None: all); the
+                others' rows are frozen and their derivatives 0.
 
         Returns:
-            dF/dtheta, shape (len(names),), in the reaction's unit per unit of each parameter.
+            dF/dtheta, shape (len(names),) for one problem, (K, len(names)) for packed
+            problems, in the reaction's unit per unit of each parameter.
         """
         start = time.perf_counter()
         try:
-            return self._derivatives(solver, displacement_m)
+            return self._derivatives(solver, displacement_m, reached)
         finally:
             self.seconds += time.perf_counter() - start
 
-    def _derivatives(self, solver: LinearSolver, displacement_m: np.ndarray) -> np.ndarray:
+    def _derivatives(
+        self, solver: LinearSolver, displacement_m: np.ndarray, reached: np.ndarray | None
+    ) -> np.ndarray:
         count = len(self.names)
+        offsets = self.node_offsets
         if count == 0:
-            return np.zeros(0)
+            return np.zeros(0) if offsets is None else np.zeros((len(offsets) - 1, 0))
         assembler = self.assembler
+        free, constrained = self._free, self._constrained
+        if offsets is not None and reached is not None and not np.all(reached):
+            on = np.repeat(np.asarray(reached, dtype=np.float64), np.diff(offsets))[:, None]
+            free = self._free * on
+            constrained = wp.array(1.0 - free, dtype=wp.vec3d, device=assembler.device)
         matrix = assembler.assemble(displacement_m).matrix
         full_values = wp.clone(matrix.values)
         derivatives = [assembler.parameter_residual(displacement_m, name) for name in self.names]
-        assembler.eliminate(self._constrained)
+        assembler.eliminate(constrained)
         refactorize = self.factorization == "refactorize"
         steps = []
         for d_residual in derivatives:
-            rhs = -d_residual * self._free
+            rhs = -d_residual * free
             if refactorize:
                 du, _ = solver.solve(matrix, rhs)
                 self.factorizations += 1
@@ -152,20 +192,27 @@ class ForceSensitivity:
                 if refactorize_now:
                     du, _ = solver.solve(matrix, rhs)
                     self.factorizations += 1
-            steps.append(du * self._free)
+            steps.append(du * free)
         viscous = assembler.viscous
         if viscous is not None:  # advance the history's derivatives with du/dtheta
             u_device = wp.array(displacement_m, dtype=wp.vec3d, device=assembler.device)
             for name, du in zip(self.names, steps, strict=True):
-                viscous.commit_sensitivity(assembler, u_device, du, name)
+                viscous.commit_sensitivity(assembler, u_device, du, name, problems=reached)
         # K du on the prescribed rows needs the tangent before elimination.
         matrix.values.assign(full_values)
         product = wp.zeros(assembler.node_count, dtype=wp.vec3d, device=assembler.device)
-        out = np.empty(count)
+        out = np.empty(count) if offsets is None else np.zeros((len(offsets) - 1, count))
         for i, (d_residual, du) in enumerate(zip(derivatives, steps, strict=True)):
             du_wp = wp.array(du, dtype=wp.vec3d, device=assembler.device)
             wps.bsr_mv(matrix, du_wp, product, alpha=1.0, beta=0.0)
-            out[i] = float(np.sum(self.reaction_weights * (d_residual + product.numpy())))
+            contributions = self.reaction_weights * (d_residual + product.numpy())
+            if offsets is None:
+                out[i] = float(np.sum(contributions))
+            else:
+                per_node = contributions.sum(axis=1)
+                out[:, i] = np.add.reduceat(per_node, offsets[:-1]) if len(per_node) else 0.0
+                if reached is not None:
+                    out[~np.asarray(reached), i] = 0.0
         return out
 
     def _refined_solve(

@@ -1,0 +1,393 @@
+"""Newton's iterations for one load increment of K problems at once.
+
+Each iteration assembles the problems still iterating in one launch, solves their tangent in
+one linear solve (block diagonal: the problems share no node), searches each problem's step
+(:mod:`~warptissue.fem.newton.search`), damps each problem's tangent after a cut step, relaxes
+each problem's residual peak (:mod:`~warptissue.fem.newton.elimination`) and tests each
+problem's convergence. A problem that has converged, or failed, is frozen: its dofs are
+treated as prescribed with a zero increment (identity rows, zero right-hand side), so its state
+stays as it was while the others iterate. One problem (K = 1) is the single run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import warp as wp
+import warp.sparse as wps
+
+from warptissue.fem.assembly import Assembler
+from warptissue.fem.linear import LinearSolver
+from warptissue.fem.newton.elimination import nonlinear_elimination
+from warptissue.fem.newton.problems import Problems
+from warptissue.fem.newton.search import search_steps
+from warptissue.fem.newton.steering import ReuseTracker, forcing_term, next_damping
+from warptissue.fem.timing import PhaseTimer
+
+__all__ = [
+    "CONTACT_PENALTY_RAMP",
+    "CONTACT_RAMP_TOLERANCE",
+    "Increment",
+    "newton_increment",
+    "penalty_ramped_increment",
+]
+
+
+@dataclass
+class Increment:
+    """Outcome of one load increment's Newton iterations, per problem (K,).
+
+    Attributes:
+        converged: Whether each problem converged.
+        displacement: The state (N, 3), an array of the loop's library: each converged
+            problem's new state, the others' start state.
+        iterations: Newton iterations each problem took.
+        linear_iterations: Its linear-solver iterations.
+        local_iterations: Its local iterations of the nonlinear elimination.
+        reasons: Why each problem stopped ("converged" or the failure).
+        from_guess: Whether it started from the extrapolated guess.
+        residual: The internal force at ``displacement`` (N, 3), valid for the converged
+            problems' nodes: a view of the assembler's residual on the CPU, valid until the
+            next assembly (the reaction is summed from it at once).
+        last_iterate: The state the iterations ended at, failed problems' last iterates
+            included (N, 3).
+    """
+
+    converged: np.ndarray
+    displacement: Any
+    iterations: np.ndarray
+    linear_iterations: np.ndarray
+    local_iterations: np.ndarray
+    reasons: list[str] = field(default_factory=list)
+    from_guess: np.ndarray | None = None
+    residual: Any = None
+    last_iterate: Any = None
+
+
+def newton_increment(
+    assembler: Assembler,
+    solver: LinearSolver,
+    problems: Problems,
+    u_start: Any,
+    prescribed_increment: Any,
+    free: Any,
+    constrained: Any,
+    *,
+    active: np.ndarray,
+    tolerance: float,
+    force_floors: np.ndarray,
+    max_iterations: int,
+    nonlinear_elimination_on: bool,
+    free_guess: Any = None,
+    guessed: np.ndarray | None = None,
+    damping: bool = False,
+    reuse_factorization: bool = False,
+    reuse: ReuseTracker | None = None,
+    timer: PhaseTimer | None = None,
+) -> Increment:
+    """Newton iterations for one load increment of the ``active`` problems.
+
+    ``u_start``, ``prescribed_increment``, ``free``, ``constrained`` (N, 3): arrays of the
+    solver's :class:`warptissue.fem.arrays.DeviceArrays` (CuPy on a CUDA device), which the
+    iterations work in: on a GPU the state, residual, directions and trial states stay on
+    the device, and each iteration reads only per-problem scalars (norms, slopes, energies).
+
+    Args:
+        assembler: The discretized body of all K problems.
+        solver: The linear solver (one factorization for all problems).
+        problems: The problems' node ranges and reductions.
+        u_start: The converged state the increment starts from.
+        prescribed_increment: The prescribed dofs' increment (0 on free dofs), m.
+        free: 1 on free dofs, 0 on prescribed ones.
+        constrained: ``1 - free``.
+        active: The problems that take this increment, (K,); the others stay frozen.
+        tolerance: Converged when a problem's free residual norm is at most ``tolerance``
+            times its reaction norm.
+        force_floors: Each problem's absolute floor of that limit, (K,), N.
+        max_iterations: Newton iterations before the increment fails.
+        nonlinear_elimination_on: Relax each problem's residual peak after its global step.
+        free_guess: A predicted change of the free dofs over the increment (N, 3), m, for
+            the problems ``guessed`` (K,). Where the state it gives (with the prescribed
+            increment applied) inverts no element of a problem, that problem starts there;
+            otherwise, and without a guess, from the linearized predictor.
+        guessed: The problems that have a guess (None: all, where ``free_guess`` is given).
+        damping: Adaptive Levenberg-Marquardt damping of each problem's tangent diagonal
+            (:func:`~warptissue.fem.newton.steering.next_damping`).
+        reuse_factorization: Solve with the last factorization by GMRES where that is
+            cheaper (:meth:`LinearSolver.solve_newton`) and ``reuse`` finds every
+            iterating problem close to its factorized state.
+        reuse: The :class:`~warptissue.fem.newton.steering.ReuseTracker` kept over the load
+            paths (None: a new one).
+        timer: The phase timer the phases are charged to (None: not timed).
+
+    Returns:
+        An :class:`Increment`.
+    """
+    arrays = problems.arrays
+    count = problems.count
+    if reuse is None:
+        reuse = ReuseTracker()
+    if timer is None:
+        timer = PhaseTimer(enabled=False)
+    single = count == 1
+    iterating = np.array(active, dtype=bool)
+    converged = np.zeros(count, dtype=bool)
+    iterations = np.zeros(count, dtype=np.int64)
+    linear = np.zeros(count, dtype=np.int64)
+    local = np.zeros(count, dtype=np.int64)
+    reasons = [""] * count
+    u = u_start.copy()
+    fixed = constrained
+    linearized = np.ones(count, dtype=bool)
+    if free_guess is not None:
+        guessed = iterating.copy() if guessed is None else iterating & guessed
+        guess = u_start + prescribed_increment + free_guess * free
+        with timer.phase("assembly"):
+            assembly = assembler.assemble(guess)
+        ok = (
+            guessed
+            & (np.asarray(assembly.problem_min_jacobians) > 0.0)
+            & np.isfinite(assembly.problem_energies_J)
+        )
+        linearized = ~ok
+        if ok.any():
+            u = problems.where(ok, guess, u)
+        if not ok.all():
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
+    else:
+        with timer.phase("assembly"):
+            assembly = assembler.assemble(u)
+    residual = arrays.view(assembly.residual)
+    (reaction_squared,) = problems.read(problems.squared(residual * fixed))
+    limits = np.maximum(tolerance * np.sqrt(reaction_squared), force_floors)
+    increment_wp = arrays.warp(prescribed_increment)
+    k_times_increment = wp.zeros_like(increment_wp)
+    constrained_wp = arrays.warp(constrained)
+    frozen_wp = constrained_wp
+    frozen = None
+    on: Any = None
+    factor = np.zeros(count)
+    for iteration in range(1, max_iterations + 1):
+        first = iterating & linearized if iteration == 1 else np.zeros(count, dtype=bool)
+        if not single:
+            on = problems.per_node(iterating.astype(np.float64))
+            frozen = arrays.xp.ascontiguousarray(arrays.xp.maximum(constrained, 1.0 - on))
+            frozen_wp = arrays.warp(frozen)  # ``frozen`` is kept alive while Warp uses it
+        rhs = -residual * free
+        if first.any():
+            wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
+            rhs_first = -(residual + arrays.view(k_times_increment)) * free + prescribed_increment
+            rhs = problems.where(first, rhs_first, rhs)
+        if on is not None:
+            rhs = rhs * on
+        with timer.phase("assembly"):
+            assembler.eliminate(frozen_wp, damping=factor)
+        (rhs_squared,) = problems.read(problems.squared(rhs))
+        rtol = forcing_term(limits, np.sqrt(rhs_squared), iterating)
+        factorizations = solver.factorizations
+        try_old = reuse_factorization and reuse.promising(u, factor, problems, iterating)
+        du, linear_iterations = solver.solve_newton(assembly.matrix, rhs, rtol=rtol, reuse=try_old)
+        if solver.factorizations > factorizations:
+            reuse.factorized(u, factor)
+        iterations[iterating] += 1
+        linear[iterating] += linear_iterations
+        free_du = du * free if on is None else du * free * on
+        free_residual = residual * free
+        du_squared, old_squared, slopes, free_du_squared = problems.read(
+            problems.squared(du if on is None else du * on),
+            problems.squared(free_residual),
+            problems.dot(free_residual, du),
+            problems.squared(free_du),
+        )
+        broken = iterating & ~np.isfinite(du_squared)
+        for k in np.flatnonzero(broken):
+            reasons[k] = "the linear solve gave non-finite values"
+        iterating &= ~broken
+        if not iterating.any():
+            break
+        if broken.any():  # their rows of the direction are not numbers
+            free_du = free_du * problems.per_node(iterating.astype(np.float64))
+            free_du = arrays.xp.nan_to_num(free_du)
+        reuse.first_step(first, np.sqrt(free_du_squared))
+        with timer.phase("line_search"):
+            search = search_steps(
+                assembler,
+                problems,
+                u,
+                free_du,
+                free,
+                searching=iterating,
+                first=first & iterating,
+                prescribed_increment=prescribed_increment,
+                energies_J=np.asarray(assembly.problem_energies_J, dtype=np.float64),
+                slopes=slopes,
+                residual_norms=np.sqrt(old_squared),
+            )
+        failed = iterating & ~search.found
+        for k in np.flatnonzero(failed):
+            reasons[k] = search.reasons[k]
+        iterating &= search.found
+        if not iterating.any():
+            break
+        u, alpha = search.state, search.alpha
+        if damping:
+            stepped = iterating & ~first
+            factor = np.where(stepped, next_damping(factor, alpha), factor)
+        if search.current:
+            # The line search's residual at u; the tangent only where another iteration
+            # (or the elimination) needs it, not at the converged state.
+            assembly = search.assembly
+        else:
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
+        residual = arrays.view(assembly.residual)
+        free_squared, reaction_squared = problems.read(
+            problems.squared(residual * free), problems.squared(residual * fixed)
+        )
+        free_norms, reaction_norms = np.sqrt(free_squared), np.sqrt(reaction_squared)
+        limits = np.maximum(tolerance * reaction_norms, force_floors)
+        relax = iterating & (free_norms > limits) if nonlinear_elimination_on else None
+        if relax is not None and relax.any():
+            if assembly.matrix is None:
+                with timer.phase("assembly"):
+                    assembly = assembler.assemble(u)
+                residual = arrays.view(assembly.residual)
+            relaxed = False
+            with timer.phase("elimination"):
+                for k in np.flatnonzero(relax):
+                    u, assembly, steps = nonlinear_elimination(
+                        assembler,
+                        assembly,
+                        u,
+                        free,
+                        float(limits[k]),
+                        problem=int(k),
+                        nodes=problems.nodes(int(k)),
+                        arrays=arrays,
+                    )
+                    local[k] += steps
+                    relaxed |= steps > 0
+            if relaxed:
+                residual = arrays.view(assembly.residual)
+                free_squared, reaction_squared = problems.read(
+                    problems.squared(residual * free), problems.squared(residual * fixed)
+                )
+                free_norms, reaction_norms = np.sqrt(free_squared), np.sqrt(reaction_squared)
+                limits = np.maximum(tolerance * reaction_norms, force_floors)
+        step = problems.per_node(alpha) * free_du
+        step_squared, moved_squared = problems.read(
+            problems.squared(step), problems.squared(u - u_start)
+        )
+        # A correction at roundoff relative to the increment means the residual sits at its
+        # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
+        at_roundoff = (np.sqrt(step_squared) <= 1e-10 * np.sqrt(moved_squared)) & (
+            free_norms <= 1e-6 * reaction_norms
+        )
+        done = iterating & ((free_norms <= limits) | at_roundoff)
+        converged |= done
+        for k in np.flatnonzero(done):
+            reasons[k] = "converged"
+        broken = iterating & ~done & ~np.isfinite(free_norms)
+        for k in np.flatnonzero(broken):
+            reasons[k] = "the residual became non-finite"
+        iterating &= ~done & ~broken
+        if not iterating.any():
+            break
+        if assembly.matrix is None:  # the next iteration's tangent
+            with timer.phase("assembly"):
+                assembly = assembler.assemble(u)
+            residual = arrays.view(assembly.residual)
+    for k in np.flatnonzero(iterating):
+        reasons[k] = f"no convergence in {max_iterations} iterations"
+    displacement = u if converged.all() else problems.where(converged, u, u_start)
+    return Increment(
+        converged=converged,
+        displacement=displacement,
+        iterations=iterations,
+        linear_iterations=linear,
+        local_iterations=local,
+        reasons=reasons,
+        from_guess=~linearized,
+        residual=residual if converged.any() else None,
+        last_iterate=u,
+    )
+
+
+CONTACT_PENALTY_RAMP = 0.1
+"""Under rigid contact (a sphere, a wedge or a rounded punch; not a plate, whose contact
+covers the whole surface) each load increment is first solved with the penalty stiffness
+times this factor (to :data:`CONTACT_RAMP_TOLERANCE`), then with the full stiffness from there
+(:func:`penalty_ramped_increment`); 1 solves with the full stiffness at once."""
+CONTACT_RAMP_TOLERANCE = 1.0e-3
+"""Relative tolerance of the softened first stage of a contact increment."""
+
+
+def penalty_ramped_increment(
+    assembler: Assembler,
+    solver: LinearSolver,
+    problems: Problems,
+    u_start: Any,
+    prescribed_increment: Any,
+    free: Any,
+    constrained: Any,
+    *,
+    tolerance: float,
+    **options: Any,
+) -> Increment:
+    """One load increment under rigid contact: a softened penalty first, then the full one.
+
+    The increment is solved by :func:`newton_increment` with the contact's penalty stiffness
+    k times :data:`CONTACT_PENALTY_RAMP` to the loose :data:`CONTACT_RAMP_TOLERANCE`, then
+    with k from that state (no prescribed increment left) to ``tolerance``. The converged
+    state is that of k alone; the iterations of both stages are counted.
+
+    Notes:
+        With ``k = beta mu0 h`` and beta = 1000, a node that a Newton step carries into the
+        indenter meets a wall a thousand times stiffer than the tissue: the line search cuts
+        the step where the first such node enters and the damping keeps the next steps
+        short, so each ring of nodes that the contact edge passes costs iterations (a rounded
+        punch on a 3 360-tet block: 10, 22, 61 at depths 0.02, 0.05, 0.1 a). With k / 10 the
+        nodes enter gently; from the converged soft state the full penalty only moves the
+        contact nodes by their penetration (a tenth of the soft one), which takes about three
+        iterations. Measured in docs/design-notes/contact-newton.md. This is a continuation
+        in the penalty parameter (Wriggers, Computational Contact Mechanics, 2006, ch. 6:
+        a penalty increased during the solution).
+    """
+    contact = assembler.contact
+    stiffness = contact.stiffness_N_per_m
+    contact.stiffness_N_per_m = stiffness * CONTACT_PENALTY_RAMP
+    try:
+        soft = newton_increment(
+            assembler,
+            solver,
+            problems,
+            u_start,
+            prescribed_increment,
+            free,
+            constrained,
+            tolerance=max(tolerance, CONTACT_RAMP_TOLERANCE),
+            **options,
+        )
+    finally:
+        contact.stiffness_N_per_m = stiffness
+    if not soft.converged.all():
+        return soft
+    stiff = newton_increment(
+        assembler,
+        solver,
+        problems,
+        soft.displacement,
+        0.0 * soft.displacement,
+        free,
+        constrained,
+        tolerance=tolerance,
+        **(options | {"free_guess": None, "guessed": None}),
+    )
+    stiff.iterations += soft.iterations
+    stiff.linear_iterations += soft.linear_iterations
+    stiff.local_iterations += soft.local_iterations
+    stiff.from_guess = soft.from_guess
+    return stiff
