@@ -53,19 +53,12 @@ from typing import Any
 import numpy as np
 import warp as wp
 
+from warptissue import simulate
 from warptissue.device import quiet_warp
 from warptissue.errors import DeviceError, InputError, WarpTissueError
 from warptissue.fit.indentation import fit_indentation
 from warptissue.io import write_csv, write_json
 from warptissue.report import write_indentation_fit_outputs
-from warptissue.simulate import (
-    prepare_study,
-    run_studies_together,
-    run_study,
-    solve_study,
-    together_refusal,
-    together_settings,
-)
 from warptissue.study import load_study
 
 __all__ = [
@@ -396,7 +389,9 @@ def _simulation_numbers(outputs: Any) -> dict[str, Any]:
 
 
 def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
-    outputs = run_study(study, out_dir=out_dir, device=device, progress=False, announce=False)
+    outputs = simulate.run_study(
+        study, out_dir=out_dir, device=device, progress=False, announce=False
+    )
     return _simulation_numbers(outputs)
 
 
@@ -497,12 +492,15 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
                 if outcomes[index].kind == "fit":
                     alone[index] = functools.partial(_fit, study, out_dir, device)
                 else:
-                    setup = prepare_study(study, out_dir=out_dir, device=device, announce=False)
+                    setup = simulate.prepare_study(
+                        study, out_dir=out_dir, device=device, announce=False
+                    )
                     alone[index] = functools.partial(_solve_alone, setup)
-                    if together_refusal(setup) is None:
-                        settings = together_settings(setup)
+                    if simulate.together_refusal(setup) is None:
+                        settings = simulate.together_settings(setup)
                         part = next(
-                            (p for p in parts if together_settings(p[0][1]) == settings), None
+                            (p for p in parts if simulate.together_settings(p[0][1]) == settings),
+                            None,
                         )
                         if part is None:
                             parts.append([(index, setup)])
@@ -517,7 +515,7 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         shared: list[str] = []
         try:
             with _recorded(shared):
-                solved = run_studies_together([setup for _, setup in part])
+                solved = simulate.run_studies_together([setup for _, setup in part])
         except Exception as exc:  # noqa: BLE001 - they run alone instead
             for index, _setup in part:
                 notes[index].append(f"solved alone: the batched run failed: {_one_line(exc)}")
@@ -553,7 +551,7 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
 def _solve_alone(setup: Any) -> dict[str, Any]:
     """A prepared simulation of a group solved alone: its outcome's numbers."""
 
-    return _simulation_numbers(solve_study(setup, progress=False))
+    return _simulation_numbers(simulate.solve_study(setup, progress=False))
 
 
 def _kind(study: Any) -> str:
