@@ -24,7 +24,7 @@ REPORT = GRAPH.analyse(REPOSITORY)
 
 def test_reads_every_module():
     assert "warptissue.kernels.fem" in REPORT.modules
-    assert "warptissue.fem.solvers" in REPORT.modules
+    assert "warptissue.fem.newton" in REPORT.modules
     assert all(GRAPH.floor(module) >= 0 for module in REPORT.modules)
 
 
