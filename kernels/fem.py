@@ -704,8 +704,9 @@ def rigid_contact_kernel(
     displacement: wp.array(dtype=wp.vec3d),
     nodes: wp.array(dtype=wp.int32),
     diagonal_blocks: wp.array(dtype=wp.int32),
-    body: RigidBody,
-    stiffness: wp.float64,
+    node_problem: wp.array(dtype=wp.int32),
+    bodies: wp.array(dtype=RigidBody),
+    stiffness: wp.array(dtype=wp.float64),
     with_tangent: int,
     residual: wp.array(dtype=wp.vec3d),
     matrix_values: wp.array(dtype=wp.mat33d),
@@ -714,28 +715,32 @@ def rigid_contact_kernel(
     node_force: wp.array(dtype=wp.vec3d),
     node_gap: wp.array(dtype=wp.float64),
 ):
-    """Frictionless penalty contact of a rigid body with the candidate nodes.
+    """Frictionless penalty contact of rigid bodies with the candidate nodes.
 
-    A node that penetrates (signed distance ``g < 0``) gets the force ``f_c = -k g n`` along
-    the body's outward normal ``n``: ``R -= f_c``, the energy gains ``k g^2 / 2`` and the
-    node's diagonal tangent block (``diagonal_blocks[i]``, BSR) gains
-    ``d(-f_c)/dx = k (n n^T + g dn/dx)``. ``contact_force[0]`` sums the force on the specimen
-    (N); ``node_force[i]`` holds the force on ``nodes[i]`` (N; zero out of contact) and
+    Candidate ``i`` (node ``nodes[i]``) belongs to problem ``k = node_problem[i]`` and meets
+    that problem's body ``bodies[k]`` with its penalty stiffness ``stiffness[k]`` (N/m); one
+    problem: all zeros. A node that penetrates (signed distance ``g < 0``) gets the force
+    ``f_c = -k g n`` along the body's outward normal ``n``: ``R -= f_c``, ``energy[k]`` gains
+    ``k g^2 / 2`` (J) and the node's diagonal tangent block (``diagonal_blocks[i]``, BSR) gains
+    ``d(-f_c)/dx = k (n n^T + g dn/dx)``. ``contact_force[k]`` sums the force on problem k's
+    body (N); ``node_force[i]`` holds the force on ``nodes[i]`` (N; zero out of contact) and
     ``node_gap[i]`` its signed distance (m).
     """
     i = wp.tid()
     node = nodes[i]
+    problem = node_problem[i]
+    k = stiffness[problem]
     x = points[node] + displacement[node]
-    hit = rigid_contact_point(body, x)
+    hit = rigid_contact_point(bodies[problem], x)
     node_gap[i] = hit.gap
     if hit.gap >= wp.float64(0.0):
         node_force[i] = wp.vec3d()
         return
-    force = -stiffness * hit.gap * hit.normal
+    force = -k * hit.gap * hit.normal
     node_force[i] = force
     wp.atomic_sub(residual, node, force)
-    wp.atomic_add(contact_force, 0, force)
-    wp.atomic_add(energy, 0, wp.float64(0.5) * stiffness * hit.gap * hit.gap)
+    wp.atomic_add(contact_force, problem, force)
+    wp.atomic_add(energy, problem, wp.float64(0.5) * k * hit.gap * hit.gap)
     if with_tangent != 0:
-        block = stiffness * (wp.outer(hit.normal, hit.normal) + hit.gap * hit.normal_gradient)
+        block = k * (wp.outer(hit.normal, hit.normal) + hit.gap * hit.normal_gradient)
         wp.atomic_add(matrix_values, diagonal_blocks[i], block)

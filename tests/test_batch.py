@@ -209,20 +209,23 @@ def test_a_broken_study_is_one_line_and_the_others_finish(first_batch):
 
 
 def test_together_solves_a_task_s_simulations_in_one_batched_run(first_batch, tmp_path):
-    """``--together 4``: one task holds a broken study, a fit and two simulations; the two
-    simulations are solved in one batched FE run (``solved_together`` 2) with the forces of
-    the same study alone to the Newton tolerance, the fit runs alone, the broken study is
-    its one-line row. A batched run that fails is said, and its studies run alone."""
+    """``--together 5``: one task holds a broken study, two fits and two simulations; the
+    two simulations are solved in one batched FE run (``solved_together`` 2) with the forces
+    of the same study alone to the Newton tolerance, the two fits are fitted together (their
+    forward runs batched) with the C10 of a fit alone, the broken study is its one-line
+    row. A batched run that fails is said, and its studies run alone."""
     studies, alone_out, _, _ = first_batch
     group = _write_studies(tmp_path / "studies")
     (group / "stiff.toml").write_text(_tiny_simulation(400.0), encoding="utf-8")
+    (group / "refit.toml").write_text(FIT_STUDY, encoding="utf-8")
     out = tmp_path / "out"
-    status = main(["batch", str(group), "-o", str(out), "--workers", "0", "--together", "4"])
+    status = main(["batch", str(group), "-o", str(out), "--workers", "0", "--together", "5"])
     assert status == batch.FAILED_EXIT_CODE
     rows = _summary(out / "summary.csv")
-    assert list(rows) == ["broken", "fit", "punch", "stiff"]
+    assert list(rows) == ["broken", "fit", "punch", "refit", "stiff"]
     assert rows["broken"]["status"] == "error" and "growht" in rows["broken"]["error"]
-    assert rows["fit"]["status"] == "converged" and rows["fit"]["solved_together"] == "1"
+    for name in ("fit", "refit"):
+        assert rows[name]["status"] == "converged" and rows[name]["solved_together"] == "2"
     for name in ("punch", "stiff"):
         assert rows[name]["status"] == "completed" and rows[name]["solved_together"] == "2"
         assert json.loads((out / name / "result.json").read_text())["solved_together"] == 2
@@ -235,11 +238,12 @@ def test_together_solves_a_task_s_simulations_in_one_batched_run(first_batch, tm
         atol=0.0,
     )
     assert float(rows["stiff"]["peak_force_N"]) > 1.3 * float(rows["punch"]["peak_force_N"])
-    fit = json.loads((out / "fit" / "fit.json").read_text())
     single_fit = json.loads((alone_out / "fit" / "fit.json").read_text())
-    assert fit["parameters"]["C10_Pa"]["value"] == pytest.approx(
-        single_fit["parameters"]["C10_Pa"]["value"], rel=1e-6
-    )
+    for name in ("fit", "refit"):
+        fit = json.loads((out / name / "fit.json").read_text())
+        assert fit["parameters"]["C10_Pa"]["value"] == pytest.approx(
+            single_fit["parameters"]["C10_Pa"]["value"], rel=1e-6
+        )
     with pytest.raises(InputError, match="--together"):
         batch.run_batch([group], out=out, workers=0, together=0)
 

@@ -1,15 +1,22 @@
 """K indentations solved together (the one Newton loop with K > 1): every problem's
 curve equals the one :func:`warptissue.fem.simulate_indentation` gives it alone, with its own
-cutbacks, and a failing problem stops without holding the others."""
+cutbacks, and a failing problem stops without holding the others; rigid indenters in contact
+(sphere, rounded punch, wedge, plate) mix with flat punches, each with its own contact
+outputs."""
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import warp as wp
+import warp.sparse as wps
+from test_fem_contact import WEDGE, _plate_cube, _wedge_strip
 
 from warptissue.errors import InputError
 from warptissue.fem import (
+    Assembler,
     IndentationProblem,
     NewtonOptions,
     batch_assembler,
@@ -17,7 +24,9 @@ from warptissue.fem import (
     simulate_indentation_batch,
 )
 from warptissue.fem.arrays import DeviceArrays
+from warptissue.fem.contact import RigidContact
 from warptissue.fem.newton.problems import Problems
+from warptissue.fem.packing import pack_meshes
 from warptissue.indenter import Indenter
 from warptissue.materials import MooneyRivlin, NeoHookean, Ogden, Viscoelastic
 from warptissue.mesh import indentation_block
@@ -198,14 +207,6 @@ def test_the_batch_refuses_what_it_cannot_take():
     )
     with pytest.raises(InputError, match="needs the time of each load"):
         simulate_indentation_batch([viscous], depths)
-    sphere = IndentationProblem(
-        problem.mesh,
-        problem.material,
-        Indenter("sphere", radius_m=RADIUS_M),
-        symmetry_planes=problem.symmetry_planes,
-    )
-    with pytest.raises(InputError, match="flat punches"):
-        simulate_indentation_batch([sphere], depths)
     ogden = IndentationProblem(
         problem.mesh,
         Ogden((120.0, -30.0), (5.0, -2.0), 1.8e5),
@@ -286,3 +287,248 @@ def test_viscoelastic_ramp_and_hold_batch_equals_single_runs(device):
             )
     # The hold relaxes: the viscoelastic forces fall at constant depth.
     assert batched[0].reaction_force_N[-1] < 0.9 * batched[0].reaction_force_N[1]
+
+
+# --- rigid contact in a batch ---------------------------------------------------------------
+
+CONTACT_FIELDS = ("reaction_force_N", "contact_force_N", "contact_area_m2", "max_penetration_m")
+
+
+def _contact_block():
+    """A coarse quarter block 3 R x 1.5 R under indenters of radius about 0.2 R (1 463 TET10
+    nodes)."""
+    return indentation_block(
+        width_m=3.0 * RADIUS_M,
+        thickness_m=1.5 * RADIUS_M,
+        probe_radius_m=0.2 * RADIUS_M,
+        size_near_m=0.2 * RADIUS_M,
+        size_far_m=0.75 * RADIUS_M,
+    )
+
+
+def _contact_problems():
+    """A sphere, a rounded flat punch, a wedge, a plate and a bonded flat punch, with their
+    own meshes, materials and depths."""
+    block = _contact_block()
+    problems = [
+        IndentationProblem(block, NeoHookean(287.5, 575e3), Indenter("sphere", radius_m=RADIUS_M)),
+        IndentationProblem(
+            block,
+            NeoHookean(400.0, 4e5),
+            Indenter("flat_punch", radius_m=0.2 * RADIUS_M, edge_radius_m=0.05 * RADIUS_M),
+        ),
+        IndentationProblem(_wedge_strip(full=False), NeoHookean(287.5, 575e3), WEDGE),
+        IndentationProblem(
+            _plate_cube(), NeoHookean(100.0, 1e5), Indenter("plate"), base="sliding"
+        ),
+        IndentationProblem(
+            block, MooneyRivlin(200.0, 60.0, 2e5), Indenter("flat_punch", radius_m=0.2 * RADIUS_M)
+        ),
+    ]
+    depths = [
+        RADIUS_M * np.array([0.01, 0.03]),
+        RADIUS_M * np.array([0.02]),
+        np.array([0.1e-3]),
+        1e-2 * np.array([0.05, 0.1]),
+        RADIUS_M * np.array([0.01, 0.02]),
+    ]
+    return problems, depths
+
+
+def test_batched_rigid_contacts_equal_their_single_runs(device):
+    """A sphere, a rounded punch, a wedge, a plate and a bonded flat punch solved together
+    (one contact launch over all their candidate nodes, each problem with its own body,
+    depth and penalty) give each the force curve and contact outputs of its own run, to
+    1e-8 (measured 1e-12 - 1e-10), and the sphere's exact sensitivities (the penalty's
+    dependence on mu0 included) those of its own run, to 1e-7."""
+    problems, depths = _contact_problems()
+    names = ("C10_Pa", "bulk_modulus_Pa")
+    options = NewtonOptions(tolerance=TOLERANCE)
+    batched = simulate_indentation_batch(
+        problems, depths, device=device, options=options, sensitivities=names
+    )
+    for k, (problem, path, result) in enumerate(zip(problems, depths, batched, strict=True)):
+        alone = simulate_indentation(
+            problem,
+            path,
+            device=device,
+            progress=False,
+            options=options,
+            sensitivities=names if k == 0 else (),
+        )
+        assert result.completed and alone.completed, (result.message, alone.message)
+        np.testing.assert_allclose(result.depths_m, path)
+        for name in CONTACT_FIELDS:
+            mine, theirs = getattr(result, name), getattr(alone, name)
+            assert mine.shape == theirs.shape, name
+            np.testing.assert_allclose(mine, theirs, rtol=1e-8, err_msg=name)
+        assert result.contact_pressure_Pa.shape == alone.contact_pressure_Pa.shape
+        if problem.is_contact:
+            np.testing.assert_allclose(
+                result.contact_pressure_Pa,
+                alone.contact_pressure_Pa,
+                rtol=0,
+                atol=1e-8 * alone.contact_pressure_Pa.max(),
+            )
+            np.testing.assert_allclose(result.contact_force_N, result.reaction_force_N, rtol=1e-6)
+        else:
+            assert result.contact_force_N.size == 0
+        scale = np.abs(alone.displacement_m).max()
+        np.testing.assert_allclose(
+            result.displacement_m, alone.displacement_m, rtol=0, atol=1e-8 * scale
+        )
+        assert result.force_sensitivity_N_per_unit.shape == (len(path), len(names))
+        if k == 0:  # the sphere: through the contact's penalty
+            assert np.all(result.force_sensitivity_N_per_unit[:, 0] > 0.0)
+            np.testing.assert_allclose(
+                result.force_sensitivity_N_per_unit, alone.force_sensitivity_N_per_unit, rtol=1e-7
+            )
+
+
+def test_packed_contacts_assemble_as_each_problem_alone(device, rng):
+    """One packed assembler with each problem's contact (and none on the bonded punch), at
+    each problem's depth, gives each problem's residual, energy, tangent, contact state and
+    dR/dC10 (the penalty's share included) of its own assembler."""
+    problems, _ = _contact_problems()
+    depths = np.array([0.03 * RADIUS_M, 0.02 * RADIUS_M, 0.2e-3, 5e-4, 0.0])
+    packed = pack_meshes([problem.mesh for problem in problems])
+    assembler = batch_assembler(problems, device=device)
+    assembler.set_contact([problem.rigid_contact() for problem in problems])
+    assembler.set_load(depths)
+    u = 1e-6 * rng.standard_normal((packed.mesh.node_count, 3))
+    assembly = assembler.assemble(u)
+    residual = assembly.residual.numpy().copy()  # the buffer is reused
+    direction = rng.standard_normal((packed.mesh.node_count, 3))
+    product = wp.zeros(packed.mesh.node_count, dtype=wp.vec3d, device=device)
+    wps.bsr_mv(assembly.matrix, wp.array(direction, dtype=wp.vec3d, device=device), product)
+    product = product.numpy()
+    d_residual = assembler.parameter_residual(u, "C10_Pa")
+    states = assembler.contact_states(u)
+    assert states[-1] is None and assembler.contact is None
+    for k, problem in enumerate(problems):
+        nodes = packed.nodes(k)
+        alone = Assembler(problem.mesh, problem.material, device=device)
+        alone.set_contact(problem.rigid_contact())
+        alone.set_load(depths[k])
+        single = alone.assemble(u[nodes])
+        expected = single.residual.numpy()
+        scale = np.abs(expected).max()
+        np.testing.assert_allclose(residual[nodes], expected, rtol=0, atol=1e-12 * scale)
+        assert assembly.problem_energies_J[k] == pytest.approx(single.energy_J, rel=1e-12)
+        mine = wp.zeros(problem.mesh.node_count, dtype=wp.vec3d, device=device)
+        wps.bsr_mv(single.matrix, wp.array(direction[nodes], dtype=wp.vec3d, device=device), mine)
+        mine = mine.numpy()
+        np.testing.assert_allclose(product[nodes], mine, rtol=0, atol=1e-12 * np.abs(mine).max())
+        theirs = alone.parameter_residual(u[nodes], "C10_Pa")
+        np.testing.assert_allclose(
+            d_residual[nodes], theirs, rtol=0, atol=1e-12 * np.abs(theirs).max()
+        )
+        if problem.is_contact:
+            state = alone.contact_state(u[nodes])
+            assert np.array_equal(states[k].nodes, state.nodes)
+            assert np.any(state.gap_m < 0.0)
+            np.testing.assert_allclose(states[k].gap_m, state.gap_m, rtol=1e-12)
+            np.testing.assert_allclose(states[k].force_N, state.force_N, rtol=1e-12, atol=0)
+            state = assembler.contact_state(u, problem=k)
+            np.testing.assert_array_equal(state.force_N, states[k].force_N)
+
+
+def test_packed_contacts_are_refused_where_they_do_not_fit():
+    problems, _ = _contact_problems()
+    problems = problems[:2]
+    assembler = batch_assembler(problems, device="cpu")
+    contacts = [problem.rigid_contact() for problem in problems]
+    with pytest.raises(InputError, match="one contact"):
+        assembler.set_contact(contacts[0])
+    with pytest.raises(InputError, match="one contact"):
+        assembler.set_contact(contacts[:1])
+    beyond = RigidContact(
+        contacts[1].indenter,
+        np.array([problems[1].mesh.node_count]),
+        contacts[1].top_z_m,
+        contacts[1].stiffness_N_per_m,
+    )
+    with pytest.raises(InputError, match="of problem 1"):
+        assembler.set_contact([contacts[0], beyond])
+    with pytest.raises(InputError, match="one load per packed problem"):
+        assembler.set_contact(contacts)
+        assembler.set_load(np.zeros(3))
+    with pytest.raises(InputError, match="name the problem"):
+        assembler.contact_state(np.zeros((assembler.node_count, 3)))
+    assembler.set_contact(None)
+    assert assembler.contacts == (None, None) and not assembler.has_contact
+
+
+def test_a_batch_of_one_contact_problem_is_its_single_run(device):
+    """K = 1 through the batch (a packed assembler of one problem) is the single run: the
+    same forces and contact outputs (to the Newton tolerance)."""
+    problems, depths = _contact_problems()
+    options = NewtonOptions(tolerance=TOLERANCE)
+    depths = depths[0][:1]
+    (batched,) = simulate_indentation_batch(problems[:1], [depths], device=device, options=options)
+    alone = simulate_indentation(
+        problems[0], depths, device=device, progress=False, options=options
+    )
+    for name in CONTACT_FIELDS:
+        np.testing.assert_allclose(getattr(batched, name), getattr(alone, name), rtol=1e-8)
+
+
+def test_the_penalty_ramp_decides_per_problem(monkeypatch):
+    """The soft stage scales every problem's penalty and restores it; the stiff stage takes
+    the problems that converged in the soft one from their soft states; a problem that failed
+    either stage keeps its start state, with the reason of the stage it failed."""
+    from warptissue.fem.newton import increment
+
+    contacts = [SimpleNamespace(stiffness_N_per_m=10.0), SimpleNamespace(stiffness_N_per_m=30.0)]
+    assembler = SimpleNamespace(contacts=(contacts[0], None, contacts[1]))
+    stages = []
+    outcomes = [np.array([True, False, True]), np.array([True, True, False])]
+
+    def stage(assembler, solver, problems, u_start, prescribed, free, constrained, **options):
+        number = len(stages)
+        stages.append(
+            (
+                options["active"].copy(),
+                options["tolerance"],
+                [each.stiffness_N_per_m for each in contacts],
+                np.array(u_start),
+            )
+        )
+        converged = options["active"] & outcomes[number]
+        state = u_start + 1.0
+        return increment.Increment(
+            converged=converged,
+            displacement=problems.where(converged, state, u_start),
+            iterations=np.array([2, 3, 4]) * options["active"],
+            linear_iterations=np.zeros(3, dtype=np.int64),
+            local_iterations=np.zeros(3, dtype=np.int64),
+            reasons=["converged" if done else f"stage {number} failed" for done in converged],
+            from_guess=np.zeros(3, dtype=bool),
+            last_iterate=state,
+        )
+
+    monkeypatch.setattr(increment, "newton_increment", stage)
+    arrays = DeviceArrays(wp.get_device("cpu"))
+    with arrays.context():
+        problems = Problems(arrays, [0, 2, 3, 5])
+        start = np.zeros((5, 3))
+        step = increment.penalty_ramped_increment(
+            assembler,
+            None,
+            problems,
+            start,
+            start,
+            start,
+            start,
+            tolerance=1e-10,
+            active=np.array([True, True, True]),
+        )
+    ramp = increment.CONTACT_PENALTY_RAMP
+    assert stages[0][1] == increment.CONTACT_RAMP_TOLERANCE and stages[1][1] == 1e-10
+    assert stages[0][2] == [10.0 * ramp, 30.0 * ramp] and stages[1][2] == [10.0, 30.0]
+    np.testing.assert_array_equal(stages[1][0], [True, False, True])
+    np.testing.assert_array_equal(stages[1][3], [[1.0] * 3] * 2 + [[0.0] * 3] + [[1.0] * 3] * 2)
+    np.testing.assert_array_equal(step.converged, [True, False, False])
+    np.testing.assert_array_equal(step.displacement, [[2.0] * 3] * 2 + [[0.0] * 3] * 3)
+    np.testing.assert_array_equal(step.iterations, [4, 3, 8])
+    assert step.reasons == ["converged", "stage 0 failed", "stage 1 failed"]

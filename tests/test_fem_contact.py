@@ -385,8 +385,9 @@ def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0, devi
             zeros,
             wp.array(np.arange(count), dtype=wp.int32, device=device),
             wp.array(np.arange(count), dtype=wp.int32, device=device),
-            contact.device_body(),
-            wp.float64(stiffness),
+            wp.zeros(count, dtype=wp.int32, device=device),  # all of problem 0
+            wp.array([contact.device_body()], dtype=kf.RigidBody, device=device),
+            wp.array([stiffness], dtype=wp.float64, device=device),
             1,
         ],
         outputs=[

@@ -922,3 +922,37 @@ def test_batched_record_runs_equal_runs_one_after_another(tmp_path):
     np.testing.assert_allclose(
         batched.jacobian, single.jacobian, rtol=1e-7, atol=1e-8 * np.abs(single.jacobian).max()
     )
+
+
+def test_studies_fitted_together_equal_each_fitted_alone(tmp_path):
+    """An elastic and a viscoelastic study (different records, depths and models of time;
+    both touching at (nearly) depth 0), fitted together (their forward runs batched
+    whenever both ask), give each fit alone's parameters to 1e-8 (and the truth to the
+    meshes' and steps' accuracy); a bad study in the list is raised after the others have
+    ended."""
+    (tmp_path / "e").mkdir()
+    (tmp_path / "v").mkdir()
+    elastic = with_fit(
+        offset_study(
+            tmp_path / "e",
+            'free = ["C10_Pa"]\ntime_steps = 8\n',
+            solver="tolerance = 1e-12",
+            offset_m=0.0,
+        ),
+        start={"C10_Pa": 200.0},
+    )
+    viscous = with_fit(
+        viscous_offset_study(tmp_path / "v", 'free = ["C10_Pa"]\ntime_steps = 6\n', offset_m=1e-7),
+        start={"C10_Pa": 350.0},
+    )
+    together = fit_indentation([elastic, viscous], progress=False)
+    for fit, study in zip(together, (elastic, viscous), strict=True):
+        alone = fit_indentation(study, progress=False)
+        assert fit.status == alone.status == "converged", (fit.message, alone.message)
+        assert fit.parameters["C10_Pa"] == pytest.approx(alone.parameters["C10_Pa"], rel=1e-8)
+        assert fit.parameters["C10_Pa"] == pytest.approx(287.5, rel=0.05)  # coarse steps
+    broken = with_fit(elastic, strategy="no_such_strategy")
+    with pytest.raises(InputError, match="no_such_strategy"):
+        fit_indentation([viscous, broken], progress=False)
+    with pytest.raises(InputError, match="sequence of studies"):
+        fit_indentation([], progress=False)

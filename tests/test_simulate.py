@@ -663,10 +663,10 @@ def test_studies_solved_together_equal_each_alone_and_refuse_what_they_cannot_sh
 ):
     """run_studies_together: the tiny study and a stiffer one on a finer mesh, in one
     batched FE run, write the files run_study writes, with the forces of each run alone to
-    the Newton tolerance; a rigid sphere, a timed protocol or other solver settings are
-    refused in one line naming the study file."""
+    the Newton tolerance, as do a rigid sphere and a viscoelastic ramp-and-hold; other
+    solver settings are refused in one line naming the study file."""
     from warptissue.errors import InputError
-    from warptissue.simulate import prepare_study, run_studies_together, together_refusal
+    from warptissue.simulate import prepare_study, run_studies_together
 
     stiff = json.loads(json.dumps(tiny_record))
     stiff["material"]["C10_Pa"] *= 1.5
@@ -676,7 +676,6 @@ def test_studies_solved_together_equal_each_alone_and_refuse_what_they_cannot_sh
         prepare_study(study, out_dir=tmp_path / name, announce=False)
         for study, name in zip(studies, ("tiny", "stiff"), strict=True)
     ]
-    assert [together_refusal(setup) for setup in setups] == [None, None]
     assert setups[0].mesh.tet_count < setups[1].mesh.tet_count
     together = run_studies_together(setups)
     stiff_alone = run_study(studies[1], out_dir=tmp_path / "alone", progress=False)
@@ -701,17 +700,25 @@ def test_studies_solved_together_equal_each_alone_and_refuse_what_they_cannot_sh
     # A stiffer material gives a larger force: the results are not swapped.
     assert together[1].result.reaction_force_N[-1] > 1.3 * together[0].result.reaction_force_N[-1]
 
-    sphere = prepare_study(study_from_dict(sphere_record), out_dir=tmp_path / "s", announce=False)
-    assert "rigid sphere" in together_refusal(sphere)
-    with pytest.raises(InputError, match="cannot be solved with other studies: a rigid sphere"):
-        run_studies_together([setups[0], sphere])
-    timed = json.loads(json.dumps(tiny_record))
-    timed["schema_version"] = 2
-    timed["protocol"] = {"depths_m": DEPTHS_M, "times_s": [1.0, 2.0, 3.0]}
-    ramp = prepare_study(study_from_dict(timed), out_dir=tmp_path / "t", announce=False)
-    assert together_refusal(ramp) == (
-        "a timed protocol (kind = 'timed') is solved one study at a time"
+    # A rigid sphere is solved with a flat punch, and gives the force of its run alone.
+    sphere_study = study_from_dict(sphere_record)
+    sphere = prepare_study(sphere_study, out_dir=tmp_path / "s", announce=False)
+    with_sphere = run_studies_together([setups[0], sphere])
+    sphere_alone = run_study(sphere_study, out_dir=tmp_path / "s_alone", progress=False)
+    np.testing.assert_allclose(
+        with_sphere[1].result.reaction_force_N, sphere_alone.result.reaction_force_N, rtol=1e-7
     )
+    # A viscoelastic ramp-and-hold is solved with an elastic quasi-static study, and gives
+    # the forces of its run alone.
+    visco = study_from_dict(viscoelastic_ramp_hold(tiny_record))
+    ramp = prepare_study(visco, out_dir=tmp_path / "t", announce=False)
+    mixed = run_studies_together([setups[0], ramp])
+    ramp_alone = run_study(visco, out_dir=tmp_path / "t_alone", progress=False)
+    assert mixed[1].completed and mixed[1].summary["solved_together"] == 2
+    np.testing.assert_allclose(
+        mixed[1].result.reaction_force_N, ramp_alone.result.reaction_force_N, rtol=1e-7
+    )
+    np.testing.assert_allclose(mixed[1].result.times_s, ramp_alone.result.times_s)
     other = json.loads(json.dumps(tiny_record))
     other["solver"]["tolerance"] = 1e-8
     loose = prepare_study(study_from_dict(other), out_dir=tmp_path / "o", announce=False)

@@ -396,9 +396,18 @@ def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
 
 
 def _fit(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
+    _check_out_dir(out_dir)
+    return _fit_numbers(fit_indentation(study, device=device, progress=False), out_dir)
+
+
+def _check_out_dir(out_dir: Path) -> None:
     if out_dir.exists() and not out_dir.is_dir():
         raise InputError("the output folder is a file", path=out_dir)
-    fit = fit_indentation(study, device=device, progress=False)
+
+
+def _fit_numbers(fit: Any, out_dir: Path, solved_together: int = 1) -> dict[str, Any]:
+    """Write a fit's outputs into its folder; its outcome's numbers."""
+
     write_indentation_fit_outputs(out_dir, fit)
     if fit.status == "interrupted":  # Ctrl-C in this process: stop the batch
         raise KeyboardInterrupt
@@ -413,6 +422,22 @@ def _fit(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
         "parameters": {name: float(value) for name, value in fit.parameters.items()},
         "warnings": list(fit.warnings),
         "error": error,
+        "solved_together": solved_together,
+    }
+
+
+def _fit_together(
+    members: list[tuple[int, Any, Path]], device: str | None
+) -> dict[int, dict[str, Any]]:
+    """A group's fits on one device fitted together (their forward runs batched,
+    :func:`warptissue.fit.fit_indentation` over their studies): each one's numbers."""
+
+    for _, _, out_dir in members:
+        _check_out_dir(out_dir)
+    fits = fit_indentation([study for _, study, _ in members], device=device, progress=False)
+    return {
+        index: _fit_numbers(fit, out_dir, solved_together=len(members))
+        for (index, _, out_dir), fit in zip(members, fits, strict=True)
     }
 
 
@@ -460,13 +485,14 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     one batched FE run (the function each Dask task runs when ``together`` > 1).
 
     Each study is loaded and set up (:func:`warptissue.simulate.prepare_study`) on its own.
-    The simulations that :func:`warptissue.simulate.together_refusal` accepts, with equal
-    device, formulation and ``[solver]`` settings, are solved together
-    (:func:`warptissue.simulate.run_studies_together`); the others (fits, rigid contact,
-    viscoelastic materials, timed protocols, a setting shared with no other study of the
-    group) run alone, as :func:`run_study_task` runs them. A batched run that raises is
-    said in its studies' warnings and they run alone instead. Each study's folder, marker
-    and outcome are those :func:`run_study_task` would give, with ``solved_together``.
+    The simulations with equal device, formulation and ``[solver]`` settings are solved
+    together (:func:`warptissue.simulate.run_studies_together`); the others (a setting
+    shared with no other study of the group) run alone, as :func:`run_study_task`
+    runs them; the group's fits on one device are fitted together, their forward runs
+    batched (:func:`warptissue.fit.fit_indentation` over their studies), and where that
+    raises, alone. A batched run that raises is said in its studies' warnings and they run
+    alone instead. Each study's folder, marker and outcome are those :func:`run_study_task`
+    would give, with ``solved_together``.
 
     Args:
         tasks: The studies of the group.
@@ -480,6 +506,7 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     seconds = [0.0] * len(tasks)
     alone: dict[int, Callable[[], dict[str, Any]]] = {}  # index -> what runs it alone
     parts: list[list[tuple[int, Any]]] = []  # simulations that share their settings
+    fit_groups: dict[str | None, list[tuple[int, Any, Path]]] = {}  # fits by device
     for index, task in enumerate(tasks):
         started = time.perf_counter()
         try:
@@ -491,21 +518,21 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
                 out_dir = Path(task.out_dir) / task.folder
                 if outcomes[index].kind == "fit":
                     alone[index] = functools.partial(_fit, study, out_dir, device)
+                    fit_groups.setdefault(device, []).append((index, study, out_dir))
                 else:
                     setup = simulate.prepare_study(
                         study, out_dir=out_dir, device=device, announce=False
                     )
                     alone[index] = functools.partial(_solve_alone, setup)
-                    if simulate.together_refusal(setup) is None:
-                        settings = simulate.together_settings(setup)
-                        part = next(
-                            (p for p in parts if simulate.together_settings(p[0][1]) == settings),
-                            None,
-                        )
-                        if part is None:
-                            parts.append([(index, setup)])
-                        else:
-                            part.append((index, setup))
+                    settings = simulate.together_settings(setup)
+                    part = next(
+                        (p for p in parts if simulate.together_settings(p[0][1]) == settings),
+                        None,
+                    )
+                    if part is None:
+                        parts.append([(index, setup)])
+                    else:
+                        part.append((index, setup))
         except Exception as exc:  # noqa: BLE001 - a failed study is a row; the batch goes on
             outcomes[index] = replace(outcomes[index], **_error_numbers(exc))
         seconds[index] = time.perf_counter() - started
@@ -523,6 +550,26 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         spent = time.perf_counter() - started
         for (index, _), outputs in zip(part, solved, strict=True):
             numbers = _simulation_numbers(outputs)
+            numbers["warnings"] = numbers["warnings"] + notes[index] + shared
+            outcomes[index] = replace(outcomes[index], **numbers)
+            seconds[index] += spent
+            del alone[index]
+    for device, members in fit_groups.items():
+        if len(members) < 2:
+            continue
+        started = time.perf_counter()
+        shared = []
+        try:
+            with _recorded(shared):
+                fitted = _fit_together(members, device)
+        except KeyboardInterrupt:
+            raise
+        except Exception as exc:  # noqa: BLE001 - they are fitted alone instead
+            for index, _, _ in members:
+                notes[index].append(f"fitted alone: the joint run failed: {_one_line(exc)}")
+            continue
+        spent = time.perf_counter() - started
+        for index, numbers in fitted.items():
             numbers["warnings"] = numbers["warnings"] + notes[index] + shared
             outcomes[index] = replace(outcomes[index], **numbers)
             seconds[index] += spent

@@ -105,7 +105,6 @@ __all__ = [
     "run_study",
     "size_near_reason",
     "solve_study",
-    "together_refusal",
     "together_settings",
     "write_study_outputs",
 ]
@@ -762,25 +761,6 @@ def write_study_outputs(
     )
 
 
-def together_refusal(setup: StudySetup) -> str | None:
-    """Why a study cannot be solved together with others (:func:`run_studies_together`).
-
-    Args:
-        setup: The study's :class:`StudySetup`.
-
-    Returns:
-        None when it can; else the reason, one line.
-    """
-    if setup.problem.is_contact:
-        return f"a rigid {setup.study.indenter.kind} in contact is solved one study at a time"
-    if _is_viscoelastic(setup.study.material):
-        return "a viscoelastic material is solved one study at a time"
-    if setup.times_s is not None:
-        kind = setup.study.protocol.kind
-        return f"a timed protocol (kind = {kind!r}) is solved one study at a time"
-    return None
-
-
 def together_settings(setup: StudySetup) -> dict[str, Any]:
     """What studies solved together must share (:func:`run_studies_together`).
 
@@ -809,35 +789,27 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
     ``result.json``.
 
     Args:
-        setups: The studies, from :func:`prepare_study`: flat punches (bonded or
-            frictionless), elastic materials, quasi-static protocols
-            (:func:`together_refusal`), on one device, with one formulation and equal
-            ``[solver]`` settings.
+        setups: The studies, from :func:`prepare_study`: any indenter, elastic or
+            viscoelastic, quasi-static or timed protocols, on one device, with one
+            formulation and equal ``[solver]`` settings.
 
     Returns:
         One :class:`SimulationOutputs` per study, in order.
 
     Raises:
-        InputError: No study, a study that cannot be solved with others (naming its file
-            and why), or one whose device, formulation or solver settings differ from the
-            first study's (quoting both).
+        InputError: No study, or one whose device, formulation or solver settings differ
+            from the first study's (quoting both).
 
     Notes:
-        The forces equal those of :func:`run_study` to the Newton tolerance: the batched
-        Newton loop leaves out the single run's nonlinear elimination, damping and
-        factorization reuse, which change the path to the solution, not the converged
-        state (docs/design-notes/batched-fe.md).
+        The forces equal those of :func:`run_study` to the Newton tolerance: every study
+        runs the one Newton loop with its own decisions; only the shared factorization's
+        reuse is decided for all at once, which changes the path to the solution, not the
+        converged state (docs/design-notes/batched-fe.md).
     """
 
     setups = list(setups)
     if not setups:
         raise InputError("at least one study is needed", key="studies", value=0)
-    for setup in setups:
-        reason = together_refusal(setup)
-        if reason is not None:
-            raise InputError(
-                f"cannot be solved with other studies: {reason}", path=setup.study.path
-            )
     first = setups[0]
     for setup in setups[1:]:
         for (key, mine), theirs in zip(
@@ -856,6 +828,7 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
         [setup.depths_m for setup in setups],
         device=str(first.device),
         options=first.study.solver.options,
+        times_s=[setup.times_s for setup in setups],
     )
     solve_s = time.perf_counter() - started
     return [

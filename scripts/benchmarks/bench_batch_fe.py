@@ -15,10 +15,10 @@ problem warms up the kernels and libraries first.
 
 Each row records curves per minute of both, their ratio, and the largest relative difference
 of a batched force from the sequential one of the same problem. With ``--what fits``, K
-inverse fits of C10 (synthetic curves made at each problem's C10, fitted from 0.8 times it):
-:func:`warptissue.fit.batched.fit_indentation_batch` against the fit engine's
-``least_squares`` over single runs, in fits per minute, and the largest relative difference
-of a fitted C10.
+inverse fits of C10 (studies whose records are synthetic curves made at each problem's C10,
+fitted from 0.8 times it): :func:`warptissue.fit.fit_indentation` over the K studies
+(forward runs batched) against ``fit_indentation`` of each, in fits per minute, and the
+largest relative difference of a fitted C10.
 
 Usage::
 
@@ -41,9 +41,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 from bench_flat_punch import (  # noqa: E402
     BULK_MODULUS_PA,
+    HALF_WIDTH_M,
     NEWTON_TOLERANCE,
     PROBE_RADIUS_M,
     SHEAR_MODULUS_PA,
+    THICKNESS_M,
     depths_m,
     machine_description,
     parse_count,
@@ -150,100 +152,161 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
     }
 
 
-def run_fits(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int) -> dict:
-    """One row of fits: K synthetic curves (made at each problem's C10) fitted for C10 from
-    0.8 times it, batched (:func:`warptissue.fit.batched.fit_indentation_batch`), and the
-    first ``sequential_limit`` fitted alone (the engine's ``least_squares`` over
-    ``simulate_indentation`` with its sensitivities, one assembler)."""
-    import dataclasses
+FIT_STUDY = """\
+schema_version = 2
+name = "bench_fit_{k}"
+
+[specimen]
+shape = "block"
+width_m = {width_m!r}
+thickness_m = {thickness_m!r}
+quarter = true
+element = "TET10"
+size_near_m = {size_near_m!r}
+size_far_m = {size_far_m!r}
+mesher = "{mesher}"
+
+[indenter]
+kind = "flat_punch"
+radius_m = {radius_m!r}
+
+[protocol]
+max_depth_m = {max_depth_m!r}
+steps = {steps}
+
+[material]
+model = "neo_hookean"
+C10_Pa = {start!r}
+bulk_modulus_Pa = {bulk_modulus_Pa!r}
+
+[solver]
+device = "{device}"
+tolerance = {tolerance!r}
+
+[[data]]
+file = "record.csv"
+
+[fit]
+free = ["C10_Pa"]
+time_steps = {steps}
+"""
+
+
+def fit_studies(
+    folder: Path,
+    truths: list[Any],
+    depths: np.ndarray,
+    forces: list[np.ndarray],
+    *,
+    size_near_m: float,
+    mesher: str,
+    device: str,
+) -> list[Any]:
+    """One study per synthetic curve in ``folder``: the benchmark's block (its sizes; the
+    near size at most the probe radius, as a study needs) and punch, its curve as the
+    record, C10 free from 0.8 times the truth."""
+    from warptissue.io import write_csv
+    from warptissue.study import load_study
+
+    studies = []
+    for k, (truth, force) in enumerate(zip(truths, forces, strict=True)):
+        here = folder / f"specimen_{k}"
+        here.mkdir(parents=True, exist_ok=True)
+        write_csv(
+            here / "record.csv",
+            {
+                "time_s": np.arange(len(depths) + 1, dtype=np.float64),
+                "displacement_m": np.concatenate([[0.0], depths]),
+                "force_N": np.concatenate([[0.0], force]),
+            },
+        )
+        text = FIT_STUDY.format(
+            k=k,
+            width_m=2.0 * HALF_WIDTH_M,
+            thickness_m=THICKNESS_M,
+            size_near_m=min(size_near_m, PROBE_RADIUS_M),
+            size_far_m=max(size_near_m, min(10.0 * size_near_m, 0.25 * THICKNESS_M)),
+            mesher=mesher,
+            radius_m=PROBE_RADIUS_M,
+            max_depth_m=float(depths[-1]),
+            steps=len(depths),
+            start=0.8 * float(truth.material.parameter_vector[0]),
+            bulk_modulus_Pa=BULK_MODULUS_PA,
+            device=device,
+            tolerance=NEWTON_TOLERANCE,
+        )
+        (here / "study.toml").write_text(text, encoding="utf-8")
+        studies.append(load_study(here / "study.toml"))
+    return studies
+
+
+def run_fits(
+    mesh: Any,
+    count: int,
+    device: str,
+    *,
+    steps: int,
+    sequential_limit: int,
+    size_near_m: float,
+    mesher: str,
+) -> dict:
+    """One row of fits: K studies whose records are synthetic curves (made by the FE at each
+    problem's C10 on the benchmark's mesh) fitted for C10 from 0.8 times it, together
+    (:func:`warptissue.fit.fit_indentation` over the K studies: forward runs batched), and
+    the first ``sequential_limit`` fitted alone (``fit_indentation`` of each)."""
+    import tempfile
 
     import warp as wp
 
     from warptissue.device import resolve_device
-    from warptissue.fem import (
-        Assembler,
-        NewtonOptions,
-        simulate_indentation,
-        simulate_indentation_batch,
-    )
-    from warptissue.fit.batched import fit_indentation_batch
-    from warptissue.lsq import least_squares
+    from warptissue.fem import NewtonOptions, simulate_indentation_batch
+    from warptissue.fit import fit_indentation
+    from warptissue.simulate import build_mesh
 
     warp_device = resolve_device(device)
-    options = NewtonOptions(tolerance=NEWTON_TOLERANCE)
-    tolerances = {"ftol": 1e-8, "xtol": 1e-8, "gtol": 1e-8}
     truths = problems_for(mesh, count)
     depths = depths_m()[:steps]
     curves = simulate_indentation_batch(
-        truths, [depths] * count, device=warp_device, options=options
-    )
-    forces = [curve.reaction_force_N for curve in curves]
-    starts = []
-    for truth in truths:
-        vector = truth.material.parameter_vector
-        vector[0] *= 0.8
-        starts.append(dataclasses.replace(truth, material=truth.material.with_parameters(vector)))
-    started = time.perf_counter()
-    fits = fit_indentation_batch(
-        starts,
+        truths,
         [depths] * count,
-        forces,
-        ("C10_Pa",),
         device=warp_device,
-        options=options,
-        **tolerances,
+        options=NewtonOptions(tolerance=NEWTON_TOLERANCE),
     )
-    wp.synchronize_device(warp_device)
-    batched_s = time.perf_counter() - started
-    alone_count = min(count, sequential_limit)
-    started = time.perf_counter()
-    assembler = Assembler(mesh, starts[0].material, device=warp_device)
-    alone = []
-    for start, measured in zip(starts[:alone_count], forces, strict=False):
-        cache: dict[bytes, Any] = {}
-
-        def forward(x, start=start, cache=cache):
-            # One run per trial point for both residuals and Jacobian (as the batched fit).
-            key = np.asarray(x, dtype=np.float64).tobytes()
-            if key in cache:
-                return cache[key]
-            cache.clear()
-            vector = start.material.parameter_vector
-            vector[0] = x[0]
-            problem = dataclasses.replace(start, material=start.material.with_parameters(vector))
-            cache[key] = simulate_indentation(
-                problem,
-                depths,
-                device=warp_device,
-                progress=False,
-                options=options,
-                assembler=assembler,
-                sensitivities=("C10_Pa",),
-            )
-            return cache[key]
-
-        scale = float(np.abs(measured).max())
-        alone.append(
-            least_squares(
-                lambda x, f=forward, m=measured, s=scale: (f(x).reaction_force_N - m) / s,
-                start.material.parameter_vector[:1],
-                jac=lambda x, f=forward, s=scale: f(x).force_sensitivity_N_per_unit / s,
-                bounds=(0.0, np.inf),
-                x_scale=start.material.parameter_vector[:1],
-                **tolerances,
-            )
+    with tempfile.TemporaryDirectory(prefix="bench_batch_fits_") as folder:
+        studies = fit_studies(
+            Path(folder),
+            truths,
+            depths,
+            [curve.reaction_force_N for curve in curves],
+            size_near_m=size_near_m,
+            mesher=mesher,
+            device=str(warp_device),
         )
-    wp.synchronize_device(warp_device)
-    sequential_s = time.perf_counter() - started
-    difference = max(abs(float(b.x[0] / a.x[0]) - 1.0) for a, b in zip(alone, fits, strict=False))
+        started = time.perf_counter()
+        fits = fit_indentation(studies, device=str(warp_device), progress=False)
+        wp.synchronize_device(warp_device)
+        batched_s = time.perf_counter() - started
+        alone_count = min(count, sequential_limit)
+        started = time.perf_counter()
+        alone = [
+            fit_indentation(study, device=str(warp_device), progress=False)
+            for study in studies[:alone_count]
+        ]
+        wp.synchronize_device(warp_device)
+        sequential_s = time.perf_counter() - started
+        fitted_mesh = build_mesh(studies[0])
+    c10 = [fit.parameters["C10_Pa"] for fit in fits]
+    difference = max(abs(c10[k] / a.parameters["C10_Pa"] - 1.0) for k, a in enumerate(alone))
     return {
-        **_common(warp_device, mesh, "fits", count, steps, batched_s, alone_count, sequential_s),
+        **_common(
+            warp_device, fitted_mesh, "fits", count, steps, batched_s, alone_count, sequential_s
+        ),
         "batched_completed": sum(fit.success for fit in fits),
-        "batched_lm_iterations": int(sum(fit.iterations for fit in fits)),
+        "batched_lm_iterations": int(sum(fit.result.nfev for fit in fits)),
         "max_parameter_difference": difference,
         "max_truth_error": max(
-            abs(float(fit.x[0] / truth.material.parameter_vector[0]) - 1.0)
-            for fit, truth in zip(fits, truths, strict=True)
+            abs(value / float(truth.material.parameter_vector[0]) - 1.0)
+            for value, truth in zip(c10, truths, strict=True)
         ),
     }
 
@@ -313,7 +376,7 @@ def main(argv: list[str] | None = None) -> int:
     if not counts or min(counts) < 1 or not 1 <= args.steps <= 20:
         print("bench_batch_fe.py: counts must be >= 1 and steps in [1, 20]", file=sys.stderr)
         return 2
-    mesh, _ = warptissue_mesh(target, mesher=args.mesher)
+    mesh, size_near_m = warptissue_mesh(target, mesher=args.mesher)
     run(mesh, 1, args.device, steps=1, sequential_limit=1)  # warm-up: kernels, libraries
     kinds = [text for text in args.what.split(",") if text]
     if not kinds or set(kinds) - {"curves", "fits"}:
@@ -322,9 +385,10 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for kind in kinds:
         for count in counts:
-            row = (run if kind == "curves" else run_fits)(
-                mesh, count, args.device, steps=args.steps, sequential_limit=args.sequential_limit
-            )
+            options = {"steps": args.steps, "sequential_limit": args.sequential_limit}
+            if kind == "fits":
+                options.update(size_near_m=size_near_m, mesher=args.mesher)
+            row = (run if kind == "curves" else run_fits)(mesh, count, args.device, **options)
             rows.append(row)
             print(json.dumps(row))
     results = {"label": args.label or args.device, "machine": machine_description(), "runs": rows}

@@ -152,12 +152,15 @@ class ElementPart:
         device_nodes: ``nodes`` as an int32 Warp array.
         forces: The part's nodal forces of the last :meth:`Assembler.assemble_part`, (R,)
             vec3d Warp array (its buffer).
+        problems: The packed problems its tets belong to, sorted, (q,) int64 (``[0]`` for an
+            assembler of one problem).
     """
 
     elements: wp.array
     nodes: np.ndarray
     device_nodes: wp.array
     forces: wp.array
+    problems: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -205,6 +208,9 @@ class Assembler:
         materials: One material per problem, (K,).
         problem_count: K.
         tet_volumes: Reference element volumes, shape (tet_count,), m^3.
+        contact: The rigid contact of an assembler of one problem (None without one, and
+            always None where K > 1: see ``contacts``).
+        contacts: Each problem's rigid contact or None, (K,) (:meth:`set_contact`).
     """
 
     def __init__(
@@ -258,6 +264,19 @@ class Assembler:
         node_problem = np.zeros(self.node_count, dtype=np.int32)
         node_problem[mesh.tets] = problems[:, None]
         self._node_problem = wp.array(node_problem, dtype=wp.int32, device=dev)
+        self._node_problem_host = node_problem
+        self._element_problem_host = problems
+        # First node of each problem and the node count at the end, where the problems are
+        # packed (pack_meshes; None where not): a contact's nodes are in its problem's own
+        # numbering (set_contact).
+        self._node_offsets: np.ndarray | None = np.array([0, self.node_count], dtype=np.int64)
+        if count > 1:
+            ranges = _packed_ranges(mesh.tets, self.node_count, problems)
+            self._node_offsets = (
+                None
+                if ranges is None
+                else np.array([r[2] for r in ranges] + [self.node_count], dtype=np.int64)
+            )
         # The damping of each problem's tangent (eliminate), copied only when it changes.
         self._damping_host = np.zeros(count)
         self._damping = wp.zeros(count, dtype=wp.float64, device=dev)
@@ -265,12 +284,16 @@ class Assembler:
         self._scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
         self._energy, self._min_jacobian = self._scalars[:count], self._scalars[count:]
         self._part_scalars = wp.zeros(2 * count, dtype=wp.float64, device=dev)
-        self._part_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
+        self._part_force = wp.zeros(count, dtype=wp.vec3d, device=dev)
         self._tets_host: np.ndarray | None = None
         self._last_submatrix: _SubmatrixBlocks | None = None
         self._points = wp.array(mesh.points, dtype=wp.vec3d, device=dev)
         self.contact: RigidContact | None = None
-        self._contact_force = wp.zeros(1, dtype=wp.vec3d, device=dev)
+        self.contacts: tuple[RigidContact | None, ...] = (None,) * count
+        self._contact_force = wp.zeros(count, dtype=wp.vec3d, device=dev)
+        self._contact_ranges = np.zeros(count + 1, dtype=np.int64)
+        self._bodies_key: Any = None
+        self._stiffness_key: Any = None
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
@@ -327,56 +350,214 @@ class Assembler:
         self.material = materials[0] if self.problem_count == 1 else None
         self._params = materials[0].device_params()
 
-    def set_contact(self, contact: RigidContact | None) -> None:
-        """Press a rigid indenter into the body from the next assembly on (None: no contact).
+    def set_contact(self, contact: RigidContact | Sequence[RigidContact | None] | None) -> None:
+        """Press rigid indenters into the bodies from the next assembly on (None: no contact).
 
-        Every later :meth:`assemble` adds the frictionless penalty of ``contact`` at its
+        Every later :meth:`assemble` adds the frictionless penalty of each contact at its
         current depth (:mod:`warptissue.fem.contact`) to the residual (``R = f_int - f_c``),
-        the tangent's diagonal blocks and the energy; :meth:`set_load` moves the indenter.
-        """
-        if contact is not None:
-            self._one_problem("a rigid contact")
-            nodes = contact.nodes
-            if nodes.min() < 0 or nodes.max() >= self.node_count:
-                raise InputError("contact nodes must be nodes of the mesh", key="mesh")
-            self._contact_nodes = wp.array(nodes, dtype=wp.int32, device=self.device)
-            self._contact_blocks = wp.array(
-                self._diagonal_blocks[nodes], dtype=wp.int32, device=self.device
-            )
-            self._contact_node_force = wp.zeros(len(nodes), dtype=wp.vec3d, device=self.device)
-            self._contact_gap = wp.zeros(len(nodes), dtype=wp.float64, device=self.device)
-        self.contact = contact
+        the tangent's diagonal blocks and its problem's energy; :meth:`set_load` moves the
+        indenters. All problems' candidate nodes are evaluated in one launch, each with its
+        own problem's body and penalty stiffness.
 
-    def set_load(self, load: float) -> None:
-        """The load of the next assemblies: the rigid indenter's depth, m (no-op without one).
+        Args:
+            contact: For one problem, its :class:`warptissue.fem.contact.RigidContact` or
+                None. For K packed problems (:func:`warptissue.fem.packing.pack_meshes`), a
+                sequence of K entries, each a contact whose nodes are in its own problem's
+                numbering, or None (a problem without one, e.g. a sharp flat punch); None
+                alone: no contact anywhere.
+
+        Raises:
+            InputError: Not one entry per problem, a contact node outside its problem, or
+                contacts on problems that are not packed in contiguous node ranges.
+        """
+        count = self.problem_count
+        if contact is None:
+            contacts: tuple[RigidContact | None, ...] = (None,) * count
+        elif isinstance(contact, RigidContact):
+            if count > 1:
+                raise InputError(
+                    f"one contact (or None) per packed problem: {count} expected",
+                    key="contact",
+                    value=1,
+                )
+            contacts = (contact,)
+        else:
+            contacts = tuple(contact)
+            if len(contacts) != count:
+                raise InputError(
+                    f"one contact (or None) per packed problem: {count} expected",
+                    key="contact",
+                    value=len(contacts),
+                )
+        for k, each in enumerate(contacts):
+            if each is not None and not isinstance(each, RigidContact):
+                raise InputError(
+                    f"problem {k}: a contact must be a RigidContact or None",
+                    key="contact",
+                    value=type(each).__name__,
+                )
+        used = [k for k, each in enumerate(contacts) if each is not None]
+        offsets = self._node_offsets
+        if used and offsets is None:
+            raise InputError(
+                "rigid contacts of several problems need them packed in contiguous node "
+                "ranges (warptissue.fem.packing.pack_meshes)",
+                key="element_problem",
+            )
+        counts = np.zeros(count, dtype=np.int64)
+        nodes, problems = [], []
+        for k in used:
+            own = contacts[k].nodes
+            size = int(offsets[k + 1] - offsets[k])
+            if own.min() < 0 or own.max() >= size:
+                raise InputError(
+                    "contact nodes must be nodes of the mesh"
+                    + ("" if count == 1 else f" (of problem {k}, in its own numbering)"),
+                    key="mesh",
+                )
+            nodes.append(own + offsets[k])
+            problems.append(np.full(len(own), k, dtype=np.int32))
+            counts[k] = len(own)
+        if used:
+            dev = self.device
+            union = np.concatenate(nodes)
+            self._contact_nodes = wp.array(union, dtype=wp.int32, device=dev)
+            self._contact_blocks = wp.array(
+                self._diagonal_blocks[union], dtype=wp.int32, device=dev
+            )
+            self._contact_problem = wp.array(np.concatenate(problems), dtype=wp.int32, device=dev)
+            self._contact_node_force = wp.zeros(len(union), dtype=wp.vec3d, device=dev)
+            self._contact_gap = wp.zeros(len(union), dtype=wp.float64, device=dev)
+        self._contact_ranges = np.concatenate([[0], np.cumsum(counts)])
+        self._bodies_key = self._stiffness_key = None  # uploaded at the next launch
+        self.contacts = contacts
+        self.contact = contacts[0] if count == 1 else None
+
+    @property
+    def has_contact(self) -> bool:
+        """Whether any problem has a rigid contact."""
+        return any(each is not None for each in self.contacts)
+
+    def set_load(self, load: Any) -> None:
+        """The load of the next assemblies: each rigid indenter's depth, m (no-op without one).
 
         :func:`warptissue.fem.solve_quasistatic` calls it before each load increment.
-        """
-        if self.contact is not None:
-            self.contact.depth_m = float(load)
 
-    def contact_state(self, displacement_m: np.ndarray | wp.array) -> ContactState:
+        Args:
+            load: The depth, m: a number for one problem; for K packed problems one per
+                problem, (K,) (a number: the same for all).
+
+        Raises:
+            InputError: Not one depth per problem.
+        """
+        count = self.problem_count
+        if count == 1:
+            if self.contact is not None:
+                value = np.asarray(load, dtype=np.float64)
+                if value.size != 1:
+                    raise InputError("one load for one problem", key="load", value=value.shape)
+                self.contact.depth_m = float(load) if value.ndim == 0 else float(value.flat[0])
+            return
+        loads = np.asarray(load, dtype=np.float64)
+        if loads.ndim == 0:
+            loads = np.full(count, float(loads))
+        if loads.shape != (count,):
+            raise InputError(
+                f"one load per packed problem ({count})", key="load", value=loads.shape
+            )
+        for each, depth in zip(self.contacts, loads, strict=True):
+            if each is not None:
+                each.depth_m = float(depth)
+
+    def contact_state(
+        self, displacement_m: np.ndarray | wp.array, *, problem: int | None = None
+    ) -> ContactState:
         """The rigid contact at a displacement and the current depth: each candidate node's gap
         and contact force (:class:`warptissue.fem.contact.ContactState`). Leaves the
         assembler's residual, tangent and energy as they were.
 
+        Args:
+            displacement_m: Nodal displacements, (N, 3), m (NumPy or a vec3d Warp array).
+            problem: Of K packed problems, whose contact (its nodes in its own numbering);
+                needed where K > 1 (:meth:`contact_states` gives all of them at once).
+
         Raises:
-            InputError: No rigid contact is set.
+            InputError: No rigid contact is set (on that problem), or no ``problem`` where
+                K > 1.
+        """
+        if problem is None:
+            if self.problem_count > 1:
+                raise InputError(
+                    f"the assembler packs {self.problem_count} problems: name the problem "
+                    "(or use contact_states)",
+                    key="problem",
+                )
+            problem = 0
+        if not 0 <= problem < self.problem_count:
+            raise InputError(
+                f"problem must lie in [0, {self.problem_count})", key="problem", value=problem
+            )
+        if self.contacts[problem] is None:
+            raise InputError("no rigid contact is set (a sharp flat punch has none)", key="kind")
+        return self.contact_states(displacement_m)[problem]
+
+    def contact_states(self, displacement_m: np.ndarray | wp.array) -> list[ContactState | None]:
+        """Every problem's :meth:`contact_state` from one launch: one entry per packed problem,
+        None where it has no rigid contact; each state's nodes in its problem's own numbering.
+
+        Args:
+            displacement_m: Nodal displacements of all problems, (N, 3), m; each problem's
+                depth is the last :meth:`set_load`'s.
         """
         from warptissue.kernels import fem as kf
 
-        if self.contact is None:
-            raise InputError("no rigid contact is set (a sharp flat punch has none)", key="kind")
+        if not self.has_contact:
+            return [None] * self.problem_count
         u = self.device_displacement(displacement_m)
         scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
-        energy = wp.zeros(1, dtype=wp.float64, device=self.device)
-        force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
+        energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
+        force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
         self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
-        return ContactState(
-            nodes=self.contact.nodes.copy(),
-            gap_m=self._contact_gap.numpy().copy(),
-            force_N=self._contact_node_force.numpy().copy(),
+        gaps, forces = self._contact_gap.numpy(), self._contact_node_force.numpy()
+        ranges = self._contact_ranges
+        return [
+            None
+            if each is None
+            else ContactState(
+                nodes=each.nodes.copy(),
+                gap_m=gaps[ranges[k] : ranges[k + 1]].copy(),
+                force_N=forces[ranges[k] : ranges[k + 1]].copy(),
+            )
+            for k, each in enumerate(self.contacts)
+        ]
+
+    def _contact_inputs(self) -> list[Any]:
+        """The per-problem inputs of ``rigid_contact_kernel``: ``[bodies, stiffness]``, each
+        problem's body at its current depth and its penalty stiffness, copied to the device
+        only when a contact's depth, body or stiffness has changed (the penalty ramp of
+        :mod:`warptissue.fem.newton.increment` scales the stiffness)."""
+        from warptissue.kernels import fem as kf
+
+        bodies_key = tuple(
+            None if each is None else (each.indenter, each.top_z_m, each.depth_m)
+            for each in self.contacts
         )
+        if bodies_key != self._bodies_key:
+            self._bodies = wp.array(
+                [kf.RigidBody() if each is None else each.device_body() for each in self.contacts],
+                dtype=kf.RigidBody,
+                device=self.device,
+            )
+            self._bodies_key = bodies_key
+        stiffness_key = tuple(
+            0.0 if each is None else float(each.stiffness_N_per_m) for each in self.contacts
+        )
+        if stiffness_key != self._stiffness_key:
+            self._stiffness = wp.array(
+                np.array(stiffness_key, dtype=np.float64), dtype=wp.float64, device=self.device
+            )
+            self._stiffness_key = stiffness_key
+        return [self._bodies, self._stiffness]
 
     def _launch_contact(
         self,
@@ -388,18 +569,18 @@ class Assembler:
         energy: wp.array,
         force: wp.array,
     ) -> None:
-        """One launch of ``rigid_contact_kernel`` at the contact's current depth."""
-        contact = self.contact
+        """One launch of ``rigid_contact_kernel`` over every problem's candidate nodes at the
+        contacts' current depths (``energy`` and ``force``: one entry per problem)."""
         wp.launch(
             kf.rigid_contact_kernel,
-            dim=len(contact.nodes),
+            dim=int(self._contact_ranges[-1]),
             inputs=[
                 self._points,
                 u,
                 self._contact_nodes,
                 self._contact_blocks,
-                contact.device_body(),
-                wp.float64(contact.stiffness_N_per_m),
+                self._contact_problem,
+                *self._contact_inputs(),
                 with_tangent,
             ],
             outputs=[residual, values, energy, force, self._contact_node_force, self._contact_gap],
@@ -485,7 +666,7 @@ class Assembler:
             outputs=[self._residual, self.matrix.values, self._energy, self._min_jacobian],
             device=self.device,
         )
-        if self.contact is not None:
+        if self.has_contact:
             self._contact_force.zero_()
             self._launch_contact(
                 kf,
@@ -579,35 +760,39 @@ class Assembler:
                 device=self.device,
             )
             explicit = self._residual.numpy().copy()
-        if self.problem_count == 1:
-            shear = float(derivatives[0].shear_modulus)
-            explicit = explicit + self._contact_parameter_residual(u, shear)
+        d_shears = np.array([float(derivative.shear_modulus) for derivative in derivatives])
+        explicit = explicit + self._contact_parameter_residual(u, d_shears)
         if viscous is None or name not in viscous.names:
             return explicit
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
 
-    def _contact_parameter_residual(self, u: wp.array, d_shear: float) -> np.ndarray | float:
-        """The rigid contact's part of ``dR/dtheta``: its penalty ``k = beta mu0 h`` follows
-        the initial shear modulus, so ``dR_c/dtheta = R_c (dmu0/dtheta) / mu0`` (0 without
-        contact or for a parameter mu0 does not depend on).
+    def _contact_parameter_residual(self, u: wp.array, d_shears: np.ndarray) -> np.ndarray | float:
+        """The rigid contacts' part of ``dR/dtheta``: each problem's penalty ``k = beta mu0 h``
+        follows its initial shear modulus, so ``dR_c/dtheta = R_c (dmu0/dtheta) / mu0`` on its
+        nodes (0 without contact or for a parameter mu0 does not depend on).
 
         Args:
             u: Nodal displacements on the device.
-            d_shear: ``dmu0/dtheta``, the ``shear_modulus`` field of
+            d_shears: Each problem's ``dmu0/dtheta``, (K,), the ``shear_modulus`` field of
                 :meth:`warptissue.materials.Material.device_params_derivative`.
         """
         from warptissue.kernels import fem as kf
 
-        if self.contact is None or d_shear == 0.0:
+        moduli = np.array([material.initial_shear_modulus_Pa for material in self.materials])
+        shares = np.where(
+            [each is not None for each in self.contacts], np.asarray(d_shears) / moduli, 0.0
+        )
+        if not np.any(shares != 0.0):
             return 0.0
-        share = d_shear / self.material.initial_shear_modulus_Pa
         scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
-        energy = wp.zeros(1, dtype=wp.float64, device=self.device)
-        force = wp.zeros(1, dtype=wp.vec3d, device=self.device)
+        energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
+        force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
         self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
-        return share * scratch.numpy()
+        if self.problem_count == 1:
+            return shares[0] * scratch.numpy()
+        return scratch.numpy() * shares[self._node_problem_host][:, None]
 
     def eliminate(self, constrained: wp.array, *, damping: Any = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
@@ -707,6 +892,7 @@ class Assembler:
             nodes=part_nodes.astype(np.int64),
             device_nodes=wp.array(part_nodes.astype(np.int32), dtype=wp.int32, device=self.device),
             forces=wp.zeros(len(part_nodes), dtype=wp.vec3d, device=self.device),
+            problems=np.unique(self._element_problem_host[elements]).astype(np.int64),
         )
 
     def assemble_part(
@@ -721,9 +907,9 @@ class Assembler:
         For a local solve on a patch of nodes (the nonlinear elimination): where only the
         patch's nodes move, only the tets that hold them change their forces and energy, so
         the whole residual follows from the last one plus the change of this part, at the
-        part's nodes. The rigid contact, where there is one, is evaluated at every candidate
-        node (its unchanged nodes cancel in that difference; the forces returned hold its
-        share at the part's nodes).
+        part's nodes. The rigid contacts, where there are any, are evaluated at every
+        candidate node (its unchanged nodes cancel in that difference; the forces returned
+        hold their share at the part's nodes).
 
         Args:
             displacement_m: Nodal displacements, (N, 3), m (NumPy or a vec3d Warp array).
@@ -736,8 +922,8 @@ class Assembler:
 
         Returns:
             (forces of these tets and of the contact at ``part.nodes``, (R, 3), N; their
-            energy (with the contact's at every candidate node), J; the smallest det F over
-            their quadrature points).
+            energy with the contact's at every candidate node of their problems
+            (``part.problems``), J; the smallest det F over their quadrature points).
         """
         from warptissue.kernels import fem as kf
 
@@ -770,7 +956,7 @@ class Assembler:
             outputs=[self._part_residual, self.matrix.values, energy, min_jacobian],
             device=self.device,
         )
-        if self.contact is not None:
+        if self.has_contact:
             self._launch_contact(
                 kf,
                 u,
@@ -784,7 +970,7 @@ class Assembler:
         values = scalars.numpy()
         return (
             part.forces.numpy().copy(),
-            float(values[:count].sum()),
+            float(values[:count][part.problems].sum()),
             float(values[count:].min()),
         )
 
@@ -937,16 +1123,6 @@ class Assembler:
             device=self.device,
         )
         return stress.numpy()
-
-    def _one_problem(self, what: str) -> None:
-        """Refuse ``what`` on an assembler of several packed problems (InputError)."""
-        if self.problem_count > 1:
-            raise InputError(
-                f"{what} is available for one problem per assembler; this one packs "
-                f"{self.problem_count}",
-                key="material",
-                value=self.problem_count,
-            )
 
     def _assembly_inputs(
         self, displacement: wp.array, *, problem_params: wp.array | None = None

@@ -34,7 +34,12 @@ import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem.assembly import FORMULATIONS, Assembler, von_mises
-from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR, ContactSurface, RigidContact
+from warptissue.fem.contact import (
+    DEFAULT_PENALTY_FACTOR,
+    ContactState,
+    ContactSurface,
+    RigidContact,
+)
 from warptissue.fem.newton import (
     DirichletConditions,
     ForceSensitivity,
@@ -474,43 +479,76 @@ def simulate_indentation(
             profile=profile,
         )
     except SolveInterrupted as interrupted:
-        partial = _indentation_result(problem, assembler, interrupted.partial_result, names)
+        partial = interrupted.partial_result
+        partial = _indentation_result(
+            problem,
+            partial,
+            names,
+            stress_Pa=_last_stress(assembler, partial),
+            contact_states=_contact_states(assembler, partial),
+        )
         raise SolveInterrupted(interrupted.message, partial_result=partial) from interrupted
-    result = _indentation_result(problem, assembler, path, names)
+    result = _indentation_result(
+        problem,
+        path,
+        names,
+        stress_Pa=_last_stress(assembler, path),
+        contact_states=_contact_states(assembler, path),
+    )
     if strict and not result.completed:
         raise ConvergenceError(result.message, partial_result=result)
     return result
 
 
+def _last_stress(assembler: Assembler, path: QuasistaticResult) -> np.ndarray:
+    """The Cauchy stress (M, 6) at a single run's last converged state ((0, 6) without one)."""
+    if not len(path.loads):
+        return np.zeros((0, 6))
+    return assembler.cauchy_stress(path.displacement_m[-1])
+
+
+def _contact_states(assembler: Assembler, path: QuasistaticResult) -> list[ContactState] | None:
+    """A single run's rigid contact at each converged depth (None without a contact).
+
+    Leaves the contact at the last depth of ``path``.
+    """
+    if assembler.contact is None:
+        return None
+    states = []
+    for depth, u in zip(path.loads, path.displacement_m, strict=True):
+        assembler.set_load(depth)
+        states.append(assembler.contact_state(u))
+    return states
+
+
 def _indentation_result(
     problem: IndentationProblem,
-    assembler: Assembler | None,
     path: QuasistaticResult,
     sensitivity_names: tuple[str, ...] = (),
     *,
-    stress_Pa: np.ndarray | None = None,
+    stress_Pa: np.ndarray,
+    contact_states: Sequence[ContactState] | None = None,
 ) -> IndentationResult:
     """The indentation result of a load path: the curve, the fields at its last state.
 
-    ``stress_Pa``: the Cauchy stress (M, 6) at the last state where the caller has it (a
-    batch computes all problems' at once; ``assembler`` is then None: no contact)."""
-    if not len(path.loads):
-        stress = np.zeros((0, 6))
-    elif stress_Pa is not None:
-        stress = stress_Pa
-    else:
-        stress = assembler.cauchy_stress(path.displacement_m[-1])
-    contact = None if assembler is None else assembler.contact
+    Args:
+        problem: The problem solved.
+        path: Its load path, in the problem's own node numbering.
+        sensitivity_names: The parameters of ``path.reaction_sensitivity``'s columns.
+        stress_Pa: The Cauchy stress (M, 6) at the last converged state ((0, 6) without one).
+        contact_states: Under a rigid indenter, the contact at each converged depth, in the
+            problem's own node numbering (:meth:`warptissue.fem.Assembler.contact_state`);
+            None for a sharp flat punch.
+    """
+    stress = stress_Pa
     contact_force, penetration, area = np.zeros(0), np.zeros(0), np.zeros(0)
     pressure = np.zeros((0, problem.mesh.node_count))
-    if contact is not None:
+    if contact_states is not None:
         steps = len(path.loads)
         surface = ContactSurface.for_mesh(problem.mesh, surface=problem.surface)
         contact_force, penetration, area = np.empty(steps), np.empty(steps), np.empty(steps)
         pressure = np.empty((steps, problem.mesh.node_count))
-        for i, (depth, u) in enumerate(zip(path.loads, path.displacement_m, strict=True)):
-            assembler.set_load(depth)
-            state = assembler.contact_state(u)
+        for i, (state, u) in enumerate(zip(contact_states, path.displacement_m, strict=True)):
             contact_force[i] = -problem.symmetry_factor * state.total_force_N[2]
             penetration[i] = state.max_penetration_m
             current = problem.mesh.points + u
@@ -557,8 +595,10 @@ def simulate_indentation_batch(
     """K indentations solved together on one device, in one Newton loop.
 
     Args:
-        problems: Bonded or frictionless flat-punch problems, all of one element type and
-            formulation (meshes, materials and viscoelastic histories may differ).
+        problems: Problems all of one element type and formulation (meshes, materials,
+            viscoelastic histories, indenters and their contact conditions may differ:
+            bonded or frictionless flat punches, and rigid indenters in contact, each with
+            its own penalty stiffness; :mod:`warptissue.fem.contact`).
         depths_m: Each problem's depths, m: positive and strictly increasing, or with its
             times any depths >= 0 (as :func:`simulate_indentation`).
         device: Warp device; None for Warp's default.
@@ -577,12 +617,16 @@ def simulate_indentation_batch(
     Returns:
         One :class:`warptissue.fem.IndentationResult` per problem, as
         :func:`warptissue.fem.simulate_indentation` gives it (equal forces to the Newton
-        tolerance).
+        tolerance), with the contact outputs (contact force, penetration, area, pressure)
+        of a rigid indenter. Where any problem has a rigid indenter other than a plate,
+        every problem's increments take the penalty ramp
+        (:func:`warptissue.fem.newton.increment.penalty_ramped_increment`): the path to the
+        solution changes, not the converged state.
 
     Raises:
-        InputError: No problem, a problem this batch cannot take (rigid contact, another
-            element type or formulation), bad depths or times, or an assembler of other
-            meshes or another formulation.
+        InputError: No problem, a problem this batch cannot take (another element type or
+            formulation), bad depths or times, or an assembler of other meshes or another
+            formulation.
     """
     problems = list(problems)
     if not problems:
@@ -593,13 +637,6 @@ def simulate_indentation_batch(
         )
     formulation = problems[0].formulation
     for k, problem in enumerate(problems):
-        if problem.is_contact:
-            raise InputError(
-                f"problem {k}: a batch takes flat punches (rigid contact runs one problem per "
-                "assembler)",
-                key="indenter",
-                value=problem.indenter.kind,
-            )
         if problem.formulation != formulation:
             raise InputError(
                 f"problem {k}: every problem of a batch has one formulation ({formulation!r})",
@@ -635,6 +672,8 @@ def simulate_indentation_batch(
     else:
         check_packed_assembler(assembler, packed, formulation)
         assembler.set_material([problem.material for problem in problems])
+    # Each contact's stiffness follows its problem's material: set on every call.
+    assembler.set_contact([problem.rigid_contact() for problem in problems])
     paths = solve_quasistatic_batch(
         assembler,
         packed,
@@ -652,13 +691,45 @@ def simulate_indentation_batch(
         if len(path.loads):
             last[packed.nodes(k)] = path.displacement_m[-1]
     stress = assembler.cauchy_stress(last)
+    states = _packed_contact_states(assembler, packed, paths)
     results = []
     for k, (problem, path) in enumerate(zip(problems, paths, strict=True)):
         tets = slice(int(packed.tet_offsets[k]), int(packed.tet_offsets[k + 1]))
         results.append(
-            _indentation_result(problem, None, path, tuple(sensitivities), stress_Pa=stress[tets])
+            _indentation_result(
+                problem,
+                path,
+                tuple(sensitivities),
+                stress_Pa=stress[tets] if len(path.loads) else np.zeros((0, 6)),
+                contact_states=states[k],
+            )
         )
     return results
+
+
+def _packed_contact_states(
+    assembler: Assembler, packed: PackedMeshes, paths: Sequence[QuasistaticResult]
+) -> list[list[ContactState] | None]:
+    """Each packed problem's rigid contact at each of its converged depths (None for a
+    problem without one), in its own node numbering: step i of every problem that reached
+    it in one launch (:meth:`warptissue.fem.Assembler.contact_states`)."""
+    states: list[list[ContactState] | None] = [
+        None if contact is None else [] for contact in assembler.contacts
+    ]
+    if not assembler.has_contact:
+        return states
+    for i in range(max(len(path.loads) for path in paths)):
+        u = np.zeros((packed.mesh.node_count, 3))
+        depths = np.zeros(len(paths))
+        for k, path in enumerate(paths):
+            if i < len(path.loads):
+                u[packed.nodes(k)] = path.displacement_m[i]
+                depths[k] = path.loads[i]
+        assembler.set_load(depths)
+        for k, state in enumerate(assembler.contact_states(u)):
+            if state is not None and i < len(paths[k].loads):
+                states[k].append(state)
+    return states
 
 
 def batch_assembler(

@@ -8,12 +8,10 @@ without importing the fits.
 Submodules: :mod:`~warptissue.fit.punch` (Sneddon, Hertz and Hayes et al. contact formulas and
 the punch-modulus fit), :mod:`~warptissue.fit.hyperelastic` (homogeneous hyperelastic tests),
 :mod:`~warptissue.fit.indentation` (inverse FE: :func:`fit_indentation` of a study's material
-parameters to its indentation records, with the FE's exact sensitivities),
-:mod:`~warptissue.fit.batched` (many flat-punch fits with their forward runs batched on one
-device: :func:`fit_indentation_batch`).
+parameters to its indentation records, with the FE's exact sensitivities; of several
+studies together, their forward runs batched on one device).
 """
 
-from warptissue.fit.batched import fit_indentation_batch
 from warptissue.fit.indentation import (
     IndentationFit,
     IndentationFitProgress,
@@ -26,5 +24,4 @@ __all__ = [
     "IndentationFitProgress",
     "RecordCurve",
     "fit_indentation",
-    "fit_indentation_batch",
 ]

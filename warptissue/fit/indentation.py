@@ -73,14 +73,10 @@ from typing import Any
 
 import numpy as np
 
+from warptissue import fem
 from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
-from warptissue.fem import (
-    Assembler,
-    batch_assembler,
-    simulate_indentation,
-    simulate_indentation_batch,
-)
+from warptissue.fit._forward import FitMeeting, run_fits
 from warptissue.fit.start import start_values_from_record
 from warptissue.io import read_sidecar, software_versions
 from warptissue.loading import resample_history
@@ -509,6 +505,7 @@ class _ForwardModel:
         settings = study.fit
         self.batch_records = batch_records
         self._packed_assembler: Any = None
+        self.meeting: tuple[FitMeeting, int] | None = None
         self.study = study
         self.problem = problem
         self.assembler = assembler
@@ -684,7 +681,26 @@ class _ForwardModel:
     ) -> list[Any]:
         """The FE runs of several load paths (``(times, depths)`` each) of one material: in
         one batched run (:func:`warptissue.fem.simulate_indentation_batch`) where
-        ``batch_records`` and there are several, else one after another."""
+        ``batch_records`` and there are several, else one after another. A fit of several
+        studies hands them to its :class:`~warptissue.fit._forward.FitMeeting`, which
+        solves them with the other fits' runs."""
+        if self.meeting is not None:
+            meeting, fit = self.meeting
+            self.forward_solves += len(grids)
+            results = meeting.request(
+                fit,
+                _RunRequest(
+                    problems=[dataclasses.replace(self.problem, material=material)] * len(grids),
+                    grids=list(grids),
+                    names=self.names if sensitivities else (),
+                    options=self.options,
+                    device=self.device,
+                ),
+            )
+            for result in results:
+                if not result.completed:
+                    raise RejectStep(f"the FE did not converge: {result.message}")
+            return results
         if not (self.batch_records and len(grids) > 1):
             return [
                 self._run(material, times, depths, sensitivities=sensitivities)
@@ -693,9 +709,9 @@ class _ForwardModel:
 
         problems = [dataclasses.replace(self.problem, material=material)] * len(grids)
         if self._packed_assembler is None or self._packed_assembler.problem_count != len(grids):
-            self._packed_assembler = batch_assembler(problems, device=self.device)
+            self._packed_assembler = fem.batch_assembler(problems, device=self.device)
         self.forward_solves += len(grids)
-        results = simulate_indentation_batch(
+        results = fem.simulate_indentation_batch(
             problems,
             [depths for _, depths in grids],
             options=self.options,
@@ -848,7 +864,7 @@ def _first_passage_times(
 
 
 def _simulate() -> Callable[..., Any]:
-    return simulate_indentation
+    return fem.simulate_indentation
 
 
 def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
@@ -910,7 +926,7 @@ def _forward_model(
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     mesh = build_mesh(study)
     problem = build_problem(dataclasses.replace(study, material=material), mesh)
-    assembler = Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
+    assembler = fem.Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
     return _ForwardModel(
         study=study,
         problem=problem,
@@ -920,25 +936,22 @@ def _forward_model(
         device=warp_device,
         progress=progress,
         offset_start=offset_start,
-        batch_records=(
-            batches_records(problem, warp_device) if batch_records is None else batch_records
-        ),
+        batch_records=(batches_records(warp_device) if batch_records is None else batch_records),
     )
 
 
-def batches_records(problem: Any, device: Any) -> bool:
+def batches_records(device: Any) -> bool:
     """Whether a fit solves its records' FE runs (one per record of a viscoelastic material)
     together in one batched run (:func:`warptissue.fem.simulate_indentation_batch`) rather
     than one after another.
 
     Args:
-        problem: The study's :class:`warptissue.fem.IndentationProblem`.
         device: The Warp device of the fit.
 
     Returns:
         True where that was measured to pay: see docs/design-notes/batched-fe.md.
     """
-    return RECORD_BATCHING[device.is_cuda] and not problem.is_contact
+    return RECORD_BATCHING[device.is_cuda]
 
 
 RECORD_BATCHING = {False: False, True: True}
@@ -1043,20 +1056,94 @@ def _shifted(record: DataRecord, offset_m: float) -> DataRecord:
     return dataclasses.replace(record, record=samples)
 
 
+@dataclass(frozen=True)
+class _RunRequest:
+    """FE runs one fit asks of a :class:`~warptissue.fit._forward.FitMeeting`: one problem
+    per load path ``(times_s or None, depths_m)``, with the sensitivities ``names``."""
+
+    problems: list[Any]
+    grids: list[tuple[np.ndarray | None, np.ndarray]]
+    names: tuple[str, ...]
+    options: Any
+    device: Any
+
+
+class _SharedRuns:
+    """Solves the requests of fits that meet (:class:`~warptissue.fit._forward.FitMeeting`):
+    the requests that share their sensitivities, Newton settings, device and formulation
+    are solved in one batched FE run; the packed assembler of the last few sets of meshes is
+    kept (a fit's trial points change the materials, not the meshes)."""
+
+    KEPT = 4
+
+    def __init__(self) -> None:
+        self._assemblers: dict[tuple, Any] = {}
+
+    def __call__(self, batch: dict[int, _RunRequest]) -> dict[int, Any]:
+        groups: dict[tuple, list[int]] = {}
+        for fit, request in sorted(batch.items()):  # in fit order: one assembler per set
+            key = (
+                request.names,
+                request.options,
+                str(request.device),
+                request.problems[0].formulation,
+            )
+            groups.setdefault(key, []).append(fit)
+        answers: dict[int, Any] = {}
+        for key, fits in groups.items():
+            problems = [problem for fit in fits for problem in batch[fit].problems]
+            grids = [grid for fit in fits for grid in batch[fit].grids]
+            meshes = (key, tuple(id(problem.mesh) for problem in problems))
+            try:
+                if meshes not in self._assemblers:
+                    if len(self._assemblers) >= self.KEPT:
+                        self._assemblers.pop(next(iter(self._assemblers)))
+                    self._assemblers[meshes] = fem.batch_assembler(
+                        problems, device=batch[fits[0]].device
+                    )
+                assembler = self._assemblers[meshes]
+                results = fem.simulate_indentation_batch(
+                    problems,
+                    [depths for _, depths in grids],
+                    options=batch[fits[0]].options,
+                    sensitivities=key[0],
+                    assembler=assembler,
+                    times_s=[times for times, _ in grids],
+                )
+            except Exception as exc:  # every fit of the group gets it
+                answers.update(dict.fromkeys(fits, exc))
+                continue
+            start = 0
+            for fit in fits:
+                count = len(batch[fit].grids)
+                answers[fit] = results[start : start + count]
+                start += count
+        return answers
+
+
 def fit_indentation(
-    study: Study,
+    study: Study | Sequence[Study],
     *,
     device: str | None = None,
     progress: bool = True,
     strategy: str | None = None,
     callback: Callable[[IndentationFitProgress], None] | None = None,
     contact_point: str | None = None,
-) -> IndentationFit:
+) -> IndentationFit | list[IndentationFit]:
     """Fit the study's free material parameters to its records by inverse FE.
+
+    Several studies (specimens, sites, rates) are fitted together: each fit runs the
+    engine's own Levenberg-Marquardt in a thread, exactly as it would alone, and whenever
+    every fit still running has asked for its forward runs, all of them are solved in one
+    batched FE run (:func:`warptissue.fem.simulate_indentation_batch`, each run with its own
+    Newton decisions), so a GPU does one batch of every fit's runs where it did them one
+    after another. Fits whose runs differ in their free parameters, Newton settings, device
+    or formulation are solved in separate batches.
 
     Args:
         study: A study with ``[[data]]`` records and a ``[fit]`` table
-            (:func:`warptissue.study.load_study`).
+            (:func:`warptissue.study.load_study`), or a sequence of them (fitted together,
+            without progress bars; ``callback`` is not called).
         device: Warp device (``"cpu"``, ``"cuda"``, ``"cuda:N"``); None: the study's
             ``solver.device`` (``"auto"``: a GPU where present, else the CPU).
         progress: Show a progress bar over the engine's trial steps (cost, R^2) and the FE's
@@ -1072,7 +1159,8 @@ def fit_indentation(
             conditioned); None: the study's ``fit.contact_point``.
 
     Returns:
-        The :class:`IndentationFit`. Ctrl-C (``KeyboardInterrupt``, also inside an FE run)
+        The :class:`IndentationFit` (a list of them, in order, for a sequence of studies).
+        Ctrl-C (``KeyboardInterrupt``, also inside an FE run)
         ends the fit with status ``"interrupted"`` and the best parameters evaluated so far
         (their curves, residuals and standard errors). A fit that reaches the iteration
         limit has status ``"max_iterations"``; one whose engine found no acceptable step or
@@ -1081,7 +1169,8 @@ def fit_indentation(
     Raises:
         InputError: The study has no fit or no records, a record was measured with another
             probe radius (its sidecar), an unknown strategy, contact point or free
-            parameter.
+            parameter. Of several studies, the first study's error is raised after every
+            fit has ended.
         ConvergenceError: The FE does not converge at the start values (nothing to fit from).
         KeyboardInterrupt: Ctrl-C before the first forward run finished (nothing to keep).
         DeviceError: The device does not exist.
@@ -1092,6 +1181,36 @@ def fit_indentation(
         LM (:mod:`warptissue.lsq.engine`). See the module docstring for the model force,
         the residuals and the warnings.
     """
+    options = {"strategy": strategy, "contact_point": contact_point}
+    if isinstance(study, Study):
+        return _fit_one(study, device=device, progress=progress, callback=callback, **options)
+    studies = list(study)
+    if not studies or not all(isinstance(each, Study) for each in studies):
+        raise InputError("give a study or a non-empty sequence of studies", key="study")
+    outcomes = run_fits(
+        len(studies),
+        _SharedRuns(),
+        lambda k, meeting: _fit_one(
+            studies[k], device=device, progress=False, meeting=(meeting, k), **options
+        ),
+    )
+    for outcome in outcomes:
+        if isinstance(outcome, BaseException):
+            raise outcome
+    return outcomes
+
+
+def _fit_one(
+    study: Study,
+    *,
+    device: str | None,
+    progress: bool,
+    strategy: str | None,
+    callback: Callable[[IndentationFitProgress], None] | None = None,
+    contact_point: str | None,
+    meeting: tuple[FitMeeting, int] | None = None,
+) -> IndentationFit:
+    """:func:`fit_indentation` of one study (its runs handed to ``meeting``, where given)."""
     started = time.perf_counter()
     if study.fit is None or not study.data:
         raise InputError(
@@ -1158,6 +1277,7 @@ def fit_indentation(
     model = _forward_model(
         study, material, free, device=device, progress=progress, offset_start=offset_start
     )
+    model.meeting = meeting
     offset_names = depth_offset_names(study.data) if fit_offsets else ()
     names = free + offset_names
     units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)

@@ -339,10 +339,14 @@ def penalty_ramped_increment(
 ) -> Increment:
     """One load increment under rigid contact: a softened penalty first, then the full one.
 
-    The increment is solved by :func:`newton_increment` with the contact's penalty stiffness
-    k times :data:`CONTACT_PENALTY_RAMP` to the loose :data:`CONTACT_RAMP_TOLERANCE`, then
-    with k from that state (no prescribed increment left) to ``tolerance``. The converged
-    state is that of k alone; the iterations of both stages are counted.
+    The increment is solved by :func:`newton_increment` with every problem's contact penalty
+    stiffness k times :data:`CONTACT_PENALTY_RAMP` to the loose :data:`CONTACT_RAMP_TOLERANCE`,
+    then with k from that state (no prescribed increment left) to ``tolerance``. Of K
+    problems, the stiff stage takes those that converged in the soft one (a problem that
+    failed it has failed the increment and keeps its start state), each from its own soft
+    state; problems without a rigid contact (a sharp flat punch, in a batch with contact
+    problems) take both stages as well. The converged state is that of k alone, as the
+    stiff stage's convergence test decides; the iterations of both stages are counted.
 
     Notes:
         With ``k = beta mu0 h`` and beta = 1000, a node that a Newton step carries into the
@@ -356,9 +360,10 @@ def penalty_ramped_increment(
         in the penalty parameter (Wriggers, Computational Contact Mechanics, 2006, ch. 6:
         a penalty increased during the solution).
     """
-    contact = assembler.contact
-    stiffness = contact.stiffness_N_per_m
-    contact.stiffness_N_per_m = stiffness * CONTACT_PENALTY_RAMP
+    contacts = [each for each in assembler.contacts if each is not None]
+    stiffnesses = [each.stiffness_N_per_m for each in contacts]
+    for each, stiffness in zip(contacts, stiffnesses, strict=True):
+        each.stiffness_N_per_m = stiffness * CONTACT_PENALTY_RAMP
     try:
         soft = newton_increment(
             assembler,
@@ -372,8 +377,9 @@ def penalty_ramped_increment(
             **options,
         )
     finally:
-        contact.stiffness_N_per_m = stiffness
-    if not soft.converged.all():
+        for each, stiffness in zip(contacts, stiffnesses, strict=True):
+            each.stiffness_N_per_m = stiffness
+    if not soft.converged.any():
         return soft
     stiff = newton_increment(
         assembler,
@@ -384,10 +390,17 @@ def penalty_ramped_increment(
         free,
         constrained,
         tolerance=tolerance,
-        **(options | {"free_guess": None, "guessed": None}),
+        **(options | {"active": soft.converged, "free_guess": None, "guessed": None}),
     )
     stiff.iterations += soft.iterations
     stiff.linear_iterations += soft.linear_iterations
     stiff.local_iterations += soft.local_iterations
     stiff.from_guess = soft.from_guess
+    stiff.reasons = [
+        mine if tried else theirs
+        for mine, theirs, tried in zip(stiff.reasons, soft.reasons, soft.converged, strict=True)
+    ]
+    # A problem that failed either stage keeps its start state (not its soft state).
+    stiff.displacement = problems.where(stiff.converged, stiff.displacement, u_start)
+    stiff.last_iterate = problems.where(soft.converged, stiff.last_iterate, soft.last_iterate)
     return stiff
