@@ -38,6 +38,7 @@ import functools
 import glob
 import hashlib
 import json
+import logging
 import os
 import signal
 import socket
@@ -669,8 +670,6 @@ def write_summary(path: str | Path, outcomes: Sequence[StudyOutcome]) -> Path:
 def _dask_client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
     """A Dask client of a running scheduler, or of a new LocalCluster (returned to close)."""
     try:
-        import logging
-
         from distributed import Client, LocalCluster
     except ImportError:
         raise InputError(
