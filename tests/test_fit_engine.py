@@ -21,7 +21,7 @@ from fit_problems import (
 )
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
+from warptissue.lsq import STATUS_MESSAGES, FitResult, RejectStep, fit_curve, least_squares
 
 METHODS = ("lm", "salm")
 

@@ -27,8 +27,8 @@ from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
 from warptissue.fit.indentation import _forward_model, depth_offset_start_m
-from warptissue.fit.result import RejectStep
 from warptissue.io import write_csv
+from warptissue.lsq.result import RejectStep
 from warptissue.materials import material_from_dict
 from warptissue.simulate import build_mesh, build_problem, run_study
 from warptissue.study import load_study, save_study
@@ -848,7 +848,7 @@ def test_the_touch_time_follows_the_offset_through_the_record():
 def test_an_offset_is_judged_against_its_record_not_its_value():
     # A depth offset may be zero: its standard error is judged against a tenth of its
     # record's depth span (standard_error_scales), a modulus against its own value.
-    from warptissue.fit.result import FitResult
+    from warptissue.lsq.result import FitResult
 
     def result(errors, scales):
         x = np.array([287.5, 1e-7])

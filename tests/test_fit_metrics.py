@@ -1,4 +1,4 @@
-"""Tests of warptissue.fit.metrics against direct formulas and scikit-learn."""
+"""Tests of warptissue.lsq.metrics against direct formulas and scikit-learn."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 from sklearn.metrics import mean_squared_error, r2_score
 
 from warptissue.errors import InputError
-from warptissue.fit.metrics import r_squared, rmse
+from warptissue.lsq.metrics import r_squared, rmse
 
 
 def test_metrics_match_scikit_learn(rng):

@@ -11,7 +11,7 @@ import pytest
 from matplotlib.image import imread
 
 from warptissue.errors import InputError
-from warptissue.fit import fit_curve
+from warptissue.lsq import fit_curve
 from warptissue.report import comparison_table, plot_fit, write_comparison, write_fit_outputs
 
 

@@ -14,18 +14,17 @@ import tomli_w
 from warptissue.acquisition.conditioning import condition_for_fit
 from warptissue.errors import InputError
 from warptissue.fem.newton import NewtonOptions
-from warptissue.fit import engine
 from warptissue.fit.punch import hayes_kappa
+from warptissue.fit.start import record_youngs_modulus_Pa, start_values_from_record
 from warptissue.io import write_csv
+from warptissue.lsq import engine
 from warptissue.mesh import size_near_for_force_accuracy
 from warptissue.simulate import size_near_reason
 from warptissue.study import (
     FIT_METHODS,
     SCHEMA_VERSION,
     load_study,
-    record_youngs_modulus_Pa,
     save_study,
-    start_values_from_record,
     study_from_dict,
 )
 
@@ -774,7 +773,7 @@ def test_custom_columns_and_a_single_data_table(tmp_path):
 
 
 def test_fit_methods_are_the_engines():
-    assert FIT_METHODS == engine._METHODS
+    assert FIT_METHODS == engine.METHODS
 
 
 def test_relative_paths_of_study_from_dict_follow_its_path(tmp_path):

@@ -38,10 +38,13 @@ import functools
 import glob
 import hashlib
 import json
+import logging
 import os
 import signal
+import socket
 import sys
 import time
+import uuid
 import warnings
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -49,9 +52,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import warp as wp
 
+from warptissue import simulate
+from warptissue.device import quiet_warp
 from warptissue.errors import DeviceError, InputError, WarpTissueError
+from warptissue.fit.indentation import fit_indentation
 from warptissue.io import write_csv, write_json
+from warptissue.report import write_indentation_fit_outputs
+from warptissue.study import load_study
 
 __all__ = [
     "DONE_MARKER",
@@ -346,7 +355,6 @@ def _worker_device(device: str | None, study: Any) -> str | None:
         return device
     if not isinstance(name, int):
         return device
-    import warp as wp
 
     wp.init()
     count = wp.get_cuda_device_count()
@@ -382,15 +390,13 @@ def _simulation_numbers(outputs: Any) -> dict[str, Any]:
 
 
 def _simulate(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
-    from warptissue.simulate import run_study
-
-    outputs = run_study(study, out_dir=out_dir, device=device, progress=False, announce=False)
+    outputs = simulate.run_study(
+        study, out_dir=out_dir, device=device, progress=False, announce=False
+    )
     return _simulation_numbers(outputs)
 
 
 def _fit(study: Any, out_dir: Path, device: str | None) -> dict[str, Any]:
-    from warptissue.fit.indentation import fit_indentation
-
     _check_out_dir(out_dir)
     return _fit_numbers(fit_indentation(study, device=device, progress=False), out_dir)
 
@@ -402,7 +408,6 @@ def _check_out_dir(out_dir: Path) -> None:
 
 def _fit_numbers(fit: Any, out_dir: Path, solved_together: int = 1) -> dict[str, Any]:
     """Write a fit's outputs into its folder; its outcome's numbers."""
-    from warptissue.report import write_indentation_fit_outputs
 
     write_indentation_fit_outputs(out_dir, fit)
     if fit.status == "interrupted":  # Ctrl-C in this process: stop the batch
@@ -427,7 +432,6 @@ def _fit_together(
 ) -> dict[int, dict[str, Any]]:
     """A group's fits on one device fitted together (their forward runs batched,
     :func:`warptissue.fit.fit_indentation` over their studies): each one's numbers."""
-    from warptissue.fit.indentation import fit_indentation
 
     for _, _, out_dir in members:
         _check_out_dir(out_dir)
@@ -452,8 +456,6 @@ def run_study_task(task: _Task) -> StudyOutcome:
     Returns:
         The study's :class:`StudyOutcome`.
     """
-    from warptissue.device import quiet_warp
-    from warptissue.study import load_study
 
     started = time.perf_counter()
     out_dir = Path(task.out_dir) / task.folder
@@ -499,13 +501,6 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
     Returns:
         One :class:`StudyOutcome` per task, in order.
     """
-    from warptissue.device import quiet_warp
-    from warptissue.simulate import (
-        prepare_study,
-        run_studies_together,
-        together_settings,
-    )
-    from warptissue.study import load_study
 
     outcomes = [_start_outcome(task) for task in tasks]
     notes: list[list[str]] = [[] for _ in tasks]
@@ -526,10 +521,15 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
                     alone[index] = functools.partial(_fit, study, out_dir, device)
                     fit_groups.setdefault(device, []).append((index, study, out_dir))
                 else:
-                    setup = prepare_study(study, out_dir=out_dir, device=device, announce=False)
+                    setup = simulate.prepare_study(
+                        study, out_dir=out_dir, device=device, announce=False
+                    )
                     alone[index] = functools.partial(_solve_alone, setup)
-                    settings = together_settings(setup)
-                    part = next((p for p in parts if together_settings(p[0][1]) == settings), None)
+                    settings = simulate.together_settings(setup)
+                    part = next(
+                        (p for p in parts if simulate.together_settings(p[0][1]) == settings),
+                        None,
+                    )
                     if part is None:
                         parts.append([(index, setup)])
                     else:
@@ -543,7 +543,7 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         shared: list[str] = []
         try:
             with _recorded(shared):
-                solved = run_studies_together([setup for _, setup in part])
+                solved = simulate.run_studies_together([setup for _, setup in part])
         except Exception as exc:  # noqa: BLE001 - they run alone instead
             for index, _setup in part:
                 notes[index].append(f"solved alone: the batched run failed: {_one_line(exc)}")
@@ -598,9 +598,8 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
 
 def _solve_alone(setup: Any) -> dict[str, Any]:
     """A prepared simulation of a group solved alone: its outcome's numbers."""
-    from warptissue.simulate import solve_study
 
-    return _simulation_numbers(solve_study(setup, progress=False))
+    return _simulation_numbers(simulate.solve_study(setup, progress=False))
 
 
 def _kind(study: Any) -> str:
@@ -611,7 +610,6 @@ def _kind(study: Any) -> str:
 def _start_outcome(task: _Task) -> StudyOutcome:
     """A study's outcome before it runs; removes its folder's marker (the folder is about
     to change: it holds no complete result)."""
-    import socket
 
     marker = Path(task.out_dir) / task.folder / DONE_MARKER
     if marker.is_file():
@@ -672,8 +670,6 @@ def write_summary(path: str | Path, outcomes: Sequence[StudyOutcome]) -> Path:
 def _dask_client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
     """A Dask client of a running scheduler, or of a new LocalCluster (returned to close)."""
     try:
-        import logging
-
         from distributed import Client, LocalCluster
     except ImportError:
         raise InputError(
@@ -867,7 +863,6 @@ def _run_on_dask(
 ) -> int:
     """Submit one task per group of studies, record each study as its task ends; returns
     the number of workers."""
-    import uuid
 
     from distributed import as_completed
 

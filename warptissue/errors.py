@@ -10,12 +10,17 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "INTERRUPTED_EXIT_CODE",
     "ConvergenceError",
     "DeviceError",
     "InputError",
     "MeshError",
     "WarpTissueError",
 ]
+
+INTERRUPTED_EXIT_CODE = 130
+"""Exit status of an interrupted run or fit (Ctrl-C), as the shell gives a process ended by
+SIGINT."""
 
 
 class WarpTissueError(Exception):

@@ -79,6 +79,8 @@ import warp as wp
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
+from warptissue.kernels import fem as kf
+from warptissue.kernels import materials as km
 
 __all__ = [
     "HOMOGENEOUS_MODES",
@@ -274,7 +276,6 @@ class Material:
         Raises:
             InputError: The model is incompressible (no bulk modulus).
         """
-        from warptissue.kernels import materials as km
 
         if math.isinf(self.bulk_modulus):
             raise InputError(
@@ -329,7 +330,6 @@ class Material:
         Raises:
             InputError: ``name`` is not a parameter of this model.
         """
-        from warptissue.kernels import materials as km
 
         names = self.sensitivity_names
         if name not in names:
@@ -351,7 +351,7 @@ class Material:
             ogden_mu[int(name[2:-3]) - 1] = 1.0
         elif name.startswith("alpha"):
             alpha_term = int(name[5:]) - 1
-        d_shear, d_bulk = self._moduli_derivative(name)
+        d_shear, d_bulk = self.moduli_derivative(name)
         params.c_i0 = km.vec6d(*c_i0)
         params.c01 = c01
         params.ogden_mu = km.vec6d(*ogden_mu)
@@ -360,11 +360,17 @@ class Material:
         params.lame_lambda = d_bulk - 2.0 * d_shear / 3.0
         return params, alpha_term
 
-    def _moduli_derivative(self, name: str) -> tuple[float, float]:
+    def moduli_derivative(self, name: str) -> tuple[float, float]:
         """``(d mu0 / d name, d K / d name)`` of the initial shear and bulk moduli.
 
         The hyperelastic models' ``mu0`` is linear in their Pa parameters (2 C10,
         2 (C10 + C01), sum mu_i), so its derivative is its value at a unit parameter.
+
+        Args:
+            name: A parameter of the model (a ``to_dict`` key).
+
+        Returns:
+            (d mu0 / d name, d K / d name), in Pa per the parameter's unit.
         """
         if name == "bulk_modulus_Pa":
             return 0.0, 1.0
@@ -375,8 +381,24 @@ class Material:
         return self._shear_modulus_of(unit), 0.0
 
     def _shear_modulus_of(self, flat: Mapping[str, float]) -> float:
-        """mu0 of flat parameter values (linear in them); see :meth:`_moduli_derivative`."""
+        """mu0 of flat parameter values (linear in them); see :meth:`moduli_derivative`."""
         raise NotImplementedError
+
+    def shear_modulus_weight(self, name: str) -> float:
+        """d mu0 / d ``name`` for a modulus, 0 for any other parameter.
+
+        mu0 is linear in the moduli (the Pa parameters: ``C10_Pa``, ``C01_Pa``, the Ogden
+        ``mu<i>_Pa``, ``shear_modulus_Pa``, ``youngs_modulus_Pa`` at a fixed Poisson's ratio),
+        so ``mu0 = sum_i weight_i p_i`` over them; the shape parameters (``C20_Pa`` and up have
+        weight 0 as well), ``alpha<i>``, a Poisson's ratio and the Prony terms get 0.
+
+        Args:
+            name: A parameter of the model.
+
+        Returns:
+            The weight, Pa / Pa (dimensionless).
+        """
+        return self.moduli_derivative(name)[0] if name.endswith("_Pa") else 0.0
 
 
 def _optional_bulk_modulus(value: float | None) -> float | None:
@@ -923,7 +945,7 @@ class LinearElastic(Material):
     def _flat_parameters(self) -> dict[str, float]:
         return {"youngs_modulus_Pa": self.youngs_modulus_Pa, "poissons_ratio": self.poissons_ratio}
 
-    def _moduli_derivative(self, name: str) -> tuple[float, float]:
+    def moduli_derivative(self, name: str) -> tuple[float, float]:
         """mu = E / (2 (1 + nu)) and K = E / (3 (1 - 2 nu)) differentiated by E or nu."""
         e, nu = self.youngs_modulus_Pa, self.poissons_ratio
         if name == "youngs_modulus_Pa":
@@ -936,7 +958,60 @@ class LinearElastic(Material):
 
 
 PRONY_KEY = re.compile(r"^(g|tau)(\d+)(_s)?$")
-"""A Prony key of a material table: ``g<i>`` (dimensionless) or ``tau<i>_s`` (s)."""
+"""What looks like a Prony key of a material table: ``g<i>`` (dimensionless) or ``tau<i>_s``
+(s), and their near misses (``tau1``, ``g1_s``) that the table reader names in its error;
+:func:`prony_term` tells the keys themselves."""
+
+
+def prony_term(name: str) -> tuple[str, int] | None:
+    """The Prony term that a parameter or material-table key names.
+
+    Args:
+        name: A key, e.g. ``g2`` (a dimensionless coefficient) or ``tau2_s`` (a time, s).
+
+    Returns:
+        ``("g" | "tau", i)`` with the term's number i (from 1), or None for any other name.
+    """
+    match = PRONY_KEY.match(name)
+    if match is None or (match.group(1) == "tau") != (match.group(3) == "_s"):
+        return None
+    return match.group(1), int(match.group(2))
+
+
+POSITIVE_MODULI: tuple[str, ...] = (
+    "C10_Pa",
+    "shear_modulus_Pa",
+    "youngs_modulus_Pa",
+    "bulk_modulus_Pa",
+)
+"""The moduli that a fit keeps at or above 0 (:func:`positive_bounds`), Pa."""
+
+
+def positive_bounds(
+    names: Sequence[str], lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Bounds tightened where a parameter must be positive, whatever the model's box says.
+
+    The moduli of :data:`POSITIVE_MODULI` and the Prony times ``tau<i>_s`` get lower bound
+    0; the Prony coefficients ``g<i>`` lie in [0, 1].
+
+    Args:
+        names: Parameter names, shape (n,).
+        lower: Lower bounds in their units, shape (n,).
+        upper: Upper bounds, shape (n,).
+
+    Returns:
+        (lower, upper), new arrays of shape (n,).
+    """
+    lower, upper = np.array(lower, dtype=np.float64), np.array(upper, dtype=np.float64)
+    for j, name in enumerate(names):
+        term = prony_term(name)
+        if name in POSITIVE_MODULI or (term is not None and term[0] == "tau"):
+            lower[j] = max(lower[j], 0.0)
+        elif term is not None:
+            lower[j] = max(lower[j], 0.0)
+            upper[j] = min(upper[j], 1.0)
+    return lower, upper
 
 
 @dataclass(frozen=True)
@@ -1087,7 +1162,7 @@ class Viscoelastic(Material):
         """As :meth:`Material.device_params_derivative`; for ``g<i>``/``tau<i>_s`` a zero
         struct (the elastic response does not depend on them; their derivative is the
         history's, :mod:`warptissue.fem.viscous`)."""
-        if PRONY_KEY.match(name) and name in self._prony_parameters():
+        if prony_term(name) is not None and name in self._prony_parameters():
             params, _ = self.elastic.device_params_derivative(self.elastic.sensitivity_names[0])
             return _zeroed(params), -1
         if name not in self.sensitivity_names:
@@ -1103,15 +1178,20 @@ class Viscoelastic(Material):
 
     def prony_derivative(self, name: str) -> tuple[str, int] | None:
         """``("g" | "tau", term index)`` for a Prony parameter name, else None."""
-        match = PRONY_KEY.match(name)
-        if match is None or name not in self._prony_parameters():
+        term = prony_term(name)
+        if term is None or name not in self._prony_parameters():
             return None
-        return match.group(1), int(match.group(2)) - 1
+        return term[0], term[1] - 1
+
+    def moduli_derivative(self, name: str) -> tuple[float, float]:
+        """The elastic model's (d mu0 / d name, d K / d name); (0, 0) for a Prony term."""
+        if name in self._prony_parameters():
+            return 0.0, 0.0
+        return self.elastic.moduli_derivative(name)
 
 
 def _zeroed(params: Any) -> Any:
     """A copy of a ``MaterialParams`` with every coefficient zero (model and counts kept)."""
-    from warptissue.kernels import materials as km
 
     params.c_i0 = km.vec6d()
     params.c01 = 0.0
@@ -1275,8 +1355,6 @@ def evaluate_material(
     Returns:
         A :class:`MaterialEvaluation` with arrays of leading size n.
     """
-    from warptissue.kernels import fem as kf
-    from warptissue.kernels import materials as km
 
     f = np.asarray(deformation_gradients, dtype=np.float64)
     if f.shape == (3, 3):

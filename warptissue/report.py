@@ -14,8 +14,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from warptissue.errors import InputError
-from warptissue.fit.result import FitResult
-from warptissue.io import atomic_path, write_csv, write_json
+from warptissue.io import atomic_path, software_versions, write_csv, write_json
+from warptissue.lsq.result import FitResult
+from warptissue.study import save_study
 
 if TYPE_CHECKING:
     from warptissue.fit.indentation import IndentationFit
@@ -498,8 +499,6 @@ def write_indentation_fit_outputs(
     Returns:
         The paths written, by the keys of :data:`INDENTATION_FIT_FILES`.
     """
-    from warptissue.io import software_versions
-    from warptissue.study import save_study
 
     folder = Path(out_dir)
     names = INDENTATION_FIT_FILES

@@ -52,6 +52,7 @@ once, on standard error, that Warp is compiling its kernels.
 
 from __future__ import annotations
 
+import os
 import re
 import sys
 import time
@@ -61,10 +62,30 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import warp as wp
 
-from warptissue.errors import ConvergenceError, InputError
+import warptissue.kernels.fem
+import warptissue.kernels.sparse
+from warptissue.device import resolve_device
+from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
+from warptissue.fem import (
+    IndentationProblem,
+    LinearSolver,
+    SolveInterrupted,
+    simulate_indentation,
+    simulate_indentation_batch,
+)
 from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
-from warptissue.study import Study
+from warptissue.materials import prony_term
+from warptissue.mesh import (
+    check_mesh,
+    estimate_indentation_mesh,
+    indentation_block,
+    indentation_disc,
+    near_size_choice,
+    write_mesh,
+)
+from warptissue.study import Study, mesh_probe_radius
 
 __all__ = [
     "CONTACT_CURVE_COLUMNS",
@@ -74,6 +95,7 @@ __all__ = [
     "StudySetup",
     "build_mesh",
     "build_problem",
+    "check_linear_solver",
     "estimate_mesh",
     "force_curve_warnings",
     "kernels_need_compiling",
@@ -97,8 +119,6 @@ PENETRATION_WARNING_SHARE = 0.01
 """A penetration of the indenter into the specimen beyond this share of the depth is said
 in ``result.json``'s warnings (the penalty is too soft; docs/fe.md "Contact" measures 1e-4
 with the default penalty factor)."""
-INTERRUPTED_EXIT_CODE = 130
-"""Exit status of an interrupted run (Ctrl-C), as the shell gives a process ended by SIGINT."""
 COMPILE_NOTICE = "compiling Warp kernels (first run only, about a minute)..."
 """Said once on standard error before a run whose kernels are not in Warp's cache."""
 _STEP_FIELDS = re.compile(r"^fields_\d{3,}\.vtu$")
@@ -148,11 +168,9 @@ def build_mesh(study: Study) -> Any:
     Returns:
         A :class:`warptissue.mesh.TetMesh` with the standard indentation node sets.
     """
-    from warptissue.mesh import indentation_block, indentation_disc
-    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
-    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    half_size_m = specimen.half_size_m
     common = {
         "thickness_m": specimen.thickness_m,
         "probe_radius_m": mesh_probe_radius(study.indenter, half_size_m),
@@ -178,13 +196,11 @@ def size_near_reason(study: Study) -> str | None:
     Returns:
         One sentence (:meth:`warptissue.mesh.NearSizeChoice.reason`), or None.
     """
-    from warptissue.mesh import near_size_choice
-    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
     if specimen.force_accuracy is None:
         return None
-    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    half_size_m = specimen.half_size_m
     return near_size_choice(
         specimen.force_accuracy,
         probe_radius_m=mesh_probe_radius(study.indenter, half_size_m),
@@ -203,11 +219,9 @@ def estimate_mesh(study: Study) -> Any:
         A :class:`warptissue.mesh.MeshSizeEstimate` (tets, nodes, bytes to generate and to
         solve on the CPU).
     """
-    from warptissue.mesh import estimate_indentation_mesh
-    from warptissue.study import mesh_probe_radius
 
     specimen = study.specimen
-    half_size_m = specimen.width_m / 2.0 if specimen.shape == "block" else specimen.radius_m
+    half_size_m = specimen.half_size_m
     return estimate_indentation_mesh(
         shape=specimen.shape,
         half_extent_m=half_size_m,
@@ -231,7 +245,6 @@ def build_problem(study: Study, mesh: Any) -> Any:
     Returns:
         A :class:`warptissue.fem.IndentationProblem`.
     """
-    from warptissue.fem import IndentationProblem
 
     return IndentationProblem(
         mesh,
@@ -265,7 +278,6 @@ def penetration_warnings(depths_m: np.ndarray, max_penetration_m: np.ndarray) ->
 
 def _mesh_statistics(mesh: Any) -> dict[str, Any]:
     """Size and shape quality of the mesh (raises MeshError on an inverted or flat tet)."""
-    from warptissue.mesh import check_mesh
 
     quality = check_mesh(mesh)
     return {**asdict(quality), "displacement_dof_count": 3 * mesh.node_count}
@@ -317,9 +329,16 @@ def _prepare_out_dir(out_path: Path) -> None:
             stale.unlink()
 
 
-def _check_linear_solver(study: Study, device: Any) -> None:
-    """Refuse, before any work, a linear solver that does not run on the device."""
-    from warptissue.fem import LinearSolver
+def check_linear_solver(study: Study, device: Any) -> None:
+    """Refuse, before any work, a linear solver that does not run on the device.
+
+    Args:
+        study: The study (its ``solver.linear_solver``).
+        device: The Warp device the study runs on.
+
+    Raises:
+        InputError: The linear solver is unknown or does not run on ``device``.
+    """
 
     try:
         LinearSolver(method=study.solver.options.linear_solver, device=device)
@@ -333,7 +352,7 @@ def _check_linear_solver(study: Study, device: Any) -> None:
 
 def _is_viscoelastic(material: Any) -> bool:
     """True for a material with a Prony series (its parameters hold ``g1``, ``tau1_s``...)."""
-    return any(re.match(r"^(g\d+|tau\d+_s)$", name) for name in material.parameter_names)
+    return any(prony_term(name) is not None for name in material.parameter_names)
 
 
 def force_curve_warnings(depths_m: np.ndarray, forces_N: np.ndarray) -> list[str]:
@@ -387,12 +406,6 @@ def kernels_need_compiling(device: Any) -> bool:
         no compiled binary for ``device`` in ``warp.config.kernel_cache_dir`` (so the first
         launch compiles it, about a minute on the CPU).
     """
-    import os
-
-    import warp as wp
-
-    import warptissue.kernels.fem
-    import warptissue.kernels.sparse
 
     for kernels in (warptissue.kernels.fem, warptissue.kernels.sparse):
         module = wp.get_module(kernels.__name__)
@@ -414,8 +427,6 @@ def kernels_need_compiling(device: Any) -> bool:
 def _write_fields(
     out_dir: Path, mesh: Any, result: Any, *, every_step: bool, contact: bool = False
 ) -> dict[str, Path]:
-    from warptissue.mesh import write_mesh
-
     files: dict[str, Path] = {}
     converged = len(result.depths_m)
     displacements = np.asarray(result.displacement_m, dtype=np.float64)
@@ -524,7 +535,6 @@ def solve_study(
         SolveInterrupted: Ctrl-C during the load steps, after the outputs of the converged
             steps were written.
     """
-    from warptissue.fem import SolveInterrupted, simulate_indentation
 
     started = time.perf_counter()
     interrupted = None
@@ -581,7 +591,6 @@ def prepare_study(
         MeshError: The mesh would not fit in memory, or the generated mesh is invalid.
         DeviceError: The device does not exist.
     """
-    from warptissue.device import resolve_device
 
     times = study.protocol.times_s
     if times is None and _is_viscoelastic(study.material):
@@ -596,7 +605,7 @@ def prepare_study(
     _prepare_out_dir(out_path)
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
-    _check_linear_solver(study, warp_device)
+    check_linear_solver(study, warp_device)
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     started = time.perf_counter()
     mesh = build_mesh(study)
@@ -797,7 +806,6 @@ def run_studies_together(setups: Sequence[StudySetup]) -> list[SimulationOutputs
         reuse is decided for all at once, which changes the path to the solution, not the
         converged state (docs/design-notes/batched-fe.md).
     """
-    from warptissue.fem import simulate_indentation_batch
 
     setups = list(setups)
     if not setups:

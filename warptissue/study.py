@@ -15,8 +15,8 @@ key, a value of the wrong type or out of range raises :class:`~warptissue.errors
 naming the file, the line, the key path (for example ``material.C10_Pa`` or
 ``data[0].keep_depth_m``) and the value, with the closest known name where one is close.
 
-:func:`start_values_from_record` gives the start of every free parameter from the small-depth
-stiffness of a record (Sneddon's flat punch with the Hayes layer factor);
+:func:`warptissue.fit.start.start_values_from_record` gives the start of every free parameter
+from the small-depth stiffness of a record (Sneddon's flat punch with the Hayes layer factor);
 :func:`save_study` writes a study (a fitted one, say) back as TOML, its data paths relative to
 the new file.
 
@@ -39,9 +39,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+import tomli_w
+
+from warptissue.acquisition.conditioning import CONTACT_MODES, OFFSET_MODES, condition_for_fit
 from warptissue.errors import InputError
+from warptissue.fem.assembly import FORMULATIONS
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
+from warptissue.fem.newton import NewtonOptions
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
+from warptissue.io import atomic_path, read_experiment_csv
+from warptissue.loading import ramp_hold, resample_history, sine
+from warptissue.lsq.engine import METHODS
+from warptissue.materials import material_from_dict, prony_term
 from warptissue.mesh.generators import MESHERS
+from warptissue.mesh.size import size_near_for_force_accuracy
 
 if TYPE_CHECKING:
     import numpy as np
@@ -67,9 +79,7 @@ __all__ = [
     "Specimen",
     "Study",
     "load_study",
-    "record_youngs_modulus_Pa",
     "save_study",
-    "start_values_from_record",
     "study_from_dict",
 ]
 
@@ -77,16 +87,14 @@ SCHEMA_VERSION: int = 2
 """The newest study schema version: the one with ``[[data]]`` and ``[fit]``."""
 SCHEMA_VERSIONS: tuple[int, ...] = (1, 2)
 """The versions this module reads (1: a simulation; 2: a simulation that may hold a fit)."""
-FIT_METHODS: tuple[str, ...] = ("lm", "salm")
-"""``fit.method``: the methods of :func:`warptissue.fit.least_squares`."""
+FIT_METHODS: tuple[str, ...] = METHODS
+"""``fit.method``: the methods of :func:`warptissue.lsq.least_squares` (its ``METHODS``)."""
 FIT_OBJECTIVES: tuple[str, ...] = ("absolute", "relative")
 """``fit.objective``: force residuals (N), or residuals divided by the measured force."""
 FIT_STRATEGIES: tuple[str, ...] = ("joint", "two_stage")
 """``fit.strategy``: all free parameters at once, or Ahn & Kim's Prony-first two stages."""
 PROTOCOL_KINDS: tuple[str, ...] = ("quasi_static", "timed", "ramp_hold", "sine", "record")
 """``protocol.kind``: depths only, explicit depths and times, or a generated history."""
-PRONY_NAME = re.compile(r"^(g\d+|tau\d+_s)$")
-"""A Prony parameter of a viscoelastic ``[material]``: ``g<i>`` or ``tau<i>_s``."""
 START_FROM: tuple[str, ...] = ("record", "material")
 """``fit.start_from``: where a free parameter without a ``[fit.start]`` value starts."""
 CONTACT_POINTS: tuple[str, ...] = ("given", "fit")
@@ -101,9 +109,6 @@ DEFAULT_COLUMNS: dict[str, str] = {
     "force_column": "force_N",
 }
 """The ``[[data]]`` column keys and the column each names by default."""
-START_DEPTH_SHARE: float = 0.1
-"""Depth, as a share of the smaller of the probe radius and the specimen thickness, to
-which :func:`record_youngs_modulus_Pa` takes a record's small-depth stiffness."""
 
 SPECIMEN_SHAPES: tuple[str, ...] = ("block", "disc")
 ELEMENT_TYPES: tuple[str, ...] = ("TET10", "TET4")
@@ -148,6 +153,11 @@ class Specimen:
     growth: float
     mesher: str = "extruded"
     force_accuracy: float | None = None
+
+    @property
+    def half_size_m(self) -> float:
+        """The specimen's extent from the probe axis, m (:func:`specimen_half_size_m`)."""
+        return specimen_half_size_m(self.shape, self.width_m, self.radius_m)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[specimen]`` table, with every default filled in; a near size chosen for a
@@ -457,7 +467,6 @@ class DataRecord:
             InputError: Fewer than two samples after the contact, or ``steps`` below 2
                 (naming the record's file).
         """
-        from warptissue.loading import resample_history
 
         try:
             return resample_history(
@@ -518,9 +527,9 @@ class FitSettings:
             material model's own box (:attr:`warptissue.materials.Material.parameter_bounds`).
         start_from: ``"record"``: free parameters without a start value that set the
             initial shear modulus start from the first record's small-depth stiffness
-            (:func:`start_values_from_record`), the others from ``[material]``;
+            (:func:`warptissue.fit.start.start_values_from_record`), the others from ``[material]``;
             ``"material"``: from ``[material]``.
-        method: ``"lm"`` or ``"salm"`` (:func:`warptissue.fit.least_squares`).
+        method: ``"lm"`` or ``"salm"`` (:func:`warptissue.lsq.least_squares`).
         objective: ``"absolute"`` (force residuals, N) or ``"relative"`` (divided by the
             measured force).
         relative_floor_N: With the relative objective, the smallest |force| used as a
@@ -567,7 +576,6 @@ class FitSettings:
 
         Given bounds, else the material model's own box (+-inf where it has none).
         """
-        import numpy as np
 
         names = list(material.parameter_names)
         lower, upper = material.parameter_bounds
@@ -808,6 +816,20 @@ class _Table:
             )
 
 
+def specimen_half_size_m(shape: str, width_m: float | None, radius_m: float | None) -> float:
+    """The specimen's extent from the probe axis: half a block's width, or a disc's radius.
+
+    Args:
+        shape: ``"block"`` or ``"disc"``.
+        width_m: The block's full edge length, m (block only).
+        radius_m: The disc's radius, m (disc only).
+
+    Returns:
+        The half size, m.
+    """
+    return width_m / 2.0 if shape == "block" else radius_m
+
+
 def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
     probe_radius_m = indenter.radius_m
     shape = table.string("shape", choices=SPECIMEN_SHAPES)
@@ -821,7 +843,7 @@ def _read_specimen(table: _Table, indenter: Indenter) -> Specimen:
         )
     width_m = table.number("width_m") if shape == "block" else None
     radius_m = table.number("radius_m") if shape == "disc" else None
-    half_size_m = width_m / 2.0 if shape == "block" else radius_m
+    half_size_m = specimen_half_size_m(shape, width_m, radius_m)
     probe_radius_m = mesh_probe_radius(indenter, half_size_m)
     size_key = "width_m" if shape == "block" else "radius_m"
     if half_size_m <= probe_radius_m:
@@ -891,7 +913,6 @@ def _size_near_for_accuracy(
 ) -> float:
     """``specimen.force_accuracy``'s near size (:func:`warptissue.mesh.size_near_for_force_
     accuracy`), its errors placed at the key that is out of what was measured."""
-    from warptissue.mesh.size import size_near_for_force_accuracy
 
     sharp = indenter.kind == "flat_punch" and indenter.edge_radius_m == 0.0
     if not (sharp and indenter.contact == "bonded"):
@@ -1013,8 +1034,6 @@ def _read_protocol(table: _Table, thickness_m: float, *, version: int, base: Pat
                 )
         depth_key = "depths_m"
     elif kind == "ramp_hold":
-        from warptissue.loading import ramp_hold
-
         settings = {
             "max_depth_m": table.number("max_depth_m"),
             "speed_m_per_s": table.number("speed_m_per_s"),
@@ -1025,8 +1044,6 @@ def _read_protocol(table: _Table, thickness_m: float, *, version: int, base: Pat
         times, depths = table.build(lambda values: ramp_hold(**values), settings)
         depth_key = "max_depth_m"
     elif kind == "sine":
-        from warptissue.loading import sine
-
         settings = {
             "preload_depth_m": table.number("preload_depth_m"),
             "amplitude_m": table.number("amplitude_m"),
@@ -1101,8 +1118,6 @@ def _read_quasi_static(table: _Table, thickness_m: float) -> Protocol:
 
 
 def _read_material(table: _Table) -> Any:
-    from warptissue.materials import material_from_dict
-
     values = table.present(list(table.data))
     return table.build(material_from_dict, values)
 
@@ -1115,9 +1130,6 @@ def _read_boundary(table: _Table) -> Boundary:
 
 def _read_solver(table: _Table) -> Solver:
     # The solver's own modules: importing them does not start Warp (test_study checks).
-    from warptissue.fem.assembly import FORMULATIONS
-    from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
-    from warptissue.fem.newton import NewtonOptions
 
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):
@@ -1147,7 +1159,6 @@ _RECORD_KEYS = (
 
 def _record_options(table: _Table, base: Path) -> dict[str, Any]:
     """The keys of a record (``[[data]]``, or a ``"record"`` protocol), validated."""
-    from warptissue.acquisition.conditioning import CONTACT_MODES, OFFSET_MODES
 
     file = table.string("file")
     if not file.strip():
@@ -1207,10 +1218,6 @@ def _condition_record(
     depth-time history needs none); the contact must then be given (``"none"`` or a
     position): detecting it needs the force.
     """
-    import numpy as np
-
-    from warptissue.acquisition.conditioning import condition_for_fit
-    from warptissue.io import read_experiment_csv
 
     path, file, contact = options["path"], options["file"], options["contact"]
     names = {key: options[key] for key in DEFAULT_COLUMNS}
@@ -1317,8 +1324,6 @@ def _parameter_table(
 
 
 def _read_fit(table: _Table, material: Any) -> FitSettings:
-    import numpy as np
-
     free_raw = table.raw("free")
     if (
         not isinstance(free_raw, list)
@@ -1371,7 +1376,7 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
         raise table.error("stop_r_squared", "must lie between 0 and 1", stop_r_squared)
     strategy = table.string("strategy", default="joint", choices=FIT_STRATEGIES)
     if strategy == "two_stage":
-        prony = [name for name in material.parameter_names if PRONY_NAME.match(name)]
+        prony = [name for name in material.parameter_names if prony_term(name) is not None]
         if not prony:
             raise table.error(
                 "strategy",
@@ -1380,7 +1385,7 @@ def _read_fit(table: _Table, material: Any) -> FitSettings:
                 "'joint'",
                 strategy,
             )
-        if all(PRONY_NAME.match(name) for name in free):
+        if all(prony_term(name) is not None for name in free):
             raise table.error(
                 "strategy",
                 "'two_stage' fits the Prony terms in stage (i) and the other free parameters "
@@ -1562,154 +1567,6 @@ def load_study(path: str | Path) -> Study:
     return _build(data, _Source(study_path, text), default_name=study_path.stem)
 
 
-def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
-    """Young's modulus of a record's small-depth stiffness, for the study's probe and layer.
-
-    Fits Sneddon's flat punch with the Hayes factor of the study's layer,
-    F = 2 a E delta kappa(a/h, nu) / (1 - nu^2) (:func:`warptissue.fit.punch.fit_punch_modulus`),
-    to the loading samples (up to the deepest point) at depths up to :data:`START_DEPTH_SHARE`
-    of the smaller of the probe radius a and the specimen thickness h (the two shallowest
-    loading samples if fewer lie there). nu is the study material's small-strain Poisson's
-    ratio. For a nearly incompressible material the bonded and the frictionless punch have
-    the same small-depth stiffness, so the study's contact does not enter.
-
-    Args:
-        study: The study (its indenter, specimen thickness and material).
-        record: A conditioned record of the study.
-
-    Returns:
-        E, Pa.
-
-    Raises:
-        InputError: The record has fewer than two loading samples with a positive depth.
-    """
-    import numpy as np
-
-    from warptissue.fit.punch import fit_punch_modulus
-
-    depth, force = record.displacement_m, record.force_N
-    loading = slice(0, int(np.argmax(depth)) + 1)
-    depth, force = depth[loading], force[loading]
-    loaded = depth > 0.0
-    depth, force = depth[loaded], force[loaded]
-    if depth.size < 2:
-        raise InputError(
-            "has fewer than two loading samples below the contact: no stiffness to start "
-            "from (give start values in [fit.start], or set contact)",
-            path=record.path,
-        )
-    if study.indenter.kind in ("plate", "wedge"):
-        raise InputError(
-            f"no start value from an indentation formula for a {study.indenter.kind} (give "
-            "start values in [fit.start])",
-            path=study.path,
-            key="kind",
-            value=study.indenter.kind,
-        )
-    limit = START_DEPTH_SHARE * min(study.indenter.radius_m, study.specimen.thickness_m)
-    shallow = depth <= limit
-    if np.count_nonzero(shallow) < 2:
-        shallow = np.argsort(depth, kind="stable")[:2]
-    poissons_ratio = min(study.material.small_strain_equivalent()[1], 0.5)
-    try:
-        result = fit_punch_modulus(
-            depth[shallow],
-            force[shallow],
-            radius_m=study.indenter.radius_m,
-            poissons_ratio=poissons_ratio,
-            geometry="sphere" if study.indenter.kind == "sphere" else "flat",
-            thickness_m=study.specimen.thickness_m,
-        )
-    except InputError as exc:  # e.g. a layer beyond the range of the Hayes factor
-        raise InputError(
-            f"no start value from {record.file}: {exc.message} (give start values in [fit.start])",
-            path=study.path,
-            value=exc.value,
-        ) from None
-    return float(result.x[0])
-
-
-_SHEAR_WEIGHTS = {"C10_Pa": 2.0, "C01_Pa": 2.0, "shear_modulus_Pa": 1.0}
-"""d mu0 / d parameter of the parameters that set the initial shear modulus mu0 (with the
-Ogden mu_i, weight 1, and Young's modulus, weight 1 / (2 (1 + nu)))."""
-
-
-def _shear_weight(name: str, material: Any) -> float:
-    """d mu0 / d ``name`` (0 for a parameter that does not set the initial shear modulus)."""
-    if name in _SHEAR_WEIGHTS:
-        return _SHEAR_WEIGHTS[name]
-    if re.fullmatch(r"mu\d+_Pa", name):
-        return 1.0
-    if name == "youngs_modulus_Pa":
-        return 1.0 / (2.0 * (1.0 + material.poissons_ratio))
-    return 0.0
-
-
-def start_values_from_record(study: Study, record: DataRecord | None = None) -> dict[str, float]:
-    """The start of every free parameter of the study's fit.
-
-    A value in ``[fit.start]`` is taken as it is. With ``start_from = "material"`` the others
-    start from ``[material]``. With ``start_from = "record"`` (the default), the free
-    parameters that set the initial shear modulus mu0 (``C10_Pa``, ``C01_Pa``, the Ogden
-    ``mu<i>_Pa``, ``shear_modulus_Pa``, ``youngs_modulus_Pa``) are multiplied by one common
-    factor, chosen so that mu0 equals the record's small-depth shear modulus
-    mu = E / (2 (1 + nu)), E from :func:`record_youngs_modulus_Pa`; the other free
-    parameters (C20, C30, the Ogden alpha<i>, a Poisson's ratio) start from ``[material]``.
-    For neo-Hookean and reduced-polynomial models this is C10 = mu / 2; for Mooney-Rivlin
-    with both free it splits mu / 2 in the ratio of the ``[material]`` values of C10 and C01,
-    and with one free it gives that one what the fixed one leaves; for Ogden it scales the
-    free mu_i so that sum mu_i = mu. A start outside the parameter's bounds is moved onto the
-    nearer bound.
-
-    Args:
-        study: A study with a ``[fit]`` table.
-        record: The record whose stiffness sets the start (default: the first of ``data``).
-
-    Returns:
-        Free parameter name -> start value, in ``study.fit.free`` order.
-
-    Raises:
-        InputError: The study has no fit; the record has no usable small-depth stiffness;
-            or no positive common factor reaches the record's stiffness (give start values).
-    """
-    import numpy as np
-
-    if study.fit is None:
-        raise InputError("the study has no [fit] table", path=study.path)
-    settings, material = study.fit, study.material
-    current = dict(zip(material.parameter_names, material.parameter_vector.tolist(), strict=True))
-    start = {name: settings.start.get(name, current[name]) for name in settings.free}
-    scaled = [
-        name
-        for name in settings.free
-        if name not in settings.start and _shear_weight(name, material) != 0.0
-    ]
-    if settings.start_from == "record" and scaled:
-        record = study.data[0] if record is None else record
-        youngs_Pa = record_youngs_modulus_Pa(study, record)
-        nu = min(material.small_strain_equivalent()[1], 0.5)
-        target = youngs_Pa / (2.0 * (1.0 + nu))
-        free_part = sum(_shear_weight(name, material) * current[name] for name in scaled)
-        fixed_part = sum(
-            _shear_weight(name, material) * start.get(name, value)
-            for name, value in current.items()
-            if name not in scaled
-        )
-        factor = (target - fixed_part) / free_part if free_part > 0.0 else math.nan
-        if not factor > 0.0:
-            raise InputError(
-                f"fit.free: scaling {', '.join(scaled)} cannot reach the record's small-depth "
-                f"shear modulus {target:.4g} Pa (the fixed parameters give {fixed_part:.4g} "
-                "Pa): give start values in [fit.start]",
-                path=study.path,
-            )
-        for name in scaled:
-            start[name] = factor * current[name]
-    lower, upper = settings.parameter_bounds(material)
-    values = np.clip([start[name] for name in settings.free], lower, upper)
-    return dict(zip(settings.free, values.tolist(), strict=True))
-
-
 def save_study(study: Study, path: str | Path) -> Path:
     """Write a study as TOML (atomically), its data files relative to the new file's folder.
 
@@ -1723,9 +1580,6 @@ def save_study(study: Study, path: str | Path) -> Path:
     Returns:
         The path written.
     """
-    import tomli_w
-
-    from warptissue.io import atomic_path
 
     target = Path(path)
     text = tomli_w.dumps(study.to_dict(relative_to=os.path.abspath(target.parent)))

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import scipy.optimize
 
-from warptissue.fit import least_squares
+from warptissue.lsq import least_squares
 
 # The test problems are a test fixture: they live in the repository's tests/ folder.
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))

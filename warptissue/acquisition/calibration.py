@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from warptissue.errors import InputError
 from warptissue.io import atomic_path, csv_number, read_csv_rows, software_versions, to_jsonable
@@ -701,7 +702,6 @@ def fit_calibrations(
         InputError: Unknown model names, unequal readings per sample, or fewer than
             ``2 folds`` samples.
     """
-    from threadpoolctl import threadpool_limits
     from tqdm import tqdm
 
     unknown = [m for m in models if m not in CALIBRATION_MODELS]

@@ -34,6 +34,9 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
+from warptissue.io import atomic_path
+from warptissue.lsq.engine import least_squares
+from warptissue.lsq.result import RejectStep
 
 __all__ = [
     "PARAMETER_UNITS",
@@ -370,8 +373,6 @@ def fit_rig_dynamics(
     Raises:
         InputError: Shapes, non-finite values, unknown parameter names.
     """
-    from warptissue.fit.engine import least_squares
-    from warptissue.fit.result import RejectStep
 
     f = np.asarray(frequency_Hz, dtype=np.float64)
     measured = np.asarray(response, dtype=np.complex128)
@@ -444,8 +445,6 @@ def plot_frequency_response(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from warptissue.io import atomic_path
 
     top = 2.0 * model.natural_frequencies_Hz()[-1]
     curve_f = np.geomspace(0.1, top, 2000)

@@ -35,6 +35,7 @@ import numpy as np
 
 from warptissue.acquisition import protocol as wire
 from warptissue.errors import InputError
+from warptissue.io import read_experiment_csv
 
 __all__ = [
     "FaultPlan",
@@ -81,7 +82,6 @@ class ForceCurveTissue:
             InputError: Missing file or column, a bad number, a depth that does not increase
                 or is negative, or forces that are all negative (file, line, column named).
         """
-        from warptissue.io import read_experiment_csv
 
         record = read_experiment_csv(
             path, required=("displacement_m", "force_N"), monotonic="displacement_m"

@@ -24,7 +24,8 @@ import sys
 import warnings
 from collections.abc import Sequence
 
-from warptissue.errors import InputError, WarpTissueError
+from warptissue import __version__
+from warptissue.errors import INTERRUPTED_EXIT_CODE, InputError, WarpTissueError
 
 __all__ = ["EXIT_STATUSES", "build_parser", "main"]
 
@@ -34,7 +35,7 @@ EXIT_STATUSES: dict[int, str] = {
     "below a file, no permission, a full disk)",
     6: "warptissue batch: one or more studies failed, the others ran (OUT/summary.csv says "
     "which and why)",
-    130: "interrupted (Ctrl-C)",
+    INTERRUPTED_EXIT_CODE: "interrupted (Ctrl-C)",
     141: "the reader of standard output closed it early (a broken pipe, as in `| head`)",
 }
 """Exit statuses that do not come from an error class of :mod:`warptissue.errors` (argparse's
@@ -57,7 +58,6 @@ COMMAND_MODULES: tuple[str, ...] = (
 
 def build_parser() -> argparse.ArgumentParser:
     """Build the full argument parser from the command modules."""
-    from warptissue import __version__
 
     parser = argparse.ArgumentParser(
         prog="warptissue",
@@ -119,7 +119,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except KeyboardInterrupt:
         print("warptissue: interrupted", file=sys.stderr)
-        return 130
+        return INTERRUPTED_EXIT_CODE
     return 0 if status is None else int(status)
 
 

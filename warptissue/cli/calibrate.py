@@ -14,7 +14,10 @@ named), checked before any model is fitted.
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
+
+from warptissue.errors import InputError
 
 __all__ = ["register"]
 
@@ -46,7 +49,6 @@ def run(args: argparse.Namespace) -> int:
         read_calibration_csv,
         split_samples,
     )
-    from warptissue.errors import InputError
     from warptissue.io import write_csv, write_json
 
     if args.model not in CALIBRATION_MODELS:
@@ -114,9 +116,6 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_output_folder(folder: Path) -> None:
     """Create ``--out`` (or find it writable) before the fits, not after."""
-    import os
-
-    from warptissue.errors import InputError
 
     try:
         folder.mkdir(parents=True, exist_ok=True)

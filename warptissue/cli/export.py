@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from warptissue.errors import InputError
+
 __all__ = ["check_usda_path", "register"]
 
 
@@ -16,7 +18,6 @@ def check_usda_path(path: Path, option: str) -> None:
     Raises:
         InputError: Naming the option and the path.
     """
-    from warptissue.errors import InputError
 
     if path.suffix != ".usda":
         raise InputError(f"{option} takes the root layer's path, a .usda file", path=path)
@@ -55,7 +56,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_export(args: argparse.Namespace) -> int:
     """Handle ``warptissue export``."""
-    from warptissue.errors import InputError
     from warptissue.usd import validate_stage
     from warptissue.usd.export import export_result_dir, export_study
 

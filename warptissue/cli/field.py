@@ -35,6 +35,7 @@ from warptissue.cli._args import (
     positive_length_m,
     positive_number,
 )
+from warptissue.errors import InputError
 
 __all__ = ["register_fit"]
 
@@ -119,7 +120,6 @@ def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue fit field``."""
     from tqdm import tqdm
 
-    from warptissue.errors import InputError
     from warptissue.field.estimation import CONSTRAINED_YOUNGS_ERROR
     from warptissue.field.markers import read_forces_csv, read_markers_csv
     from warptissue.field.pipeline import estimate_load_set, write_load_set_outputs

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 from warptissue.cli import EXIT_STATUSES
 from warptissue.cli._args import device
-from warptissue.errors import ConvergenceError, InputError
+from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
 
 if TYPE_CHECKING:
     from warptissue.fit.indentation import IndentationFit
@@ -38,7 +38,7 @@ CONTACT_POINTS = ("given", "fit")
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
     """Add ``warptissue fit indentation``."""
-    interrupted = EXIT_STATUSES[130]
+    interrupted = EXIT_STATUSES[INTERRUPTED_EXIT_CODE]
     parser = subparsers.add_parser(
         "indentation",
         help="fit a study's material parameters to its indentation records by inverse FE",

@@ -33,13 +33,10 @@ from warptissue.errors import InputError
 if TYPE_CHECKING:
     import numpy as np
 
-    from warptissue.fit import FitResult
     from warptissue.io import ExperimentData
+    from warptissue.lsq import FitResult
 
 __all__ = ["parse_model", "register_fit"]
-
-RELATIVE_FLOOR_SHARE = 0.01
-"""``--relative-floor auto``: the floor is this share of the largest |force| of the records."""
 
 
 def parse_model(text: str) -> tuple[str, int]:
@@ -184,8 +181,8 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         default="auto",
         metavar="auto|FORCE",
         help="relative objective: smallest |force| used as a divisor, so that a record that "
-        f"starts at zero force can be fitted (N, e.g. 1mN; auto: {RELATIVE_FLOOR_SHARE:g} of "
-        "the largest |force|)",
+        "starts at zero force can be fitted (N, e.g. 1mN; auto: the share "
+        "warptissue.lsq.engine.RELATIVE_FLOOR_SHARE of the largest |force|)",
     )
     relaxation.add_argument(
         "--predict",
@@ -339,6 +336,8 @@ def _floor(args: argparse.Namespace, records: list[_Record]) -> float | None:
     """The relative objective's floor (N), or None for the absolute objective."""
     import numpy as np
 
+    from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE
+
     if args.objective != "relative":
         return None
     if args.relative_floor != "auto":
@@ -351,8 +350,8 @@ def _predict(
     args: argparse.Namespace, result: FitResult, out_dir: Path, label: str
 ) -> tuple[list[dict[str, Any]], dict[str, Path], list[str]]:
     """Predict every ``--predict`` record; write its CSV and PNG; R^2 and RMSE."""
-    from warptissue.fit.metrics import r_squared, rmse
     from warptissue.io import write_csv
+    from warptissue.lsq.metrics import r_squared, rmse
     from warptissue.report import plot_fit
 
     reports, files, lines = [], {}, []
@@ -487,8 +486,8 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
     """Fit E to a force-depth curve, write JSON + CSV + PNG; return the exit status."""
     import numpy as np
 
-    from warptissue.fit.plausibility import check_indentation_record, elastic_curve_warnings
     from warptissue.fit.punch import fit_punch_modulus
+    from warptissue.lsq.plausibility import check_indentation_record, elastic_curve_warnings
     from warptissue.report import write_fit_outputs
 
     record = _read(args.data, args, required=("displacement_m", "force_N"))

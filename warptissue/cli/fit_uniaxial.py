@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from warptissue.cli._args import positive_length_m, positive_number
+from warptissue.errors import InputError
 
 __all__ = ["ALL_MODELS", "register_fit"]
 
@@ -124,7 +125,6 @@ def _model_names(text: str) -> tuple[str, ...]:
     Raises:
         InputError: An empty entry or an unknown model, naming ``--model``.
     """
-    from warptissue.errors import InputError
     from warptissue.fit.hyperelastic import model_from_name, model_label
 
     if text.strip().lower() == "all":
@@ -148,7 +148,6 @@ def run(args: argparse.Namespace) -> int:
     """Fit, write the outputs, print the comparison; return the exit status."""
     import numpy as np
 
-    from warptissue.errors import InputError
     from warptissue.fit.hyperelastic import HomogeneousTest, fit_hyperelastic
     from warptissue.io import atomic_path, read_experiment_csv, write_json
     from warptissue.report import comparison_table
@@ -230,7 +229,6 @@ def _output_folder(args: argparse.Namespace) -> Path:
     Raises:
         InputError: It exists and is not a folder, or it cannot be created.
     """
-    from warptissue.errors import InputError
 
     folder = args.out if args.out is not None else Path(f"{args.data.stem}_uniaxial_fit")
     if folder.exists() and not folder.is_dir():

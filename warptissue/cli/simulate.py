@@ -7,6 +7,8 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from warptissue.cli.export import check_usda_path
+
 if TYPE_CHECKING:
     from warptissue.simulate import SimulationOutputs
 
@@ -87,7 +89,6 @@ def _device(text: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Handle ``warptissue simulate``; returns the exit status."""
-    from warptissue.cli.export import check_usda_path
     from warptissue.device import quiet_warp
     from warptissue.fem import SolveInterrupted
     from warptissue.simulate import run_study

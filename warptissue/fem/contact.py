@@ -35,6 +35,7 @@ import warp as wp
 
 from warptissue.errors import InputError
 from warptissue.indenter import Indenter
+from warptissue.kernels import fem as kf
 from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
 
 __all__ = [
@@ -104,7 +105,6 @@ class RigidContact:
 
     def device_body(self) -> Any:
         """The indenter at the current depth as the kernels' ``RigidBody`` struct."""
-        from warptissue.kernels import fem as kf
 
         probe = self.indenter
         body = kf.RigidBody()

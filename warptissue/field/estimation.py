@@ -5,7 +5,7 @@ Three steps, each a function:
 1. :func:`homogeneous_estimate`: one (E, nu) for the whole body from the force balance
    (Tong et al., Eq. 13-14), the initial value and the Tikhonov anchor of step 2.
 2. :func:`estimate_field` with ``objective="force"``: per-group (alpha, nu) minimizing the
-   regularized force residual of Eq. 5-6, by the self-adapting LM of ``warptissue.fit``.
+   regularized force residual of Eq. 5-6, by the self-adapting LM of ``warptissue.lsq``.
 3. :func:`estimate_field` with ``objective="displacement"``: the same parameters fitted to
    the measured marker displacements through forward FE solves, with exact sensitivities
    from the linear system (K du/dtheta = -dK/dtheta u).
@@ -30,7 +30,7 @@ from warptissue.field.fe import (
     youngs_from_alpha,
 )
 from warptissue.field.markers import MarkerGrid
-from warptissue.fit import FitResult, least_squares
+from warptissue.lsq import FitResult, least_squares
 
 __all__ = [
     "FieldEstimate",
@@ -271,7 +271,7 @@ class FieldEstimate:
         nu_deviation: The assumed largest deviation of the true nu from nu0 (given, or the
             fitted field's largest deviation).
         identifiability: The fit's identifiability warnings
-            (:attr:`warptissue.fit.FitResult.identifiability`: a parameter pinned at a bound,
+            (:attr:`warptissue.lsq.FitResult.identifiability`: a parameter pinned at a bound,
             a standard error above its value) in physical units, one per parameter
             (``alpha[g]`` in Pa, ``nu[g]``); empty when every parameter is identified.
     """
@@ -537,7 +537,7 @@ def estimate_field(
         gamma: Tikhonov weight (dimensionless, on the normalized parameters).
         method: "salm" (Tong et al.'s self-adapting LM) or "lm".
         max_iterations: Iteration limit of the LM.
-        ftol, xtol, gtol: Stopping tolerances of :func:`warptissue.fit.least_squares`.
+        ftol, xtol, gtol: Stopping tolerances of :func:`warptissue.lsq.least_squares`.
         alpha_deviation: Assumed largest deviation of the true alpha from alpha0 in any
             group, relative (0.5: within +-50%), for the regularization bias bounds. None:
             the fitted field's largest deviation.

@@ -31,7 +31,8 @@ from warptissue.field.markers import (
     grid_from_markers,
     surface_interpolation,
 )
-from warptissue.io import write_csv, write_json
+from warptissue.io import atomic_path, write_csv, write_json
+from warptissue.mesh import write_mesh
 
 __all__ = ["LoadSetResult", "estimate_load_set", "split_markers", "write_load_set_outputs"]
 
@@ -310,8 +311,6 @@ def plot_field_maps(path: str | Path, result: LoadSetResult) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from warptissue.io import atomic_path
-
     grid, field = result.grid, result.field
     nx, ny, nz = grid.hex_shape
     top = slice((nz - 1) * nx * ny, nz * nx * ny)
@@ -349,7 +348,6 @@ def write_load_set_outputs(out_dir: str | Path, result: LoadSetResult) -> dict[s
     ``field_<set>_test_markers.csv``, ``field_<set>.png`` (maps) and ``field_<set>.vtu``
     (mesh with E, nu, alpha and constrained flags as cell data, displacements as point data).
     """
-    from warptissue.mesh import write_mesh
 
     out = Path(out_dir)
     stem = f"field_{result.load_set}"

@@ -4,7 +4,7 @@ The incompressible, isotropic hyperelastic models of :mod:`warptissue.materials`
 conventions; their closed forms are documented there) under the homogeneous tests of a
 materials lab: uniaxial tension and compression, equibiaxial tension and planar tension (pure
 shear). Measured force and displacement become nominal stress and strain
-(:class:`HomogeneousTest`); the models are fitted with :func:`warptissue.fit.fit_curve` with
+(:class:`HomogeneousTest`); the models are fitted with :func:`warptissue.lsq.fit_curve` with
 an absolute (the needle-indentation study, Eq. 4) or relative (Eq. 5) objective
 (:func:`fit_hyperelastic`); and every fitted model gets a Drucker stability check over the six
 standard modes (:func:`drucker_stability`), as Abaqus's material evaluation reports it.
@@ -40,9 +40,9 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
-from warptissue.fit.engine import fit_curve
-from warptissue.fit.plausibility import SOFT_TISSUE_MODULUS_RANGE_PA, fit_quality_warnings
-from warptissue.fit.result import FitResult, RejectStep
+from warptissue.lsq.engine import fit_curve
+from warptissue.lsq.plausibility import SOFT_TISSUE_MODULUS_RANGE_PA, fit_quality_warnings
+from warptissue.lsq.result import FitResult, RejectStep
 from warptissue.materials import (
     HyperelasticMaterial,
     MooneyRivlin,
@@ -626,7 +626,7 @@ def fit_hyperelastic(
 
 def _modulus_warnings(model: HyperelasticMaterial) -> list[str]:
     """A message when the small-strain Young's modulus 3 mu0 of the fitted model lies outside
-    :data:`~warptissue.fit.plausibility.SOFT_TISSUE_MODULUS_RANGE_PA` (units of the data or
+    :data:`~warptissue.lsq.plausibility.SOFT_TISSUE_MODULUS_RANGE_PA` (units of the data or
     of the specimen geometry off?)."""
     youngs_Pa = 3.0 * model.initial_shear_modulus_Pa
     low, high = SOFT_TISSUE_MODULUS_RANGE_PA

@@ -7,7 +7,7 @@ measured force of every ``[[data]]`` record, jointly. It is the Python API behin
 
 Every forward run also gives the exact force sensitivities dF/dtheta (``K du/dtheta =
 -dR/dtheta`` at each converged step, docs/fe.md "Sensitivities"), so the least-squares engine
-(:func:`warptissue.fit.least_squares`, Levenberg-Marquardt or Tong et al.'s self-adapting LM)
+(:func:`warptissue.lsq.least_squares`, Levenberg-Marquardt or Tong et al.'s self-adapting LM)
 gets its Jacobian from the same run as its residuals: one forward run per trial point, where
 forward differences need 1 + n (FEBio's optimizer).
 
@@ -58,7 +58,7 @@ Notes:
     ``probe_radius_m``) is refused before fitting; systematic residuals (Durbin-Watson
     statistic below :data:`DURBIN_WATSON_LIMIT`), a force that rises during a hold or does
     not return to zero after unloading, a drift removed by the conditioning, non-identified
-    parameters (:attr:`warptissue.fit.FitResult.identifiability`) and a fit that did not
+    parameters (:attr:`warptissue.lsq.FitResult.identifiability`) and a fit that did not
     converge are warnings of the result.
 """
 
@@ -66,7 +66,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -74,11 +73,18 @@ from typing import Any
 
 import numpy as np
 
-from warptissue.errors import ConvergenceError, InputError
+from warptissue import fem
+from warptissue.device import resolve_device
+from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
 from warptissue.fit._forward import FitMeeting, run_fits
-from warptissue.fit.engine import covariance_from_jacobian, least_squares
-from warptissue.fit.metrics import r_squared, rmse
-from warptissue.fit.result import FitResult, IterationRecord, RejectStep
+from warptissue.fit.start import start_values_from_record
+from warptissue.io import read_sidecar, software_versions
+from warptissue.loading import resample_history
+from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE, covariance_from_jacobian, least_squares
+from warptissue.lsq.metrics import r_squared, rmse
+from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
+from warptissue.materials import Viscoelastic, positive_bounds, prony_term
+from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
 from warptissue.study import (
     CONTACT_POINTS,
     DEPTH_OFFSET,
@@ -86,8 +92,8 @@ from warptissue.study import (
     DataRecord,
     Protocol,
     Study,
-    start_values_from_record,
 )
+from warptissue.viscoelastic.fitting import fit_qlv
 
 __all__ = [
     "CORRELATION_LIMIT",
@@ -119,8 +125,6 @@ DRIFT_SHARE = 0.02
 CORRELATION_LIMIT = 0.995
 """Two parameters whose correlation exceeds this in magnitude are reported: the data
 determine a combination of them rather than each."""
-RELATIVE_FLOOR_SHARE = 0.01
-"""Default floor of the relative objective: this share of the largest |force| of the records."""
 OFFSET_IDENTIFIED_SHARE = 0.1
 """A fitted depth offset whose standard error exceeds this share of its record's depth span
 is reported as not identified (an offset may well be zero, so not judged by its value)."""
@@ -134,15 +138,7 @@ as a share of the record's depth span."""
 OFFSET_NOISE_SIGMA = 6.0
 """The start of a depth offset without a contact point: where the force first exceeds this
 many noise standard deviations (and 1 % of the peak force)."""
-INTERRUPTED_EXIT_CODE = 130
-"""Exit status of an interrupted fit (Ctrl-C), as the shell gives a process ended by SIGINT."""
 _CACHE_SIZE = 8
-
-
-def _is_prony(name: str) -> bool:
-    from warptissue.materials import PRONY_KEY
-
-    return bool(PRONY_KEY.match(name))
 
 
 @dataclass(frozen=True)
@@ -309,7 +305,6 @@ class IndentationFit:
             used), ``fitted_material``, ``history`` (per trial step: x, cost, accepted...),
             ``seconds`` and ``software``.
         """
-        from warptissue.io import software_versions
 
         result = self.result
         errors = result.standard_errors
@@ -455,7 +450,6 @@ def _record_drift_warnings(record: DataRecord) -> list[str]:
 
 def _check_probe_radius(study: Study) -> None:
     """Refuse a record whose sidecar names another probe radius than the study's."""
-    from warptissue.io import read_sidecar
 
     radius = study.indenter.radius_m
     for record in study.data:
@@ -531,7 +525,6 @@ class _ForwardModel:
                 value=missing[0],
             )
         self.index = [self.all_names.index(name) for name in names]
-        from warptissue.materials import Viscoelastic
 
         self.viscoelastic = isinstance(material, Viscoelastic)
         self.records = study.data
@@ -632,7 +625,6 @@ class _ForwardModel:
         else:
             share = (offset - reached[i - 1]) / (reached[i] - reached[i - 1])
             touch = float(t[i - 1] + share * (t[i] - t[i - 1]))
-        from warptissue.loading import resample_history
 
         try:
             grid = resample_history(t - touch, recorded - offset, steps=self.steps)
@@ -714,13 +706,12 @@ class _ForwardModel:
                 self._run(material, times, depths, sensitivities=sensitivities)
                 for times, depths in grids
             ]
-        from warptissue.fem import batch_assembler, simulate_indentation_batch
 
         problems = [dataclasses.replace(self.problem, material=material)] * len(grids)
         if self._packed_assembler is None or self._packed_assembler.problem_count != len(grids):
-            self._packed_assembler = batch_assembler(problems, device=self.device)
+            self._packed_assembler = fem.batch_assembler(problems, device=self.device)
         self.forward_solves += len(grids)
-        results = simulate_indentation_batch(
+        results = fem.simulate_indentation_batch(
             problems,
             [depths for _, depths in grids],
             options=self.options,
@@ -873,9 +864,7 @@ def _first_passage_times(
 
 
 def _simulate() -> Callable[..., Any]:
-    from warptissue.fem import simulate_indentation
-
-    return simulate_indentation
+    return fem.simulate_indentation
 
 
 def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
@@ -887,27 +876,11 @@ def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
     return scale
 
 
-def _positive_bounds(
-    names: Sequence[str], lower: np.ndarray, upper: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Moduli that must be positive get lower bound 0 where the model leaves them free."""
-    lower, upper = lower.copy(), upper.copy()
-    for j, name in enumerate(names):
-        if name in ("C10_Pa", "shear_modulus_Pa", "youngs_modulus_Pa", "bulk_modulus_Pa"):
-            lower[j] = max(lower[j], 0.0)
-        elif name.startswith("tau") and name.endswith("_s"):
-            lower[j] = max(lower[j], 0.0)
-        elif _is_prony(name):
-            lower[j] = max(lower[j], 0.0)
-            upper[j] = min(upper[j], 1.0)
-    return lower, upper
-
-
 def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitResult, ...], dict]:
     """Ahn & Kim's stage (i): fit_qlv on every record; the mean Prony terms."""
-    from warptissue.viscoelastic.fitting import fit_qlv
 
-    terms = sum(1 for name in material.parameter_names if re.fullmatch(r"g\d+", name))
+    kinds = [term[0] for term in map(prony_term, material.parameter_names) if term is not None]
+    terms = kinds.count("g")
     if terms == 0:
         raise InputError(
             "strategy two_stage fits a Prony series first: the material has none (add g1, "
@@ -946,17 +919,14 @@ def _forward_model(
     """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
     of the free parameters (and of the records' depth offsets, with ``offset_start``);
     ``batch_records`` (None: :func:`batches_records`) solves the records' runs together."""
-    from warptissue.device import resolve_device
-    from warptissue.fem import Assembler
-    from warptissue.simulate import _check_linear_solver, build_mesh, build_problem, estimate_mesh
 
     chosen = device if device is not None else study.solver.device
     warp_device = resolve_device(None if chosen == "auto" else chosen)
-    _check_linear_solver(study, warp_device)
+    check_linear_solver(study, warp_device)
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
     mesh = build_mesh(study)
     problem = build_problem(dataclasses.replace(study, material=material), mesh)
-    assembler = Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
+    assembler = fem.Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
     return _ForwardModel(
         study=study,
         problem=problem,
@@ -1110,8 +1080,6 @@ class _SharedRuns:
         self._assemblers: dict[tuple, Any] = {}
 
     def __call__(self, batch: dict[int, _RunRequest]) -> dict[int, Any]:
-        from warptissue.fem import batch_assembler, simulate_indentation_batch
-
         groups: dict[tuple, list[int]] = {}
         for fit, request in sorted(batch.items()):  # in fit order: one assembler per set
             key = (
@@ -1130,11 +1098,11 @@ class _SharedRuns:
                 if meshes not in self._assemblers:
                     if len(self._assemblers) >= self.KEPT:
                         self._assemblers.pop(next(iter(self._assemblers)))
-                    self._assemblers[meshes] = batch_assembler(
+                    self._assemblers[meshes] = fem.batch_assembler(
                         problems, device=batch[fits[0]].device
                     )
                 assembler = self._assemblers[meshes]
-                results = simulate_indentation_batch(
+                results = fem.simulate_indentation_batch(
                     problems,
                     [depths for _, depths in grids],
                     options=batch[fits[0]].options,
@@ -1210,7 +1178,7 @@ def fit_indentation(
     Notes:
         Ahn & Kim (2010), the two-stage method and the relative objective (Eq. 7); the
         engine: Levenberg-Marquardt with Marquardt's scaling or Tong et al.'s self-adapting
-        LM (:mod:`warptissue.fit.engine`). See the module docstring for the model force,
+        LM (:mod:`warptissue.lsq.engine`). See the module docstring for the model force,
         the residuals and the warnings.
     """
     options = {"strategy": strategy, "contact_point": contact_point}
@@ -1294,7 +1262,7 @@ def _fit_one(
                 path=study.path,
                 value=prony,
             ) from None
-        keep = [j for j, name in enumerate(free) if not _is_prony(name)]
+        keep = [j for j, name in enumerate(free) if prony_term(name) is None]
         if not keep:
             raise InputError(
                 "strategy two_stage fits the Prony terms in stage (i) and the other free "
@@ -1315,7 +1283,7 @@ def _fit_one(
     units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
     units += ("m",) * len(offset_names)
     x0 = np.array([start[name] for name in free], dtype=np.float64)
-    lower, upper = _positive_bounds(free, all_lower, all_upper)
+    lower, upper = positive_bounds(free, all_lower, all_upper)
     x0 = np.clip(x0, lower, upper)
     spans = np.array([float(np.ptp(record.displacement_m)) for record in study.data])
     if offset_start is not None:
@@ -1528,7 +1496,6 @@ def _fitted_study(study: Study, material: Any) -> Study:
     """The study with the fitted material; a viscoelastic one whose study has a quasi-static
     protocol replays the first record's history instead (``warptissue simulate`` needs time
     steps for it)."""
-    from warptissue.materials import Viscoelastic
 
     fitted = dataclasses.replace(study, material=material)
     if isinstance(material, Viscoelastic) and not study.protocol.timed:

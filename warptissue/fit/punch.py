@@ -13,9 +13,11 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from warptissue.errors import ConvergenceError, InputError
+from warptissue.lsq import fit_curve
+from warptissue.lsq.plausibility import modulus_warnings
 
 if TYPE_CHECKING:
-    from warptissue.fit import FitResult
+    from warptissue.lsq import FitResult
 
 __all__ = [
     "HAYES_MAX_RADIUS_OVER_THICKNESS",
@@ -285,7 +287,7 @@ def fit_punch_modulus(
 
     Fits F = 2 a E delta kappa / (1 - nu^2) ("flat", Sneddon with the Hayes factor kappa
     when ``thickness_m`` is given) or F = 4/3 E/(1 - nu^2) sqrt(R) delta^1.5 ("sphere",
-    Hertz) through :func:`warptissue.fit.fit_curve`.
+    Hertz) through :func:`warptissue.lsq.fit_curve`.
 
     Args:
         depth_m: Depths, shape (m,), all > 0.
@@ -297,18 +299,16 @@ def fit_punch_modulus(
         method: "lm" or "salm".
 
     Returns:
-        A :class:`warptissue.fit.FitResult` with the one parameter ``youngs_modulus_Pa``,
+        A :class:`warptissue.lsq.FitResult` with the one parameter ``youngs_modulus_Pa``,
         bounded below by 0 (a curve that falls with depth pins it there, which the result's
         identifiability check reports). Its ``warnings`` say when the deepest point exceeds
         :data:`SMALL_STRAIN_DEPTH_OVER_THICKNESS` of the layer thickness and when the modulus
-        is implausible for soft tissue (:func:`warptissue.fit.plausibility.modulus_warnings`).
+        is implausible for soft tissue (:func:`warptissue.lsq.plausibility.modulus_warnings`).
 
     Raises:
         InputError: Bad data or options, or a layer outside the range of the Hayes
             correction (:data:`HAYES_MAX_RADIUS_OVER_THICKNESS`).
     """
-    from warptissue.fit import fit_curve
-    from warptissue.fit.plausibility import modulus_warnings
 
     depth = _depth(depth_m)
     force = np.asarray(force_N, dtype=np.float64)

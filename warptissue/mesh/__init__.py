@@ -1,5 +1,6 @@
 """Tetrahedral meshes: the container, generators, checks and file I/O."""
 
+from warptissue.mesh._grading import graded_spacing
 from warptissue.mesh.core import (
     TET4_EDGES,
     TET4_FACES,
@@ -14,7 +15,6 @@ from warptissue.mesh.generators import (
     block_mesh,
     extrude_triangles,
     graded_coordinates,
-    graded_spacing,
     hex_to_tets,
     indentation_block,
     indentation_disc,

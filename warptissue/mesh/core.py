@@ -15,6 +15,7 @@ __all__ = [
     "boundary_faces",
     "signed_volumes",
     "to_tet10",
+    "unique_sorted_rows",
 ]
 
 TET4_EDGES: np.ndarray = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]], dtype=np.int32)
@@ -153,7 +154,7 @@ def to_tet10(mesh: TetMesh) -> TetMesh:
     if mesh.nodes_per_tet == 10:
         return mesh
     corners = mesh.tets
-    unique_edges, inverse = _unique_sorted_rows(corners[:, TET4_EDGES].reshape(-1, 2))
+    unique_edges, inverse = unique_sorted_rows(corners[:, TET4_EDGES].reshape(-1, 2))
     midpoints = 0.5 * (mesh.points[unique_edges[:, 0]] + mesh.points[unique_edges[:, 1]])
     mid_index = (mesh.node_count + inverse.reshape(-1, 6)).astype(np.int32)
     node_sets = {}
@@ -181,11 +182,11 @@ def boundary_faces(tets: np.ndarray) -> np.ndarray:
         Boundary triangles, shape (k, 3), int32, in the order of the tets they come from.
     """
     faces = np.asarray(tets)[:, :4][:, TET4_FACES].reshape(-1, 3)
-    _, inverse, counts = _unique_sorted_rows(faces, return_counts=True)
+    _, inverse, counts = unique_sorted_rows(faces, return_counts=True)
     return faces[counts[inverse] == 1].astype(np.int32)
 
 
-def _unique_sorted_rows(rows: np.ndarray, *, return_counts: bool = False) -> tuple[np.ndarray, ...]:
+def unique_sorted_rows(rows: np.ndarray, *, return_counts: bool = False) -> tuple[np.ndarray, ...]:
     """Unique rows of small non-negative integers, ignoring the order within a row.
 
     Rows are sorted and packed into one int64 key when that cannot overflow, which is several

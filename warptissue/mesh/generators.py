@@ -5,15 +5,23 @@ from __future__ import annotations
 import numpy as np
 
 from warptissue.errors import InputError, MeshError
+from warptissue.mesh._grading import (
+    INNER_SQUARE_FRACTION,
+    graded_spacing,
+    ogrid_division,
+    ogrid_rings,
+    require_positive,
+)
 from warptissue.mesh.core import (
     TET4_EDGES,
     TetMesh,
-    _unique_sorted_rows,
     boundary_faces,
     signed_volumes,
     to_tet10,
+    unique_sorted_rows,
 )
-from warptissue.mesh.size import estimate_indentation_mesh
+from warptissue.mesh.size import estimate_indentation_mesh, size_near_for_force_accuracy
+from warptissue.mesh.surface import tetrahedralize_surface
 
 __all__ = [
     "HEX_TO_FIVE_TETS",
@@ -22,7 +30,6 @@ __all__ = [
     "block_mesh",
     "extrude_triangles",
     "graded_coordinates",
-    "graded_spacing",
     "hex_to_tets",
     "indentation_block",
     "indentation_disc",
@@ -176,7 +183,7 @@ def hex_to_tets(
     if split not in ("five", "six"):
         raise MeshError(f"split must be 'five' or 'six', got {split!r}")
     quads = cells[:, _HEX_FACES].reshape(-1, 4)
-    _, quad_inverse, quad_counts = _unique_sorted_rows(quads, return_counts=True)
+    _, quad_inverse, quad_counts = unique_sorted_rows(quads, return_counts=True)
     if quad_counts.max() > 2:
         raise MeshError("a hex face is shared by more than two hexes (non-manifold mesh)")
     if split == "five" and parity is None:
@@ -252,84 +259,6 @@ def _two_colouring(hex_faces: np.ndarray, face_counts: np.ndarray) -> np.ndarray
             "mesh's face graph has an odd cycle; use split='six'"
         )
     return parity
-
-
-def graded_spacing(
-    length_m: float, first_m: float, largest_m: float, *, growth: float = 1.2
-) -> np.ndarray:
-    """Coordinates from 0 to ``length_m`` whose intervals grow geometrically up to a cap.
-
-    The first interval is about ``first_m``; each next one is ``growth`` times the previous
-    until it reaches ``largest_m``, after which intervals stay at ``largest_m``. The interval
-    count is the one whose sizes, scaled uniformly to fit ``length_m`` exactly, are closest to
-    the requested ones.
-
-    Args:
-        length_m: Total length, metres.
-        first_m: Target size of the first interval, metres.
-        largest_m: Largest interval size, metres (>= ``first_m``).
-        growth: Ratio of neighbouring intervals (>= 1).
-
-    Returns:
-        Increasing coordinates, shape (count + 1,), float64, from 0 to ``length_m``.
-    """
-    _require_positive(length_m=length_m, first_m=first_m, largest_m=largest_m)
-    if largest_m < first_m:
-        raise InputError(
-            f"largest_m ({largest_m} m) must not be smaller than first_m ({first_m} m)",
-            key="largest_m",
-            value=largest_m,
-        )
-    if not growth >= 1.0:
-        raise InputError("growth must be >= 1", key="growth", value=growth)
-    ramp_count = 1 if growth == 1.0 else int(np.ceil(np.log(largest_m / first_m) / np.log(growth)))
-    # Every ramp interval is >= first_m, so no more than this many can be used (a growth just
-    # above 1 would otherwise ask for an astronomically long ramp).
-    ramp_count = min(ramp_count, int(np.ceil(length_m / first_m)) + 1)
-    ramp = np.minimum(first_m * growth ** np.arange(max(ramp_count, 1)), largest_m)
-    ramp_total = np.cumsum(ramp)
-    if ramp_total[-1] >= length_m:
-        sizes = ramp[: int(np.searchsorted(ramp_total, length_m)) + 1]
-    else:
-        extra = int(np.ceil((length_m - ramp_total[-1]) / largest_m))
-        sizes = np.concatenate([ramp, np.full(extra, largest_m)])
-    return _fit_sizes(sizes, length_m)
-
-
-def _fit_sizes(sizes: np.ndarray, length_m: float) -> np.ndarray:
-    """Coordinates of intervals ``sizes`` (whose sum reaches ``length_m`` only with the last
-    one), dropping the last interval when that fits better, scaled to end at ``length_m``."""
-    if len(sizes) > 1 and abs(sizes[:-1].sum() - length_m) < abs(sizes.sum() - length_m):
-        sizes = sizes[:-1]
-    coordinates = np.concatenate([[0.0], np.cumsum(sizes)])
-    coordinates *= length_m / coordinates[-1]
-    coordinates[-1] = length_m
-    return coordinates
-
-
-def _radial_spacing(
-    inner_m: float,
-    outer_m: float,
-    first_m: float,
-    largest_m: float,
-    *,
-    growth: float,
-    angle_step: float,
-) -> np.ndarray:
-    """Radial offsets from ``inner_m`` to ``outer_m`` for rings with a fixed angular step.
-
-    Like :func:`graded_spacing`, but the radial size at radius r also stays below
-    ``_RADIAL_ASPECT * r * angle_step`` (when that exceeds ``first_m``), so cells far out stay
-    close to square instead of long and thin.
-    """
-    sizes = []
-    radius, size = inner_m, first_m
-    while radius < outer_m:
-        sizes.append(size)
-        radius += size
-        cap = max(first_m, _RADIAL_ASPECT * radius * angle_step)
-        size = max(size, min(size * growth, largest_m, cap))
-    return _fit_sizes(np.array(sizes), outer_m - inner_m)
 
 
 def extrude_triangles(
@@ -439,7 +368,7 @@ def indentation_block(
         A positively oriented, conforming mesh. Refine it by scaling both sizes: the tet count
         grows roughly as the inverse cube of the scale.
     """
-    _require_positive(width_m=width_m, thickness_m=thickness_m)
+    require_positive(width_m=width_m, thickness_m=thickness_m)
     return _indentation_specimen(
         outer="square",
         half_extent_m=0.5 * width_m,
@@ -501,7 +430,7 @@ def indentation_disc(
     Returns:
         A positively oriented, conforming mesh.
     """
-    _require_positive(radius_m=radius_m, thickness_m=thickness_m)
+    require_positive(radius_m=radius_m, thickness_m=thickness_m)
     return _indentation_specimen(
         outer="circle",
         half_extent_m=radius_m,
@@ -517,19 +446,6 @@ def indentation_disc(
         mesher=mesher,
         force_accuracy=force_accuracy,
     )
-
-
-def _require_positive(**values: float) -> None:
-    for name, value in values.items():
-        if not (np.isfinite(value) and value > 0):
-            raise InputError(f"{name} must be a positive finite number", key=name, value=value)
-
-
-_INNER_SQUARE_FRACTION = 0.5
-"""Half-width of the O-grid's central square over the probe radius."""
-
-_RADIAL_ASPECT = 1.25
-"""Largest radial over tangential size of the O-grid's outer rings (on the x axis)."""
 
 
 def _indentation_specimen(
@@ -557,12 +473,10 @@ def _indentation_specimen(
             value=force_accuracy,
         )
     if force_accuracy is not None:
-        from warptissue.mesh.size import size_near_for_force_accuracy
-
         size_near_m = size_near_for_force_accuracy(
             force_accuracy, probe_radius_m=probe_radius_m, mesher=mesher, element=element
         )
-    _require_positive(probe_radius_m=probe_radius_m, size_near_m=size_near_m, size_far_m=size_far_m)
+    require_positive(probe_radius_m=probe_radius_m, size_near_m=size_near_m, size_far_m=size_far_m)
     if element not in ("TET4", "TET10"):
         raise InputError("element must be 'TET4' or 'TET10'", key="element", value=element)
     if mesher not in MESHERS:
@@ -604,7 +518,7 @@ def _indentation_specimen(
     if not quarter:
         points_2d, triangles = _mirror_quarter(points_2d, triangles)
     layer_max_m = size_far_m if layer_max_m is None else layer_max_m
-    _require_positive(layer_max_m=layer_max_m)
+    require_positive(layer_max_m=layer_max_m)
     depth = graded_spacing(thickness_m, size_near_m, max(layer_max_m, size_near_m), growth=growth)
     z = thickness_m - depth[::-1]
     z[0] = 0.0
@@ -666,7 +580,6 @@ _DELAUNAY_MIN_DIHEDRAL_DEG = 12.0
 def _delaunay_refill(extruded: TetMesh) -> TetMesh:
     """TetGen quality tets inside the boundary surface of an extruded specimen, with its
     named face and node sets carried over (``top`` holds the ``probe`` faces too)."""
-    from warptissue.mesh.surface import tetrahedralize_surface
 
     faces = boundary_faces(extruded.tets)
     keys = {tuple(face): index for index, face in enumerate(np.sort(faces, axis=1))}
@@ -713,8 +626,8 @@ def _ogrid_quarter(
         boundary nodes lie on their curves to rounding.
     """
     a = probe_radius_m
-    n = _ogrid_division(probe_radius_m, size_near_m)
-    c = _INNER_SQUARE_FRACTION * a
+    n = ogrid_division(probe_radius_m, size_near_m)
+    c = INNER_SQUARE_FRACTION * a
     step = np.arange(n + 1) / n
     # The central square: (n + 1)^2 nodes, (i, j) -> i + (n + 1) j.
     square = np.column_stack([np.tile(c * step, n + 1), np.repeat(c * step, n + 1)])
@@ -728,7 +641,7 @@ def _ogrid_quarter(
     direction = np.column_stack([np.cos(angle), np.sin(angle)])
     direction[-1] = (0.0, 1.0)
     # Rings from the square to the probe edge (uniform), then out to the outer boundary.
-    inner_count, outer_fraction = _ogrid_rings(
+    inner_count, outer_fraction = ogrid_rings(
         half_extent_m, probe_radius_m, size_near_m, size_far_m, growth=growth
     )
     if outer == "circle":
@@ -755,36 +668,6 @@ def _ogrid_quarter(
 
     quads = np.vstack([_grid_quads(square_index), _grid_quads(ring_index)])
     return points, _split_quads(points, quads)
-
-
-def _ogrid_division(probe_radius_m: float, size_near_m: float) -> int:
-    """Cells along each side of the O-grid's central square (a quarter of the probe ring has
-    twice as many)."""
-    return max(2, int(np.ceil(0.25 * np.pi * probe_radius_m / size_near_m)))
-
-
-def _ogrid_rings(
-    half_extent_m: float,
-    probe_radius_m: float,
-    size_near_m: float,
-    size_far_m: float,
-    *,
-    growth: float,
-) -> tuple[int, np.ndarray]:
-    """The O-grid's rings outside its central square.
-
-    Returns:
-        ``(inner_count, outer_fraction)``: the number of uniform rings from the square to the
-        probe ring, and the increasing positions in (0, 1] of the rings from the probe ring to
-        the outer boundary (1 is the boundary).
-    """
-    a = probe_radius_m
-    n = _ogrid_division(probe_radius_m, size_near_m)
-    inner_count = max(1, int(round((1.0 - _INNER_SQUARE_FRACTION) * a / (0.25 * np.pi * a / n))))
-    outer_fraction = _radial_spacing(
-        a, half_extent_m, size_near_m, size_far_m, growth=growth, angle_step=0.25 * np.pi / n
-    )
-    return inner_count, outer_fraction[1:] / outer_fraction[-1]
 
 
 def _grid_quads(node_index: np.ndarray) -> np.ndarray:

@@ -12,8 +12,8 @@ from warptissue.mesh.core import (
     TET4_EDGES,
     TET4_FACES,
     TetMesh,
-    _unique_sorted_rows,
     signed_volumes,
+    unique_sorted_rows,
 )
 
 __all__ = [
@@ -147,7 +147,7 @@ def check_mesh(
                 element=first,
             )
     faces = np.sort(mesh.corner_tets[:, TET4_FACES].reshape(-1, 3), axis=1)
-    _, face_inverse, face_counts = _unique_sorted_rows(faces, return_counts=True)
+    _, face_inverse, face_counts = unique_sorted_rows(faces, return_counts=True)
     crowded = np.flatnonzero(face_counts[face_inverse] > 2)
     if crowded.size:
         first = int(crowded[0] // 4)

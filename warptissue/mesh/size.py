@@ -24,6 +24,7 @@ import numpy as np
 
 from warptissue.device import available_host_memory_bytes
 from warptissue.errors import InputError, MeshError
+from warptissue.mesh._grading import graded_spacing, ogrid_division, ogrid_rings, require_positive
 
 __all__ = [
     "FLAT_PUNCH_FORCE_ERRORS",
@@ -160,19 +161,12 @@ def estimate_indentation_mesh(
     Raises:
         InputError: A size that is not positive and finite, or an unknown shape or element.
     """
-    from warptissue.mesh.generators import (
-        _ogrid_division,
-        _ogrid_rings,
-        _require_positive,
-        graded_spacing,
-    )
-
     if shape not in ("block", "disc"):
         raise InputError("shape must be 'block' or 'disc'", key="shape", value=shape)
     if element not in ("TET4", "TET10"):
         raise InputError("element must be 'TET4' or 'TET10'", key="element", value=element)
     layer_max_m = size_far_m if layer_max_m is None else layer_max_m
-    _require_positive(
+    require_positive(
         half_extent_m=half_extent_m,
         thickness_m=thickness_m,
         probe_radius_m=probe_radius_m,
@@ -181,7 +175,7 @@ def estimate_indentation_mesh(
         layer_max_m=layer_max_m,
     )
     layer_size_m = max(layer_max_m, size_near_m)
-    n = _ogrid_division(probe_radius_m, size_near_m)
+    n = ogrid_division(probe_radius_m, size_near_m)
     # A lower bound first (the layers are at most layer_size_m thick, the outer rings at
     # most size_far_m wide): where even that is beyond 32-bit indices, counting exactly
     # could take as long as generating.
@@ -191,7 +185,7 @@ def estimate_indentation_mesh(
     lower = _estimate(3.0 * triangles_low * layers_low, triangles_low, layers_low, element)
     if max(lower.tet_count, lower.node_count) > MAX_INDEX:
         return lower
-    inner_count, outer_fraction = _ogrid_rings(
+    inner_count, outer_fraction = ogrid_rings(
         half_extent_m, probe_radius_m, size_near_m, size_far_m, growth=growth
     )
     rings = inner_count + len(outer_fraction)

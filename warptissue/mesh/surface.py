@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import tetgen
 
 from warptissue.errors import InputError, MeshError
 from warptissue.mesh.core import TetMesh, boundary_faces
@@ -102,7 +103,6 @@ def tetrahedralize_surface(
             exist or that another set already holds (the message names both).
         MeshError: TetGen fails (for example on a self-intersecting surface).
     """
-    import tetgen
 
     check_closed_surface(vertices_m, triangles)
     set_names = list(surface_sets or {})

@@ -25,13 +25,13 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.indenter import Indenter
-from warptissue.mesh import TetMesh
+from warptissue.mesh import NODE_SET_PREFIX, TET_REGION_KEY, TetMesh
+from warptissue.simulate import build_mesh
+from warptissue.study import load_study
 from warptissue.usd.writer import UsdScenePaths, write_simulation_usd
 
 __all__ = ["export_result_dir", "export_study", "read_fields_vtu"]
 
-NODE_SET_PREFIX = "node_set:"
-TET_REGION_KEY = "tet_region"
 _CELL_TYPES = {"tetra": 4, "tetra10": 10}
 
 
@@ -239,8 +239,6 @@ def export_study(
     Returns:
         The paths written.
     """
-    from warptissue.simulate import build_mesh
-    from warptissue.study import load_study
 
     study = load_study(study_path)
     return write_simulation_usd(

@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pxr import Tf, Usd, UsdGeom, UsdShade
 
 from warptissue.errors import InputError, MeshError
 from warptissue.mesh import TetMesh
@@ -30,7 +31,6 @@ __all__ = [
 
 def open_stage(path: str | Path) -> Any:
     """Open a USD stage with an error naming the file when it cannot be read."""
-    from pxr import Tf, Usd
 
     path = Path(path)
     if not path.is_file():
@@ -45,8 +45,6 @@ def open_stage(path: str | Path) -> Any:
 
 
 def _find_tetmesh(stage: Any, path: Path, prim_path: str | None) -> Any:
-    from pxr import UsdGeom
-
     if prim_path is not None:
         prim = stage.GetPrimAtPath(prim_path)
         if not prim or not prim.IsA(UsdGeom.TetMesh):
@@ -77,7 +75,6 @@ def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMe
         tetrahedron subsets, and face sets from the ``faceSet`` subsets of the sibling surface
         Mesh written by :func:`warptissue.usd.write_simulation_usd`.
     """
-    from pxr import Usd, UsdGeom
 
     path = Path(path)
     stage = open_stage(path)
@@ -143,7 +140,6 @@ def read_material_field_usd(
         InputError: A primvar is missing, has no default value, is not uniform or does not
             hold one value per tet.
     """
-    from pxr import UsdGeom
 
     path = Path(path)
     stage = open_stage(path)
@@ -180,7 +176,6 @@ def read_material_usd(path: str | Path) -> dict[str, Any]:
         "density_kg_per_m3", "youngs_modulus_Pa", "poissons_ratio"}`` (the last two are the
         small-strain equivalents under ``physics:``).
     """
-    from pxr import Usd, UsdGeom, UsdShade
 
     path = Path(path)
     stage = open_stage(path)

@@ -24,7 +24,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pxr import Plug
 
+from warptissue import materials
 from warptissue.errors import InputError
 
 __all__ = [
@@ -95,7 +97,6 @@ def register_schema_plugin() -> None:
     global _registered
     if _registered:
         return
-    from pxr import Plug
 
     Plug.Registry().RegisterPlugins([PLUGIN_DIRECTORY.as_posix()])
     _registered = True
@@ -237,7 +238,6 @@ def _small_strain_material(model: str, values: Mapping[str, Any], bulk: float | 
     Raises:
         InputError: The initial shear modulus is not positive, or a value the model refuses.
     """
-    from warptissue import materials
 
     coefficients = []
     while f"C{len(coefficients) + 1}0" in values:

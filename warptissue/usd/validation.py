@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from pxr import Sdf, Usd, UsdGeom, UsdValidation
 
 from warptissue.usd.reader import open_stage
 from warptissue.usd.schema import (
@@ -28,8 +29,6 @@ __all__ = ["validate_stage"]
 
 
 def _framework_findings(stage: object) -> list[str]:
-    from pxr import UsdValidation
-
     registry = UsdValidation.ValidationRegistry()
     context = UsdValidation.ValidationContext(registry.GetOrLoadAllValidators())
     return [
@@ -40,8 +39,6 @@ def _framework_findings(stage: object) -> list[str]:
 
 
 def _tetmesh_findings(stage: object) -> list[str]:
-    from pxr import Usd, UsdGeom
-
     findings = []
     for prim in stage.Traverse():
         if not prim.IsA(UsdGeom.TetMesh):
@@ -72,8 +69,6 @@ def _tetmesh_findings(stage: object) -> list[str]:
 
 
 def _layer_findings(stage: object) -> list[str]:
-    from pxr import Sdf, UsdGeom
-
     findings = []
     if UsdGeom.GetStageMetersPerUnit(stage) != 1.0:
         findings.append(
@@ -141,8 +136,6 @@ def _material_findings(stage: object) -> list[str]:
 
 
 def _material_field_findings(stage: object) -> list[str]:
-    from pxr import UsdGeom
-
     findings = []
     for prim in stage.Traverse():
         if prim.IsA(UsdGeom.TetMesh):

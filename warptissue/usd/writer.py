@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 
 from warptissue.errors import InputError, MeshError
 from warptissue.indenter import Indenter
@@ -112,7 +113,6 @@ def _corner_mesh(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _vt_dictionary(data: Mapping[str, Any]) -> dict[str, Any]:
     """JSON-like data as values USD customData accepts (nested dicts, str, float, int, bool)."""
-    from pxr import Vt
 
     converted: dict[str, Any] = {}
     for key, value in to_jsonable(data).items():
@@ -166,7 +166,6 @@ def _define_subsets(
     through the Usd API recomposes the stage per subset, which is slow for meshes with
     thousands of regions.
     """
-    from pxr import Sdf, Tf, UsdGeom, Vt
 
     if not sets:
         return
@@ -208,7 +207,6 @@ def _indenter_prims(
     side thick, resting on the top; a platen with ``length_m`` > 0 is a square of that side
     centred on the probe.
     """
-    from pxr import Gf, Sdf, UsdGeom
 
     contact_z = top_z_m if indenter.z_m is None else indenter.z_m
     xform = UsdGeom.Xform.Define(stage, INDENTER)
@@ -273,7 +271,6 @@ def _wedge_mesh(stage: Any, indenter: Indenter) -> None:
     """A wedge along y (opening ``angle_deg``, tip radius ``radius_m``, its lowest line at the
     origin) drawn as an extruded profile: the tip arc and two flanks up to a height of a few
     tip radii; ``length_m`` along y (0: ten tip radii)."""
-    from pxr import UsdGeom
 
     radius = indenter.radius_m
     half = math.radians(0.5 * indenter.angle_deg)
@@ -369,7 +366,6 @@ def _material_field_primvars(
     stage: Any, arrays: Mapping[str, np.ndarray], *, owners: np.ndarray
 ) -> None:
     """Per-tet values on the TetMesh and per-face values (of the owning tet) on the surface."""
-    from pxr import Sdf, UsdGeom, Vt
 
     volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(VOLUME))
     surface = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(SURFACE))
@@ -397,7 +393,6 @@ def _material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
     Returns:
         The ``UsdShade.Material`` at ``/World/Materials/Tissue``.
     """
-    from pxr import Sdf, UsdGeom, UsdShade, Vt
 
     UsdGeom.Scope.Define(stage, MATERIAL.rsplit("/", 1)[0])
     material = UsdShade.Material.Define(stage, MATERIAL)
@@ -483,7 +478,6 @@ def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str,
 
 def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> None:
     """Declare (type, interpolation, unit; no values) the attributes the results layer samples."""
-    from pxr import Sdf, UsdGeom
 
     volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(VOLUME))
     surface = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(SURFACE))
@@ -524,8 +518,6 @@ def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> 
         primvar.GetAttr().SetCustomDataByKey("unit", unit)
     indenter = stage.GetPrimAtPath(INDENTER)
     if not indenter:
-        from pxr import Gf
-
         UsdGeom.Xform.Define(stage, INDENTER).AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 0.0))
         indenter = stage.GetPrimAtPath(INDENTER)
     curves = [("depth", "m"), ("reactionForce", "N")] + (
@@ -550,7 +542,6 @@ def _write_results(
     rest: np.ndarray,
 ) -> None:
     """Author the time samples (stage's edit target: the results layer)."""
-    from pxr import Gf, UsdGeom, Vt
 
     volume = UsdGeom.TetMesh(stage.GetPrimAtPath(VOLUME))
     surface = UsdGeom.Mesh(stage.GetPrimAtPath(SURFACE))
@@ -618,7 +609,6 @@ def _volume_prim(
     stage: Any, mesh: TetMesh, *, tets: np.ndarray, rest: np.ndarray, new_index: np.ndarray
 ) -> tuple[Any, np.ndarray]:
     """The TetMesh with its node-set and region subsets; returns (prim, surface faces (F, 3))."""
-    from pxr import Gf, UsdGeom, UsdPhysics, Vt
 
     volume = UsdGeom.TetMesh.Define(stage, VOLUME)
     volume_prim = volume.GetPrim()
@@ -661,7 +651,6 @@ def _surface_prim(
     Returns:
         The TetMesh points on the surface (n,) and the tet owning each face (F,).
     """
-    from pxr import Gf, Sdf, UsdGeom, Vt
 
     surface_nodes, surface_local = np.unique(faces, return_inverse=True)
     surface_triangles = surface_local.reshape(-1, 3).astype(np.int32)
@@ -748,7 +737,6 @@ def write_simulation_usd(
     Returns:
         The paths written.
     """
-    from pxr import Sdf, Usd, UsdGeom
 
     root_path = Path(root_path)
     if root_path.suffix != ".usda":
@@ -795,8 +783,6 @@ def write_simulation_usd(
         _material_field_primvars(stage, field_arrays, owners=owners)
 
     if material is not None:
-        from pxr import UsdShade
-
         tissue = _material_prims(stage, material_record(material), density_kg_per_m3)
         UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
             tissue, UsdShade.Tokens.fallbackStrength, "physics"
@@ -883,7 +869,6 @@ def write_material_usd(
     Returns:
         The path written.
     """
-    from pxr import Sdf, Usd, UsdGeom
 
     path = Path(path)
     if path.suffix != ".usda":

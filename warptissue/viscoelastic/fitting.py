@@ -1,7 +1,7 @@
-"""Fits of the lumped viscoelastic models, all through :mod:`warptissue.fit`.
+"""Fits of the lumped viscoelastic models, all through :mod:`warptissue.lsq`.
 
 Every least-squares fit here goes through the project's one engine
-(:func:`warptissue.fit.fit_curve` / :func:`warptissue.fit.least_squares`, Levenberg-Marquardt
+(:func:`warptissue.lsq.fit_curve` / :func:`warptissue.lsq.least_squares`, Levenberg-Marquardt
 or the self-adapting LM). The joint Wiechert fit can also use Nelder-Mead
 (``scipy.optimize.minimize``) on Takacs et al.'s cost, the sum of the RMS errors of the
 curves.
@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit import FitResult, RejectStep, fit_curve
-from warptissue.fit.engine import covariance_from_jacobian
-from warptissue.fit.metrics import r_squared, rmse
-from warptissue.fit.plausibility import (
+from warptissue.lsq import FitResult, RejectStep, fit_curve
+from warptissue.lsq.engine import covariance_from_jacobian
+from warptissue.lsq.metrics import r_squared, rmse
+from warptissue.lsq.plausibility import (
     check_indentation_record,
     fit_quality_warnings,
     stiffness_warnings,
@@ -96,7 +96,7 @@ class RelaxationRecord:
         object.__setattr__(self, "force_N", force)
 
     def plausibility_warnings(self) -> list[str]:
-        """:func:`warptissue.fit.plausibility.check_indentation_record` on this record.
+        """:func:`warptissue.lsq.plausibility.check_indentation_record` on this record.
 
         Raises:
             InputError: A record that cannot be an indentation in SI units.
@@ -199,20 +199,20 @@ def fit_relaxation_joint(
             nonlinear Wiechert model starts from its linear fit with kappa = 0). All
             parameters are bounded below by 0 (kappa_j >= 0: progressive springs; a negative
             kappa makes the spring force fall with stretch beyond 1/|kappa|).
-        method: "lm" or "salm" (:func:`warptissue.fit.least_squares`).
+        method: "lm" or "salm" (:func:`warptissue.lsq.least_squares`).
         objective: "absolute" or "relative".
         relative_floor: Smallest |force| (N) used as the divisor of the relative objective
-            (:func:`warptissue.fit.fit_curve`); needed for records that start at zero force.
+            (:func:`warptissue.lsq.fit_curve`); needed for records that start at zero force.
         max_iterations: Iteration limit of the engine.
         progress: Show a progress bar.
 
     Returns:
-        The :class:`warptissue.fit.FitResult` (``fitted`` and ``r_squared``/``rmse`` over
+        The :class:`warptissue.lsq.FitResult` (``fitted`` and ``r_squared``/``rmse`` over
         all samples, unweighted), with the extra attributes ``fitted_model`` (the model
         object; :func:`model_from_result` builds it again from any result),
         ``record_rmse_N`` and ``record_r_squared`` (one per record). Its ``warnings`` hold
         the plausibility warnings of the data and of the fitted stiffness
-        (:mod:`warptissue.fit.plausibility`).
+        (:mod:`warptissue.lsq.plausibility`).
 
     Raises:
         InputError: Bad data (implausible for an indentation: zero force, opposite signs,

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit import FitResult, RejectStep, fit_curve
+from warptissue.lsq import FitResult, RejectStep, fit_curve
 from warptissue.viscoelastic._hereditary import validate_history
 
 __all__ = ["ParallelNonlinearSprings", "blatz_pressure_Pa", "fit_blatz"]

@@ -1,7 +1,7 @@
 """The result of a least-squares fit, its status table, and the step-refusal signal.
 
-A :class:`FitResult` is what :func:`warptissue.fit.least_squares` and
-:func:`warptissue.fit.fit_curve` return, in the style of ``scipy.optimize.OptimizeResult``:
+A :class:`FitResult` is what :func:`warptissue.lsq.least_squares` and
+:func:`warptissue.lsq.fit_curve` return, in the style of ``scipy.optimize.OptimizeResult``:
 the parameters, the final residuals and Jacobian, an integer ``status`` with a message from
 :data:`STATUS_MESSAGES`, the iteration history, and the statistics of the fit (covariance,
 standard errors, correlation, R², RMSE). It never holds NaN: quantities that are undefined
@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from warptissue.io import software_versions
 
 __all__ = [
     "STANDARD_ERROR_BOUND_FACTOR",
@@ -272,7 +274,6 @@ class FitResult:
             "software"}`` (and ``"history"`` when asked). ``identifiability`` lists the
             messages of :attr:`identifiability`; ``warnings`` lists :attr:`all_warnings`.
         """
-        from warptissue.io import software_versions
 
         errors = self.standard_errors
         parameters = {

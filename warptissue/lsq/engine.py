@@ -3,8 +3,8 @@
 Every fit in the project (analytic stress-strain curves, lumped viscoelastic models, the
 heterogeneous field estimator, inverse FE) goes through :func:`least_squares` or its curve
 front end :func:`fit_curve`. The front end follows ``scipy.optimize.least_squares``: validate
-the input first, then iterate, then return a :class:`~warptissue.fit.result.FitResult` with an
-integer status from :data:`~warptissue.fit.result.STATUS_MESSAGES`.
+the input first, then iterate, then return a :class:`~warptissue.lsq.result.FitResult` with an
+integer status from :data:`~warptissue.lsq.result.STATUS_MESSAGES`.
 
 Notes:
     Both methods solve the damped Gauss-Newton system for the step d,
@@ -72,13 +72,17 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
-from warptissue.fit.metrics import r_squared, rmse
-from warptissue.fit.result import STATUS_MESSAGES, FitResult, IterationRecord, RejectStep
+from warptissue.lsq.metrics import r_squared, rmse
+from warptissue.lsq.result import STATUS_MESSAGES, FitResult, IterationRecord, RejectStep
 
 __all__ = ["covariance_from_jacobian", "fit_curve", "least_squares"]
 
 _EPS = float(np.finfo(np.float64).eps)
-_METHODS = ("lm", "salm")
+METHODS: tuple[str, ...] = ("lm", "salm")
+"""The methods of :func:`least_squares`: Levenberg-Marquardt and self-adapting LM."""
+RELATIVE_FLOOR_SHARE = 0.01
+"""The default floor of a relative objective (``relative_floor`` of :func:`fit_curve`) that
+the fits choose for the user: this share of the largest |force| of the records."""
 _OPTION_DEFAULTS: Mapping[str, Mapping[str, float]] = {
     "lm": {"initial_damping": 1e-3, "p0": 1e-4},
     "salm": {"theta": 0.5, "c": 1e-8, "p0": 1e-4, "eta0": 1.0},
@@ -351,8 +355,8 @@ def least_squares(
             Jacobian, or finite differences refused on both sides). Later such a failure
             ends the fit with status -3 and the best point so far.
     """
-    if method not in _METHODS:
-        raise InputError(f"method must be one of {_METHODS}", value=method)
+    if method not in METHODS:
+        raise InputError(f"method must be one of {METHODS}", value=method)
     x = np.asarray(x0, dtype=np.float64).reshape(-1).copy()
     n = x.size
     if n == 0 or not np.all(np.isfinite(x)):

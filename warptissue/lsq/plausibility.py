@@ -5,7 +5,7 @@ displacements written in millimetres in a ``displacement_m`` column all give a f
 fine. These checks say so. Data that cannot be an indentation in SI units raise an
 :class:`~warptissue.errors.InputError` (exit status 2 on the command line); data or results
 that are merely unusual return warning messages, which the fits append to
-:attr:`warptissue.fit.FitResult.warnings` (a ``warning:`` line and the JSON ``warnings`` key).
+:attr:`warptissue.lsq.FitResult.warnings` (a ``warning:`` line and the JSON ``warnings`` key).
 
 The limits are module constants, documented on the fitting page of the docs.
 """
@@ -21,7 +21,7 @@ import numpy as np
 from warptissue.errors import InputError
 
 if TYPE_CHECKING:
-    from warptissue.fit.result import FitResult
+    from warptissue.lsq.result import FitResult
 
 __all__ = [
     "INDENTATION_STIFFNESS_RANGE_N_PER_M",
