@@ -156,5 +156,5 @@ def test_packed_assemblers_refuse_what_they_cannot_do():
     contact = RigidContact(
         Indenter("sphere", radius_m=1e-3), nodes=np.arange(3), top_z_m=0.0, stiffness_N_per_m=1.0
     )
-    with pytest.raises(InputError, match="one contact \(or None\) per packed problem: 3"):
+    with pytest.raises(InputError, match=r"one contact \(or None\) per packed problem: 3"):
         together.set_contact(contact)
