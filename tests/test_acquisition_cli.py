@@ -250,6 +250,7 @@ RIG_SIM_ERRORS = [
 
 
 @pytest.mark.parametrize(("options", "message"), RIG_SIM_ERRORS)
+@pytest.mark.slow
 def test_rig_sim_bad_options_one_line(options, message):
     """Refused before serving; in its own process (a working rig-sim would serve until the
     timeout)."""

@@ -313,6 +313,7 @@ def test_cli_acquire_against_simulated_rig(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("stop", ["SIGINT", "SIGTERM", "SIGINT-inherited-ignored"])
+@pytest.mark.slow
 def test_cli_rig_sim_serves_until_ctrl_c(tmp_path, stop):
     """``warptissue rig-sim`` in its own process: prints its URL, serves, and exits cleanly on
     SIGINT or SIGTERM, also when started with SIGINT ignored (as a non-interactive shell

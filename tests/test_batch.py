@@ -131,6 +131,7 @@ def first_batch(tmp_path_factory):
     return studies, out, status, err.getvalue()
 
 
+@pytest.mark.slow
 def test_batch_files_equal_the_single_study_commands(first_batch, tmp_path, capsys):
     """Each study's folder holds what its own command writes, with the same numbers."""
     studies, out, _, _ = first_batch
@@ -208,6 +209,7 @@ def test_a_broken_study_is_one_line_and_the_others_finish(first_batch):
     assert lines[-1] == f"warptissue: error: 1 of 3 studies failed (see {out / 'summary.csv'})"
 
 
+@pytest.mark.slow
 def test_together_solves_a_task_s_simulations_in_one_batched_run(first_batch, tmp_path):
     """``--together 5``: one task holds a broken study, two fits and two simulations; the
     two simulations are solved in one batched FE run (``solved_together`` 2) with the forces
@@ -269,6 +271,7 @@ def test_a_batched_run_that_fails_leaves_its_studies_to_run_alone(tmp_path, monk
         assert (tmp_path / "out" / outcome.folder / batch.DONE_MARKER).is_file()
 
 
+@pytest.mark.slow
 def test_resume_skips_complete_studies_and_force_redoes_them(tmp_path):
     studies = tmp_path / "studies"
     studies.mkdir()
@@ -356,6 +359,7 @@ def test_study_sources_and_folder_names(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("together", [1, 2])
+@pytest.mark.slow
 def test_local_cluster_loses_no_study_when_a_worker_is_killed(tmp_path, monkeypatch, together):
     """Must-show c of issue 23: 2 workers on loopback, one killed in the middle of a task;
     with ``together=2`` the killed task holds two studies solved in one batched run, and

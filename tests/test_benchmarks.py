@@ -42,6 +42,7 @@ def test_the_page_has_generated_tables():
     generated_tables() + generated_tables(INVERSE_FIT) + generated_tables(BATCH),
     ids=lambda x: str(x)[:40],
 )
+@pytest.mark.slow
 def test_a_performance_table_is_the_benchmarks_output(command, table):
     script, *arguments = shlex.split(command)[1:]
     assert run_script(script, *arguments, cwd=ROOT).strip() == table
@@ -68,6 +69,7 @@ def run_benchmark(name: str, *args: str, cwd: Path) -> str:
     return run_script(f"scripts/benchmarks/{name}", *args, cwd=cwd)
 
 
+@pytest.mark.slow
 def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):
     """Two of the 20 load steps on about a thousand tets: the force per depth lies 0-30 %
     above Sneddon's half-space 8 mu a (the finite block is stiffer, by 1.09 at convergence),
@@ -84,6 +86,7 @@ def test_the_flat_punch_benchmark_runs_a_tiny_mesh(tmp_path):
     assert "| 2 of 20 |" in table
 
 
+@pytest.mark.slow
 def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
     """--size-near-ratios meshes the block at a near size of R probe radii and the far size
     of a study's default (2.5 mm); with two tolerances the table gives each run's largest
@@ -125,6 +128,7 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
         ),
     ],
 )
+@pytest.mark.slow
 def test_a_quick_benchmark_runs(name, args, expected, tmp_path):
     """The benchmarks without a test of their numbers still run on a small case."""
     assert re.search(expected, run_benchmark(name, *args, cwd=tmp_path))
@@ -180,6 +184,7 @@ def test_the_cudss_batch_benchmark_tables_a_failed_solve(tmp_path):
     assert "| h100 | 7 885 | 8 | 319 968 | 41.2 | failed | 136 | 0.52, -, 1.6 | 2.0e-15 |" in table
 
 
+@pytest.mark.slow
 def test_the_cudss_batch_benchmark_splits_the_union_into_each_problems_tangent():
     """The batch it hands cuDSS is each problem's own eliminated tangent: the diagonal blocks
     of the packed problems' CSR matrix (two meshes of different sizes), and nothing else."""

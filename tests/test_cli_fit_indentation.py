@@ -102,6 +102,7 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_fit_writes_its_report_and_summary_and_the_fitted_study_runs(study_file, tmp_path, capsys):
     out = tmp_path / "out"
     status = main(["fit", "indentation", str(study_file), "-o", str(out), "--usd"])
@@ -214,6 +215,7 @@ def test_help_states_the_exit_statuses(capsys):
         assert status in text
 
 
+@pytest.mark.slow
 def test_the_shipped_liver_records_are_what_their_script_makes(tmp_path):
     """scenes/data/liver_ramp_*.csv come from scripts/tools/make_relaxation_example.py (the
     forward FE of scenes/liver_fit.toml with the truth of the sidecar): its quick form remakes

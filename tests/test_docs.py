@@ -172,6 +172,7 @@ PAGE_PARAMS = [
 
 
 @pytest.mark.parametrize("page", PAGE_PARAMS)
+@pytest.mark.slow
 def test_page_code_blocks(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """Every runnable block of the page runs, in order, without error."""
     blocks = code_blocks(page)

@@ -40,6 +40,7 @@ def test_every_example_has_a_test():
     assert {p.name for p in EXAMPLES.glob("*.py")} == tested
 
 
+@pytest.mark.slow
 def test_wiechert_table1_refit_predicts_the_held_out_rate(tmp_path):
     """Takacs et al.'s protocol: fit the near-step and 20 mm/min records jointly, predict
     100 mm/min. The prediction must match the noise-free curve far inside the 5 mN noise."""
@@ -53,6 +54,7 @@ def test_wiechert_table1_refit_predicts_the_held_out_rate(tmp_path):
     assert "nelder-mead" not in out  # --quick stops after LM
 
 
+@pytest.mark.slow
 def test_pillow_case_quick_beats_the_homogeneous_estimate(tmp_path):
     """Tong et al.'s pillow at half marker resolution: the heterogeneous field's held-out
     marker errors lie below the paper's 1.5 mm and well below the homogeneous estimate's."""
@@ -66,6 +68,7 @@ def test_pillow_case_quick_beats_the_homogeneous_estimate(tmp_path):
     assert (tmp_path / "pillow" / "calibration.json").is_file()
 
 
+@pytest.mark.slow
 def test_verify_flat_punch_quick_matches_the_layer_factor_and_shows_locking(tmp_path):
     """The small-depth punch stiffness on the coarse meshes lies within 3 % of the layer
     factor that hayes_kappa computes (Hayes et al. 1972), and displacement TET4 locks."""
@@ -80,6 +83,7 @@ def test_verify_flat_punch_quick_matches_the_layer_factor_and_shows_locking(tmp_
     assert locking["tet10_mixed"] < locking["tet10_displacement"]
 
 
+@pytest.mark.slow
 def test_rig_acquisition_demo_recovers_the_simulated_tissue(tmp_path):
     """The simulated rig's tissue (a standard linear solid) and rig model come back from the
     recorded, conditioned ramp-and-hold records and the simulated sine sweep."""
@@ -92,6 +96,7 @@ def test_rig_acquisition_demo_recovers_the_simulated_tissue(tmp_path):
     assert (tmp_path / "rig" / "rig_bode.png").is_file()
 
 
+@pytest.mark.slow
 def test_ahn_kim_two_stage_quick_recovers_table_1_and_c10(tmp_path):
     """Ahn & Kim's two-stage method on an FE-made record of Table 1, experiment 1 (C10 =
     287.5 Pa, 1 % noise): stage (i) gives the Prony series within 5 %, stage (ii) C10 within
@@ -112,6 +117,7 @@ def test_ahn_kim_two_stage_quick_recovers_table_1_and_c10(tmp_path):
     assert joint["forward_solves"] < joint["finite_difference_solves"]
 
 
+@pytest.mark.slow
 def test_hertz_sphere_quick_follows_the_layer_corrected_hertz(tmp_path):
     """The sphere's quick form (a thin small block): the force within 8 % of Hertz times
     Dimitriadis et al.'s bonded-layer factor, which the script computes from the formula, and
@@ -126,6 +132,7 @@ def test_hertz_sphere_quick_follows_the_layer_corrected_hertz(tmp_path):
         assert row["contact_force_N"] == pytest.approx(row["force_N"], rel=1e-8)
 
 
+@pytest.mark.slow
 def test_rounded_punch_quick_lies_between_the_flat_face_and_the_sharp_punch(tmp_path):
     """The rounded punch's quick form: its force lies below the sharp punch's on the same
     mesh, the sharp punch of equal force has a radius between the flat face's a - rho and a,
@@ -147,6 +154,7 @@ def test_rounded_punch_quick_lies_between_the_flat_face_and_the_sharp_punch(tmp_
     assert gap[0.1] < 0.4 * gap[0.4]
 
 
+@pytest.mark.slow
 def test_hertz_contact_pressure_quick_follows_hertz_and_shows_the_checkerboard(tmp_path):
     """Coarse block: the contact area against Hertz's pi R d (recomputed here) within 50 %
     (measured +44 % and +16 %: the edge of contact is one ring of nodes on 0.1 R elements),
@@ -167,6 +175,7 @@ def test_hertz_contact_pressure_quick_follows_hertz_and_shows_the_checkerboard(t
         assert row["positive_lumping_mid_edge_over_hertz"] > 1.15
 
 
+@pytest.mark.slow
 def test_takacs_line_indenter_quick_meets_the_estimate_at_depth(tmp_path):
     """Takacs et al.'s strip on the coarse mesh: the FE wedge's force grows with depth, equals
     the summed contact force, stays within 6 % of the full mesh's 0.763 N at 6 mm (measured

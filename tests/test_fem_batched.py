@@ -89,6 +89,7 @@ def test_per_problem_sums_and_spreads_follow_the_node_ranges(device, rng):
     assert whole[0] == pytest.approx(np.sum(vectors**2), rel=1e-14)
 
 
+@pytest.mark.slow
 def test_batched_curves_equal_sequential_ones(device):
     """Three problems (different meshes, materials, contact conditions and depths, one of
     them cut back) give each the curve and displacements of its own run, to 1e-8."""
@@ -119,6 +120,7 @@ def test_batched_curves_equal_sequential_ones(device):
     assert batched[1].cutbacks > 0 and cut == batched[1].cutbacks
 
 
+@pytest.mark.slow
 def test_batched_force_sensitivities_equal_sequential_ones(device):
     """dF/dC10 and dF/dK of each problem, by its own parameters, equal those of its own run
     (exact sensitivities, tests/test_fem_sensitivity.py), to 1e-7."""
@@ -164,6 +166,7 @@ def test_a_failing_problem_stops_alone():
     np.testing.assert_allclose(easy.reaction_force_N, alone.reaction_force_N, rtol=1e-8)
 
 
+@pytest.mark.slow
 def test_a_reused_assembler_takes_each_calls_materials():
     """An assembler from batch_assembler, reused with new materials (a fit's next trial
     points), gives the curves of a run that builds its own; one of other meshes is refused."""
@@ -217,6 +220,7 @@ def test_the_batch_refuses_what_it_cannot_take():
         simulate_indentation_batch([ogden, problem], depths * 2, sensitivities=("alpha1",))
 
 
+@pytest.mark.slow
 def test_viscoelastic_ramp_and_hold_batch_equals_single_runs(device):
     """A ramp-and-hold of two viscoelastic problems (different Prony series, time steps and
     meshes) and an elastic one, solved together with their exact sensitivities (a Prony
@@ -335,6 +339,7 @@ def _contact_problems():
     return problems, depths
 
 
+@pytest.mark.slow
 def test_batched_rigid_contacts_equal_their_single_runs(device):
     """A sphere, a rounded punch, a wedge, a plate and a bonded flat punch solved together
     (one contact launch over all their candidate nodes, each problem with its own body,

@@ -198,6 +198,7 @@ def sphere_run(sphere_mesh):
     return result
 
 
+@pytest.mark.slow
 def test_sphere_force_follows_hertz_on_a_coarse_layer(sphere_run):
     """Coarse check (the 3 % case on a large block is scripts/examples/hertz_sphere.py): on
     this thin layer the force lies within 8 % of Hertz corrected for the layer's thickness
@@ -209,6 +210,7 @@ def test_sphere_force_follows_hertz_on_a_coarse_layer(sphere_run):
     assert np.all(sphere_run.max_penetration_m < 2e-3 * SPHERE_DEPTHS_M)
 
 
+@pytest.mark.slow
 def test_sphere_force_is_insensitive_to_the_penalty_factor(sphere_mesh, sphere_run):
     soft = simulate_indentation(
         _sphere_problem(sphere_mesh, penalty_factor=min(PENALTIES)),
@@ -220,6 +222,7 @@ def test_sphere_force_is_insensitive_to_the_penalty_factor(sphere_mesh, sphere_r
     assert np.all(soft.max_penetration_m > sphere_run.max_penetration_m)
 
 
+@pytest.mark.slow
 def test_sensitivities_through_contact_match_central_differences(sphere_mesh):
     """Exact dF/dtheta (the penalty's own dependence on mu0 included) against central
     differences of whole runs with a tight Newton tolerance, relative step 1e-6 (measured
@@ -519,6 +522,7 @@ def _sneddon_layer_ratio(edge_radius_over_radius: float) -> np.ndarray:
     return np.array(ratios)
 
 
+@pytest.mark.slow
 def test_rounded_punch_converges_to_the_prescribed_frictionless_punch(rounded_punch_runs):
     """On the same mesh, the rigid punch with a rounded edge in contact approaches the sharp
     frictionless punch with prescribed nodes as its edge radius shrinks, by the contact area
@@ -536,6 +540,7 @@ def test_rounded_punch_converges_to_the_prescribed_frictionless_punch(rounded_pu
         np.testing.assert_allclose(run.contact_force_N, run.reaction_force_N, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_penalty_ramp_keeps_the_force_and_saves_newton_iterations(
     punch_block, rounded_punch_runs, monkeypatch
 ):
@@ -631,6 +636,7 @@ def hertz_run():
     return problem, assembler, result
 
 
+@pytest.mark.slow
 def test_sphere_contact_area_and_pressure_follow_hertz(hertz_run):
     """Hertz (independent): a = sqrt(R d), p(r) = p0 sqrt(1 - r^2/a^2) with p0 = 3 F / (2 pi
     a^2), F the FE force. The area agrees within 10 % (measured +7 % and +5 %: the contact
@@ -818,6 +824,7 @@ def test_wedge_force_grows_with_depth_and_equals_a_cylinder_on_its_tip(wedge_qua
     ],
     ids=["sphere", "rounded_punch"],
 )
+@pytest.mark.slow
 def test_rigid_contact_runs_on_every_device_with_the_cpu_force(sphere_mesh, probe, device):
     """The same run through contact on each Warp device (CUDA where present) gives the CPU's
     forces, contact force and penetration (the GPU's atomics only reorder the sums)."""

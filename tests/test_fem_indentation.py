@@ -69,6 +69,7 @@ def layer_stiffness(thickness_m: float, material: NeoHookean) -> float:
     return 8.0 * mu * RADIUS_M * hayes_kappa(RADIUS_M / thickness_m, poissons_ratio)
 
 
+@pytest.mark.slow
 def test_small_depth_stiffness_matches_sneddon_with_the_layer_factor():
     """A block 8 times wider than thick stands for the infinite layer (16 times changes the
     stiffness by 0.04 %); at this mesh the FE is 0.7 % below the computed factor and its

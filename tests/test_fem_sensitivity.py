@@ -113,6 +113,7 @@ def test_residual_derivative_matches_central_differences_of_the_residual(mesh, f
 
 @pytest.mark.parametrize("contact", ["bonded", "frictionless"])
 @pytest.mark.parametrize("model", list(MATERIALS))
+@pytest.mark.slow
 def test_sensitivities_match_central_differences_of_whole_runs(mesh, model, contact):
     material = MATERIALS[model]
     names = material.sensitivity_names

@@ -89,6 +89,7 @@ def test_uniaxial_compression_matches_incompressible_analytic(name):
     assert np.all(path.newton_iterations <= 8)  # quadratic convergence, consistent tangent
 
 
+@pytest.mark.slow
 def test_linear_solvers_agree(rng):
     mesh = _cube()
     assembler = Assembler(mesh, NeoHookean(100.0, 1e4), device="cpu")
@@ -290,6 +291,7 @@ def _bonded_punch_runs(depths, option: str, values) -> dict:
     }
 
 
+@pytest.mark.slow
 def test_nonlinear_elimination_saves_newton_iterations_and_keeps_the_curve():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets): relaxing the residual peaks at
     the punch edge after each global step saves global Newton iterations (factorizations;
@@ -497,6 +499,7 @@ def test_extrapolated_predictor_saves_newton_iterations_on_a_smooth_path():
     )
 
 
+@pytest.mark.slow
 def test_extrapolated_predictor_keeps_the_punch_curve():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets): the same converged forces from
     either predictor. (At a finely meshed punch edge the extrapolation costs iterations:
@@ -508,6 +511,7 @@ def test_extrapolated_predictor_keeps_the_punch_curve():
     np.testing.assert_allclose(forces[1], forces[0], rtol=1e-7)
 
 
+@pytest.mark.slow
 def test_an_extrapolation_that_inverts_an_element_falls_back_to_the_linearized_predictor():
     """A guess that folds the mesh is refused before any Newton iteration: the increment then
     runs exactly as without a guess."""
@@ -636,6 +640,7 @@ def test_ctrl_c_keeps_the_converged_steps(ctrl_c_at_newton_increment):
     assert "2 converged steps are kept" in str(error.value)
 
 
+@pytest.mark.slow
 def test_damping_saves_newton_iterations_on_a_large_depth_increment():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets) pressed to 0.3 a in one step: with
     the adaptive Levenberg-Marquardt damping the line search no longer cuts step after step

@@ -76,6 +76,7 @@ def runs(problem):
     return out
 
 
+@pytest.mark.slow
 def test_an_unprofiled_run_has_no_timings_and_the_same_curve(runs):
     plain, _ = runs[False]
     profiled, _ = runs[True]
@@ -159,6 +160,7 @@ def test_a_disabled_timer_reads_no_clock():
     assert timer.phase("assembly") is timer.phase("line_search")  # one shared null context
 
 
+@pytest.mark.slow
 def test_solve_quasistatic_profiles_a_cutback(problem):
     """A depth jump with no room for it: cut back, every attempted increment counted."""
     assembler = Assembler(problem.mesh, problem.material, device="cpu")

@@ -186,6 +186,7 @@ def test_sensitivities_carried_in_time_match_central_differences(material):
 
 
 @pytest.mark.parametrize("contact", ["bonded", "frictionless"])
+@pytest.mark.slow
 def test_punch_sensitivities_match_central_differences(contact, device):
     mesh = indentation_block(
         width_m=0.02, thickness_m=0.01, probe_radius_m=0.0025, size_near_m=0.0025, size_far_m=0.006

@@ -227,6 +227,7 @@ def test_force_objective_recovers_the_field_from_complete_exact_data():
 
 @pytest.mark.parametrize("objective", ["displacement", "force"])
 @pytest.mark.parametrize("noise_m", [0.0, 5e-6])
+@pytest.mark.slow
 def test_constrained_cells_lie_within_their_error_bounds_on_an_independent_slab(noise_m, objective):
     """Issue 19: on a slab unlike the pillow (a 3x stiff inclusion on a gradient, nu 0.30-0.35,
     an oblique force off the centre), a cell reported constrained (R_alpha >= 0.9, standard
@@ -257,6 +258,7 @@ def test_constrained_cells_lie_within_their_error_bounds_on_an_independent_slab(
         assert np.any(error[resolved] > 3.0 * estimate.youngs_relative_error[resolved])
 
 
+@pytest.mark.slow
 def test_reduced_pillow_case_matches_table_3_pattern():
     """Tong et al.'s pillow at half marker resolution (12 x 7 markers, 66 hexahedra).
 
@@ -546,6 +548,7 @@ def test_cli_fit_field_names_a_marker_off_the_grid(tmp_path, capsys, slab_files)
     assert "marker 'M005' at x0 = " in error and "rectangular grid" in error
 
 
+@pytest.mark.slow
 def test_the_shipped_marker_example_is_the_generated_one_and_fits_within_its_bounds(
     tmp_path, capsys
 ):
@@ -587,6 +590,7 @@ def test_a_field_too_large_for_memory_is_refused_before_the_fit(monkeypatch):
     assert estimation.dense_memory_bytes(rows=3 * 10_000 + 19_602, unknowns=19_602) > 1e10
 
 
+@pytest.mark.slow
 def test_bias_operator_predicts_the_noise_free_error_of_the_regularized_estimate():
     """On noise-free data the whole error of the estimate is the Tikhonov bias, which the
     linearized operator I - R = gamma A^-1 predicts from the known truth:

@@ -88,6 +88,7 @@ def test_the_felupe_script_runs_and_converges_from_above(study):
     assert np.all((excess > 0.02) & (excess < 0.05)), excess
 
 
+@pytest.mark.slow
 def test_forward_curve_agrees_with_felupe(study):
     (record,) = study.data
     true_study = dataclasses.replace(
@@ -106,6 +107,7 @@ def test_forward_curve_agrees_with_felupe(study):
     assert np.all(np.abs(error) < FORWARD_TOLERANCE), error
 
 
+@pytest.mark.slow
 def test_inverse_fe_fit_recovers_felupe_c10(study):
     from warptissue.fit.indentation import fit_indentation
 

@@ -159,6 +159,7 @@ def neo_hookean_fit(tmp_path_factory) -> IndentationFit:
     return fit_indentation(study, progress=False)
 
 
+@pytest.mark.slow
 def test_neo_hookean_c10_is_recovered_from_a_noisy_fe_record(neo_hookean_fit):
     fit = neo_hookean_fit
     assert fit.status == "converged" and fit.exit_code == 0 and fit.success
@@ -185,6 +186,7 @@ def test_neo_hookean_c10_is_recovered_from_a_noisy_fe_record(neo_hookean_fit):
     assert summary["status"] == "converged"
 
 
+@pytest.mark.slow
 def test_elastic_records_of_different_depths_share_one_fe_run_per_evaluation(tmp_path):
     # Elastic: the force depends on the depth only, so one FE run to the deepest point of
     # both records serves both.
@@ -211,6 +213,7 @@ def test_elastic_records_of_different_depths_share_one_fe_run_per_evaluation(tmp
         assert record.r_squared > 0.99 and record.rmse_N > 0.0
 
 
+@pytest.mark.slow
 def test_two_parameters_are_recovered_with_fewer_forward_runs_than_differences(tmp_path):
     study = make_study(
         tmp_path,
@@ -241,6 +244,7 @@ def test_two_parameters_are_recovered_with_fewer_forward_runs_than_differences(t
     ],
     ids=["mooney_rivlin", "ogden"],
 )
+@pytest.mark.slow
 def test_mooney_rivlin_and_ogden_parameters_are_recovered(tmp_path, truth, start):
     free = list(start)
     study = make_study(
@@ -275,6 +279,7 @@ def test_mooney_rivlin_and_ogden_parameters_are_recovered(tmp_path, truth, start
     ],
     ids=["reduced_polynomial", "viscoelastic"],
 )
+@pytest.mark.slow
 def test_the_jacobian_equals_central_differences_of_the_residuals(
     tmp_path, truth, free, history, steps
 ):
@@ -360,6 +365,7 @@ def test_ctrl_c_inside_a_forward_run_keeps_the_best_parameters(
     assert fit.forward_solves == 3
 
 
+@pytest.mark.slow
 def test_stop_at_r_squared(tmp_path):
     study = make_study(
         tmp_path,
@@ -396,6 +402,7 @@ def test_a_record_of_another_probe_radius_is_refused_before_fitting(tmp_path):
 
 
 @pytest.mark.parametrize("factor", [100.0, 0.01], ids=["too_stiff", "too_soft"])
+@pytest.mark.slow
 def test_a_start_100_times_off_converges(tmp_path, factor):
     # The force is nearly linear in C10: LM reaches the truth in a few steps from either side
     # (too soft, K / mu = 1e5: the mixed formulation still converges).
@@ -411,6 +418,7 @@ def test_a_start_100_times_off_converges(tmp_path, factor):
     assert_recovered(fit, NEO_HOOKEAN, 0.02)
 
 
+@pytest.mark.slow
 def test_a_drifting_offset_is_reported(tmp_path):
     # An elastic record with a hold whose force rises: a transducer drifting by 2 % of the
     # peak force per second, which an elastic tissue cannot do.
@@ -430,6 +438,7 @@ def test_a_drifting_offset_is_reported(tmp_path):
     assert any("Durbin-Watson" in m for m in fit.warnings), fit.warnings
 
 
+@pytest.mark.slow
 def test_two_prony_terms_on_a_one_term_record_are_not_identified(tmp_path):
     two_terms = {**NEO_HOOKEAN, "g1": 0.2, "g2": 0.2, "tau1_s": 0.3, "tau2_s": 3.0}
     study = make_study(
@@ -490,6 +499,7 @@ def test_viscoelastic_c10_g1_tau1_are_recovered_from_a_ramp_and_hold(tmp_path):
     np.testing.assert_allclose(simulated, record.fitted_force_N, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_ahn_and_kim_two_stage_fits_the_prony_series_first(tmp_path):
     study = make_study(
         tmp_path,
@@ -587,6 +597,7 @@ def with_fit(study, **changes):
     return dataclasses.replace(study, fit=dataclasses.replace(study.fit, **changes))
 
 
+@pytest.mark.slow
 def test_the_contact_point_and_c10_are_recovered_jointly(offset_record):
     # The offset's start is 50 % off (0.225 mm for 0.15 mm), C10 starts from the record.
     study = with_fit(offset_record, contact_point="fit", start={"depth_offset_m": 0.225e-3})
@@ -615,6 +626,7 @@ def test_the_contact_point_and_c10_are_recovered_jointly(offset_record):
     assert summary["records"][0]["depth_offset_m"] == pytest.approx(d0)
 
 
+@pytest.mark.slow
 def test_without_the_contact_point_the_same_record_biases_c10(offset_record):
     # The lab's depth counts 0.15 mm of air as indentation: the tissue looks much softer.
     fit = fit_indentation(offset_record, progress=False)
@@ -638,6 +650,7 @@ def test_the_offset_start_comes_from_the_first_force_above_noise(offset_record):
     assert depth_offset_start_m(conditioned) == 0.0
 
 
+@pytest.mark.slow
 def test_an_offset_pinned_at_its_bound_is_reported(offset_record):
     # The Python option, over the study's "given".
     study = with_fit(
@@ -654,6 +667,7 @@ def test_an_offset_pinned_at_its_bound_is_reported(offset_record):
     ), fit.warnings
 
 
+@pytest.mark.slow
 def test_the_offset_column_of_the_jacobian_equals_central_differences(tmp_path):
     study = offset_study(
         tmp_path,
@@ -717,6 +731,7 @@ def viscous_offset_study(folder: Path, fit: str, **options):
     )
 
 
+@pytest.mark.slow
 def test_the_timed_offset_column_equals_central_differences(tmp_path):
     # Viscoelastic: the FE run starts at the touch, which moves with the offset; the column
     # is a one-sided difference (one more run), checked against central differences.
@@ -757,6 +772,7 @@ def test_a_viscoelastic_record_gives_its_contact_point_and_c10(tmp_path):
     assert fit.warnings == []
 
 
+@pytest.mark.slow
 def test_each_record_has_its_own_offset_and_all_share_one_fe_run(tmp_path):
     first, recorded_first = offset_ramp()
     second, recorded_second = offset_ramp(0.3e-3, 0.05e-3, 30)
@@ -779,6 +795,7 @@ def test_each_record_has_its_own_offset_and_all_share_one_fe_run(tmp_path):
     assert fit.warnings == []
 
 
+@pytest.mark.slow
 def test_the_cli_reports_the_fitted_contact_point(offset_record, tmp_path, capsys):
     from warptissue.cli import main
 
@@ -882,6 +899,7 @@ def test_an_offset_is_judged_against_its_record_not_its_value():
     assert "C10_Pa" in message and "larger than its value" in message
 
 
+@pytest.mark.slow
 def test_batched_record_runs_equal_runs_one_after_another(tmp_path):
     """A viscoelastic fit of two records with fitted contact points: its forward model with
     the records' FE runs (and the offset columns' extra runs) batched gives the residuals
@@ -924,6 +942,7 @@ def test_batched_record_runs_equal_runs_one_after_another(tmp_path):
     )
 
 
+@pytest.mark.slow
 def test_studies_fitted_together_equal_each_fitted_alone(tmp_path):
     """An elastic and a viscoelastic study (different records, depths and models of time;
     both touching at (nearly) depth 0), fitted together (their forward runs batched

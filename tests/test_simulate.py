@@ -570,6 +570,7 @@ def sphere_record(tiny_record) -> dict:
     return record
 
 
+@pytest.mark.slow
 def test_a_sphere_study_writes_contact_area_and_pressure(sphere_record, tmp_path):
     """force_curve.csv gains contact_area_m2, fields.vtu (and every fields_NNN.vtu) the
     nodal contact_pressure_Pa, result.json the contact curve and the largest penetration;
@@ -658,6 +659,7 @@ def test_penetration_beyond_a_share_of_the_depth_is_said():
     assert "step 2" in warning and "solver.penalty_factor" in warning and "2.00%" in warning
 
 
+@pytest.mark.slow
 def test_studies_solved_together_equal_each_alone_and_refuse_what_they_cannot_share(
     api_run, tiny_record, sphere_record, tmp_path
 ):
