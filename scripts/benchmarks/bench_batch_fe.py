@@ -102,7 +102,15 @@ def _common(
     }
 
 
-def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int) -> dict:
+def run(
+    mesh: Any,
+    count: int,
+    device: str,
+    *,
+    steps: int,
+    sequential_limit: int,
+    elimination: bool = True,
+) -> dict:
     """One row: K problems batched, and the first ``sequential_limit`` of them alone."""
     import warp as wp
 
@@ -115,7 +123,7 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
     )
 
     warp_device = resolve_device(device)
-    options = NewtonOptions(tolerance=NEWTON_TOLERANCE)
+    options = NewtonOptions(tolerance=NEWTON_TOLERANCE, nonlinear_elimination=elimination)
     problems = problems_for(mesh, count)
     depths = depths_m()[:steps]
     started = time.perf_counter()
@@ -148,6 +156,7 @@ def run(mesh: Any, count: int, device: str, *, steps: int, sequential_limit: int
         **_common(warp_device, mesh, "curves", count, steps, batched_s, alone_count, sequential_s),
         "batched_completed": sum(result.completed for result in batched),
         "batched_newton_iterations": int(sum(r.newton_iterations.sum() for r in batched)),
+        "nonlinear_elimination": elimination,
         "max_force_difference": difference,
     }
 
@@ -182,6 +191,7 @@ bulk_modulus_Pa = {bulk_modulus_Pa!r}
 [solver]
 device = "{device}"
 tolerance = {tolerance!r}
+nonlinear_elimination = {elimination}
 
 [[data]]
 file = "record.csv"
@@ -201,6 +211,7 @@ def fit_studies(
     size_near_m: float,
     mesher: str,
     device: str,
+    elimination: bool,
 ) -> list[Any]:
     """One study per synthetic curve in ``folder``: the benchmark's block (its sizes; the
     near size at most the probe radius, as a study needs) and punch, its curve as the
@@ -234,6 +245,7 @@ def fit_studies(
             bulk_modulus_Pa=BULK_MODULUS_PA,
             device=device,
             tolerance=NEWTON_TOLERANCE,
+            elimination=str(elimination).lower(),
         )
         (here / "study.toml").write_text(text, encoding="utf-8")
         studies.append(load_study(here / "study.toml"))
@@ -249,6 +261,7 @@ def run_fits(
     sequential_limit: int,
     size_near_m: float,
     mesher: str,
+    elimination: bool = True,
 ) -> dict:
     """One row of fits: K studies whose records are synthetic curves (made by the FE at each
     problem's C10 on the benchmark's mesh) fitted for C10 from 0.8 times it, together
@@ -270,7 +283,7 @@ def run_fits(
         truths,
         [depths] * count,
         device=warp_device,
-        options=NewtonOptions(tolerance=NEWTON_TOLERANCE),
+        options=NewtonOptions(tolerance=NEWTON_TOLERANCE, nonlinear_elimination=elimination),
     )
     with tempfile.TemporaryDirectory(prefix="bench_batch_fits_") as folder:
         studies = fit_studies(
@@ -281,6 +294,7 @@ def run_fits(
             size_near_m=size_near_m,
             mesher=mesher,
             device=str(warp_device),
+            elimination=elimination,
         )
         started = time.perf_counter()
         fits = fit_indentation(studies, device=str(warp_device), progress=False)
@@ -303,6 +317,7 @@ def run_fits(
         ),
         "batched_completed": sum(fit.success for fit in fits),
         "batched_lm_iterations": int(sum(fit.result.nfev for fit in fits)),
+        "nonlinear_elimination": elimination,
         "max_parameter_difference": difference,
         "max_truth_error": max(
             abs(value / float(truth.material.parameter_vector[0]) - 1.0)
@@ -358,6 +373,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--sequential-limit", type=int, default=8, help="problems run alone to measure the rate"
     )
+    parser.add_argument(
+        "--elimination",
+        choices=("on", "off"),
+        default="on",
+        help="the Newton solver's nonlinear elimination (NewtonOptions.nonlinear_elimination)",
+    )
     parser.add_argument("--label", default="", help="name of this machine in the tables")
     parser.add_argument("--out", type=Path, help="write the results as JSON here")
     parser.add_argument(
@@ -385,7 +406,11 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     for kind in kinds:
         for count in counts:
-            options = {"steps": args.steps, "sequential_limit": args.sequential_limit}
+            options = {
+                "steps": args.steps,
+                "sequential_limit": args.sequential_limit,
+                "elimination": args.elimination == "on",
+            }
             if kind == "fits":
                 options.update(size_near_m=size_near_m, mesher=args.mesher)
             row = (run if kind == "curves" else run_fits)(mesh, count, args.device, **options)
