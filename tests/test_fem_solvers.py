@@ -23,6 +23,7 @@ from warptissue.fem.arrays import DeviceArrays
 from warptissue.fem.linear.direct import pardiso_available
 from warptissue.fem.newton import increment as newton_increments
 from warptissue.fem.newton.elimination import nonlinear_elimination, patch_solve
+from warptissue.fem.newton.options import ELIMINATION_MIN_TETS_CUDA, elimination_pays
 from warptissue.fem.newton.problems import Problems
 from warptissue.fem.newton.search import search_steps
 from warptissue.fem.newton.steering import DAMPING_START, next_damping
@@ -296,10 +297,14 @@ def test_nonlinear_elimination_saves_newton_iterations_and_keeps_the_curve():
     """Bonded flat punch (TET10/P0, K/mu = 1000, 1 728 tets): relaxing the residual peaks at
     the punch edge after each global step saves global Newton iterations (factorizations;
     measured 18 -> 12 here), and the converged forces equal those of plain Newton to the
-    tolerance."""
+    tolerance. The default ("auto") on the CPU is the elimination, iteration for iteration."""
     depths = PUNCH_RADIUS_M * np.array([0.05, 0.1, 0.15])
-    results = _bonded_punch_runs(depths, "nonlinear_elimination", (False, True))
+    results = _bonded_punch_runs(depths, "nonlinear_elimination", (False, True, "auto"))
     plain, relaxed = results[False], results[True]
+    np.testing.assert_array_equal(results["auto"].newton_iterations, relaxed.newton_iterations)
+    np.testing.assert_allclose(  # PARDISO's run-to-run roundoff
+        results["auto"].reaction_force_N, relaxed.reaction_force_N, rtol=1e-10
+    )
     assert plain.completed and relaxed.completed
     assert plain.local_iterations.sum() == 0
     assert relaxed.local_iterations.sum() > 0
@@ -596,10 +601,35 @@ def test_newton_options_refuse_bad_values_by_name():
         ("max_cutbacks", -1),
         ("damping", "yes"),
         ("nonlinear_elimination", 1),
+        ("nonlinear_elimination", "yes"),
     ):
         with pytest.raises(InputError) as error:
             NewtonOptions(**{key: value})
         assert error.value.column == key and repr(value) in str(error.value)
+
+
+def test_nonlinear_elimination_auto_follows_the_measured_rule():
+    """ "auto": on the CPU always; on CUDA for one problem of 16 000 tets or more, never for a
+    batch (docs/performance.md); true and false are kept as given."""
+    assert elimination_pays(is_cuda=False, tets_per_problem=500, problem_count=32)
+    assert not elimination_pays(is_cuda=True, tets_per_problem=8_828, problem_count=1)
+    assert elimination_pays(
+        is_cuda=True, tets_per_problem=ELIMINATION_MIN_TETS_CUDA, problem_count=1
+    )
+    assert not elimination_pays(is_cuda=True, tets_per_problem=78_171, problem_count=2)
+    auto = NewtonOptions()
+    assert auto.nonlinear_elimination == "auto"
+    for is_cuda, tets, count in ((False, 10, 1), (True, 10, 1), (True, 10**5, 4)):
+        expected = elimination_pays(is_cuda=is_cuda, tets_per_problem=tets, problem_count=count)
+        assert auto.eliminates(is_cuda=is_cuda, tets_per_problem=tets, problem_count=count) is (
+            expected
+        )
+        for value in (True, False):
+            given = NewtonOptions(nonlinear_elimination=value)
+            assert (
+                given.eliminates(is_cuda=is_cuda, tets_per_problem=tets, problem_count=count)
+                is value
+            )
 
 
 def test_solvers_take_one_options_object():

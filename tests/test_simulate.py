@@ -74,7 +74,7 @@ def test_api_writes_curve_json_and_fields(api_run):
     assert summary["study"]["specimen"]["element"] == "TET10"
     assert summary["force_curve"]["reaction_force_N"] == pytest.approx([r[2] for r in rows[1:]])
     assert summary["status"] == "completed"
-    assert summary["study"]["solver"]["nonlinear_elimination"] is True
+    assert summary["study"]["solver"]["nonlinear_elimination"] == "auto"
     assert summary["study"]["solver"]["predictor"] == "linearized"
     assert summary["study"]["solver"]["damping"] is True
     assert len(summary["force_curve"]["local_iterations"]) == 3

@@ -107,7 +107,7 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert options.tolerance == pytest.approx(1e-9)
     assert options.max_newton_iterations == 25
     assert options.max_cutbacks == 8
-    assert options.nonlinear_elimination is True
+    assert options.nonlinear_elimination == "auto"
     assert options.predictor == "linearized"
     assert options.damping is True
 

@@ -9,9 +9,44 @@ from typing import Any
 from warptissue.errors import InputError
 from warptissue.fem.linear import LINEAR_SOLVERS
 
-__all__ = ["PREDICTORS", "NewtonOptions", "checked_options"]
+__all__ = [
+    "ELIMINATION_MIN_TETS_CUDA",
+    "PREDICTORS",
+    "NewtonOptions",
+    "checked_options",
+    "elimination_pays",
+]
 
 PREDICTORS = ("linearized", "extrapolated")
+
+ELIMINATION_MIN_TETS_CUDA = 16_000
+"""Tets of one problem from which the nonlinear elimination pays on a CUDA device, run alone.
+
+Measured on an H100 and an H200 (docs/performance.md, "Factorization reuse and the nonlinear
+elimination", and docs/design-notes/nonlinear-elimination.md): it saves 26-66 Newton
+iterations from 16 118 tets on and costs more than it saves at 8 828 tets and fewer, where
+its patch solves (host round trips, one problem after another) take longer than the few
+factorizations they save."""
+
+
+def elimination_pays(*, is_cuda: bool, tets_per_problem: int, problem_count: int) -> bool:
+    """Whether the nonlinear elimination is on where the options say ``"auto"``.
+
+    The rule, as measured: on the CPU always; on a CUDA device only for one problem of at
+    least :data:`ELIMINATION_MIN_TETS_CUDA` tets. Of K > 1 problems on a CUDA device the
+    patches are relaxed one problem after another while the factorization is shared, so the
+    elimination's cost grows with K and its saving does not: 32 inverse fits of C10 on
+    1 260 tets ran 116 fits per minute without it and 33 with it on an H200
+    (``bench_batch_fe.py --what fits``, docs/performance.md).
+
+    Args:
+        is_cuda: The device is a CUDA device.
+        tets_per_problem: Tets of one problem (the largest of a batch).
+        problem_count: Problems solved together, K >= 1.
+    """
+    if not is_cuda:
+        return True
+    return problem_count == 1 and tets_per_problem >= ELIMINATION_MIN_TETS_CUDA
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -34,7 +69,10 @@ class NewtonOptions:
         max_cutbacks: Halvings of a failed increment allowed per requested load before the
             run stops early, keeping what converged (>= 0).
         nonlinear_elimination: After each global Newton step, relax the nodes that hold most
-            of the residual with the others fixed (fewer factorizations at a punch edge).
+            of the residual with the others fixed (fewer factorizations at a punch edge):
+            ``True``, ``False`` or ``"auto"`` (the measured rule of
+            :func:`elimination_pays`: on the CPU; on a CUDA device for one problem of
+            16 000 tets or more).
         predictor: Start of each increment: ``"linearized"`` (the tangent's response to the
             prescribed increment) or ``"extrapolated"`` (the last two converged states
             extrapolated linearly in the load).
@@ -53,7 +91,7 @@ class NewtonOptions:
     tolerance: float = 1.0e-9
     max_newton_iterations: int = 25
     max_cutbacks: int = 8
-    nonlinear_elimination: bool = True
+    nonlinear_elimination: bool | str = "auto"
     predictor: str = "linearized"
     damping: bool = True
     reuse_factorization: bool = True
@@ -78,9 +116,25 @@ class NewtonOptions:
                 raise InputError("must be an integer", key=key, value=value)
             if value < minimum:
                 raise InputError(f"must be at least {minimum}", key=key, value=value)
-        for key in ("nonlinear_elimination", "damping", "reuse_factorization"):
+        elimination = self.nonlinear_elimination
+        if not (isinstance(elimination, bool) or elimination == "auto"):
+            raise InputError(
+                'must be true, false or "auto"',
+                key="nonlinear_elimination",
+                value=self.nonlinear_elimination,
+            )
+        for key in ("damping", "reuse_factorization"):
             if not isinstance(getattr(self, key), bool):
                 raise InputError("must be true or false", key=key, value=getattr(self, key))
+
+    def eliminates(self, *, is_cuda: bool, tets_per_problem: int, problem_count: int) -> bool:
+        """Whether the nonlinear elimination runs for these problems on this device: the
+        option itself, or for ``"auto"`` the rule of :func:`elimination_pays`."""
+        if self.nonlinear_elimination == "auto":
+            return elimination_pays(
+                is_cuda=is_cuda, tets_per_problem=tets_per_problem, problem_count=problem_count
+            )
+        return bool(self.nonlinear_elimination)
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:

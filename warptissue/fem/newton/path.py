@@ -361,6 +361,11 @@ def _follow_paths(
     ramped = increment.CONTACT_PENALTY_RAMP < 1.0 and any(
         each is not None and each.indenter.kind != "plate" for each in assembler.contacts
     )
+    eliminating = options.eliminates(
+        is_cuda=assembler.device.is_cuda,
+        tets_per_problem=assembler.tet_count // assembler.problem_count,
+        problem_count=assembler.problem_count,
+    )
     for path in paths:
         path.finished = path.loads.size == 0
         path.message = f"converged at all {len(path.loads)} requested values of {load_name}"
@@ -444,7 +449,7 @@ def _follow_paths(
                     tolerance=options.tolerance,
                     force_floors=force_floors,
                     max_iterations=options.max_newton_iterations,
-                    nonlinear_elimination_on=options.nonlinear_elimination,
+                    nonlinear_elimination_on=eliminating,
                     free_guess=guess,
                     guessed=guessed if guess is not None else None,
                     damping=options.damping,
@@ -564,7 +569,9 @@ def solve_quasistatic(
             first increment) from the free dofs extrapolated linearly in the load from the
             last two converged states, and where that state inverts an element, or Newton
             fails from it, the increment runs again from the linearized predictor before any
-            cutback. ``options.nonlinear_elimination`` relaxes, after each global Newton step,
+            cutback. ``options.nonlinear_elimination`` (``"auto"``: the measured rule of
+            :func:`warptissue.fem.newton.options.elimination_pays`) relaxes, after each
+            global Newton step,
             the nodes that hold most of the residual with the others fixed
             (:func:`warptissue.fem.newton.elimination.nonlinear_elimination`).
             ``options.damping``: where the line search cuts a Newton step below a quarter of
