@@ -479,22 +479,9 @@ def simulate_indentation(
             profile=profile,
         )
     except SolveInterrupted as interrupted:
-        partial = interrupted.partial_result
-        partial = _indentation_result(
-            problem,
-            partial,
-            names,
-            stress_Pa=_last_stress(assembler, partial),
-            contact_states=_contact_states(assembler, partial),
-        )
+        partial = _finished(problem, assembler, interrupted.partial_result, names)
         raise SolveInterrupted(interrupted.message, partial_result=partial) from interrupted
-    result = _indentation_result(
-        problem,
-        path,
-        names,
-        stress_Pa=_last_stress(assembler, path),
-        contact_states=_contact_states(assembler, path),
-    )
+    result = _finished(problem, assembler, path, names)
     if strict and not result.completed:
         raise ConvergenceError(result.message, partial_result=result)
     return result
@@ -519,6 +506,23 @@ def _contact_states(assembler: Assembler, path: QuasistaticResult) -> list[Conta
         assembler.set_load(depth)
         states.append(assembler.contact_state(u))
     return states
+
+
+def _finished(
+    problem: IndentationProblem,
+    assembler: Assembler,
+    path: QuasistaticResult,
+    sensitivity_names: tuple[str, ...],
+) -> IndentationResult:
+    """The indentation result of a single run's load path (complete or interrupted), with
+    the stress and contact states of its last state read from ``assembler``."""
+    return _indentation_result(
+        problem,
+        path,
+        sensitivity_names,
+        stress_Pa=_last_stress(assembler, path),
+        contact_states=_contact_states(assembler, path),
+    )
 
 
 def _indentation_result(
