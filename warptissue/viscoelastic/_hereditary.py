@@ -80,6 +80,16 @@ def exponential_hereditary_states(
     Returns:
         q of shape (m, n): q[i, k] = integral_{t_0^-}^{t_k} exp(-(t_k - s)/tau_i) dh(s), with
         the jump h(t_0) at the first sample included.
+
+    Notes:
+        The recursion ``q_{k+1} = a_k q_k + b_k`` (module docstring) is summed in closed form,
+        ``q_k = exp(-C_k) (exp(C_m) q_m + sum_{j=m}^{k-1} b_j exp(C_{j+1}))`` with
+        ``C_k = sum_{j<k} dt_j / tau``, by NumPy over blocks of samples in which ``C`` grows by
+        less than :data:`BLOCK_DECAY` (so no exponential overflows); each term is the
+        recursion's own to rounding. A Python loop runs over the blocks only (one per
+        ``BLOCK_DECAY`` relaxation times of the record), not over the samples, unless the
+        relaxation time is so far below the sample spacing that the blocks are short; then
+        the recursion runs sample by sample.
     """
     taus = np.asarray(relaxation_times_s, dtype=np.float64).reshape(-1)
     states = np.empty((taus.size, time_s.size), dtype=np.float64)
@@ -89,13 +99,45 @@ def exponential_hereditary_states(
     dt = np.diff(time_s)
     rate = np.diff(history) / dt
     for i, tau in enumerate(taus):
-        decay = np.exp(-dt / tau)
         gain = rate * tau * -np.expm1(-dt / tau)
-        states[i] = list(
-            accumulate(
-                zip(decay.tolist(), gain.tolist(), strict=True),
-                lambda q, ab: ab[0] * q + ab[1],
-                initial=float(history[0]),
-            )
-        )
+        decays = np.concatenate([[0.0], np.cumsum(dt / tau)])  # C_k
+        states[i] = _summed_recursion(decays, gain, float(history[0]))
     return states
+
+
+BLOCK_DECAY = 500.0
+"""Largest growth of the decay exponent C within one block of samples (exp(500) ~ 1e217)."""
+
+
+def _summed_recursion(decays: np.ndarray, gains: np.ndarray, first: float) -> np.ndarray:
+    """q with ``q_0 = first`` and ``q_{k+1} = exp(-(C_{k+1} - C_k)) q_k + gains_k``.
+
+    Args:
+        decays: C_k, non-decreasing, shape (n,), C_0 = 0.
+        gains: b_k, shape (n - 1,).
+        first: q_0.
+    """
+    q = np.empty_like(decays)
+    q[0] = first
+    blocks = np.floor(decays[1:] / BLOCK_DECAY)
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(blocks)) + 1, [blocks.size]])
+    if len(starts) > 8 + gains.size // 16:
+        # Relaxation times far below the sample spacing: few samples a block, so the
+        # recursion itself is the cheaper loop.
+        factors = np.exp(-np.diff(decays)).tolist()
+        return np.fromiter(
+            accumulate(
+                zip(factors, gains.tolist(), strict=True),
+                lambda value, step: step[0] * value + step[1],
+                initial=first,
+            ),
+            dtype=np.float64,
+            count=decays.size,
+        )
+    for start, stop in zip(starts[:-1], starts[1:], strict=True):
+        nodes = slice(start + 1, stop + 1)  # q's samples of this block
+        reference = blocks[start] * BLOCK_DECAY
+        scale = np.exp(decays[nodes] - reference)  # in [1, exp(BLOCK_DECAY))
+        carried = q[start] * np.exp(decays[start] - reference)  # <= q[start]; may underflow
+        q[nodes] = (carried + np.cumsum(gains[start:stop] * scale)) / scale
+    return q
