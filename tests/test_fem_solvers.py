@@ -20,6 +20,7 @@ from warptissue.fem import (
     solve_quasistatic,
 )
 from warptissue.fem.arrays import DeviceArrays
+from warptissue.fem.linear import solver as linear_solver_module
 from warptissue.fem.linear.direct import pardiso_available
 from warptissue.fem.newton import increment as newton_increments
 from warptissue.fem.newton.elimination import nonlinear_elimination, patch_solve
@@ -630,6 +631,39 @@ def test_nonlinear_elimination_auto_follows_the_measured_rule():
                 given.eliminates(is_cuda=is_cuda, tets_per_problem=tets, problem_count=count)
                 is value
             )
+
+
+@pytest.mark.parametrize("method", ["superlu", "pardiso"])
+def test_an_assemblers_later_runs_reuse_its_symbolic_analysis(method, monkeypatch):
+    """A second run on the same assembler (a fit's next forward run) analyses nothing again
+    and gives the run of a fresh assembler; a matrix of another pattern gets its own."""
+    if method == "pardiso" and not pardiso_available():
+        pytest.skip("pypardiso is not installed")
+    built = []
+    original = linear_solver_module.CpuDirectSolver
+
+    def counting(matrix, *, method):
+        built.append(matrix)
+        return original(matrix, method=method)
+
+    monkeypatch.setattr(linear_solver_module, "CpuDirectSolver", counting)
+    mesh = _cube()
+    options = NewtonOptions(linear_solver=method, reuse_factorization=False)
+    conditions = compression_conditions(mesh)
+    assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+    first = solve_quasistatic(assembler, conditions, [1e-4, 2e-4], options=options)
+    assembler.set_material(NeoHookean(150.0, 1e5))
+    second = solve_quasistatic(assembler, conditions, [1e-4, 2e-4], options=options)
+    assert built == [assembler.matrix]
+    fresh = Assembler(mesh, NeoHookean(150.0, 1e5), device="cpu")
+    alone = solve_quasistatic(fresh, conditions, [1e-4, 2e-4], options=options)
+    assert built == [assembler.matrix, fresh.matrix]
+    np.testing.assert_array_equal(second.newton_iterations, alone.newton_iterations)
+    np.testing.assert_allclose(second.displacement_m, alone.displacement_m, rtol=1e-12, atol=1e-18)
+    assert not np.allclose(first.displacement_m, second.displacement_m, rtol=1e-6, atol=0.0)
+    assert linear_solver_module.analysed_solver(assembler.matrix, method) is (
+        linear_solver_module.analysed_solver(assembler.matrix, method)
+    )
 
 
 def test_solvers_take_one_options_object():

@@ -24,6 +24,7 @@ A Newton iteration may instead be solved by GMRES with the last factorization
 from __future__ import annotations
 
 import math
+import weakref
 from time import perf_counter
 from typing import Any
 
@@ -49,6 +50,35 @@ REUSE_PREDICT_AFTER = 3
 residual reduction per iteration so far predicts that it would overrun its budget."""
 REUSE_MAX_ITERATIONS = 40
 """Most GMRES iterations of one solve with old factors (the basis is kept in memory)."""
+
+_ANALYSED: weakref.WeakKeyDictionary[wps.BsrMatrix, dict[str, tuple[int, Any]]] = (
+    weakref.WeakKeyDictionary()
+)
+"""The direct solvers analysed for a matrix (kept while the matrix lives), by method, with
+the matrix's block count at the analysis: an assembler's later runs (the forward runs of a
+fit, the load paths of a study) reuse its symbolic analysis."""
+
+
+def analysed_solver(matrix: wps.BsrMatrix, method: str) -> Any:
+    """The direct solver of ``matrix``: the one analysed before for this matrix and method
+    where its sparsity pattern has not changed since, else a new one (its analysis runs now).
+
+    Args:
+        matrix: Square 3x3-block BSR matrix (N x N blocks).
+        method: ``"cudss"``, ``"pardiso"`` or ``"superlu"``.
+
+    Returns:
+        A :class:`~warptissue.fem.linear.cudss.CudssSolver` or
+        :class:`~warptissue.fem.linear.direct.CpuDirectSolver`; its next
+        ``solve`` factorizes the matrix's values then.
+    """
+    kept = _ANALYSED.setdefault(matrix, {})
+    blocks = matrix.nnz_sync()
+    if method in kept and kept[method][0] == blocks:
+        return kept[method][1]
+    solver = CudssSolver(matrix) if method == "cudss" else CpuDirectSolver(matrix, method=method)
+    kept[method] = (blocks, solver)
+    return solver
 
 
 class LinearSolver:
@@ -160,14 +190,14 @@ class LinearSolver:
         if self.method == "cudss":
             if self._cudss is None or self._cudss.matrix is not matrix:
                 with self.timer.phase("analysis"):
-                    self._cudss = CudssSolver(matrix)
+                    self._cudss = analysed_solver(matrix, "cudss")
             self._cudss.timer = self.timer
             started = perf_counter()
             x = self._cudss.solve(rhs)  # NumPy: ends on the host; CuPy: stays on the device
         else:
             if self.direct is None or self.direct.matrix is not matrix:
                 with self.timer.phase("analysis"):
-                    self.direct = CpuDirectSolver(matrix, method=self.method)
+                    self.direct = analysed_solver(matrix, self.method)
             self.direct.timer = self.timer
             started = perf_counter()
             x = self.direct.solve(rhs)
