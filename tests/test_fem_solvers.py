@@ -4,6 +4,8 @@ cutback."""
 
 from __future__ import annotations
 
+import gc
+
 import numpy as np
 import pytest
 import warp as wp
@@ -661,9 +663,12 @@ def test_an_assemblers_later_runs_reuse_its_symbolic_analysis(method, monkeypatc
     np.testing.assert_array_equal(second.newton_iterations, alone.newton_iterations)
     np.testing.assert_allclose(second.displacement_m, alone.displacement_m, rtol=1e-12, atol=1e-18)
     assert not np.allclose(first.displacement_m, second.displacement_m, rtol=1e-6, atol=0.0)
-    assert linear_solver_module.analysed_solver(assembler.matrix, method) is (
-        linear_solver_module.analysed_solver(assembler.matrix, method)
-    )
+    owned = linear_solver_module.analysed_solver(assembler.matrix, method, owner=assembler)
+    assert owned is linear_solver_module.analysed_solver(assembler.matrix, method, owner=assembler)
+    assert linear_solver_module.analysed_solver(assembler.matrix, method) is not owned
+    del assembler, fresh, owned  # the analyses go with their assemblers
+    gc.collect()
+    assert len(linear_solver_module._ANALYSED) == 0
 
 
 def test_solvers_take_one_options_object():

@@ -309,4 +309,7 @@ class CpuDirectSolver:
 
     def __del__(self) -> None:
         if getattr(self, "method", None) == "pardiso" and hasattr(self, "_iparm"):
-            self._pardiso(-1)  # release all of PARDISO's memory for this handle
+            try:
+                self._pardiso(-1)  # release all of PARDISO's memory for this handle
+            except ImportError:  # the interpreter is shutting down: the process frees it
+                pass

@@ -51,30 +51,32 @@ residual reduction per iteration so far predicts that it would overrun its budge
 REUSE_MAX_ITERATIONS = 40
 """Most GMRES iterations of one solve with old factors (the basis is kept in memory)."""
 
-_ANALYSED: weakref.WeakKeyDictionary[wps.BsrMatrix, dict[str, tuple[int, Any]]] = (
+_ANALYSED: weakref.WeakKeyDictionary[Any, dict[str, tuple[int, Any]]] = (
     weakref.WeakKeyDictionary()
 )
-"""The direct solvers analysed for a matrix (kept while the matrix lives), by method, with
-the matrix's block count at the analysis: an assembler's later runs (the forward runs of a
-fit, the load paths of a study) reuse its symbolic analysis."""
+"""The direct solvers analysed for an owner's matrix (an assembler's: kept while the
+assembler lives, not longer), by method, with the matrix's block count at the analysis."""
 
 
-def analysed_solver(matrix: wps.BsrMatrix, method: str) -> Any:
-    """The direct solver of ``matrix``: the one analysed before for this matrix and method
-    where its sparsity pattern has not changed since, else a new one (its analysis runs now).
+def analysed_solver(matrix: wps.BsrMatrix, method: str, *, owner: Any = None) -> Any:
+    """The direct solver of ``matrix``: the one analysed before for ``owner``'s matrix and
+    this method where it is the same matrix with the same sparsity pattern, else a new one
+    (its analysis runs now).
 
     Args:
         matrix: Square 3x3-block BSR matrix (N x N blocks).
         method: ``"cudss"``, ``"pardiso"`` or ``"superlu"``.
+        owner: The object that owns ``matrix`` and outlives the runs that solve it (the
+            :class:`~warptissue.fem.Assembler`); None keeps nothing.
 
     Returns:
         A :class:`~warptissue.fem.linear.cudss.CudssSolver` or
-        :class:`~warptissue.fem.linear.direct.CpuDirectSolver`; its next
-        ``solve`` factorizes the matrix's values then.
+        :class:`~warptissue.fem.linear.direct.CpuDirectSolver`; its next ``solve``
+        factorizes the matrix's values then.
     """
-    kept = _ANALYSED.setdefault(matrix, {})
+    kept = {} if owner is None else _ANALYSED.setdefault(owner, {})
     blocks = matrix.nnz_sync()
-    if method in kept and kept[method][0] == blocks:
+    if method in kept and kept[method][1].matrix is matrix and kept[method][0] == blocks:
         return kept[method][1]
     solver = CudssSolver(matrix) if method == "cudss" else CpuDirectSolver(matrix, method=method)
     kept[method] = (blocks, solver)
@@ -92,6 +94,10 @@ class LinearSolver:
         max_iterations: Iteration limit of CG (None: 30 x the number of dofs).
         preconditioner: CG preconditioner, any ``ptype`` of
             ``warp.optim.linear.preconditioner`` (``"fsai"``, ``"diag"``, ...).
+        owner: The owner of the matrices, which outlives this solver (the
+            :class:`~warptissue.fem.Assembler` of a run): a direct solver's symbolic
+            analysis of its matrix is kept with it for its later runs
+            (:func:`analysed_solver`). None: kept by this solver alone.
 
     Attributes:
         direct: The CPU direct solver of the last matrix (PARDISO or SuperLU), or None. It
@@ -118,6 +124,7 @@ class LinearSolver:
         tolerance: float = 1e-12,
         max_iterations: int | None = None,
         preconditioner: str = "fsai",
+        owner: Any = None,
     ) -> None:
         if method not in LINEAR_SOLVERS:
             raise InputError(
@@ -157,6 +164,7 @@ class LinearSolver:
             )
         self.method = method
         self.device = device
+        self.owner = owner
         self.arrays = DeviceArrays(device)
         self.timer = PhaseTimer(enabled=False)
         self.factorizations = 0
@@ -190,14 +198,14 @@ class LinearSolver:
         if self.method == "cudss":
             if self._cudss is None or self._cudss.matrix is not matrix:
                 with self.timer.phase("analysis"):
-                    self._cudss = analysed_solver(matrix, "cudss")
+                    self._cudss = analysed_solver(matrix, "cudss", owner=self.owner)
             self._cudss.timer = self.timer
             started = perf_counter()
             x = self._cudss.solve(rhs)  # NumPy: ends on the host; CuPy: stays on the device
         else:
             if self.direct is None or self.direct.matrix is not matrix:
                 with self.timer.phase("analysis"):
-                    self.direct = analysed_solver(matrix, self.method)
+                    self.direct = analysed_solver(matrix, self.method, owner=self.owner)
             self.direct.timer = self.timer
             started = perf_counter()
             x = self.direct.solve(rhs)

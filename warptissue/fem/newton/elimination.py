@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib.util
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -110,52 +111,51 @@ def nonlinear_elimination(
     free_residual = residual * free
     if nodes is None:
         nodes = slice(0, assembler.node_count)
-    first_node = nodes.start
-    norms = arrays.row_norms(free_residual[nodes])
-    count = min(seed_count, len(norms))
-    seeds = xp.argpartition(norms, len(norms) - count)[len(norms) - count :]
-    seeds, seed_norms = arrays.host(seeds), arrays.host(norms[seeds])
-    seeds = seeds + first_node
-    largest = float(seed_norms.max())
-    if largest == 0.0:
-        return u, assembly, 0
-    seeds = seeds[seed_norms >= 1e-3 * largest]
-    patch = assembler.node_patch(seeds)
-    if 4 * len(patch) > nodes.stop - nodes.start:
+    patch = _residual_patch(assembler, arrays, free_residual, nodes, seed_count)
+    if patch is None:
         return u, assembly, 0
     # Only the tets holding a patch node change, and with them the residual at their nodes:
     # the whole residual and energy follow from the last ones and the change of that part.
     # The host works on the part's nodes alone (no array of the whole mesh per trial).
     part = assembler.element_part(nodes=patch)
-    nodes = part.nodes
-    nodes_at = xp.asarray(nodes)
+    nodes_at = xp.asarray(part.nodes)
     patch_at = xp.asarray(patch)
-    at_patch = np.searchsorted(nodes, patch)
+    at_patch = np.searchsorted(part.nodes, patch)
     free_part = arrays.host(free[nodes_at])
     free_patch = free_part[at_patch]
     patch_free = free_patch.reshape(-1) > 0.5
-    residual_part = arrays.host(residual[nodes_at])
-    device = assembler.device
-    patch_wp = wp.array(patch.astype(np.int32), dtype=wp.int32, device=device)
-    patch_values = wp.zeros(len(patch), dtype=wp.vec3d, device=device)
-    trial_state = u.copy()  # the trials are scattered into it
-    u_device = arrays.warp(trial_state)
     outside = xp.zeros(len(u), dtype=bool)
     outside[nodes] = True
     outside[nodes_at] = False
     rest_squared, total_squared = arrays.floats(
         arrays.squared_norm(free_residual[outside]), arrays.squared_norm(free_residual[nodes])
     )
-    total = math.sqrt(total_squared)
-    forces, part_energy, _ = assembler.assemble_part(u_device, part)
-    u_patch = arrays.host(u[patch_at])
-    energy = float(assembly.problem_energies_J[problem])
-    min_jacobian = float(assembly.problem_min_jacobians[problem])
+    trials = _PatchTrials(
+        assembler=assembler,
+        part=part,
+        patch=wp.array(patch.astype(np.int32), dtype=wp.int32, device=assembler.device),
+        values=wp.zeros(len(patch), dtype=wp.vec3d, device=assembler.device),
+        state=arrays.warp(u.copy()),  # the trials are scattered into it
+        free_part=free_part,
+        rest_squared=rest_squared,
+    )
+    forces, part_energy, _ = assembler.assemble_part(trials.state, part)
+    state = _PatchState(
+        u_patch=arrays.host(u[patch_at]),
+        residual_part=arrays.host(residual[nodes_at]),
+        energy=float(assembly.problem_energies_J[problem]),
+        total=math.sqrt(total_squared),
+        forces=forces,
+        part_energy=part_energy,
+        min_jacobian=float(assembly.problem_min_jacobians[problem]),
+    )
     iterations = 0
     for _ in range(max_iterations):
         if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
-            forces, part_energy, _ = assembler.assemble_part(u_device, part, with_tangent=True)
-        local_residual = (residual_part[at_patch] * free_patch).reshape(-1)[patch_free]
+            state.forces, state.part_energy, _ = assembler.assemble_part(
+                trials.state, part, with_tangent=True
+            )
+        local_residual = (state.residual_part[at_patch] * free_patch).reshape(-1)[patch_free]
         step = patch_solve(assembler, patch, patch_free, local_residual)
         if step is None:
             break
@@ -164,47 +164,25 @@ def nonlinear_elimination(
             break
         patch_step = np.zeros(3 * len(patch))
         patch_step[patch_free] = step
-        direction = patch_step.reshape(-1, 3)
-        alpha, accepted = 1.0, None
-        for _ in range(8):
-            trial = u_patch + alpha * direction
-            patch_values.assign(trial)
-            scatter_vectors(patch_values, patch_wp, u_device)
-            trial_forces, trial_part_energy, trial_min_jacobian = assembler.assemble_part(
-                u_device, part
-            )
-            trial_residual = residual_part + (trial_forces - forces)
-            trial_energy = energy + (trial_part_energy - part_energy)
-            trial_free = trial_residual * free_part
-            trial_total = math.sqrt(rest_squared + np.einsum("ij,ij->", trial_free, trial_free))
-            if (
-                trial_min_jacobian > 0.0
-                and math.isfinite(trial_energy)
-                and trial_energy <= energy + 1e-4 * alpha * slope
-                and trial_total < total
-            ):
-                accepted = trial
-                break
-            alpha *= 0.5
+        accepted = trials.backtrack(state, patch_step.reshape(-1, 3), slope)
         if accepted is None:
             break
         iterations += 1
-        u_patch, residual_part, energy, total = accepted, trial_residual, trial_energy, trial_total
-        forces, part_energy = trial_forces, trial_part_energy
-        min_jacobian = min(min_jacobian, trial_min_jacobian)
-        local = _norm(residual_part[at_patch] * free_patch)
+        state = accepted
+        local = _norm(state.residual_part[at_patch] * free_patch)
+        total = state.total
         if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
             break
     if iterations == 0:
         # Nothing moved and the tangent is untouched (it is only reassembled after a step).
         return u, assembly, 0
     u = u.copy()
-    u[patch_at] = arrays.asarray(u_patch)
+    u[patch_at] = arrays.asarray(state.u_patch)
     residual = residual.copy()
-    residual[nodes_at] = arrays.asarray(residual_part)
+    residual[nodes_at] = arrays.asarray(state.residual_part)
     energies = np.array(assembly.problem_energies_J, dtype=np.float64)
     min_jacobians = np.array(assembly.problem_min_jacobians, dtype=np.float64)
-    energies[problem], min_jacobians[problem] = energy, min_jacobian
+    energies[problem], min_jacobians[problem] = state.energy, state.min_jacobian
     assembly = Assembly(
         residual=assembler.set_residual(residual),
         matrix=None,
@@ -214,6 +192,94 @@ def nonlinear_elimination(
         problem_min_jacobians=min_jacobians,
     )
     return u, assembly, iterations
+
+
+def _residual_patch(
+    assembler: Assembler,
+    arrays: DeviceArrays,
+    free_residual: Any,
+    nodes: slice,
+    seed_count: int,
+) -> np.ndarray | None:
+    """The patch to relax: the (up to) ``seed_count`` nodes of ``nodes`` with the largest
+    free residual (at least 1e-3 of the largest) and their neighbours; None where the
+    residual is zero or the patch would hold more than a quarter of the nodes."""
+    xp = arrays.xp
+    norms = arrays.row_norms(free_residual[nodes])
+    count = min(seed_count, len(norms))
+    seeds = xp.argpartition(norms, len(norms) - count)[len(norms) - count :]
+    seeds, seed_norms = arrays.host(seeds), arrays.host(norms[seeds])
+    seeds = seeds + nodes.start
+    largest = float(seed_norms.max())
+    if largest == 0.0:
+        return None
+    patch = assembler.node_patch(seeds[seed_norms >= 1e-3 * largest])
+    if 4 * len(patch) > nodes.stop - nodes.start:
+        return None
+    return patch
+
+
+@dataclass
+class _PatchState:
+    """A state of the patch on the host: its displacements (P, 3), m; the residual at the
+    part's nodes (R, 3), N; the problem's energy, J; the whole free residual norm, N; the
+    part's forces (R, 3), N, and energy, J; the smallest det F so far."""
+
+    u_patch: np.ndarray
+    residual_part: np.ndarray
+    energy: float
+    total: float
+    forces: np.ndarray
+    part_energy: float
+    min_jacobian: float
+
+
+@dataclass
+class _PatchTrials:
+    """Evaluates trial states of a patch: scatters them into the device state and assembles
+    the part's tets alone."""
+
+    assembler: Assembler
+    part: Any
+    patch: wp.array
+    values: wp.array
+    state: wp.array
+    free_part: np.ndarray
+    rest_squared: float
+
+    def backtrack(
+        self, state: _PatchState, direction: np.ndarray, slope: float
+    ) -> _PatchState | None:
+        """The first of ``state.u_patch + alpha direction``, alpha = 1, 1/2, ... (8 tries),
+        where every J > 0, the energy decreases (Armijo, 1e-4) and the whole free residual
+        norm decreases; None where none does."""
+        alpha = 1.0
+        for _ in range(8):
+            trial = state.u_patch + alpha * direction
+            self.values.assign(trial)
+            scatter_vectors(self.values, self.patch, self.state)
+            forces, part_energy, min_jacobian = self.assembler.assemble_part(self.state, self.part)
+            residual_part = state.residual_part + (forces - state.forces)
+            energy = state.energy + (part_energy - state.part_energy)
+            trial_free = residual_part * self.free_part
+            total = math.sqrt(self.rest_squared + np.einsum("ij,ij->", trial_free, trial_free))
+            if (
+                min_jacobian > 0.0
+                and math.isfinite(energy)
+                and energy <= state.energy + 1e-4 * alpha * slope
+                and total < state.total
+            ):
+                return _PatchState(
+                    u_patch=trial,
+                    residual_part=residual_part,
+                    energy=energy,
+                    total=total,
+                    forces=forces,
+                    part_energy=part_energy,
+                    min_jacobian=min(state.min_jacobian, min_jacobian),
+                )
+            alpha *= 0.5
+        return None
 
 
 def patch_solve(
