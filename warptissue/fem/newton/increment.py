@@ -152,6 +152,7 @@ def newton_increment(
     residual = arrays.view(assembly.residual)
     (reaction_squared,) = problems.read(problems.squared(residual * fixed))
     limits = np.maximum(tolerance * np.sqrt(reaction_squared), force_floors)
+    norms = _ResidualNorms(problems, free, fixed, tolerance, force_floors)
     increment_wp = arrays.warp(prescribed_increment)
     k_times_increment = wp.zeros_like(increment_wp)
     constrained_wp = arrays.warp(constrained)
@@ -165,13 +166,16 @@ def newton_increment(
             on = problems.per_node(iterating.astype(np.float64))
             frozen = arrays.xp.ascontiguousarray(arrays.xp.maximum(constrained, 1.0 - on))
             frozen_wp = arrays.warp(frozen)  # ``frozen`` is kept alive while Warp uses it
-        rhs = -residual * free
-        if first.any():
-            wps.bsr_mv(assembly.matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
-            rhs_first = -(residual + arrays.view(k_times_increment)) * free + prescribed_increment
-            rhs = problems.where(first, rhs_first, rhs)
-        if on is not None:
-            rhs = rhs * on
+        rhs = _newton_rhs(
+            problems,
+            assembly.matrix,
+            residual,
+            free,
+            prescribed_increment,
+            first,
+            on,
+            scratch=(increment_wp, k_times_increment),
+        )
         with timer.phase("assembly"):
             assembler.eliminate(frozen_wp, damping=factor)
         (rhs_squared,) = problems.read(problems.squared(rhs))
@@ -233,11 +237,7 @@ def newton_increment(
             with timer.phase("assembly"):
                 assembly = assembler.assemble(u)
         residual = arrays.view(assembly.residual)
-        free_squared, reaction_squared = problems.read(
-            problems.squared(residual * free), problems.squared(residual * fixed)
-        )
-        free_norms, reaction_norms = np.sqrt(free_squared), np.sqrt(reaction_squared)
-        limits = np.maximum(tolerance * reaction_norms, force_floors)
+        free_norms, reaction_norms, limits = norms(residual)
         relax = iterating & (free_norms > limits) if nonlinear_elimination_on else None
         if relax is not None and relax.any():
             u, assembly, steps = _relax(
@@ -246,20 +246,8 @@ def newton_increment(
             local += steps
             residual = arrays.view(assembly.residual)
             if steps.any():
-                free_squared, reaction_squared = problems.read(
-                    problems.squared(residual * free), problems.squared(residual * fixed)
-                )
-                free_norms, reaction_norms = np.sqrt(free_squared), np.sqrt(reaction_squared)
-                limits = np.maximum(tolerance * reaction_norms, force_floors)
-        step = problems.per_node(alpha) * free_du
-        step_squared, moved_squared = problems.read(
-            problems.squared(step), problems.squared(u - u_start)
-        )
-        # A correction at roundoff relative to the increment means the residual sits at its
-        # roundoff floor (large bulk moduli raise it): accept if it is small anyway.
-        at_roundoff = (np.sqrt(step_squared) <= 1e-10 * np.sqrt(moved_squared)) & (
-            free_norms <= 1e-6 * reaction_norms
-        )
+                free_norms, reaction_norms, limits = norms(residual)
+        at_roundoff = _at_roundoff(problems, alpha, free_du, u, u_start, free_norms, reaction_norms)
         done = iterating & ((free_norms <= limits) | at_roundoff)
         converged |= done
         for k in np.flatnonzero(done):
@@ -287,6 +275,70 @@ def newton_increment(
         from_guess=~linearized,
         residual=residual if converged.any() else None,
         last_iterate=u,
+    )
+
+
+class _ResidualNorms:
+    """Each problem's free residual norm, reaction norm and convergence limit
+    ``max(tolerance * reaction norm, floor)``, N, of a residual (N, 3)."""
+
+    def __init__(
+        self, problems: Problems, free: Any, fixed: Any, tolerance: float, floors: np.ndarray
+    ) -> None:
+        self.problems, self.free, self.fixed = problems, free, fixed
+        self.tolerance, self.floors = tolerance, floors
+
+    def __call__(self, residual: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        problems = self.problems
+        free_squared, reaction_squared = problems.read(
+            problems.squared(residual * self.free), problems.squared(residual * self.fixed)
+        )
+        free_norms, reaction_norms = np.sqrt(free_squared), np.sqrt(reaction_squared)
+        return free_norms, reaction_norms, np.maximum(self.tolerance * reaction_norms, self.floors)
+
+
+def _newton_rhs(
+    problems: Problems,
+    matrix: Any,
+    residual: Any,
+    free: Any,
+    prescribed_increment: Any,
+    first: np.ndarray,
+    on: Any,
+    *,
+    scratch: tuple[wp.array, wp.array],
+) -> Any:
+    """The Newton system's right-hand side (N, 3): ``-r`` on the free dofs; for the problems
+    taking their ``first`` (linearized) step ``-(r + K du_p)`` there and the prescribed
+    increment ``du_p`` on the prescribed dofs; zero on the nodes of problems not iterating
+    (``on``, None where all iterate). ``scratch``: ``du_p`` and a buffer for ``K du_p``."""
+    arrays = problems.arrays
+    rhs = -residual * free
+    if first.any():
+        increment_wp, k_times_increment = scratch
+        wps.bsr_mv(matrix, increment_wp, k_times_increment, alpha=1.0, beta=0.0)
+        rhs_first = -(residual + arrays.view(k_times_increment)) * free + prescribed_increment
+        rhs = problems.where(first, rhs_first, rhs)
+    return rhs if on is None else rhs * on
+
+
+def _at_roundoff(
+    problems: Problems,
+    alpha: np.ndarray,
+    free_du: Any,
+    u: Any,
+    u_start: Any,
+    free_norms: np.ndarray,
+    reaction_norms: np.ndarray,
+) -> np.ndarray:
+    """The problems whose last correction ``alpha du`` is at roundoff (1e-10) relative to
+    the increment's displacement and whose residual is small anyway (1e-6 of the reaction):
+    the residual sits at its roundoff floor (large bulk moduli raise it), (K,) bool."""
+    step_squared, moved_squared = problems.read(
+        problems.squared(problems.per_node(alpha) * free_du), problems.squared(u - u_start)
+    )
+    return (np.sqrt(step_squared) <= 1e-10 * np.sqrt(moved_squared)) & (
+        free_norms <= 1e-6 * reaction_norms
     )
 
 
