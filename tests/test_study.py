@@ -1403,14 +1403,14 @@ def test_bad_strategy_and_time_steps(tmp_path, line, key_path, value):
 
 
 def test_every_protocol_key_is_in_the_study_file_reference():
-    from warptissue.study import _PROTOCOL_KEYS
+    from warptissue.study._reader import PROTOCOL_KEYS
 
     page = (REPOSITORY / "docs" / "study-files.md").read_text(encoding="utf-8")
     documented = set(re.findall(r"^\| `([A-Za-z0-9_]+)`[ ,|]", page, flags=re.MULTILINE))
     rows = re.findall(r"^\| (`[A-Za-z0-9_]+`(?:, `[A-Za-z0-9_]+`)*) \|", page, re.MULTILINE)
     for row in rows:
         documented |= set(re.findall(r"`([A-Za-z0-9_]+)`", row))
-    keys = {"kind"} | {key for keys in _PROTOCOL_KEYS.values() for key in keys}
+    keys = {"kind"} | {key for keys in PROTOCOL_KEYS.values() for key in keys}
     assert keys <= documented, sorted(keys - documented)
     for kind in ("quasi_static", "timed", "ramp_hold", "sine", "record"):
         assert f'`"{kind}"`' in page, kind

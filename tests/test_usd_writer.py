@@ -501,11 +501,13 @@ def test_indenter_validation():
 def test_one_indenter_type_from_the_study_to_usd():
     """The study's [indenter] table, the FE problem and the USD writer share one type, and
     to_dict/from_dict round-trip it (the study's table is exactly kind, radius_m, contact)."""
-    import warptissue.study
+    import typing
+
     import warptissue.usd.writer
     from warptissue.fem import IndentationProblem
+    from warptissue.study import Study
 
-    assert warptissue.study.Indenter is Indenter is warptissue.usd.writer.Indenter
+    assert typing.get_type_hints(Study)["indenter"] is Indenter is warptissue.usd.writer.Indenter
     assert "indenter" in IndentationProblem.__dataclass_fields__
     probe = Indenter("flat_punch", radius_m=1e-3, contact="frictionless")
     assert probe.to_dict() == {"kind": "flat_punch", "radius_m": 1e-3, "contact": "frictionless"}

@@ -1,0 +1,640 @@
+"""Reading a study: each table validated into the schema's dataclasses, errors placed at
+the file, line and key path (:func:`load_study`, :func:`study_from_dict`)."""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from warptissue.errors import InputError
+from warptissue.fem.assembly import FORMULATIONS
+from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
+from warptissue.fem.newton import NewtonOptions
+from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
+from warptissue.loading import ramp_hold, sine
+from warptissue.materials import material_from_dict, prony_term
+from warptissue.mesh.generators import MESHERS
+from warptissue.mesh.size import size_near_for_force_accuracy
+from warptissue.study._records import condition_record, read_data, record_options
+from warptissue.study._schema import (
+    BASE_KINDS,
+    CONTACT_POINTS,
+    DEPTH_OFFSET,
+    DEVICE_PATTERN,
+    ELEMENT_TYPES,
+    FIT_METHODS,
+    FIT_OBJECTIVES,
+    FIT_STRATEGIES,
+    MAX_STEPS,
+    PROTOCOL_KINDS,
+    SCHEMA_VERSIONS,
+    SPECIMEN_SHAPES,
+    START_FROM,
+    Boundary,
+    DataRecord,
+    FitSettings,
+    Protocol,
+    Solver,
+    Specimen,
+    Study,
+)
+from warptissue.study._sizing import mesh_probe_radius, specimen_half_size_m
+from warptissue.study._toml import Source, Table, closest, plain
+
+
+def _read_specimen(table: Table, indenter: Indenter) -> Specimen:
+    probe_radius_m = indenter.radius_m
+    shape = table.string("shape", choices=SPECIMEN_SHAPES)
+    thickness_m = table.number("thickness_m")
+    other_size_key = "radius_m" if shape == "block" else "width_m"
+    if table.has(other_size_key):
+        raise table.error(
+            other_size_key,
+            f"is not used by shape {shape!r} (a block has width_m, a disc radius_m)",
+            table.data[other_size_key],
+        )
+    width_m = table.number("width_m") if shape == "block" else None
+    radius_m = table.number("radius_m") if shape == "disc" else None
+    half_size_m = specimen_half_size_m(shape, width_m, radius_m)
+    probe_radius_m = mesh_probe_radius(indenter, half_size_m)
+    size_key = "width_m" if shape == "block" else "radius_m"
+    if half_size_m <= probe_radius_m:
+        raise table.error(
+            size_key,
+            f"the specimen must extend beyond the probe radius {probe_radius_m!r} m"
+            + (" (half the width is compared)" if shape == "block" else ""),
+            width_m if shape == "block" else radius_m,
+        )
+    quarter = table.boolean("quarter", default=True)
+    element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
+    force_accuracy = table.number("force_accuracy", default=None)
+    if force_accuracy is not None and table.has("size_near_m"):
+        raise table.error(
+            "force_accuracy",
+            f"give either force_accuracy or size_near_m, not both (size_near_m = "
+            f"{table.raw('size_near_m')!r})",
+            force_accuracy,
+        )
+    if force_accuracy is None:
+        size_near_m = table.number("size_near_m", default=probe_radius_m / 4.0)
+    else:
+        size_near_m = _size_near_for_accuracy(
+            table, force_accuracy, indenter=indenter, probe_radius_m=probe_radius_m
+        )
+    size_far_m = table.number("size_far_m", default=min(thickness_m, half_size_m) / 4.0)
+    if size_near_m > size_far_m and force_accuracy is not None:
+        raise table.error(
+            "force_accuracy",
+            f"chooses size_near_m = {size_near_m!r} m, coarser than size_far_m "
+            f"({size_far_m!r} m): give a size_far_m of at least that, or size_near_m",
+            force_accuracy,
+        )
+    if size_near_m > size_far_m:
+        raise table.error(
+            "size_near_m", f"must not exceed size_far_m ({size_far_m!r} m)", size_near_m
+        )
+    if size_near_m > probe_radius_m:
+        raise table.error(
+            "size_near_m",
+            f"must not exceed the probe radius ({probe_radius_m!r} m), or the probe is not "
+            "resolved",
+            size_near_m,
+        )
+    growth = table.number("growth", default=1.2)
+    if growth < 1.0:
+        raise table.error("growth", "must be at least 1", growth)
+    mesher = table.string("mesher", default="extruded", choices=MESHERS)
+    table.finish()
+    return Specimen(
+        shape=shape,
+        thickness_m=thickness_m,
+        width_m=width_m,
+        radius_m=radius_m,
+        quarter=quarter,
+        element=element,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+        mesher=mesher,
+        force_accuracy=force_accuracy,
+    )
+
+
+def _size_near_for_accuracy(
+    table: Table, accuracy: float, *, indenter: Indenter, probe_radius_m: float
+) -> float:
+    """``specimen.force_accuracy``'s near size (:func:`warptissue.mesh.size_near_for_force_
+    accuracy`), its errors placed at the key that is out of what was measured."""
+
+    sharp = indenter.kind == "flat_punch" and indenter.edge_radius_m == 0.0
+    if not (sharp and indenter.contact == "bonded"):
+        raise table.error(
+            "force_accuracy",
+            "was measured for the sharp bonded flat punch only (indenter.kind = "
+            f"{indenter.kind!r}, edge_radius_m = {indenter.edge_radius_m!r}, contact = "
+            f"{indenter.contact!r}): give size_near_m",
+            accuracy,
+        )
+    # The element and mesher keys come after this one in the table; read them here.
+    element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
+    mesher = table.string("mesher", default="extruded", choices=MESHERS)
+    try:
+        return size_near_for_force_accuracy(
+            accuracy, probe_radius_m=probe_radius_m, mesher=mesher, element=element
+        )
+    except InputError as exc:
+        key = exc.column if exc.column in ("element", "mesher") else "force_accuracy"
+        raise table.error(key, exc.message, table.raw(key, None)) from exc
+
+
+def _read_indenter(table: Table) -> Indenter:
+    kind = table.string("kind", choices=SIMULATED_KINDS)
+    # A plate needs no radius; given, it is the radius of the mesh's refined zone.
+    radius_m = (
+        table.number("radius_m", default=0.0) if kind == "plate" else table.number("radius_m")
+    )
+    values: dict[str, Any] = {"kind": kind, "radius_m": radius_m}
+    if kind == "flat_punch":
+        values["edge_radius_m"] = table.number("edge_radius_m", default=0.0, positive=False)
+    if kind == "wedge":
+        values["angle_deg"] = table.number("angle_deg", positive=False)
+        values["length_m"] = table.number("length_m", default=0.0)
+    rigid = kind in CONTACT_KINDS or values.get("edge_radius_m", 0.0) > 0
+    values["contact"] = table.string(
+        "contact", default="frictionless" if rigid else "bonded", choices=CONTACTS
+    )
+    table.finish()
+    return table.build(lambda values: Indenter(**values), values)
+
+
+PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
+    "quasi_static": ("depths_m", "max_depth_m", "steps"),
+    "timed": ("depths_m", "times_s"),
+    "ramp_hold": ("max_depth_m", "speed_m_per_s", "hold_s", "ramp_steps", "hold_steps"),
+    "sine": (
+        "preload_depth_m",
+        "amplitude_m",
+        "frequency_Hz",
+        "cycles",
+        "preload_s",
+        "preload_steps",
+        "steps_per_cycle",
+    ),
+    "record": (
+        "file",
+        "time_column",
+        "displacement_column",
+        "force_column",
+        "contact",
+        "contact_position_m",
+        "offset",
+        "keep_depth_m",
+        "window_s",
+        "steps",
+    ),
+}
+"""The keys of ``[protocol]`` for each kind (besides ``kind``)."""
+RECORD_PROTOCOL_STEPS: int = 40
+"""Default ``protocol.steps`` of a ``"record"`` protocol."""
+
+
+def _read_protocol(table: Table, thickness_m: float, *, version: int, base: Path) -> Protocol:
+    timed_list = table.has("times_s")
+    kind = table.string(
+        "kind", default="timed" if timed_list else "quasi_static", choices=PROTOCOL_KINDS
+    )
+    if version < 2 and (kind != "quasi_static" or timed_list):
+        key = "kind" if table.has("kind") else "times_s"
+        raise table.error(
+            key, "a timed protocol needs schema_version = 2 (this file says 1)", table.data[key]
+        )
+    for key in table.data:  # a key of another kind (a typo is named by finish())
+        owners = [k for k, keys in PROTOCOL_KEYS.items() if key in keys]
+        if key != "kind" and owners and key not in PROTOCOL_KEYS[kind]:
+            raise table.error(
+                key,
+                f"is not a key of kind {kind!r} (its keys: {', '.join(PROTOCOL_KEYS[kind])}); "
+                f"it belongs to kind {owners[0]!r}",
+                None,
+            )
+    if kind == "quasi_static":
+        return _read_quasi_static(table, thickness_m)
+    settings: dict[str, Any] = {}
+    record = None
+    if kind == "timed":
+        depths = table.number_list("depths_m")
+        times = table.number_list("times_s")
+        if len(times) != len(depths):
+            raise table.error(
+                "times_s",
+                f"must hold one time per depth ({len(depths)} depths, {len(times)} times)",
+                len(times),
+            )
+        for previous, time in zip((0.0, *times[:-1]), times, strict=True):
+            if time <= previous:
+                raise table.error(
+                    "times_s", "must be positive and strictly increasing", list(times)
+                )
+        depth_key = "depths_m"
+    elif kind == "ramp_hold":
+        settings = {
+            "max_depth_m": table.number("max_depth_m"),
+            "speed_m_per_s": table.number("speed_m_per_s"),
+            "hold_s": table.number("hold_s", positive=False),
+            "ramp_steps": table.integer("ramp_steps", default=10),
+            "hold_steps": table.integer("hold_steps", default=20),
+        }
+        times, depths = table.build(lambda values: ramp_hold(**values), settings)
+        depth_key = "max_depth_m"
+    elif kind == "sine":
+        settings = {
+            "preload_depth_m": table.number("preload_depth_m"),
+            "amplitude_m": table.number("amplitude_m"),
+            "frequency_Hz": table.number("frequency_Hz"),
+            "cycles": table.integer("cycles"),
+            "preload_s": table.number("preload_s"),
+            "preload_steps": table.integer("preload_steps", default=5),
+            "steps_per_cycle": table.integer("steps_per_cycle", default=16, minimum=4),
+        }
+        times, depths = table.build(lambda values: sine(**values), settings)
+        depth_key = "amplitude_m"
+    else:  # record
+        options = record_options(table, base)
+        steps = table.integer("steps", default=RECORD_PROTOCOL_STEPS, minimum=2)
+        if steps > MAX_STEPS:
+            raise table.error("steps", f"must be at most {MAX_STEPS}", steps)
+        record = condition_record(table, options, force_required=False)
+        try:
+            times, depths = record.load_history(steps=steps)
+        except InputError as exc:
+            raise table.error("file", exc.message, options["file"]) from None
+        settings = {"steps": steps}
+        depth_key = "file"
+    times, depths = tuple(map(float, times)), tuple(map(float, depths))
+    if len(depths) > MAX_STEPS:
+        raise table.error(depth_key, f"gives more than {MAX_STEPS} steps", len(depths))
+    if min(depths) < 0.0:
+        raise table.error(depth_key, "depths must be >= 0 (into the specimen)", min(depths))
+    if max(depths) >= thickness_m:
+        raise table.error(
+            depth_key,
+            f"the deepest depth must be less than the thickness ({thickness_m!r} m)",
+            max(depths),
+        )
+    table.finish(also_known=PROTOCOL_KEYS[kind])
+    return Protocol(depths_m=depths, times_s=times, kind=kind, settings=settings, record=record)
+
+
+def _read_quasi_static(table: Table, thickness_m: float) -> Protocol:
+    has_list = table.has("depths_m")
+    has_ramp = table.has("max_depth_m") or table.has("steps")
+    if has_list == has_ramp:
+        raise table.source.error(
+            table.prefix,
+            "give either depths_m, or max_depth_m and steps (exactly one of the two forms)",
+        )
+    if has_list:
+        depths = table.number_list("depths_m")
+        if len(depths) > MAX_STEPS:
+            raise table.error("depths_m", f"must hold at most {MAX_STEPS} depths", len(depths))
+        for previous, depth in zip((0.0, *depths[:-1]), depths, strict=True):
+            if depth <= previous:
+                raise table.error(
+                    "depths_m", "must be positive and strictly increasing", list(depths)
+                )
+        last_key = "depths_m"
+    else:
+        max_depth_m = table.number("max_depth_m")
+        steps = table.integer("steps")
+        if steps > MAX_STEPS:
+            raise table.error("steps", f"must be at most {MAX_STEPS}", steps)
+        depths = tuple(max_depth_m * (k + 1) / steps for k in range(steps))
+        last_key = "max_depth_m"
+    if depths[-1] >= thickness_m:
+        raise table.error(
+            last_key,
+            f"the final depth must be less than the thickness ({thickness_m!r} m)",
+            depths[-1],
+        )
+    table.finish(also_known=("kind", *PROTOCOL_KEYS["quasi_static"]))
+    return Protocol(depths_m=depths)
+
+
+def _read_material(table: Table) -> Any:
+    values = table.present(list(table.data))
+    return table.build(material_from_dict, values)
+
+
+def _read_boundary(table: Table) -> Boundary:
+    base = table.string("base", default="fixed", choices=BASE_KINDS)
+    table.finish()
+    return Boundary(base=base)
+
+
+def _read_solver(table: Table) -> Solver:
+    # The solver's own modules: importing them does not start Warp (test_study checks).
+
+    device = table.string("device", default="auto")
+    if not DEVICE_PATTERN.match(device):
+        raise table.error("device", "must be 'auto', 'cpu', 'cuda' or 'cuda:N'", device)
+    formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
+    penalty_factor = table.number("penalty_factor", default=DEFAULT_PENALTY_FACTOR)
+    options = table.build(
+        lambda values: NewtonOptions(**values), table.present(NewtonOptions.keys())
+    )
+    table.finish()
+    return Solver(
+        device=device, formulation=formulation, options=options, penalty_factor=penalty_factor
+    )
+
+
+def _free_name_problem(name: str, material: Any) -> str:
+    """Why ``name`` is not a free parameter of ``material``."""
+    names = material.parameter_names
+    if name in material.to_dict():
+        return (
+            f"is held fixed: the volumetric term is not a fit parameter of model "
+            f"{material.model_name!r} (its fit parameters: {', '.join(names)})"
+        )
+    close = closest(name, names)
+    hint = f"did you mean {close!r}? " if close else ""
+    return f"is not a parameter of model {material.model_name!r} ({hint}its fit parameters: " + (
+        f"{', '.join(names)})"
+    )
+
+
+def _parameter_table(
+    table: Table, free: Sequence[str], material: Any, *, contact_point: str = "given"
+) -> dict[str, Any]:
+    """The keys of ``[fit.start]`` or ``[fit.bounds]``: each must be a free parameter (or
+    the depth offset, with ``contact_point = "fit"``)."""
+    for key in table.data:
+        if key in free:
+            continue
+        if key == DEPTH_OFFSET:
+            if contact_point == "fit":
+                continue
+            raise table.error(
+                key,
+                "applies only with fit.contact_point = 'fit' (the depth offset fitted with "
+                "the material)",
+                table.data[key],
+            )
+        if key in material.parameter_names:
+            raise table.error(
+                key,
+                "is not free: list it in fit.free, or set its value in [material]",
+                table.data[key],
+            )
+        raise table.error(key, _free_name_problem(key, material), None)
+    return dict(table.data)
+
+
+def _read_fit(table: Table, material: Any) -> FitSettings:
+    free_raw = table.raw("free")
+    if (
+        not isinstance(free_raw, list)
+        or not free_raw
+        or not all(isinstance(name, str) for name in free_raw)
+    ):
+        raise table.error("free", "must be a non-empty list of parameter names", free_raw)
+    for name in free_raw:
+        if name not in material.parameter_names:
+            raise table.error("free", f"{name!r} {_free_name_problem(name, material)}", name)
+        if free_raw.count(name) > 1:
+            raise table.error("free", f"names {name!r} twice", free_raw)
+    free = tuple(free_raw)
+    contact_point = table.string("contact_point", default="given", choices=CONTACT_POINTS)
+    bounds_table = _optional_table(table, "bounds")
+    bounds: dict[str, tuple[float, float]] = {}
+    for key in _parameter_table(bounds_table, free, material, contact_point=contact_point):
+        pair = bounds_table.raw(key)
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise bounds_table.error(key, "must be [lower, upper]", pair)
+        low, high = (plain(v) for v in pair)
+        if any(isinstance(v, bool) or not isinstance(v, int | float) for v in (low, high)):
+            raise bounds_table.error(key, "must be [lower, upper], two numbers", pair)
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise bounds_table.error(key, "the lower bound must be below the upper", pair)
+        bounds[key] = (float(low), float(high))
+    start_table = _optional_table(table, "start")
+    start = {
+        key: start_table.number(key, positive=False)
+        for key in _parameter_table(start_table, free, material, contact_point=contact_point)
+    }
+    if DEPTH_OFFSET in start and DEPTH_OFFSET in bounds:
+        low, high = bounds[DEPTH_OFFSET]
+        if not low <= start[DEPTH_OFFSET] <= high:
+            raise start_table.error(
+                DEPTH_OFFSET, f"lies outside fit.bounds [{low:g}, {high:g}]", start[DEPTH_OFFSET]
+            )
+    start_from = table.string("start_from", default="record", choices=START_FROM)
+    method = table.string("method", default="lm", choices=FIT_METHODS)
+    objective = table.string("objective", default="absolute", choices=FIT_OBJECTIVES)
+    relative_floor_N = table.number("relative_floor_N", default=None)
+    if relative_floor_N is not None and objective != "relative":
+        raise table.error(
+            "relative_floor_N", "applies only with objective = 'relative'", relative_floor_N
+        )
+    max_iterations = table.integer("max_iterations", default=50)
+    tolerances = {key: table.number(key, default=1e-8) for key in ("ftol", "xtol", "gtol")}
+    stop_r_squared = table.number("stop_r_squared", default=None)
+    if stop_r_squared is not None and not stop_r_squared < 1.0:
+        raise table.error("stop_r_squared", "must lie between 0 and 1", stop_r_squared)
+    strategy = table.string("strategy", default="joint", choices=FIT_STRATEGIES)
+    if strategy == "two_stage":
+        prony = [name for name in material.parameter_names if prony_term(name) is not None]
+        if not prony:
+            raise table.error(
+                "strategy",
+                "'two_stage' (Ahn & Kim) fits Prony terms first, and [material] has none "
+                f"(model {material.model_name!r}): add g1, tau1_s, ... to [material], or use "
+                "'joint'",
+                strategy,
+            )
+        if all(prony_term(name) is not None for name in free):
+            raise table.error(
+                "strategy",
+                "'two_stage' fits the Prony terms in stage (i) and the other free parameters "
+                "by inverse FE in stage (ii), and fit.free names no other: free an elastic "
+                "parameter too (C10_Pa, ...), or use 'joint'",
+                strategy,
+            )
+    time_steps = table.integer("time_steps", default=24, minimum=2)
+    if time_steps > MAX_STEPS:
+        raise table.error("time_steps", f"must be at most {MAX_STEPS}", time_steps)
+    table.finish()
+    settings = FitSettings(
+        free=free,
+        start=start,
+        bounds=bounds,
+        start_from=start_from,
+        method=method,
+        objective=objective,
+        relative_floor_N=relative_floor_N,
+        max_iterations=max_iterations,
+        stop_r_squared=stop_r_squared,
+        strategy=strategy,
+        time_steps=time_steps,
+        contact_point=contact_point,
+        **tolerances,
+    )
+    lower, upper = settings.parameter_bounds(material)
+    current = dict(zip(material.parameter_names, material.parameter_vector.tolist(), strict=True))
+    for j, name in enumerate(free):
+        if name in start:
+            where, value = start_table, start[name]
+        elif start_from == "material":
+            where, value = table, current[name]
+        else:
+            continue
+        if not lower[j] <= value <= upper[j]:
+            key, problem = (
+                (name, "lies outside fit.bounds")
+                if where is start_table
+                else ("start_from", f"the [material] value of {name} lies outside its bounds")
+            )
+            raise where.error(key, f"{problem} [{lower[j]:g}, {upper[j]:g}]", value)
+    given = {name: value for name, value in start.items() if name != DEPTH_OFFSET}
+    if given:
+        vector = np.array([given.get(name, current[name]) for name in material.parameter_names])
+        try:
+            material.with_parameters(vector)
+        except InputError as exc:
+            key = exc.column if exc.column in given else next(iter(given))
+            raise start_table.error(key, exc.message, given[key]) from None
+    return settings
+
+
+def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
+    root = Table(data, "", source)
+    version = root.raw("schema_version")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise root.error("schema_version", "must be an integer", version)
+    if version not in SCHEMA_VERSIONS:
+        raise root.error(
+            "schema_version",
+            f"unsupported schema version; this reader knows {', '.join(map(str, SCHEMA_VERSIONS))}",
+            version,
+        )
+    name = root.string("name", default=default_name)
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\0"):
+        raise root.error(
+            "name", "must be a plain name (it names the default output folder runs/<name>)", name
+        )
+    description = root.string("description", default="")
+    indenter = _read_indenter(root.table("indenter"))
+    specimen = _read_specimen(root.table("specimen"), indenter)
+    base = source.path.parent if source.path is not None else Path.cwd()
+    protocol = _read_protocol(
+        root.table("protocol"), specimen.thickness_m, version=version, base=base
+    )
+    material = _read_material(root.table("material"))
+    boundary = _read_boundary(_optional_table(root, "boundary"))
+    solver = _read_solver(_optional_table(root, "solver"))
+    if solver.formulation == "mixed" and specimen.element != "TET10":
+        key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
+        raise source.error(
+            key,
+            f"formulation 'mixed' needs element 'TET10' (specimen.element is "
+            f"{specimen.element!r}); TET4 takes formulation 'displacement', which locks when "
+            "nearly incompressible",
+        )
+    if specimen.force_accuracy is not None and solver.formulation != "mixed":
+        raise source.error(
+            "solver.formulation",
+            "specimen.force_accuracy was measured with the 'mixed' formulation only: give "
+            "specimen.size_near_m",
+            solver.formulation,
+        )
+    records: tuple[DataRecord, ...] = ()
+    fit = None
+    if version >= 2:
+        if root.has("data"):
+            records = read_data(root, base)
+        if root.has("fit"):
+            if not records:
+                raise root.error("fit", "a fit needs measured records: add [[data]] tables")
+            fit = _read_fit(root.table("fit"), material)
+    else:
+        for key in ("data", "fit"):
+            if root.has(key):
+                raise root.error(key, "needs schema_version = 2 (this file says 1)", None)
+    root.finish()
+    return Study(
+        name=name,
+        description=description,
+        specimen=specimen,
+        indenter=indenter,
+        protocol=protocol,
+        material=material,
+        boundary=boundary,
+        solver=solver,
+        path=source.path,
+        schema_version=version,
+        data=records,
+        fit=fit,
+    )
+
+
+def _optional_table(root: Table, key: str) -> Table:
+    """A table whose keys all have defaults, so that the table itself may be left out."""
+    return Table(root.raw(key, {}), root.key_path(key), root.source)
+
+
+def study_from_dict(data: Mapping[str, Any], *, path: str | Path | None = None) -> Study:
+    """Validate a study given as a mapping (for example built by a script).
+
+    Args:
+        data: The study, shaped like the TOML file.
+        path: The file it came from, used in error messages only.
+
+    Returns:
+        The validated study.
+
+    Raises:
+        InputError: A key is unknown or missing, or a value has the wrong type or range.
+    """
+    source = Source(None if path is None else Path(path), None)
+    return _build(data, source, default_name="study" if path is None else Path(path).stem)
+
+
+def load_study(path: str | Path) -> Study:
+    """Load and validate a study TOML file.
+
+    Args:
+        path: The study file.
+
+    Returns:
+        The validated study, with defaults filled in and ``path`` set.
+
+    Raises:
+        InputError: The file is missing or not valid TOML (with the line), or a key is
+            unknown or missing, or a value has the wrong type or range (naming the file, the
+            line, the key path and the value).
+    """
+    study_path = Path(path)
+    if study_path.is_dir():
+        raise InputError("this is a folder, not a study file", path=study_path)
+    if not study_path.is_file():
+        raise InputError("study file not found", path=study_path)
+    try:
+        text = study_path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        line = study_path.read_bytes()[: exc.start].count(b"\n") + 1
+        raise InputError("not a text (UTF-8) TOML file", path=study_path, line=line) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        line = getattr(exc, "lineno", None)
+        if line is None:
+            match = re.search(r"at line (\d+)", str(exc))
+            line = int(match.group(1)) if match else None
+        raise InputError(f"not valid TOML: {exc}", path=study_path, line=line) from exc
+    return _build(data, Source(study_path, text), default_name=study_path.stem)
