@@ -21,6 +21,10 @@ from warptissue.errors import InputError
 from warptissue.fem.contact import ContactState, RigidContact
 from warptissue.fem.elements import element_geometry
 from warptissue.fem.viscous import ViscousHistory, elastic_step
+from warptissue.kernels import assembly as ka
+from warptissue.kernels import contact as kc
+from warptissue.kernels import sparse as ks
+from warptissue.kernels.materials import MaterialParams
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
@@ -82,8 +86,6 @@ def gather_bsr_blocks(matrix: wps.BsrMatrix, block_ids: wp.array, gathered: wp.a
         block_ids: Indices into the matrix's blocks, (k,) int32 on the matrix's device.
         gathered: Output, (k,) mat33d on the matrix's device.
     """
-    from warptissue.kernels import sparse as ks
-
     if block_ids.shape[0] == 0:
         return
     if gathered.shape[0] != block_ids.shape[0]:
@@ -107,8 +109,6 @@ def gather_vectors(values: wp.array, indices: wp.array, gathered: wp.array) -> N
         indices: (k,) int32, each in [0, N).
         gathered: Output, (k,) vec3d.
     """
-    from warptissue.kernels import sparse as ks
-
     if indices.shape[0] == 0:
         return
     wp.launch(
@@ -128,8 +128,6 @@ def scatter_vectors(values: wp.array, indices: wp.array, target: wp.array) -> No
         indices: (k,) int32, distinct, each in [0, N).
         target: (N,) vec3d, changed at ``indices`` only.
     """
-    from warptissue.kernels import sparse as ks
-
     if indices.shape[0] == 0:
         return
     wp.launch(
@@ -297,11 +295,9 @@ class Assembler:
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
-        from warptissue.kernels import fem as kf
-
         # Every problem's step of an elastic material (inactive), one per problem.
         self._elastic_steps = wp.array(
-            [elastic_step()] * self.problem_count, dtype=kf.ViscousStep, device=dev
+            [elastic_step()] * self.problem_count, dtype=ka.ViscousStep, device=dev
         )
         self.viscous: ViscousHistory | None = None
         self._zero_history: wp.array | None = None
@@ -315,8 +311,6 @@ class Assembler:
         unloaded state; otherwise :attr:`viscous` is None. An assembler of K packed problems
         takes a sequence of K materials.
         """
-        from warptissue.kernels.materials import MaterialParams
-
         materials = (material,) if isinstance(material, Material) else tuple(material)
         if len(materials) != self.problem_count:
             raise InputError(
@@ -509,15 +503,13 @@ class Assembler:
             displacement_m: Nodal displacements of all problems, (N, 3), m; each problem's
                 depth is the last :meth:`set_load`'s.
         """
-        from warptissue.kernels import fem as kf
-
         if not self.has_contact:
             return [None] * self.problem_count
         u = self.device_displacement(displacement_m)
         scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
         energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
         force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
-        self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
+        self._launch_contact(u, 0, scratch, self.matrix.values, energy, force)
         gaps, forces = self._contact_gap.numpy(), self._contact_node_force.numpy()
         ranges = self._contact_ranges
         return [
@@ -536,16 +528,14 @@ class Assembler:
         problem's body at its current depth and its penalty stiffness, copied to the device
         only when a contact's depth, body or stiffness has changed (the penalty ramp of
         :mod:`warptissue.fem.newton.increment` scales the stiffness)."""
-        from warptissue.kernels import fem as kf
-
         bodies_key = tuple(
             None if each is None else (each.indenter, each.top_z_m, each.depth_m)
             for each in self.contacts
         )
         if bodies_key != self._bodies_key:
             self._bodies = wp.array(
-                [kf.RigidBody() if each is None else each.device_body() for each in self.contacts],
-                dtype=kf.RigidBody,
+                [kc.RigidBody() if each is None else each.device_body() for each in self.contacts],
+                dtype=kc.RigidBody,
                 device=self.device,
             )
             self._bodies_key = bodies_key
@@ -561,7 +551,6 @@ class Assembler:
 
     def _launch_contact(
         self,
-        kf: Any,
         u: wp.array,
         with_tangent: int,
         residual: wp.array,
@@ -572,7 +561,7 @@ class Assembler:
         """One launch of ``rigid_contact_kernel`` over every problem's candidate nodes at the
         contacts' current depths (``energy`` and ``force``: one entry per problem)."""
         wp.launch(
-            kf.rigid_contact_kernel,
+            kc.rigid_contact_kernel,
             dim=int(self._contact_ranges[-1]),
             inputs=[
                 self._points,
@@ -644,8 +633,6 @@ class Assembler:
             An :class:`Assembly`; its arrays live on the assembler's device and are reused by
             the next call.
         """
-        from warptissue.kernels import fem as kf
-
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
         self._energy.zero_()
@@ -653,7 +640,7 @@ class Assembler:
         if with_tangent:
             self.matrix.values.zero_()
         wp.launch(
-            kf.assemble_elements_kernel,
+            ka.assemble_elements_kernel,
             dim=self.tet_count,
             inputs=[
                 *self._assembly_inputs(u),
@@ -669,7 +656,6 @@ class Assembler:
         if self.has_contact:
             self._contact_force.zero_()
             self._launch_contact(
-                kf,
                 u,
                 int(with_tangent),
                 self._residual,
@@ -711,9 +697,6 @@ class Assembler:
             dR/d theta, shape (N, 3), N per unit of the parameter (a copy: the assembler's
             residual buffer is reused).
         """
-        from warptissue.kernels import fem as kf
-        from warptissue.kernels.materials import MaterialParams
-
         derivatives, alpha_term = [], -1
         for k, material in enumerate(self.materials):
             derivative, alpha_term = material.device_params_derivative(name)
@@ -730,7 +713,7 @@ class Assembler:
         viscous = self.viscous
         if alpha_term >= 0:
             wp.launch(
-                kf.ogden_alpha_residual_kernel,
+                ka.ogden_alpha_residual_kernel,
                 dim=self.tet_count,
                 inputs=[*self._element_inputs(u), alpha_term],
                 outputs=[self._residual],
@@ -746,7 +729,7 @@ class Assembler:
             self._min_jacobian.fill_(np.inf)
             derivative_params = wp.array(derivatives, dtype=MaterialParams, device=self.device)
             wp.launch(
-                kf.assemble_elements_kernel,
+                ka.assemble_elements_kernel,
                 dim=self.tet_count,
                 inputs=[
                     *self._assembly_inputs(u, problem_params=derivative_params),
@@ -778,8 +761,6 @@ class Assembler:
             d_shears: Each problem's ``dmu0/dtheta``, (K,), the ``shear_modulus`` field of
                 :meth:`warptissue.materials.Material.device_params_derivative`.
         """
-        from warptissue.kernels import fem as kf
-
         moduli = np.array([material.initial_shear_modulus_Pa for material in self.materials])
         shares = np.where(
             [each is not None for each in self.contacts], np.asarray(d_shears) / moduli, 0.0
@@ -789,7 +770,7 @@ class Assembler:
         scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
         energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
         force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
-        self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
+        self._launch_contact(u, 0, scratch, self.matrix.values, energy, force)
         if self.problem_count == 1:
             return shares[0] * scratch.numpy()
         return scratch.numpy() * shares[self._node_problem_host][:, None]
@@ -807,8 +788,6 @@ class Assembler:
         Raises:
             InputError: A negative or non-finite ``damping``, or not one per problem.
         """
-        from warptissue.kernels import fem as kf
-
         factors = np.asarray(damping, dtype=np.float64)
         if factors.ndim == 0:
             factors = np.full(self.problem_count, float(factors))
@@ -820,7 +799,7 @@ class Assembler:
             self._damping_host = factors.copy()
             self._damping.assign(self._damping_host)
         wp.launch(
-            kf.eliminate_dirichlet_kernel,
+            ka.eliminate_dirichlet_kernel,
             dim=self.node_count,
             inputs=[
                 self.matrix.offsets,
@@ -925,8 +904,6 @@ class Assembler:
             energy with the contact's at every candidate node of their problems
             (``part.problems``), J; the smallest det F over their quadrature points).
         """
-        from warptissue.kernels import fem as kf
-
         u = self.device_displacement(displacement_m)
         self._part_residual.zero_()
         scalars = self._part_scalars
@@ -936,14 +913,14 @@ class Assembler:
         min_jacobian.fill_(np.inf)
         if with_tangent:
             wp.launch(
-                kf.zero_element_blocks_kernel,
+                ka.zero_element_blocks_kernel,
                 dim=(part.elements.shape[0], self.nodes_per_tet**2),
                 inputs=[part.elements, self._block_index],
                 outputs=[self.matrix.values],
                 device=self.device,
             )
         wp.launch(
-            kf.assemble_elements_kernel,
+            ka.assemble_elements_kernel,
             dim=part.elements.shape[0],
             inputs=[
                 *self._assembly_inputs(u),
@@ -958,7 +935,6 @@ class Assembler:
         )
         if self.has_contact:
             self._launch_contact(
-                kf,
                 u,
                 int(with_tangent),
                 self._part_residual,
@@ -1034,8 +1010,6 @@ class Assembler:
         Raises:
             InputError: A node index is out of range, or the indices are not sorted and unique.
         """
-        from warptissue.kernels import sparse as ks
-
         part = self._submatrix_blocks(nodes)
         size = 3 * len(part.nodes)
         dense = wp.zeros((size, size), dtype=wp.float64, device=self.device)
@@ -1103,12 +1077,10 @@ class Assembler:
         A viscoelastic material gives the stress of its last committed step; packed problems
         each their own material's.
         """
-        from warptissue.kernels import fem as kf
-
         u = self.device_displacement(displacement_m)
         stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
         wp.launch(
-            kf.cauchy_stress_kernel,
+            ka.cauchy_stress_kernel,
             dim=self.tet_count,
             inputs=[
                 *self._assembly_inputs(u),
@@ -1137,7 +1109,7 @@ class Assembler:
         ]
 
     def _element_inputs(self, displacement: wp.array) -> list[Any]:
-        """The leading inputs of the element kernels of ``kernels/fem.py`` that take one
+        """The leading inputs of the element kernels of ``kernels/assembly.py`` that take one
         material (``ogden_alpha_residual_kernel``; the others take one per problem,
         :meth:`_assembly_inputs`).
 

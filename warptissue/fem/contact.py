@@ -11,7 +11,7 @@ force ``f_c = -k g n`` along the indenter's outward normal ``n``; the residual b
 ``R = f_int - f_c`` and the node's diagonal tangent block gains ``k (n n^T + g dn/dx)`` (the
 second term is the turning of the normal over a curved surface). The energy gains
 ``k g^2 / 2``, so the line search sees one potential. Device code: ``rigid_contact_point``
-and ``rigid_contact_kernel`` in ``kernels/fem.py``.
+and ``rigid_contact_kernel`` in ``kernels/contact.py``.
 
 Penalty stiffness per node: ``k = beta mu0 h``, ``mu0`` the material's initial shear modulus
 and ``h`` the mean edge length of the elements of the candidate nodes under the indenter
@@ -35,7 +35,7 @@ import warp as wp
 
 from warptissue.errors import InputError
 from warptissue.indenter import Indenter
-from warptissue.kernels import fem as kf
+from warptissue.kernels import contact as kc
 from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
 
 __all__ = [
@@ -107,21 +107,21 @@ class RigidContact:
         """The indenter at the current depth as the kernels' ``RigidBody`` struct."""
 
         probe = self.indenter
-        body = kf.RigidBody()
+        body = kc.RigidBody()
         body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m)
         body.radius = wp.float64(probe.radius_m)
         body.edge_radius = wp.float64(0.0)
         body.half_angle = wp.float64(0.0)
         if probe.kind == "sphere":
-            body.kind = int(kf.RIGID_SPHERE)
+            body.kind = int(kc.RIGID_SPHERE)
             body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m + probe.radius_m)
         elif probe.kind == "plate":
-            body.kind = int(kf.RIGID_PLATE)
+            body.kind = int(kc.RIGID_PLATE)
         elif probe.kind == "flat_punch":
-            body.kind = int(kf.RIGID_PUNCH)
+            body.kind = int(kc.RIGID_PUNCH)
             body.edge_radius = wp.float64(probe.edge_radius_m)
         else:
-            body.kind = int(kf.RIGID_WEDGE)
+            body.kind = int(kc.RIGID_WEDGE)
             body.edge_radius = wp.float64(probe.radius_m)
             body.half_angle = wp.float64(math.radians(0.5 * probe.angle_deg))
         return body
