@@ -7,6 +7,11 @@ import warp as wp
 
 wp.set_module_options({"enable_backward": False})
 
+# The kernels below are compiled in the Warp module of assembly.py: the FE's kernels are one
+# Warp module, so that a cold start compiles the constitutive code once
+# (docs/design-notes/kernel-modules.md; __init__.py imports every file of that module).
+FE_MODULE = wp.get_module("warptissue.kernels.assembly")
+
 RIGID_SPHERE = wp.constant(0)
 RIGID_PLATE = wp.constant(1)
 RIGID_PUNCH = wp.constant(2)
@@ -139,7 +144,7 @@ def rigid_contact_point(body: RigidBody, x: wp.vec3d) -> RigidContactPoint:
     return result
 
 
-@wp.kernel
+@wp.kernel(module=FE_MODULE)
 def rigid_contact_kernel(
     points: wp.array(dtype=wp.vec3d),
     displacement: wp.array(dtype=wp.vec3d),

@@ -17,6 +17,11 @@ from warptissue.kernels.materials import (
 
 wp.set_module_options({"enable_backward": False})
 
+# The kernels below are compiled in the Warp module of assembly.py: the FE's kernels are one
+# Warp module, so that a cold start compiles the constitutive code once
+# (docs/design-notes/kernel-modules.md; __init__.py imports every file of that module).
+FE_MODULE = wp.get_module("warptissue.kernels.assembly")
+
 
 @wp.func
 def deviatoric_pk2(params: MaterialParams, f: wp.mat33d) -> wp.mat33d:
@@ -25,7 +30,7 @@ def deviatoric_pk2(params: MaterialParams, f: wp.mat33d) -> wp.mat33d:
     return wp.inverse(f) @ p
 
 
-@wp.kernel
+@wp.kernel(module=FE_MODULE)
 def viscous_frozen_kernel(
     element_problem: wp.array(dtype=wp.int32),
     viscous: wp.array(dtype=ViscousStep),
@@ -47,7 +52,7 @@ def viscous_frozen_kernel(
     frozen[e, q] = total
 
 
-@wp.kernel
+@wp.kernel(module=FE_MODULE)
 def viscous_commit_kernel(
     problem_params: wp.array(dtype=MaterialParams),
     element_problem: wp.array(dtype=wp.int32),
@@ -78,7 +83,7 @@ def viscous_commit_kernel(
     elastic_stress[e, q] = current
 
 
-@wp.kernel
+@wp.kernel(module=FE_MODULE)
 def viscous_history_residual_kernel(
     problem_params: wp.array(dtype=MaterialParams),
     element_problem: wp.array(dtype=wp.int32),
@@ -129,7 +134,7 @@ def viscous_history_residual_kernel(
             wp.atomic_add(residual, tets[e, a], dv * (dp @ shape_gradients[e, q, a]))
 
 
-@wp.kernel
+@wp.kernel(module=FE_MODULE)
 def viscous_sensitivity_commit_kernel(
     problem_params: wp.array(dtype=MaterialParams),
     d_params: wp.array(dtype=MaterialParams),

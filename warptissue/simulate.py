@@ -402,9 +402,9 @@ def kernels_need_compiling(device: Any) -> bool:
         device: An initialized Warp device.
 
     Returns:
-        True when a kernel module of :mod:`warptissue.kernels` that every simulation launches
-        (``assembly`` and ``sparse``; ``contact`` and ``viscous``, which only some runs launch,
-        are not checked) has no compiled binary for ``device`` in
+        True when a Warp module of :mod:`warptissue.kernels` that a simulation launches (that
+        of ``assembly.py``, which holds the kernels of ``viscous.py`` and ``contact.py`` too,
+        and ``sparse``) has no compiled binary for ``device`` in
         ``warp.config.kernel_cache_dir`` (so the first launch compiles it, about a minute on
         the CPU).
     """
