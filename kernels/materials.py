@@ -7,13 +7,15 @@ Every model returns the strain energy density ``psi`` (Pa), the first Piola-Kirc
 The energy is split as ``psi(F) = psi_dev(F) + U(J)``. ``deviatoric_response`` gives the first
 part and ``volumetric_energy`` gives ``U`` and its first two derivatives, so that the mixed
 (mean-dilatation) element can evaluate ``U`` at the element's mean dilatation instead of the
-pointwise ``J``. ``quadrature_point_response`` in ``fem.py`` combines them for either
+pointwise ``J``. ``quadrature_point_response`` in ``assembly.py`` combines them for either
 formulation.
 
 One ``MaterialParams`` struct with a ``model`` id is the single dispatch point, so that one
 compiled kernel serves every model. This file holds functions only; the kernels that call them
-(including the pointwise ``evaluate_material_kernel``) live in ``fem.py``, so the constitutive
-code is compiled once, in one Warp module.
+live in ``assembly.py`` (including the pointwise ``evaluate_material_kernel``) and
+``viscous.py``. Warp compiles a function into each module whose kernels call it, so the
+constitutive code is compiled once per module that uses it
+(docs/design-notes/kernel-modules.md).
 
 Notes:
     Abaqus conventions (Abaqus Theory Manual 4.6.1; the needle-indentation study, Eq. 2):

@@ -189,26 +189,3 @@ def test_eliminate_refuses_a_negative_or_nan_damping(damping):
     assembler.assemble(np.zeros((mesh.node_count, 3)))
     with pytest.raises(InputError, match="damping"):
         assembler.eliminate(wp.zeros(mesh.node_count, dtype=wp.vec3d), damping=damping)
-
-
-def test_packed_problems_get_the_pattern_of_their_union():
-    """The sparsity pattern of packed problems, built once per distinct mesh and shifted, is
-    the one a sort of the union's node pairs gives: three problems, two of them one mesh;
-    problems that are not packed (interleaved tets) take the sort of the union."""
-    from warptissue.fem.assembly import _element_pattern, _sparsity_pattern
-    from warptissue.fem.packing import pack_meshes
-
-    small = _mesh(10)
-    grid = np.linspace(0.0, 1e-2, 4)
-    large = to_tet10(block_mesh(grid, grid, np.linspace(0.0, 5e-3, 2)))
-    packed = pack_meshes([small, large, small])
-    tets, n = packed.mesh.tets, packed.mesh.node_count
-    union = _element_pattern(tets, n)
-    for got, expected in zip(
-        _sparsity_pattern(tets, n, packed.element_problem), union, strict=True
-    ):
-        np.testing.assert_array_equal(got, expected)
-    interleaved = np.arange(len(tets), dtype=np.int32) % 3
-    for got, expected in zip(_sparsity_pattern(tets, n, interleaved), union, strict=True):
-        np.testing.assert_array_equal(got, expected)
-    assert union[0].dtype == np.int32 and union[2].shape == (len(tets), 100)

@@ -369,7 +369,7 @@ def _inside(probe: Indenter, planar: np.ndarray) -> np.ndarray:
 
 def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0, device: str = "cpu"):
     import warp as wp
-    from warptissue.kernels import fem as kf
+    from warptissue.kernels import contact as kc
 
     from warptissue.fem.contact import RigidContact
 
@@ -381,7 +381,7 @@ def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0, devi
     gap = wp.zeros(count, dtype=wp.float64, device=device)
     blocks = wp.zeros(count, dtype=wp.mat33d, device=device)
     wp.launch(
-        kf.rigid_contact_kernel,
+        kc.rigid_contact_kernel,
         dim=count,
         inputs=[
             wp.array(points, dtype=wp.vec3d, device=device),
@@ -389,7 +389,7 @@ def _launch(probe: Indenter, points: np.ndarray, *, stiffness: float = 1.0, devi
             wp.array(np.arange(count), dtype=wp.int32, device=device),
             wp.array(np.arange(count), dtype=wp.int32, device=device),
             wp.zeros(count, dtype=wp.int32, device=device),  # all of problem 0
-            wp.array([contact.device_body()], dtype=kf.RigidBody, device=device),
+            wp.array([contact.device_body()], dtype=kc.RigidBody, device=device),
             wp.array([stiffness], dtype=wp.float64, device=device),
             1,
         ],

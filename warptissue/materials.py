@@ -79,7 +79,7 @@ import warp as wp
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
-from warptissue.kernels import fem as kf
+from warptissue.kernels import assembly as ka
 from warptissue.kernels import materials as km
 
 __all__ = [
@@ -1376,7 +1376,7 @@ def evaluate_material(
     stress = wp.zeros(n, dtype=wp.mat33d, device=dev)
     tangent = wp.zeros(n, dtype=km.mat99d, device=dev)
     wp.launch(
-        kf.evaluate_material_kernel,
+        ka.evaluate_material_kernel,
         dim=n,
         inputs=[material.device_params(), f_wp],
         outputs=[energy, stress, tangent],

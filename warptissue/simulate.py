@@ -64,7 +64,7 @@ from typing import Any
 import numpy as np
 import warp as wp
 
-import warptissue.kernels.fem
+import warptissue.kernels.assembly
 import warptissue.kernels.sparse
 from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
@@ -402,12 +402,14 @@ def kernels_need_compiling(device: Any) -> bool:
         device: An initialized Warp device.
 
     Returns:
-        True when a kernel module of :mod:`warptissue.kernels` that a simulation launches has
-        no compiled binary for ``device`` in ``warp.config.kernel_cache_dir`` (so the first
-        launch compiles it, about a minute on the CPU).
+        True when a Warp module of :mod:`warptissue.kernels` that a simulation launches (that
+        of ``assembly.py``, which holds the kernels of ``viscous.py`` and ``contact.py`` too,
+        and ``sparse``) has no compiled binary for ``device`` in
+        ``warp.config.kernel_cache_dir`` (so the first launch compiles it, about a minute on
+        the CPU).
     """
 
-    for kernels in (warptissue.kernels.fem, warptissue.kernels.sparse):
+    for kernels in (warptissue.kernels.assembly, warptissue.kernels.sparse):
         module = wp.get_module(kernels.__name__)
         # Warp launches on the CPU with one thread per block (its kernel cache key).
         block_dim = 1 if device.is_cpu else module.options["block_dim"]

@@ -18,9 +18,13 @@ import warp.sparse as wps
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
-from warptissue.fem.contact import ContactState, RigidContact
+from warptissue.fem.contact import ContactState, RigidContact, RigidContacts
 from warptissue.fem.elements import element_geometry
+from warptissue.fem.sparsity import block_ranges, packed_ranges, sparsity_pattern, tet_problems
 from warptissue.fem.viscous import ViscousHistory, elastic_step
+from warptissue.kernels import assembly as ka
+from warptissue.kernels import sparse as ks
+from warptissue.kernels.materials import MaterialParams
 from warptissue.materials import Material, Viscoelastic
 from warptissue.mesh import TetMesh
 
@@ -82,8 +86,6 @@ def gather_bsr_blocks(matrix: wps.BsrMatrix, block_ids: wp.array, gathered: wp.a
         block_ids: Indices into the matrix's blocks, (k,) int32 on the matrix's device.
         gathered: Output, (k,) mat33d on the matrix's device.
     """
-    from warptissue.kernels import sparse as ks
-
     if block_ids.shape[0] == 0:
         return
     if gathered.shape[0] != block_ids.shape[0]:
@@ -107,8 +109,6 @@ def gather_vectors(values: wp.array, indices: wp.array, gathered: wp.array) -> N
         indices: (k,) int32, each in [0, N).
         gathered: Output, (k,) vec3d.
     """
-    from warptissue.kernels import sparse as ks
-
     if indices.shape[0] == 0:
         return
     wp.launch(
@@ -128,8 +128,6 @@ def scatter_vectors(values: wp.array, indices: wp.array, target: wp.array) -> No
         indices: (k,) int32, distinct, each in [0, N).
         target: (N,) vec3d, changed at ``indices`` only.
     """
-    from warptissue.kernels import sparse as ks
-
     if indices.shape[0] == 0:
         return
     wp.launch(
@@ -178,14 +176,6 @@ class _SubmatrixBlocks:
     device_columns: wp.array
 
 
-def _block_ranges(offsets: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Indices of all blocks of the given block rows of a BSR pattern, row after row."""
-    starts = offsets[rows]
-    counts = offsets[rows + 1] - starts
-    shift = np.repeat(starts - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
-    return shift + np.arange(int(counts.sum()))
-
-
 class Assembler:
     """Assembles internal forces and the consistent tangent of a tet mesh on a Warp device.
 
@@ -208,9 +198,6 @@ class Assembler:
         materials: One material per problem, (K,).
         problem_count: K.
         tet_volumes: Reference element volumes, shape (tet_count,), m^3.
-        contact: The rigid contact of an assembler of one problem (None without one, and
-            always None where K > 1: see ``contacts``).
-        contacts: Each problem's rigid contact or None, (K,) (:meth:`set_contact`).
     """
 
     def __init__(
@@ -252,7 +239,7 @@ class Assembler:
             geometry.quadrature_volumes, dtype=wp.float64, device=dev
         )
         self.problem_count = 1 if isinstance(material, Material) else len(material)
-        problems = _element_problems(element_problem, mesh.tet_count, self.problem_count)
+        problems = tet_problems(element_problem, mesh.tet_count, self.problem_count)
         self._build_pattern(mesh.tets, problems)
         self._all_elements = wp.array(
             np.arange(self.tet_count, dtype=np.int32), dtype=wp.int32, device=dev
@@ -271,7 +258,7 @@ class Assembler:
         # numbering (set_contact).
         self._node_offsets: np.ndarray | None = np.array([0, self.node_count], dtype=np.int64)
         if count > 1:
-            ranges = _packed_ranges(mesh.tets, self.node_count, problems)
+            ranges = packed_ranges(mesh.tets, self.node_count, problems)
             self._node_offsets = (
                 None
                 if ranges is None
@@ -287,21 +274,20 @@ class Assembler:
         self._part_force = wp.zeros(count, dtype=wp.vec3d, device=dev)
         self._tets_host: np.ndarray | None = None
         self._last_submatrix: _SubmatrixBlocks | None = None
-        self._points = wp.array(mesh.points, dtype=wp.vec3d, device=dev)
-        self.contact: RigidContact | None = None
-        self.contacts: tuple[RigidContact | None, ...] = (None,) * count
-        self._contact_force = wp.zeros(count, dtype=wp.vec3d, device=dev)
-        self._contact_ranges = np.zeros(count + 1, dtype=np.int64)
-        self._bodies_key: Any = None
-        self._stiffness_key: Any = None
+        self._rigid = RigidContacts(
+            points=wp.array(mesh.points, dtype=wp.vec3d, device=dev),
+            diagonal_blocks=self._diagonal_blocks,
+            node_offsets=self._node_offsets,
+            node_problem=node_problem,
+            problem_count=count,
+            device=dev,
+        )
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
-        from warptissue.kernels import fem as kf
-
         # Every problem's step of an elastic material (inactive), one per problem.
         self._elastic_steps = wp.array(
-            [elastic_step()] * self.problem_count, dtype=kf.ViscousStep, device=dev
+            [elastic_step()] * self.problem_count, dtype=ka.ViscousStep, device=dev
         )
         self.viscous: ViscousHistory | None = None
         self._zero_history: wp.array | None = None
@@ -315,8 +301,6 @@ class Assembler:
         unloaded state; otherwise :attr:`viscous` is None. An assembler of K packed problems
         takes a sequence of K materials.
         """
-        from warptissue.kernels.materials import MaterialParams
-
         materials = (material,) if isinstance(material, Material) else tuple(material)
         if len(materials) != self.problem_count:
             raise InputError(
@@ -370,73 +354,23 @@ class Assembler:
             InputError: Not one entry per problem, a contact node outside its problem, or
                 contacts on problems that are not packed in contiguous node ranges.
         """
-        count = self.problem_count
-        if contact is None:
-            contacts: tuple[RigidContact | None, ...] = (None,) * count
-        elif isinstance(contact, RigidContact):
-            if count > 1:
-                raise InputError(
-                    f"one contact (or None) per packed problem: {count} expected",
-                    key="contact",
-                    value=1,
-                )
-            contacts = (contact,)
-        else:
-            contacts = tuple(contact)
-            if len(contacts) != count:
-                raise InputError(
-                    f"one contact (or None) per packed problem: {count} expected",
-                    key="contact",
-                    value=len(contacts),
-                )
-        for k, each in enumerate(contacts):
-            if each is not None and not isinstance(each, RigidContact):
-                raise InputError(
-                    f"problem {k}: a contact must be a RigidContact or None",
-                    key="contact",
-                    value=type(each).__name__,
-                )
-        used = [k for k, each in enumerate(contacts) if each is not None]
-        offsets = self._node_offsets
-        if used and offsets is None:
-            raise InputError(
-                "rigid contacts of several problems need them packed in contiguous node "
-                "ranges (warptissue.fem.packing.pack_meshes)",
-                key="element_problem",
-            )
-        counts = np.zeros(count, dtype=np.int64)
-        nodes, problems = [], []
-        for k in used:
-            own = contacts[k].nodes
-            size = int(offsets[k + 1] - offsets[k])
-            if own.min() < 0 or own.max() >= size:
-                raise InputError(
-                    "contact nodes must be nodes of the mesh"
-                    + ("" if count == 1 else f" (of problem {k}, in its own numbering)"),
-                    key="mesh",
-                )
-            nodes.append(own + offsets[k])
-            problems.append(np.full(len(own), k, dtype=np.int32))
-            counts[k] = len(own)
-        if used:
-            dev = self.device
-            union = np.concatenate(nodes)
-            self._contact_nodes = wp.array(union, dtype=wp.int32, device=dev)
-            self._contact_blocks = wp.array(
-                self._diagonal_blocks[union], dtype=wp.int32, device=dev
-            )
-            self._contact_problem = wp.array(np.concatenate(problems), dtype=wp.int32, device=dev)
-            self._contact_node_force = wp.zeros(len(union), dtype=wp.vec3d, device=dev)
-            self._contact_gap = wp.zeros(len(union), dtype=wp.float64, device=dev)
-        self._contact_ranges = np.concatenate([[0], np.cumsum(counts)])
-        self._bodies_key = self._stiffness_key = None  # uploaded at the next launch
-        self.contacts = contacts
-        self.contact = contacts[0] if count == 1 else None
+        self._rigid.set(contact)
 
     @property
     def has_contact(self) -> bool:
         """Whether any problem has a rigid contact."""
-        return any(each is not None for each in self.contacts)
+        return self._rigid.has_contact
+
+    @property
+    def contact(self) -> RigidContact | None:
+        """The rigid contact of an assembler of one problem (None without one, and always
+        None where K > 1: see :attr:`contacts`)."""
+        return self._rigid.contact
+
+    @property
+    def contacts(self) -> tuple[RigidContact | None, ...]:
+        """Each problem's rigid contact or None, (K,) (:meth:`set_contact`)."""
+        return self._rigid.contacts
 
     def set_load(self, load: Any) -> None:
         """The load of the next assemblies: each rigid indenter's depth, m (no-op without one).
@@ -450,24 +384,7 @@ class Assembler:
         Raises:
             InputError: Not one depth per problem.
         """
-        count = self.problem_count
-        if count == 1:
-            if self.contact is not None:
-                value = np.asarray(load, dtype=np.float64)
-                if value.size != 1:
-                    raise InputError("one load for one problem", key="load", value=value.shape)
-                self.contact.depth_m = float(load) if value.ndim == 0 else float(value.flat[0])
-            return
-        loads = np.asarray(load, dtype=np.float64)
-        if loads.ndim == 0:
-            loads = np.full(count, float(loads))
-        if loads.shape != (count,):
-            raise InputError(
-                f"one load per packed problem ({count})", key="load", value=loads.shape
-            )
-        for each, depth in zip(self.contacts, loads, strict=True):
-            if each is not None:
-                each.depth_m = float(depth)
+        self._rigid.set_load(load)
 
     def contact_state(
         self, displacement_m: np.ndarray | wp.array, *, problem: int | None = None
@@ -509,83 +426,7 @@ class Assembler:
             displacement_m: Nodal displacements of all problems, (N, 3), m; each problem's
                 depth is the last :meth:`set_load`'s.
         """
-        from warptissue.kernels import fem as kf
-
-        if not self.has_contact:
-            return [None] * self.problem_count
-        u = self.device_displacement(displacement_m)
-        scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
-        energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
-        force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
-        self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
-        gaps, forces = self._contact_gap.numpy(), self._contact_node_force.numpy()
-        ranges = self._contact_ranges
-        return [
-            None
-            if each is None
-            else ContactState(
-                nodes=each.nodes.copy(),
-                gap_m=gaps[ranges[k] : ranges[k + 1]].copy(),
-                force_N=forces[ranges[k] : ranges[k + 1]].copy(),
-            )
-            for k, each in enumerate(self.contacts)
-        ]
-
-    def _contact_inputs(self) -> list[Any]:
-        """The per-problem inputs of ``rigid_contact_kernel``: ``[bodies, stiffness]``, each
-        problem's body at its current depth and its penalty stiffness, copied to the device
-        only when a contact's depth, body or stiffness has changed (the penalty ramp of
-        :mod:`warptissue.fem.newton.increment` scales the stiffness)."""
-        from warptissue.kernels import fem as kf
-
-        bodies_key = tuple(
-            None if each is None else (each.indenter, each.top_z_m, each.depth_m)
-            for each in self.contacts
-        )
-        if bodies_key != self._bodies_key:
-            self._bodies = wp.array(
-                [kf.RigidBody() if each is None else each.device_body() for each in self.contacts],
-                dtype=kf.RigidBody,
-                device=self.device,
-            )
-            self._bodies_key = bodies_key
-        stiffness_key = tuple(
-            0.0 if each is None else float(each.stiffness_N_per_m) for each in self.contacts
-        )
-        if stiffness_key != self._stiffness_key:
-            self._stiffness = wp.array(
-                np.array(stiffness_key, dtype=np.float64), dtype=wp.float64, device=self.device
-            )
-            self._stiffness_key = stiffness_key
-        return [self._bodies, self._stiffness]
-
-    def _launch_contact(
-        self,
-        kf: Any,
-        u: wp.array,
-        with_tangent: int,
-        residual: wp.array,
-        values: wp.array,
-        energy: wp.array,
-        force: wp.array,
-    ) -> None:
-        """One launch of ``rigid_contact_kernel`` over every problem's candidate nodes at the
-        contacts' current depths (``energy`` and ``force``: one entry per problem)."""
-        wp.launch(
-            kf.rigid_contact_kernel,
-            dim=int(self._contact_ranges[-1]),
-            inputs=[
-                self._points,
-                u,
-                self._contact_nodes,
-                self._contact_blocks,
-                self._contact_problem,
-                *self._contact_inputs(),
-                with_tangent,
-            ],
-            outputs=[residual, values, energy, force, self._contact_node_force, self._contact_gap],
-            device=self.device,
-        )
+        return self._rigid.states(self.device_displacement(displacement_m), self.matrix.values)
 
     def reset_history(self) -> None:
         """Back to the unloaded state at t = 0 (a viscoelastic material forgets its history)."""
@@ -602,9 +443,9 @@ class Assembler:
             return [self.viscous.steps, self._zero_history]
         return [self.viscous.steps, self.viscous.frozen]
 
-    def _build_pattern(self, tets: np.ndarray, element_problems: np.ndarray) -> None:
+    def _build_pattern(self, tets: np.ndarray, problems: np.ndarray) -> None:
         n = self.node_count
-        block_rows, block_cols, block_index = _sparsity_pattern(tets, n, element_problems)
+        block_rows, block_cols, block_index = sparsity_pattern(tets, n, problems)
         self._block_index_host = block_index
         self._block_index = wp.array(self._block_index_host, dtype=wp.int32, device=self.device)
         self.matrix = wps.bsr_zeros(n, n, block_type=wp.mat33d, device=self.device)
@@ -644,8 +485,6 @@ class Assembler:
             An :class:`Assembly`; its arrays live on the assembler's device and are reused by
             the next call.
         """
-        from warptissue.kernels import fem as kf
-
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
         self._energy.zero_()
@@ -653,7 +492,7 @@ class Assembler:
         if with_tangent:
             self.matrix.values.zero_()
         wp.launch(
-            kf.assemble_elements_kernel,
+            ka.assemble_elements_kernel,
             dim=self.tet_count,
             inputs=[
                 *self._assembly_inputs(u),
@@ -667,15 +506,14 @@ class Assembler:
             device=self.device,
         )
         if self.has_contact:
-            self._contact_force.zero_()
-            self._launch_contact(
-                kf,
+            self._rigid.force.zero_()
+            self._rigid.launch(
                 u,
                 int(with_tangent),
                 self._residual,
                 self.matrix.values,
                 self._energy,
-                self._contact_force,
+                self._rigid.force,
             )
         scalars = self._scalars.numpy()
         energies, min_jacobians = scalars[: self.problem_count], scalars[self.problem_count :]
@@ -711,9 +549,6 @@ class Assembler:
             dR/d theta, shape (N, 3), N per unit of the parameter (a copy: the assembler's
             residual buffer is reused).
         """
-        from warptissue.kernels import fem as kf
-        from warptissue.kernels.materials import MaterialParams
-
         derivatives, alpha_term = [], -1
         for k, material in enumerate(self.materials):
             derivative, alpha_term = material.device_params_derivative(name)
@@ -730,7 +565,7 @@ class Assembler:
         viscous = self.viscous
         if alpha_term >= 0:
             wp.launch(
-                kf.ogden_alpha_residual_kernel,
+                ka.ogden_alpha_residual_kernel,
                 dim=self.tet_count,
                 inputs=[*self._element_inputs(u), alpha_term],
                 outputs=[self._residual],
@@ -746,7 +581,7 @@ class Assembler:
             self._min_jacobian.fill_(np.inf)
             derivative_params = wp.array(derivatives, dtype=MaterialParams, device=self.device)
             wp.launch(
-                kf.assemble_elements_kernel,
+                ka.assemble_elements_kernel,
                 dim=self.tet_count,
                 inputs=[
                     *self._assembly_inputs(u, problem_params=derivative_params),
@@ -761,38 +596,15 @@ class Assembler:
             )
             explicit = self._residual.numpy().copy()
         d_shears = np.array([float(derivative.shear_modulus) for derivative in derivatives])
-        explicit = explicit + self._contact_parameter_residual(u, d_shears)
+        moduli = np.array([material.initial_shear_modulus_Pa for material in self.materials])
+        explicit = explicit + self._rigid.parameter_residual(
+            u, self.matrix.values, d_shears, moduli
+        )
         if viscous is None or name not in viscous.names:
             return explicit
         self._residual.zero_()
         viscous.history_residual(self, u, name, self._residual)
         return explicit + self._residual.numpy()
-
-    def _contact_parameter_residual(self, u: wp.array, d_shears: np.ndarray) -> np.ndarray | float:
-        """The rigid contacts' part of ``dR/dtheta``: each problem's penalty ``k = beta mu0 h``
-        follows its initial shear modulus, so ``dR_c/dtheta = R_c (dmu0/dtheta) / mu0`` on its
-        nodes (0 without contact or for a parameter mu0 does not depend on).
-
-        Args:
-            u: Nodal displacements on the device.
-            d_shears: Each problem's ``dmu0/dtheta``, (K,), the ``shear_modulus`` field of
-                :meth:`warptissue.materials.Material.device_params_derivative`.
-        """
-        from warptissue.kernels import fem as kf
-
-        moduli = np.array([material.initial_shear_modulus_Pa for material in self.materials])
-        shares = np.where(
-            [each is not None for each in self.contacts], np.asarray(d_shears) / moduli, 0.0
-        )
-        if not np.any(shares != 0.0):
-            return 0.0
-        scratch = wp.zeros(self.node_count, dtype=wp.vec3d, device=self.device)
-        energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
-        force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
-        self._launch_contact(kf, u, 0, scratch, self.matrix.values, energy, force)
-        if self.problem_count == 1:
-            return shares[0] * scratch.numpy()
-        return scratch.numpy() * shares[self._node_problem_host][:, None]
 
     def eliminate(self, constrained: wp.array, *, damping: Any = 0.0) -> None:
         """Zero the rows and columns of constrained dofs in ``self.matrix``, 1 on the diagonal,
@@ -807,8 +619,6 @@ class Assembler:
         Raises:
             InputError: A negative or non-finite ``damping``, or not one per problem.
         """
-        from warptissue.kernels import fem as kf
-
         factors = np.asarray(damping, dtype=np.float64)
         if factors.ndim == 0:
             factors = np.full(self.problem_count, float(factors))
@@ -820,7 +630,7 @@ class Assembler:
             self._damping_host = factors.copy()
             self._damping.assign(self._damping_host)
         wp.launch(
-            kf.eliminate_dirichlet_kernel,
+            ka.eliminate_dirichlet_kernel,
             dim=self.node_count,
             inputs=[
                 self.matrix.offsets,
@@ -846,7 +656,7 @@ class Assembler:
             InputError: A node index is out of range.
         """
         nodes = self._node_indices(nodes)
-        neighbours = self._pattern_columns[_block_ranges(self._pattern_offsets, nodes)]
+        neighbours = self._pattern_columns[block_ranges(self._pattern_offsets, nodes)]
         return np.union1d(nodes, neighbours)
 
     def element_part(
@@ -877,7 +687,7 @@ class Assembler:
                 np.cumsum(np.bincount(tets.reshape(-1), minlength=self.node_count), out=offsets[1:])
                 self._node_elements = (offsets, owners[order])
             offsets, owners = self._node_elements
-            elements = np.unique(owners[_block_ranges(offsets, nodes)])
+            elements = np.unique(owners[block_ranges(offsets, nodes)])
         else:
             elements = np.unique(np.asarray(elements, dtype=np.int64).reshape(-1))
             if elements.size and (elements[0] < 0 or elements[-1] >= self.tet_count):
@@ -925,8 +735,6 @@ class Assembler:
             energy with the contact's at every candidate node of their problems
             (``part.problems``), J; the smallest det F over their quadrature points).
         """
-        from warptissue.kernels import fem as kf
-
         u = self.device_displacement(displacement_m)
         self._part_residual.zero_()
         scalars = self._part_scalars
@@ -936,14 +744,14 @@ class Assembler:
         min_jacobian.fill_(np.inf)
         if with_tangent:
             wp.launch(
-                kf.zero_element_blocks_kernel,
+                ka.zero_element_blocks_kernel,
                 dim=(part.elements.shape[0], self.nodes_per_tet**2),
                 inputs=[part.elements, self._block_index],
                 outputs=[self.matrix.values],
                 device=self.device,
             )
         wp.launch(
-            kf.assemble_elements_kernel,
+            ka.assemble_elements_kernel,
             dim=part.elements.shape[0],
             inputs=[
                 *self._assembly_inputs(u),
@@ -957,8 +765,7 @@ class Assembler:
             device=self.device,
         )
         if self.has_contact:
-            self._launch_contact(
-                kf,
+            self._rigid.launch(
                 u,
                 int(with_tangent),
                 self._part_residual,
@@ -1002,7 +809,7 @@ class Assembler:
         local[nodes] = np.arange(len(nodes))
         counts = self._pattern_offsets[nodes + 1] - self._pattern_offsets[nodes]
         rows = np.repeat(np.arange(len(nodes)), counts)
-        blocks = _block_ranges(self._pattern_offsets, nodes)
+        blocks = block_ranges(self._pattern_offsets, nodes)
         columns = local[self._pattern_columns[blocks]]
         inside = columns >= 0
         rows, blocks, columns = rows[inside], blocks[inside], columns[inside]
@@ -1034,8 +841,6 @@ class Assembler:
         Raises:
             InputError: A node index is out of range, or the indices are not sorted and unique.
         """
-        from warptissue.kernels import sparse as ks
-
         part = self._submatrix_blocks(nodes)
         size = 3 * len(part.nodes)
         dense = wp.zeros((size, size), dtype=wp.float64, device=self.device)
@@ -1103,12 +908,10 @@ class Assembler:
         A viscoelastic material gives the stress of its last committed step; packed problems
         each their own material's.
         """
-        from warptissue.kernels import fem as kf
-
         u = self.device_displacement(displacement_m)
         stress = wp.zeros((self.tet_count, 6), dtype=wp.float64, device=self.device)
         wp.launch(
-            kf.cauchy_stress_kernel,
+            ka.cauchy_stress_kernel,
             dim=self.tet_count,
             inputs=[
                 *self._assembly_inputs(u),
@@ -1137,7 +940,7 @@ class Assembler:
         ]
 
     def _element_inputs(self, displacement: wp.array) -> list[Any]:
-        """The leading inputs of the element kernels of ``kernels/fem.py`` that take one
+        """The leading inputs of the element kernels of ``kernels/assembly.py`` that take one
         material (``ogden_alpha_residual_kernel``; the others take one per problem,
         :meth:`_assembly_inputs`).
 
@@ -1182,118 +985,3 @@ class Assembler:
         if array.shape != (self.node_count, 3):
             raise InputError(f"{name} must have shape ({self.node_count}, 3)", value=array.shape)
         return array
-
-
-def _sparsity_pattern(
-    tets: np.ndarray, node_count: int, element_problems: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The distinct node pairs of the element blocks, row-major, and each block's place.
-
-    Packed problems (:func:`warptissue.fem.packing.pack_meshes`: each problem's tets and
-    nodes one contiguous range, in problem order) have a block-diagonal pattern: each
-    problem's own pattern, shifted. It is computed once per distinct mesh (several rates or
-    sites on one specimen's mesh share it), instead of sorting the node pairs of the union.
-
-    Args:
-        tets: Element connectivity, (M, npe).
-        node_count: N.
-        element_problems: The problem of each tet, (M,).
-
-    Returns:
-        (block rows (B,), block columns (B,), block index (M, npe * npe)), int32: the
-        distinct (row, column) node pairs in row-major order, and for each element block
-        ``(a, b)`` (row-major over the element's nodes) its index among them.
-    """
-    ranges = _packed_ranges(tets, node_count, element_problems)
-    if ranges is None:
-        return _element_pattern(tets, node_count)
-    rows, cols = [], []
-    index = np.empty((tets.shape[0], tets.shape[1] ** 2), dtype=np.int32)
-    known: dict[tuple[int, int, int], tuple[np.ndarray, ...]] = {}
-    blocks = 0
-    for first_tet, last_tet, first_node, last_node in ranges:
-        local = tets[first_tet:last_tet] - first_node
-        key = (last_node - first_node, local.shape[0], hash(local.tobytes()))
-        found = known.get(key)
-        if found is None or not np.array_equal(found[0], local):
-            found = (local, *_element_pattern(local, last_node - first_node))
-            known[key] = found
-        _, local_rows, local_cols, local_index = found
-        rows.append(local_rows + first_node)
-        cols.append(local_cols + first_node)
-        index[first_tet:last_tet] = local_index + blocks
-        blocks += local_rows.shape[0]
-    return np.concatenate(rows), np.concatenate(cols), index
-
-
-def _packed_ranges(
-    tets: np.ndarray, node_count: int, element_problems: np.ndarray
-) -> list[tuple[int, int, int, int]] | None:
-    """(first tet, end tet, first node, end node) of each problem where the problems are
-    packed (contiguous, ordered, disjoint tet and node ranges covering the mesh); else None
-    (and for a single problem)."""
-    if element_problems.size == 0 or element_problems[-1] == element_problems[0]:
-        return None
-    if np.any(np.diff(element_problems) < 0):
-        return None
-    starts = np.flatnonzero(np.diff(element_problems)) + 1
-    bounds = np.concatenate([[0], starts, [len(element_problems)]])
-    ranges = []
-    next_node = 0
-    for first_tet, last_tet in zip(bounds[:-1], bounds[1:], strict=True):
-        part = tets[first_tet:last_tet]
-        if int(part.min()) != next_node:
-            return None
-        end_node = int(part.max()) + 1
-        ranges.append((int(first_tet), int(last_tet), next_node, end_node))
-        next_node = end_node
-    return ranges if next_node == node_count else None
-
-
-def _element_pattern(tets: np.ndarray, node_count: int) -> tuple[np.ndarray, ...]:
-    """:func:`_sparsity_pattern` of one mesh, by one sort of the element blocks' node pairs."""
-    npe = tets.shape[1]
-    n = node_count
-    rows = np.repeat(tets, npe, axis=1).astype(np.int64)  # (M, npe*npe): a-major
-    cols = np.tile(tets, (1, npe)).astype(np.int64)
-    keys = (rows * n + cols).reshape(-1)
-    # One sort gives the distinct node pairs and each element block's place among them
-    # (NumPy's hash-based np.unique took 4x longer on these keys).
-    order = np.argsort(keys)
-    sorted_keys = keys[order]
-    first = np.empty(len(keys), dtype=bool)
-    first[0] = True
-    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=first[1:])
-    unique_keys = sorted_keys[first]
-    block_index = np.empty(len(keys), dtype=np.int32)
-    block_index[order] = np.cumsum(first) - 1
-    return (
-        (unique_keys // n).astype(np.int32),
-        (unique_keys % n).astype(np.int32),
-        block_index.reshape(rows.shape),
-    )
-
-
-def _element_problems(element_problem: Any, tet_count: int, problem_count: int) -> np.ndarray:
-    """The problem of each tet, checked: (tet_count,) integers in [0, problem_count)."""
-    if element_problem is None:
-        if problem_count != 1:
-            raise InputError(
-                f"{problem_count} materials need element_problem, the problem of each tet",
-                key="element_problem",
-            )
-        return np.zeros(tet_count, dtype=np.int32)
-    problems = np.asarray(element_problem)
-    if problems.shape != (tet_count,) or not np.issubdtype(problems.dtype, np.integer):
-        raise InputError(
-            f"element_problem must hold one integer per tet ({tet_count})",
-            key="element_problem",
-            value=(problems.shape, str(problems.dtype)),
-        )
-    if problems.size and (problems.min() < 0 or problems.max() >= problem_count):
-        raise InputError(
-            f"element_problem must lie in [0, {problem_count})",
-            key="element_problem",
-            value=(int(problems.min()), int(problems.max())),
-        )
-    return problems.astype(np.int32)

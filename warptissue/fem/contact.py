@@ -11,7 +11,7 @@ force ``f_c = -k g n`` along the indenter's outward normal ``n``; the residual b
 ``R = f_int - f_c`` and the node's diagonal tangent block gains ``k (n n^T + g dn/dx)`` (the
 second term is the turning of the normal over a curved surface). The energy gains
 ``k g^2 / 2``, so the line search sees one potential. Device code: ``rigid_contact_point``
-and ``rigid_contact_kernel`` in ``kernels/fem.py``.
+and ``rigid_contact_kernel`` in ``kernels/contact.py``.
 
 Penalty stiffness per node: ``k = beta mu0 h``, ``mu0`` the material's initial shear modulus
 and ``h`` the mean edge length of the elements of the candidate nodes under the indenter
@@ -27,6 +27,7 @@ node set; a TET10 face is a 6-node triangle), in the current configuration.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +36,7 @@ import warp as wp
 
 from warptissue.errors import InputError
 from warptissue.indenter import Indenter
-from warptissue.kernels import fem as kf
+from warptissue.kernels import contact as kc
 from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
 
 __all__ = [
@@ -43,6 +44,7 @@ __all__ = [
     "ContactState",
     "ContactSurface",
     "RigidContact",
+    "RigidContacts",
     "mean_edge_length",
 ]
 
@@ -107,21 +109,21 @@ class RigidContact:
         """The indenter at the current depth as the kernels' ``RigidBody`` struct."""
 
         probe = self.indenter
-        body = kf.RigidBody()
+        body = kc.RigidBody()
         body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m)
         body.radius = wp.float64(probe.radius_m)
         body.edge_radius = wp.float64(0.0)
         body.half_angle = wp.float64(0.0)
         if probe.kind == "sphere":
-            body.kind = int(kf.RIGID_SPHERE)
+            body.kind = int(kc.RIGID_SPHERE)
             body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m + probe.radius_m)
         elif probe.kind == "plate":
-            body.kind = int(kf.RIGID_PLATE)
+            body.kind = int(kc.RIGID_PLATE)
         elif probe.kind == "flat_punch":
-            body.kind = int(kf.RIGID_PUNCH)
+            body.kind = int(kc.RIGID_PUNCH)
             body.edge_radius = wp.float64(probe.edge_radius_m)
         else:
-            body.kind = int(kf.RIGID_WEDGE)
+            body.kind = int(kc.RIGID_WEDGE)
             body.edge_radius = wp.float64(probe.radius_m)
             body.half_angle = wp.float64(math.radians(0.5 * probe.angle_deg))
         return body
@@ -343,3 +345,262 @@ class ContactSurface:
             corners = corners[weight[corners] > 0]
             pressure[corners] = total[corners] / weight[corners]
         return pressure
+
+
+class RigidContacts:
+    """The rigid contacts of the K problems of one assembler's mesh and their launches of
+    ``rigid_contact_kernel``: one launch over every problem's candidate nodes, each with its
+    own problem's body and penalty stiffness. :class:`warptissue.fem.assembly.Assembler`
+    holds one (``set_contact``, ``set_load``, ``contact_states``).
+
+    Args:
+        points: Reference node coordinates, vec3d (N,), m, on the assembler's device.
+        diagonal_blocks: Each node's diagonal block in the tangent's BSR values, (N,) int32.
+        node_offsets: First node of each packed problem and N at the end, (K + 1,); None
+            where the problems are not packed in contiguous node ranges.
+        node_problem: The problem of each node, (N,).
+        problem_count: K.
+        device: The assembler's Warp device.
+
+    Attributes:
+        contacts: Each problem's rigid contact or None, (K,).
+        contact: The rigid contact of one problem (None without one, and always None where
+            K > 1).
+        force: The force on each problem's body of the last launch that wrote it, vec3d
+            (K,), N.
+    """
+
+    def __init__(
+        self,
+        *,
+        points: wp.array,
+        diagonal_blocks: np.ndarray,
+        node_offsets: np.ndarray | None,
+        node_problem: np.ndarray,
+        problem_count: int,
+        device: Any,
+    ) -> None:
+        count = problem_count
+        self.problem_count = count
+        self.device = device
+        self._points = points
+        self._diagonal_blocks = diagonal_blocks
+        self._node_offsets = node_offsets
+        self._node_problem = node_problem
+        self.contact: RigidContact | None = None
+        self.contacts: tuple[RigidContact | None, ...] = (None,) * count
+        self.force = wp.zeros(count, dtype=wp.vec3d, device=device)
+        self._ranges = np.zeros(count + 1, dtype=np.int64)
+        self._bodies_key: Any = None
+        self._stiffness_key: Any = None
+
+    def set(self, contact: RigidContact | Sequence[RigidContact | None] | None) -> None:
+        """The contacts from the next launch on (as
+        :meth:`warptissue.fem.assembly.Assembler.set_contact`).
+
+        Raises:
+            InputError: Not one entry per problem, a contact node outside its problem, or
+                contacts on problems that are not packed in contiguous node ranges.
+        """
+        count = self.problem_count
+        if contact is None:
+            contacts: tuple[RigidContact | None, ...] = (None,) * count
+        elif isinstance(contact, RigidContact):
+            if count > 1:
+                raise InputError(
+                    f"one contact (or None) per packed problem: {count} expected",
+                    key="contact",
+                    value=1,
+                )
+            contacts = (contact,)
+        else:
+            contacts = tuple(contact)
+            if len(contacts) != count:
+                raise InputError(
+                    f"one contact (or None) per packed problem: {count} expected",
+                    key="contact",
+                    value=len(contacts),
+                )
+        for k, each in enumerate(contacts):
+            if each is not None and not isinstance(each, RigidContact):
+                raise InputError(
+                    f"problem {k}: a contact must be a RigidContact or None",
+                    key="contact",
+                    value=type(each).__name__,
+                )
+        used = [k for k, each in enumerate(contacts) if each is not None]
+        offsets = self._node_offsets
+        if used and offsets is None:
+            raise InputError(
+                "rigid contacts of several problems need them packed in contiguous node "
+                "ranges (warptissue.fem.packing.pack_meshes)",
+                key="element_problem",
+            )
+        counts = np.zeros(count, dtype=np.int64)
+        nodes, problems = [], []
+        for k in used:
+            own = contacts[k].nodes
+            size = int(offsets[k + 1] - offsets[k])
+            if own.min() < 0 or own.max() >= size:
+                raise InputError(
+                    "contact nodes must be nodes of the mesh"
+                    + ("" if count == 1 else f" (of problem {k}, in its own numbering)"),
+                    key="mesh",
+                )
+            nodes.append(own + offsets[k])
+            problems.append(np.full(len(own), k, dtype=np.int32))
+            counts[k] = len(own)
+        if used:
+            dev = self.device
+            union = np.concatenate(nodes)
+            self._nodes = wp.array(union, dtype=wp.int32, device=dev)
+            self._blocks = wp.array(self._diagonal_blocks[union], dtype=wp.int32, device=dev)
+            self._problem = wp.array(np.concatenate(problems), dtype=wp.int32, device=dev)
+            self._node_force = wp.zeros(len(union), dtype=wp.vec3d, device=dev)
+            self._gap = wp.zeros(len(union), dtype=wp.float64, device=dev)
+        self._ranges = np.concatenate([[0], np.cumsum(counts)])
+        self._bodies_key = self._stiffness_key = None  # uploaded at the next launch
+        self.contacts = contacts
+        self.contact = contacts[0] if count == 1 else None
+
+    @property
+    def has_contact(self) -> bool:
+        """Whether any problem has a rigid contact."""
+        return any(each is not None for each in self.contacts)
+
+    def set_load(self, load: Any) -> None:
+        """Each indenter's depth, m (as :meth:`warptissue.fem.assembly.Assembler.set_load`).
+
+        Raises:
+            InputError: Not one depth per problem.
+        """
+        count = self.problem_count
+        if count == 1:
+            if self.contact is not None:
+                value = np.asarray(load, dtype=np.float64)
+                if value.size != 1:
+                    raise InputError("one load for one problem", key="load", value=value.shape)
+                self.contact.depth_m = float(load) if value.ndim == 0 else float(value.flat[0])
+            return
+        loads = np.asarray(load, dtype=np.float64)
+        if loads.ndim == 0:
+            loads = np.full(count, float(loads))
+        if loads.shape != (count,):
+            raise InputError(
+                f"one load per packed problem ({count})", key="load", value=loads.shape
+            )
+        for each, depth in zip(self.contacts, loads, strict=True):
+            if each is not None:
+                each.depth_m = float(depth)
+
+    def states(self, u: wp.array, values: wp.array) -> list[ContactState | None]:
+        """Every problem's :class:`ContactState` at the displacement ``u`` (vec3d (N,), m)
+        from one launch without the tangent, None where a problem has no rigid contact.
+
+        Args:
+            u: Nodal displacements on the device.
+            values: The tangent's BSR values (not written without the tangent).
+        """
+        if not self.has_contact:
+            return [None] * self.problem_count
+        scratch = wp.zeros(len(self._node_problem), dtype=wp.vec3d, device=self.device)
+        energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
+        force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
+        self.launch(u, 0, scratch, values, energy, force)
+        gaps, forces = self._gap.numpy(), self._node_force.numpy()
+        ranges = self._ranges
+        return [
+            None
+            if each is None
+            else ContactState(
+                nodes=each.nodes.copy(),
+                gap_m=gaps[ranges[k] : ranges[k + 1]].copy(),
+                force_N=forces[ranges[k] : ranges[k + 1]].copy(),
+            )
+            for k, each in enumerate(self.contacts)
+        ]
+
+    def _inputs(self) -> list[Any]:
+        """The per-problem inputs of ``rigid_contact_kernel``: ``[bodies, stiffness]``, each
+        problem's body at its current depth and its penalty stiffness, copied to the device
+        only when a contact's depth, body or stiffness has changed (the penalty ramp of
+        :mod:`warptissue.fem.newton.increment` scales the stiffness)."""
+        bodies_key = tuple(
+            None if each is None else (each.indenter, each.top_z_m, each.depth_m)
+            for each in self.contacts
+        )
+        if bodies_key != self._bodies_key:
+            self._bodies = wp.array(
+                [kc.RigidBody() if each is None else each.device_body() for each in self.contacts],
+                dtype=kc.RigidBody,
+                device=self.device,
+            )
+            self._bodies_key = bodies_key
+        stiffness_key = tuple(
+            0.0 if each is None else float(each.stiffness_N_per_m) for each in self.contacts
+        )
+        if stiffness_key != self._stiffness_key:
+            self._stiffness = wp.array(
+                np.array(stiffness_key, dtype=np.float64), dtype=wp.float64, device=self.device
+            )
+            self._stiffness_key = stiffness_key
+        return [self._bodies, self._stiffness]
+
+    def launch(
+        self,
+        u: wp.array,
+        with_tangent: int,
+        residual: wp.array,
+        values: wp.array,
+        energy: wp.array,
+        force: wp.array,
+    ) -> None:
+        """One launch of ``rigid_contact_kernel`` over every problem's candidate nodes at the
+        contacts' current depths: subtracts the contact forces from ``residual`` (vec3d (N,)),
+        adds to the diagonal blocks of ``values`` where ``with_tangent``, and to ``energy``
+        (J) and ``force`` (N), one entry per problem."""
+        wp.launch(
+            kc.rigid_contact_kernel,
+            dim=int(self._ranges[-1]),
+            inputs=[
+                self._points,
+                u,
+                self._nodes,
+                self._blocks,
+                self._problem,
+                *self._inputs(),
+                with_tangent,
+            ],
+            outputs=[residual, values, energy, force, self._node_force, self._gap],
+            device=self.device,
+        )
+
+    def parameter_residual(
+        self, u: wp.array, values: wp.array, d_shears: np.ndarray, moduli: np.ndarray
+    ) -> np.ndarray | float:
+        """The rigid contacts' part of ``dR/dtheta``: each problem's penalty ``k = beta mu0 h``
+        follows its initial shear modulus, so ``dR_c/dtheta = R_c (dmu0/dtheta) / mu0`` on its
+        nodes (0 without contact or for a parameter mu0 does not depend on).
+
+        Args:
+            u: Nodal displacements on the device.
+            values: The tangent's BSR values (not written).
+            d_shears: Each problem's ``dmu0/dtheta``, (K,), the ``shear_modulus`` field of
+                :meth:`warptissue.materials.Material.device_params_derivative`.
+            moduli: Each problem's initial shear modulus ``mu0``, (K,), Pa.
+
+        Returns:
+            (N, 3), N per unit of the parameter; or 0.0.
+        """
+        shares = np.where(
+            [each is not None for each in self.contacts], np.asarray(d_shears) / moduli, 0.0
+        )
+        if not np.any(shares != 0.0):
+            return 0.0
+        scratch = wp.zeros(len(self._node_problem), dtype=wp.vec3d, device=self.device)
+        energy = wp.zeros(self.problem_count, dtype=wp.float64, device=self.device)
+        force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
+        self.launch(u, 0, scratch, values, energy, force)
+        if self.problem_count == 1:
+            return shares[0] * scratch.numpy()
+        return scratch.numpy() * shares[self._node_problem][:, None]

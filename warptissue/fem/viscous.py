@@ -44,6 +44,9 @@ import numpy as np
 import warp as wp
 
 from warptissue.errors import InputError
+from warptissue.kernels import viscous as kv
+from warptissue.kernels.assembly import ViscousStep
+from warptissue.kernels.materials import MaterialParams, vec6d
 from warptissue.materials import Material, Viscoelastic
 
 __all__ = ["ViscousHistory", "elastic_step"]
@@ -51,26 +54,22 @@ __all__ = ["ViscousHistory", "elastic_step"]
 
 def elastic_step() -> object:
     """The ``ViscousStep`` struct of an elastic material (``active = 0``)."""
-    from warptissue.kernels import fem as kf
-
-    step = kf.ViscousStep()
+    step = ViscousStep()
     step.active = 0
     step.terms = 0
     step.gamma = 1.0
-    step.a = kf.vec6d()
-    step.b = kf.vec6d()
+    step.a = vec6d()
+    step.b = vec6d()
     return step
 
 
 def _step_struct(gamma: float, a: Sequence[float], b: Sequence[float]) -> object:
-    from warptissue.kernels import fem as kf
-
-    step = kf.ViscousStep()
+    step = ViscousStep()
     step.active = 1
     step.terms = len(a)
     step.gamma = float(gamma)
-    step.a = kf.vec6d(*a, *([0.0] * (6 - len(a))))
-    step.b = kf.vec6d(*b, *([0.0] * (6 - len(b))))
+    step.a = vec6d(*a, *([0.0] * (6 - len(a))))
+    step.b = vec6d(*b, *([0.0] * (6 - len(b))))
     return step
 
 
@@ -182,10 +181,8 @@ class ViscousHistory:
         )
 
     def _set_steps(self, steps: list[object]) -> None:
-        from warptissue.kernels import fem as kf
-
         self._step_list = steps
-        self.steps = wp.array(steps, dtype=kf.ViscousStep, device=self.device)
+        self.steps = wp.array(steps, dtype=ViscousStep, device=self.device)
 
     def gamma(self, problem: int = 0) -> float:
         """The weight ``gamma`` of the current elastic stress in problem ``problem``'s step."""
@@ -202,8 +199,6 @@ class ViscousHistory:
     def begin_step(self, dt_s: float | np.ndarray) -> None:
         """Set the coefficients of a step of length ``dt_s`` (one per problem, (K,), or one
         for all) and its frozen history stress."""
-        from warptissue.kernels import fem as kf
-
         steps = np.broadcast_to(np.asarray(dt_s, dtype=np.float64), (len(self.materials),))
         if not (np.all(np.isfinite(steps)) and np.all(steps > 0.0)):
             raise InputError("a time step must be positive and finite", key="times_s", value=dt_s)
@@ -216,7 +211,7 @@ class ViscousHistory:
         self.dt_s = steps.copy()
         self._set_steps(structs)
         wp.launch(
-            kf.viscous_frozen_kernel,
+            kv.viscous_frozen_kernel,
             dim=self._shape,
             inputs=[self._element_problem, self.steps, self.history, self.elastic_stress],
             outputs=[self.frozen],
@@ -226,18 +221,16 @@ class ViscousHistory:
     def stress_state(self) -> tuple[wp.array, wp.array]:
         """``(steps, frozen)`` giving the committed stress ``g_inf S0 + sum_i H_i`` (for the
         stress output after a step: the assembly kernels read it as ``gamma S0 + Q``)."""
-        from warptissue.kernels import fem as kf
-
         structs = [
             _step_struct(material.long_term_factor, [1.0] * terms, [0.0] * terms)
             if isinstance(material, Viscoelastic)
             else elastic_step()
             for material, terms in zip(self.materials, self.term_counts(), strict=True)
         ]
-        steps = wp.array(structs, dtype=kf.ViscousStep, device=self.device)
+        steps = wp.array(structs, dtype=ViscousStep, device=self.device)
         total = wp.zeros(self._shape, dtype=wp.mat33d, device=self.device)
         wp.launch(
-            kf.viscous_frozen_kernel,
+            kv.viscous_frozen_kernel,
             dim=self._shape,
             inputs=[self._element_problem, steps, self.history, self.elastic_stress],
             outputs=[total],
@@ -257,10 +250,8 @@ class ViscousHistory:
     ) -> None:
         """Advance H_i and S0_prev to a converged step (after its sensitivities), in the
         problems ``problems`` ((K,) booleans; None: all)."""
-        from warptissue.kernels import fem as kf
-
         wp.launch(
-            kf.viscous_commit_kernel,
+            kv.viscous_commit_kernel,
             dim=self._shape,
             inputs=[
                 assembler._problem_params,
@@ -279,8 +270,6 @@ class ViscousHistory:
     def step_derivatives(self, name: str) -> wp.array:
         """Each problem's ``ViscousStep`` holding ``dgamma, da_i, db_i`` by one parameter for
         this step, a Warp array (K,) (zero where ``name`` is not a Prony parameter)."""
-        from warptissue.kernels import fem as kf
-
         structs = []
         for material, terms, dt in zip(self.materials, self.term_counts(), self.dt_s, strict=True):
             d_gamma, d_a, d_b = 0.0, np.zeros(terms), np.zeros(terms)
@@ -298,16 +287,14 @@ class ViscousHistory:
                     d_b[i] = g * (-math.expm1(-x) / dt - a / tau)
                     d_gamma = d_b[i]
             structs.append(_step_struct(d_gamma, d_a, d_b) if terms else elastic_step())
-        return wp.array(structs, dtype=kf.ViscousStep, device=self.device)
+        return wp.array(structs, dtype=ViscousStep, device=self.device)
 
     def history_residual(
         self, assembler: object, displacement: wp.array, name: str, residual: wp.array
     ) -> None:
         """Add the history's part of ``dR/d name`` at fixed u into ``residual`` (N)."""
-        from warptissue.kernels import fem as kf
-
         wp.launch(
-            kf.viscous_history_residual_kernel,
+            kv.viscous_history_residual_kernel,
             dim=self._shape[0],
             inputs=[
                 assembler._problem_params,
@@ -338,9 +325,6 @@ class ViscousHistory:
     ) -> None:
         """Advance the history's derivatives by ``name`` with the step's ``du/d name``
         (before :meth:`commit`), in the problems ``problems`` ((K,); None: all)."""
-        from warptissue.kernels import fem as kf
-        from warptissue.kernels.materials import MaterialParams
-
         derivatives, explicit, alpha_term = [], [], -1
         for material in self.materials:
             d_params, alpha_term = material.device_params_derivative(name)
@@ -348,7 +332,7 @@ class ViscousHistory:
             prony = isinstance(material, Viscoelastic) and material.prony_derivative(name)
             explicit.append(int(not prony))
         wp.launch(
-            kf.viscous_sensitivity_commit_kernel,
+            kv.viscous_sensitivity_commit_kernel,
             dim=self._shape,
             inputs=[
                 assembler._problem_params,
