@@ -488,3 +488,32 @@ def test_outputs_inside_out_are_not_studies_and_workers_take_gpus_in_turn(tmp_pa
     monkeypatch.setattr(distributed, "get_worker", lambda: types.SimpleNamespace(name="w"))
     monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
     assert batch._worker_device("cuda", study) == "cuda"  # a worker of `dask worker`
+
+
+@pytest.mark.slow
+def test_local_workers_are_pinned_to_the_gpus_in_turn(tmp_path, monkeypatch):
+    """One worker per GPU by default, each pinned by CUDA_VISIBLE_DEVICES (two workers on one
+    GPU share it): each study's row names the GPU its worker had. Simulated here with the
+    GPUs this process may use set to '3,5' (the CPU studies ignore the pin)."""
+    pytest.importorskip("distributed")
+    import warp as wp
+
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 2)
+    monkeypatch.delenv(batch.GPU_PIN_ENV, raising=False)
+    assert batch.worker_gpus("cuda") == ["0", "1"]
+    assert batch.worker_gpus("cpu") == [] and batch.worker_gpus("cuda:1") == []
+    monkeypatch.setenv(batch.GPU_PIN_ENV, "3, 5")
+    assert batch.worker_gpus(None) == batch.worker_gpus("auto") == ["3", "5"]
+    for k in range(3):
+        (tmp_path / f"p{k}.toml").write_text(_tiny_simulation(300.0 + k), encoding="utf-8")
+    result = batch.run_batch([tmp_path / "*.toml"], out=tmp_path / "out", progress=False)
+    assert result.exit_code == 0 and result.workers == 2
+    rows = _summary(tmp_path / "out" / "summary.csv")
+    assert {rows[name]["gpu"] for name in rows} <= {"3", "5"} and len(rows) == 3
+    client, cluster = batch._dask_client(None, 3, ["7"])
+    try:
+        pins = client.run(os.getenv, batch.GPU_PIN_ENV)
+    finally:
+        client.close()
+        cluster.close()
+    assert sorted(pins.values()) == ["7", "7", "7"]

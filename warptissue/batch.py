@@ -87,6 +87,7 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
     "exit_status",
     "seconds",
     "solved_together",
+    "gpu",
     "peak_force_N",
     "r_squared",
     "parameters",
@@ -99,7 +100,8 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
 simulation's ``completed``/``stopped_early``, a fit's ``converged``/
 ``stopped_at_r_squared``/``max_iterations``/``failed``, or ``error``); the exit status its
 single-study command would have given (0 success); the task's wall time (s); how many
-studies its load steps were solved with in one batched FE run (1: alone); the peak
+studies its load steps were solved with in one batched FE run (1: alone); the GPU its
+worker was pinned to (``CUDA_VISIBLE_DEVICES``; empty where not pinned); the peak
 reaction force of a simulation (N); a fit's R^2 over all its records; the fitted parameters
 (``name=value`` separated by ``;``); the number of warnings; ``True`` for a study skipped
 because its folder holds a complete result of an earlier run (its numbers are that run's);
@@ -112,6 +114,8 @@ _KILL_ONCE_ENV = "WARPTISSUE_BATCH_TEST_KILL_ONCE"
 """Test hook (tests/test_batch.py): names a file; the first Dask task to create it kills its
 own worker process (SIGKILL) after writing its results and before its marker."""
 _GLOB_CHARACTERS = frozenset("*?[")
+GPU_PIN_ENV = "CUDA_VISIBLE_DEVICES"
+"""The environment variable that pins a LocalCluster worker to one GPU."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +133,8 @@ class StudyOutcome:
             setup plus the whole batched run, load steps and outputs).
         solved_together: How many studies its load steps were solved with in one batched
             FE run, itself included (1: alone).
+        gpu: The GPU its worker process was pinned to (its ``CUDA_VISIBLE_DEVICES``), or
+            ``""`` where it was not.
         peak_force_N: Largest reaction force of a simulation, N (None for a fit).
         r_squared: R^2 of a fit over all its records (None for a simulation).
         parameters: A fit's fitted parameters, name -> value in SI units (empty otherwise).
@@ -149,6 +155,7 @@ class StudyOutcome:
     exit_status: int = 1
     seconds: float = 0.0
     solved_together: int = 1
+    gpu: str = ""
     peak_force_N: float | None = None
     r_squared: float | None = None
     parameters: dict[str, float] = field(default_factory=dict)
@@ -184,6 +191,7 @@ class StudyOutcome:
             "exit_status": int(self.exit_status),
             "seconds": float(self.seconds),
             "solved_together": int(self.solved_together),
+            "gpu": self.gpu,
             "peak_force_N": self.peak_force_N,
             "r_squared": self.r_squared,
             "parameters": ";".join(f"{k}={float(v)!r}" for k, v in self.parameters.items()),
@@ -618,6 +626,7 @@ def _start_outcome(task: _Task) -> StudyOutcome:
         study=task.study,
         folder=task.folder,
         study_sha256=_sha256(task.path),
+        gpu=os.environ.get(GPU_PIN_ENV, ""),
         host=socket.gethostname(),
         pid=os.getpid(),
     )
@@ -667,8 +676,27 @@ def write_summary(path: str | Path, outcomes: Sequence[StudyOutcome]) -> Path:
     return write_csv(path, columns)
 
 
-def _dask_client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
-    """A Dask client of a running scheduler, or of a new LocalCluster (returned to close)."""
+def worker_gpus(device: str | None) -> list[str]:
+    """The GPUs a LocalCluster's workers are pinned to, in turn, or [] where they are not.
+
+    For ``device`` ``"cuda"``, ``"auto"`` or None (each study's own ``solver.device``) on a
+    machine with GPUs: the GPUs this process may use (its own ``CUDA_VISIBLE_DEVICES``
+    where that is set, else every GPU Warp finds). ``"cpu"`` and ``"cuda:N"`` (a GPU chosen
+    by index) pin nothing.
+    """
+    if device not in (None, "cuda", "auto"):
+        return []
+    visible = os.environ.get(GPU_PIN_ENV)
+    if visible is not None:
+        return [gpu.strip() for gpu in visible.split(",") if gpu.strip()]
+    wp.init()
+    return [str(index) for index in range(wp.get_cuda_device_count())]
+
+
+def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) -> tuple[Any, Any]:
+    """A Dask client of a running scheduler, or of a new local cluster (returned to close):
+    ``workers`` single-threaded worker processes, worker k pinned to ``gpus[k mod len]`` by
+    :data:`GPU_PIN_ENV` where ``gpus`` are given (so that its ``cuda`` is that GPU)."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -684,6 +712,28 @@ def _dask_client(scheduler: str | None, workers: int) -> tuple[Any, Any]:
             raise DeviceError(
                 f"cannot reach the Dask scheduler {scheduler!r}: {_one_line(exc)}"
             ) from None
+    if gpus:
+        from distributed import Nanny, Scheduler, SpecCluster
+
+        cluster = SpecCluster(
+            workers={
+                k: {
+                    "cls": Nanny,
+                    "options": {
+                        "nthreads": 1,
+                        "env": {GPU_PIN_ENV: gpus[k % len(gpus)]},
+                        "silence_logs": logging.CRITICAL,
+                    },
+                }
+                for k in range(workers)
+            },
+            scheduler={
+                "cls": Scheduler,
+                "options": {"host": "127.0.0.1", "dashboard_address": None},
+            },
+            silence_logs=logging.CRITICAL,
+        )
+        return Client(cluster), cluster
     cluster = LocalCluster(
         n_workers=workers,
         threads_per_worker=1,
@@ -724,10 +774,13 @@ def run_batch(
         out: The batch's output folder: one folder per study (:func:`folder_names`) and
             ``summary.csv``.
         device: Warp device of every study (``"cpu"``, ``"cuda"``, ``"cuda:N"``); None:
-            each study's ``solver.device``. On a LocalCluster of a machine with several GPUs
-            the workers take them in turn for ``cuda`` and ``auto``.
-        workers: Worker processes of the LocalCluster (default 1; 0 runs the studies in this
-            process, one after another, without Dask). Not with ``scheduler``.
+            each study's ``solver.device``. For ``cuda``, ``auto`` and None on a machine
+            with GPUs, the local cluster's workers are pinned to them in turn by
+            ``CUDA_VISIBLE_DEVICES`` (:func:`worker_gpus`): worker k's ``cuda`` is GPU
+            k mod (number of GPUs).
+        workers: Worker processes of the local cluster (default: one per GPU where the
+            workers are pinned to GPUs, else 1; 0 runs the studies in this process, one
+            after another, without Dask). Not with ``scheduler``.
         scheduler: Address of a running Dask scheduler (``"tcp://HOST:PORT"``) to run the
             studies on its workers instead of a LocalCluster.
         force: Run the studies whose folder holds a complete result too.
@@ -831,7 +884,10 @@ def run_batch(
                     finish(index, outcome)
         else:
             groups = _groups(pending, together)
-            worker_count = _run_on_dask(groups, scheduler, workers, retries, finish)
+            gpus = [] if scheduler is not None else worker_gpus(device)
+            if workers is None:
+                workers = max(1, len(gpus))  # one worker per GPU, else one
+            worker_count = _run_on_dask(groups, scheduler, workers, retries, finish, gpus)
     finally:
         bar.close()
     return BatchResult(
@@ -860,13 +916,14 @@ def _run_on_dask(
     workers: int | None,
     retries: int,
     finish: Callable[[int | None, StudyOutcome | None], None],
+    gpus: Sequence[str] = (),
 ) -> int:
     """Submit one task per group of studies, record each study as its task ends; returns
     the number of workers."""
 
     from distributed import as_completed
 
-    client, cluster = _dask_client(scheduler, 1 if workers is None else workers)
+    client, cluster = _dask_client(scheduler, 1 if workers is None else workers, gpus)
     futures: dict[Any, Sequence[tuple[int, _Task]]] = {}
     try:
         worker_count = len(client.scheduler_info().get("workers", {}))

@@ -61,8 +61,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         type=nonnegative_int,
         default=None,
         metavar="N",
-        help="worker processes of the LocalCluster (default 1); 0 runs the studies in this "
-        "process, one after another, without Dask",
+        help="worker processes of the local cluster (default: one per GPU, pinned by "
+        "CUDA_VISIBLE_DEVICES, for --device cuda or auto on a machine with GPUs; else 1); 0 "
+        "runs the studies in this process, one after another, without Dask",
     )
     parser.add_argument(
         "--scheduler",

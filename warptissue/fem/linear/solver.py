@@ -51,9 +51,7 @@ residual reduction per iteration so far predicts that it would overrun its budge
 REUSE_MAX_ITERATIONS = 40
 """Most GMRES iterations of one solve with old factors (the basis is kept in memory)."""
 
-_ANALYSED: weakref.WeakKeyDictionary[Any, dict[str, tuple[int, Any]]] = (
-    weakref.WeakKeyDictionary()
-)
+_ANALYSED: weakref.WeakKeyDictionary[Any, dict[str, tuple[int, Any]]] = weakref.WeakKeyDictionary()
 """The direct solvers analysed for an owner's matrix (an assembler's: kept while the
 assembler lives, not longer), by method, with the matrix's block count at the analysis."""
 

@@ -337,9 +337,7 @@ def _follow_paths(
     count = len(paths)
     n = assembler.node_count
     viscous = assembler.viscous
-    solver = LinearSolver(
-        method=options.linear_solver, device=assembler.device, owner=assembler
-    )
+    solver = LinearSolver(method=options.linear_solver, device=assembler.device, owner=assembler)
     arrays = solver.arrays
     reuse = ReuseTracker()
     timer = PhaseTimer(enabled=profile, device=assembler.device)
