@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -529,11 +530,19 @@ def test_numpy_values_are_read_and_printed_as_plain_numbers():
 
 
 def test_tet4_with_the_mixed_formulation_is_refused_at_load(tmp_path):
-    """It used to pass the study and fail after meshing, naming a 'column'."""
+    """It used to pass the study and fail after meshing, naming a 'column'. A TET4 study
+    that names no formulation (as version-1 files did) takes 'displacement' and is told
+    where that locks."""
     text = MINIMAL.replace("thickness_m = 0.01", 'thickness_m = 0.01\nelement = "TET4"')
-    with pytest.raises(InputError, match="formulation 'mixed' needs element 'TET10'") as caught:
-        load_study(write(tmp_path, text))
-    assert caught.value.line == line_of(text, "element =")
+    with pytest.warns(UserWarning, match="'displacement' formulation is used, which locks"):
+        study = load_study(write(tmp_path, text))
+    assert study.solver.formulation == "displacement"
+    saved = save_study(study, tmp_path / "saved" / "study.toml")  # explicit from now on
+    assert 'formulation = "displacement"' in saved.read_text(encoding="utf-8")
+    compressible = text.replace("bulk_modulus_Pa = 575000.0", "bulk_modulus_Pa = 2000.0")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # K/mu = 3.5: nothing locks, nothing is said
+        assert load_study(write(tmp_path, compressible)).solver.formulation == "displacement"
     text += '[solver]\nformulation = "mixed"\n'
     with pytest.raises(InputError, match="solver.formulation") as caught:
         load_study(write(tmp_path, text))

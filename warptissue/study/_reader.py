@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -337,13 +338,33 @@ def _read_boundary(table: Table) -> Boundary:
     return Boundary(base=base)
 
 
-def _read_solver(table: Table) -> Solver:
+LOCKING_BULK_TO_SHEAR = 10.0
+"""K / mu (Poisson's ratio about 0.45) from which a TET4 study without a formulation is told
+that the displacement formulation it gets locks."""
+
+
+def _read_solver(table: Table, element: str, material: Any) -> Solver:
     # The solver's own modules: importing them does not start Warp (test_study checks).
 
     device = table.string("device", default="auto")
     if not DEVICE_PATTERN.match(device):
         raise table.error("device", "must be 'auto', 'cpu', 'cuda' or 'cuda:N'", device)
-    formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
+    if table.has("formulation") or element == "TET10":
+        formulation = table.string("formulation", default="mixed", choices=FORMULATIONS)
+    else:
+        # A TET4 study that names no formulation (version-1 files ran so): the one TET4
+        # takes, said out loud where it locks.
+        formulation = "displacement"
+        ratio = material.bulk_modulus / material.initial_shear_modulus_Pa
+        if ratio >= LOCKING_BULK_TO_SHEAR:
+            where = table.source.path if table.source.path is not None else "the study"
+            warnings.warn(
+                f"{where}: specimen.element = 'TET4' and no solver.formulation: the "
+                f"'displacement' formulation is used, which locks at K/mu = {ratio:.4g} "
+                "(forces too high); element = \"TET10\" takes the locking-free 'mixed' one",
+                UserWarning,
+                stacklevel=2,
+            )
     penalty_factor = table.number("penalty_factor", default=DEFAULT_PENALTY_FACTOR)
     options = table.build(
         lambda values: NewtonOptions(**values), table.present(NewtonOptions.keys())
@@ -537,7 +558,7 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     )
     material = _read_material(root.table("material"))
     boundary = _read_boundary(_optional_table(root, "boundary"))
-    solver = _read_solver(_optional_table(root, "solver"))
+    solver = _read_solver(_optional_table(root, "solver"), specimen.element, material)
     if solver.formulation == "mixed" and specimen.element != "TET10":
         key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
         raise source.error(
