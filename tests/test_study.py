@@ -17,7 +17,7 @@ from warptissue.errors import InputError
 from warptissue.fem.newton import NewtonOptions
 from warptissue.fit.punch import hayes_kappa
 from warptissue.fit.start import record_youngs_modulus_Pa, start_values_from_record
-from warptissue.io import write_csv
+from warptissue.io import read_experiment_csv, write_csv
 from warptissue.lsq import engine
 from warptissue.mesh import size_near_for_force_accuracy
 from warptissue.simulate import size_near_reason
@@ -1076,10 +1076,10 @@ def test_a_layer_beyond_the_hayes_range_asks_for_start_values(tmp_path):
         "max_depth_m = 0.0005", "max_depth_m = 0.00001"
     )
     study = load_study(write_v2(tmp_path, text))
-    thin = study_from_dict(
-        dict(study.to_dict(), specimen=dict(study.to_dict()["specimen"], thickness_m=5e-5)),
-        path=study.path,
-    )
+    table = study.to_dict()
+    table["specimen"]["thickness_m"] = 5e-5
+    table["data"][0]["keep_depth_m"] = 4e-5  # a record shallower than the layer
+    thin = study_from_dict(table, path=study.path)
     with pytest.raises(InputError, match=r"no start value from record\.csv: .*\[fit\.start\]"):
         start_values_from_record(thin)
 
@@ -1442,3 +1442,38 @@ def test_a_protocol_from_a_data_record_is_written_and_read_back(tmp_path):
         protocol.times_s,
         protocol.depths_m,
     )
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        pytest.param(
+            lambda columns: {**columns, "displacement_m": columns["displacement_m"] * 1e3},
+            "m deep and the specimen is 0.01 m thick: check the displacement's unit",
+            id="millimetres-in-a-metre-column",
+        ),
+        pytest.param(
+            lambda columns: {**columns, "force_N": np.zeros_like(columns["force_N"])},
+            "the force is zero throughout",
+            id="zero-force",
+        ),
+        pytest.param(
+            lambda columns: {**columns, "force_N": -columns["force_N"]},
+            "the force is mostly negative",
+            id="negative-force",
+        ),
+    ],
+)
+def test_a_fit_record_that_cannot_be_an_indentation_is_refused_at_load(tmp_path, change, message):
+    """Checked against the specimen before any FE run (they used to fail after it: exit 4,
+    or a start-value error naming fit.free): one line at data[0].file, naming the file."""
+    path = synthetic_record(tmp_path / "record.csv")
+    columns = read_experiment_csv(path).columns
+    write_csv(path, change(dict(columns)))
+    # The whole record, used as recorded (with contact = "auto" a flat force is refused by
+    # the contact detection already).
+    text = V2.replace("keep_depth_m = 0.0004\n", "").replace('"auto"', '"none"')
+    with pytest.raises(InputError, match=message) as caught:
+        load_study(write(tmp_path, text))
+    assert "data[0].file" in str(caught.value) and "record.csv" in str(caught.value)
+    assert caught.value.line == line_of(text, 'file = "record.csv"')

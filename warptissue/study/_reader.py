@@ -578,7 +578,7 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     fit = None
     if version >= 2:
         if root.has("data"):
-            records = read_data(root, base)
+            records = read_data(root, base, specimen.thickness_m)
         if root.has("fit"):
             if not records:
                 raise root.error("fit", "a fit needs measured records: add [[data]] tables")

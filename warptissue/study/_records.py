@@ -131,20 +131,56 @@ def condition_record(
     return DataRecord(**options, record=record)
 
 
-def _read_record(table: Table, base: Path) -> DataRecord:
-    """One ``[[data]]`` record: validate its keys, read its CSV, condition it."""
+def _read_record(table: Table, base: Path, thickness_m: float) -> DataRecord:
+    """One ``[[data]]`` record: validate its keys, read its CSV, condition it, and check it
+    against the specimen (:func:`check_record`)."""
     options = record_options(table, base)
     table.finish(also_known=_RECORD_KEYS)
-    return condition_record(table, options)
+    record = condition_record(table, options)
+    check_record(table, record, thickness_m)
+    return record
 
 
-def read_data(root: Table, base: Path) -> tuple[DataRecord, ...]:
-    """``[[data]]`` (one or more records) or a single ``[data]`` table."""
+def check_record(table: Table, record: DataRecord, thickness_m: float) -> None:
+    """Refuse, before any FE run, a fit record that cannot be an indentation of the
+    specimen: one deeper than the specimen is thick (often millimetres in a ``_m``
+    column), or one whose force never pushes (all zero, or more negative than positive:
+    compression is positive).
+
+    Raises:
+        InputError: At the record's ``file`` key, naming the file and the value.
+    """
+    path = record.path
+    depth = float(np.max(record.displacement_m))
+    if depth >= thickness_m:
+        raise table.error(
+            "file",
+            f"{path}: the record goes {depth:.6g} m deep and the specimen is {thickness_m:.6g}"
+            " m thick: check the displacement's unit (a '_m' column holds metres) or "
+            "specimen.thickness_m",
+            depth,
+        )
+    force = record.force_N
+    peak, trough = float(np.max(force)), float(np.min(force))
+    if peak <= 0.0 or -trough > peak:
+        what = "is zero throughout" if peak == trough == 0.0 else "is mostly negative"
+        raise table.error(
+            "file",
+            f"{path}: the force {what} (from {trough:.6g} to {peak:.6g} N): an indentation "
+            "pushes, with compression positive: check the force column and its sign",
+            peak,
+        )
+
+
+def read_data(root: Table, base: Path, thickness_m: float) -> tuple[DataRecord, ...]:
+    """``[[data]]`` (one or more records) or a single ``[data]`` table, each checked against
+    the specimen's thickness (m)."""
     value = root.raw("data")
     if isinstance(value, Mapping):
-        return (_read_record(root.table("data"), base),)
+        return (_read_record(root.table("data"), base, thickness_m),)
     if not isinstance(value, list) or not value:
         raise root.error("data", "must be one or more [[data]] tables", value)
     return tuple(
-        _read_record(Table(item, f"data[{i}]", root.source), base) for i, item in enumerate(value)
+        _read_record(Table(item, f"data[{i}]", root.source), base, thickness_m)
+        for i, item in enumerate(value)
     )
