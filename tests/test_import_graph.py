@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+import tomllib
 from pathlib import Path
 
 REPOSITORY = Path(__file__).resolve().parents[1]
@@ -72,3 +73,11 @@ def test_prints_the_report(tmp_path, capsys):
     assert "cycles counting imports inside functions: 1" in out
     assert "warptissue.fit <-> warptissue.study" in out
     assert "largest functions by lines:" in out
+
+
+def test_pyproject_installs_every_package():
+    """pyproject.toml lists its packages: one missing there is left out of a wheel."""
+    config = tomllib.loads((REPOSITORY / "pyproject.toml").read_text(encoding="utf-8"))
+    listed = set(config["tool"]["setuptools"]["packages"])
+    packages = {name for name, path in REPORT.modules.items() if path.name == "__init__.py"}
+    assert sorted(packages - listed) == []
