@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib
+import pkgutil
 import re
 import sys
 from pathlib import Path
@@ -14,6 +16,8 @@ ROOT = DOCS.parent
 # the installed package (an editable install maps both itself).
 sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != ROOT]
 sys.path.insert(0, str(DOCS / "_ext"))
+
+from sphinx.pycode import ModuleAnalyzer  # noqa: E402
 
 from warptissue import __version__  # noqa: E402
 
@@ -68,6 +72,34 @@ def _escape_bars(app, what, name, obj, options, lines: list[str]) -> None:  # no
             lines[i] = _ABSOLUTE_VALUE.sub(r"\\|", line)
 
 
+PUBLIC_FACES = ("warptissue.study", "warptissue.materials")
+"""Packages whose ``__init__`` re-exports the names of private modules (``_schema.py``, ...)."""
+
+
+def _document_reexported_data(app) -> None:  # noqa: ARG001
+    """Give autodoc the docstrings of the constants that a public face re-exports.
+
+    autodoc documents a module's constant only where the module's own source holds its
+    docstring (the string literal below it); a package's ``__init__`` imports its constants
+    from private modules, which hold them. Their docstrings are added to the attribute docs
+    of the package's source analyzer (cached, so autodoc reads them from there).
+    """
+    for package in PUBLIC_FACES:
+        face = importlib.import_module(package)
+        analyzer = ModuleAnalyzer.for_module(package)
+        analyzer.analyze()
+        for info in pkgutil.iter_modules(face.__path__, f"{package}."):
+            module = importlib.import_module(info.name)
+            for (scope, name), lines in (
+                ModuleAnalyzer.for_module(info.name).find_attr_docs().items()
+            ):
+                if scope or name not in face.__all__:
+                    continue
+                if getattr(face, name) is getattr(module, name, None):
+                    analyzer.attr_docs.setdefault((scope, name), list(lines))
+
+
 def setup(app) -> None:
-    """Connect the docstring hook."""
+    """Connect the docstring hooks."""
+    app.connect("builder-inited", _document_reexported_data)
     app.connect("autodoc-process-docstring", _escape_bars)
