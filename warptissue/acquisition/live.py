@@ -7,7 +7,8 @@ thread, so the recorder never waits for a fit). The fit thread conditions the re
 grows (contact point and force offset, :func:`~warptissue.acquisition.conditioning.
 condition_for_fit`, the same choices as ``warptissue fit relaxation``) and refits it with
 :func:`warptissue.viscoelastic.fit_relaxation_joint` every ``every_samples`` new samples,
-warm-started from the last estimate. A fit that takes longer than the record grows simply
+warm-started from the last identified estimate (from the data when there is none, or when
+the warm start does not end identified). A fit that takes longer than the record grows simply
 skips cadences: it always takes the latest record, and never queues work.
 
 With a :class:`StopRule` (``se<2%``), the fit asks the recorder to stop the protocol once
@@ -303,7 +304,6 @@ class LiveFit:
                 contact=self.contact,
                 offset=self.offset,
             )
-            previous = self.latest_result()
             fitted = RelaxationRecord(
                 record.time_s,
                 record.displacement_m,
@@ -311,13 +311,7 @@ class LiveFit:
                 source="live record",
                 conditioned=record.conditioned,
             )
-            result = self._fit(
-                [fitted],
-                model=self.model,
-                terms=self.terms,
-                p0=None if previous is None else previous.x,
-                method=self.method,
-            )
+            result = self._warm_or_cold_fit(fitted)
         except (InputError, ConvergenceError) as exc:
             result, fitted, message = None, None, f"not yet: {exc}"
         met = result is not None and self.stop_rule is not None and self.stop_rule.met(result)
@@ -330,11 +324,25 @@ class LiveFit:
         if self.on_estimate is not None:
             self.on_estimate(estimate, fitted)
 
-    def latest_result(self) -> FitResult | None:
-        """The last estimate's fit, or None."""
+    def _warm_or_cold_fit(self, record: RelaxationRecord) -> FitResult:
+        """Warm-started from the last identified estimate; from the data's own start (as
+        ``fit relaxation``) when there is none, or when the warm start ends unidentified
+        (an early estimate can sit in another basin: a short hold does not separate the
+        time constants)."""
+        options = {"model": self.model, "terms": self.terms, "method": self.method}
+        previous = self.latest_result(identified=True)
+        if previous is not None:
+            result = self._fit([record], p0=previous.x, **options)
+            if result.success and result.identified:
+                return result
+        return self._fit([record], p0=None, **options)
+
+    def latest_result(self, *, identified: bool = False) -> FitResult | None:
+        """The last estimate's fit (the last identified one if asked), or None."""
         for estimate in reversed(self.estimates):
-            if estimate.result is not None:
-                return estimate.result
+            result = estimate.result
+            if result is not None and (not identified or result.identified):
+                return result
         return None
 
     def summary(self) -> dict[str, Any]:

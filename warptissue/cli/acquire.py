@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from warptissue.acquisition import CommandRefused
     from warptissue.acquisition.live import LiveFit
 
-__all__ = ["register"]
+__all__ = ["register", "tissue_from_args"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -484,7 +484,12 @@ def _prony_terms(args: argparse.Namespace) -> tuple[list[float], list[float]]:
     return g, tau
 
 
-def _tissue(args: argparse.Namespace):
+def tissue_from_args(args: argparse.Namespace):
+    """The specimen that rig-sim's ``--tissue`` options describe (SI units).
+
+    Raises:
+        InputError: A bad option (named).
+    """
     from functools import partial
 
     from warptissue.acquisition import ForceCurveTissue
@@ -554,7 +559,7 @@ def run_rig_sim(args: argparse.Namespace) -> int:
         time_scale=time_scale,
         seed=args.seed,
     )
-    tissue = _tissue(args)
+    tissue = tissue_from_args(args)
     faults = FaultPlan.parse(args.faults)
     server = RigServer(
         SimulatedRig(tissue, config),
