@@ -46,8 +46,32 @@ __all__ = [
     "RampHold",
     "RecordingResult",
     "Recorder",
+    "SampleListener",
     "Sine",
 ]
+
+
+class SampleListener(Protocol):
+    """What the recorder feeds as it records, for example a
+    :class:`warptissue.acquisition.live.LiveFit`: each saved chunk of samples, and a request
+    to end the protocol early.
+
+    The recorder calls :meth:`add_samples` from its own thread after each chunk is on disk;
+    the call must return at once (a listener that works on the samples does so in its own
+    thread), so that it never delays the next chunk.
+    """
+
+    def add_samples(
+        self, time_s: np.ndarray, displacement_m: np.ndarray, force_N: np.ndarray
+    ) -> None:
+        """Take the chunk's samples (s, m, N; shape (k,) each, as saved to the CSV)."""
+        ...
+
+    @property
+    def stop_requested(self) -> bool:
+        """True once the listener asks the rig to stop the protocol (checked between
+        messages)."""
+        ...
 
 
 class ForceCorrection(Protocol):
@@ -151,10 +175,12 @@ class RecordingResult:
     Attributes:
         csv_path: The experiment CSV.
         sidecar_path: Its JSON sidecar.
-        status: ``complete``, ``stopped`` (a STOP from elsewhere), ``fault`` (the rig ended
-            the motion with FAULT), ``interrupted`` (Ctrl-C), ``link_lost`` (the port could
-            not be reopened) or ``stalled`` (the rig stopped answering). A test the rig
-            refuses raises instead, and writes nothing.
+        status: ``complete``, ``stopped_early`` (the recorder's listener asked for the stop,
+            e.g. a live fit whose parameters are known), ``stopped`` (a STOP from
+            elsewhere), ``fault`` (the rig ended the motion with FAULT), ``interrupted``
+            (Ctrl-C), ``link_lost`` (the port could not be reopened) or ``stalled`` (the
+            rig stopped answering). A test the rig refuses raises instead, and writes
+            nothing.
         samples_sent: Samples the rig reports it emitted (None if it never said).
         samples_received: Valid samples received (saved, one row each).
         samples_missing: Sequence numbers never received (gaps and a lost tail).
@@ -224,6 +250,9 @@ class Recorder:
             rig still does not answer, the run ends as ``stalled`` with its data kept.
         flush_rows: Rows per fsync-ed chunk.
         flush_interval_s: Longest time between chunks (wall s).
+        listener: Fed every saved chunk (:class:`SampleListener`); when it asks for a
+            stop, the rig is sent ``STOP`` and the run ends as ``stopped_early`` once the
+            rig's ``DONE`` is in (every sample before it is kept).
     """
 
     def __init__(
@@ -240,6 +269,7 @@ class Recorder:
         give_up_s: float = 10.0,
         flush_rows: int = 1000,
         flush_interval_s: float = 0.5,
+        listener: SampleListener | None = None,
     ) -> None:
         if not 1.0 <= rate_Hz <= 1000.0:
             raise InputError("rate must be between 1 Hz and 1000 Hz", value=rate_Hz)
@@ -277,6 +307,7 @@ class Recorder:
         self.flush_rows = flush_rows
         self.flush_interval_s = flush_interval_s
         self.overwrite = overwrite
+        self.listener = listener
         self._software = software_versions()
 
     # -- output ----------------------------------------------------------------------------
@@ -391,6 +422,7 @@ class Recorder:
             desc=f"{test.name} {self.csv_path.name}",
         )
         rows: list[list[Any]] = []  # rows written since the last fsync
+        values: list[tuple[float, float, float]] = []  # their (time_s, displacement_m, force_N)
         origin: list[float] = []
 
         def save() -> None:
@@ -405,6 +437,10 @@ class Recorder:
                 rows.clear()
             self._sync(handle)
             self._sidecar("recording", state.counts(client), extra)
+            if values and self.listener is not None:
+                chunk = np.array(values, dtype=np.float64)
+                self.listener.add_samples(chunk[:, 0], chunk[:, 1], chunk[:, 2])
+            values.clear()
 
         def keep(sample: wire.Sample) -> None:
             if not state.accept(sample.sequence):
@@ -418,9 +454,10 @@ class Recorder:
                 if self.calibration is None
                 else float(self.calibration.correct(np.array([raw_force_N]))[0])
             )
+            time_s, displacement_m = sample.time_us / 1e6, position_m - origin[0]
             row = [
-                repr(sample.time_us / 1e6),
-                repr(position_m - origin[0]),
+                repr(time_s),
+                repr(displacement_m),
                 repr(force),
                 sample.sequence,
                 sample.time_us,
@@ -431,6 +468,7 @@ class Recorder:
                 row.append(repr(raw_force_N))
             writer.writerow(row)  # line-buffered: in the OS at once
             rows.append(row)
+            values.append((time_s, displacement_m, force))
             bar.update(1)
 
         status = "link_lost"
@@ -484,9 +522,16 @@ class Recorder:
         last_message = last_save = time.monotonic()
         asked = False
         recovered_without_reply = False
+        stop_sent = False
         while True:
             if self._interrupt_requested:
                 raise KeyboardInterrupt
+            if not stop_sent and self.listener is not None and self.listener.stop_requested:
+                stop_sent = True
+                try:
+                    client.send("STOP")  # the rig answers OK STOP, then DONE STOPPED
+                except LinkLost:
+                    pass  # the next read reconnects, as for any lost link
             try:
                 message = client.read_message()
             except LinkLost:
@@ -522,12 +567,14 @@ class Recorder:
                 keep(message)
             elif isinstance(message, wire.Done):
                 state.finish(message.samples)
+                if message.status == "STOPPED" and stop_sent:
+                    return "stopped_early"
                 return "complete" if message.status == "OK" else message.status.lower()
             elif isinstance(message, wire.Reply) and message.command == "STAT":
                 status = parse_status(message)
                 if status is not None and status[0] == "IDLE":
                     state.finish(status[1])
-                    return "complete"
+                    return "stopped_early" if stop_sent else "complete"
             if len(rows) >= self.flush_rows or now - last_save > self.flush_interval_s:
                 save()
                 last_save = now

@@ -18,14 +18,17 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from warptissue.cli._args import length_m, positive_int
 from warptissue.errors import DeviceError, InputError
 
 if TYPE_CHECKING:
     from warptissue.acquisition import CommandRefused
+    from warptissue.acquisition.live import LiveFit
 
-__all__ = ["register"]
+__all__ = ["register", "tissue_from_args"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -66,6 +69,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--meta", action="append", default=[], metavar="KEY=VALUE", help="sidecar metadata"
     )
     acquire.add_argument("--no-progress", action="store_true", help="no progress bar")
+    live = acquire.add_argument_group(
+        "live fit (warptissue.acquisition.live; docs: Live fitting)",
+        "Fit a lumped viscoelastic model while the test runs, in a thread apart from the "
+        "recorder; at the end, 'warptissue fit relaxation' runs on the saved record.",
+    )
+    live.add_argument("--fit", metavar="MODEL", help="sls or prony:N: refit the record as it grows")
+    live.add_argument(
+        "--fit-every",
+        type=positive_int,
+        default=500,
+        metavar="N",
+        help="refit after N new samples (default 500; a slow fit skips cadences)",
+    )
+    live.add_argument(
+        "--contact",
+        default="auto",
+        metavar="none|auto|POSITION",
+        help="the fit's contact point, as 'fit relaxation --contact' (default auto; the force "
+        "offset before contact is removed)",
+    )
+    live.add_argument(
+        "--stop-when",
+        metavar="se<LIMIT",
+        help="stop the protocol once every parameter's relative standard error is below "
+        "LIMIT (e.g. se<2%%) and the fit is identified; the record keeps every sample",
+    )
+    live.add_argument(
+        "--fit-out",
+        metavar="DIR",
+        help="folder of the fit's outputs (default: STEM_relaxation_fit beside the CSV)",
+    )
     acquire.set_defaults(handler=run_acquire)
 
     sim = subparsers.add_parser(
@@ -79,10 +113,24 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     where = sim.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (default)")
     where.add_argument("--tcp", type=int, metavar="PORT", help="serve on 127.0.0.1:PORT (0: any)")
-    sim.add_argument("--tissue", choices=("sls", "curve"), default="sls")
-    sim.add_argument("--instantaneous-stiffness", default="40N/m")
-    sim.add_argument("--equilibrium-stiffness", default="20N/m")
-    sim.add_argument("--relaxation-time", default="2s")
+    sim.add_argument(
+        "--tissue",
+        choices=("sls", "prony", "qlv", "curve"),
+        default="sls",
+        help="sls: standard linear solid; prony: Prony series of --g and --tau on the "
+        "linear spring --instantaneous-stiffness; qlv: Fung's quasi-linear viscoelasticity, "
+        "--g and --tau on the exponential spring A (exp(B x) - 1) of --elastic-scale A and "
+        "--elastic-rate B; curve: a static force-depth curve",
+    )
+    sim.add_argument("--instantaneous-stiffness", default="40N/m", help="sls and prony: G0")
+    sim.add_argument("--equilibrium-stiffness", default="20N/m", help="sls")
+    sim.add_argument("--relaxation-time", default="2s", help="sls")
+    sim.add_argument(
+        "--g", default="0.35,0.35", help="prony and qlv: normalized Prony coefficients g_i"
+    )
+    sim.add_argument("--tau", default="1s,20s", help="prony and qlv: relaxation times tau_i")
+    sim.add_argument("--elastic-scale", default="10mN", help="qlv: A of A (exp(B x) - 1)")
+    sim.add_argument("--elastic-rate", default="500", help="qlv: B of A (exp(B x) - 1), 1/m")
     sim.add_argument(
         "--force-curve",
         help="CSV with displacement_m,force_N columns, e.g. simulate's force_curve.csv "
@@ -206,6 +254,7 @@ def run_acquire(args: argparse.Namespace) -> int:
             "--give-up must be longer than --stall-timeout (first ask the rig, then reopen)",
             value=f"{args.give_up} <= {args.stall_timeout}",
         )
+    live = _live_fit(args)
     client = RigClient(args.port, reconnect_attempts=args.reconnect_attempts)
     with client:
         recorder = Recorder(  # checks the output before the rig moves
@@ -218,6 +267,7 @@ def run_acquire(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             stall_timeout_s=stall_timeout_s,
             give_up_s=give_up_s,
+            listener=live,
         )
         try:
             if start_m is not None:
@@ -225,7 +275,14 @@ def run_acquire(args: argparse.Namespace) -> int:
                 client.wait_until_done(timeout_s=60.0)  # Ctrl-C: the client sends STOP
             if args.zero:
                 client.zero_force()
+            if live is not None:
+                live.start()
             result = recorder.record(test)
+        except KeyboardInterrupt:
+            if live is not None:
+                live.abandon("interrupted (Ctrl-C)")
+                _write_live_summary(args, live, status="interrupted", saved_s=None)
+            raise
         except CommandRefused as refusal:
             if refusal.reply.code in (ErrorCode.BAD_ARGUMENT, ErrorCode.OUT_OF_RANGE):
                 raise _refusal_as_input_error(refusal) from None
@@ -244,6 +301,8 @@ def run_acquire(args: argparse.Namespace) -> int:
     for key, value in counts.items():
         print(f"{key:<{width}}  {value}")
     print(f"wrote {result.csv_path} and {result.sidecar_path}")
+    if live is not None:
+        _finish_live(args, live, result, test)
     if result.status in INCOMPLETE:
         print(
             f"warptissue: error: {INCOMPLETE[result.status]}; the data so far are kept",
@@ -251,6 +310,120 @@ def run_acquire(args: argparse.Namespace) -> int:
         )
         return DeviceError.exit_code
     return 0
+
+
+def _fit_out(args: argparse.Namespace) -> Path:
+    """The folder of the live and the final fit's outputs."""
+    if args.fit_out is not None:
+        return Path(args.fit_out)
+    out = Path(args.out)
+    return out.parent / f"{out.stem}_relaxation_fit"
+
+
+def _live_fit(args: argparse.Namespace) -> LiveFit | None:
+    """The LiveFit that ``--fit``, ``--fit-every``, ``--contact`` and ``--stop-when``
+    describe, printing its progress lines and refreshing its plot; None without ``--fit``."""
+    from warptissue.acquisition.live import LiveFit, StopRule
+    from warptissue.cli.fit_relaxation import parse_model
+    from warptissue.report import plot_fit
+
+    if args.fit is None:
+        if args.stop_when is not None:
+            raise InputError("--stop-when needs --fit MODEL (the fit that decides)")
+        return None
+    model, terms = parse_model(args.fit)
+    if model not in ("sls", "prony"):
+        raise InputError("--fit: a live fit takes sls or prony:N", value=args.fit)
+    contact: str | float = args.contact
+    if contact not in ("none", "auto"):
+        try:
+            contact = length_m(args.contact)
+        except argparse.ArgumentTypeError as exc:
+            raise InputError(f"--contact: use none, auto or a position; {exc}") from None
+    stop_rule = None if args.stop_when is None else StopRule.parse(args.stop_when)
+    plot_path = _fit_out(args) / f"{Path(args.out).stem}_live.png"
+
+    def show(estimate, record) -> None:
+        print(estimate.progress_line(), flush=True)
+        if record is None or estimate.result is None:
+            return
+        plot_fit(
+            plot_path,
+            record.time_s,
+            record.force_N,
+            estimate.result.fitted,
+            xlabel="time (s)",
+            ylabel="force (N)",
+            title=f"live {args.fit} fit at {estimate.rig_time_s:.4g} s "
+            f"({estimate.samples} samples)",
+        )
+
+    return LiveFit(
+        model=model,
+        terms=terms,
+        every_samples=args.fit_every,
+        contact=contact,
+        stop_rule=stop_rule,
+        on_estimate=show,
+    )
+
+
+def _write_live_summary(
+    args: argparse.Namespace, live: LiveFit, *, status: str, saved_s: float | None
+) -> Path:
+    """``STEM_live.json`` in the fit folder: the recording status, how the live fit ended,
+    the time the stop rule saved, and every live estimate."""
+    from warptissue.io import write_json
+
+    return write_json(
+        _fit_out(args) / f"{Path(args.out).stem}_live.json",
+        {
+            "data_file": str(args.out),
+            "recording_status": status,
+            "saved_time_s": saved_s,
+            **live.summary(),
+        },
+    )
+
+
+def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> None:
+    """Wait for the live fit, write its summary, and fit the saved record offline with
+    ``warptissue fit relaxation`` (its outputs in the fit folder)."""
+    from warptissue.cli.fit_relaxation import run_relaxation
+    from warptissue.io import read_experiment_csv
+
+    live.finish()
+    saved_s = None
+    if result.status == "stopped_early":
+        recorded_s = float(read_experiment_csv(result.csv_path)["time_s"][-1])
+        saved_s = max(test.duration_s() - recorded_s, 0.0)
+        print(
+            f"live fit: stopped the test at {recorded_s:.4g} s by --stop-when "
+            f"{live.stop_rule}; {saved_s:.4g} s of the protocol saved"
+        )
+    print(f"live fit: {live.state}" + (f" ({live.stop_reason})" if live.stop_reason else ""))
+    print(f"wrote {_write_live_summary(args, live, status=result.status, saved_s=saved_s)}")
+    final = argparse.Namespace(
+        data=[Path(result.csv_path)],
+        model=args.fit,
+        p0=None,
+        method="lm",
+        objective="absolute",
+        relative_floor="auto",
+        predict=[],
+        contact=live.contact,
+        offset=live.offset,
+        keep_depth=None,
+        window=None,
+        out=_fit_out(args),
+        json=False,
+    )
+    try:
+        run_relaxation(final)
+    except InputError as exc:
+        print(
+            f"warptissue: warning: the final fit of the record did not run: {exc}", file=sys.stderr
+        )
 
 
 INCOMPLETE: dict[str, str] = {
@@ -290,14 +463,67 @@ def _disturbance(args: argparse.Namespace):
     return PhysiologicalDisturbance(**values)
 
 
-def _tissue(args: argparse.Namespace):
+def _prony_terms(args: argparse.Namespace) -> tuple[list[float], list[float]]:
+    """``--g`` and ``--tau`` as lists of equal length (g_i >= 0 summing to at most 1,
+    tau_i > 0 in s)."""
+    from warptissue.acquisition.protocol import parse_quantity
+
+    try:
+        g = [float(v) for v in args.g.split(",")]
+    except ValueError:
+        raise InputError(
+            "--g takes comma-separated numbers, e.g. 0.35,0.35", value=args.g
+        ) from None
+    tau = [parse_quantity(v, "time", name="--tau") for v in args.tau.split(",")]
+    if len(g) != len(tau):
+        raise InputError("--g and --tau need as many values each", value=f"{args.g} / {args.tau}")
+    if not all(math.isfinite(v) and v >= 0 for v in g) or sum(g) > 1.0:
+        raise InputError("--g: each g_i zero or more, summing to at most 1", value=args.g)
+    if not all(math.isfinite(v) and v > 0 for v in tau):
+        raise InputError("--tau: each tau_i must be positive", value=args.tau)
+    return g, tau
+
+
+def tissue_from_args(args: argparse.Namespace):
+    """The specimen that rig-sim's ``--tissue`` options describe (SI units).
+
+    Raises:
+        InputError: A bad option (named).
+    """
+    from functools import partial
+
     from warptissue.acquisition import ForceCurveTissue
-    from warptissue.viscoelastic import StandardLinearSolid
+    from warptissue.acquisition.protocol import parse_quantity
+    from warptissue.viscoelastic import (
+        PronySeries,
+        QuasiLinearViscoelastic,
+        StandardLinearSolid,
+        exponential_elastic_force,
+    )
 
     if args.tissue == "curve":
         if args.force_curve is None:
             raise InputError("--tissue curve needs --force-curve CSV")
         return ForceCurveTissue.from_csv(args.force_curve)
+    if args.tissue == "prony":
+        g, tau = _prony_terms(args)
+        stiffness = _quantity(args, "instantaneous_stiffness", "stiffness", sign="positive")
+        return PronySeries.from_normalized(stiffness, g, tau)
+    if args.tissue == "qlv":
+        g, tau = _prony_terms(args)
+        scale_N = parse_quantity(args.elastic_scale, "force", name="--elastic-scale")
+        try:
+            rate_per_m = float(args.elastic_rate)
+        except ValueError:
+            raise InputError("--elastic-rate: a number in 1/m", value=args.elastic_rate) from None
+        if not (scale_N > 0 and math.isfinite(rate_per_m)):
+            raise InputError(
+                "--elastic-scale must be positive and --elastic-rate finite",
+                value=f"{args.elastic_scale} / {args.elastic_rate}",
+            )
+        return QuasiLinearViscoelastic(
+            g, tau, partial(exponential_elastic_force, scale_N=scale_N, rate_per_m=rate_per_m)
+        )
     return StandardLinearSolid(
         _quantity(args, "instantaneous_stiffness", "stiffness", sign="positive"),
         _quantity(args, "equilibrium_stiffness", "stiffness", sign="nonnegative"),
@@ -333,7 +559,7 @@ def run_rig_sim(args: argparse.Namespace) -> int:
         time_scale=time_scale,
         seed=args.seed,
     )
-    tissue = _tissue(args)
+    tissue = tissue_from_args(args)
     faults = FaultPlan.parse(args.faults)
     server = RigServer(
         SimulatedRig(tissue, config),

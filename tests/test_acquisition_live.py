@@ -1,0 +1,339 @@
+"""warptissue.acquisition.live and ``warptissue acquire --fit``: a lumped fit of the record as
+it grows, apart from the recorder; ``--stop-when``; the final fit equal to the offline fit of
+the saved record; faults and Ctrl-C; ``rig-sim --tissue prony/qlv`` against the closed-form
+ramp-and-hold force."""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from warptissue.acquisition import (
+    FaultPlan,
+    RampHold,
+    Recorder,
+    RigClient,
+    RigConfig,
+    RigServer,
+    SimulatedRig,
+)
+from warptissue.acquisition.live import LiveFit, StopRule
+from warptissue.cli import main
+from warptissue.errors import InputError
+from warptissue.io import read_experiment_csv
+from warptissue.viscoelastic import PronySeries, fit_relaxation_joint
+
+G0_N_PER_M, G, TAU_S = 40.0, (0.35, 0.35), (1.0, 8.0)
+"""The known lumped Prony tissue served by the simulated rig."""
+
+PARAMETERS = ("equilibrium_stiffness_N_per_m", "k1_N_per_m", "k2_N_per_m", "tau1_s", "tau2_s")
+
+
+def prony_rig(*, time_scale: float, faults: FaultPlan | None = None, seed: int = 0):
+    """A simulated rig indenting the known Prony tissue (0.3 mm below the start)."""
+    tissue = PronySeries.from_normalized(G0_N_PER_M, G, TAU_S)
+    rig = SimulatedRig(tissue, RigConfig(time_scale=time_scale, force_noise_N=3e-4, seed=seed))
+    return rig, RigServer(rig, transport="tcp", faults=faults or FaultPlan())
+
+
+def acquire(url: str, out, *extra: str, hold: str = "30s") -> int:
+    """``warptissue acquire`` of a 4 mm ramp at 8 mm/s and a hold, at 200 Hz, with a live
+    Prony fit."""
+    command = ["acquire", "--port", url, "--depth", "4mm", "--speed", "8mm/s", "--hold", hold]
+    command += ["--rate", "200Hz", "--out", str(out), "--no-progress", "--fit", "prony:2"]
+    return main([*command, *extra])
+
+
+def fit_json(folder, stem: str = "run") -> dict:
+    return json.loads((folder / f"{stem}_relaxation_fit" / f"{stem}_prony2.json").read_text())
+
+
+def live_json(folder, stem: str = "run") -> dict:
+    return json.loads((folder / f"{stem}_relaxation_fit" / f"{stem}_live.json").read_text())
+
+
+def values(report: dict) -> np.ndarray:
+    return np.array([report["parameters"][n]["value"] for n in PARAMETERS])
+
+
+def errors(report: dict) -> np.ndarray:
+    return np.array([report["parameters"][n]["standard_error"] for n in PARAMETERS])
+
+
+# -- the stop rule --------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("text", "limit"), [("se<2%", 0.02), ("se < 0.5 %", 0.005), ("se<0.1", 0.1)]
+)
+def test_stop_rule_parses(text, limit):
+    assert StopRule.parse(text).relative_standard_error == pytest.approx(limit)
+
+
+@pytest.mark.parametrize("text", ["se>2%", "rmse<2%", "se<", "se<-1%", "se<0%", "se<x"])
+def test_stop_rule_refuses_other_text(text):
+    with pytest.raises(InputError):
+        StopRule.parse(text)
+
+
+def test_stop_rule_needs_every_relative_error_below_the_limit_and_an_identified_fit():
+    """Judged against the relative standard errors computed here from the covariance
+    (independent of the rule's own arithmetic)."""
+    rng = np.random.default_rng(3)
+    time_s = np.linspace(0.0, 30.0, 600)
+    depth_m = np.clip(time_s * 8e-3, 0.0, 4e-3)
+    tissue = PronySeries.from_normalized(G0_N_PER_M, G, TAU_S)
+    force_N = tissue.force_N(time_s, depth_m) + rng.normal(0.0, 3e-4, time_s.size)
+    result = fit_relaxation_joint([(time_s, depth_m, force_N)], model="prony", terms=2)
+    relative = np.sqrt(np.diag(result.covariance)) / np.abs(result.x)
+    assert result.identified
+    assert StopRule(1.01 * relative.max()).met(result)
+    assert not StopRule(0.99 * relative.max()).met(result)
+    short = fit_relaxation_joint(
+        [(time_s[:60], depth_m[:60], force_N[:60])], model="prony", terms=2
+    )  # the ramp and 2.5 s of hold: tau2 = 8 s is not identified
+    assert not short.identified and not StopRule(1e6).met(short)
+
+
+# -- the thread apart from the recorder -----------------------------------------------------
+def test_a_fit_that_blocks_never_delays_the_recording(tmp_path):
+    """The fit blocks until the recording has ended (it waits on an event set only after
+    Recorder.record returned): the recorder saves every sample of a 1 kHz test meanwhile,
+    and the live fit then finishes with the whole record."""
+    released = threading.Event()
+    calls: list[int] = []
+
+    def blocking_fit(records, **options):
+        calls.append(records[0].time_s.size)
+        assert released.wait(timeout=60.0)
+        return fit_relaxation_joint(records, **options)
+
+    live = LiveFit(model="prony", terms=2, every_samples=200, fit=blocking_fit)
+    rig, server = prony_rig(time_scale=math.inf)
+    with server, RigClient(server.url) as client:
+        recorder = Recorder(
+            client, tmp_path / "run.csv", rate_Hz=1000.0, progress=False, listener=live
+        )
+        live.start()
+        result = recorder.record(
+            RampHold(depth_m=4e-3, speed_m_per_s=8e-3, hold_s=3.0, dwell_s=0.5)
+        )
+        assert calls and calls[0] < result.samples_received  # the fit started mid-record
+        assert live.state == "running" and not live.estimates  # ... and is still blocked
+    released.set()
+    live.finish(timeout_s=60.0)
+    assert result.status == "complete" and result.samples_missing == 0
+    assert result.samples_received == result.samples_sent == rig.counters.emitted
+    assert live.state == "finished"
+    assert live.estimates[-1].samples == result.samples_received  # the end was fitted
+    assert len(live.estimates) == 2  # a blocked fit skips cadences instead of queueing them
+
+
+def test_an_error_in_the_fit_thread_stops_the_live_fit_not_the_recording(tmp_path):
+    def broken(records, **options):
+        raise RuntimeError("no more memory")
+
+    live = LiveFit(every_samples=100, fit=broken)
+    rig, server = prony_rig(time_scale=math.inf)
+    with server, RigClient(server.url) as client:
+        recorder = Recorder(client, tmp_path / "run.csv", progress=False, listener=live)
+        live.start()
+        result = recorder.record(
+            RampHold(depth_m=2e-3, speed_m_per_s=8e-3, hold_s=1.0, dwell_s=0.5)
+        )
+    live.finish(timeout_s=30.0)
+    assert result.status == "complete" and result.samples_missing == 0
+    assert live.state == "stopped" and "no more memory" in live.stop_reason
+
+
+# -- the command line -----------------------------------------------------------------------
+@pytest.mark.slow
+def test_live_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, capsys):
+    """acquire --fit prony:2 against the known Prony tissue: the final parameters are those
+    of 'warptissue fit relaxation' run afterwards on the saved CSV (to 1e-6 relative), the
+    last live estimate (warm-started, the whole record) agrees with them to 1e-6, and both
+    recover the tissue (k_inf = G0 (1 - g1 - g2), k_i = G0 g_i, tau_i) to 2 % (the
+    detected contact point is biased by the noise by more than the standard errors)."""
+    _, server = prony_rig(time_scale=math.inf)
+    out = tmp_path / "run.csv"
+    with server:
+        assert acquire(server.url, out) == 0
+    printed = capsys.readouterr().out
+    assert "live fit @" in printed and "+-" in printed and "live fit: finished" in printed
+    final = fit_json(tmp_path)
+    live = live_json(tmp_path)
+    assert live["state"] == "finished" and live["recording_status"] == "complete"
+    samples = read_experiment_csv(out).sample_count
+    assert live["estimates"][-1]["samples"] == samples
+    offline_dir = tmp_path / "offline"
+    assert main(["fit", "relaxation", str(out), "--model", "prony:2", "--contact", "auto",
+                 "--out", str(offline_dir)]) == 0  # fmt: skip
+    offline = json.loads((offline_dir / "run_prony2.json").read_text())
+    np.testing.assert_allclose(values(final), values(offline), rtol=1e-6)
+    last_live = values(live["estimates"][-1])
+    np.testing.assert_allclose(last_live, values(offline), rtol=1e-6)
+    truth = np.array([G0_N_PER_M * (1 - sum(G)), G0_N_PER_M * G[0], G0_N_PER_M * G[1], *TAU_S])
+    np.testing.assert_allclose(values(final), truth, rtol=0.02)  # the contact point's bias
+    assert (tmp_path / "run_relaxation_fit" / "run_live.png").stat().st_size > 0
+    assert (tmp_path / "run_relaxation_fit" / "run_prony2.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_stop_when_ends_the_test_early_and_the_early_fit_agrees_with_the_full_one(tmp_path, capsys):
+    """--stop-when se<2% on a 60 s hold (rig at 10x): the rig is stopped once identified,
+    the saved time is reported, every sample up to the stop is kept, and the early record's
+    offline fit lies within 2 of its standard errors of the full record's (same tissue,
+    same noise seed)."""
+    _, server = prony_rig(time_scale=10.0)
+    with server:
+        assert acquire(server.url, tmp_path / "run.csv", "--stop-when", "se<2%",
+                       "--fit-every", "1000", hold="60s") == 0  # fmt: skip
+    printed = capsys.readouterr().out
+    assert "protocol saved" in printed
+    live = live_json(tmp_path)
+    assert live["recording_status"] == "stopped_early" and live["stop_rule_met"]
+    assert live["saved_time_s"] > 5.0
+    sidecar = json.loads((tmp_path / "run.json").read_text())
+    assert sidecar["status"] == "stopped_early"
+    assert sidecar["counts"]["samples_missing"] == 0
+    assert sidecar["counts"]["samples_saved"] == sidecar["counts"]["samples_sent"]
+    full = tmp_path / "full"
+    _, server = prony_rig(time_scale=math.inf)
+    with server:
+        assert acquire(server.url, full / "run.csv", hold="60s") == 0
+    early, complete = fit_json(tmp_path), fit_json(full)
+    assert np.all(np.abs(values(early) - values(complete)) < 2.0 * errors(early))
+    assert np.all(errors(early) / np.abs(values(early)) < 0.05)
+
+
+@pytest.mark.parametrize(
+    "faults", ["garbage=150,split=170,corrupt=230,drop=310", "disconnect=2000"]
+)
+def test_faults_lose_no_sample_and_the_live_fit_continues(tmp_path, capsys, faults):
+    rig, server = prony_rig(time_scale=20.0, faults=FaultPlan.parse(faults))
+    with server:
+        assert acquire(server.url, tmp_path / "run.csv", hold="6s") == 0
+    sidecar = json.loads((tmp_path / "run.json").read_text())
+    counts = sidecar["counts"]
+    rig_counts = rig.counters
+    lost_on_the_link = rig_counts.corrupted + rig_counts.dropped + rig_counts.undelivered
+    assert counts["samples_sent"] == rig_counts.emitted
+    assert counts["samples_missing"] == lost_on_the_link  # none lost by the recorder
+    assert counts["samples_received"] + counts["samples_missing"] == counts["samples_sent"]
+    live = live_json(tmp_path)
+    assert (
+        live["state"] == "finished"
+        and live["estimates"][-1]["samples"] == (counts["samples_saved"])
+    )
+    assert "live fit: finished" in capsys.readouterr().out
+
+
+def test_ctrl_c_keeps_the_data_and_says_the_live_fit_stopped(tmp_path, capsys, monkeypatch):
+    calls = {"n": 0}
+    read = RigClient.read_message
+
+    def read_then_interrupt(self):
+        calls["n"] += 1
+        if calls["n"] == 1500:
+            raise KeyboardInterrupt
+        return read(self)
+
+    monkeypatch.setattr(RigClient, "read_message", read_then_interrupt)
+    _, server = prony_rig(time_scale=math.inf)
+    with server:
+        assert acquire(server.url, tmp_path / "run.csv", "--fit-every", "300") == 130
+    sidecar = json.loads((tmp_path / "run.json").read_text())
+    assert sidecar["status"] == "interrupted"
+    assert (
+        sidecar["counts"]["samples_saved"] == read_experiment_csv(tmp_path / "run.csv").sample_count
+    )
+    live = live_json(tmp_path)
+    assert live["recording_status"] == "interrupted"
+    assert live["state"] == "stopped" and "Ctrl-C" in live["stop_reason"]
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--stop-when", "se<2%"], "--stop-when needs --fit"),
+        (["--fit", "wiechert"], "sls or prony:N"),
+        (["--fit", "prony:x"], "prony:N"),
+        (["--fit", "sls", "--stop-when", "rmse<1"], "se<LIMIT"),
+        (["--fit", "sls", "--contact", "up"], "--contact"),
+    ],
+)
+def test_bad_live_options_one_line_nothing_written(tmp_path, capsys, options, message):
+    _, server = prony_rig(time_scale=math.inf)
+    out = tmp_path / "run.csv"
+    command = ["acquire", "--port", server.url, "--depth", "1mm", "--speed", "8mm/s"]
+    with server:
+        assert main([*command, "--hold", "0s", "--out", str(out), *options]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and message in err and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- rig-sim tissues ------------------------------------------------------------------------
+def ramp_hold_force_N(time_s, *, k_inf, k, tau, speed, ramp_s):
+    """Closed-form force of a Prony solid under a ramp at ``speed`` from t = 0 to ramp_s,
+    then a hold (Boltzmann superposition of a linear ramp, written from the definition)."""
+    t = np.asarray(time_s)
+    in_ramp = np.minimum(t, ramp_s)
+    force = k_inf * speed * in_ramp
+    for k_i, tau_i in zip(k, tau, strict=True):
+        during = speed * tau_i * (1.0 - np.exp(-in_ramp / tau_i))
+        force = force + k_i * during * np.exp(-np.maximum(t - ramp_s, 0.0) / tau_i)
+    return force
+
+
+@pytest.mark.parametrize("tissue", ["prony", "qlv"])
+def test_rig_sim_prony_and_qlv_tissues_give_the_closed_form_force(tmp_path, tissue):
+    """rig-sim's option parsing builds the tissue; recorded without noise, with the surface
+    at the start and an ideal ramp, its force follows the closed-form ramp-and-hold of a Prony
+    solid (qlv: with B -> 0 so that the exponential spring is the linear spring A B)."""
+    from warptissue.cli import build_parser
+    from warptissue.cli.acquire import tissue_from_args
+
+    options = ["rig-sim", "--tissue", tissue, "--g", "0.3,0.4", "--tau", "0.5s,3s"]
+    if tissue == "prony":
+        options += ["--instantaneous-stiffness", "50N/m"]
+    else:  # A B = 50 N/m with B x < 1e-6: linear to 1e-6
+        options += ["--elastic-scale", "5e5N", "--elastic-rate", "1e-4"]
+    model = tissue_from_args(build_parser().parse_args(options))
+    config = RigConfig(
+        time_scale=math.inf,
+        surface_position_m=0.0,
+        force_noise_N=0.0,
+        force_resolution_N=1e-9,
+        acceleration_m_per_s2=1e6,  # an ideal ramp, as the closed form assumes
+    )
+    rig = SimulatedRig(model, config)
+    with RigServer(rig, transport="tcp") as server, RigClient(server.url) as client:
+        result = Recorder(client, tmp_path / "run.csv", rate_Hz=1000.0, progress=False).record(
+            RampHold(depth_m=2e-3, speed_m_per_s=4e-3, hold_s=4.0)
+        )
+    data = read_experiment_csv(result.csv_path)
+    expected = ramp_hold_force_N(
+        data["time_s"] - data["time_s"][0], k_inf=15.0, k=(15.0, 20.0), tau=(0.5, 3.0),
+        speed=4e-3, ramp_s=0.5,
+    )  # fmt: skip
+    np.testing.assert_allclose(data["force_N"], expected, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        (["--tissue", "prony", "--g", "0.6,0.6"], "--g"),
+        (["--tissue", "prony", "--g", "0.3", "--tau", "1s,2s"], "as many"),
+        (["--tissue", "prony", "--tau", "1s,-2s"], "--tau"),
+        (["--tissue", "qlv", "--elastic-rate", "fast"], "--elastic-rate"),
+    ],
+)
+def test_rig_sim_bad_tissue_options(options, message):
+    from warptissue.cli import build_parser
+    from warptissue.cli.acquire import tissue_from_args
+
+    with pytest.raises(InputError, match=message.replace("-", r"\-")):
+        tissue_from_args(build_parser().parse_args(["rig-sim", *options]))
