@@ -54,6 +54,13 @@ def _punch(size_near_m: float, material, *, contact: str = "bonded", width_m: fl
     )
 
 
+def _alone(problem, depths, device, options, **extra):
+    """The problem's single run (the reference of its batched run)."""
+    return simulate_indentation(
+        problem, depths, device=device, progress=False, options=options, **extra
+    )
+
+
 def _problems():
     return [
         _punch(RADIUS_M / 2.0, NeoHookean(287.5, 575e3)),
@@ -104,7 +111,7 @@ def test_batched_curves_equal_sequential_ones(device):
     batched = simulate_indentation_batch(problems, depths, device=device, options=options)
     cut = 0
     for problem, path, result in zip(problems, depths, batched, strict=True):
-        alone = simulate_indentation(problem, path, device=device, progress=False, options=options)
+        alone = _alone(problem, path, device, options)
         assert result.completed and alone.completed, (result.message, alone.message)
         np.testing.assert_allclose(result.depths_m, path)
         np.testing.assert_allclose(result.reaction_force_N, alone.reaction_force_N, rtol=1e-8)
@@ -136,9 +143,7 @@ def test_batched_force_sensitivities_equal_sequential_ones(device):
         problems, depths, device=device, options=options, sensitivities=names
     )
     for problem, path, result in zip(problems, depths, batched, strict=True):
-        alone = simulate_indentation(
-            problem, path, device=device, progress=False, options=options, sensitivities=names
-        )
+        alone = _alone(problem, path, device, options, sensitivities=names)
         assert result.sensitivity_names == names
         assert result.force_sensitivity_N_per_unit.shape == (len(path), 2)
         np.testing.assert_allclose(
@@ -267,14 +272,8 @@ def test_viscoelastic_ramp_and_hold_batch_equals_single_runs(device):
         times_s=times[:2],
     )
     for k, (problem, path, time) in enumerate(zip(problems, depths, times, strict=True)):
-        alone = simulate_indentation(
-            problem,
-            path,
-            device=device,
-            progress=False,
-            options=options,
-            sensitivities=names if k < 2 else names[:1],
-            times_s=time,
+        alone = _alone(
+            problem, path, device, options, sensitivities=names[: 2 if k < 2 else 1], times_s=time
         )
         assert batched[k].completed and alone.completed
         np.testing.assert_allclose(batched[k].reaction_force_N, alone.reaction_force_N, rtol=1e-8)
@@ -353,14 +352,7 @@ def test_batched_rigid_contacts_equal_their_single_runs(device):
         problems, depths, device=device, options=options, sensitivities=names
     )
     for k, (problem, path, result) in enumerate(zip(problems, depths, batched, strict=True)):
-        alone = simulate_indentation(
-            problem,
-            path,
-            device=device,
-            progress=False,
-            options=options,
-            sensitivities=names if k == 0 else (),
-        )
+        alone = _alone(problem, path, device, options, sensitivities=names if k == 0 else ())
         assert result.completed and alone.completed, (result.message, alone.message)
         np.testing.assert_allclose(result.depths_m, path)
         for name in CONTACT_FIELDS:
@@ -471,9 +463,7 @@ def test_a_batch_of_one_contact_problem_is_its_single_run(device):
     options = NewtonOptions(tolerance=TOLERANCE)
     depths = depths[0][:1]
     (batched,) = simulate_indentation_batch(problems[:1], [depths], device=device, options=options)
-    alone = simulate_indentation(
-        problems[0], depths, device=device, progress=False, options=options
-    )
+    alone = _alone(problems[0], depths, device, options)
     for name in CONTACT_FIELDS:
         np.testing.assert_allclose(getattr(batched, name), getattr(alone, name), rtol=1e-8)
 

@@ -13,6 +13,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import tomli_w
 
 import warptissue.fem
 from warptissue.errors import InputError
@@ -20,42 +21,29 @@ from warptissue.fit import fit_indentation
 from warptissue.io import write_csv
 from warptissue.study import load_study
 
-STUDY = """\
-schema_version = 2
-name = "linear_{name}"
 
-[specimen]
-shape = "block"
-width_m = 0.008
-thickness_m = 0.004
-quarter = true
-element = "TET10"
-size_near_m = 0.001
-size_far_m = 0.002
-
-[indenter]
-kind = "flat_punch"
-radius_m = 0.001
-
-[protocol]
-max_depth_m = 0.0003
-steps = 2
-
-[material]
-model = "neo_hookean"
-C10_Pa = {start}
-bulk_modulus_Pa = 575000.0
-
-[solver]
-device = "cpu"
-
-[[data]]
-file = "ramp.csv"
-
-[fit]
-free = ["C10_Pa"]
-time_steps = 4
-"""
+def _study(name: str, start_Pa: float) -> dict:
+    """A neo-Hookean flat-punch fit study of C10 (2 FE depths, a 4 mm quarter block) whose
+    record is ``ramp.csv`` beside it."""
+    return {
+        "schema_version": 2,
+        "name": f"linear_{name}",
+        "specimen": {
+            "shape": "block",
+            "width_m": 0.008,
+            "thickness_m": 0.004,
+            "quarter": True,
+            "element": "TET10",
+            "size_near_m": 0.001,
+            "size_far_m": 0.002,
+        },
+        "indenter": {"kind": "flat_punch", "radius_m": 0.001},
+        "protocol": {"max_depth_m": 0.0003, "steps": 2},
+        "material": {"model": "neo_hookean", "C10_Pa": start_Pa, "bulk_modulus_Pa": 575000.0},
+        "solver": {"device": "cpu"},
+        "data": [{"file": "ramp.csv"}],
+        "fit": {"free": ["C10_Pa"], "time_steps": 4},
+    }
 
 
 def _linear_studies(folder: Path) -> tuple[list, tuple[float, ...]]:
@@ -71,7 +59,7 @@ def _linear_studies(folder: Path) -> tuple[list, tuple[float, ...]]:
             here / "ramp.csv",
             {"time_s": depth / 1e-4, "displacement_m": depth, "force_N": truth * depth},
         )
-        (here / "study.toml").write_text(STUDY.format(name=k, start=0.8 * truth))
+        (here / "study.toml").write_text(tomli_w.dumps(_study(str(k), 0.8 * truth)))
         studies.append(load_study(here / "study.toml"))
     return studies, truths
 
