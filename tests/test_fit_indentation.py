@@ -26,7 +26,8 @@ import pytest
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
-from warptissue.fit.indentation import _forward_model, depth_offset_start_m
+from warptissue.fit._model import ForwardModel, forward_model
+from warptissue.fit.indentation import depth_offset_start_m
 from warptissue.io import write_csv
 from warptissue.lsq.result import RejectStep
 from warptissue.materials import material_from_dict
@@ -291,7 +292,7 @@ def test_the_jacobian_equals_central_differences_of_the_residuals(
         history=history,
         solver="tolerance = 1e-12",
     )
-    model = _forward_model(study, study.material, free, device="cpu", progress=False)
+    model = forward_model(study, study.material, free, device="cpu", progress=False)
     x = np.array([truth[name] for name in free]) * 0.9
     jacobian = model.jac(x)
     assert model.forward_solves == model.solves_per_evaluation  # fun and jac: one run
@@ -326,7 +327,7 @@ def test_ctrl_c_keeps_the_best_parameters_evaluated(tmp_path):
     fit = fit_indentation(study, progress=False, callback=interrupt)
     assert fit.status == "interrupted" and fit.exit_code == 130 and not fit.success
     assert [p.iteration for p in steps] == [1, 2]
-    start_cost = _forward_model(
+    start_cost = forward_model(
         study, study.material, ("C10_Pa",), device="cpu", progress=False
     ).evaluate(np.array([2000.0]))
     assert fit.result.cost <= start_cost.cost
@@ -678,7 +679,7 @@ def test_the_offset_column_of_the_jacobian_equals_central_differences(tmp_path):
         samples=20,
     )
     free = ("C10_Pa", "C20_Pa")
-    model = _forward_model(
+    model = forward_model(
         study, study.material, free, device="cpu", progress=False, offset_start=np.array([1e-4])
     )
     x = np.array([260.0, 380.0, 1.37e-4])
@@ -739,7 +740,7 @@ def test_the_timed_offset_column_equals_central_differences(tmp_path):
         tmp_path, 'free = ["C10_Pa", "g1"]\ntime_steps = 6\ncontact_point = "fit"\n'
     )
     free = ("C10_Pa", "g1")
-    model = _forward_model(
+    model = forward_model(
         study, study.material, free, device="cpu", progress=False, offset_start=np.array([1e-4])
     )
     x = np.array([270.0, 0.45, 0.93e-4])
@@ -840,7 +841,6 @@ def test_the_touch_time_follows_the_offset_through_the_record():
     from types import SimpleNamespace
 
     from warptissue.acquisition.conditioning import FitRecord
-    from warptissue.fit.indentation import _ForwardModel
     from warptissue.study import DataRecord
 
     # As a conditioned record: depth 0 (clipped) until the contact at 1 s, then 0.1 mm/s.
@@ -852,14 +852,14 @@ def test_the_touch_time_follows_the_offset_through_the_record():
         record=FitRecord(time, depth, depth * 10.0, True, {}),
     )
     model = SimpleNamespace(records=(record,), steps=8)
-    touch, (times, depths) = _ForwardModel._touch(model, 0, 0.0)
+    touch, (times, depths) = ForwardModel._touch(model, 0, 0.0)
     assert touch == pytest.approx(1.0)  # the contact, not the first sample
     assert times[-1] == pytest.approx(3.0) and depths[-1] == pytest.approx(3e-4)
-    touch, (times, depths) = _ForwardModel._touch(model, 0, 0.125e-4)
+    touch, (times, depths) = ForwardModel._touch(model, 0, 0.125e-4)
     assert touch == pytest.approx(1.125)  # between samples
     assert depths[-1] == pytest.approx(3e-4 - 0.125e-4)
     with pytest.raises(RejectStep, match="never reaches"):
-        _ForwardModel._touch(model, 0, 4e-4)
+        ForwardModel._touch(model, 0, 4e-4)
 
 
 def test_an_offset_is_judged_against_its_record_not_its_value():
@@ -922,7 +922,7 @@ def test_batched_record_runs_equal_runs_one_after_another(tmp_path):
     x = np.array([270.0, 0.45, 0.93e-4, 1.1e-4])
     evaluations = {}
     for batch in (False, True):
-        model = _forward_model(
+        model = forward_model(
             study,
             study.material,
             ("C10_Pa", "g1"),

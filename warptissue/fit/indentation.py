@@ -37,7 +37,7 @@ Notes:
     contact), so t0, the steps and the depths all move with d0; the force is a hereditary
     integral of the depth history, and its offset column is a one-sided difference: one
     more run per record (without sensitivities) at ``d0 - h``, h =
-    :data:`OFFSET_DIFFERENCE_SHARE` of the record's depth span.
+    :data:`warptissue.fit._model.OFFSET_DIFFERENCE_SHARE` of the record's depth span.
 
     Residuals, stacked over the records: ``F_model - F_measured`` (N, "absolute") or that
     divided by ``max(|F_measured|, floor)`` ("relative", Ahn & Kim Eq. 7), with ``floor`` =
@@ -73,21 +73,26 @@ from typing import Any
 
 import numpy as np
 
-from warptissue import fem
-from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
 from warptissue.fit._forward import FitMeeting, run_fits
+from warptissue.fit._model import (
+    Evaluation,
+    ForwardModel,
+    SharedRuns,
+    depth_offset_names,
+    depth_offset_start_m,
+    forward_model,
+    offset_box,
+    shifted_record,
+)
 from warptissue.fit.start import start_values_from_record
 from warptissue.io import read_sidecar, software_versions
-from warptissue.loading import resample_history
-from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE, covariance_from_jacobian, least_squares
+from warptissue.lsq.engine import covariance_from_jacobian, least_squares
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
 from warptissue.materials import Viscoelastic, positive_bounds, prony_term
-from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
 from warptissue.study import (
     CONTACT_POINTS,
-    DEPTH_OFFSET,
     FIT_STRATEGIES,
     DataRecord,
     Protocol,
@@ -128,17 +133,6 @@ determine a combination of them rather than each."""
 OFFSET_IDENTIFIED_SHARE = 0.1
 """A fitted depth offset whose standard error exceeds this share of its record's depth span
 is reported as not identified (an offset may well be zero, so not judged by its value)."""
-OFFSET_BOUND_SHARES = (0.5, 0.1)
-"""Default bounds of a record's depth offset: from its shallowest recorded depth less this
-first share of its depth span, to its deepest less the second share (the probe touches
-before its deepest point)."""
-OFFSET_DIFFERENCE_SHARE = 1e-4
-"""The step of the one-sided difference of a viscoelastic record's force by its depth offset,
-as a share of the record's depth span."""
-OFFSET_NOISE_SIGMA = 6.0
-"""The start of a depth offset without a contact point: where the force first exceeds this
-many noise standard deviations (and 1 % of the peak force)."""
-_CACHE_SIZE = 8
 
 
 @dataclass(frozen=True)
@@ -375,21 +369,6 @@ class IndentationFit:
         }
 
 
-@dataclass
-class _Evaluation:
-    """One forward evaluation: residuals, Jacobian and the curves behind them."""
-
-    x: np.ndarray
-    residuals: np.ndarray
-    jacobian: np.ndarray
-    predicted: list[np.ndarray]
-    fe_curves: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
-
-    @property
-    def cost(self) -> float:
-        return 0.5 * float(self.residuals @ self.residuals)
-
-
 def _durbin_watson(residuals: np.ndarray) -> float | None:
     """sum(diff(r)^2) / sum(r^2): about 2 for independent residuals, near 0 for a trend."""
     total = float(residuals @ residuals)
@@ -477,396 +456,6 @@ def _check_probe_radius(study: Study) -> None:
             )
 
 
-class _ForwardModel:
-    """The FE force of every record as a function of the free parameters, with a cache.
-
-    One evaluation runs the FE (once for an elastic material, once per record for a
-    viscoelastic one) with the sensitivities of the free parameters, and gives the
-    residuals and the Jacobian together: ``fun`` and ``jac`` at one point share one run.
-
-    With ``offset_start`` (one depth offset per record, m) the parameter
-    vector is the free material parameters followed by the records' depth offsets, and the
-    FE depths are a lattice of steps fixed by the start (module docstring, "Contact point").
-    """
-
-    def __init__(
-        self,
-        *,
-        study: Study,
-        problem: Any,
-        assembler: Any,
-        material: Any,
-        names: tuple[str, ...],
-        device: Any,
-        progress: bool,
-        offset_start: np.ndarray | None = None,
-        batch_records: bool = False,
-    ) -> None:
-        settings = study.fit
-        self.batch_records = batch_records
-        self._packed_assembler: Any = None
-        self.meeting: tuple[FitMeeting, int] | None = None
-        self.study = study
-        self.problem = problem
-        self.assembler = assembler
-        self.material = material
-        self.names = names
-        self.device = device
-        self.progress = progress
-        self.options = study.solver.options
-        self.all_names = tuple(material.parameter_names)
-        missing = [name for name in names if name not in self.all_names]
-        if missing:
-            raise InputError(
-                f"fit.free names {missing[0]!r}, not a parameter of the material "
-                f"({', '.join(self.all_names)})",
-                path=study.path,
-                key="fit.free",
-                value=missing[0],
-            )
-        self.index = [self.all_names.index(name) for name in names]
-
-        self.viscoelastic = isinstance(material, Viscoelastic)
-        self.records = study.data
-        steps = settings.time_steps
-        self.measured = [np.asarray(r.force_N, dtype=np.float64) for r in self.records]
-        everything = np.concatenate(self.measured)
-        largest = float(np.max(np.abs(everything)))
-        if settings.objective == "relative":
-            floor = settings.relative_floor_N or RELATIVE_FLOOR_SHARE * largest
-            self.divisors = [np.maximum(np.abs(f), floor) for f in self.measured]
-        else:
-            self.divisors = [np.ones_like(f) for f in self.measured]
-        self.contact_s = [r.contact_time_s for r in self.records]
-        self.offset_count = 0 if offset_start is None else len(self.records)
-        self.depth_step_m = 0.0
-        self.steps = steps
-        self.offset_differences = [
-            OFFSET_DIFFERENCE_SHARE * max(float(np.ptp(r.displacement_m)), 1e-12)
-            for r in self.records
-        ]
-        if self.viscoelastic and self.offset_count:
-            offsets = np.asarray(offset_start, dtype=np.float64)
-            try:
-                self.grids = [self._touch(k, offsets[k])[1] for k in range(len(self.records))]
-            except RejectStep as exc:
-                raise InputError(
-                    f"the start of the depth offsets {offsets.tolist()} m: {exc}; give "
-                    "fit.start.depth_offset_m below the deepest recorded depth",
-                    path=study.path,
-                    key=f"fit.start.{DEPTH_OFFSET}",
-                ) from None
-        elif self.viscoelastic:
-            self.grids = [record.load_history(steps=steps) for record in self.records]
-        elif self.offset_count:
-            reach = self._reach(np.asarray(offset_start, dtype=np.float64))
-            if not reach > 0.0:
-                raise InputError(
-                    f"the start of the depth offsets {np.asarray(offset_start).tolist()} m "
-                    "leaves no record in contact: give fit.start.depth_offset_m below the "
-                    "deepest recorded depth",
-                    path=study.path,
-                    key=f"fit.start.{DEPTH_OFFSET}",
-                )
-            self.depth_step_m = reach / steps
-            self.grids = [(None, self._lattice(np.asarray(offset_start, dtype=np.float64)))]
-        else:
-            deepest = max(float(np.max(r.displacement_m)) for r in self.records)
-            self.grids = [(None, deepest * np.arange(1, steps + 1) / steps)]
-        self.forward_solves = 0
-        self.solves_per_evaluation = len(self.grids)
-        self.cache: dict[bytes, _Evaluation] = {}
-        self.best: _Evaluation | None = None
-        self.evaluations = 0
-
-    def material_at(self, x: np.ndarray) -> Any:
-        vector = self.material.parameter_vector.copy()
-        vector[self.index] = np.asarray(x)[: len(self.names)]
-        return self.material.with_parameters(vector)
-
-    def offsets_at(self, x: np.ndarray) -> np.ndarray:
-        """The records' depth offsets (m) in ``x``: zeros when the contact is given."""
-        if not self.offset_count:
-            return np.zeros(len(self.records))
-        return np.asarray(x, dtype=np.float64)[len(self.names) :]
-
-    def _touch(self, k: int, offset: float) -> tuple[float, tuple[np.ndarray, np.ndarray]]:
-        """Record ``k``'s touch time at a depth offset and its FE time steps from it.
-
-        The touch time t0 is where the record's recorded depth (its running maximum) first
-        passes ``offset`` (linear between samples; the first sample's time for a record
-        deeper than that from its start); the steps are
-        :func:`warptissue.loading.resample_history` of ``(time - t0, depth - offset)``, as
-        :meth:`DataRecord.load_history` does from a given contact.
-
-        Returns:
-            ``(t0, (times_s, depths_m))``: t0 on the record's clock (s); the FE times from
-            t0 (s) and true depths (m).
-
-        Raises:
-            RejectStep: The record never reaches the offset, or fewer than two samples
-                follow the touch.
-        """
-        record = self.records[k]
-        t = np.asarray(record.time_s, dtype=np.float64)
-        recorded = np.asarray(record.displacement_m, dtype=np.float64)
-        reached = np.maximum.accumulate(recorded)
-        # The first sample beyond the offset; the touch lies after the one before it (the
-        # last at or above the offset's level: a conditioned record's clipped zeros end at
-        # its contact).
-        i = int(np.searchsorted(reached, offset, side="right"))
-        if i >= reached.size:
-            raise RejectStep(
-                f"{record.file} never reaches the depth offset {offset:.6g} m (its deepest "
-                f"recorded depth is {reached[-1]:.6g} m)"
-            )
-        if i == 0:
-            touch = float(t[0])
-        else:
-            share = (offset - reached[i - 1]) / (reached[i] - reached[i - 1])
-            touch = float(t[i - 1] + share * (t[i] - t[i - 1]))
-
-        try:
-            grid = resample_history(t - touch, recorded - offset, steps=self.steps)
-        except InputError as exc:
-            raise RejectStep(f"{record.file}: {exc.message}") from exc
-        return touch, grid
-
-    def _reach(self, offsets: np.ndarray) -> float:
-        """The deepest true depth of the records at these offsets (m)."""
-        return max(
-            float(np.max(r.displacement_m)) - d0
-            for r, d0 in zip(self.records, offsets, strict=True)
-        )
-
-    def _lattice(self, offsets: np.ndarray) -> np.ndarray:
-        """FE depths: the fixed steps of ``depth_step_m`` to the deepest true depth."""
-        count = max(1, math.ceil(self._reach(offsets) / self.depth_step_m - 1e-9))
-        return self.depth_step_m * np.arange(1, count + 1)
-
-    def _run(
-        self,
-        material: Any,
-        times: np.ndarray | None,
-        depths: np.ndarray,
-        *,
-        sensitivities: bool = True,
-    ) -> Any:
-        problem = dataclasses.replace(self.problem, material=material)
-        extra = {} if times is None else {"times_s": times}
-        self.forward_solves += 1
-        try:
-            result = _simulate()(
-                problem,
-                depths,
-                device=self.device,
-                progress=self.progress,
-                options=self.options,
-                assembler=self.assembler,
-                sensitivities=self.names if sensitivities else (),
-                **extra,
-            )
-        except ConvergenceError as exc:
-            raise RejectStep(f"the FE failed: {exc}") from exc
-        if not result.completed:
-            raise RejectStep(f"the FE did not converge: {result.message}")
-        return result
-
-    def _runs(
-        self,
-        material: Any,
-        grids: Sequence[tuple[np.ndarray | None, np.ndarray]],
-        *,
-        sensitivities: bool = True,
-    ) -> list[Any]:
-        """The FE runs of several load paths (``(times, depths)`` each) of one material: in
-        one batched run (:func:`warptissue.fem.simulate_indentation_batch`) where
-        ``batch_records`` and there are several, else one after another. A fit of several
-        studies hands them to its :class:`~warptissue.fit._forward.FitMeeting`, which
-        solves them with the other fits' runs."""
-        if self.meeting is not None:
-            meeting, fit = self.meeting
-            self.forward_solves += len(grids)
-            results = meeting.request(
-                fit,
-                _RunRequest(
-                    problems=[dataclasses.replace(self.problem, material=material)] * len(grids),
-                    grids=list(grids),
-                    names=self.names if sensitivities else (),
-                    options=self.options,
-                    device=self.device,
-                ),
-            )
-            for result in results:
-                if not result.completed:
-                    raise RejectStep(f"the FE did not converge: {result.message}")
-            return results
-        if not (self.batch_records and len(grids) > 1):
-            return [
-                self._run(material, times, depths, sensitivities=sensitivities)
-                for times, depths in grids
-            ]
-
-        problems = [dataclasses.replace(self.problem, material=material)] * len(grids)
-        if self._packed_assembler is None or self._packed_assembler.problem_count != len(grids):
-            self._packed_assembler = fem.batch_assembler(problems, device=self.device)
-        self.forward_solves += len(grids)
-        results = fem.simulate_indentation_batch(
-            problems,
-            [depths for _, depths in grids],
-            options=self.options,
-            sensitivities=self.names if sensitivities else (),
-            assembler=self._packed_assembler,
-            times_s=[times for times, _ in grids],
-        )
-        for result in results:
-            if not result.completed:
-                raise RejectStep(f"the FE did not converge: {result.message}")
-        return results
-
-    def evaluate(self, x: np.ndarray) -> _Evaluation:
-        key = np.asarray(x, dtype=np.float64).tobytes()
-        if key in self.cache:  # least recently used out: the current point stays
-            self.cache[key] = self.cache.pop(key)
-            return self.cache[key]
-        try:
-            material = self.material_at(x)
-        except InputError as exc:
-            raise RejectStep(str(exc)) from exc
-        if float(material.initial_shear_modulus_Pa) <= 0.0:
-            raise RejectStep("the initial shear modulus is not positive")
-        offsets = self.offsets_at(x)
-        touches = list(self.contact_s)
-        if self.viscoelastic and self.offset_count:
-            timed = [self._touch(k, offsets[k]) for k in range(len(self.records))]
-            touches = [touch for touch, _ in timed]
-            grids = [grid for _, grid in timed]
-        elif self.offset_count:
-            grids = [(None, self._lattice(offsets))]
-        else:
-            grids = self.grids
-        runs = self._runs(material, grids)
-        earlier = None
-        if self.viscoelastic and self.offset_count:
-            earlier = self._earlier_touches(material, offsets)
-        predicted, jacobians, curves = [], [], []
-        for k, record in enumerate(self.records):
-            if self.viscoelastic:
-                run = runs[k]
-                fe_time = np.asarray(grids[k][0], dtype=np.float64)
-                fe_depth = np.asarray(run.depths_m, dtype=np.float64)
-                where = np.concatenate([[0.0], fe_time])
-                at = record.time_s - touches[k]
-            else:
-                run = runs[0]
-                fe_depth = np.asarray(run.depths_m, dtype=np.float64)
-                where = np.concatenate([[0.0], fe_depth])
-                shifted = record.displacement_m - offsets[k]
-                at = np.clip(shifted, 0.0, None)
-                fe_time = _first_passage_times(record.time_s, shifted, self.contact_s[k], fe_depth)
-            force = np.asarray(run.reaction_force_N, dtype=np.float64)
-            sensitivity = np.asarray(run.force_sensitivity_N_per_unit, dtype=np.float64)
-            curve = np.concatenate([[0.0], force])
-            predicted.append(np.interp(at, where, curve))
-            columns = [
-                np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
-                for j in range(len(self.names))
-            ]
-            for i in range(self.offset_count):
-                if i != k:
-                    columns.append(np.zeros(at.size))
-                elif self.viscoelastic:
-                    columns.append((predicted[k] - earlier[k]) / self.offset_differences[k])
-                else:
-                    columns.append(_offset_column(shifted, where, curve))
-            jacobians.append(np.column_stack(columns))
-            if self.viscoelastic:
-                curves.append((fe_time, fe_depth, force))
-            else:
-                # The FE steps up to the first one at or beyond the record's deepest point.
-                covered = int(np.searchsorted(fe_depth, float(np.max(at))))
-                keep = slice(0, covered + 1)
-                curves.append((fe_time[keep], fe_depth[keep], force[keep]))
-        residuals = np.concatenate(
-            [(p - f) / w for p, f, w in zip(predicted, self.measured, self.divisors, strict=True)]
-        )
-        jacobian = np.vstack(
-            [j / w[:, None] for j, w in zip(jacobians, self.divisors, strict=True)]
-        )
-        evaluation = _Evaluation(
-            np.array(x, dtype=np.float64), residuals, jacobian, predicted, curves
-        )
-        self.evaluations += 1
-        if len(self.cache) >= _CACHE_SIZE:
-            self.cache.pop(next(iter(self.cache)))
-        self.cache[key] = evaluation
-        if self.best is None or evaluation.cost < self.best.cost:
-            self.best = evaluation
-        return evaluation
-
-    def _earlier_touches(self, material: Any, offsets: np.ndarray) -> list[np.ndarray]:
-        """Each record's force at its samples with the probe touching earlier, for dF/dd0 of
-        a viscoelastic material by a one-sided difference.
-
-        The touch time, the FE time steps and the depths all move with the offset, and the
-        force is a hereditary integral of the depth history, not a function of the depth:
-        one more FE run per record (without sensitivities, all records batched where the
-        forward runs are) at ``offset - h`` (the probe touching earlier, so the record stays
-        in contact), h = :data:`OFFSET_DIFFERENCE_SHARE` of the record's depth span, gives
-        (F(d0) - F(d0 - h)) / h at the samples.
-        """
-        timed = [
-            self._touch(k, offsets[k] - self.offset_differences[k])
-            for k in range(len(self.records))
-        ]
-        runs = self._runs(material, [grid for _, grid in timed], sensitivities=False)
-        forces = []
-        for record, (touch, (times, _)), run in zip(self.records, timed, runs, strict=True):
-            where = np.concatenate([[0.0], np.asarray(times, dtype=np.float64)])
-            curve = np.concatenate([[0.0], np.asarray(run.reaction_force_N, dtype=np.float64)])
-            forces.append(np.interp(record.time_s - touch, where, curve))
-        return forces
-
-    def fun(self, x: np.ndarray) -> np.ndarray:
-        return self.evaluate(x).residuals
-
-    def jac(self, x: np.ndarray) -> np.ndarray:
-        return self.evaluate(x).jacobian
-
-    def r_squared_at(self, evaluation: _Evaluation) -> float | None:
-        try:
-            return r_squared(np.concatenate(self.measured), np.concatenate(evaluation.predicted))
-        except InputError:
-            return None
-
-
-def _offset_column(shifted: np.ndarray, where: np.ndarray, curve: np.ndarray) -> np.ndarray:
-    """d F_model / d d0 at the samples: minus the slope of the interpolant's segment at the
-    true depth ``shifted`` = d - d0 (m, shape (m,)); zero before the touch and beyond the
-    last FE depth, where the interpolant is flat. ``where``, ``curve``: the FE depths and
-    forces with (0, 0) first."""
-    slopes = np.diff(curve) / np.diff(where)
-    segment = np.clip(np.searchsorted(where, shifted, side="right") - 1, 0, slopes.size - 1)
-    inside = (shifted > 0.0) & (shifted < where[-1])
-    return np.where(inside, -slopes[segment], 0.0)
-
-
-def _first_passage_times(
-    time_s: np.ndarray, depth_m: np.ndarray, contact_s: float, depths: np.ndarray
-) -> np.ndarray:
-    """The times (from the contact) at which a record of depth ``depth_m`` (below the
-    contact, m) first reaches each depth (its loading ramp); depths beyond its deepest point
-    get its deepest point's time."""
-    t = time_s - contact_s
-    d = np.maximum.accumulate(np.clip(depth_m, 0.0, None))
-    rising = np.concatenate([[True], np.diff(d) > 0.0])
-    return np.interp(depths, d[rising], t[rising])
-
-
-def _simulate() -> Callable[..., Any]:
-    return fem.simulate_indentation
-
-
 def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
     """|start|, or for a zero start the mean |start| of the parameters of its unit (else 1)."""
     scale = np.abs(start).astype(np.float64)
@@ -904,221 +493,6 @@ def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitRes
         for name in (f"g{i}", f"tau{i}_s"):
             mean[name] = float(np.mean([fit.parameters[name] for fit in fits]))
     return tuple(fits), mean
-
-
-def _forward_model(
-    study: Study,
-    material: Any,
-    free: tuple[str, ...],
-    *,
-    device: str | None,
-    progress: bool,
-    offset_start: np.ndarray | None = None,
-    batch_records: bool | None = None,
-) -> _ForwardModel:
-    """The mesh, problem and assembler of a study (built once), as a :class:`_ForwardModel`
-    of the free parameters (and of the records' depth offsets, with ``offset_start``);
-    ``batch_records`` (None: :func:`batches_records`) solves the records' runs together."""
-
-    chosen = device if device is not None else study.solver.device
-    warp_device = resolve_device(None if chosen == "auto" else chosen)
-    check_linear_solver(study, warp_device)
-    estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
-    mesh = build_mesh(study)
-    problem = build_problem(dataclasses.replace(study, material=material), mesh)
-    assembler = fem.Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
-    return _ForwardModel(
-        study=study,
-        problem=problem,
-        assembler=assembler,
-        material=material,
-        names=free,
-        device=warp_device,
-        progress=progress,
-        offset_start=offset_start,
-        batch_records=(batches_records(warp_device) if batch_records is None else batch_records),
-    )
-
-
-def batches_records(device: Any) -> bool:
-    """Whether a fit solves its records' FE runs (one per record of a viscoelastic material)
-    together in one batched run (:func:`warptissue.fem.simulate_indentation_batch`) rather
-    than one after another.
-
-    Args:
-        device: The Warp device of the fit.
-
-    Returns:
-        True where that was measured to pay: see docs/design-notes/batched-fe.md.
-    """
-    return RECORD_BATCHING[device.is_cuda]
-
-
-RECORD_BATCHING = {False: False, True: True}
-"""Whether a fit batches its records' FE runs, by device (CPU: False, CUDA: True), as
-measured (docs/design-notes/batched-fe.md, "A fit's records")."""
-
-
-def depth_offset_names(records: Sequence[DataRecord]) -> tuple[str, ...]:
-    """The parameter names of the records' depth offsets: ``depth_offset_m`` for one record,
-    ``depth_offset1_m``, ``depth_offset2_m``, ... (in ``[[data]]`` order) for several."""
-    if len(records) == 1:
-        return (DEPTH_OFFSET,)
-    return tuple(f"depth_offset{k}_m" for k in range(1, len(records) + 1))
-
-
-def depth_offset_start_m(record: DataRecord) -> float:
-    """A start value of a record's depth offset d0 (m), from the record.
-
-    A record conditioned with a contact point (``contact = "auto"``, detected by
-    :func:`warptissue.acquisition.conditioning.detect_contact`, or ``contact_position_m``)
-    has its depths counted from it: 0. A record used as recorded (``contact = "none"``):
-    where the force first exceeds :data:`OFFSET_NOISE_SIGMA` noise standard deviations and
-    1 % of the peak force, refined by a straight line through the next samples (to 4 times
-    that force) back to zero force, kept between the last sample below it and the first one
-    above; a record above it from its first sample: that line's zero, at most that sample.
-
-    Args:
-        record: A conditioned ``[[data]]`` record.
-
-    Returns:
-        The recorded depth at first touch (m).
-
-    Notes:
-        The noise is estimated from second differences of the force (1.4826 times their
-        median absolute value over sqrt(6)), which a smooth loading curve leaves to the
-        noise. The force is taken as zero before the touch (the model's too).
-    """
-    if record.conditioning.get("contact", "none") != "none":
-        return 0.0
-    d = np.asarray(record.displacement_m, dtype=np.float64)
-    f = np.asarray(record.force_N, dtype=np.float64)
-    peak = float(np.max(f)) if f.size else 0.0
-    if f.size < 3 or not peak > 0.0:
-        return float(d[0]) if d.size else 0.0
-    noise = 1.4826 * float(np.median(np.abs(np.diff(f, 2)))) / math.sqrt(6.0)
-    threshold = max(OFFSET_NOISE_SIGMA * noise, 0.01 * peak)
-    loading = int(np.argmax(d)) + 1  # up to the deepest point
-    above = np.flatnonzero(f[:loading] > threshold)
-    if not above.size:
-        return float(d[int(np.argmax(f))])
-    first = int(above[0])
-    upto = np.flatnonzero(f[first:loading] > 4.0 * threshold)
-    last = first + (int(upto[0]) if upto.size else loading - 1 - first)
-    last = max(last, min(first + 1, loading - 1))
-    pick = slice(first, last + 1)
-    guess = float(d[first])
-    if last > first and np.ptp(d[pick]) > 0.0:
-        slope, intercept = np.polyfit(d[pick], f[pick], 1)
-        if slope > 0.0:
-            guess = float(-intercept / slope)
-    if first > 0:
-        return float(np.clip(guess, d[first - 1], d[first]))
-    return min(guess, float(d[0]))
-
-
-def _offset_box(study: Study) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(start, lower, upper) of each record's depth offset (m), each shape (records,):
-    ``[fit.start]``/``[fit.bounds]`` ``depth_offset_m`` where given, else from the record
-    (:func:`depth_offset_start_m`, :data:`OFFSET_BOUND_SHARES`); the start clipped into the
-    bounds."""
-    settings = study.fit
-    starts, lowers, uppers = [], [], []
-    below, above = OFFSET_BOUND_SHARES
-    for record in study.data:
-        d = np.asarray(record.displacement_m, dtype=np.float64)
-        shallow, deep = float(np.min(d)), float(np.max(d))
-        span = deep - shallow
-        low, high = settings.bounds.get(DEPTH_OFFSET, (shallow - below * span, deep - above * span))
-        start = settings.start.get(DEPTH_OFFSET)
-        start = depth_offset_start_m(record) if start is None else float(start)
-        start = min(max(start, low), high)
-        if not start < deep:
-            key = "start" if DEPTH_OFFSET in settings.start else "bounds"
-            raise InputError(
-                f"{record.file}: a depth offset of {start:g} m leaves the record out of "
-                f"contact (its deepest recorded depth is {deep:g} m): give a start below it",
-                path=study.path,
-                key=f"fit.{key}.{DEPTH_OFFSET}",
-                value=start,
-            )
-        starts.append(start)
-        lowers.append(low)
-        uppers.append(high)
-    return np.array(starts), np.array(lowers), np.array(uppers)
-
-
-def _shifted(record: DataRecord, offset_m: float) -> DataRecord:
-    """The record with its depths counted from a depth offset (``d - d0``)."""
-    if offset_m == 0.0:
-        return record
-    samples = dataclasses.replace(record.record, displacement_m=record.displacement_m - offset_m)
-    return dataclasses.replace(record, record=samples)
-
-
-@dataclass(frozen=True)
-class _RunRequest:
-    """FE runs one fit asks of a :class:`~warptissue.fit._forward.FitMeeting`: one problem
-    per load path ``(times_s or None, depths_m)``, with the sensitivities ``names``."""
-
-    problems: list[Any]
-    grids: list[tuple[np.ndarray | None, np.ndarray]]
-    names: tuple[str, ...]
-    options: Any
-    device: Any
-
-
-class _SharedRuns:
-    """Solves the requests of fits that meet (:class:`~warptissue.fit._forward.FitMeeting`):
-    the requests that share their sensitivities, Newton settings, device and formulation
-    are solved in one batched FE run; the packed assembler of the last few sets of meshes is
-    kept (a fit's trial points change the materials, not the meshes)."""
-
-    KEPT = 4
-
-    def __init__(self) -> None:
-        self._assemblers: dict[tuple, Any] = {}
-
-    def __call__(self, batch: dict[int, _RunRequest]) -> dict[int, Any]:
-        groups: dict[tuple, list[int]] = {}
-        for fit, request in sorted(batch.items()):  # in fit order: one assembler per set
-            key = (
-                request.names,
-                request.options,
-                str(request.device),
-                request.problems[0].formulation,
-            )
-            groups.setdefault(key, []).append(fit)
-        answers: dict[int, Any] = {}
-        for key, fits in groups.items():
-            problems = [problem for fit in fits for problem in batch[fit].problems]
-            grids = [grid for fit in fits for grid in batch[fit].grids]
-            meshes = (key, tuple(id(problem.mesh) for problem in problems))
-            try:
-                if meshes not in self._assemblers:
-                    if len(self._assemblers) >= self.KEPT:
-                        self._assemblers.pop(next(iter(self._assemblers)))
-                    self._assemblers[meshes] = fem.batch_assembler(
-                        problems, device=batch[fits[0]].device
-                    )
-                assembler = self._assemblers[meshes]
-                results = fem.simulate_indentation_batch(
-                    problems,
-                    [depths for _, depths in grids],
-                    options=batch[fits[0]].options,
-                    sensitivities=key[0],
-                    assembler=assembler,
-                    times_s=[times for times, _ in grids],
-                )
-            except Exception as exc:  # every fit of the group gets it
-                answers.update(dict.fromkeys(fits, exc))
-                continue
-            start = 0
-            for fit in fits:
-                count = len(batch[fit].grids)
-                answers[fit] = results[start : start + count]
-                start += count
-        return answers
 
 
 def fit_indentation(
@@ -1189,7 +563,7 @@ def fit_indentation(
         raise InputError("give a study or a non-empty sequence of studies", key="study")
     outcomes = run_fits(
         len(studies),
-        _SharedRuns(),
+        SharedRuns(),
         lambda k, meeting: _fit_one(
             studies[k], device=device, progress=False, meeting=(meeting, k), **options
         ),
@@ -1239,8 +613,10 @@ def _fit_one(
     offset_start: np.ndarray | None = None
     offset_lower = offset_upper = np.zeros(0)
     if fit_offsets:
-        offset_start, offset_lower, offset_upper = _offset_box(study)
-        start = start_values_from_record(study, _shifted(study.data[0], float(offset_start[0])))
+        offset_start, offset_lower, offset_upper = offset_box(study)
+        start = start_values_from_record(
+            study, shifted_record(study.data[0], float(offset_start[0]))
+        )
     else:
         start = start_values_from_record(study)
     material = study.material
@@ -1274,7 +650,7 @@ def _fit_one(
         free = tuple(free[j] for j in keep)
         all_lower, all_upper = all_lower[keep], all_upper[keep]
 
-    model = _forward_model(
+    model = forward_model(
         study, material, free, device=device, progress=progress, offset_start=offset_start
     )
     model.meeting = meeting
@@ -1442,8 +818,8 @@ def _fit_one(
 
 def _result_from(
     engine_result: FitResult | None,
-    best: _Evaluation,
-    model: _ForwardModel,
+    best: Evaluation,
+    model: ForwardModel,
     names: tuple[str, ...],
     units: tuple[str, ...],
     method: str,
@@ -1505,7 +881,7 @@ def _fitted_study(study: Study, material: Any) -> Study:
     return fitted
 
 
-def _record_curves(model: _ForwardModel, best: _Evaluation) -> tuple[RecordCurve, ...]:
+def _record_curves(model: ForwardModel, best: Evaluation) -> tuple[RecordCurve, ...]:
     curves = []
     for k, record in enumerate(model.records):
         measured = model.measured[k]
