@@ -109,7 +109,7 @@ def run(
     *,
     steps: int,
     sequential_limit: int,
-    elimination: bool = True,
+    elimination: bool | str = "auto",
 ) -> dict:
     """One row: K problems batched, and the first ``sequential_limit`` of them alone."""
     import warp as wp
@@ -211,7 +211,7 @@ def fit_studies(
     size_near_m: float,
     mesher: str,
     device: str,
-    elimination: bool,
+    elimination: bool | str,
 ) -> list[Any]:
     """One study per synthetic curve in ``folder``: the benchmark's block (its sizes; the
     near size at most the probe radius, as a study needs) and punch, its curve as the
@@ -245,7 +245,7 @@ def fit_studies(
             bulk_modulus_Pa=BULK_MODULUS_PA,
             device=device,
             tolerance=NEWTON_TOLERANCE,
-            elimination=str(elimination).lower(),
+            elimination=json.dumps(elimination),
         )
         (here / "study.toml").write_text(text, encoding="utf-8")
         studies.append(load_study(here / "study.toml"))
@@ -261,7 +261,7 @@ def run_fits(
     sequential_limit: int,
     size_near_m: float,
     mesher: str,
-    elimination: bool = True,
+    elimination: bool | str = "auto",
 ) -> dict:
     """One row of fits: K studies whose records are synthetic curves (made by the FE at each
     problem's C10 on the benchmark's mesh) fitted for C10 from 0.8 times it, together
@@ -375,9 +375,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--elimination",
-        choices=("on", "off"),
-        default="on",
-        help="the Newton solver's nonlinear elimination (NewtonOptions.nonlinear_elimination)",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="the Newton solver's nonlinear elimination (NewtonOptions.nonlinear_elimination; "
+        "auto: its measured rule)",
     )
     parser.add_argument("--label", default="", help="name of this machine in the tables")
     parser.add_argument("--out", type=Path, help="write the results as JSON here")
@@ -409,7 +410,7 @@ def main(argv: list[str] | None = None) -> int:
             options = {
                 "steps": args.steps,
                 "sequential_limit": args.sequential_limit,
-                "elimination": args.elimination == "on",
+                "elimination": {"auto": "auto", "on": True, "off": False}[args.elimination],
             }
             if kind == "fits":
                 options.update(size_near_m=size_near_m, mesher=args.mesher)
