@@ -67,6 +67,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -299,6 +300,313 @@ def covariance_from_jacobian(
     return covariance, errors, correlation
 
 
+@dataclass(frozen=True)
+class _Problem:
+    """The validated input of :func:`least_squares`."""
+
+    x0: np.ndarray
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+    scale_vector: np.ndarray | None
+    damping: _MarquardtDamping | _SelfAdaptingDamping
+
+
+def _validated_problem(
+    x0: Sequence[float] | np.ndarray,
+    *,
+    bounds: tuple[Any, Any],
+    method: str,
+    x_scale: Sequence[float] | np.ndarray | float | None,
+    max_iterations: int,
+    tolerances: Mapping[str, float],
+    parameter_names: Sequence[str] | None,
+    parameter_units: Sequence[str] | None,
+    options: Mapping[str, float] | None,
+) -> _Problem:
+    """The checked start, names, units, bounds, scale and damping rule (InputError if not)."""
+    if method not in METHODS:
+        raise InputError(f"method must be one of {METHODS}", value=method)
+    x = np.asarray(x0, dtype=np.float64).reshape(-1).copy()
+    n = x.size
+    if n == 0 or not np.all(np.isfinite(x)):
+        raise InputError("x0 must be a non-empty array of finite numbers", value=x.tolist())
+    names = _validate_names(parameter_names, n, "x", "parameter_names")
+    units = (
+        ("",) * n
+        if parameter_units is None
+        else _validate_names(parameter_units, n, "", "parameter_units")
+    )
+    if len(bounds) != 2:
+        raise InputError("bounds must be a pair (lower, upper)", value=bounds)
+    lower = _as_vector("lower bound", bounds[0], n)
+    upper = _as_vector("upper bound", bounds[1], n)
+    if np.any(np.isnan(lower)) or np.any(np.isnan(upper)) or np.any(lower >= upper):
+        raise InputError(
+            "each lower bound must be below its upper bound",
+            value=(lower.tolist(), upper.tolist()),
+        )
+    outside = np.flatnonzero((x < lower) | (x > upper))
+    if outside.size:
+        j = int(outside[0])
+        raise InputError(
+            f"x0 is outside the bounds [{lower[j]}, {upper[j]}] for {names[j]}",
+            value=float(x[j]),
+        )
+    scale_vector = None
+    if x_scale is not None:
+        scale_vector = _as_vector("x_scale", x_scale, n)
+        if not np.all(np.isfinite(scale_vector) & (scale_vector > 0.0)):
+            raise InputError("x_scale must be positive and finite", value=scale_vector.tolist())
+    if int(max_iterations) < 1:
+        raise InputError("max_iterations must be at least 1", value=max_iterations)
+    for tol_name, tol in tolerances.items():
+        if not (tol >= 0.0 and math.isfinite(tol)):
+            raise InputError(f"{tol_name} must be a finite number >= 0", value=tol)
+    merged = dict(_OPTION_DEFAULTS[method])
+    for key, value in (options or {}).items():
+        if key not in merged:
+            raise InputError(
+                f"unknown option for method {method!r}; known: {sorted(merged)}", value=key
+            )
+        merged[key] = float(value)
+    damping = (
+        _MarquardtDamping(merged, scale_vector)
+        if method == "lm"
+        else _SelfAdaptingDamping(merged, scale_vector)
+    )
+    return _Problem(x, names, units, lower, upper, scale_vector, damping)
+
+
+class _Jacobians:
+    """The Jacobian at a point (``jac``, or finite differences), counting evaluations."""
+
+    def __init__(
+        self,
+        jac: Callable[[np.ndarray], np.ndarray] | None,
+        evaluate: _Evaluator,
+        problem: _Problem,
+    ) -> None:
+        self.jac = jac
+        self.evaluate = evaluate
+        self.lower, self.upper = problem.lower, problem.upper
+        n = problem.x0.size
+        self.typical = np.ones(n) if problem.scale_vector is None else problem.scale_vector
+        self.njev = 0
+
+    def __call__(self, point: np.ndarray, point_residuals: np.ndarray) -> np.ndarray:
+        self.njev += 1
+        n = point.size
+        if self.jac is None:
+            return _finite_difference_jacobian(
+                self.evaluate, point, point_residuals, self.lower, self.upper, self.typical
+            )
+        try:
+            matrix = np.asarray(self.jac(point.copy()), dtype=np.float64)
+        except RejectStep as exc:
+            raise ConvergenceError(f"the Jacobian was refused at x = {point.tolist()}") from exc
+        if matrix.shape != (point_residuals.size, n):
+            raise InputError(
+                f"jac must return shape ({point_residuals.size}, {n})", value=matrix.shape
+            )
+        if not np.all(np.isfinite(matrix)):
+            raise ConvergenceError(f"the Jacobian is not finite at x = {point.tolist()}")
+        return matrix
+
+
+@dataclass
+class _Iterate:
+    """The iteration's state: the current point, what is known there, the steps so far."""
+
+    x: np.ndarray
+    residuals: np.ndarray
+    cost: float
+    jacobian: np.ndarray
+    jacobian_is_current: bool = True
+    history: list[IterationRecord] = field(default_factory=list)
+    iteration: int = 0
+    status: int | None = None
+
+
+def _step_status(
+    *,
+    accepted: bool,
+    small_step: bool,
+    previous_cost: float,
+    cost: float,
+    ratio: float | None,
+    ftol: float,
+    stop: bool,
+    iteration: int,
+    max_iterations: int,
+) -> int | None:
+    """The termination status after a trial step (STATUS_MESSAGES' keys), or None to go on."""
+    status = None
+    if accepted:
+        small_reduction = (previous_cost - cost) <= ftol * previous_cost and (ratio > 0.25)
+        if small_reduction and small_step:
+            status = 4
+        elif small_reduction:
+            status = 2
+        elif small_step:
+            status = 3
+    elif small_step:
+        status = 3
+    if status is None and stop:
+        status = -1
+    if status is None and not accepted and iteration >= max_iterations:
+        status = 0
+    return status
+
+
+def _iterate(
+    state: _Iterate,
+    problem: _Problem,
+    *,
+    evaluate: _Evaluator,
+    jacobian_at: _Jacobians,
+    max_iterations: int,
+    ftol: float,
+    xtol: float,
+    gtol: float,
+    callback: Callable[[IterationRecord], bool | None] | None,
+    bar: Any,
+) -> None:
+    """The damped Gauss-Newton iteration (module notes) on ``state`` until it has a status."""
+    damping, lower, upper = problem.damping, problem.lower, problem.upper
+    n = state.x.size
+    while state.status is None:
+        x, residuals, cost, jacobian = state.x, state.residuals, state.cost, state.jacobian
+        gradient = jacobian.T @ residuals
+        scale = damping.scale(jacobian)
+        at_lower = (x <= lower) & (gradient > 0.0)
+        at_upper = (x >= upper) & (gradient < 0.0)
+        free = ~(at_lower | at_upper)
+        gradient_norm = damping.gradient_norm(jacobian, residuals, gradient, free)
+        if gradient_norm <= gtol:
+            state.status = 1
+            break
+        if state.iteration >= max_iterations:
+            state.status = 0
+            break
+        scaled_jacobian = jacobian[:, free] / scale[free]
+        u, singular, vt = np.linalg.svd(scaled_jacobian, full_matrices=False)
+        projected_residuals = u.T @ residuals
+        residual_norm = math.sqrt(2.0 * cost)
+        scaled_gradient_norm = float(np.linalg.norm(scaled_jacobian.T @ residuals))
+        x_norm = float(np.linalg.norm(scale * x))
+        while True:
+            lam = damping.value(residual_norm, scaled_gradient_norm)
+            if not (lam < _DAMPING_LIMIT):
+                state.status = -2
+                break
+            z = -(vt.T @ (singular * projected_residuals / (singular**2 + lam)))
+            step = np.zeros(n)
+            step[free] = z / scale[free]
+            trial = np.clip(x + step, lower, upper)
+            step = trial - x
+            step_norm = float(np.linalg.norm(scale * step))
+            predicted = -(2.0 * float(gradient @ step) + float(np.sum((jacobian @ step) ** 2)))
+            state.iteration += 1
+            trial_residuals = evaluate(trial) if predicted > 0.0 else None
+            if trial_residuals is None:
+                trial_cost = None
+                ratio = None
+            else:
+                trial_cost = 0.5 * float(trial_residuals @ trial_residuals)
+                ratio = (cost - trial_cost) / (0.5 * predicted)
+            damping.update(ratio if predicted > 0.0 else -1.0)
+            accepted = ratio is not None and ratio > damping.p0
+            if accepted:
+                state.x, state.residuals, state.cost = trial, trial_residuals, trial_cost
+                state.jacobian_is_current = False
+            record = IterationRecord(
+                iteration=state.iteration,
+                x=state.x.copy(),
+                cost=state.cost,
+                trial_cost=trial_cost,
+                step_norm=step_norm,
+                damping=lam,
+                gradient_norm=gradient_norm,
+                ratio=ratio,
+                accepted=accepted,
+            )
+            state.history.append(record)
+            bar.update(1)
+            bar.set_postfix(cost=f"{state.cost:.4g}", damping=f"{lam:.2g}", refresh=False)
+            try:
+                stop = bool(callback(record)) if callback is not None else False
+            except StopIteration:
+                stop = True
+            state.status = _step_status(
+                accepted=accepted,
+                small_step=step_norm <= xtol * (xtol + x_norm),
+                previous_cost=cost,
+                cost=state.cost,
+                ratio=ratio,
+                ftol=ftol,
+                stop=stop,
+                iteration=state.iteration,
+                max_iterations=max_iterations,
+            )
+            if state.status is not None or accepted:
+                break
+        if state.status is None:
+            try:
+                state.jacobian = jacobian_at(state.x, state.residuals)
+                state.jacobian_is_current = True
+            except ConvergenceError:
+                state.status = -3
+
+
+def _result(
+    state: _Iterate,
+    problem: _Problem,
+    *,
+    evaluate: _Evaluator,
+    jacobian_at: _Jacobians,
+    method: str,
+) -> FitResult:
+    """The :class:`FitResult` of a finished iteration: the Jacobian at its point (where not
+    yet evaluated) for the covariance, the status message and the counts."""
+    if not state.jacobian_is_current and state.status != -3:
+        try:
+            state.jacobian = jacobian_at(state.x, state.residuals)
+            state.jacobian_is_current = True
+        except ConvergenceError:
+            state.status = -3
+    covariance, errors, correlation = (
+        covariance_from_jacobian(state.jacobian, state.cost)
+        if state.jacobian_is_current
+        else (None, None, None)
+    )
+    status = state.status
+    return FitResult(
+        x=state.x,
+        parameter_names=problem.names,
+        parameter_units=problem.units,
+        cost=state.cost,
+        residuals=state.residuals,
+        jacobian=state.jacobian,
+        success=status > 0,
+        status=status,
+        message=STATUS_MESSAGES[status],
+        iterations=state.iteration,
+        nfev=evaluate.nfev,
+        njev=jacobian_at.njev,
+        covariance=covariance,
+        standard_errors=errors,
+        correlation=correlation,
+        r_squared=None,
+        rmse=float(np.sqrt(np.mean(state.residuals**2))),
+        history=state.history,
+        method=method,
+        lower_bounds=problem.lower,
+        upper_bounds=problem.upper,
+    )
+
+
 def least_squares(
     fun: Callable[[np.ndarray], np.ndarray],
     x0: Sequence[float] | np.ndarray,
@@ -355,90 +663,26 @@ def least_squares(
             Jacobian, or finite differences refused on both sides). Later such a failure
             ends the fit with status -3 and the best point so far.
     """
-    if method not in METHODS:
-        raise InputError(f"method must be one of {METHODS}", value=method)
-    x = np.asarray(x0, dtype=np.float64).reshape(-1).copy()
-    n = x.size
-    if n == 0 or not np.all(np.isfinite(x)):
-        raise InputError("x0 must be a non-empty array of finite numbers", value=x.tolist())
-    names = _validate_names(parameter_names, n, "x", "parameter_names")
-    units = (
-        ("",) * n
-        if parameter_units is None
-        else _validate_names(parameter_units, n, "", "parameter_units")
+    problem = _validated_problem(
+        x0,
+        bounds=bounds,
+        method=method,
+        x_scale=x_scale,
+        max_iterations=max_iterations,
+        tolerances={"ftol": ftol, "xtol": xtol, "gtol": gtol},
+        parameter_names=parameter_names,
+        parameter_units=parameter_units,
+        options=options,
     )
-    if len(bounds) != 2:
-        raise InputError("bounds must be a pair (lower, upper)", value=bounds)
-    lower = _as_vector("lower bound", bounds[0], n)
-    upper = _as_vector("upper bound", bounds[1], n)
-    if np.any(np.isnan(lower)) or np.any(np.isnan(upper)) or np.any(lower >= upper):
-        raise InputError(
-            "each lower bound must be below its upper bound",
-            value=(lower.tolist(), upper.tolist()),
-        )
-    outside = np.flatnonzero((x < lower) | (x > upper))
-    if outside.size:
-        j = int(outside[0])
-        raise InputError(
-            f"x0 is outside the bounds [{lower[j]}, {upper[j]}] for {names[j]}",
-            value=float(x[j]),
-        )
-    scale_vector = None
-    if x_scale is not None:
-        scale_vector = _as_vector("x_scale", x_scale, n)
-        if not np.all(np.isfinite(scale_vector) & (scale_vector > 0.0)):
-            raise InputError("x_scale must be positive and finite", value=scale_vector.tolist())
-    if int(max_iterations) < 1:
-        raise InputError("max_iterations must be at least 1", value=max_iterations)
-    for tol_name, tol in (("ftol", ftol), ("xtol", xtol), ("gtol", gtol)):
-        if not (tol >= 0.0 and math.isfinite(tol)):
-            raise InputError(f"{tol_name} must be a finite number >= 0", value=tol)
-    merged = dict(_OPTION_DEFAULTS[method])
-    for key, value in (options or {}).items():
-        if key not in merged:
-            raise InputError(
-                f"unknown option for method {method!r}; known: {sorted(merged)}", value=key
-            )
-        merged[key] = float(value)
-    damping = (
-        _MarquardtDamping(merged, scale_vector)
-        if method == "lm"
-        else _SelfAdaptingDamping(merged, scale_vector)
-    )
-
+    x = problem.x0
     evaluate = _Evaluator(fun, None)
     residuals = evaluate(x)
     if residuals is None:
         raise InputError("the model is not defined (refused or non-finite) at x0", value=x.tolist())
     evaluate.residual_count = residuals.size
-    typical = np.ones(n) if scale_vector is None else scale_vector
-    njev = 0
-
-    def jacobian_at(point: np.ndarray, point_residuals: np.ndarray) -> np.ndarray:
-        nonlocal njev
-        njev += 1
-        if jac is None:
-            return _finite_difference_jacobian(
-                evaluate, point, point_residuals, lower, upper, typical
-            )
-        try:
-            matrix = np.asarray(jac(point.copy()), dtype=np.float64)
-        except RejectStep as exc:
-            raise ConvergenceError(f"the Jacobian was refused at x = {point.tolist()}") from exc
-        if matrix.shape != (point_residuals.size, n):
-            raise InputError(
-                f"jac must return shape ({point_residuals.size}, {n})", value=matrix.shape
-            )
-        if not np.all(np.isfinite(matrix)):
-            raise ConvergenceError(f"the Jacobian is not finite at x = {point.tolist()}")
-        return matrix
-
+    jacobian_at = _Jacobians(jac, evaluate, problem)
     cost = 0.5 * float(residuals @ residuals)
-    jacobian = jacobian_at(x, residuals)
-    jacobian_is_current = True
-    history: list[IterationRecord] = []
-    iteration = 0
-    status: int | None = None
+    state = _Iterate(x=x, residuals=residuals, cost=cost, jacobian=jacobian_at(x, residuals))
 
     from tqdm.auto import tqdm
 
@@ -450,129 +694,21 @@ def least_squares(
         leave=False,
     )
     try:
-        while status is None:
-            gradient = jacobian.T @ residuals
-            scale = damping.scale(jacobian)
-            at_lower = (x <= lower) & (gradient > 0.0)
-            at_upper = (x >= upper) & (gradient < 0.0)
-            free = ~(at_lower | at_upper)
-            gradient_norm = damping.gradient_norm(jacobian, residuals, gradient, free)
-            if gradient_norm <= gtol:
-                status = 1
-                break
-            if iteration >= max_iterations:
-                status = 0
-                break
-            scaled_jacobian = jacobian[:, free] / scale[free]
-            u, singular, vt = np.linalg.svd(scaled_jacobian, full_matrices=False)
-            projected_residuals = u.T @ residuals
-            residual_norm = math.sqrt(2.0 * cost)
-            scaled_gradient_norm = float(np.linalg.norm(scaled_jacobian.T @ residuals))
-            x_norm = float(np.linalg.norm(scale * x))
-            while True:
-                lam = damping.value(residual_norm, scaled_gradient_norm)
-                if not (lam < _DAMPING_LIMIT):
-                    status = -2
-                    break
-                z = -(vt.T @ (singular * projected_residuals / (singular**2 + lam)))
-                step = np.zeros(n)
-                step[free] = z / scale[free]
-                trial = np.clip(x + step, lower, upper)
-                step = trial - x
-                step_norm = float(np.linalg.norm(scale * step))
-                predicted = -(2.0 * float(gradient @ step) + float(np.sum((jacobian @ step) ** 2)))
-                iteration += 1
-                trial_residuals = evaluate(trial) if predicted > 0.0 else None
-                if trial_residuals is None:
-                    trial_cost = None
-                    ratio = None
-                else:
-                    trial_cost = 0.5 * float(trial_residuals @ trial_residuals)
-                    ratio = (cost - trial_cost) / (0.5 * predicted)
-                damping.update(ratio if predicted > 0.0 else -1.0)
-                accepted = ratio is not None and ratio > damping.p0
-                small_step = step_norm <= xtol * (xtol + x_norm)
-                previous_cost = cost
-                if accepted:
-                    x, residuals, cost = trial, trial_residuals, trial_cost
-                    jacobian_is_current = False
-                record = IterationRecord(
-                    iteration=iteration,
-                    x=x.copy(),
-                    cost=cost,
-                    trial_cost=trial_cost,
-                    step_norm=step_norm,
-                    damping=lam,
-                    gradient_norm=gradient_norm,
-                    ratio=ratio,
-                    accepted=accepted,
-                )
-                history.append(record)
-                bar.update(1)
-                bar.set_postfix(cost=f"{cost:.4g}", damping=f"{lam:.2g}", refresh=False)
-                try:
-                    stop = bool(callback(record)) if callback is not None else False
-                except StopIteration:
-                    stop = True
-                if accepted:
-                    small_reduction = (previous_cost - cost) <= ftol * previous_cost and (
-                        ratio > 0.25
-                    )
-                    if small_reduction and small_step:
-                        status = 4
-                    elif small_reduction:
-                        status = 2
-                    elif small_step:
-                        status = 3
-                elif small_step:
-                    status = 3
-                if status is None and stop:
-                    status = -1
-                if status is None and not accepted and iteration >= max_iterations:
-                    status = 0
-                if status is not None or accepted:
-                    break
-            if status is None:
-                try:
-                    jacobian = jacobian_at(x, residuals)
-                    jacobian_is_current = True
-                except ConvergenceError:
-                    status = -3
+        _iterate(
+            state,
+            problem,
+            evaluate=evaluate,
+            jacobian_at=jacobian_at,
+            max_iterations=max_iterations,
+            ftol=ftol,
+            xtol=xtol,
+            gtol=gtol,
+            callback=callback,
+            bar=bar,
+        )
     finally:
         bar.close()
-
-    if not jacobian_is_current and status != -3:
-        try:
-            jacobian = jacobian_at(x, residuals)
-            jacobian_is_current = True
-        except ConvergenceError:
-            status = -3
-    covariance, errors, correlation = (
-        covariance_from_jacobian(jacobian, cost) if jacobian_is_current else (None, None, None)
-    )
-    return FitResult(
-        x=x,
-        parameter_names=names,
-        parameter_units=units,
-        cost=cost,
-        residuals=residuals,
-        jacobian=jacobian,
-        success=status > 0,
-        status=status,
-        message=STATUS_MESSAGES[status],
-        iterations=iteration,
-        nfev=evaluate.nfev,
-        njev=njev,
-        covariance=covariance,
-        standard_errors=errors,
-        correlation=correlation,
-        r_squared=None,
-        rmse=float(np.sqrt(np.mean(residuals**2))),
-        history=history,
-        method=method,
-        lower_bounds=lower,
-        upper_bounds=upper,
-    )
+    return _result(state, problem, evaluate=evaluate, jacobian_at=jacobian_at, method=method)
 
 
 def fit_curve(
