@@ -65,3 +65,25 @@ def test_a_container_limit_caps_the_available_memory(tmp_path):
          "memory/memory.usage_in_bytes": "17741119488"},
     )  # fmt: skip
     assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=v1_unlimited) == machine
+
+
+def test_a_silenced_start_prints_nothing_and_gives_standard_error_back(tmp_path):
+    """``--quiet`` on a machine without an NVIDIA driver: Warp's native start-up note
+    ("Could not find or load the NVIDIA CUDA driver") does not reach standard error, and
+    what is written there afterwards does. In a fresh process (Warp starts once)."""
+    import subprocess
+    import sys
+
+    script = (
+        "import os\n"
+        "from warptissue.device import quiet_warp\n"
+        "quiet_warp(silence_start=True)\n"
+        "import warp as wp\n"
+        "wp.init()\n"
+        "os.write(2, b'after')\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=120
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stderr == "after"

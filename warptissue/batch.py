@@ -471,7 +471,7 @@ def run_study_task(task: _Task) -> StudyOutcome:
     caught: list[str] = []
     try:
         with _recorded(caught):
-            quiet_warp()
+            quiet_warp(silence_start=True)
             study = load_study(task.path)
             kind = _kind(study)
             outcome = replace(outcome, kind=kind)
@@ -520,7 +520,7 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         started = time.perf_counter()
         try:
             with _recorded(notes[index]):
-                quiet_warp()
+                quiet_warp(silence_start=True)
                 study = load_study(task.path)
                 outcomes[index] = replace(outcomes[index], kind=_kind(study))
                 device = _worker_device(task.device, study) if task.on_dask else task.device
@@ -689,7 +689,7 @@ def worker_gpus(device: str | None) -> list[str]:
     visible = os.environ.get(GPU_PIN_ENV)
     if visible is not None:
         return [gpu.strip() for gpu in visible.split(",") if gpu.strip()]
-    wp.init()
+    quiet_warp(silence_start=True)  # counting GPUs prints nothing where there are none
     return [str(index) for index in range(wp.get_cuda_device_count())]
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -48,10 +49,17 @@ def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
         raise DeviceError(f"unknown device {device!r}; available: {available}") from exc
 
 
-def quiet_warp() -> None:
+def quiet_warp(*, silence_start: bool = False) -> None:
     """Keep Warp's start-up and module-load notes off stdout (so ``--json`` prints only JSON).
 
     Warp 1.19 replaced ``wp.config.quiet`` with log levels; both are handled.
+
+    Args:
+        silence_start: Also start Warp now with the process's standard error closed to it:
+            on a machine without an NVIDIA driver Warp's native start-up prints "Warp CUDA
+            warning: Could not find or load the NVIDIA CUDA driver" to standard error
+            whatever the log level, which ``--quiet`` must not show (a later request for a
+            CUDA device still fails with its own one-line error).
     """
     import warp as wp
 
@@ -59,6 +67,26 @@ def quiet_warp() -> None:
         wp.config.log_level = wp.LOG_WARNING
     else:
         wp.config.quiet = True
+    if silence_start:
+        _init_without_stderr()
+
+
+def _init_without_stderr() -> None:
+    """``wp.init()`` with file descriptor 2 pointed at the null device (Warp's native code
+    writes there directly), restored afterwards."""
+    import warp as wp
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            try:
+                wp.init()
+            finally:
+                os.dup2(saved, 2)
+    finally:
+        os.close(saved)
 
 
 def available_host_memory_bytes(
