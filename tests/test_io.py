@@ -44,6 +44,14 @@ def test_csv_round_trip_and_sidecar(tmp_path):
             ":3, column 'time_s': time_s must strictly increase",
         ),
         ("time_s,displacement_m,force_N\n0,0\n", ":2: expected 3 fields"),
+        (
+            "time_s,displacement_m,force_N\n0,0,0\n1,1e308,0\n",
+            ":3, column 'displacement_m': beyond any measurement",
+        ),
+        (
+            "time_s,displacement_m,force_N\n0,0,0\n1," + "1" * 200_000 + ",0\n",
+            ":3: not a CSV table of numbers: field larger than field limit",
+        ),
     ],
 )
 def test_bad_csv_names_file_line_and_column(tmp_path, text, fragment):

@@ -208,6 +208,11 @@ def _text_lines(path: Path) -> list[str]:
     return text.splitlines(keepends=True)
 
 
+LARGEST_VALUE = 1e150
+"""The largest magnitude an experiment file's value may have: its square (a least-squares
+cost, a norm) must stay finite in float64 (about 1.8e308)."""
+
+
 def read_experiment_csv(
     path: str | Path,
     *,
@@ -232,10 +237,15 @@ def read_experiment_csv(
     csv_path = Path(path)
     if not csv_path.is_file():
         raise InputError("experiment file not found", path=csv_path)
+    reader = csv.reader(_text_lines(csv_path))
     try:
-        rows = list(csv.reader(_text_lines(csv_path)))
+        rows = list(reader)
     except OSError as exc:
         raise InputError(f"cannot read file: {exc.strerror}", path=csv_path) from exc
+    except csv.Error as exc:  # e.g. a field longer than the csv module's limit (128 KiB)
+        raise InputError(
+            f"not a CSV table of numbers: {exc}", path=csv_path, line=reader.line_num
+        ) from None
     rows = [
         (number, row)
         for number, row in enumerate(rows, start=1)
@@ -279,6 +289,15 @@ def read_experiment_csv(
             if not math.isfinite(number_value):
                 raise InputError(
                     "not a finite number", path=csv_path, line=number, column=names[j], value=text
+                )
+            if abs(number_value) > LARGEST_VALUE:
+                raise InputError(
+                    f"beyond any measurement (|value| > {LARGEST_VALUE:g}, where squares and "
+                    "sums of squares overflow): check the column's unit",
+                    path=csv_path,
+                    line=number,
+                    column=names[j],
+                    value=text,
                 )
             values[index, j] = number_value
     columns = {name: values[:, j].copy() for j, name in enumerate(names)}
