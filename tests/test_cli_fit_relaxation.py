@@ -11,7 +11,7 @@ from warptissue.cli import main
 from warptissue.cli.fit_relaxation import parse_model
 from warptissue.errors import InputError
 from warptissue.fit.punch import flat_punch_force_N
-from warptissue.io import write_csv
+from warptissue.io import read_experiment_csv, write_csv
 from warptissue.viscoelastic import PronySeries
 
 
@@ -315,3 +315,23 @@ def test_punch_modulus_on_a_ramp_and_hold_warns_about_the_hold(tmp_path, capsys)
     assert "hold the deepest point" in capsys.readouterr().err
     assert main([*argv, "--keep-depth", "1.8mm"]) == 0
     assert "hold the deepest point" not in capsys.readouterr().err
+
+
+def test_punch_modulus_refuses_a_force_of_the_other_sign(tmp_path, capsys):
+    """A negative force against a positive depth was fitted as its magnitude (exit 0, the
+    modulus of the flipped curve, R^2 = 1): opposite signs are refused in one line, exit 2;
+    both negative (a rig that records pushing so) fit as both positive."""
+    path = _punch_csv(tmp_path / "probe.csv", deepest_m=1e-3, radius_m=1e-3)
+    columns = read_experiment_csv(path, required=(), monotonic=None).columns
+    flipped = tmp_path / "flipped.csv"
+    write_csv(flipped, {**columns, "force_N": -columns["force_N"]})
+    command = ["fit", "punch-modulus", "--radius-m", "1e-3", "--poissons-ratio", "0.5"]
+    assert main([*command, str(flipped), "--out", str(tmp_path / "f")]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "opposite signs" in error[0] and "flipped.csv" in error[0]
+    assert not (tmp_path / "f").exists()
+    both = tmp_path / "both.csv"
+    write_csv(both, {key: -values for key, values in columns.items()})
+    assert main([*command, str(both), "--out", str(tmp_path / "b"), "--json"]) == 0
+    fitted = json.loads(capsys.readouterr().out)["fit"]["parameters"]["youngs_modulus_Pa"]
+    assert fitted["value"] == pytest.approx(3e4, rel=1e-6)

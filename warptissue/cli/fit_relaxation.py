@@ -491,11 +491,15 @@ def run_punch_modulus(args: argparse.Namespace) -> int:
     from warptissue.report import write_fit_outputs
 
     record = _read(args.data, args, required=("displacement_m", "force_N"))
+    # The signs as recorded (opposite signs are refused there), then their magnitudes: a
+    # rig that records pushing as negative force and depth fits as one that records both
+    # as positive.
+    data_warnings = check_indentation_record(
+        record.displacement_m, record.force_N, path=args.data, conditioned=record.conditioned
+    )
     depth = np.abs(record.displacement_m)
     force = np.abs(record.force_N)
-    data_warnings = check_indentation_record(
-        depth, force, path=args.data, conditioned=record.conditioned
-    ) + elastic_curve_warnings(depth, force)
+    data_warnings += elastic_curve_warnings(depth, force)
     loaded = depth > 0.0
     if np.count_nonzero(loaded) < 2:
         raise InputError(
