@@ -517,3 +517,61 @@ def test_local_workers_are_pinned_to_the_gpus_in_turn(tmp_path, monkeypatch):
         client.close()
         cluster.close()
     assert sorted(pins.values()) == ["7", "7", "7"]
+
+
+@pytest.fixture
+def silent_port():
+    """A loopback port that accepts connections and never answers (a hung scheduler)."""
+    import socket
+    import threading
+
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    held: list[socket.socket] = []
+    stop = threading.Event()
+
+    def accept() -> None:
+        server.settimeout(0.2)
+        while not stop.is_set():
+            try:
+                held.append(server.accept()[0])
+            except OSError:
+                continue
+
+    thread = threading.Thread(target=accept, daemon=True)
+    thread.start()
+    yield server.getsockname()[1]
+    stop.set()
+    thread.join()
+    for connection in held:
+        connection.close()
+    server.close()
+
+
+def test_a_scheduler_that_never_answers_is_unreachable_within_the_timeout(
+    tmp_path, capsys, monkeypatch, silent_port
+):
+    """Issue 36: a port that accepts and never answers is exit 5 within the bounded wait
+    (it hung for minutes before); a scheduler address that is not one is exit 5 too."""
+    pytest.importorskip("distributed")
+    import time
+
+    study = tmp_path / "a.toml"
+    study.write_text(FIT_STUDY.split("[[data]]")[0], encoding="utf-8")
+    monkeypatch.setattr(batch, "SCHEDULER_TIMEOUT_S", 2.0)
+    started = time.perf_counter()
+    address = f"tcp://127.0.0.1:{silent_port}"
+    status = main(
+        ["batch", str(study), "-o", str(tmp_path / "o"), "--scheduler", address, "--quiet"]
+    )
+    assert status == 5
+    assert time.perf_counter() - started < 60  # bounded: the wait is 2 s, not forever
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "it did not answer within 2 s" in err
+    status = main(
+        ["batch", str(study), "-o", str(tmp_path / "o"), "--scheduler", "not a url", "--quiet"]
+    )
+    assert status == 5
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot reach the Dask scheduler 'not a url'" in err

@@ -114,6 +114,10 @@ _KILL_ONCE_ENV = "WARPTISSUE_BATCH_TEST_KILL_ONCE"
 """Test hook (tests/test_batch.py): names a file; the first Dask task to create it kills its
 own worker process (SIGKILL) after writing its results and before its marker."""
 _GLOB_CHARACTERS = frozenset("*?[")
+SCHEDULER_TIMEOUT_S = 20.0
+"""How long ``--scheduler`` waits for the scheduler to connect and answer, s: a port that
+accepts and never answers is an unreachable scheduler (exit 5) after this long."""
+
 GPU_PIN_ENV = "CUDA_VISIBLE_DEVICES"
 """The environment variable that pins a LocalCluster worker to one GPU."""
 
@@ -706,8 +710,9 @@ def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) 
             option="--scheduler" if scheduler else "--workers",
         ) from None
     if scheduler is not None:
+        _check_scheduler(scheduler, SCHEDULER_TIMEOUT_S)
         try:
-            return Client(scheduler, timeout="20s"), None
+            return Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s"), None
         except (OSError, TimeoutError, ValueError) as exc:
             raise DeviceError(
                 f"cannot reach the Dask scheduler {scheduler!r}: {_one_line(exc)}"
@@ -743,6 +748,38 @@ def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) 
         silence_logs=logging.CRITICAL,
     )
     return Client(cluster), cluster
+
+
+def _check_scheduler(address: str, timeout_s: float) -> None:
+    """Ask the Dask scheduler at ``address`` who it is, waiting at most ``timeout_s`` for the
+    connection and the answer together (a Dask client waits for ever on a port that accepts
+    and never answers).
+
+    Raises:
+        DeviceError: No scheduler answers there in time, or ``address`` is not an address.
+    """
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def identity() -> Any:
+        comm = await connect(address, timeout=timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        asyncio.run(asyncio.wait_for(identity(), timeout_s))
+    except TimeoutError:
+        raise DeviceError(
+            f"cannot reach the Dask scheduler {address!r}: it did not answer within {timeout_s:g} s"
+        ) from None
+    except (OSError, ValueError) as exc:
+        raise DeviceError(
+            f"cannot reach the Dask scheduler {address!r}: {_one_line(exc)}"
+        ) from None
 
 
 def _have_dask() -> bool:
