@@ -64,8 +64,6 @@ Notes:
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -82,23 +80,14 @@ from warptissue.fit._model import (
     depth_offset_names,
     depth_offset_start_m,
     forward_model,
-    offset_box,
-    shifted_record,
 )
-from warptissue.fit.start import start_values_from_record
-from warptissue.io import read_sidecar, software_versions
-from warptissue.lsq.engine import covariance_from_jacobian, least_squares
+from warptissue.fit._report import durbin_watson, fitted_study, record_drift_warnings, result_from
+from warptissue.fit._setup import FitPlan, ParameterSpace, fit_plan, parameter_space
+from warptissue.io import software_versions
+from warptissue.lsq.engine import least_squares
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
-from warptissue.materials import Viscoelastic, positive_bounds, prony_term
-from warptissue.study import (
-    CONTACT_POINTS,
-    FIT_STRATEGIES,
-    DataRecord,
-    Protocol,
-    Study,
-)
-from warptissue.viscoelastic.fitting import fit_qlv
+from warptissue.study import Study
 
 __all__ = [
     "CORRELATION_LIMIT",
@@ -124,9 +113,6 @@ STATUSES: tuple[str, ...] = (
 DURBIN_WATSON_LIMIT = 0.5
 """A record whose residuals have a Durbin-Watson statistic below this is fitted
 systematically badly (independent noise gives about 2)."""
-DRIFT_SHARE = 0.02
-"""A force change of more than this share of the record's peak force where none is expected
-(rising in a hold, left after unloading, a baseline drift) is reported."""
 CORRELATION_LIMIT = 0.995
 """Two parameters whose correlation exceeds this in magnitude are reported: the data
 determine a combination of them rather than each."""
@@ -369,132 +355,6 @@ class IndentationFit:
         }
 
 
-def _durbin_watson(residuals: np.ndarray) -> float | None:
-    """sum(diff(r)^2) / sum(r^2): about 2 for independent residuals, near 0 for a trend."""
-    total = float(residuals @ residuals)
-    if residuals.size < 3 or total == 0.0:
-        return None
-    return float(np.sum(np.diff(residuals) ** 2) / total)
-
-
-def _record_drift_warnings(record: DataRecord) -> list[str]:
-    """A force that rises in a hold, stays after unloading, or a baseline drift removed."""
-    t, d, f = record.time_s, record.displacement_m, record.force_N
-    peak = float(np.max(np.abs(f))) if f.size else 0.0
-    if peak == 0.0 or f.size < 10:
-        return []
-    messages = []
-    name = record.file
-    drift = record.conditioning.get("force_drift_N_per_s")
-    if drift:
-        change = abs(float(drift)) * float(t[-1] - t[0])
-        if change > DRIFT_SHARE * peak:
-            messages.append(
-                f"{name}: the conditioning removed a force baseline drift of {float(drift):.4g} "
-                f"N/s ({100 * change / peak:.0f} % of the peak force over the record): a "
-                "drifting transducer offset; check the record's zero"
-            )
-    deepest = int(np.argmax(d))
-    span = float(d[deepest])
-    if span > 0.0:
-        hold = np.flatnonzero(np.abs(d - span) <= 0.005 * span)
-        hold = hold[hold >= deepest]
-        breaks = np.flatnonzero(np.diff(hold) > 1)
-        contiguous = hold[: int(breaks[0]) + 1] if breaks.size else hold  # the first hold
-        if contiguous.size >= 10:
-            # Running means over a tenth of the hold: the last one against the lowest, beyond
-            # both DRIFT_SHARE of the peak and 4 noise levels of such a mean.
-            forces = f[contiguous]
-            window = max(3, contiguous.size // 10)
-            means = np.convolve(forces, np.full(window, 1.0 / window), mode="valid")
-            rise = float(means[-1] - np.min(means))
-            noise = 1.4826 * float(np.median(np.abs(np.diff(forces)))) / math.sqrt(2.0)
-            if rise > max(DRIFT_SHARE * peak, 4.0 * noise / math.sqrt(window)):
-                messages.append(
-                    f"{name}: the force rises by {rise:.4g} N ({100 * rise / peak:.0f} % of "
-                    "its peak) during the hold at the deepest point, where a tissue relaxes: "
-                    "a drifting offset or a moving specimen"
-                )
-        after = np.flatnonzero((np.arange(d.size) > deepest) & (d <= 0.005 * span))
-        if after.size >= 5:
-            left = float(np.mean(f[after]))
-            if abs(left) > DRIFT_SHARE * peak:
-                messages.append(
-                    f"{name}: the force is {left:.4g} N ({100 * abs(left) / peak:.0f} % of its "
-                    "peak) after unloading, where it should return to zero: a drifting "
-                    "offset or a probe that lost contact late"
-                )
-    return messages
-
-
-def _check_probe_radius(study: Study) -> None:
-    """Refuse a record whose sidecar names another probe radius than the study's."""
-
-    radius = study.indenter.radius_m
-    for record in study.data:
-        sidecar = read_sidecar(record.path)
-        value = sidecar.get("probe_radius_m")
-        if value is None:
-            continue
-        try:
-            measured = float(value)
-        except (TypeError, ValueError):
-            raise InputError(
-                f"{record.file}: the sidecar's probe_radius_m is not a number",
-                path=record.path,
-                key="probe_radius_m",
-                value=value,
-            ) from None
-        if not math.isclose(measured, radius, rel_tol=1e-3):
-            raise InputError(
-                f"{record.file} was measured with probe_radius_m = {measured:g} m (its "
-                f"sidecar), the study's indenter has radius_m = {radius:g} m: fit it with a "
-                "study of that probe",
-                path=record.path,
-                key="probe_radius_m",
-                value=measured,
-            )
-
-
-def _x_scale(start: np.ndarray, units: Sequence[str]) -> np.ndarray:
-    """|start|, or for a zero start the mean |start| of the parameters of its unit (else 1)."""
-    scale = np.abs(start).astype(np.float64)
-    for j in np.flatnonzero(scale == 0.0):
-        same = [abs(start[k]) for k in range(start.size) if units[k] == units[j] and start[k]]
-        scale[j] = float(np.mean(same)) if same else 1.0
-    return scale
-
-
-def _stage_one(study: Study, material: Any, strategy: str) -> tuple[tuple[FitResult, ...], dict]:
-    """Ahn & Kim's stage (i): fit_qlv on every record; the mean Prony terms."""
-
-    kinds = [term[0] for term in map(prony_term, material.parameter_names) if term is not None]
-    terms = kinds.count("g")
-    if terms == 0:
-        raise InputError(
-            "strategy two_stage fits a Prony series first: the material has none (add g1, "
-            "tau1_s, ... to [material])",
-            path=study.path,
-            key="fit.strategy",
-            value=strategy,
-        )
-    fits = []
-    for record in study.data:
-        try:
-            fits.append(fit_qlv(record.time_s, record.displacement_m, record.force_N, terms=terms))
-        except InputError as exc:
-            raise InputError(
-                f"{record.file}: stage (i) (Ahn & Kim): {exc.message}",
-                path=record.path,
-                value=exc.value,
-            ) from None
-    mean = {}
-    for i in range(1, terms + 1):
-        for name in (f"g{i}", f"tau{i}_s"):
-            mean[name] = float(np.mean([fit.parameters[name] for fit in fits]))
-    return tuple(fits), mean
-
-
 def fit_indentation(
     study: Study | Sequence[Study],
     *,
@@ -574,6 +434,18 @@ def fit_indentation(
     return outcomes
 
 
+@dataclass
+class _EngineRun:
+    """How the engine's iteration ended: its result (None when interrupted), the cost at the
+    start, the trial steps, and whether Ctrl-C or ``fit.stop_r_squared`` ended it."""
+
+    engine_result: FitResult | None
+    start_cost: float | None
+    history: list[IterationRecord]
+    interrupted: bool
+    stopped_at_r_squared: bool
+
+
 def _fit_one(
     study: Study,
     *,
@@ -586,90 +458,39 @@ def _fit_one(
 ) -> IndentationFit:
     """:func:`fit_indentation` of one study (its runs handed to ``meeting``, where given)."""
     started = time.perf_counter()
-    if study.fit is None or not study.data:
-        raise InputError(
-            "the study holds no fit: add [[data]] records and a [fit] table (schema_version 2)",
-            path=study.path,
-        )
-    settings = study.fit
-    chosen_strategy = strategy if strategy is not None else settings.strategy
-    if chosen_strategy not in FIT_STRATEGIES:
-        raise InputError(
-            f"strategy must be one of {', '.join(FIT_STRATEGIES)}",
-            path=study.path,
-            key="fit.strategy",
-            value=chosen_strategy,
-        )
-    chosen_contact = contact_point if contact_point is not None else settings.contact_point
-    if chosen_contact not in CONTACT_POINTS:
-        raise InputError(
-            f"contact_point must be one of {', '.join(CONTACT_POINTS)}",
-            path=study.path,
-            key="fit.contact_point",
-            value=chosen_contact,
-        )
-    fit_offsets = chosen_contact == "fit"
-    _check_probe_radius(study)
-    offset_start: np.ndarray | None = None
-    offset_lower = offset_upper = np.zeros(0)
-    if fit_offsets:
-        offset_start, offset_lower, offset_upper = offset_box(study)
-        start = start_values_from_record(
-            study, shifted_record(study.data[0], float(offset_start[0]))
-        )
-    else:
-        start = start_values_from_record(study)
-    material = study.material
-    free = tuple(settings.free)
-    all_lower, all_upper = settings.parameter_bounds(material)
-    stage_one_fits: tuple[FitResult, ...] = ()
-    prony: dict[str, float] = {}
-    if chosen_strategy == "two_stage":
-        stage_one_fits, prony = _stage_one(study, material, chosen_strategy)
-        vector = material.parameter_vector.copy()
-        names = list(material.parameter_names)
-        for name, value in prony.items():
-            vector[names.index(name)] = value
-        try:
-            material = material.with_parameters(vector)
-        except InputError as exc:
-            raise InputError(
-                f"stage (i) (Ahn & Kim) gave an invalid Prony series: {exc.message}",
-                path=study.path,
-                value=prony,
-            ) from None
-        keep = [j for j, name in enumerate(free) if prony_term(name) is None]
-        if not keep:
-            raise InputError(
-                "strategy two_stage fits the Prony terms in stage (i) and the other free "
-                "parameters by inverse FE in stage (ii): free an elastic parameter too",
-                path=study.path,
-                key="fit.free",
-                value=list(free),
-            )
-        free = tuple(free[j] for j in keep)
-        all_lower, all_upper = all_lower[keep], all_upper[keep]
-
+    plan = fit_plan(study, strategy=strategy, contact_point=contact_point)
     model = forward_model(
-        study, material, free, device=device, progress=progress, offset_start=offset_start
+        study,
+        plan.material,
+        plan.free,
+        device=device,
+        progress=progress,
+        offset_start=plan.offset_start,
     )
     model.meeting = meeting
-    offset_names = depth_offset_names(study.data) if fit_offsets else ()
-    names = free + offset_names
-    units = tuple(material.parameter_units[material.parameter_names.index(n)] for n in free)
-    units += ("m",) * len(offset_names)
-    x0 = np.array([start[name] for name in free], dtype=np.float64)
-    lower, upper = positive_bounds(free, all_lower, all_upper)
-    x0 = np.clip(x0, lower, upper)
-    spans = np.array([float(np.ptp(record.displacement_m)) for record in study.data])
-    if offset_start is not None:
-        x0 = np.concatenate([x0, offset_start])
-        lower = np.concatenate([lower, offset_lower])
-        upper = np.concatenate([upper, offset_upper])
-    x_scale = _x_scale(x0, units)
-    if offset_names:
-        x_scale[len(free) :] = spans  # an offset may start at 0: its record's depth span
-    stage = "stage two" if chosen_strategy == "two_stage" else "joint"
+    space = parameter_space(study, plan)
+    run = _run_engine(
+        model,
+        space,
+        stage="stage two" if plan.strategy == "two_stage" else "joint",
+        progress=progress,
+        callback=callback,
+    )
+    return _outcome(study, plan, space, model, run, started=started)
+
+
+def _run_engine(
+    model: ForwardModel,
+    space: ParameterSpace,
+    *,
+    stage: str,
+    progress: bool,
+    callback: Callable[[IndentationFitProgress], None] | None,
+) -> _EngineRun:
+    """The least-squares engine on ``model`` from ``space.x0``, with its progress bar and
+    ``callback``; Ctrl-C after the first forward run keeps the best point evaluated."""
+    settings = model.study.fit
+    names, x0 = space.names, space.x0
     history: list[IterationRecord] = []
     stopped_at_r_squared = False
 
@@ -732,9 +553,9 @@ def _fit_one(
             model.fun,
             x0,
             jac=model.jac,
-            bounds=(lower, upper),
+            bounds=(space.lower, space.upper),
             method=settings.method,
-            x_scale=None if settings.method == "lm" else x_scale,
+            x_scale=None if settings.method == "lm" else space.x_scale,
             max_iterations=settings.max_iterations,
             ftol=settings.ftol,
             xtol=settings.xtol,
@@ -742,7 +563,7 @@ def _fit_one(
             callback=on_step,
             progress=False,
             parameter_names=names,
-            parameter_units=units,
+            parameter_units=space.units,
         )
     except KeyboardInterrupt:
         interrupted = True
@@ -750,14 +571,38 @@ def _fit_one(
             raise
     finally:
         bar.close()
+    return _EngineRun(engine_result, start_cost, history, interrupted, stopped_at_r_squared)
 
-    best = model.best if interrupted else model.evaluate(engine_result.x)
-    result = _result_from(
-        engine_result, best, model, names, units, settings.method, lower, upper, history
+
+def _outcome(
+    study: Study,
+    plan: FitPlan,
+    space: ParameterSpace,
+    model: ForwardModel,
+    run: _EngineRun,
+    *,
+    started: float,
+) -> IndentationFit:
+    """The :class:`IndentationFit` of a finished engine run: its result at the best point,
+    status and message, record curves and warnings; ``started``: its perf_counter start."""
+    settings = study.fit
+    engine_result, history, names = run.engine_result, run.history, space.names
+    free = plan.free
+    best = model.best if run.interrupted else model.evaluate(engine_result.x)
+    result = result_from(
+        engine_result,
+        best,
+        model,
+        names,
+        space.units,
+        settings.method,
+        space.lower,
+        space.upper,
+        history,
     )
-    if offset_names:
+    if space.offset_names:
         scales = np.full(len(names), np.nan)
-        scales[len(free) :] = OFFSET_IDENTIFIED_SHARE * spans
+        scales[len(free) :] = OFFSET_IDENTIFIED_SHARE * space.spans
         result.standard_error_scales = scales
     n = len(names)
     if engine_result is not None:
@@ -767,13 +612,13 @@ def _fit_one(
     else:
         jacobians = 1 + sum(1 for record in history if record.accepted)
         finite_difference = (jacobians * n + 1 + len(history)) * model.solves_per_evaluation
-    if interrupted:
+    if run.interrupted:
         status = "interrupted"
         message = (
             f"interrupted (Ctrl-C) after {len(history)} trial steps: the best parameters "
             f"evaluated so far are kept (cost {best.cost:.6g})"
         )
-    elif stopped_at_r_squared:
+    elif run.stopped_at_r_squared:
         status = "stopped_at_r_squared"
         message = (
             f"stopped at R^2 = {result.r_squared:.6g} > fit.stop_r_squared = "
@@ -786,7 +631,7 @@ def _fit_one(
     else:
         status, message = "failed", engine_result.message
     records = _record_curves(model, best)
-    if offset_names:
+    if space.offset_names:
         errors = result.standard_errors
         for k, curve in enumerate(records):
             j = len(free) + k
@@ -797,88 +642,23 @@ def _fit_one(
     fitted_material = model.material_at(best.x)
     return IndentationFit(
         study=study,
-        fitted_study=_fitted_study(study, fitted_material),
+        fitted_study=fitted_study(study, fitted_material),
         result=result,
         records=records,
-        strategy=chosen_strategy,
-        stage_one=stage_one_fits[0] if stage_one_fits else None,
+        strategy=plan.strategy,
+        stage_one=plan.stage_one_fits[0] if plan.stage_one_fits else None,
         forward_solves=model.forward_solves,
         finite_difference_solves=int(finite_difference),
         status=status,
         message=message,
         seconds=time.perf_counter() - started,
         warnings=result.all_warnings,
-        stage_one_fits=stage_one_fits,
-        stage_one_prony=prony,
-        start=dict(zip(names, x0.tolist(), strict=True)),
-        start_cost=start_cost,
-        contact_point=chosen_contact,
+        stage_one_fits=plan.stage_one_fits,
+        stage_one_prony=plan.prony,
+        start=dict(zip(names, space.x0.tolist(), strict=True)),
+        start_cost=run.start_cost,
+        contact_point=plan.contact_point,
     )
-
-
-def _result_from(
-    engine_result: FitResult | None,
-    best: Evaluation,
-    model: ForwardModel,
-    names: tuple[str, ...],
-    units: tuple[str, ...],
-    method: str,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    history: list[IterationRecord],
-) -> FitResult:
-    """The engine's result with the data statistics (R^2, RMSE in N, fitted force); for an
-    interrupted fit, a result built from the best evaluation."""
-    measured = np.concatenate(model.measured)
-    fitted = np.concatenate(best.predicted)
-    if engine_result is None:
-        covariance, errors, correlation = covariance_from_jacobian(best.jacobian, best.cost)
-        result = FitResult(
-            x=best.x.copy(),
-            parameter_names=names,
-            parameter_units=units,
-            cost=best.cost,
-            residuals=best.residuals,
-            jacobian=best.jacobian,
-            success=False,
-            status=-1,
-            message="Interrupted (Ctrl-C): the best point evaluated so far.",
-            iterations=len(history),
-            nfev=model.evaluations,
-            njev=1 + sum(1 for record in history if record.accepted),
-            covariance=covariance,
-            standard_errors=errors,
-            correlation=correlation,
-            r_squared=None,
-            rmse=0.0,
-            history=list(history),
-            method=method,
-            lower_bounds=lower,
-            upper_bounds=upper,
-        )
-    else:
-        result = engine_result
-    result.fitted = fitted
-    result.objective = model.study.fit.objective
-    result.rmse = rmse(measured, fitted)
-    try:
-        result.r_squared = r_squared(measured, fitted)
-    except InputError:
-        result.r_squared = None
-    return result
-
-
-def _fitted_study(study: Study, material: Any) -> Study:
-    """The study with the fitted material; a viscoelastic one whose study has a quasi-static
-    protocol replays the first record's history instead (``warptissue simulate`` needs time
-    steps for it)."""
-
-    fitted = dataclasses.replace(study, material=material)
-    if isinstance(material, Viscoelastic) and not study.protocol.timed:
-        steps = study.fit.time_steps if study.fit is not None else 40
-        protocol = Protocol.from_record(study.data[0], steps=steps)
-        fitted = dataclasses.replace(fitted, protocol=protocol)
-    return fitted
 
 
 def _record_curves(model: ForwardModel, best: Evaluation) -> tuple[RecordCurve, ...]:
@@ -903,7 +683,7 @@ def _record_curves(model: ForwardModel, best: Evaluation) -> tuple[RecordCurve, 
                 fe_force_N=fe_force,
                 r_squared=r2,
                 rmse_N=rmse(measured, fitted),
-                durbin_watson=_durbin_watson(fitted - measured),
+                durbin_watson=durbin_watson(fitted - measured),
             )
         )
     return tuple(curves)
@@ -935,7 +715,7 @@ def _warnings(
                         "depths, speeds or hold times)"
                     )
     for record, curve in zip(study.data, records, strict=True):
-        messages.extend(_record_drift_warnings(record))
+        messages.extend(record_drift_warnings(record))
         if curve.durbin_watson is not None and curve.durbin_watson < DURBIN_WATSON_LIMIT:
             messages.append(
                 f"{curve.file}: the residuals are systematic (Durbin-Watson statistic "
