@@ -15,6 +15,10 @@ import csv
 import json
 import os
 import re
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -555,7 +559,6 @@ def test_a_scheduler_that_never_answers_is_unreachable_within_the_timeout(
     """Issue 36: a port that accepts and never answers is exit 5 within the bounded wait
     (it hung for minutes before); a scheduler address that is not one is exit 5 too."""
     pytest.importorskip("distributed")
-    import time
 
     study = tmp_path / "a.toml"
     study.write_text(FIT_STUDY.split("[[data]]")[0], encoding="utf-8")
@@ -575,3 +578,53 @@ def test_a_scheduler_that_never_answers_is_unreachable_within_the_timeout(
     assert status == 5
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cannot reach the Dask scheduler 'not a url'" in err
+
+
+def _batch_process(*args: str) -> subprocess.Popen:
+    """``warptissue batch ARGS`` in a process group of its own, with Ctrl-C's default
+    handling (a shell's background job would ignore SIGINT), stdout and stderr piped."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "warptissue.cli", "batch", *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+
+
+@pytest.mark.slow
+def test_quiet_batch_on_a_local_cluster_prints_nothing(tmp_path):
+    """Issue 36: ``--quiet`` printed Warp's start-up notes (stdout) and its CUDA-driver
+    warning (stderr, once per process) on a machine without a CUDA driver."""
+    pytest.importorskip("distributed")
+    study = tmp_path / "punch.toml"
+    study.write_text(_tiny_simulation(), encoding="utf-8")
+    process = _batch_process(str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet")
+    out, err = process.communicate(timeout=300)
+    assert (process.returncode, out, err) == (0, "", "")
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_a_batch_is_one_line_and_leaves_no_temporary_file(tmp_path):
+    """Issue 36: Ctrl-C (SIGINT to the terminal's process group) during a fit on a Dask
+    worker printed the workers' tracebacks and a "leaked semaphore" warning; now the batch
+    says "interrupted", exits 130, and no atomic write's temporary file is left."""
+    pytest.importorskip("distributed")
+    out_dir = tmp_path / "out"
+    process = _batch_process(
+        str(ROOT / "scenes" / "liver_fit.toml"), "-o", str(out_dir), "--workers", "1", "--quiet"
+    )
+    try:
+        time.sleep(15.0)  # the cluster starts and the fit (about 90 s of CPU) is under way
+        assert process.poll() is None, process.communicate()
+        os.killpg(process.pid, signal.SIGINT)
+        out, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 130, err
+    assert err == "warptissue: interrupted\n"
+    time.sleep(2.0)  # the workers' cleanup
+    assert [p.name for p in out_dir.rglob("*") if ".tmp" in p.name] == []

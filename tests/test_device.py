@@ -67,23 +67,19 @@ def test_a_container_limit_caps_the_available_memory(tmp_path):
     assert available_host_memory_bytes(meminfo=meminfo, cgroup_root=v1_unlimited) == machine
 
 
-def test_a_silenced_start_prints_nothing_and_gives_standard_error_back(tmp_path):
-    """``--quiet`` on a machine without an NVIDIA driver: Warp's native start-up note
-    ("Could not find or load the NVIDIA CUDA driver") does not reach standard error, and
-    what is written there afterwards does. In a fresh process (Warp starts once)."""
+def test_quiet_warp_starts_warp_without_a_word():
+    """Issue 36: on a machine without a CUDA driver, Warp's start-up warned "Could not find or
+    load the NVIDIA CUDA driver" on stderr even for the CPU; after :func:`quiet_warp` a CPU
+    run starts silently (on a machine with CUDA there is nothing to say either)."""
     import subprocess
     import sys
 
-    script = (
-        "import os\n"
-        "from warptissue.device import quiet_warp\n"
-        "quiet_warp(silence_start=True)\n"
-        "import warp as wp\n"
-        "wp.init()\n"
-        "os.write(2, b'after')\n"
+    code = (
+        "from warptissue.device import quiet_warp, resolve_device\n"
+        "quiet_warp()\n"
+        "resolve_device('cpu')\n"
     )
     done = subprocess.run(
-        [sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=120
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
     )
-    assert done.returncode == 0, done.stderr
-    assert done.stderr == "after"
+    assert (done.stdout, done.stderr) == ("", "")

@@ -43,6 +43,7 @@ import os
 import signal
 import socket
 import sys
+import threading
 import time
 import uuid
 import warnings
@@ -475,7 +476,7 @@ def run_study_task(task: _Task) -> StudyOutcome:
     caught: list[str] = []
     try:
         with _recorded(caught):
-            quiet_warp(silence_start=True)
+            quiet_warp()
             study = load_study(task.path)
             kind = _kind(study)
             outcome = replace(outcome, kind=kind)
@@ -524,7 +525,7 @@ def run_group_task(tasks: Sequence[_Task]) -> list[StudyOutcome]:
         started = time.perf_counter()
         try:
             with _recorded(notes[index]):
-                quiet_warp(silence_start=True)
+                quiet_warp()
                 study = load_study(task.path)
                 outcomes[index] = replace(outcomes[index], kind=_kind(study))
                 device = _worker_device(task.device, study) if task.on_dask else task.device
@@ -693,7 +694,7 @@ def worker_gpus(device: str | None) -> list[str]:
     visible = os.environ.get(GPU_PIN_ENV)
     if visible is not None:
         return [gpu.strip() for gpu in visible.split(",") if gpu.strip()]
-    quiet_warp(silence_start=True)  # counting GPUs prints nothing where there are none
+    quiet_warp()  # counting GPUs prints nothing where there are none
     return [str(index) for index in range(wp.get_cuda_device_count())]
 
 
@@ -720,34 +721,55 @@ def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) 
     if gpus:
         from distributed import Nanny, Scheduler, SpecCluster
 
-        cluster = SpecCluster(
-            workers={
-                k: {
-                    "cls": Nanny,
-                    "options": {
-                        "nthreads": 1,
-                        "env": {GPU_PIN_ENV: gpus[k % len(gpus)]},
-                        "silence_logs": logging.CRITICAL,
-                    },
-                }
-                for k in range(workers)
-            },
-            scheduler={
-                "cls": Scheduler,
-                "options": {"host": "127.0.0.1", "dashboard_address": None},
-            },
+        with _terminal_interrupts_ignored():
+            cluster = SpecCluster(
+                workers={
+                    k: {
+                        "cls": Nanny,
+                        "options": {
+                            "nthreads": 1,
+                            "env": {GPU_PIN_ENV: gpus[k % len(gpus)]},
+                            "silence_logs": logging.CRITICAL,
+                        },
+                    }
+                    for k in range(workers)
+                },
+                scheduler={
+                    "cls": Scheduler,
+                    "options": {"host": "127.0.0.1", "dashboard_address": None},
+                },
+                silence_logs=logging.CRITICAL,
+            )
+        return Client(cluster), cluster
+    with _terminal_interrupts_ignored():
+        cluster = LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host="127.0.0.1",
+            dashboard_address=None,
             silence_logs=logging.CRITICAL,
         )
-        return Client(cluster), cluster
-    cluster = LocalCluster(
-        n_workers=workers,
-        threads_per_worker=1,
-        processes=True,
-        host="127.0.0.1",
-        dashboard_address=None,
-        silence_logs=logging.CRITICAL,
-    )
     return Client(cluster), cluster
+
+
+@contextlib.contextmanager
+def _terminal_interrupts_ignored() -> Iterator[None]:
+    """Ignore SIGINT while a local cluster starts its worker processes, which inherit that.
+
+    Ctrl-C in a terminal interrupts every process of the foreground group: the workers would
+    each print a traceback and die under their tasks (leaving semaphores behind). Ignoring it
+    there, only this process is interrupted, and it cancels the tasks and closes the cluster.
+    Outside the main thread (where signals cannot be set) nothing changes.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _check_scheduler(address: str, timeout_s: float) -> None:
@@ -944,7 +966,18 @@ def _groups(pending: Sequence[tuple[int, _Task]], together: int) -> list[list[tu
 def _run_group(group: Sequence[tuple[int, _Task]]) -> list[StudyOutcome]:
     """Run one group's task: a single study alone, several as :func:`run_group_task`."""
     tasks = [task for _, task in group]
+    if tasks[0].on_dask:
+        _thread_lock_for_progress_bars()
     return [run_study_task(tasks[0])] if len(tasks) == 1 else run_group_task(tasks)
+
+
+def _thread_lock_for_progress_bars() -> None:
+    """Give tqdm a thread lock in a Dask worker: its default lock holds a multiprocessing
+    semaphore, which a worker stopped under its task (Ctrl-C, a closed cluster) leaves behind
+    (the resource tracker's "leaked semaphore" warning); a worker shows no bars anyway."""
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
 
 
 def _run_on_dask(

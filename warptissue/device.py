@@ -9,6 +9,8 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -17,7 +19,7 @@ from warptissue.errors import DeviceError
 if TYPE_CHECKING:
     import warp as wp
 
-__all__ = ["available_host_memory_bytes", "quiet_warp", "resolve_device"]
+__all__ = ["CUDA_DRIVER_WARNING", "available_host_memory_bytes", "quiet_warp", "resolve_device"]
 
 
 def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
@@ -49,17 +51,16 @@ def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
         raise DeviceError(f"unknown device {device!r}; available: {available}") from exc
 
 
-def quiet_warp(*, silence_start: bool = False) -> None:
-    """Keep Warp's start-up and module-load notes off stdout (so ``--json`` prints only JSON).
+def quiet_warp() -> None:
+    """Keep Warp's start-up and module-load notes off stdout (so ``--json`` prints only JSON),
+    and initialize Warp without its CUDA-driver warning.
 
-    Warp 1.19 replaced ``wp.config.quiet`` with log levels; both are handled.
-
-    Args:
-        silence_start: Also start Warp now with the process's standard error closed to it:
-            on a machine without an NVIDIA driver Warp's native start-up prints "Warp CUDA
-            warning: Could not find or load the NVIDIA CUDA driver" to standard error
-            whatever the log level, which ``--quiet`` must not show (a later request for a
-            CUDA device still fails with its own one-line error).
+    On a machine without a CUDA driver, Warp's native start-up prints "Could not find or load
+    the NVIDIA CUDA driver" on stderr (through C, whatever the log level), whichever device is
+    asked for; a run on the CPU there is no fault, and a request for ``cuda`` is refused by
+    :func:`resolve_device` with a :class:`~warptissue.errors.DeviceError`. So Warp starts
+    here with that one line held back (anything else it prints on stderr passes). Warp 1.19
+    replaced ``wp.config.quiet`` with log levels; both are handled.
     """
     import warp as wp
 
@@ -67,26 +68,34 @@ def quiet_warp(*, silence_start: bool = False) -> None:
         wp.config.log_level = wp.LOG_WARNING
     else:
         wp.config.quiet = True
-    if silence_start:
-        _init_without_stderr()
+    with _stderr_without(CUDA_DRIVER_WARNING):
+        wp.init()
 
 
-def _init_without_stderr() -> None:
-    """``wp.init()`` with file descriptor 2 pointed at the null device (Warp's native code
-    writes there directly), restored afterwards."""
-    import warp as wp
+CUDA_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"
+"""The part of Warp's start-up warning on a machine without a CUDA driver that
+:func:`quiet_warp` holds back."""
 
+
+@contextlib.contextmanager
+def _stderr_without(text: str) -> Iterator[None]:
+    """Hold back the lines containing ``text`` that native code writes to file descriptor 2
+    inside the block; the other lines are written to stderr after it."""
     sys.stderr.flush()
-    saved = os.dup(2)
-    try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 2)
-            try:
-                wp.init()
-            finally:
-                os.dup2(saved, 2)
-    finally:
-        os.close(saved)
+    with tempfile.TemporaryFile() as held:
+        saved = os.dup(2)
+        os.dup2(held.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            held.seek(0)
+            lines = held.read().decode("utf-8", "replace").splitlines(keepends=True)
+            kept = "".join(line for line in lines if text not in line)
+            if kept:
+                sys.stderr.write(kept)
+                sys.stderr.flush()
 
 
 def available_host_memory_bytes(

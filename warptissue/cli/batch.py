@@ -100,6 +100,9 @@ def run(args: argparse.Namespace) -> int:
     from tqdm.auto import tqdm
 
     from warptissue.batch import run_batch
+    from warptissue.device import quiet_warp
+
+    quiet_warp()
 
     def report(outcome) -> None:
         if outcome.failed:

@@ -113,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
     from warptissue.report import write_indentation_fit_outputs
     from warptissue.study import load_study
 
-    quiet_warp(silence_start=args.quiet)
+    quiet_warp()
     study = load_study(args.study)
     if not study.data or study.fit is None:
         missing = "[[data]] records" if not study.data else "a [fit] table"

@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from warptissue.simulate import run_study
     from warptissue.study import load_study
 
-    quiet_warp(silence_start=args.quiet)
+    quiet_warp()
     study = load_study(args.study)
     out_dir = args.out if args.out is not None else Path("runs") / study.name
     usd_path = out_dir / "scene.usda" if args.usd is True else args.usd
