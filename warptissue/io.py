@@ -28,6 +28,7 @@ from warptissue.errors import InputError
 
 __all__ = [
     "INDENTATION_COLUMNS",
+    "MAX_MAGNITUDE",
     "ExperimentData",
     "atomic_path",
     "read_experiment_csv",
@@ -40,6 +41,10 @@ __all__ = [
 
 INDENTATION_COLUMNS: tuple[str, ...] = ("time_s", "displacement_m", "force_N")
 """Required columns of an indentation record, in SI units."""
+
+MAX_MAGNITUDE = 1e100
+"""The largest magnitude an experiment CSV's value may have: no measurement in SI units comes
+near, and the fits' squares and products of larger values overflow float64."""
 
 
 @contextlib.contextmanager
@@ -59,21 +64,24 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(
-        prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
-    )
-    os.close(handle)
-    temporary_path = Path(temporary)
     umask = os.umask(0)
     os.umask(umask)
+    temporary_path: Path | None = None
     try:
+        # Inside the try: an interrupt (Ctrl-C) right after the file is made removes it too.
+        handle, temporary = tempfile.mkstemp(
+            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
+        )
+        temporary_path = Path(temporary)
+        os.close(handle)
         yield temporary_path
         # mkstemp creates owner-only files; give the result the usual mode of a new file.
         os.chmod(temporary_path, 0o666 & ~umask)
         os.replace(temporary_path, target)
     finally:
-        with contextlib.suppress(FileNotFoundError):
-            temporary_path.unlink()
+        if temporary_path is not None:
+            with contextlib.suppress(FileNotFoundError):
+                temporary_path.unlink()
 
 
 def to_jsonable(value: Any) -> Any:
@@ -208,9 +216,18 @@ def _text_lines(path: Path) -> list[str]:
     return text.splitlines(keepends=True)
 
 
-LARGEST_VALUE = 1e150
-"""The largest magnitude an experiment file's value may have: its square (a least-squares
-cost, a norm) must stay finite in float64 (about 1.8e308)."""
+def _parsed_rows(path: Path, reader: Iterator[Any]) -> list[Any]:
+    """The rows of a CSV reader, its errors (a field larger than the csv module's limit, an
+    unclosed quote) as one-line :class:`InputError` naming the file and line."""
+    rows = []
+    try:
+        for row in reader:
+            rows.append(row)
+    except csv.Error as exc:
+        # A DictReader's own line_num lags its row reader's by the row that failed.
+        line = getattr(getattr(reader, "reader", reader), "line_num", None)
+        raise InputError(f"cannot parse as CSV: {exc}", path=path, line=line) from None
+    return rows
 
 
 def read_experiment_csv(
@@ -237,15 +254,10 @@ def read_experiment_csv(
     csv_path = Path(path)
     if not csv_path.is_file():
         raise InputError("experiment file not found", path=csv_path)
-    reader = csv.reader(_text_lines(csv_path))
     try:
-        rows = list(reader)
+        rows = _parsed_rows(csv_path, csv.reader(_text_lines(csv_path)))
     except OSError as exc:
         raise InputError(f"cannot read file: {exc.strerror}", path=csv_path) from exc
-    except csv.Error as exc:  # e.g. a field longer than the csv module's limit (128 KiB)
-        raise InputError(
-            f"not a CSV table of numbers: {exc}", path=csv_path, line=reader.line_num
-        ) from None
     rows = [
         (number, row)
         for number, row in enumerate(rows, start=1)
@@ -290,10 +302,10 @@ def read_experiment_csv(
                 raise InputError(
                     "not a finite number", path=csv_path, line=number, column=names[j], value=text
                 )
-            if abs(number_value) > LARGEST_VALUE:
+            if abs(number_value) > MAX_MAGNITUDE:
                 raise InputError(
-                    f"beyond any measurement (|value| > {LARGEST_VALUE:g}, where squares and "
-                    "sums of squares overflow): check the column's unit",
+                    f"too large for a measurement in SI units (magnitude above "
+                    f"{MAX_MAGNITUDE:g}); check the column's unit",
                     path=csv_path,
                     line=number,
                     column=names[j],
@@ -343,7 +355,7 @@ def read_csv_rows(path: str | Path, *, required: Sequence[str]) -> list[tuple[in
     if missing:
         raise InputError(f"missing column(s) {missing}; header is {header}", path=csv_path, line=1)
     reader.fieldnames = header
-    return [(index + 2, row) for index, row in enumerate(reader)]
+    return [(index + 2, row) for index, row in enumerate(_parsed_rows(csv_path, reader))]
 
 
 def csv_number(path: str | Path, line: int, row: Mapping[str, str | None], column: str) -> float:
