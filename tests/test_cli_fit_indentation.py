@@ -270,3 +270,18 @@ def test_a_fit_out_of_iterations_exits_4_with_its_outputs(study_file, tmp_path, 
     summary = json.loads((out / "fit.json").read_text())
     assert summary["status"] == "max_iterations" and not summary["success"]
     assert (out / "fitted_study.toml").is_file() and (out / "fit_curves.csv").is_file()
+
+
+def test_two_stage_refuses_a_record_without_a_hold(study_file, tmp_path, capsys):
+    """Issue 36: a ramp-only record fed stage (i) of Ahn & Kim's two stages, which invented
+    a Prony series for it (g1 = 0.119, tau1 = 0.958 s) and said so only deep in fit.json;
+    now it is refused in one line naming the record, before any FE run."""
+    text = study_file.read_text()
+    text = text.replace("C10_Pa = 287.5", "C10_Pa = 287.5\ng1 = 0.5\ntau1_s = 1.0")
+    text = text.replace("time_steps = 6", 'time_steps = 6\nstrategy = "two_stage"')
+    study_file.write_text(text)
+    status = main(["fit", "indentation", str(study_file), "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert err.count("\n") == 1 and "ramp.csv" in err and "no hold" in err
+    assert not (tmp_path / "out").exists()

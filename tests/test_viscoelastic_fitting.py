@@ -209,3 +209,36 @@ def test_single_record_nonlinear_wiechert_and_model_round_trip(rng):
     linear = fit_relaxation(time, x, force, model="wiechert")
     assert isinstance(model_from_result(linear), LinearWiechert)
     assert linear.rmse > 2 * result.rmse  # the linear body cannot follow the stiffening
+
+
+def _qlv_truth() -> QuasiLinearViscoelastic:
+    tau1, tau2, g1, g2 = AHN_KIM_TABLE1[0]
+    return QuasiLinearViscoelastic(
+        (g1, g2),
+        (tau1, tau2),
+        lambda d: exponential_elastic_force(d, scale_N=0.05, rate_per_m=400.0),
+    )
+
+
+def test_qlv_refuses_a_record_without_a_hold():
+    """Issue 36: a ramp-only record fed a relaxation fit, which invented g1 and tau1; a
+    Prony series needs a hold's relaxation, so such a record is refused in one line."""
+    time = np.linspace(0.0, 1.0, 101)
+    x = 5e-3 * time
+    force = _qlv_truth().force_N(time, x, substeps=8)
+    with pytest.raises(InputError) as caught:
+        fit_qlv(time, x, force)
+    assert "no hold" in str(caught.value) and "\n" not in str(caught.value)
+    assert caught.value.column == "displacement_m"
+
+
+def test_qlv_says_in_its_warnings_when_it_did_not_converge(rng):
+    """Issue 36: fit_qlv stopped at its iteration limit said so only in ``success`` and
+    ``status``; its ``warnings`` say it too."""
+    time, x = ramp_and_hold(1.0, 5e-3, 50.0, 0.1)
+    force = _qlv_truth().force_N(time, x, substeps=8)
+    result = fit_qlv(
+        time, x, force * (1 + 0.01 * rng.standard_normal(force.size)), max_iterations=1
+    )
+    assert not result.success
+    assert any("did not converge" in message for message in result.warnings)

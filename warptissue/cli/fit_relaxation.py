@@ -312,9 +312,10 @@ def _finish(
     lines: list[str] | None = None,
 ) -> int:
     """Print the summary (or JSON) and the warnings; exit status 0."""
-    messages = list(result.all_warnings)
-    if not result.success:
-        messages.insert(0, f"the fit did not converge: {result.message}")
+    from warptissue.lsq.plausibility import convergence_warnings
+
+    stopped = convergence_warnings(result)
+    messages = stopped + [m for m in result.all_warnings if m not in stopped]
     _print_warnings(messages)
     if args.json:
         print(

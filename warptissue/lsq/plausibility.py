@@ -29,6 +29,7 @@ __all__ = [
     "MAX_INDENTATION_FORCE_N",
     "SOFT_TISSUE_MODULUS_RANGE_PA",
     "check_indentation_record",
+    "convergence_warnings",
     "elastic_curve_warnings",
     "fit_quality_warnings",
     "modulus_warnings",
@@ -164,6 +165,14 @@ def fit_quality_warnings(result: FitResult) -> list[str]:
             "check the sign and units of the data and the model choice"
         ]
     return []
+
+
+def convergence_warnings(result: FitResult) -> list[str]:
+    """A warning when the engine stopped without converging (its iteration limit, no
+    acceptable step): the parameters are the best it reached, not a solution."""
+    if result.success:
+        return []
+    return [f"the fit did not converge: {result.message} ({result.iterations} iterations)"]
 
 
 def modulus_warnings(modulus_Pa: float, *, name: str = "youngs_modulus_Pa") -> list[str]:

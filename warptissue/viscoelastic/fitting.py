@@ -24,6 +24,7 @@ from warptissue.lsq.engine import covariance_from_jacobian
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.plausibility import (
     check_indentation_record,
+    convergence_warnings,
     fit_quality_warnings,
     stiffness_warnings,
 )
@@ -386,6 +387,7 @@ def fit_qlv(
     n = int(terms)
     if n < 1:
         raise InputError("terms must be >= 1", value=terms)
+    check_hold(record)
     if p0 is None:
         prony = _initial_prony(record, n)
         instantaneous = prony[0] + prony[1 : 1 + n].sum()
@@ -427,9 +429,51 @@ def fit_qlv(
         max_iterations=max_iterations,
     )
     result.fitted_model = build(result.x)
+    result.warnings.extend(convergence_warnings(result))
     result.warnings.extend(data_warnings)
     result.warnings.extend(fit_quality_warnings(result))
     return result
+
+
+MIN_HOLD_FRACTION = 0.1
+"""The shortest hold a relaxation fit of a ramp-and-hold record takes, as a fraction of the
+ramp's duration (:func:`check_hold`)."""
+
+HOLD_LEVEL = 0.99
+"""A sample holds when its displacement is at least this fraction of the peak's."""
+
+
+def check_hold(record: RelaxationRecord) -> float:
+    """Refuse a record without a hold: the relaxation that a Prony series describes shows only
+    while the displacement is held.
+
+    The hold runs from the first to the last sample at :data:`HOLD_LEVEL` of the peak
+    displacement or more; the ramp from the first sample to the hold.
+
+    Args:
+        record: The record.
+
+    Returns:
+        The hold's duration, s.
+
+    Raises:
+        InputError: The hold is shorter than :data:`MIN_HOLD_FRACTION` of the ramp (a
+            ramp-only or loading-unloading record), naming the record and its hold.
+    """
+    depth = np.abs(record.displacement_m)
+    held = np.flatnonzero(depth >= HOLD_LEVEL * float(np.max(depth)))
+    time = record.time_s
+    ramp_s = float(time[held[0]] - time[0])
+    hold_s = float(time[held[-1]] - time[held[0]])
+    if hold_s < MIN_HOLD_FRACTION * ramp_s or held.size < 3:
+        raise InputError(
+            f"the record has no hold (the displacement stays at its peak for {hold_s:.3g} s "
+            f"after a {ramp_s:.3g} s ramp; at least {MIN_HOLD_FRACTION:g} of the ramp is "
+            "needed): a Prony series is fitted to the relaxation of a ramp-and-hold record",
+            path=record.source,
+            column="displacement_m",
+        )
+    return hold_s
 
 
 def fit_wiechert_joint(
