@@ -285,3 +285,37 @@ def test_two_stage_refuses_a_record_without_a_hold(study_file, tmp_path, capsys)
     assert status == 2
     assert err.count("\n") == 1 and "ramp.csv" in err and "no hold" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_two_stage_says_when_stage_one_did_not_converge(
+    study_file, record_columns, tmp_path, capsys, monkeypatch
+):
+    """Issue 36: stage (i) stopped at its iteration limit, and the command printed "status:
+    converged", no warning and exit 0. Now each stage (i) finding is a warning line on stderr
+    naming the stage and the record, and a stage (i) that did not converge is exit 4 (as a
+    stage (ii) that did not), the outputs written."""
+    import functools
+
+    import warptissue.fit.indentation as indentation
+    from warptissue.viscoelastic.fitting import fit_qlv
+
+    monkeypatch.setattr(indentation, "fit_qlv", functools.partial(fit_qlv, max_iterations=1))
+    time = np.concatenate([record_columns["time_s"], 3.0 + np.arange(1, 13) * 0.25])
+    depth = np.concatenate([record_columns["displacement_m"], np.full(12, 3e-4)])
+    peak = record_columns["force_N"][-1]
+    relaxing = peak * (0.7 + 0.3 * np.exp(-np.arange(1, 13) * 0.25))
+    force = np.concatenate([record_columns["force_N"], relaxing])
+    write_csv(
+        study_file.parent / "ramp.csv", {"time_s": time, "displacement_m": depth, "force_N": force}
+    )
+    text = study_file.read_text()
+    text = text.replace("C10_Pa = 287.5", "C10_Pa = 287.5\ng1 = 0.3\ntau1_s = 1.0")
+    text = text.replace("time_steps = 6", 'time_steps = 6\nstrategy = "two_stage"')
+    study_file.write_text(text)
+    out = tmp_path / "out"
+    status = main(["fit", "indentation", str(study_file), "-o", str(out), "--quiet"])
+    err = capsys.readouterr().err
+    assert status == 4, err
+    assert "warptissue: warning: stage (i) (Ahn & Kim), ramp.csv: the fit did not converge" in err
+    assert "error: stage (i) (Ahn & Kim) did not converge" in err and "Traceback" not in err
+    assert (out / "fit.json").is_file()

@@ -31,6 +31,9 @@ if TYPE_CHECKING:
 __all__ = ["register_fit", "run", "summary"]
 
 STRATEGIES = ("joint", "two_stage")
+
+STAGE_ONE = "stage (i) (Ahn & Kim)"
+"""How the messages name the two-stage fit's first stage (the Prony series by fit_qlv)."""
 """``--strategy`` values: every free parameter at once, or Ahn & Kim's two stages."""
 CONTACT_POINTS = ("given", "fit")
 """``--contact-point`` values: :data:`warptissue.study.CONTACT_POINTS`."""
@@ -56,8 +59,11 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
             "output folder. Warnings (parameters not identified, systematic residuals, a "
             "parameter at its bound) go to stderr and to fit.json. Exit status: 0 fitted "
             "(warnings on stderr), 2 bad input or usage (one line naming the file, line and "
-            f"key), 3 unusable mesh, {ConvergenceError.exit_code} the fit failed or did not "
-            "converge within max_iterations (the files are written from the best parameters), "
+            f"key; also a two-stage record without a hold), 3 unusable mesh, "
+            f"{ConvergenceError.exit_code} the fit failed or did not converge within "
+            "max_iterations, or stage (i) of the two-stage fit did not converge on a record "
+            "(the files are written from the best parameters; each stage (i) finding is a "
+            "warning line naming the record), "
             f"5 device, 130 {interrupted}: the files are written from the best parameters "
             "found so far, 141 broken pipe."
         ),
@@ -139,6 +145,20 @@ def run(args: argparse.Namespace) -> int:
         print(f"outputs in {out_dir}: " + ", ".join(p.name for p in files.values()))
     for message in fit.warnings:
         print(f"warptissue: warning: {message}", file=sys.stderr)
+    stage_one = zip(fit.records, fit.stage_one_fits, strict=False)
+    unconverged = []
+    for record, stage in stage_one:
+        for message in stage.all_warnings:
+            print(f"warptissue: warning: {STAGE_ONE}, {record.file}: {message}", file=sys.stderr)
+        if not stage.success:
+            unconverged.append(record.file)
+    if unconverged and fit.exit_code == 0:
+        print(
+            f"warptissue: error: {STAGE_ONE} did not converge on {', '.join(unconverged)}; the "
+            f"outputs in {out_dir} hold the Prony terms it reached",
+            file=sys.stderr,
+        )
+        return ConvergenceError.exit_code
     if fit.status == "interrupted":
         print(
             f"warptissue: interrupted: the outputs in {out_dir} hold the best parameters "
