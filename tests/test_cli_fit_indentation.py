@@ -296,10 +296,12 @@ def test_two_stage_says_when_stage_one_did_not_converge(
     stage (ii) that did not), the outputs written."""
     import functools
 
-    import warptissue.fit.indentation as indentation
     from warptissue.viscoelastic.fitting import fit_qlv
 
-    monkeypatch.setattr(indentation, "fit_qlv", functools.partial(fit_qlv, max_iterations=1))
+    # Stage (i) as the fit plan runs it, with one iteration.
+    monkeypatch.setattr(
+        "warptissue.fit._setup.fit_qlv", functools.partial(fit_qlv, max_iterations=1)
+    )
     time = np.concatenate([record_columns["time_s"], 3.0 + np.arange(1, 13) * 0.25])
     depth = np.concatenate([record_columns["displacement_m"], np.full(12, 3e-4)])
     peak = record_columns["force_N"][-1]
