@@ -184,8 +184,10 @@ def test_live_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, capsys
 def test_stop_when_ends_the_test_early_and_the_early_fit_agrees_with_the_full_one(tmp_path, capsys):
     """--stop-when se<2% on a 60 s hold (rig at 10x): the rig is stopped once identified,
     the saved time is reported, every sample up to the stop is kept, and the early record's
-    offline fit lies within 2 of its standard errors of the full record's (same tissue,
-    same noise seed)."""
+    offline fit lies within 3 of its standard errors of the full record's (same tissue,
+    same noise seed). Three, not one or two: the early record stops at a time set by how fast
+    the fit ran, and five parameters each within 2 standard errors fail about one run in
+    five by chance alone (a CI run saw 2.04); within 3 they fail about one in a hundred."""
     _, server = prony_rig(time_scale=10.0)
     with server:
         assert acquire(server.url, tmp_path / "run.csv", "--stop-when", "se<2%",
@@ -204,7 +206,7 @@ def test_stop_when_ends_the_test_early_and_the_early_fit_agrees_with_the_full_on
     with server:
         assert acquire(server.url, full / "run.csv", hold="60s") == 0
     early, complete = fit_json(tmp_path), fit_json(full)
-    assert np.all(np.abs(values(early) - values(complete)) < 2.0 * errors(early))
+    assert np.all(np.abs(values(early) - values(complete)) < 3.0 * errors(early))
     assert np.all(errors(early) / np.abs(values(early)) < 0.05)
 
 

@@ -580,12 +580,14 @@ def test_a_scheduler_that_never_answers_is_unreachable_within_the_timeout(
     assert err.count("\n") == 1 and "cannot reach the Dask scheduler 'not a url'" in err
 
 
-def _batch_process(*args: str) -> subprocess.Popen:
+def _batch_process(cwd: Path, *args: str) -> subprocess.Popen:
     """``warptissue batch ARGS`` in a process group of its own, with Ctrl-C's default
-    handling (a shell's background job would ignore SIGINT), stdout and stderr piped."""
+    handling (a shell's background job would ignore SIGINT), stdout and stderr piped. It runs
+    in ``cwd``, outside the checkout: from the checkout's root, Python would import its
+    ``warptissue/`` (which has no ``kernels/``) instead of the installed package."""
     return subprocess.Popen(
         [sys.executable, "-m", "warptissue.cli", "batch", *args],
-        cwd=ROOT,
+        cwd=cwd,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -601,7 +603,7 @@ def test_quiet_batch_on_a_local_cluster_prints_nothing(tmp_path):
     pytest.importorskip("distributed")
     study = tmp_path / "punch.toml"
     study.write_text(_tiny_simulation(), encoding="utf-8")
-    process = _batch_process(str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet")
+    process = _batch_process(tmp_path, str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet")
     out, err = process.communicate(timeout=300)
     assert (process.returncode, out, err) == (0, "", "")
 
@@ -614,7 +616,7 @@ def test_ctrl_c_in_a_batch_is_one_line_and_leaves_no_temporary_file(tmp_path):
     pytest.importorskip("distributed")
     out_dir = tmp_path / "out"
     process = _batch_process(
-        str(ROOT / "scenes" / "liver_fit.toml"), "-o", str(out_dir), "--workers", "1", "--quiet"
+        tmp_path, str(ROOT / "scenes" / "liver_fit.toml"), "-o", str(out_dir), "--workers", "1", "--quiet"
     )
     try:
         time.sleep(15.0)  # the cluster starts and the fit (about 90 s of CPU) is under way
