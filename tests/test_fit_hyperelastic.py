@@ -148,8 +148,14 @@ def test_four_models_ranked_by_r_squared_and_mooney_rivlin_stability(rng):
     assert fits["neo_hookean"].stability.stable_everywhere
     assert fits["reduced_polynomial:2"].stability.stable_everywhere
     # unstable inside the tested range: said in the result's warnings
-    (warning,) = mooney.result.warnings
+    warning, *others = mooney.result.warnings
     assert "not Drucker-stable in uniaxial compression" in warning
+    # and in the loadings not tested (issue 36): a negative tensile stress, instabilities
+    assert [m.split(" (not tested)")[0] for m in others] == [
+        "in tension",
+        "in equibiaxial",
+        "in planar",
+    ]
     assert warning in mooney.to_dict()["fit"]["warnings"]
     assert fits["reduced_polynomial:2"].result.warnings == []
 
@@ -318,3 +324,15 @@ def test_window_errors_show_plain_numbers():
     with pytest.raises(InputError, match="largest nominal strain 0.1") as error:
         fit_hyperelastic("neo_hookean", test, min_strain=np.float64(0.5))
     assert "np.float64" not in str(error.value)
+
+
+def test_a_negative_c01_is_named_as_the_cause_of_an_implausible_modulus():
+    """Issue 36: a Mooney-Rivlin fit with a negative C01 got "the modulus is outside the
+    plausible range ... check the units"; the cause, the negative parameter, is named."""
+    truth = MooneyRivlin(1000.0, -999.0)  # mu0 = 2 (C10 + C01) = 2 Pa, E = 6 Pa
+    stretch = np.linspace(1.0, 2.0, 21)
+    test = HomogeneousTest("tension", stretch - 1.0, truth.nominal_stress_Pa(stretch, "uniaxial"))
+    fit = fit_hyperelastic("mooney_rivlin", test)
+    assert fit.model.C01_Pa == pytest.approx(-999.0, rel=1e-6)
+    (message,) = [m for m in fit.result.warnings if "Young's modulus" in m]
+    assert "because C01_Pa = -999 Pa is negative" in message and "units" not in message
