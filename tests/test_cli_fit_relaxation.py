@@ -335,3 +335,24 @@ def test_punch_modulus_refuses_a_force_of_the_other_sign(tmp_path, capsys):
     assert main([*command, str(both), "--out", str(tmp_path / "b"), "--json"]) == 0
     fitted = json.loads(capsys.readouterr().out)["fit"]["parameters"]["youngs_modulus_Pa"]
     assert fitted["value"] == pytest.approx(3e4, rel=1e-6)
+
+
+def test_qlv_is_a_model_of_the_command_line(tmp_path, capsys):
+    """Issue 36: the README says fit relaxation fits QLV, but --model qlv was unknown. On a
+    linear Prony record (QLV's linear limit: a nearly linear elastic force) it gives back the
+    relaxation g_i = k_i / (k0 + k1 + k2) and tau_i; a ramp without a hold is refused."""
+    path = _record(tmp_path / "relax.csv")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)[::8]  # 500 samples: seconds, not 20
+    write_csv(path, {"time_s": data[:, 0], "displacement_m": data[:, 1], "force_N": data[:, 2]})
+    argv = ["relaxation", str(path), "--model", "qlv:2", "--out", str(tmp_path / "o")]
+    status, printed, err = _fit_json(capsys, argv)
+    assert status == 0, err
+    fitted = _stiffness(printed)
+    assert (fitted["g1"], fitted["g2"]) == pytest.approx((6.0 / 15.0, 4.0 / 15.0), rel=0.05)
+    assert (fitted["tau1_s"], fitted["tau2_s"]) == pytest.approx((0.8, 15.0), rel=0.05)
+    assert printed["records"][0]["r_squared"] > 0.999
+    ramp = data[data[:, 0] <= 1.4]
+    write_csv(path, {"time_s": ramp[:, 0], "displacement_m": ramp[:, 1], "force_N": ramp[:, 2]})
+    status, _, err = _fit_json(capsys, argv)
+    assert status == 2 and err.count("\n") == 1
+    assert str(path) in err and "no hold" in err

@@ -9,8 +9,11 @@ parameters (value, unit, standard error), whether they are identified, and its D
 stable range (``STEM_comparison.txt`` and ``.json``). A parameter the data do not determine
 (standard error larger than its value, pinned at a bound, singular covariance) is flagged
 with a ``warning:`` line on stderr and ``"identified": false``; the exit status stays 0.
-With ``--usd PATH`` the best model by R² is also written as a USD material layer (nearly
-incompressible: bulk modulus K = --bulk-modulus-ratio x the initial shear modulus).
+With ``--usd PATH`` the best model by R² that is identified and Drucker-stable in the tested
+range is also written as a USD material layer (nearly incompressible: bulk modulus K =
+--bulk-modulus-ratio x the initial shear modulus). Exit status: 0 fitted (warnings on
+stderr), 2 bad input or usage (one line naming the file, column or option; also --usd
+where no model is identified and stable), 141 broken pipe.
 """
 
 from __future__ import annotations
@@ -140,7 +143,9 @@ over the fitted stretch range, the Drucker check) and a comparison ranked by R^2
 and its stress in each loading at the largest fitted stretch, tested or predicted. Warnings
 on stderr (exit status 0): parameters not identified, Drucker instability in the tested
 range, a loading not tested where the model predicts an absurd stress or is unstable. With
---usd the best model by R^2 that is identified and stable is written as a USD material."""
+--usd the best model by R^2 that is identified and stable is written as a USD material.
+Exit status: 0 fitted (warnings on stderr), 2 bad input or usage (one line naming the file,
+column or option; also --usd where no model is identified and stable), 141 broken pipe."""
 
 
 def _register_joint(subparsers: argparse._SubParsersAction) -> None:
