@@ -151,7 +151,9 @@ def test_four_models_ranked_by_r_squared_and_mooney_rivlin_stability(rng):
     warning, *others = mooney.result.warnings
     assert "not Drucker-stable in uniaxial compression" in warning
     # and in the loadings not tested (issue 36): a negative tensile stress, instabilities
-    assert [m.split(" (not tested)")[0] for m in others] == [
+    # (and its residuals are systematic: Durbin-Watson, as the inverse FE's rule)
+    assert any("residuals of test" in m and "systematic" in m for m in others)
+    assert [m.split(" (not tested)")[0] for m in others if m.startswith("in ")] == [
         "in tension",
         "in equibiaxial",
         "in planar",
@@ -336,3 +338,24 @@ def test_a_negative_c01_is_named_as_the_cause_of_an_implausible_modulus():
     assert fit.model.C01_Pa == pytest.approx(-999.0, rel=1e-6)
     (message,) = [m for m in fit.result.warnings if "Young's modulus" in m]
     assert "because C01_Pa = -999 Pa is negative" in message and "units" not in message
+
+
+def test_systematic_residuals_are_warned_as_in_the_inverse_fe():
+    """Issue 36: a neo-Hookean fit with R^2 = 0.84 on data with a strong upturn got no
+    warning; the inverse FE's Durbin-Watson rule (lsq.metrics) applies to each test. The
+    statistic is checked by hand: sum(diff(r)^2) / sum(r^2)."""
+    from warptissue.lsq.metrics import DURBIN_WATSON_LIMIT, durbin_watson
+
+    stretch = np.linspace(1.0, 3.0, 30)
+    upturn = ReducedPolynomial((1000.0, 0.0, 400.0)).nominal_stress_Pa(stretch, "uniaxial")
+    fit = fit_hyperelastic("neo_hookean", HomogeneousTest("tension", stretch - 1.0, upturn))
+    residuals = fit.tests[0].predicted_stress_Pa(fit.model) - upturn
+    by_hand = np.sum(np.diff(residuals) ** 2) / np.sum(residuals**2)
+    assert durbin_watson(residuals) == pytest.approx(by_hand)
+    assert by_hand < DURBIN_WATSON_LIMIT
+    (message,) = [m for m in fit.result.warnings if "systematic" in m]
+    assert f"Durbin-Watson statistic {by_hand:.3g}" in message
+    exact = ReducedPolynomial((1000.0,)).nominal_stress_Pa(stretch, "uniaxial")
+    noisy = exact * (1 + 0.01 * np.random.default_rng(3).standard_normal(stretch.size))
+    clean = fit_hyperelastic("neo_hookean", HomogeneousTest("tension", stretch - 1.0, noisy))
+    assert not [m for m in clean.result.warnings if "systematic" in m]

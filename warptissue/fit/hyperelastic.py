@@ -42,7 +42,7 @@ import numpy as np
 from warptissue.errors import InputError
 from warptissue.io import read_experiment_csv
 from warptissue.lsq.engine import fit_curve
-from warptissue.lsq.metrics import r_squared, rmse
+from warptissue.lsq.metrics import DURBIN_WATSON_LIMIT, durbin_watson, r_squared, rmse
 from warptissue.lsq.plausibility import SOFT_TISSUE_MODULUS_RANGE_PA, fit_quality_warnings
 from warptissue.lsq.result import FitResult, RejectStep
 from warptissue.materials import (
@@ -815,6 +815,7 @@ def fit_hyperelastic(
         stability=stability,
     )
     largest = max(float(np.max(t.nominal_stress_Pa)) for t in test_list)
+    result.warnings.extend(_systematic_residual_warnings(fit))
     if len(test_list) > 1:
         result.warnings.extend(
             f"in test {row['test']!r} ({row['loading']}) the fitted model is worse than a "
@@ -824,6 +825,24 @@ def fit_hyperelastic(
         )
     result.warnings.extend(_prediction_warnings(fit.mode_predictions(), largest))
     return fit
+
+
+def _systematic_residual_warnings(fit: HyperelasticFit) -> list[str]:
+    """A warning per test whose residuals, in the order of its data, have a Durbin-Watson
+    statistic below :data:`~warptissue.lsq.metrics.DURBIN_WATSON_LIMIT` (the inverse FE's
+    rule): the model misses the curve's shape (an upturn it cannot follow, say)."""
+    messages = []
+    for test, row in zip(fit.tests, fit.test_errors(), strict=True):
+        window = test.window(fit.min_strain)
+        statistic = durbin_watson(window.predicted_stress_Pa(fit.model) - window.nominal_stress_Pa)
+        if statistic is not None and statistic < DURBIN_WATSON_LIMIT:
+            r2 = "n/a" if row["r_squared"] is None else f"{row['r_squared']:.3g}"
+            messages.append(
+                f"the residuals of test {test.name!r} ({test.loading}) are systematic "
+                f"(Durbin-Watson statistic {statistic:.3g}, about 2 for noise; R^2 = {r2}): "
+                "the model misses the curve's shape; try a model that can (Yeoh, Ogden)"
+            )
+    return messages
 
 
 PREDICTION_LIMIT = 10.0
