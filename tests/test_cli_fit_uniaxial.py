@@ -535,3 +535,17 @@ def test_bad_test_loading_and_missing_stress_column_are_one_line(tmp_path, capsy
     assert main(["fit", "hyperelastic", "--test", "tension", str(path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no nominal stress column" in err and str(path) in err
+
+
+def test_stretches_of_the_other_loading_or_not_positive_name_the_fix(tmp_path, capsys):
+    """Hunting issue 36's kind: tensile stretches under --test compression got "strains are
+    magnitudes ... flip the sign"; they now name the loading, and a stretch of 0 is named."""
+    path = tmp_path / "pull.csv"
+    path.write_text("stretch,nominal_stress_Pa\n1.0,0\n1.5,1000\n2.0,2000\n")
+    assert main(["fit", "hyperelastic", "--test", "compression", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "give the test's loading as tension" in err
+    path.write_text("stretch,nominal_stress_Pa\n1.0,0\n0.0,1000\n")
+    assert main(["fit", "hyperelastic", "--test", "compression", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a stretch (L / L0) must be positive" in err

@@ -165,12 +165,7 @@ def _register_joint(subparsers: argparse._SubParsersAction) -> None:
         help="a test: its loading (tension, compression, equibiaxial or planar) and its CSV; "
         "repeat for a joint fit",
     )
-    parser.add_argument(
-        "--model",
-        default="all",
-        help="neo_hookean, mooney_rivlin, reduced_polynomial:N, yeoh, ogden:N, a "
-        "comma-separated list, or all (default)",
-    )
+    _copy_option(subparsers.choices["uniaxial"], parser, "--model")
     parser.add_argument(
         "--area-m2",
         type=positive_number,

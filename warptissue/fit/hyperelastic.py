@@ -301,7 +301,26 @@ class HomogeneousTest:
         """
         if loading not in LOADINGS:
             raise InputError(f"loading must be one of {tuple(LOADINGS)}", value=loading)
-        strain = LOADINGS[loading][1] * (np.asarray(stretch, dtype=np.float64) - 1.0)
+        stretches = np.asarray(stretch, dtype=np.float64)
+        if np.any(stretches <= 0.0):
+            row = int(np.flatnonzero(stretches <= 0.0)[0])
+            raise InputError(
+                f"a stretch (L / L0) must be positive; data row {row + 1} has "
+                f"{float(stretches[row]):.4g}",
+                path=path,
+                column="stretch",
+            )
+        sign = LOADINGS[loading][1]
+        if stretches.size and np.median(sign * (stretches - 1.0)) < 0.0:
+            other = "compression" if sign > 0 else "tension"
+            raise InputError(
+                f"the stretches are mostly {'below' if sign > 0 else 'above'} 1 (median "
+                f"{float(np.median(stretches)):.4g}), which is {other}, not {loading}: give the "
+                f"test's loading as {other}",
+                path=path,
+                column="stretch",
+            )
+        strain = sign * (stretches - 1.0)
         stress = np.asarray(nominal_stress_Pa, dtype=np.float64)
         if strain.shape == stress.shape:
             _check_magnitudes(
