@@ -356,3 +356,25 @@ def test_qlv_is_a_model_of_the_command_line(tmp_path, capsys):
     status, _, err = _fit_json(capsys, argv)
     assert status == 2 and err.count("\n") == 1
     assert str(path) in err and "no hold" in err
+
+
+def test_the_displacement_limit_follows_the_declared_test(tmp_path, capsys):
+    """Issue 36: fit relaxation refused displacements above 0.1 m ("implausible for an
+    indentation"), so a tensile relaxation of an 80 mm specimen beyond stretch 2.25 could not
+    be fitted. --gauge-length-m declares a specimen (displacements up to 10 gauge lengths);
+    --max-displacement-m overrides the limit; the indentation default stays."""
+    data = np.loadtxt(_record(tmp_path / "r.csv"), delimiter=",", skiprows=1)[::8]
+    path = tmp_path / "tensile.csv"
+    write_csv(
+        path, {"time_s": data[:, 0], "displacement_m": 60.0 * data[:, 1], "force_N": data[:, 2]}
+    )  # 0.12 m: stretch 2.5 of an 80 mm specimen
+    argv = ["fit", "relaxation", str(path), "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert "more than 0.1 m" in capsys.readouterr().err
+    assert main([*argv, "--gauge-length-m", "80mm"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--max-displacement-m", "0.2"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--max-displacement-m", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--max-displacement-m" in err

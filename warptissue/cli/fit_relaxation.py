@@ -163,6 +163,23 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         "wiechert-nonlinear",
     )
     relaxation.add_argument(
+        "--gauge-length-m",
+        type=positive_length_m,
+        default=None,
+        metavar="L0",
+        help="the record is a tensile or compressive test of a specimen of this gauge length "
+        "(m, e.g. 80mm): displacements up to MAX_NOMINAL_STRAIN (10) gauge lengths are "
+        "plausible (an indentation's limit is 0.1 m)",
+    )
+    relaxation.add_argument(
+        "--max-displacement-m",
+        type=positive_length_m,
+        default=None,
+        metavar="D",
+        help="the largest plausible displacement (m, e.g. 150mm), overriding the "
+        "indentation's 0.1 m and --gauge-length-m",
+    )
+    relaxation.add_argument(
         "--p0",
         default=None,
         help="comma-separated initial parameters in the model's order, SI units "
@@ -410,6 +427,20 @@ def _predict(
     return reports, files, lines
 
 
+def _displacement_limit(args: argparse.Namespace) -> float:
+    """The largest plausible displacement of the declared test, m: --max-displacement-m, else
+    MAX_NOMINAL_STRAIN gauge lengths of a specimen (--gauge-length-m), else an indentation's
+    MAX_INDENTATION_DEPTH_M."""
+    from warptissue.fit.hyperelastic import MAX_NOMINAL_STRAIN
+    from warptissue.lsq.plausibility import MAX_INDENTATION_DEPTH_M
+
+    if args.max_displacement_m is not None:
+        return args.max_displacement_m
+    if args.gauge_length_m is not None:
+        return MAX_NOMINAL_STRAIN * args.gauge_length_m
+    return MAX_INDENTATION_DEPTH_M
+
+
 def _fit_qlv(
     args: argparse.Namespace, records: list[_Record], terms: int, p0: list[float] | None
 ) -> FitResult:
@@ -462,6 +493,7 @@ def run_relaxation(args: argparse.Namespace) -> int:
         _read(path, args, required=("time_s", "displacement_m", "force_N")) for path in args.data
     ]
     floor = _floor(args, records)
+    limit = _displacement_limit(args)
     if model == "qlv":
         result = _fit_qlv(args, records, terms, p0)
     else:
@@ -473,6 +505,7 @@ def run_relaxation(args: argparse.Namespace) -> int:
                     r.force_N,
                     source=str(r.path),
                     conditioned=r.conditioned,
+                    max_displacement_m=limit,
                 )  # fmt: skip
                 for r in records
             ],
