@@ -335,3 +335,46 @@ def test_punch_modulus_refuses_a_force_of_the_other_sign(tmp_path, capsys):
     assert main([*command, str(both), "--out", str(tmp_path / "b"), "--json"]) == 0
     fitted = json.loads(capsys.readouterr().out)["fit"]["parameters"]["youngs_modulus_Pa"]
     assert fitted["value"] == pytest.approx(3e4, rel=1e-6)
+
+
+def test_qlv_is_a_model_of_the_command_line(tmp_path, capsys):
+    """Issue 36: the README says fit relaxation fits QLV, but --model qlv was unknown. On a
+    linear Prony record (QLV's linear limit: a nearly linear elastic force) it gives back the
+    relaxation g_i = k_i / (k0 + k1 + k2) and tau_i; a ramp without a hold is refused."""
+    path = _record(tmp_path / "relax.csv")
+    data = np.loadtxt(path, delimiter=",", skiprows=1)[::8]  # 500 samples: seconds, not 20
+    write_csv(path, {"time_s": data[:, 0], "displacement_m": data[:, 1], "force_N": data[:, 2]})
+    argv = ["relaxation", str(path), "--model", "qlv:2", "--out", str(tmp_path / "o")]
+    status, printed, err = _fit_json(capsys, argv)
+    assert status == 0, err
+    fitted = _stiffness(printed)
+    assert (fitted["g1"], fitted["g2"]) == pytest.approx((6.0 / 15.0, 4.0 / 15.0), rel=0.05)
+    assert (fitted["tau1_s"], fitted["tau2_s"]) == pytest.approx((0.8, 15.0), rel=0.05)
+    assert printed["records"][0]["r_squared"] > 0.999
+    ramp = data[data[:, 0] <= 1.4]
+    write_csv(path, {"time_s": ramp[:, 0], "displacement_m": ramp[:, 1], "force_N": ramp[:, 2]})
+    status, _, err = _fit_json(capsys, argv)
+    assert status == 2 and err.count("\n") == 1
+    assert str(path) in err and "no hold" in err
+
+
+def test_the_displacement_limit_follows_the_declared_test(tmp_path, capsys):
+    """Issue 36: fit relaxation refused displacements above 0.1 m ("implausible for an
+    indentation"), so a tensile relaxation of an 80 mm specimen beyond stretch 2.25 could not
+    be fitted. --gauge-length-m declares a specimen (displacements up to 10 gauge lengths);
+    --max-displacement-m overrides the limit; the indentation default stays."""
+    data = np.loadtxt(_record(tmp_path / "r.csv"), delimiter=",", skiprows=1)[::8]
+    path = tmp_path / "tensile.csv"
+    write_csv(
+        path, {"time_s": data[:, 0], "displacement_m": 60.0 * data[:, 1], "force_N": data[:, 2]}
+    )  # 0.12 m: stretch 2.5 of an 80 mm specimen
+    argv = ["fit", "relaxation", str(path), "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    assert "more than 0.1 m" in capsys.readouterr().err
+    assert main([*argv, "--gauge-length-m", "80mm"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--max-displacement-m", "0.2"]) == 0
+    capsys.readouterr()
+    assert main([*argv, "--max-displacement-m", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--max-displacement-m" in err

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -405,3 +406,146 @@ def test_an_implausible_modulus_is_warned(compression_csv, tmp_path, capsys):
     assert "outside the plausible range of soft tissue" in captured.err
     (row,) = json.loads(captured.out)["models"]
     assert any("specimen's area and height" in warning for warning in row["warnings"])
+
+
+ROOT = Path(__file__).resolve().parents[1]
+TRELOAR = {
+    loading: ROOT / "scenes" / "data" / f"treloar_{name}.csv"
+    for loading, name in (
+        ("tension", "uniaxial"),
+        ("equibiaxial", "equibiaxial"),
+        ("planar", "planar"),
+    )
+}
+
+
+def _neo_hookean_stress_Pa(stretch: np.ndarray, loading: str, c10_Pa: float) -> np.ndarray:
+    """Incompressible neo-Hookean nominal stress, by hand: P = 2 C10 (lam - lam^-k), k = 2
+    (uniaxial), 5 (equibiaxial), 3 (planar)."""
+    power = {"tension": 2.0, "equibiaxial": 5.0, "planar": 3.0}[loading]
+    return 2.0 * c10_Pa * (stretch - stretch**-power)
+
+
+def test_joint_fit_of_stretch_and_stress_files_recovers_a_neo_hookean(tmp_path, capsys):
+    """Issue 36: tests given as stretch and nominal stress (kPa here), three loadings, one
+    joint fit from the command line; each test's error and the stress in each loading are
+    reported; C10 against the closed forms written by hand."""
+    arguments = ["fit", "hyperelastic"]
+    for loading in ("tension", "equibiaxial", "planar"):
+        stretch = np.linspace(1.0, 3.0, 11)
+        stress_kPa = _neo_hookean_stress_Pa(stretch, loading, 2500.0) / 1e3
+        path = tmp_path / f"{loading}.csv"
+        lines = ["stretch,nominal_stress_kPa"] + [
+            f"{float(a)!r},{float(b)!r}" for a, b in zip(stretch, stress_kPa, strict=True)
+        ]
+        path.write_text("\n".join(lines) + "\n")
+        arguments += ["--test", loading, str(path)]
+    out = tmp_path / "out"
+    status = main([*arguments, "--model", "neo_hookean", "--out", str(out), "--json"])
+    assert status == 0
+    (row,) = json.loads(capsys.readouterr().out)["models"]
+    assert row["parameters"]["C10_Pa"]["value"] == pytest.approx(2500.0, rel=1e-9)
+    assert [t["loading"] for t in row["tests"]] == ["tension", "equibiaxial", "planar"]
+    assert all(t["r_squared"] == pytest.approx(1.0) for t in row["tests"])
+    for entry in row["predictions"]:
+        stretch = np.asarray(entry["stretch"])
+        assert entry["tested"] and stretch[-1] == pytest.approx(3.0)
+        expected = _neo_hookean_stress_Pa(stretch, entry["loading"], 2500.0)
+        np.testing.assert_allclose(entry["nominal_stress_Pa"], expected, rtol=1e-9)
+    saved = json.loads((out / "neo_hookean.json").read_text())
+    assert saved["tests"] == row["tests"] and len(saved["data_files"]) == 3
+
+
+def test_ogden_fits_treloar_s_three_tests_jointly_and_one_alone_is_warned(tmp_path, capsys):
+    """Issue 36: a 3-term Ogden fitted jointly to Treloar's uniaxial, equibiaxial and planar
+    tests describes each (R^2 > 0.99 each); fitted to the uniaxial test alone, its absurd
+    equibiaxial and planar predictions are warnings (it said only "not identified")."""
+    arguments = ["fit", "hyperelastic", "--model", "ogden:3", "--out", str(tmp_path / "o")]
+    for loading, path in TRELOAR.items():
+        arguments += ["--test", loading, str(path)]
+    assert main(arguments) == 0
+    captured = capsys.readouterr()
+    for name in ("treloar_uniaxial (tension)", "treloar_equibiaxial", "treloar_planar"):
+        (line,) = [x for x in captured.out.splitlines() if x.strip().startswith(name)]
+        assert float(re.search(r"R\^2 = ([0-9.]+)", line).group(1)) > 0.99
+    assert "equibiaxial at stretch" in captured.out
+    alone = ["fit", "hyperelastic", "--model", "ogden:3", "--out", str(tmp_path / "a")]
+    assert main([*alone, "--test", "tension", str(TRELOAR["tension"])]) == 0
+    err = capsys.readouterr().err
+    assert "in equibiaxial (not tested) the fitted model predicts a nominal stress of" in err
+    assert "in planar (not tested)" in err
+
+
+def test_usd_writes_only_an_identified_stable_model_unless_asked(tmp_path, capsys):
+    """Issue 36: --usd wrote the best model by R^2 although it was not identified; now the
+    best identified and stable one is written and named, none at all is one line (exit 2),
+    and --usd-any-model writes the best by R^2."""
+    base = ["fit", "hyperelastic", "--test", "tension", str(TRELOAR["tension"])]
+    usd = tmp_path / "m.usda"
+    status = main(
+        [*base, "--model", "ogden:3,neo_hookean", "--out", str(tmp_path / "a"), "--usd", str(usd)]
+    )
+    err = capsys.readouterr().err
+    assert status == 0 and usd.is_file()
+    assert "writing the best one that is, neo_hookean" in err
+    assert '"model": "neo_hookean"' in usd.read_text() or "neo_hookean" in usd.read_text()
+    usd.unlink()
+    status = main([*base, "--model", "ogden:3", "--out", str(tmp_path / "b"), "--usd", str(usd)])
+    err = capsys.readouterr().err
+    assert status == 2 and not usd.exists()
+    assert (
+        err.strip().splitlines()[-1].startswith("warptissue: error: option --usd: no fitted model")
+    )
+    status = main(
+        [
+            *base,
+            "--model",
+            "ogden:3",
+            "--out",
+            str(tmp_path / "c"),
+            "--usd",
+            str(usd),
+            "--usd-any-model",
+        ]
+    )
+    capsys.readouterr()
+    assert status == 0 and usd.is_file()
+
+
+def test_tensile_data_under_the_default_compression_name_loading_tension(tmp_path, capsys):
+    """Issue 36: tensile data with the default --loading compression got "the compressive
+    nominal strain must stay below 1 ... check the specimen height"."""
+    path = tmp_path / "pull.csv"
+    d = np.linspace(0.0, 0.16, 9)
+    path.write_text(
+        "displacement_m,force_N\n" + "".join(f"{float(x)!r},{50 * float(x)!r}\n" for x in d)
+    )
+    status = main(["fit", "uniaxial", str(path), "--area-m2", "1e-4", "--height-m", "0.08"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count("\n") == 1
+    assert "the data look tensile" in err and "--loading tension" in err
+
+
+def test_bad_test_loading_and_missing_stress_column_are_one_line(tmp_path, capsys):
+    path = tmp_path / "t.csv"
+    path.write_text("stretch,force_N\n1,0\n2,1\n")
+    assert main(["fit", "hyperelastic", "--test", "shear", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "loading must be one of" in err
+    assert main(["fit", "hyperelastic", "--test", "tension", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no nominal stress column" in err and str(path) in err
+
+
+def test_stretches_of_the_other_loading_or_not_positive_name_the_fix(tmp_path, capsys):
+    """Hunting issue 36's kind: tensile stretches under --test compression got "strains are
+    magnitudes ... flip the sign"; they now name the loading, and a stretch of 0 is named."""
+    path = tmp_path / "pull.csv"
+    path.write_text("stretch,nominal_stress_Pa\n1.0,0\n1.5,1000\n2.0,2000\n")
+    assert main(["fit", "hyperelastic", "--test", "compression", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "give the test's loading as tension" in err
+    path.write_text("stretch,nominal_stress_Pa\n1.0,0\n0.0,1000\n")
+    assert main(["fit", "hyperelastic", "--test", "compression", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a stretch (L / L0) must be positive" in err

@@ -249,3 +249,35 @@ def test_readme_command_table_names_every_command() -> None:
     ]
     missing = [n for n in names if not any(row.startswith(f"| `{n}") for row in rows)]
     assert not missing, f"README.md's command table lacks {missing}"
+
+
+def test_the_fit_exit_status_table_agrees_with_the_commands_and_names_real_tests(capsys) -> None:
+    """Issue 36: docs/fitting.md's table of every fit's exit statuses: each status a row
+    gives is one its command's ``--help`` states, and each test it names exists."""
+    from warptissue.cli import main
+
+    text = (ROOT / "docs" / "fitting.md").read_text(encoding="utf-8")
+    section = text.split("## Exit statuses and warnings of every fit", 1)[1]
+    rows = [line for line in section.splitlines() if line.startswith("| `fit ")]
+    header = next(line for line in section.splitlines() if line.startswith("| fit |"))
+    statuses = [cell.strip() for cell in header.strip("|").split("|")][1:-1]
+    assert statuses == ["0", "2", "4", "130"]
+    commands = set()
+    for row in rows:
+        cells = [cell.strip() for cell in row.strip("|").split("|")]
+        command = re.match(r"`fit ([a-z-]+)`", cells[0]).group(1)
+        commands.add(command)
+        with pytest.raises(SystemExit):
+            main(["fit", command, "--help"])
+        stated = " ".join(capsys.readouterr().out.split())
+        for status, cell in zip(statuses, cells[1:-1], strict=True):
+            if cell:
+                assert re.search(rf"(exit status:? |, |; ){status} ", stated, re.IGNORECASE) or (
+                    f"exit status {status}" in stated
+                ), f"fit {command}: --help does not state exit status {status}"
+        for name in re.findall(r"`(test_[a-z_]+\.py)::(test_[a-z0-9_]+)`", cells[-1]):
+            module, function = name
+            assert f"def {function}(" in (ROOT / "tests" / module).read_text(encoding="utf-8"), (
+                f"{module}::{function} named in docs/fitting.md does not exist"
+            )
+    assert commands == {"uniaxial", "hyperelastic", "relaxation", "punch-modulus", "indentation"}

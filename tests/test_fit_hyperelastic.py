@@ -148,8 +148,16 @@ def test_four_models_ranked_by_r_squared_and_mooney_rivlin_stability(rng):
     assert fits["neo_hookean"].stability.stable_everywhere
     assert fits["reduced_polynomial:2"].stability.stable_everywhere
     # unstable inside the tested range: said in the result's warnings
-    (warning,) = mooney.result.warnings
+    warning, *others = mooney.result.warnings
     assert "not Drucker-stable in uniaxial compression" in warning
+    # and in the loadings not tested (issue 36): a negative tensile stress, instabilities
+    # (and its residuals are systematic: Durbin-Watson, as the inverse FE's rule)
+    assert any("residuals of test" in m and "systematic" in m for m in others)
+    assert [m.split(" (not tested)")[0] for m in others if m.startswith("in ")] == [
+        "in tension",
+        "in equibiaxial",
+        "in planar",
+    ]
     assert warning in mooney.to_dict()["fit"]["warnings"]
     assert fits["reduced_polynomial:2"].result.warnings == []
 
@@ -318,3 +326,36 @@ def test_window_errors_show_plain_numbers():
     with pytest.raises(InputError, match="largest nominal strain 0.1") as error:
         fit_hyperelastic("neo_hookean", test, min_strain=np.float64(0.5))
     assert "np.float64" not in str(error.value)
+
+
+def test_a_negative_c01_is_named_as_the_cause_of_an_implausible_modulus():
+    """Issue 36: a Mooney-Rivlin fit with a negative C01 got "the modulus is outside the
+    plausible range ... check the units"; the cause, the negative parameter, is named."""
+    truth = MooneyRivlin(1000.0, -999.0)  # mu0 = 2 (C10 + C01) = 2 Pa, E = 6 Pa
+    stretch = np.linspace(1.0, 2.0, 21)
+    test = HomogeneousTest("tension", stretch - 1.0, truth.nominal_stress_Pa(stretch, "uniaxial"))
+    fit = fit_hyperelastic("mooney_rivlin", test)
+    assert fit.model.C01_Pa == pytest.approx(-999.0, rel=1e-6)
+    (message,) = [m for m in fit.result.warnings if "Young's modulus" in m]
+    assert "because C01_Pa = -999 Pa is negative" in message and "units" not in message
+
+
+def test_systematic_residuals_are_warned_as_in_the_inverse_fe():
+    """Issue 36: a neo-Hookean fit with R^2 = 0.84 on data with a strong upturn got no
+    warning; the inverse FE's Durbin-Watson rule (lsq.metrics) applies to each test. The
+    statistic is checked by hand: sum(diff(r)^2) / sum(r^2)."""
+    from warptissue.lsq.metrics import DURBIN_WATSON_LIMIT, durbin_watson
+
+    stretch = np.linspace(1.0, 3.0, 30)
+    upturn = ReducedPolynomial((1000.0, 0.0, 400.0)).nominal_stress_Pa(stretch, "uniaxial")
+    fit = fit_hyperelastic("neo_hookean", HomogeneousTest("tension", stretch - 1.0, upturn))
+    residuals = fit.tests[0].predicted_stress_Pa(fit.model) - upturn
+    by_hand = np.sum(np.diff(residuals) ** 2) / np.sum(residuals**2)
+    assert durbin_watson(residuals) == pytest.approx(by_hand)
+    assert by_hand < DURBIN_WATSON_LIMIT
+    (message,) = [m for m in fit.result.warnings if "systematic" in m]
+    assert f"Durbin-Watson statistic {by_hand:.3g}" in message
+    exact = ReducedPolynomial((1000.0,)).nominal_stress_Pa(stretch, "uniaxial")
+    noisy = exact * (1 + 0.01 * np.random.default_rng(3).standard_normal(stretch.size))
+    clean = fit_hyperelastic("neo_hookean", HomogeneousTest("tension", stretch - 1.0, noisy))
+    assert not [m for m in clean.result.warnings if "systematic" in m]

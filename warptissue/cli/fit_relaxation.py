@@ -42,15 +42,16 @@ __all__ = ["parse_model", "register_fit"]
 def parse_model(text: str) -> tuple[str, int]:
     """Split a model name such as ``prony:3`` into (model, terms); InputError when unknown."""
     name, _, count = text.partition(":")
-    known = ("sls", "prony", "wiechert", "wiechert-nonlinear")
-    if name not in known or (count and name != "prony"):
+    known = ("sls", "prony", "qlv", "wiechert", "wiechert-nonlinear")
+    if name not in known or (count and name not in ("prony", "qlv")):
         raise InputError(
-            f"--model: unknown model {text!r}; use one of sls, prony:N, {', '.join(known[2:])}"
+            f"--model: unknown model {text!r}; use one of sls, prony:N, qlv:N, "
+            f"{', '.join(known[3:])}"
         )
     if not count:
         return name, 2
     if not count.isdigit() or int(count) < 1:
-        raise InputError(f"--model: prony:N needs a positive integer N (got {text!r})")
+        raise InputError(f"--model: {name}:N needs a positive integer N (got {text!r})")
     return name, int(count)
 
 
@@ -155,7 +156,28 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
         help="CSV file(s) with time_s,displacement_m,force_N; several files are fitted jointly",
     )
     relaxation.add_argument(
-        "--model", default="sls", help="sls (default), prony:N, wiechert, wiechert-nonlinear"
+        "--model",
+        default="sls",
+        help="sls (default), prony:N, qlv:N (quasi-linear viscoelasticity with an exponential "
+        "elastic force, Ahn & Kim's stage (i); one ramp-and-hold record), wiechert, "
+        "wiechert-nonlinear",
+    )
+    relaxation.add_argument(
+        "--gauge-length-m",
+        type=positive_length_m,
+        default=None,
+        metavar="L0",
+        help="the record is a tensile or compressive test of a specimen of this gauge length "
+        "(m, e.g. 80mm): displacements up to MAX_NOMINAL_STRAIN (10) gauge lengths are "
+        "plausible (an indentation's limit is 0.1 m)",
+    )
+    relaxation.add_argument(
+        "--max-displacement-m",
+        type=positive_length_m,
+        default=None,
+        metavar="D",
+        help="the largest plausible displacement (m, e.g. 150mm), overriding the "
+        "indentation's 0.1 m and --gauge-length-m",
     )
     relaxation.add_argument(
         "--p0",
@@ -405,6 +427,54 @@ def _predict(
     return reports, files, lines
 
 
+def _displacement_limit(args: argparse.Namespace) -> float:
+    """The largest plausible displacement of the declared test, m: --max-displacement-m, else
+    MAX_NOMINAL_STRAIN gauge lengths of a specimen (--gauge-length-m), else an indentation's
+    MAX_INDENTATION_DEPTH_M."""
+    from warptissue.fit.hyperelastic import MAX_NOMINAL_STRAIN
+    from warptissue.lsq.plausibility import MAX_INDENTATION_DEPTH_M
+
+    if args.max_displacement_m is not None:
+        return args.max_displacement_m
+    if args.gauge_length_m is not None:
+        return MAX_NOMINAL_STRAIN * args.gauge_length_m
+    return MAX_INDENTATION_DEPTH_M
+
+
+def _fit_qlv(
+    args: argparse.Namespace, records: list[_Record], terms: int, p0: list[float] | None
+) -> FitResult:
+    """``--model qlv:N``: :func:`warptissue.viscoelastic.fitting.fit_qlv` on the one record,
+    with the per-record statistics the other models give.
+
+    Raises:
+        InputError: Several records, the relative objective, or a record the fit refuses
+            (no hold), naming the file.
+    """
+    from warptissue.lsq.metrics import r_squared, rmse
+    from warptissue.viscoelastic.fitting import fit_qlv
+
+    if len(records) != 1:
+        raise InputError(
+            "qlv fits one ramp-and-hold record (Ahn & Kim's stage (i)): give one file",
+            option="--model",
+            value=args.model,
+        )
+    if args.objective != "absolute":
+        raise InputError("qlv fits the absolute force residuals", option="--objective")
+    (record,) = records
+    try:
+        result = fit_qlv(
+            record.time_s, record.displacement_m, record.force_N, terms=terms, p0=p0,
+            method=args.method,
+        )  # fmt: skip
+    except InputError as exc:
+        raise _named(exc, record.path) from None
+    result.record_rmse_N = [rmse(record.force_N, result.fitted)]
+    result.record_r_squared = [r_squared(record.force_N, result.fitted)]
+    return result
+
+
 def run_relaxation(args: argparse.Namespace) -> int:
     """Fit, write JSON + CSV + PNG, print a summary (or JSON); return the exit status."""
     import numpy as np
@@ -423,25 +493,36 @@ def run_relaxation(args: argparse.Namespace) -> int:
         _read(path, args, required=("time_s", "displacement_m", "force_N")) for path in args.data
     ]
     floor = _floor(args, records)
-    result = fit_relaxation_joint(
-        [
-            RelaxationRecord(
-                r.time_s, r.displacement_m, r.force_N, source=str(r.path), conditioned=r.conditioned
-            )
-            for r in records
-        ],
-        model=model,
-        terms=terms,
-        p0=p0,
-        method=args.method,
-        objective=args.objective,
-        relative_floor=floor,
-    )
-    label = f"{model}{terms}" if model == "prony" else model
+    limit = _displacement_limit(args)
+    if model == "qlv":
+        result = _fit_qlv(args, records, terms, p0)
+    else:
+        result = fit_relaxation_joint(
+            [
+                RelaxationRecord(
+                    r.time_s,
+                    r.displacement_m,
+                    r.force_N,
+                    source=str(r.path),
+                    conditioned=r.conditioned,
+                    max_displacement_m=limit,
+                )  # fmt: skip
+                for r in records
+            ],
+            model=model,
+            terms=terms,
+            p0=p0,
+            method=args.method,
+            objective=args.objective,
+            relative_floor=floor,
+        )
+    label = f"{model}{terms}" if model in ("prony", "qlv") else model
     stem = args.data[0].stem + ("_joint" if len(records) > 1 else "")
     details: dict[str, Any] = {
         "data_files": [str(p) for p in args.data],
-        "model": result.fitted_model.to_dict(),
+        "model": result.fitted_model.to_dict()
+        if model != "qlv"
+        else {"model": "qlv", **result.parameters},
         "objective": args.objective,
         "relative_floor_N": floor,
         "conditioning": [r.conditioning for r in records],

@@ -24,7 +24,6 @@ from warptissue.study import DataRecord, Protocol, Study
 
 __all__ = [
     "DRIFT_SHARE",
-    "durbin_watson",
     "fitted_study",
     "record_drift_warnings",
     "result_from",
@@ -98,14 +97,6 @@ def fitted_study(study: Study, material: Any) -> Study:
         protocol = Protocol.from_record(study.data[0], steps=steps)
         fitted = dataclasses.replace(fitted, protocol=protocol)
     return fitted
-
-
-def durbin_watson(residuals: np.ndarray) -> float | None:
-    """sum(diff(r)^2) / sum(r^2): about 2 for independent residuals, near 0 for a trend."""
-    total = float(residuals @ residuals)
-    if residuals.size < 3 or total == 0.0:
-        return None
-    return float(np.sum(np.diff(residuals) ** 2) / total)
 
 
 def record_drift_warnings(record: DataRecord) -> list[str]:

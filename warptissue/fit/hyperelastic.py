@@ -40,7 +40,9 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
+from warptissue.io import read_experiment_csv
 from warptissue.lsq.engine import fit_curve
+from warptissue.lsq.metrics import DURBIN_WATSON_LIMIT, durbin_watson, r_squared, rmse
 from warptissue.lsq.plausibility import SOFT_TISSUE_MODULUS_RANGE_PA, fit_quality_warnings
 from warptissue.lsq.result import FitResult, RejectStep
 from warptissue.materials import (
@@ -57,7 +59,10 @@ __all__ = [
     "LOADINGS",
     "MAX_NOMINAL_STRAIN",
     "MODEL_NAMES",
+    "PREDICTION_LIMIT",
     "STABILITY_MODES",
+    "STRAIN_COLUMNS",
+    "STRESS_COLUMNS",
     "HomogeneousTest",
     "HyperelasticFit",
     "StabilityReport",
@@ -66,6 +71,7 @@ __all__ = [
     "fit_hyperelastic",
     "model_from_name",
     "model_label",
+    "read_homogeneous_test",
 ]
 
 LOADINGS: dict[str, tuple[str, float]] = {
@@ -160,8 +166,9 @@ def _check_magnitudes(
         row = int(np.flatnonzero(strain >= 1.0)[0])
         raise InputError(
             f"the compressive nominal strain must stay below 1 but reaches "
-            f"{float(strain[row]):.4g} at data row {row + 1}: check the specimen height and "
-            "that the displacement is in metres",
+            f"{float(strain[row]):.4g} at data row {row + 1}: the data look tensile (the "
+            "loading is compression by default: give --loading tension, equibiaxial or "
+            "planar), else check the specimen height and that the displacement is in metres",
             path=path,
             column=strain_column,
         )
@@ -268,6 +275,60 @@ class HomogeneousTest:
             )
         return cls(loading, strain, stress, name)
 
+    @classmethod
+    def from_stretch(
+        cls,
+        stretch: np.ndarray,
+        nominal_stress_Pa: np.ndarray,
+        *,
+        loading: str,
+        name: str = "",
+        path: str | Path | None = None,
+    ) -> HomogeneousTest:
+        """A test given as the stretch of the loading direction and the nominal stress.
+
+        Args:
+            stretch: Stretch lambda = L / L0 of the loading direction, shape (m,) (below 1 in
+                compression).
+            nominal_stress_Pa: Force per undeformed area, positive in the loading direction,
+                shape (m,).
+            loading: See :data:`LOADINGS`.
+            name: A label for reports.
+            path: The file the record came from, named in error messages.
+
+        Raises:
+            InputError: Invalid data (see the class), naming ``path`` and the column.
+        """
+        if loading not in LOADINGS:
+            raise InputError(f"loading must be one of {tuple(LOADINGS)}", value=loading)
+        stretches = np.asarray(stretch, dtype=np.float64)
+        if np.any(stretches <= 0.0):
+            row = int(np.flatnonzero(stretches <= 0.0)[0])
+            raise InputError(
+                f"a stretch (L / L0) must be positive; data row {row + 1} has "
+                f"{float(stretches[row]):.4g}",
+                path=path,
+                column="stretch",
+            )
+        sign = LOADINGS[loading][1]
+        if stretches.size and np.median(sign * (stretches - 1.0)) < 0.0:
+            other = "compression" if sign > 0 else "tension"
+            raise InputError(
+                f"the stretches are mostly {'below' if sign > 0 else 'above'} 1 (median "
+                f"{float(np.median(stretches)):.4g}), which is {other}, not {loading}: give the "
+                f"test's loading as {other}",
+                path=path,
+                column="stretch",
+            )
+        strain = sign * (stretches - 1.0)
+        stress = np.asarray(nominal_stress_Pa, dtype=np.float64)
+        if strain.shape == stress.shape:
+            _check_magnitudes(
+                strain, stress, loading, path=path, strain_column="stretch",
+                stress_column="nominal_stress",
+            )  # fmt: skip
+        return cls(loading, strain, stress, name)
+
     @property
     def mode(self) -> str:
         """The deformation mode: uniaxial, equibiaxial or planar."""
@@ -303,6 +364,92 @@ class HomogeneousTest:
     def predicted_stress_Pa(self, model: HyperelasticMaterial) -> np.ndarray:
         """Model nominal stress magnitude in the loading direction, shape (m,)."""
         return self.sign * model.nominal_stress_Pa(self.stretch, self.mode)
+
+
+STRAIN_COLUMNS: tuple[str, ...] = ("stretch", "nominal_strain", "displacement_m")
+"""The deformation columns a homogeneous test's CSV may have, in the order they are looked
+for: the stretch of the loading direction, the nominal strain (displacement over gauge
+length, a magnitude), or the displacement (m, with ``force_N``, the gauge length and area)."""
+
+STRESS_COLUMNS: dict[str, float] = {
+    "nominal_stress_Pa": 1.0,
+    "nominal_stress_kPa": 1e3,
+    "nominal_stress_MPa": 1e6,
+}
+"""The nominal stress (force per undeformed area) columns of a homogeneous test's CSV, with
+the factor to Pa."""
+
+
+def read_homogeneous_test(
+    path: str | Path,
+    *,
+    loading: str,
+    area_m2: float | None = None,
+    height_m: float | None = None,
+) -> HomogeneousTest:
+    """Read a homogeneous test as labs record it, from a CSV with a header row.
+
+    The deformation is the first of :data:`STRAIN_COLUMNS` present: ``stretch``,
+    ``nominal_strain`` or ``displacement_m``; the stress one of :data:`STRESS_COLUMNS`
+    (``nominal_stress_Pa``, ``_kPa`` or ``_MPa``), or ``force_N`` with ``displacement_m``
+    (then ``area_m2`` and ``height_m`` are needed). A ``time_s`` column, where present, must
+    increase. Values are magnitudes in the loading direction (a compressive stretch is below
+    1).
+
+    Args:
+        path: The CSV file.
+        loading: See :data:`LOADINGS`.
+        area_m2: Undeformed loaded area A0 for ``force_N``, m^2.
+        height_m: Undeformed gauge length H0 for ``displacement_m``, m.
+
+    Returns:
+        The test, named by the file's stem.
+
+    Raises:
+        InputError: A missing column or geometry, or invalid data, naming the file and column.
+    """
+    record = read_experiment_csv(path, required=(), monotonic="time_s")
+    columns = record.columns
+    name = Path(path).stem
+    stress_names = [c for c in STRESS_COLUMNS if c in columns]
+    if "stretch" in columns or "nominal_strain" in columns:
+        if not stress_names:
+            raise InputError(
+                f"no nominal stress column: give one of {list(STRESS_COLUMNS)} beside the "
+                f"deformation (header has {list(columns)})",
+                path=path,
+                line=1,
+            )
+        stress = columns[stress_names[0]] * STRESS_COLUMNS[stress_names[0]]
+        if "stretch" in columns:
+            return HomogeneousTest.from_stretch(
+                columns["stretch"], stress, loading=loading, name=name, path=path
+            )
+        strain = columns["nominal_strain"]
+        _check_magnitudes(strain, stress, loading, path=path, stress_column=stress_names[0])
+        return HomogeneousTest(loading, strain, stress, name)
+    if "displacement_m" not in columns or ("force_N" not in columns and not stress_names):
+        raise InputError(
+            f"needs a deformation column ({', '.join(STRAIN_COLUMNS)}) and a stress column "
+            f"({', '.join(STRESS_COLUMNS)}, or force_N with displacement_m); header has "
+            f"{list(columns)}",
+            path=path,
+            line=1,
+        )
+    if height_m is None:
+        raise InputError(
+            "displacement_m needs the gauge length (--height-m) to give a strain", path=path
+        )
+    if stress_names:
+        force, area = columns[stress_names[0]] * STRESS_COLUMNS[stress_names[0]], 1.0
+    elif area_m2 is None:
+        raise InputError("force_N needs the loaded area (--area-m2) to give a stress", path=path)
+    else:
+        force, area = columns["force_N"], area_m2
+    return HomogeneousTest.from_force_displacement(
+        columns["displacement_m"], force, area_m2=area, height_m=height_m, loading=loading,
+        name=name, path=path,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -478,6 +625,70 @@ class HyperelasticFit:
             "stability": self.stability.to_dict(),
         }
 
+    def test_errors(self) -> list[dict[str, Any]]:
+        """Each test's fit over the strain window.
+
+        Returns:
+            Per test: ``test`` (its name), ``loading``, ``points``, ``r_squared`` and
+            ``rmse_Pa`` of the nominal stress.
+        """
+        rows = []
+        for test in self.tests:
+            window = test.window(self.min_strain)
+            predicted = window.predicted_stress_Pa(self.model)
+            rows.append(
+                {
+                    "test": window.name,
+                    "loading": window.loading,
+                    "points": int(window.nominal_strain.size),
+                    "r_squared": r_squared(window.nominal_stress_Pa, predicted),
+                    "rmse_Pa": rmse(window.nominal_stress_Pa, predicted),
+                }
+            )
+        return rows
+
+    def mode_predictions(self, *, points: int = 6) -> list[dict[str, Any]]:
+        """The fitted model's nominal stress in every loading over the fitted stretch range:
+        a loading tested up to its tests' largest stretch (smallest in compression), one not
+        tested (tension, equibiaxial, planar) up to the largest stretch of all the tests in
+        tension (1 / the smallest in compression when none is). Compression is listed only
+        where it was tested.
+
+        Args:
+            points: Stretches per loading, evenly spaced after 1.
+
+        Returns:
+            Per loading: ``loading``, ``tested`` (a test of it was fitted), ``stretch`` and
+            ``nominal_stress_Pa`` (lists), and ``unstable_from_strain`` (the Drucker check of
+            that mode; None when stable over the checked range).
+        """
+        tensile = [float(np.max(t.stretch)) for t in self.tests if t.sign > 0]
+        compressive = [float(np.min(t.stretch)) for t in self.tests if t.sign < 0]
+        highest = max(tensile) if tensile else 1.0 / min(compressive)
+        tested = {t.loading for t in self.tests}
+        rows = []
+        for loading, (mode, sign) in LOADINGS.items():
+            if sign < 0 and not compressive:
+                continue
+            own = [
+                float(np.max(np.abs(t.stretch - 1.0))) for t in self.tests if t.loading == loading
+            ]
+            end = 1.0 + sign * max(own) if own else highest
+            stretch = np.linspace(1.0, end, points + 1)[1:]
+            with np.errstate(over="ignore", invalid="ignore"):
+                stress = sign * self.model.nominal_stress_Pa(stretch, mode)
+            check = self.stability[f"{mode}_{'tension' if sign > 0 else 'compression'}"]
+            rows.append(
+                {
+                    "loading": loading,
+                    "tested": loading in tested,
+                    "stretch": stretch.tolist(),
+                    "nominal_stress_Pa": stress.tolist(),
+                    "unstable_from_strain": check.unstable_from_strain,
+                }
+            )
+        return rows
+
     def comparison_row(self) -> dict[str, Any]:
         """One row of a model-comparison table (the needle-indentation study, Table 1, plus the
         stable range)."""
@@ -614,7 +825,7 @@ def fit_hyperelastic(
     result.warnings.extend(fit_quality_warnings(result))
     result.warnings.extend(_modulus_warnings(fitted))
     result.warnings.extend(_instability_warnings(stability, test_list))
-    return HyperelasticFit(
+    fit = HyperelasticFit(
         model=fitted,
         result=result,
         tests=test_list,
@@ -622,6 +833,70 @@ def fit_hyperelastic(
         min_strain=window,
         stability=stability,
     )
+    largest = max(float(np.max(t.nominal_stress_Pa)) for t in test_list)
+    result.warnings.extend(_systematic_residual_warnings(fit))
+    if len(test_list) > 1:
+        result.warnings.extend(
+            f"in test {row['test']!r} ({row['loading']}) the fitted model is worse than a "
+            f"constant (R^2 = {row['r_squared']:.4g}): it does not describe that loading"
+            for row in fit.test_errors()
+            if row["r_squared"] is not None and row["r_squared"] < 0.0
+        )
+    result.warnings.extend(_prediction_warnings(fit.mode_predictions(), largest))
+    return fit
+
+
+def _systematic_residual_warnings(fit: HyperelasticFit) -> list[str]:
+    """A warning per test whose residuals, in the order of its data, have a Durbin-Watson
+    statistic below :data:`~warptissue.lsq.metrics.DURBIN_WATSON_LIMIT` (the inverse FE's
+    rule): the model misses the curve's shape (an upturn it cannot follow, say)."""
+    messages = []
+    for test, row in zip(fit.tests, fit.test_errors(), strict=True):
+        window = test.window(fit.min_strain)
+        statistic = durbin_watson(window.predicted_stress_Pa(fit.model) - window.nominal_stress_Pa)
+        if statistic is not None and statistic < DURBIN_WATSON_LIMIT:
+            r2 = "n/a" if row["r_squared"] is None else f"{row['r_squared']:.3g}"
+            messages.append(
+                f"the residuals of test {test.name!r} ({test.loading}) are systematic "
+                f"(Durbin-Watson statistic {statistic:.3g}, about 2 for noise; R^2 = {r2}): "
+                "the model misses the curve's shape; try a model that can (Yeoh, Ogden)"
+            )
+    return messages
+
+
+PREDICTION_LIMIT = 10.0
+"""A loading not tested where the fitted model predicts more than this many times the
+largest measured stress (or a negative or non-finite stress) within the fitted stretch range
+gets a warning: the model is not to be used there."""
+
+
+def _prediction_warnings(rows: Sequence[dict[str, Any]], largest_Pa: float) -> list[str]:
+    """Warnings for the loadings not tested where the prediction of
+    :meth:`HyperelasticFit.mode_predictions` is absurd or Drucker-unstable."""
+    messages = []
+    for row in rows:
+        if row["tested"]:
+            continue
+        stretch = np.asarray(row["stretch"])
+        stress = np.asarray(row["nominal_stress_Pa"])
+        bad = ~np.isfinite(stress) | (stress < 0.0) | (stress > PREDICTION_LIMIT * largest_Pa)
+        if np.any(bad):
+            k = int(np.flatnonzero(bad)[0])
+            messages.append(
+                f"in {row['loading']} (not tested) the fitted model predicts a nominal stress of "
+                f"{float(stress[k]):.4g} Pa at stretch {float(stretch[k]):.3g}, against at most "
+                f"{largest_Pa:.4g} Pa measured in the tests: do not use it there"
+            )
+            continue
+        limit = row["unstable_from_strain"]
+        strain = float(np.max(np.abs(stretch - 1.0)))
+        if limit is not None and limit < strain:
+            messages.append(
+                f"in {row['loading']} (not tested) the fitted model is not Drucker-stable "
+                f"beyond nominal strain {limit:.3g}, inside the fitted stretch range (up to "
+                f"strain {strain:.3g}): do not use it there"
+            )
+    return messages
 
 
 def _modulus_warnings(model: HyperelasticMaterial) -> list[str]:
@@ -632,6 +907,21 @@ def _modulus_warnings(model: HyperelasticMaterial) -> list[str]:
     low, high = SOFT_TISSUE_MODULUS_RANGE_PA
     if low <= youngs_Pa <= high:
         return []
+    negative = [
+        f"{name} = {value:.4g} {unit}"
+        for name, value, unit in zip(
+            model.parameter_names, model.parameter_vector, model.parameter_units, strict=True
+        )
+        if unit == "Pa" and value < 0.0
+    ]
+    if negative:
+        return [
+            f"the fitted small-strain Young's modulus 3 mu0 = {youngs_Pa:.4g} Pa is outside the "
+            f"plausible range of soft tissue [{low:.4g}, {high:.4g}] Pa because "
+            f"{', '.join(negative)} is negative: the fit traded it against the other "
+            "parameters for the curve's shape (not a unit error); choose another model or "
+            "bound that parameter at 0"
+        ]
     return [
         f"the fitted small-strain Young's modulus 3 mu0 = {youngs_Pa:.4g} Pa is outside the "
         f"plausible range of soft tissue [{low:.4g}, {high:.4g}] Pa: check the units of the "

@@ -56,7 +56,8 @@ Notes:
 
     Plausibility: a record measured with another probe radius than the study's (its sidecar
     ``probe_radius_m``) is refused before fitting; systematic residuals (Durbin-Watson
-    statistic below :data:`DURBIN_WATSON_LIMIT`), a force that rises during a hold or does
+    statistic below :data:`warptissue.lsq.metrics.DURBIN_WATSON_LIMIT`), a force that rises
+    during a hold or does
     not return to zero after unloading, a drift removed by the conditioning, non-identified
     parameters (:attr:`warptissue.lsq.FitResult.identifiability`) and a fit that did not
     converge are warnings of the result.
@@ -81,17 +82,16 @@ from warptissue.fit._model import (
     depth_offset_start_m,
     forward_model,
 )
-from warptissue.fit._report import durbin_watson, fitted_study, record_drift_warnings, result_from
+from warptissue.fit._report import fitted_study, record_drift_warnings, result_from
 from warptissue.fit._setup import FitPlan, ParameterSpace, fit_plan, parameter_space
 from warptissue.io import software_versions
 from warptissue.lsq.engine import least_squares
-from warptissue.lsq.metrics import r_squared, rmse
+from warptissue.lsq.metrics import DURBIN_WATSON_LIMIT, durbin_watson, r_squared, rmse
 from warptissue.lsq.result import FitResult, IterationRecord, RejectStep
 from warptissue.study import Study
 
 __all__ = [
     "CORRELATION_LIMIT",
-    "DURBIN_WATSON_LIMIT",
     "OFFSET_IDENTIFIED_SHARE",
     "STATUSES",
     "IndentationFit",
@@ -110,9 +110,6 @@ STATUSES: tuple[str, ...] = (
     "failed",
 )
 """``IndentationFit.status``: the first two are successes."""
-DURBIN_WATSON_LIMIT = 0.5
-"""A record whose residuals have a Durbin-Watson statistic below this is fitted
-systematically badly (independent noise gives about 2)."""
 CORRELATION_LIMIT = 0.995
 """Two parameters whose correlation exceeds this in magnitude are reported: the data
 determine a combination of them rather than each."""

@@ -6,7 +6,11 @@ import numpy as np
 
 from warptissue.errors import InputError
 
-__all__ = ["r_squared", "rmse"]
+__all__ = ["DURBIN_WATSON_LIMIT", "durbin_watson", "r_squared", "rmse"]
+
+DURBIN_WATSON_LIMIT = 0.5
+"""Residuals in the order of the data whose Durbin-Watson statistic is below this are
+systematic: the model misses the curve's shape (independent noise gives about 2)."""
 
 
 def _paired(y: np.ndarray, y_fit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,3 +57,19 @@ def rmse(y: np.ndarray, y_fit: np.ndarray) -> float:
     """
     measured, fitted = _paired(y, y_fit)
     return float(np.sqrt(np.mean((measured - fitted) ** 2)))
+
+
+def durbin_watson(residuals: np.ndarray) -> float | None:
+    """sum(diff(r)^2) / sum(r^2): about 2 for independent residuals, near 0 for a trend.
+
+    Args:
+        residuals: Residuals in the order of the data, shape (m,).
+
+    Returns:
+        The statistic, or None for fewer than 3 residuals or a perfect fit.
+    """
+    residuals = np.asarray(residuals, dtype=np.float64).reshape(-1)
+    total = float(residuals @ residuals)
+    if residuals.size < 3 or total == 0.0:
+        return None
+    return float(np.sum(np.diff(residuals) ** 2) / total)

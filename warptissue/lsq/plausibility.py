@@ -59,6 +59,7 @@ def check_indentation_record(
     *,
     path: str | Path | None = None,
     conditioned: bool = False,
+    max_displacement_m: float = MAX_INDENTATION_DEPTH_M,
 ) -> list[str]:
     """Refuse an implausible indentation record and list what is unusual about it.
 
@@ -68,6 +69,8 @@ def check_indentation_record(
         path: The file the record came from, named in the messages.
         conditioned: The record went through contact detection (no "probe above the
             surface" warning then).
+        max_displacement_m: The largest plausible displacement, m: an indentation's
+            :data:`MAX_INDENTATION_DEPTH_M` by default; a test of a specimen allows more.
 
     Returns:
         Warning messages (no "warning:" prefix): a force above
@@ -93,11 +96,13 @@ def check_indentation_record(
             path=path,
             column="displacement_m",
         )
-    if deepest > MAX_INDENTATION_DEPTH_M:
+    if deepest > max_displacement_m:
+        test = "an indentation" if max_displacement_m == MAX_INDENTATION_DEPTH_M else "the test"
         raise InputError(
-            f"the largest displacement is {_g(deepest)} m, implausible for an indentation "
-            f"(more than {_g(MAX_INDENTATION_DEPTH_M)} m): is the column in millimetres? "
-            "Convert it to metres",
+            f"the largest displacement is {_g(deepest)} m, implausible for {test} "
+            f"(more than {_g(max_displacement_m)} m): is the column in millimetres? "
+            "Convert it to metres (a specimen's tensile or compressive test: give its gauge "
+            "length, --gauge-length-m, or the limit, --max-displacement-m)",
             path=path,
             column="displacement_m",
         )

@@ -23,6 +23,7 @@ from warptissue.lsq import FitResult, RejectStep, fit_curve
 from warptissue.lsq.engine import covariance_from_jacobian
 from warptissue.lsq.metrics import r_squared, rmse
 from warptissue.lsq.plausibility import (
+    MAX_INDENTATION_DEPTH_M,
     check_indentation_record,
     convergence_warnings,
     fit_quality_warnings,
@@ -77,6 +78,8 @@ class RelaxationRecord:
         conditioned: The record went through contact detection and trimming
             (:mod:`warptissue.acquisition.conditioning`); the fits then skip the "probe
             above the surface" warning.
+        max_displacement_m: The largest plausible displacement, m (an indentation's 0.1 m by
+            default; a specimen's tensile or compressive test allows more).
     """
 
     time_s: np.ndarray
@@ -84,6 +87,7 @@ class RelaxationRecord:
     force_N: np.ndarray
     source: str | None = None
     conditioned: bool = False
+    max_displacement_m: float = MAX_INDENTATION_DEPTH_M
 
     def __post_init__(self) -> None:
         time, displacement = validate_history(
@@ -103,7 +107,11 @@ class RelaxationRecord:
             InputError: A record that cannot be an indentation in SI units.
         """
         messages = check_indentation_record(
-            self.displacement_m, self.force_N, path=self.source, conditioned=self.conditioned
+            self.displacement_m,
+            self.force_N,
+            path=self.source,
+            conditioned=self.conditioned,
+            max_displacement_m=self.max_displacement_m,
         )
         return [f"{self.source}: {m}" if self.source else m for m in messages]
 
