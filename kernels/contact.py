@@ -20,7 +20,11 @@ RIGID_WEDGE = wp.constant(3)
 
 @wp.struct
 class RigidBody:
-    """A rigid indenter at its current position (SI units).
+    """A rigid indenter at its current position (SI units), described in its own frame.
+
+    ``axes``: the frame's unit axes as rows (world coordinates), so that a world point ``x``
+    has the frame coordinates ``axes x``; every other field and the shapes below are in frame
+    coordinates (the identity: the world's, the probe along -z).
 
     ``kind``: ``RIGID_SPHERE`` (centre ``point``, radius ``radius``), ``RIGID_PLATE`` (the
     plane ``z = point[2]``, filling the half-space above), ``RIGID_PUNCH`` (a flat-ended
@@ -31,6 +35,7 @@ class RigidBody:
     """
 
     kind: int
+    axes: wp.mat33d
     point: wp.vec3d
     radius: wp.float64
     edge_radius: wp.float64
@@ -73,7 +78,8 @@ def distance_to_point(offset: wp.vec3d, plane_only: int) -> RigidContactPoint:
 
 @wp.func
 def rigid_contact_point(body: RigidBody, x: wp.vec3d) -> RigidContactPoint:
-    """Signed distance, normal and normal gradient of the point ``x`` to ``body``.
+    """Signed distance, normal and normal gradient of the point ``x`` (frame coordinates,
+    ``RigidBody``) to ``body``, in frame coordinates.
 
     The punch is the Minkowski sum of a sharp cylinder of radius ``radius - edge_radius``
     whose end lies ``edge_radius`` above the face, and a ball of radius ``edge_radius``; the
@@ -170,14 +176,20 @@ def rigid_contact_kernel(
     ``k g^2 / 2`` (J) and the node's diagonal tangent block (``diagonal_blocks[i]``, BSR) gains
     ``d(-f_c)/dx = k (n n^T + g dn/dx)``. ``contact_force[k]`` sums the force on problem k's
     body (N); ``node_force[i]`` holds the force on ``nodes[i]`` (N; zero out of contact) and
-    ``node_gap[i]`` its signed distance (m).
+    ``node_gap[i]`` its signed distance (m). The body's shape is evaluated in its frame
+    (``x' = A x``, ``A = body.axes``) and the normal and its gradient turned back to the world
+    (``n = A^T n'``, ``dn/dx = A^T (dn'/dx') A``).
     """
     i = wp.tid()
     node = nodes[i]
     problem = node_problem[i]
     k = stiffness[problem]
-    x = points[node] + displacement[node]
-    hit = rigid_contact_point(bodies[problem], x)
+    body = bodies[problem]
+    x = body.axes @ (points[node] + displacement[node])
+    hit = rigid_contact_point(body, x)
+    back = wp.transpose(body.axes)
+    hit.normal = back @ hit.normal
+    hit.normal_gradient = back @ hit.normal_gradient @ body.axes
     node_gap[i] = hit.gap
     if hit.gap >= wp.float64(0.0):
         node_force[i] = wp.vec3d()

@@ -2,7 +2,9 @@
 
 The indenter is an analytic rigid body positioned by the depth (the load of
 :func:`warptissue.fem.solve_quasistatic`), its contact point at ``top - depth`` on the axis
-``(x_m, y_m)``: a sphere of radius ``r``; a plate (the plane ``z = top - depth``, filling the
+``(x_m, y_m)``, or, in a probe frame (:mod:`warptissue.fem.probe`), at
+``site + depth * direction`` with the shapes below turned so that -z is the direction and y
+the wedge's edge: a sphere of radius ``r``; a plate (the plane ``z = top - depth``, filling the
 half-space above); a flat-ended cylinder of radius ``a`` whose edge is rounded with radius
 ``rho`` (``edge_radius_m``); a wedge along y of opening angle ``2 alpha`` whose tip is rounded
 with radius ``rho``. Each candidate node (every node of the indented surface, TET10 mid-edge
@@ -35,6 +37,7 @@ import numpy as np
 import warp as wp
 
 from warptissue.errors import InputError
+from warptissue.fem.probe import ProbeFrame, probe_frame
 from warptissue.indenter import Indenter
 from warptissue.kernels import contact as kc
 from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
@@ -77,6 +80,9 @@ class RigidContact:
         top_z_m: z of the contact point at depth 0 (the specimen's top), m.
         stiffness_N_per_m: Penalty stiffness per node ``k``, N/m.
         depth_m: Current depth of the indenter below ``top_z_m``, m.
+        frame: The probe's frame (:class:`warptissue.fem.probe.ProbeFrame`): its origin is
+            the contact point at depth 0 and the indenter moves ``depth_m`` along its
+            direction. None: along -z from ``(x_m, y_m, top_z_m)`` of the indenter.
     """
 
     indenter: Indenter
@@ -84,6 +90,7 @@ class RigidContact:
     top_z_m: float
     stiffness_N_per_m: float
     depth_m: float = 0.0
+    frame: ProbeFrame | None = None
 
     def __post_init__(self) -> None:
         if not self.indenter.is_rigid_contact:
@@ -99,24 +106,32 @@ class RigidContact:
         k = self.stiffness_N_per_m
         if not (math.isfinite(k) and k > 0):
             raise InputError("the penalty stiffness must be positive", value=k)
+        if self.frame is None:
+            origin = (self.indenter.x_m, self.indenter.y_m, self.top_z_m)
+            self.frame = probe_frame(origin_m=origin)
 
     @property
     def contact_z_m(self) -> float:
-        """z of the indenter's lowest point at the current depth, m."""
-        return self.top_z_m - self.depth_m
+        """z of the indenter's contact point at the current depth, m (its lowest point
+        along -z)."""
+        return float(self.frame.point_at_depth(self.depth_m)[2])
 
     def device_body(self) -> Any:
         """The indenter at the current depth as the kernels' ``RigidBody`` struct."""
 
         probe = self.indenter
+        frame = self.frame
+        # The contact point in frame coordinates (the kernel's x' = A x, no translation).
+        point = frame.axes @ frame.point_at_depth(self.depth_m)
         body = kc.RigidBody()
-        body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m)
+        body.axes = wp.mat33d(*frame.axes.ravel())
+        body.point = wp.vec3d(*point)
         body.radius = wp.float64(probe.radius_m)
         body.edge_radius = wp.float64(0.0)
         body.half_angle = wp.float64(0.0)
         if probe.kind == "sphere":
             body.kind = int(kc.RIGID_SPHERE)
-            body.point = wp.vec3d(probe.x_m, probe.y_m, self.contact_z_m + probe.radius_m)
+            body.point = wp.vec3d(point[0], point[1], point[2] + probe.radius_m)
         elif probe.kind == "plate":
             body.kind = int(kc.RIGID_PLATE)
         elif probe.kind == "flat_punch":
@@ -137,9 +152,14 @@ class RigidContact:
         *,
         surface: str = "top",
         penalty_factor: float = DEFAULT_PENALTY_FACTOR,
+        frame: ProbeFrame | None = None,
     ) -> RigidContact:
         """The contact of ``indenter`` with the nodes of ``surface``, its stiffness from the
         material and the mesh (``k = beta mu0 h``, module docstring).
+
+        ``frame`` (None: along -z from ``(x_m, y_m)`` and the top of ``surface``) places the
+        indenter; the nodes "under" it are measured perpendicular to its direction, within
+        its radius of the site along it (so that the far side of a body does not count).
 
         Raises:
             InputError: A non-positive ``penalty_factor``, or no node under the indenter.
@@ -153,23 +173,31 @@ class RigidContact:
                 "must be a positive number", key="penalty_factor", value=penalty_factor
             )
         nodes = mesh.node_set(surface).astype(np.int64)
-        top = float(mesh.points[nodes, 2].max()) if indenter.z_m is None else indenter.z_m
+        placed = frame is not None
+        if frame is None:
+            top = float(mesh.points[nodes, 2].max()) if indenter.z_m is None else indenter.z_m
+            frame = probe_frame(origin_m=(indenter.x_m, indenter.y_m, top))
+        local = frame.to_local(mesh.points[nodes])
+        if placed:  # not the far side of the body
+            near = np.abs(local[:, 2]) <= max(indenter.radius_m, float(np.abs(local[:, 2]).min()))
+            nodes, local = nodes[near], local[near]
         under = nodes
         if indenter.kind in ("sphere", "flat_punch"):
-            xy = mesh.points[nodes, :2] - np.array([indenter.x_m, indenter.y_m])
+            xy = local[:, :2]
             under = nodes[np.einsum("ij,ij->i", xy, xy) <= indenter.radius_m**2]
         elif indenter.kind == "wedge":
-            dx = np.abs(mesh.points[nodes, 0] - indenter.x_m)
+            dx = np.abs(local[:, 0])
             under = nodes[dx <= max(indenter.radius_m, float(dx.min()))]
         if under.size == 0:
             raise InputError(
                 f"no node of {surface!r} lies under the {indenter.kind} (within "
-                f"{indenter.radius_m} m of ({indenter.x_m}, {indenter.y_m}))",
+                f"{indenter.radius_m} m of the axis through {frame.origin_m.tolist()})",
                 key="radius_m",
                 value=indenter.radius_m,
             )
         h = mean_edge_length(mesh, under)
-        return cls(indenter, nodes, top, float(penalty_factor) * shear_modulus_Pa * h)
+        stiffness = float(penalty_factor) * shear_modulus_Pa * h
+        return cls(indenter, nodes, float(frame.origin_m[2]), stiffness, frame=frame)
 
 
 @dataclass(frozen=True)
@@ -526,7 +554,9 @@ class RigidContacts:
         only when a contact's depth, body or stiffness has changed (the penalty ramp of
         :mod:`warptissue.fem.newton.increment` scales the stiffness)."""
         bodies_key = tuple(
-            None if each is None else (each.indenter, each.top_z_m, each.depth_m)
+            None
+            if each is None
+            else (each.indenter, each.depth_m, *each.frame.origin_m, *each.frame.axes.ravel())
             for each in self.contacts
         )
         if bodies_key != self._bodies_key:

@@ -52,6 +52,7 @@ from warptissue.fem.newton import (
 from warptissue.fem.newton.path import check_packed_assembler
 from warptissue.fem.newton.sensitivity import check_sensitivity_names
 from warptissue.fem.packing import PackedMeshes, pack_meshes
+from warptissue.fem.probe import DOWN, ProbeFrame, footprint_normal, probe_frame, snap_to_surface
 from warptissue.fem.timing import NewtonTimings
 from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
@@ -102,6 +103,20 @@ class IndentationProblem:
             (:class:`warptissue.fem.contact.ContactSurface`: a set holding none is refused).
         penalty_factor: ``beta`` of the contact penalty ``k = beta mu0 h`` of a sphere or a
             plate (:mod:`warptissue.fem.contact`; unused by a flat punch).
+        site_m: Where the probe meets the specimen, (3,), m: snapped to the nearest point of
+            ``surface``'s boundary triangles (:func:`warptissue.fem.probe.snap_to_surface`).
+            None: ``(x_m, y_m)`` of the indenter on the top of ``surface`` (today's probe on
+            the axis) where ``direction`` is given; with neither, the probe is along -z.
+        direction: The probe's direction of motion into the body, (3,) (normalised). None:
+            -z without a site; with a site, the inward normal averaged over the probe's
+            footprint (:func:`warptissue.fem.probe.footprint_normal`). A probe at a site or
+            along a direction needs the full specimen (no symmetry planes); a sharp
+            frictionless punch only goes along -z (its one prescribed component), and a
+            direction that points out of the body is refused.
+        edge: A wedge's edge direction, (3,) (its part perpendicular to ``direction``);
+            None: y (:func:`warptissue.fem.probe.probe_frame`).
+        site_tolerance_m: How far ``site_m`` may lie from the surface, m; None: 1 % of the
+            mesh's largest extent.
     """
 
     mesh: TetMesh
@@ -112,6 +127,10 @@ class IndentationProblem:
     formulation: str = field(default="mixed", kw_only=True)
     surface: str = field(default="top", kw_only=True)
     penalty_factor: float = field(default=DEFAULT_PENALTY_FACTOR, kw_only=True)
+    site_m: Sequence[float] | None = field(default=None, kw_only=True)
+    direction: Sequence[float] | None = field(default=None, kw_only=True)
+    edge: Sequence[float] | None = field(default=None, kw_only=True)
+    site_tolerance_m: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         if not isinstance(self.indenter, Indenter):
@@ -158,18 +177,29 @@ class IndentationProblem:
                     f"the mesh has no node set {name!r} (it has {sorted(self.mesh.node_sets)})",
                     key="mesh",
                 )
+        for key in ("site_m", "direction", "edge"):
+            if getattr(self, key) is not None:
+                object.__setattr__(self, key, tuple(float(v) for v in np.ravel(getattr(self, key))))
+        object.__setattr__(self, "_frame", self._placed_frame())
         if self.is_contact:
             self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
             # The contact outputs need the surface's triangles: refused here, not after a run.
             ContactSurface.for_mesh(self.mesh, surface=self.surface)
             return
+        if self.punch_nodes.size == 0 and self.frame is not None:
+            raise InputError(
+                f"no node of {self.surface!r} lies within the punch radius "
+                f"{self.indenter.radius_m} m of the probe's axis through the site "
+                f"{self.frame.origin_m.tolist()}",
+                key="radius_m",
+            )
         if self.punch_nodes.size == 0:
             raise InputError(
                 f"no node of {self.surface!r} lies within the punch radius "
                 f"{self.indenter.radius_m} m of the axis x = y = 0",
                 key="radius_m",
             )
-        if self.indenter.z_m is not None:
+        if self.indenter.z_m is not None and self.frame is None:
             top = float(self.mesh.points[self.punch_nodes, 2].max())
             if abs(self.indenter.z_m - top) > 1e-9 * float(np.ptp(self.mesh.points[:, 2])):
                 raise InputError(
@@ -177,6 +207,64 @@ class IndentationProblem:
                     key="z_m",
                     value=self.indenter.z_m,
                 )
+
+    def _placed_frame(self) -> ProbeFrame | None:
+        """The probe's frame where ``site_m`` or ``direction`` is given (else None)."""
+        if self.site_m is None and self.direction is None and self.edge is None:
+            return None
+        probe = self.indenter
+        if self.symmetry_planes:
+            raise InputError(
+                "a probe at a site or along a direction needs the full specimen "
+                "(symmetry_planes=())",
+                key="site_m" if self.site_m is not None else "direction",
+            )
+        if self.site_m is not None and (probe.x_m or probe.y_m or probe.z_m is not None):
+            raise InputError(
+                "give the probe's position as site_m, not also the indenter's x_m, y_m, z_m",
+                key="site_m",
+                value=list(self.site_m),
+            )
+        mesh = self.mesh
+        site = self.site_m
+        if site is None:
+            top = float(mesh.points[mesh.node_set(self.surface), 2].max())
+            site = (probe.x_m, probe.y_m, top if probe.z_m is None else probe.z_m)
+        tolerance = self.site_tolerance_m
+        if tolerance is None:
+            tolerance = 0.01 * float(np.ptp(mesh.points, axis=0).max())
+        site = snap_to_surface(mesh, site, tolerance_m=tolerance, surface=self.surface)
+        inward = footprint_normal(mesh, site, radius_m=probe.radius_m, surface=self.surface)
+        direction = inward if self.direction is None else self.direction
+        frame = probe_frame(origin_m=site, direction=direction, edge=self.edge)
+        cosine = float(np.dot(frame.direction, inward))
+        if cosine <= 0.0:
+            angle = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+            raise InputError(
+                f"the direction points out of the body ({angle:.1f} degrees from the inward "
+                f"normal {np.round(inward, 6).tolist()} at the site)",
+                key="direction",
+                value=list(self.direction),
+            )
+        if not self.is_contact and probe.contact == "frictionless" and not frame.is_default:
+            raise InputError(
+                "a sharp frictionless punch prescribes z only: it goes along -z (a bonded "
+                "punch or a rounded edge goes along any direction)",
+                key="contact",
+                value=probe.contact,
+            )
+        return frame
+
+    @property
+    def frame(self) -> ProbeFrame | None:
+        """The probe's frame at its site (None: along -z through ``(x_m, y_m)``, as before
+        sites and directions)."""
+        return self._frame  # type: ignore[attr-defined]
+
+    @property
+    def probe_direction(self) -> np.ndarray:
+        """The unit direction the probe moves in, (3,)."""
+        return np.array(DOWN) if self.frame is None else self.frame.direction
 
     @property
     def symmetry_factor(self) -> int:
@@ -199,6 +287,7 @@ class IndentationProblem:
             self.material.initial_shear_modulus_Pa,
             surface=self.surface,
             penalty_factor=self.penalty_factor,
+            frame=self.frame,
         )
 
     def reaction_weights(self) -> np.ndarray:
@@ -206,6 +295,12 @@ class IndentationProblem:
         punch nodes' z (flat punch), +factor on the "bottom" nodes' z (sphere, plate)."""
         weights = np.zeros((self.mesh.node_count, 3))
         factor = float(self.symmetry_factor)
+        if self.frame is not None:  # along the direction
+            if self.is_contact:
+                weights[self.mesh.node_set("bottom")] = -factor * self.frame.direction
+            else:
+                weights[self.punch_nodes] = factor * self.frame.direction
+            return weights
         if self.is_contact:
             weights[self.mesh.node_set("bottom"), 2] = factor
         else:
@@ -215,12 +310,18 @@ class IndentationProblem:
     @property
     def punch_nodes(self) -> np.ndarray:
         """Nodes of the punch surface with r <= radius (1e-9 relative tolerance); none under a
-        sphere or a plate (no node is prescribed there)."""
+        sphere or a plate (no node is prescribed there). In a probe frame r is measured
+        perpendicular to the direction, and only nodes within the radius of the site along
+        it count (not the far side of a body)."""
         if self.is_contact:
             return np.zeros(0, dtype=np.int64)
         nodes = self.mesh.node_set(self.surface)
         xy = self.mesh.points[nodes, :2]
         radius = self.indenter.radius_m
+        if self.frame is not None:
+            local = self.frame.to_local(self.mesh.points[nodes])
+            nodes = nodes[np.abs(local[:, 2]) <= radius]
+            xy = local[np.abs(local[:, 2]) <= radius, :2]
         inside = np.einsum("ij,ij->i", xy, xy) <= (radius * (1.0 + 1e-9)) ** 2
         return nodes[inside].astype(np.int64)
 
@@ -229,8 +330,9 @@ class IndentationProblem:
         parts = []
         punch = self.punch_nodes
         punch_components = (2,) if self.indenter.contact == "frictionless" else (0, 1, 2)
+        along = self.probe_direction
         for comp in punch_components:
-            parts.append(_fixed(punch, comp, -1.0 if comp == 2 else 0.0))
+            parts.append(_fixed(punch, comp, float(along[comp])))
         planes = {}
         for name in self.symmetry_planes:
             axis = _plane_component(self.mesh, name)
@@ -283,9 +385,14 @@ class IndentationResult:
             (S, n), N per unit of each parameter (N/Pa for ``C10_Pa``, N for ``alpha1``);
             n = 0 unless ``sensitivities`` were asked for (docs/fe.md "Sensitivities").
         times_s: The time of each depth of a timed run, s; else the step number 1..S, (S,).
-        contact_force_N: Under a sphere or a plate: the z contact force on the body summed
-            over the nodes, times the symmetry factor, positive pushing in, (S,) (equal to
-            ``reaction_force_N`` at equilibrium); empty for a flat punch.
+        contact_force_N: Under a rigid indenter: the contact force on the body along the
+            probe's direction summed over the nodes, times the symmetry factor, positive
+            pushing in, (S,) (equal to ``reaction_force_N`` at equilibrium); empty for a
+            sharp flat punch.
+        tangential_force_N: Under a rigid indenter: the magnitude of the contact force's
+            part perpendicular to the direction, (S,), N (a probe off the surface normal, or
+            on a surface that is not symmetric about it; 0 in a symmetry model, whose
+            symmetry cancels it); empty for a sharp flat punch.
         max_penetration_m: Under a sphere or a plate: the largest penetration of a node into
             the indenter at each depth, (S,), m; empty for a flat punch.
         contact_area_m2: Under a rigid indenter: the area of the surface in contact at each
@@ -328,6 +435,7 @@ class IndentationResult:
     max_penetration_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    tangential_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     timings: NewtonTimings | None = None
     linear_solver_statistics: dict[str, int] = field(default_factory=dict)
 
@@ -546,14 +654,23 @@ def _indentation_result(
     """
     stress = stress_Pa
     contact_force, penetration, area = np.zeros(0), np.zeros(0), np.zeros(0)
+    tangential = np.zeros(0)
+    along = problem.probe_direction
     pressure = np.zeros((0, problem.mesh.node_count))
     if contact_states is not None:
         steps = len(path.loads)
         surface = ContactSurface.for_mesh(problem.mesh, surface=problem.surface)
         contact_force, penetration, area = np.empty(steps), np.empty(steps), np.empty(steps)
+        tangential = np.zeros(steps)
         pressure = np.empty((steps, problem.mesh.node_count))
         for i, (state, u) in enumerate(zip(contact_states, path.displacement_m, strict=True)):
-            contact_force[i] = -problem.symmetry_factor * state.total_force_N[2]
+            total = state.total_force_N
+            if problem.frame is None:
+                contact_force[i] = -problem.symmetry_factor * total[2]
+            else:
+                contact_force[i] = problem.symmetry_factor * float(np.dot(total, along))
+            if not problem.symmetry_planes:
+                tangential[i] = np.linalg.norm(total - np.dot(total, along) * along)
             penetration[i] = state.max_penetration_m
             current = problem.mesh.points + u
             area[i] = problem.symmetry_factor * surface.contact_area_m2(state, current)
@@ -581,6 +698,7 @@ def _indentation_result(
         max_penetration_m=penetration,
         contact_area_m2=area,
         contact_pressure_Pa=pressure,
+        tangential_force_N=tangential,
         timings=path.timings,
         linear_solver_statistics=path.linear_solver_statistics,
     )
