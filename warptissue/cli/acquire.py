@@ -131,12 +131,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     where.add_argument("--tcp", type=int, metavar="PORT", help="serve on 127.0.0.1:PORT (0: any)")
     sim.add_argument(
         "--tissue",
-        choices=("sls", "prony", "qlv", "curve"),
+        type=tissue_kind,
         default="sls",
+        metavar="sls|prony|qlv|curve|study:FILE",
         help="sls: standard linear solid; prony: Prony series of --g and --tau on the "
         "linear spring --instantaneous-stiffness; qlv: Fung's quasi-linear viscoelasticity, "
         "--g and --tau on the exponential spring A (exp(B x) - 1) of --elastic-scale A and "
-        "--elastic-rate B; curve: a static force-depth curve",
+        "--elastic-rate B; curve: a static force-depth curve; study:FILE: the FE force of "
+        "a study with an elastic material (run once on its [protocol] depths, then "
+        "interpolated in depth)",
     )
     sim.add_argument("--instantaneous-stiffness", default="40N/m", help="sls and prony: G0")
     sim.add_argument("--equilibrium-stiffness", default="20N/m", help="sls")
@@ -568,6 +571,17 @@ def _prony_terms(args: argparse.Namespace) -> tuple[list[float], list[float]]:
     return g, tau
 
 
+TISSUES = ("sls", "prony", "qlv", "curve")
+"""rig-sim's built-in ``--tissue`` kinds (besides ``study:FILE``)."""
+
+
+def tissue_kind(text: str) -> str:
+    """``--tissue``: one of :data:`TISSUES` or ``study:FILE``."""
+    if text in TISSUES or (text.startswith("study:") and len(text) > len("study:")):
+        return text
+    raise argparse.ArgumentTypeError(f"choose from {', '.join(TISSUES)} or study:FILE")
+
+
 def tissue_from_args(args: argparse.Namespace):
     """The specimen that rig-sim's ``--tissue`` options describe (SI units).
 
@@ -585,6 +599,13 @@ def tissue_from_args(args: argparse.Namespace):
         exponential_elastic_force,
     )
 
+    if args.tissue.startswith("study:"):
+        from warptissue.device import quiet_warp
+        from warptissue.simulate import force_curve_tissue
+        from warptissue.study import load_study
+
+        quiet_warp()
+        return force_curve_tissue(load_study(args.tissue.removeprefix("study:")))
     if args.tissue == "curve":
         if args.force_curve is None:
             raise InputError("--tissue curve needs --force-curve CSV")
