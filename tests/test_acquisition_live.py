@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import math
-import threading
 
 import numpy as np
 import pytest
@@ -21,7 +20,7 @@ from warptissue.acquisition import (
     RigServer,
     SimulatedRig,
 )
-from warptissue.acquisition.live import LiveFit, StopRule
+from warptissue.acquisition.live import LiveFit, LumpedFitter, StopRule
 from warptissue.cli import main
 from warptissue.errors import InputError
 from warptissue.io import read_experiment_csv
@@ -97,20 +96,37 @@ def test_stop_rule_needs_every_relative_error_below_the_limit_and_an_identified_
     assert not short.identified and not StopRule(1e6).met(short)
 
 
-# -- the thread apart from the recorder -----------------------------------------------------
-def test_a_fit_that_blocks_never_delays_the_recording(tmp_path):
-    """The fit blocks until the recording has ended (it waits on an event set only after
+# -- the process apart from the recorder ----------------------------------------------------
+RELEASE = "WARPTISSUE_TEST_RELEASE_FIT"
+"""Environment variable naming the file whose existence releases :func:`blocking_fit`."""
+
+
+def blocking_fit(records, **options):
+    """The real fit, once the file named by $WARPTISSUE_TEST_RELEASE_FIT exists (it runs in
+    the fit process: a module-level function, pickled by reference)."""
+    import os
+    import time
+    from pathlib import Path
+
+    release = Path(os.environ[RELEASE])
+    deadline = time.monotonic() + 60.0
+    while not release.exists():
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    return fit_relaxation_joint(records, **options)
+
+
+def broken_fit(records, **options):
+    raise RuntimeError("no more memory")
+
+
+def test_a_fit_that_blocks_never_delays_the_recording(tmp_path, monkeypatch):
+    """The fit blocks until the recording has ended (it waits for a file made only after
     Recorder.record returned): the recorder saves every sample of a 1 kHz test meanwhile,
     and the live fit then finishes with the whole record."""
-    released = threading.Event()
-    calls: list[int] = []
-
-    def blocking_fit(records, **options):
-        calls.append(records[0].time_s.size)
-        assert released.wait(timeout=60.0)
-        return fit_relaxation_joint(records, **options)
-
-    live = LiveFit(model="prony", terms=2, every_samples=200, fit=blocking_fit)
+    release = tmp_path / "release"
+    monkeypatch.setenv(RELEASE, str(release))
+    live = LiveFit(LumpedFitter(model="prony", terms=2, fit=blocking_fit), every_samples=200)
     rig, server = prony_rig(time_scale=math.inf)
     with server, RigClient(server.url) as client:
         recorder = Recorder(
@@ -120,22 +136,19 @@ def test_a_fit_that_blocks_never_delays_the_recording(tmp_path):
         result = recorder.record(
             RampHold(depth_m=4e-3, speed_m_per_s=8e-3, hold_s=3.0, dwell_s=0.5)
         )
-        assert calls and calls[0] < result.samples_received  # the fit started mid-record
-        assert live.state == "running" and not live.estimates  # ... and is still blocked
-    released.set()
-    live.finish(timeout_s=60.0)
+        assert live.state == "running" and not live.estimates  # the fit is still blocked
+    release.touch()
+    live.finish(timeout_s=120.0)
     assert result.status == "complete" and result.samples_missing == 0
     assert result.samples_received == result.samples_sent == rig.counters.emitted
-    assert live.state == "finished"
+    assert live.state == "finished", live.stop_reason
+    assert live.estimates[0].samples < result.samples_received  # the fit started mid-record
     assert live.estimates[-1].samples == result.samples_received  # the end was fitted
     assert len(live.estimates) == 2  # a blocked fit skips cadences instead of queueing them
 
 
-def test_an_error_in_the_fit_thread_stops_the_live_fit_not_the_recording(tmp_path):
-    def broken(records, **options):
-        raise RuntimeError("no more memory")
-
-    live = LiveFit(every_samples=100, fit=broken)
+def test_an_error_in_the_fit_process_stops_the_live_fit_not_the_recording(tmp_path):
+    live = LiveFit(LumpedFitter(fit=broken_fit), every_samples=100)
     rig, server = prony_rig(time_scale=math.inf)
     with server, RigClient(server.url) as client:
         recorder = Recorder(client, tmp_path / "run.csv", progress=False, listener=live)
@@ -143,9 +156,27 @@ def test_an_error_in_the_fit_thread_stops_the_live_fit_not_the_recording(tmp_pat
         result = recorder.record(
             RampHold(depth_m=2e-3, speed_m_per_s=8e-3, hold_s=1.0, dwell_s=0.5)
         )
-    live.finish(timeout_s=30.0)
+    live.finish(timeout_s=60.0)
     assert result.status == "complete" and result.samples_missing == 0
     assert live.state == "stopped" and "no more memory" in live.stop_reason
+
+
+def test_refits_at_the_end_of_each_segment(tmp_path):
+    """Without a sample cadence the fit runs once the record passes the end of the dwell
+    and of the ramp, and at the end of the record."""
+    test = RampHold(depth_m=2e-3, speed_m_per_s=8e-3, hold_s=1.0, dwell_s=0.5)
+    live = LiveFit(LumpedFitter(), every_samples=None, segment_ends_s=test.segment_ends_s())
+    _, server = prony_rig(time_scale=5.0)
+    with server, RigClient(server.url) as client:
+        recorder = Recorder(client, tmp_path / "run.csv", progress=False, listener=live)
+        live.start()
+        result = recorder.record(test)
+    live.finish(timeout_s=120.0)
+    times = [estimate.rig_time_s for estimate in live.estimates]
+    assert live.state == "finished" and result.status == "complete"
+    assert test.segment_ends_s() == (0.5, 0.75, 1.75)
+    assert times[-1] == pytest.approx(float(read_experiment_csv(result.csv_path)["time_s"][-1]))
+    assert times[0] >= 0.5 and len(times) <= 3  # a fit slower than the ramp skips one
 
 
 # -- the command line -----------------------------------------------------------------------
@@ -260,7 +291,10 @@ def test_ctrl_c_keeps_the_data_and_says_the_live_fit_stopped(tmp_path, capsys, m
     ("options", "message"),
     [
         (["--stop-when", "se<2%"], "--stop-when needs --fit"),
-        (["--fit", "wiechert"], "sls or prony:N"),
+        (["--fit", "wiechert"], "sls, prony:N or a study"),
+        (["--fit", "sls", "--usd"], "--usd needs a study fit"),
+        (["--usd"], "--usd needs --fit"),
+        (["--fit", "missing.toml"], "missing.toml"),
         (["--fit", "prony:x"], "prony:N"),
         (["--fit", "sls", "--stop-when", "rmse<1"], "se<LIMIT"),
         (["--fit", "sls", "--contact", "up"], "--contact"),

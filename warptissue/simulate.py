@@ -66,6 +66,7 @@ import warp as wp
 
 import warptissue.kernels.assembly
 import warptissue.kernels.sparse
+from warptissue.acquisition import ForceCurveTissue
 from warptissue.device import resolve_device
 from warptissue.errors import INTERRUPTED_EXIT_CODE, ConvergenceError, InputError
 from warptissue.fem import (
@@ -565,6 +566,59 @@ def solve_study(
     if interrupted is not None:
         raise SolveInterrupted(message, partial_result=outputs) from interrupted
     return outputs
+
+
+def force_curve_tissue(study: Study, *, device: str | None = None) -> ForceCurveTissue:
+    """A simulated rig's specimen whose force is the study's FE force response
+    (``warptissue rig-sim --tissue study:FILE``).
+
+    The study's material is elastic, so its FE force depends on the depth only (a
+    hyperelastic response is path independent) and the force on any path the rig is
+    commanded is that of the FE force-depth curve: the FE runs once on the study's own
+    ``[protocol]`` depths (the same mesh, problem and solver as ``warptissue simulate``),
+    and the rig interpolates its force linearly in depth (zero at depth 0). Deeper than the
+    protocol's deepest step the force stays at the last one: give the study a
+    ``[protocol] max_depth_m`` at least as deep as the rig will indent.
+
+    Args:
+        study: A study with an elastic material (:func:`warptissue.study.load_study`).
+        device: Warp device; None uses the study's ``solver.device``.
+
+    Returns:
+        The :class:`~warptissue.acquisition.ForceCurveTissue` of the FE curve.
+
+    Raises:
+        InputError: A viscoelastic material (its force depends on the whole path, which the
+            rig learns only as it is commanded), or an FE run that did not reach the
+            protocol's deepest step (naming the study file).
+        MeshError: The mesh would not fit in memory, or the generated mesh is invalid.
+        DeviceError: The device does not exist.
+    """
+    if _is_viscoelastic(study.material):
+        raise InputError(
+            "a rig-sim study tissue takes an elastic material: a viscoelastic force depends "
+            "on the whole depth-time path, which the rig learns only as it is commanded",
+            path=study.path,
+            key="material",
+        )
+    chosen = device if device is not None else study.solver.device
+    warp_device = resolve_device(None if chosen == "auto" else chosen)
+    check_linear_solver(study, warp_device)
+    depths_m = np.asarray(study.protocol.depths_m, dtype=np.float64)
+    result = simulate_indentation(
+        build_problem(study, build_mesh(study)),
+        depths_m,
+        device=warp_device,
+        progress=False,
+        options=study.solver.options,
+    )
+    if not result.completed:
+        raise InputError(
+            f"the FE stopped before the protocol's deepest step: {result.message}",
+            path=study.path,
+            key="protocol",
+        )
+    return ForceCurveTissue(depths_m, np.asarray(result.reaction_force_N, dtype=np.float64))
 
 
 def prepare_study(

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from warptissue.acquisition import RampHold, Recorder, RigClient, RigConfig, RigServer, SimulatedRig
-from warptissue.acquisition.live import LiveFit
+from warptissue.acquisition.live import LiveFit, LumpedFitter
 from warptissue.viscoelastic import PronySeries, fit_relaxation_joint
 
 
@@ -56,7 +56,7 @@ def run(kind: str, folder: Path) -> str:
     tissue = PronySeries.from_normalized(40.0, (0.35, 0.35), (1.0, 8.0))
     rig = SimulatedRig(tissue, RigConfig(time_scale=1.0, force_noise_N=3e-4))
     fit = busy_fit if kind == "busy" else fit_relaxation_joint
-    live = None if kind == "none" else LiveFit(every_samples=500, fit=fit)
+    live = None if kind == "none" else LiveFit(LumpedFitter(fit=fit), every_samples=500)
     probe = LagProbe(live)
     with RigServer(rig, transport="tcp") as server, RigClient(server.url) as client:
         recorder = Recorder(

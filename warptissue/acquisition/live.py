@@ -1,15 +1,22 @@
-"""Fit a lumped viscoelastic model while the rig records, in a thread apart from the recorder.
+"""Fit the record while the rig records it, in a process apart from the recorder.
 
 :class:`LiveFit` is a :class:`~warptissue.acquisition.recorder.SampleListener`: the
 :class:`~warptissue.acquisition.Recorder` hands it each chunk of samples once the chunk is on
-disk (:meth:`LiveFit.add_samples` only appends to a list under a lock and wakes the fit
-thread, so the recorder never waits for a fit). The fit thread conditions the record as it
-grows (contact point and force offset, :func:`~warptissue.acquisition.conditioning.
-condition_for_fit`, the same choices as ``warptissue fit relaxation``) and refits it with
-:func:`warptissue.viscoelastic.fit_relaxation_joint` every ``every_samples`` new samples,
-warm-started from the last identified estimate (from the data when there is none, or when
-the warm start does not end identified). A fit that takes longer than the record grows simply
-skips cadences: it always takes the latest record, and never queues work.
+disk (:meth:`LiveFit.add_samples` only appends to a list under a lock and wakes a hand-over
+thread, so the recorder never waits for a fit). The fit itself runs in a process of its own
+(``multiprocessing`` with the ``spawn`` start method): the hand-over thread sends it the rows
+recorded since the last refit through a pipe and sleeps in the pipe's read until the estimate
+comes back, so the fit never holds the recorder's interpreter lock. A fit that takes longer
+than the record grows simply skips cadences: it always takes the latest record, and never
+queues work.
+
+What is fitted is a *fitter* (:class:`LiveFitter`): :class:`LumpedFitter` (a lumped
+viscoelastic model, :func:`warptissue.viscoelastic.fit_relaxation_joint`, conditioned as
+``warptissue fit relaxation`` does) or the inverse FE of a study
+(:class:`warptissue.fit.live.StudyFitter`). It lives in the fit process, so it keeps its
+own warm start from one refit to the next. The cadence is every ``every_samples`` new
+samples, or each time the record passes the end of a protocol segment (``segment_ends_s``:
+the end of the ramp, of the hold), or both; the end of the record is always fitted.
 
 With a :class:`StopRule` (``se<2%``), the fit asks the recorder to stop the protocol once
 every free parameter's relative standard error is below the limit and the fit is identified
@@ -18,19 +25,23 @@ bound, a non-singular covariance); the recorder sends ``STOP`` and keeps every s
 the rig's ``DONE``.
 
 The live estimates are progress, not the result: the final fit of the finished record is the
-offline fit (``warptissue acquire --fit`` runs ``warptissue fit relaxation`` on the saved
-CSV), so that the reported parameters are those anyone gets from the file.
+offline fit (``warptissue acquire --fit`` runs ``warptissue fit relaxation`` or ``warptissue
+fit indentation`` on the saved CSV), so that the reported parameters are those anyone gets
+from the file.
 """
 
 from __future__ import annotations
 
 import math
+import multiprocessing
 import re
+import signal
 import threading
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -39,7 +50,7 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.lsq import FitResult
 from warptissue.viscoelastic import RelaxationRecord, fit_relaxation_joint
 
-__all__ = ["LiveEstimate", "LiveFit", "StopRule"]
+__all__ = ["LiveCurve", "LiveEstimate", "LiveFit", "LiveFitter", "LumpedFitter", "StopRule"]
 
 _STOP_RULE = re.compile(r"^\s*se\s*<\s*([0-9.eE+-]+)\s*(%?)\s*$")
 
@@ -157,24 +168,123 @@ class LiveEstimate:
         return entry
 
 
-class LiveFit:
-    """Refit a lumped viscoelastic model to the record as it grows, in its own thread.
+@dataclass(frozen=True)
+class LiveCurve:
+    """What a refit fitted and its model force, for the live plot.
+
+    Attributes:
+        time_s: Times of the fitted samples (s), shape (m,).
+        measured_force_N: Their force (N), shape (m,).
+        model_force_N: The fitted model's force there (N), shape (m,).
+    """
+
+    time_s: np.ndarray
+    measured_force_N: np.ndarray
+    model_force_N: np.ndarray
+
+
+class LiveFitter(Protocol):
+    """What a live fit refits: an object that can be pickled into the fit process."""
+
+    def refit(self, samples: np.ndarray) -> tuple[FitResult, LiveCurve]:
+        """Fit the record so far.
+
+        Args:
+            samples: Every sample so far, shape (n, 3): time_s (s), displacement_m (m),
+                force_N (N), as the recorder saved them.
+
+        Returns:
+            The fit and the curve it fitted.
+
+        Raises:
+            InputError: Not enough of a record yet (no contact, too few samples).
+            ConvergenceError: The fit did not converge on the record so far.
+        """
+        ...
+
+
+@dataclass
+class LumpedFitter:
+    """A lumped viscoelastic model refitted to the record as it grows.
+
+    Each refit conditions the whole record so far (contact point and force offset,
+    :func:`~warptissue.acquisition.conditioning.condition_for_fit`, as ``warptissue fit
+    relaxation``), then fits it warm-started from the last identified estimate; from the
+    data's own start (as ``fit relaxation``) when there is none, or when the warm start ends
+    unidentified (an early estimate can sit in another basin: a short hold does not separate
+    the time constants).
 
     Args:
         model: ``"sls"`` or ``"prony"`` (:func:`warptissue.viscoelastic.fit_relaxation_joint`).
         terms: Prony terms.
-        every_samples: Refit after this many new samples (a slower fit skips cadences).
-        contact: Conditioning: ``"none"``, ``"auto"`` or the axis position at contact (m).
-        offset: Conditioning: ``"auto"`` or ``"none"`` (the force offset).
+        contact: ``"none"``, ``"auto"`` or the axis position at contact (m).
+        offset: ``"auto"`` or ``"none"`` (the force offset).
         method: ``"lm"`` or ``"salm"``.
+        fit: The fitting function, a module-level function (it is pickled into the fit
+            process), called with a list of one :class:`~warptissue.viscoelastic.
+            RelaxationRecord` and the keyword options ``model``, ``terms``, ``p0``,
+            ``method``.
+    """
+
+    model: str = "prony"
+    terms: int = 2
+    contact: str | float = "auto"
+    offset: str = "auto"
+    method: str = "lm"
+    fit: Callable[..., FitResult] = fit_relaxation_joint
+    _previous: FitResult | None = field(default=None, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if self.model not in ("sls", "prony"):
+            raise InputError("a live fit takes the model sls or prony:N", value=self.model)
+
+    @property
+    def label(self) -> str:
+        """``sls`` or ``prony:N``."""
+        return self.model if self.model == "sls" else f"prony:{self.terms}"
+
+    def refit(self, samples: np.ndarray) -> tuple[FitResult, LiveCurve]:
+        """Condition and fit the record so far (see :class:`LiveFitter`)."""
+        conditioned = condition_for_fit(
+            {"time_s": samples[:, 0], "displacement_m": samples[:, 1], "force_N": samples[:, 2]},
+            contact=self.contact,
+            offset=self.offset,
+        )
+        record = RelaxationRecord(
+            conditioned.time_s,
+            conditioned.displacement_m,
+            conditioned.force_N,
+            source="live record",
+            conditioned=conditioned.conditioned,
+        )
+        options = {"model": self.model, "terms": self.terms, "method": self.method}
+        result = None
+        if self._previous is not None:
+            result = self.fit([record], p0=self._previous.x, **options)
+        if result is None or not (result.success and result.identified):
+            result = self.fit([record], p0=None, **options)
+        if result.identified:
+            self._previous = result
+        return result, LiveCurve(record.time_s, record.force_N, np.asarray(result.fitted))
+
+
+class LiveFit:
+    """Refit the record as it grows, in a process of its own.
+
+    Args:
+        fitter: What to fit (:class:`LumpedFitter`, :class:`warptissue.fit.live.StudyFitter`).
+        every_samples: Refit after this many new samples; None: only at ``segment_ends_s``
+            and at the end (a slower fit skips cadences).
+        segment_ends_s: Rig times (s) at which a protocol segment ends: the record is refitted
+            once it has passed each of them.
         stop_rule: Ask the recorder to stop once this holds, or None.
-        on_estimate: Called in the fit thread with each :class:`LiveEstimate` and the
-            conditioned record it fitted (None when the fit could not run): progress line,
-            live plot. An exception there stops the live fit cleanly (the recording goes on).
-        fit: The fitting function (default :func:`~warptissue.viscoelastic.
-            fit_relaxation_joint`), called with a list of one
-            :class:`~warptissue.viscoelastic.RelaxationRecord` and the keyword options
-            ``model``, ``terms``, ``p0``, ``method``.
+        on_estimate: Called in this process's hand-over thread with each
+            :class:`LiveEstimate` (the progress line). An exception there stops the live fit
+            cleanly (the recording goes on).
+        plot: Called in the fit process with each :class:`LiveEstimate` and the
+            :class:`LiveCurve` it fitted (when the fit ran): the live plot. A module-level
+            function or a ``functools.partial`` of one (it is pickled); an exception there
+            stops the live fit cleanly.
 
     Attributes:
         estimates: Every estimate so far, in order.
@@ -185,36 +295,36 @@ class LiveFit:
 
     def __init__(
         self,
+        fitter: LiveFitter,
         *,
-        model: str = "prony",
-        terms: int = 2,
-        every_samples: int = 500,
-        contact: str | float = "auto",
-        offset: str = "auto",
-        method: str = "lm",
+        every_samples: int | None = 500,
+        segment_ends_s: Sequence[float] = (),
         stop_rule: StopRule | None = None,
-        on_estimate: Callable[[LiveEstimate, RelaxationRecord | None], None] | None = None,
-        fit: Callable[..., FitResult] = fit_relaxation_joint,
+        on_estimate: Callable[[LiveEstimate], None] | None = None,
+        plot: Callable[[LiveEstimate, LiveCurve], None] | None = None,
     ) -> None:
-        if model not in ("sls", "prony"):
-            raise InputError("a live fit takes the model sls or prony:N", value=model)
-        if int(every_samples) < 1:
+        if every_samples is not None and int(every_samples) < 1:
             raise InputError("every_samples must be at least 1", value=every_samples)
-        self.model, self.terms, self.method = model, int(terms), method
-        self.every_samples = int(every_samples)
-        self.contact, self.offset = contact, offset
+        if every_samples is None and not segment_ends_s:
+            raise InputError("a live fit needs every_samples or segment_ends_s")
+        self.fitter = fitter
+        self.every_samples = None if every_samples is None else int(every_samples)
+        self.segment_ends_s = tuple(sorted(float(t) for t in segment_ends_s))
         self.stop_rule = stop_rule
         self.on_estimate = on_estimate
-        self._fit = fit
+        self.plot = plot
         self.estimates: list[LiveEstimate] = []
         self.state = "waiting"
         self.stop_reason = ""
         self._chunks: list[np.ndarray] = []
         self._count = 0
+        self._last_time_s = -math.inf
         self._ended = False
         self._wake = threading.Condition()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._process: Any = None
+        self._connection: Connection | None = None
 
     # -- the recorder's side ----------------------------------------------------------------
     def add_samples(
@@ -225,6 +335,8 @@ class LiveFit:
         with self._wake:
             self._chunks.append(chunk)
             self._count += chunk.shape[0]
+            if chunk.shape[0]:
+                self._last_time_s = float(chunk[-1, 0])
             self._wake.notify()
 
     @property
@@ -232,33 +344,54 @@ class LiveFit:
         """True once the stop rule held."""
         return self._stop.is_set()
 
-    # -- the thread -------------------------------------------------------------------------
+    # -- the process and the hand-over thread -----------------------------------------------
     def start(self) -> LiveFit:
-        """Start the fit thread (a daemon: it never keeps the process alive)."""
+        """Start the fit process and the hand-over thread (daemons: neither keeps this
+        process alive). The fit process starts in the background (its imports take a
+        second or two); the first refit waits for it, the recorder does not."""
+        context = multiprocessing.get_context("spawn")
+        ours, theirs = context.Pipe()
+        self._process = context.Process(
+            target=_serve,
+            args=(theirs, self.fitter, self.plot, self.stop_rule),
+            name="live-fit",
+            daemon=True,
+        )
+        self._process.start()
+        theirs.close()
+        self._connection = ours
         self.state = "running"
         self._thread = threading.Thread(target=self._run, name="live-fit", daemon=True)
         self._thread.start()
         return self
 
     def finish(self, *, timeout_s: float | None = None) -> None:
-        """Tell the thread the record is complete and wait for its last fit.
+        """Tell the fit the record is complete, wait for its last refit, end the process.
 
         Args:
-            timeout_s: Longest wait (s); None waits for the fit in progress to end.
+            timeout_s: Longest wait (s); None waits for the fit in progress to end. A fit
+                still running then is ended (state ``"stopped"``).
         """
         with self._wake:
             self._ended = True
             self._wake.notify()
         if self._thread is not None:
             self._thread.join(timeout_s)
+            if self._thread.is_alive():
+                self.abandon(f"the last refit did not end within {timeout_s:g} s")
+                self._thread.join()
+        self._close()
 
     def abandon(self, reason: str) -> None:
-        """End the live fit without waiting for the fit in progress (Ctrl-C)."""
+        """End the live fit without waiting for the fit in progress (Ctrl-C): the fit
+        process is terminated."""
         with self._wake:
             self._ended = True
             if self.state == "running":
                 self.state, self.stop_reason = "stopped", reason
             self._wake.notify()
+        if self._process is not None and self._process.is_alive():
+            self._process.terminate()
 
     def record(self) -> np.ndarray:
         """The samples so far, shape (n, 3): time_s, displacement_m, force_N."""
@@ -267,75 +400,75 @@ class LiveFit:
                 self._chunks = [np.concatenate(self._chunks)]
             return self._chunks[0].copy() if self._chunks else np.empty((0, 3))
 
+    def _due(self, fitted: int, fitted_time_s: float) -> bool:
+        """(Under the lock.) Enough new samples, or a segment end passed since the last fit."""
+        if self._count <= fitted:
+            return False
+        if self.every_samples is not None and self._count - fitted >= self.every_samples:
+            return True
+        return any(fitted_time_s < end <= self._last_time_s for end in self.segment_ends_s)
+
     def _run(self) -> None:
-        fitted = 0
+        fitted, fitted_time_s = 0, -math.inf
         while True:
             with self._wake:
-                while not self._ended and self._count - fitted < self.every_samples:
+                while not self._ended and not self._due(fitted, fitted_time_s):
                     self._wake.wait()
                 ended, count = self._ended, self._count
+                rig_time_s = self._last_time_s
             if self.state != "running":
                 return
             if count > fitted:
-                fitted = count
-                try:
-                    self._refit()
-                except Exception as exc:  # noqa: BLE001 - the recording must go on
-                    self.state = "stopped"
-                    self.stop_reason = f"{type(exc).__name__}: {exc}"
+                rows = self.record()[fitted:count]
+                fitted, fitted_time_s = count, rig_time_s
+                if not self._refit(rows):
                     return
             if ended:
                 self.state = "finished"
                 return
 
-    def _refit(self) -> None:
-        started = time.perf_counter()
-        samples = self.record()
-        count = samples.shape[0]
-        rig_time_s = float(samples[-1, 0]) if count else 0.0
-        result, message, fitted = None, "", None
+    def _refit(self, rows: np.ndarray) -> bool:
+        """Send the new rows to the fit process and take its estimate; False when the live
+        fit stopped."""
+        assert self._connection is not None
         try:
-            record = condition_for_fit(
-                {
-                    "time_s": samples[:, 0],
-                    "displacement_m": samples[:, 1],
-                    "force_N": samples[:, 2],
-                },
-                contact=self.contact,
-                offset=self.offset,
-            )
-            fitted = RelaxationRecord(
-                record.time_s,
-                record.displacement_m,
-                record.force_N,
-                source="live record",
-                conditioned=record.conditioned,
-            )
-            result = self._warm_or_cold_fit(fitted)
-        except (InputError, ConvergenceError) as exc:
-            result, fitted, message = None, None, f"not yet: {exc}"
-        met = result is not None and self.stop_rule is not None and self.stop_rule.met(result)
-        estimate = LiveEstimate(
-            count, rig_time_s, result, message, met, time.perf_counter() - started
-        )
-        self.estimates.append(estimate)
-        if met:
+            self._connection.send(rows)
+            reply = self._connection.recv()
+        except (EOFError, OSError) as exc:
+            self._stopped(f"the fit process ended ({type(exc).__name__})")
+            return False
+        if isinstance(reply, str):
+            self._stopped(reply)
+            return False
+        self.estimates.append(reply)
+        if reply.stop_rule_met:
             self._stop.set()
         if self.on_estimate is not None:
-            self.on_estimate(estimate, fitted)
+            try:
+                self.on_estimate(reply)
+            except Exception as exc:  # noqa: BLE001 - the recording must go on
+                self._stopped(f"{type(exc).__name__}: {exc}")
+                return False
+        return True
 
-    def _warm_or_cold_fit(self, record: RelaxationRecord) -> FitResult:
-        """Warm-started from the last identified estimate; from the data's own start (as
-        ``fit relaxation``) when there is none, or when the warm start ends unidentified
-        (an early estimate can sit in another basin: a short hold does not separate the
-        time constants)."""
-        options = {"model": self.model, "terms": self.terms, "method": self.method}
-        previous = self.latest_result(identified=True)
-        if previous is not None:
-            result = self._fit([record], p0=previous.x, **options)
-            if result.success and result.identified:
-                return result
-        return self._fit([record], p0=None, **options)
+    def _stopped(self, reason: str) -> None:
+        with self._wake:
+            if self.state == "running":
+                self.state, self.stop_reason = "stopped", reason
+
+    def _close(self) -> None:
+        if self._connection is not None:
+            try:
+                self._connection.send(None)
+            except (OSError, ValueError):
+                pass
+            self._connection.close()
+            self._connection = None
+        if self._process is not None:
+            self._process.join(10.0)
+            if self._process.is_alive():
+                self._process.terminate()
+                self._process.join()
 
     def latest_result(self, *, identified: bool = False) -> FitResult | None:
         """The last estimate's fit (the last identified one if asked), or None."""
@@ -346,15 +479,65 @@ class LiveFit:
         return None
 
     def summary(self) -> dict[str, Any]:
-        """JSON form: state, why it stopped, the stop rule, every estimate."""
+        """JSON form: what was fitted, state, why it stopped, the stop rule, every estimate."""
         return {
-            "model": self.model if self.model == "sls" else f"prony:{self.terms}",
+            "model": getattr(self.fitter, "label", type(self.fitter).__name__),
             "every_samples": self.every_samples,
-            "contact": self.contact,
-            "offset": self.offset,
+            "segment_ends_s": list(self.segment_ends_s),
             "state": self.state,
             "stop_reason": self.stop_reason,
             "stop_rule": None if self.stop_rule is None else str(self.stop_rule),
             "stop_rule_met": self.stop_requested,
             "estimates": [e.to_dict() for e in self.estimates],
         }
+
+
+def _serve(
+    connection: Connection,
+    fitter: LiveFitter,
+    plot: Callable[[LiveEstimate, LiveCurve], None] | None,
+    stop_rule: StopRule | None,
+) -> None:
+    """The fit process: take rows, refit the record so far, send back the estimate (or one
+    line saying why the live fit must stop); None ends it. Ctrl-C is the parent's to handle
+    (it terminates this process)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    chunks: list[np.ndarray] = []
+    while True:
+        try:
+            rows = connection.recv()
+        except EOFError:
+            return
+        if rows is None:
+            return
+        chunks.append(rows)
+        samples = np.concatenate(chunks)
+        chunks = [samples]
+        started = time.perf_counter()
+        try:
+            estimate = _estimate(fitter, samples, plot, stop_rule, started)
+        except Exception as exc:  # noqa: BLE001 - said to the parent, which stops cleanly
+            estimate = f"{type(exc).__name__}: {exc}"
+        connection.send(estimate)
+
+
+def _estimate(
+    fitter: LiveFitter,
+    samples: np.ndarray,
+    plot: Callable[[LiveEstimate, LiveCurve], None] | None,
+    stop_rule: StopRule | None,
+    started: float,
+) -> LiveEstimate:
+    """One refit of the record so far, as a :class:`LiveEstimate`, plotted."""
+    count = samples.shape[0]
+    rig_time_s = float(samples[-1, 0]) if count else 0.0
+    result, curve, message = None, None, ""
+    try:
+        result, curve = fitter.refit(samples)
+    except (InputError, ConvergenceError) as exc:
+        message = f"not yet: {exc}"
+    met = result is not None and stop_rule is not None and stop_rule.met(result)
+    estimate = LiveEstimate(count, rig_time_s, result, message, met, time.perf_counter() - started)
+    if plot is not None and curve is not None:
+        plot(estimate, curve)
+    return estimate

@@ -115,6 +115,11 @@ class RampHold:
         """Nominal duration (s), ignoring acceleration."""
         return self.dwell_s + self.depth_m / self.speed_m_per_s + self.hold_s
 
+    def segment_ends_s(self) -> tuple[float, ...]:
+        """Rig times at which the dwell, the ramp and the hold end (s; nominal)."""
+        ramp_end_s = self.dwell_s + self.depth_m / self.speed_m_per_s
+        return (self.dwell_s, ramp_end_s, ramp_end_s + self.hold_s)
+
     def start(self, client: RigClient) -> None:
         """Send the command."""
         client.ramp_hold(
@@ -151,6 +156,14 @@ class Sine:
     def duration_s(self) -> float:
         """Duration (s)."""
         return self.cycles / self.frequency_Hz
+
+    def segment_ends_s(self) -> tuple[float, ...]:
+        """Rig times at which each full cycle ends, and the last part cycle (s)."""
+        period_s = 1.0 / self.frequency_Hz
+        ends = [period_s * k for k in range(1, int(math.floor(self.cycles)) + 1)]
+        if not ends or ends[-1] < self.duration_s():
+            ends.append(self.duration_s())
+        return tuple(ends)
 
     def start(self, client: RigClient) -> None:
         """Send the command."""

@@ -26,9 +26,9 @@ from warptissue.errors import DeviceError, InputError
 
 if TYPE_CHECKING:
     from warptissue.acquisition import CommandRefused
-    from warptissue.acquisition.live import LiveFit
+    from warptissue.acquisition.live import LiveCurve, LiveEstimate, LiveFit
 
-__all__ = ["register", "tissue_from_args"]
+__all__ = ["plot_live", "register", "tissue_from_args"]
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -41,7 +41,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "100s, 250ms, 1000Hz. Exit status: 0 complete; 2 bad input, or a test the rig refuses "
         "(nothing is written); 5 the rig cannot be reached, or the test did not run to its "
         "end (FAULT, STOP, link lost, rig silent: the data so far are kept); 130 Ctrl-C (the "
-        "rig is stopped, the data so far are kept).",
+        "rig is stopped, the data so far are kept). With --fit, a final fit that fails or "
+        "does not converge gives its own exit status (fit relaxation's, fit indentation's).",
     )
     acquire.add_argument("--port", required=True, help="port or pyserial URL of the rig")
     acquire.add_argument("--protocol", choices=("ramp-hold", "sine"), default="ramp-hold")
@@ -71,23 +72,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     acquire.add_argument("--no-progress", action="store_true", help="no progress bar")
     live = acquire.add_argument_group(
         "live fit (warptissue.acquisition.live; docs: Live fitting)",
-        "Fit a lumped viscoelastic model while the test runs, in a thread apart from the "
-        "recorder; at the end, 'warptissue fit relaxation' runs on the saved record.",
+        "Fit the record while the test runs, in a process apart from the recorder; at the "
+        "end, 'warptissue fit relaxation' (a lumped model) or 'warptissue fit indentation' "
+        "(a study) runs on the saved record.",
     )
-    live.add_argument("--fit", metavar="MODEL", help="sls or prony:N: refit the record as it grows")
+    live.add_argument(
+        "--fit",
+        metavar="MODEL|STUDY.toml",
+        help="sls or prony:N: a lumped model refitted every --fit-every samples; or a fit "
+        "study with one [[data]] table, whose record the test replaces: its inverse FE "
+        "refitted at the end of each ramp or hold (warm-started from the last estimate)",
+    )
     live.add_argument(
         "--fit-every",
         type=positive_int,
-        default=500,
+        default=None,
         metavar="N",
-        help="refit after N new samples (default 500; a slow fit skips cadences)",
+        help="refit after N new samples (default 500 for a lumped model; a study: at the end "
+        "of each protocol segment only; a slow fit skips cadences)",
     )
     live.add_argument(
         "--contact",
         default="auto",
         metavar="none|auto|POSITION",
-        help="the fit's contact point, as 'fit relaxation --contact' (default auto; the force "
-        "offset before contact is removed)",
+        help="the lumped fit's contact point, as 'fit relaxation --contact' (default auto; the "
+        "force offset before contact is removed; a study's [[data]] table says its own)",
     )
     live.add_argument(
         "--stop-when",
@@ -98,7 +107,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument(
         "--fit-out",
         metavar="DIR",
-        help="folder of the fit's outputs (default: STEM_relaxation_fit beside the CSV)",
+        help="folder of the fit's outputs (default: STEM_relaxation_fit, or "
+        "STEM_indentation_fit for a study, beside the CSV)",
+    )
+    live.add_argument(
+        "--usd",
+        action="store_true",
+        help="a study fit: also write the specimen with the fitted material as a USD scene "
+        "(as 'fit indentation --usd'; a lumped model has no continuum material: refused)",
     )
     acquire.set_defaults(handler=run_acquire)
 
@@ -115,12 +131,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     where.add_argument("--tcp", type=int, metavar="PORT", help="serve on 127.0.0.1:PORT (0: any)")
     sim.add_argument(
         "--tissue",
-        choices=("sls", "prony", "qlv", "curve"),
+        type=tissue_kind,
         default="sls",
+        metavar="sls|prony|qlv|curve|study:FILE",
         help="sls: standard linear solid; prony: Prony series of --g and --tau on the "
         "linear spring --instantaneous-stiffness; qlv: Fung's quasi-linear viscoelasticity, "
         "--g and --tau on the exponential spring A (exp(B x) - 1) of --elastic-scale A and "
-        "--elastic-rate B; curve: a static force-depth curve",
+        "--elastic-rate B; curve: a static force-depth curve; study:FILE: the FE force of "
+        "a study with an elastic material (run once on its [protocol] depths, then "
+        "interpolated in depth)",
     )
     sim.add_argument("--instantaneous-stiffness", default="40N/m", help="sls and prony: G0")
     sim.add_argument("--equilibrium-stiffness", default="20N/m", help="sls")
@@ -254,7 +273,7 @@ def run_acquire(args: argparse.Namespace) -> int:
             "--give-up must be longer than --stall-timeout (first ask the rig, then reopen)",
             value=f"{args.give_up} <= {args.stall_timeout}",
         )
-    live = _live_fit(args)
+    live = _live_fit(args, test)
     client = RigClient(args.port, reconnect_attempts=args.reconnect_attempts)
     with client:
         recorder = Recorder(  # checks the output before the rig moves
@@ -301,15 +320,19 @@ def run_acquire(args: argparse.Namespace) -> int:
     for key, value in counts.items():
         print(f"{key:<{width}}  {value}")
     print(f"wrote {result.csv_path} and {result.sidecar_path}")
-    if live is not None:
-        _finish_live(args, live, result, test)
+    final_status = 0 if live is None else _finish_live(args, live, result, test)
     if result.status in INCOMPLETE:
         print(
             f"warptissue: error: {INCOMPLETE[result.status]}; the data so far are kept",
             file=sys.stderr,
         )
         return DeviceError.exit_code
-    return 0
+    return final_status
+
+
+def _study_fit(args: argparse.Namespace) -> bool:
+    """``--fit`` names a study file (``*.toml``) rather than a lumped model."""
+    return args.fit is not None and args.fit.lower().endswith(".toml")
 
 
 def _fit_out(args: argparse.Namespace) -> Path:
@@ -317,54 +340,82 @@ def _fit_out(args: argparse.Namespace) -> Path:
     if args.fit_out is not None:
         return Path(args.fit_out)
     out = Path(args.out)
-    return out.parent / f"{out.stem}_relaxation_fit"
+    kind = "indentation" if _study_fit(args) else "relaxation"
+    return out.parent / f"{out.stem}_{kind}_fit"
 
 
-def _live_fit(args: argparse.Namespace) -> LiveFit | None:
-    """The LiveFit that ``--fit``, ``--fit-every``, ``--contact`` and ``--stop-when``
-    describe, printing its progress lines and refreshing its plot; None without ``--fit``."""
-    from warptissue.acquisition.live import LiveFit, StopRule
-    from warptissue.cli.fit_relaxation import parse_model
+def plot_live(path: Path, label: str, estimate: LiveEstimate, curve: LiveCurve) -> None:
+    """The live plot: the record so far and the latest fit (run in the fit process).
+
+    Args:
+        path: The PNG file (replaced atomically).
+        label: What was fitted (``prony:2``, the study file).
+        estimate: The refit.
+        curve: What it fitted: time (s), measured and model force (N), shape (m,) each.
+    """
     from warptissue.report import plot_fit
 
-    if args.fit is None:
-        if args.stop_when is not None:
-            raise InputError("--stop-when needs --fit MODEL (the fit that decides)")
-        return None
-    model, terms = parse_model(args.fit)
-    if model not in ("sls", "prony"):
-        raise InputError("--fit: a live fit takes sls or prony:N", value=args.fit)
-    contact: str | float = args.contact
-    if contact not in ("none", "auto"):
-        try:
-            contact = length_m(args.contact)
-        except argparse.ArgumentTypeError as exc:
-            raise InputError(f"--contact: use none, auto or a position; {exc}") from None
-    stop_rule = None if args.stop_when is None else StopRule.parse(args.stop_when)
-    plot_path = _fit_out(args) / f"{Path(args.out).stem}_live.png"
+    plot_fit(
+        path,
+        curve.time_s,
+        curve.measured_force_N,
+        curve.model_force_N,
+        xlabel="time (s)",
+        ylabel="force (N)",
+        title=f"live {label} fit at {estimate.rig_time_s:.4g} s ({estimate.samples} samples)",
+    )
 
-    def show(estimate, record) -> None:
-        print(estimate.progress_line(), flush=True)
-        if record is None or estimate.result is None:
-            return
-        plot_fit(
-            plot_path,
-            record.time_s,
-            record.force_N,
-            estimate.result.fitted,
-            xlabel="time (s)",
-            ylabel="force (N)",
-            title=f"live {args.fit} fit at {estimate.rig_time_s:.4g} s "
-            f"({estimate.samples} samples)",
+
+def _live_fit(args: argparse.Namespace, test) -> LiveFit | None:
+    """The LiveFit that ``--fit``, ``--fit-every``, ``--contact`` and ``--stop-when``
+    describe, printing its progress lines and refreshing its plot; None without ``--fit``."""
+    from functools import partial
+
+    from warptissue.acquisition.live import LiveFit, LumpedFitter, StopRule
+    from warptissue.cli.fit_relaxation import parse_model
+    from warptissue.fit.live import StudyFitter
+
+    if args.fit is None:
+        for option, given in (("--stop-when", args.stop_when), ("--usd", args.usd)):
+            if given:
+                raise InputError(f"{option} needs --fit MODEL or --fit STUDY.toml")
+        return None
+    stem = Path(args.out).stem
+    if _study_fit(args):
+        fitter = StudyFitter.from_file(
+            args.fit, record_path=_fit_out(args) / f"{stem}_live_record.csv"
         )
+        every, label = args.fit_every, Path(args.fit).name
+    else:
+        if args.usd:
+            raise InputError(
+                "--usd needs a study fit (--fit STUDY.toml): a lumped model has no continuum "
+                "material to write",
+                value=args.fit,
+            )
+        model, terms = parse_model(args.fit)
+        if model not in ("sls", "prony"):
+            raise InputError("--fit: a live fit takes sls, prony:N or a study", value=args.fit)
+        contact: str | float = args.contact
+        if contact not in ("none", "auto"):
+            try:
+                contact = length_m(args.contact)
+            except argparse.ArgumentTypeError as exc:
+                raise InputError(f"--contact: use none, auto or a position; {exc}") from None
+        fitter = LumpedFitter(model=model, terms=terms, contact=contact)
+        every, label = args.fit_every or 500, args.fit
+    stop_rule = None if args.stop_when is None else StopRule.parse(args.stop_when)
+
+    def show(estimate) -> None:
+        print(estimate.progress_line(), flush=True)
 
     return LiveFit(
-        model=model,
-        terms=terms,
-        every_samples=args.fit_every,
-        contact=contact,
+        fitter,
+        every_samples=every,
+        segment_ends_s=test.segment_ends_s(),
         stop_rule=stop_rule,
         on_estimate=show,
+        plot=partial(plot_live, _fit_out(args) / f"{stem}_live.png", label),
     )
 
 
@@ -386,10 +437,10 @@ def _write_live_summary(
     )
 
 
-def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> None:
+def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> int:
     """Wait for the live fit, write its summary, and fit the saved record offline with
-    ``warptissue fit relaxation`` (its outputs in the fit folder)."""
-    from warptissue.cli.fit_relaxation import run_relaxation
+    ``warptissue fit relaxation`` or ``warptissue fit indentation`` (outputs in the fit
+    folder); the exit status of that fit (0 when it could not run: a warning)."""
     from warptissue.io import read_experiment_csv
 
     live.finish()
@@ -403,27 +454,63 @@ def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> None:
         )
     print(f"live fit: {live.state}" + (f" ({live.stop_reason})" if live.stop_reason else ""))
     print(f"wrote {_write_live_summary(args, live, status=result.status, saved_s=saved_s)}")
-    final = argparse.Namespace(
-        data=[Path(result.csv_path)],
-        model=args.fit,
-        p0=None,
-        method="lm",
-        objective="absolute",
-        relative_floor="auto",
-        predict=[],
-        contact=live.contact,
-        offset=live.offset,
-        keep_depth=None,
-        window=None,
-        out=_fit_out(args),
-        json=False,
-    )
+    final = _final_study_fit if _study_fit(args) else _final_lumped_fit
     try:
-        run_relaxation(final)
+        return final(args, live, Path(result.csv_path))
     except InputError as exc:
         print(
             f"warptissue: warning: the final fit of the record did not run: {exc}", file=sys.stderr
         )
+    return 0
+
+
+def _final_lumped_fit(args: argparse.Namespace, live: LiveFit, csv_path: Path) -> int:
+    """``warptissue fit relaxation`` of the saved record, with the live fit's conditioning;
+    its exit status."""
+    from warptissue.cli.fit_relaxation import run_relaxation
+
+    return run_relaxation(
+        argparse.Namespace(
+            data=[csv_path],
+            model=args.fit,
+            p0=None,
+            method="lm",
+            objective="absolute",
+            relative_floor="auto",
+            predict=[],
+            contact=live.fitter.contact,
+            offset=live.fitter.offset,
+            keep_depth=None,
+            window=None,
+            out=_fit_out(args),
+            json=False,
+        )
+    )
+
+
+def _final_study_fit(args: argparse.Namespace, live: LiveFit, csv_path: Path) -> int:
+    """``warptissue fit indentation`` of the study with the saved record in its [[data]]
+    (written as ``STEM_study.toml`` in the fit folder, which reproduces the fit offline);
+    its exit status."""
+    from warptissue.cli.fit_indentation import run as run_fit_indentation
+    from warptissue.study import save_study
+
+    folder = _fit_out(args)
+    study_path = folder / f"{Path(args.out).stem}_study.toml"
+    save_study(live.fitter.study_for(csv_path), study_path)
+    print(f"wrote {study_path}")
+    return run_fit_indentation(
+        argparse.Namespace(
+            study=study_path,
+            out=folder,
+            usd=args.usd,
+            strategy=None,
+            contact_point=None,
+            device=None,
+            json=False,
+            quiet=args.no_progress,
+        )
+    )
 
 
 INCOMPLETE: dict[str, str] = {
@@ -484,6 +571,17 @@ def _prony_terms(args: argparse.Namespace) -> tuple[list[float], list[float]]:
     return g, tau
 
 
+TISSUES = ("sls", "prony", "qlv", "curve")
+"""rig-sim's built-in ``--tissue`` kinds (besides ``study:FILE``)."""
+
+
+def tissue_kind(text: str) -> str:
+    """``--tissue``: one of :data:`TISSUES` or ``study:FILE``."""
+    if text in TISSUES or (text.startswith("study:") and len(text) > len("study:")):
+        return text
+    raise argparse.ArgumentTypeError(f"choose from {', '.join(TISSUES)} or study:FILE")
+
+
 def tissue_from_args(args: argparse.Namespace):
     """The specimen that rig-sim's ``--tissue`` options describe (SI units).
 
@@ -501,6 +599,13 @@ def tissue_from_args(args: argparse.Namespace):
         exponential_elastic_force,
     )
 
+    if args.tissue.startswith("study:"):
+        from warptissue.device import quiet_warp
+        from warptissue.simulate import force_curve_tissue
+        from warptissue.study import load_study
+
+        quiet_warp()
+        return force_curve_tissue(load_study(args.tissue.removeprefix("study:")))
     if args.tissue == "curve":
         if args.force_curve is None:
             raise InputError("--tissue curve needs --force-curve CSV")
