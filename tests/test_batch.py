@@ -603,7 +603,9 @@ def test_quiet_batch_on_a_local_cluster_prints_nothing(tmp_path):
     pytest.importorskip("distributed")
     study = tmp_path / "punch.toml"
     study.write_text(_tiny_simulation(), encoding="utf-8")
-    process = _batch_process(tmp_path, str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet")
+    process = _batch_process(
+        tmp_path, str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet"
+    )
     out, err = process.communicate(timeout=300)
     assert (process.returncode, out, err) == (0, "", "")
 
@@ -616,7 +618,13 @@ def test_ctrl_c_in_a_batch_is_one_line_and_leaves_no_temporary_file(tmp_path):
     pytest.importorskip("distributed")
     out_dir = tmp_path / "out"
     process = _batch_process(
-        tmp_path, str(ROOT / "scenes" / "liver_fit.toml"), "-o", str(out_dir), "--workers", "1", "--quiet"
+        tmp_path,
+        str(ROOT / "scenes" / "liver_fit.toml"),
+        "-o",
+        str(out_dir),
+        "--workers",
+        "1",
+        "--quiet",
     )
     try:
         time.sleep(15.0)  # the cluster starts and the fit (about 90 s of CPU) is under way

@@ -359,3 +359,23 @@ def test_systematic_residuals_are_warned_as_in_the_inverse_fe():
     noisy = exact * (1 + 0.01 * np.random.default_rng(3).standard_normal(stretch.size))
     clean = fit_hyperelastic("neo_hookean", HomogeneousTest("tension", stretch - 1.0, noisy))
     assert not [m for m in clean.result.warnings if "systematic" in m]
+
+
+def test_an_absurd_prediction_in_a_loading_not_tested_is_a_warning():
+    """Issue 36: a 3-term Ogden fitted to uniaxial data alone predicted 2.8e10 MPa in
+    equibiaxial tension with only "not identified" said. An Ogden with a hidden term
+    (mu = -10 Pa, alpha = -8: 1e-3 of the uniaxial stress at stretch 3, but it sends the
+    equibiaxial stress negative) fitted to its own uniaxial curve gets a warning naming the
+    loading, the stress and the stretch."""
+    truth = Ogden(mu_Pa=(3e5, -10.0), alpha=(2.0, -8.0))
+    stretch = np.linspace(1.0, 3.0, 21)[1:]
+    test = HomogeneousTest(
+        "tension", stretch - 1.0, truth.nominal_stress_Pa(stretch, "uniaxial"), name="hidden"
+    )
+    fit = fit_hyperelastic(truth, test)
+    assert fit.model.parameter_vector == pytest.approx(truth.parameter_vector, rel=1e-9)
+    equibiaxial = truth.nominal_stress_Pa(stretch, "equibiaxial")
+    assert np.min(equibiaxial) < 0.0  # by the closed form: the rule has something to catch
+    (warning,) = [w for w in fit.result.warnings if "(not tested)" in w]
+    assert warning.startswith("in equibiaxial (not tested) the fitted model predicts a nominal")
+    assert "do not use it there" in warning

@@ -851,6 +851,11 @@ def _systematic_residual_warnings(fit: HyperelasticFit) -> list[str]:
     statistic below :data:`~warptissue.lsq.metrics.DURBIN_WATSON_LIMIT` (the inverse FE's
     rule): the model misses the curve's shape (an upturn it cannot follow, say)."""
     messages = []
+    advice = (
+        "try more terms or another model"
+        if isinstance(fit.model, Ogden)
+        else "try a model that can (Yeoh, Ogden)"
+    )
     for test, row in zip(fit.tests, fit.test_errors(), strict=True):
         window = test.window(fit.min_strain)
         statistic = durbin_watson(window.predicted_stress_Pa(fit.model) - window.nominal_stress_Pa)
@@ -859,7 +864,7 @@ def _systematic_residual_warnings(fit: HyperelasticFit) -> list[str]:
             messages.append(
                 f"the residuals of test {test.name!r} ({test.loading}) are systematic "
                 f"(Durbin-Watson statistic {statistic:.3g}, about 2 for noise; R^2 = {r2}): "
-                "the model misses the curve's shape; try a model that can (Yeoh, Ogden)"
+                f"the model misses the curve's shape; {advice}"
             )
     return messages
 
