@@ -124,7 +124,27 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
         (
             "bench_batch_fe.py",
             ("--tets", "300", "--counts", "2", "--steps", "2", "--what", "fits", "--label", "t"),
-            r"\| t \| cpu \| [\d ]+ \| fits \| 2 \| .* \| \d\.\de-\d\d \(C10\) \|",
+            r"\| t \| cpu \| [\d ]+ \| fits \| 2 \| .* \| \d\.\de-\d\d \(C10\) \| - \| - \|",
+        ),
+        (
+            "bench_batch_fe.py",
+            (
+                "--tets",
+                "300",
+                "--counts",
+                "2",
+                "--steps",
+                "2",
+                "--what",
+                "fits",
+                "--cluster-workers",
+                "1",
+                "--sequential-limit",
+                "1",
+                "--label",
+                "c",
+            ),
+            r"\| c \| cpu \| [\d ]+ \| fits \| 2 \| .* \(C10\) \| [\d.]+ \(1\) \| [\d.]+ \|",
         ),
     ],
 )

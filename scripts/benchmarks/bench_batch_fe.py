@@ -18,12 +18,17 @@ of a batched force from the sequential one of the same problem. With ``--what fi
 inverse fits of C10 (studies whose records are synthetic curves made at each problem's C10,
 fitted from 0.8 times it): :func:`warptissue.fit.fit_indentation` over the K studies
 (forward runs batched) against ``fit_indentation`` of each, in fits per minute, and the
-largest relative difference of a fitted C10.
+largest relative difference of a fitted C10. With ``--cluster-workers N`` as well, the same K
+fits also run on a Dask ``LocalCluster`` of N single-threaded CPU worker processes
+(:func:`warptissue.batch.run_batch` over the K study files with ``device="cpu"``, the wall
+time including the cluster's start), the way a lab without a GPU runs them on every core.
 
 Usage::
 
     python scripts/benchmarks/bench_batch_fe.py --device cuda --counts 1,8,32,128 \
         --out $OUT/bench_batch_fe.json
+    python scripts/benchmarks/bench_batch_fe.py --device cuda --tets 600 --counts 32 \
+        --what fits --cluster-workers 16 --out $OUT/bench_batch_fits.json
     python scripts/benchmarks/bench_batch_fe.py --markdown scripts/results/bench_batch_fe_*.json
 """
 
@@ -262,6 +267,7 @@ def run_fits(
     size_near_m: float,
     mesher: str,
     elimination: bool | str = "auto",
+    cluster_workers: int = 0,
 ) -> dict:
     """One row of fits: K studies whose records are synthetic curves (made by the FE at each
     problem's C10 on the benchmark's mesh) fitted for C10 from 0.8 times it, together
@@ -309,6 +315,7 @@ def run_fits(
         wp.synchronize_device(warp_device)
         sequential_s = time.perf_counter() - started
         fitted_mesh = build_mesh(studies[0])
+        cluster = cpu_cluster_fits(Path(folder), count, cluster_workers) if cluster_workers else {}
     c10 = [fit.parameters["C10_Pa"] for fit in fits]
     difference = max(abs(c10[k] / a.parameters["C10_Pa"] - 1.0) for k, a in enumerate(alone))
     return {
@@ -323,6 +330,53 @@ def run_fits(
             abs(value / float(truth.material.parameter_vector[0]) - 1.0)
             for value, truth in zip(c10, truths, strict=True)
         ),
+        **{key: value for key, value in cluster.items() if key != "C10_Pa"},
+        **(
+            {
+                "cluster_over_batched_C10_difference": max(
+                    abs(a / b - 1.0) for a, b in zip(cluster["C10_Pa"], c10, strict=True)
+                ),
+                "batched_over_cluster": 60.0 * count / batched_s / cluster["cluster_per_minute"],
+            }
+            if cluster
+            else {}
+        ),
+    }
+
+
+def cpu_cluster_fits(folder: Path, count: int, workers: int) -> dict[str, Any]:
+    """The K study files in ``folder`` fitted by :func:`warptissue.batch.run_batch` on a Dask
+    LocalCluster of ``workers`` CPU processes (one thread each; BLAS and OpenMP held to one
+    thread per process), timed from the cluster's start to the summary."""
+    import os
+    import tempfile
+
+    from warptissue.batch import run_batch
+
+    paths = [folder / f"specimen_{k}" / "study.toml" for k in range(count)]
+    saved = {name: os.environ.get(name) for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    os.environ.update(OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    try:
+        with tempfile.TemporaryDirectory(prefix="bench_batch_cluster_") as out:
+            started = time.perf_counter()
+            result = run_batch(paths, out=out, device="cpu", workers=workers, progress=False)
+            seconds = time.perf_counter() - started
+            fitted = [
+                json.loads(next(Path(out, outcome.folder).glob("**/fit.json")).read_text())
+                for outcome in result.outcomes
+            ]
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
+    return {
+        "cluster_workers": workers,
+        "cluster_s": seconds,
+        "cluster_per_minute": 60.0 * count / seconds,
+        "cluster_completed": sum(outcome.exit_status == 0 for outcome in result.outcomes),
+        "C10_Pa": [row["parameters"]["C10_Pa"]["value"] for row in fitted],
     }
 
 
@@ -336,8 +390,9 @@ def markdown_table(all_results: list[dict]) -> str:
     lines = [
         "| run | device | cells | what | problems | batched s | batched per min "
         "| sequential per min (measured on) | batched / sequential "
-        "| largest difference from sequential |",
-        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|",
+        "| largest difference from sequential | CPU cluster per min (workers) "
+        "| batched / CPU cluster |",
+        "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for results in all_results:
         for row in results["runs"]:
@@ -350,7 +405,13 @@ def markdown_table(all_results: list[dict]) -> str:
                 f"| {results['label']} | {row['device']} | {cells} | {row['kind']} "
                 f"| {row['problems']} | {row['batched_s']:.3g} | {row['batched_per_minute']:.3g} "
                 f"| {row['sequential_per_minute']:.3g} ({row['sequential_problems']}) "
-                f"| {row['speedup']:.2f} | {difference:.1e} ({what}) |"
+                f"| {row['speedup']:.2f} | {difference:.1e} ({what}) "
+                + (
+                    f"| {row['cluster_per_minute']:.3g} ({row['cluster_workers']}) "
+                    f"| {row['batched_over_cluster']:.2f} |"
+                    if "cluster_per_minute" in row
+                    else "| - | - |"
+                )
             )
     return "\n".join(lines)
 
@@ -379,6 +440,13 @@ def main(argv: list[str] | None = None) -> int:
         default="auto",
         help="the Newton solver's nonlinear elimination (NewtonOptions.nonlinear_elimination; "
         "auto: its measured rule)",
+    )
+    parser.add_argument(
+        "--cluster-workers",
+        type=int,
+        default=0,
+        help="with --what fits: also run the K fits on a Dask LocalCluster of this many CPU "
+        "worker processes (0: not)",
     )
     parser.add_argument("--label", default="", help="name of this machine in the tables")
     parser.add_argument("--out", type=Path, help="write the results as JSON here")
@@ -413,7 +481,11 @@ def main(argv: list[str] | None = None) -> int:
                 "elimination": {"auto": "auto", "on": True, "off": False}[args.elimination],
             }
             if kind == "fits":
-                options.update(size_near_m=size_near_m, mesher=args.mesher)
+                options.update(
+                    size_near_m=size_near_m,
+                    mesher=args.mesher,
+                    cluster_workers=args.cluster_workers,
+                )
             row = (run if kind == "curves" else run_fits)(mesh, count, args.device, **options)
             rows.append(row)
             print(json.dumps(row))

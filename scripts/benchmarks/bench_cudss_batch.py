@@ -11,7 +11,10 @@ eliminated, and times a factorization with a solve, three ways:
 - ``batch``: the K diagonal blocks as a sequence of CSR matrices in one nvmath-python
   ``DirectSolver`` (cuDSS's batch API), with the same options;
 - ``loop``: one :class:`~warptissue.fem.linear.cudss.CudssSolver` per problem, one after another
-  (timed on the first ``--loop-limit`` problems and scaled to K).
+  (timed on the first ``--loop-limit`` problems and scaled to K);
+- ``dense``: the K diagonal blocks as dense matrices, factorized and solved at once by
+  cuSOLVER's batched dense LU (``cupy.linalg.solve`` on the ``(K, n, n)`` stack), where the
+  stack fits in ``--dense-limit-gib`` of device memory; its "analysis" is the densification.
 
 Each is timed over ``--repeat`` factorizations with solves after a warm-up, the device
 synchronized; the analysis (reordering) is timed once. Every row also gives the largest
@@ -128,27 +131,14 @@ def diagonal_blocks(
 def batch(assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any) -> dict[str, Any]:
     """The K diagonal blocks of the union's CSR matrix as one batch of nvmath matrices."""
     import cupy
-    import cupyx.scipy.sparse
     import nvmath.sparse.advanced as nvs
-    import warp as wp
 
-    from warptissue.fem.linear.cudss import bsr33_csr_pattern, bsr33_csr_values, preload_cudss
+    from warptissue.fem.linear.cudss import preload_cudss
 
     preload_cudss()
     matrix = assembler.matrix
-    offsets_wp, columns_wp, block_rows = bsr33_csr_pattern(matrix)
-    values_wp = wp.zeros(columns_wp.shape[0], dtype=wp.float64, device=matrix.device)
-    bsr33_csr_values(matrix, block_rows, values_wp)
-    offsets, columns = cupy.asarray(offsets_wp), cupy.asarray(columns_wp)
-    values, right = cupy.asarray(values_wp), cupy.asarray(rhs).reshape(-1)
-    matrices = diagonal_blocks(
-        offsets,
-        cupy.asnumpy(offsets),
-        columns,
-        values,
-        packed.node_offsets,
-        cupyx.scipy.sparse.csr_matrix,
-    )
+    right = cupy.asarray(rhs).reshape(-1)
+    matrices = _device_blocks(assembler, packed)
     sides = [
         cupy.ascontiguousarray(right[3 * int(first) : 3 * int(last)])
         for first, last in zip(packed.node_offsets[:-1], packed.node_offsets[1:], strict=True)
@@ -178,6 +168,51 @@ def batch(assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any) 
     x = cupy.concatenate([cupy.asarray(part).reshape(-1) for part in parts])
     solver.free()
     return {"analysis_s": analysis, "factor_solve_s": seconds, "x": x.reshape(-1, 3)}
+
+
+def _device_blocks(assembler: Any, packed: Any) -> list[Any]:
+    """The union's K diagonal blocks as K CuPy CSR matrices (values on the device)."""
+    import cupy
+    import cupyx.scipy.sparse
+    import warp as wp
+
+    from warptissue.fem.linear.cudss import bsr33_csr_pattern, bsr33_csr_values
+
+    matrix = assembler.matrix
+    offsets_wp, columns_wp, block_rows = bsr33_csr_pattern(matrix)
+    values_wp = wp.zeros(columns_wp.shape[0], dtype=wp.float64, device=matrix.device)
+    bsr33_csr_values(matrix, block_rows, values_wp)
+    offsets, columns = cupy.asarray(offsets_wp), cupy.asarray(columns_wp)
+    return diagonal_blocks(
+        offsets,
+        cupy.asnumpy(offsets),
+        columns,
+        cupy.asarray(values_wp),
+        packed.node_offsets,
+        cupyx.scipy.sparse.csr_matrix,
+    )
+
+
+def dense(
+    assembler: Any, packed: Any, rhs: Any, repeat: int, synchronize: Any, limit_gib: float
+) -> dict[str, Any]:
+    """The K diagonal blocks densified into one ``(K, n, n)`` stack (the problems share a
+    mesh, so n is one size) and solved by batched LU; refused above ``limit_gib``."""
+    import cupy
+
+    sizes = np.diff(packed.node_offsets) * 3
+    n, count = int(sizes[0]), len(sizes)
+    gib = count * n * n * 8 / 2**30
+    if np.any(sizes != n) or gib > limit_gib:
+        raise MemoryError(f"a dense stack of {count} x {n}^2 is {gib:.3g} GiB > {limit_gib} GiB")
+    start = time.perf_counter()
+    stack = cupy.stack([block.toarray() for block in _device_blocks(assembler, packed)])
+    sides = cupy.asarray(rhs).reshape(count, n, 1)
+    synchronize()
+    densify = time.perf_counter() - start
+    seconds = timed(lambda: cupy.linalg.solve(stack, sides), repeat, synchronize)
+    x = cupy.linalg.solve(stack, sides)
+    return {"analysis_s": densify, "factor_solve_s": seconds, "x": x.reshape(-1, 3)}
 
 
 def loop(
@@ -227,12 +262,16 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
             "dofs": 3 * packed.mesh.node_count,
         }
         scale = float(cupy.abs(reference["x"]).max())
-        for name in ("block_diagonal", "batch", "loop"):
+        for name in ("block_diagonal", "batch", "loop", "dense"):
             try:
                 if name == "block_diagonal":
                     result = reference
                 elif name == "batch":
                     result = batch(assembler, packed, rhs, args.repeat, synchronize)
+                elif name == "dense":
+                    result = dense(
+                        assembler, packed, rhs, args.repeat, synchronize, args.dense_limit_gib
+                    )
                 else:  # measured on the first --loop-limit problems, scaled to K
                     measured = min(count, args.loop_limit)
                     result = loop(
@@ -256,29 +295,33 @@ def run(args: argparse.Namespace) -> dict[str, Any]:
 def markdown(all_results: list[dict[str, Any]]) -> str:
     """The rows of result sets (as :func:`run` returns them) as one Markdown table."""
     lines = [
-        "| run | cells | problems | DOFs | block-diagonal ms | batch ms | loop ms "
-        "| analysis s: block-diagonal, batch, loop | largest difference |",
-        "|---|---:|---:|---:|---:|---:|---:|---|---:|",
+        "| run | cells | problems | DOFs | block-diagonal ms | batch ms | loop ms | dense ms "
+        "| analysis s: block-diagonal, batch, loop, dense | largest difference |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---|---:|",
     ]
     for results in all_results:
         for row in results["runs"]:
 
             def ms(name: str, row: dict[str, Any] = row) -> str:
                 value = row.get(f"{name}_factor_solve_s")
-                return "failed" if value is None else f"{1e3 * value:.3g}"
+                if value is None:  # failed in this run, or not a way of that run's version
+                    return "failed" if f"{name}_error" in row else "-"
+                return f"{1e3 * value:.3g}"
 
             def analysis(name: str, row: dict[str, Any] = row) -> str:
                 value = row.get(f"{name}_analysis_s")
                 return "-" if value is None else f"{value:.2g}"
 
             difference = max(
-                (row.get(f"{name}_difference", 0.0) for name in ("batch", "loop")), default=0.0
+                (row.get(f"{name}_difference", 0.0) for name in ("batch", "loop", "dense")),
+                default=0.0,
             )
             cells, dofs = (f"{row[key]:,}".replace(",", " ") for key in ("cells", "dofs"))
             lines.append(
                 f"| {results['label']} | {cells} | {row['problems']} | {dofs} "
-                f"| {ms('block_diagonal')} | {ms('batch')} | {ms('loop')} "
-                f"| {analysis('block_diagonal')}, {analysis('batch')}, {analysis('loop')} "
+                f"| {ms('block_diagonal')} | {ms('batch')} | {ms('loop')} | {ms('dense')} "
+                f"| {analysis('block_diagonal')}, {analysis('batch')}, {analysis('loop')}, "
+                f"{analysis('dense')} "
                 f"| {difference:.1e} |"
             )
     return "\n".join(lines)
@@ -295,6 +338,12 @@ def main(argv: list[str] | None = None) -> int:
         type=int,
         default=8,
         help="time the loop on at most this many problems and scale it to K",
+    )
+    parser.add_argument(
+        "--dense-limit-gib",
+        type=float,
+        default=16.0,
+        help="largest dense stack (K n^2 float64) the dense way may allocate, GiB",
     )
     parser.add_argument("--label", default="", help="name of this machine in the tables")
     parser.add_argument("--out", type=Path, help="write the results as JSON here")

@@ -482,6 +482,8 @@ def _final_lumped_fit(args: argparse.Namespace, live: LiveFit, csv_path: Path) -
             offset=live.fitter.offset,
             keep_depth=None,
             window=None,
+            gauge_length_m=None,
+            max_displacement_m=None,
             out=_fit_out(args),
             json=False,
         )
