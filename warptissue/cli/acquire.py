@@ -464,55 +464,41 @@ def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> int:
     return 0
 
 
+def _command_args(argv: list[str]) -> argparse.Namespace:
+    """``argv`` parsed by the CLI's own parser: the final fits get every option of the offline
+    command, with its defaults (a hand-built Namespace missed each option added later)."""
+    from warptissue.cli import build_parser
+
+    return build_parser().parse_args(argv)
+
+
 def _final_lumped_fit(args: argparse.Namespace, live: LiveFit, csv_path: Path) -> int:
     """``warptissue fit relaxation`` of the saved record, with the live fit's conditioning;
     its exit status."""
-    from warptissue.cli.fit_relaxation import run_relaxation
-
-    return run_relaxation(
-        argparse.Namespace(
-            data=[csv_path],
-            model=args.fit,
-            p0=None,
-            method="lm",
-            objective="absolute",
-            relative_floor="auto",
-            predict=[],
-            contact=live.fitter.contact,
-            offset=live.fitter.offset,
-            keep_depth=None,
-            window=None,
-            gauge_length_m=None,
-            max_displacement_m=None,
-            out=_fit_out(args),
-            json=False,
-        )
+    contact = live.fitter.contact
+    parsed = _command_args(
+        ["fit", "relaxation", str(csv_path), "--model", args.fit, "--out", str(_fit_out(args))]
+        + ["--contact", contact if isinstance(contact, str) else repr(float(contact))]
+        + ["--offset", live.fitter.offset]
     )
+    return parsed.handler(parsed)
 
 
 def _final_study_fit(args: argparse.Namespace, live: LiveFit, csv_path: Path) -> int:
     """``warptissue fit indentation`` of the study with the saved record in its [[data]]
     (written as ``STEM_study.toml`` in the fit folder, which reproduces the fit offline);
     its exit status."""
-    from warptissue.cli.fit_indentation import run as run_fit_indentation
     from warptissue.study import save_study
 
     folder = _fit_out(args)
     study_path = folder / f"{Path(args.out).stem}_study.toml"
     save_study(live.fitter.study_for(csv_path), study_path)
     print(f"wrote {study_path}")
-    return run_fit_indentation(
-        argparse.Namespace(
-            study=study_path,
-            out=folder,
-            usd=args.usd,
-            strategy=None,
-            contact_point=None,
-            device=None,
-            json=False,
-            quiet=args.no_progress,
-        )
-    )
+    argv = ["fit", "indentation", str(study_path), "--out", str(folder)]
+    argv += ["--usd"] if args.usd else []
+    argv += ["--quiet"] if args.no_progress else []
+    parsed = _command_args(argv)
+    return parsed.handler(parsed)
 
 
 INCOMPLETE: dict[str, str] = {
