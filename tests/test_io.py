@@ -164,3 +164,13 @@ def test_a_value_beyond_any_measurement_names_file_line_and_column(tmp_path):
         read_experiment_csv(path)
     assert (caught.value.path, caught.value.line, caught.value.column) == (path, 3, "force_N")
     assert "too large" in str(caught.value)
+
+
+def test_a_folder_given_as_an_experiment_file_is_named_as_one(tmp_path):
+    """A folder passed where a record belongs was "experiment file not found"."""
+    folder = tmp_path / "run.csv"
+    folder.mkdir()
+    with pytest.raises(InputError, match="this is a folder, not an experiment file"):
+        read_experiment_csv(folder)
+    with pytest.raises(InputError, match="experiment file not found"):
+        read_experiment_csv(tmp_path / "absent.csv")

@@ -252,6 +252,8 @@ def read_experiment_csv(
             and the column.
     """
     csv_path = Path(path)
+    if csv_path.is_dir():
+        raise InputError("this is a folder, not an experiment file", path=csv_path)
     if not csv_path.is_file():
         raise InputError("experiment file not found", path=csv_path)
     try:
