@@ -174,3 +174,16 @@ def test_a_folder_given_as_an_experiment_file_is_named_as_one(tmp_path):
         read_experiment_csv(folder)
     with pytest.raises(InputError, match="experiment file not found"):
         read_experiment_csv(tmp_path / "absent.csv")
+
+
+def test_an_atomic_write_that_cannot_start_names_the_file_asked_for(tmp_path, monkeypatch):
+    """A folder where no file can be made: the error named the hidden temporary file."""
+    import tempfile
+
+    def refuse(**_: object) -> None:
+        raise PermissionError(13, "Permission denied", str(tmp_path / ".out.xyz.tmp.json"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    with pytest.raises(PermissionError) as caught:
+        write_json(tmp_path / "out.json", {"a": 1})
+    assert caught.value.filename == str(tmp_path / "out.json")

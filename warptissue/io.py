@@ -69,9 +69,12 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     temporary_path: Path | None = None
     try:
         # Inside the try: an interrupt (Ctrl-C) right after the file is made removes it too.
-        handle, temporary = tempfile.mkstemp(
-            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
-        )
+        try:
+            handle, temporary = tempfile.mkstemp(
+                prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
+            )
+        except OSError as error:  # name the file asked for, not the temporary one
+            raise OSError(error.errno, error.strerror, str(target)) from None
         temporary_path = Path(temporary)
         os.close(handle)
         yield temporary_path
