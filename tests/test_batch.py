@@ -638,3 +638,47 @@ def test_ctrl_c_in_a_batch_is_one_line_and_leaves_no_temporary_file(tmp_path):
     assert err == "warptissue: interrupted\n"
     time.sleep(2.0)  # the workers' cleanup
     assert [p.name for p in out_dir.rglob("*") if ".tmp" in p.name] == []
+
+
+def test_a_two_stage_fit_whose_stage_one_did_not_converge_is_exit_4_in_the_summary(
+    tmp_path, monkeypatch
+):
+    """Issue 36: stage (i) of Ahn & Kim's two-stage fit stopped at its iteration limit and
+    the batch's row said ``converged``, exit status 0, with no warning of it. Now the row's
+    status is ``stage_one_not_converged`` (exit status 4, the error naming the record) and
+    each stage (i) finding is among the study's warnings (its outcome's and fit.json's)."""
+    import functools
+
+    from warptissue.viscoelastic.fitting import fit_qlv
+
+    # Stage (i) as the fit plan runs it, with one iteration.
+    monkeypatch.setattr(
+        "warptissue.fit._setup.fit_qlv", functools.partial(fit_qlv, max_iterations=1)
+    )
+    text = FIT_STUDY.replace("C10_Pa = 287.5", "C10_Pa = 287.5\ng1 = 0.3\ntau1_s = 1.0")
+    text = text.replace("time_steps = 3", 'time_steps = 3\nstrategy = "two_stage"')
+    (tmp_path / "relax.toml").write_text(text, encoding="utf-8")
+    ramp_s = np.linspace(0.0, 3.0, 7)
+    hold_s = 3.0 + np.arange(1, 13) * 0.25
+    depth = np.concatenate([ramp_s * 1e-4, np.full(hold_s.size, 3e-4)])
+    peak_N = 2e-3 * 2400.0 * 3e-4 / 0.75 * 1.3
+    force = np.concatenate(
+        [peak_N * ramp_s / 3.0, peak_N * (0.7 + 0.3 * np.exp(-(hold_s - 3.0) / 1.0))]
+    )
+    write_csv(
+        tmp_path / "ramp.csv",
+        {"time_s": np.concatenate([ramp_s, hold_s]), "displacement_m": depth, "force_N": force},
+    )
+    out = tmp_path / "out"
+    result = batch.run_batch([tmp_path / "relax.toml"], out=out, workers=0, progress=False)
+    assert result.exit_code == batch.FAILED_EXIT_CODE
+    row = _summary(out / "summary.csv")["relax"]
+    assert row["status"] == "stage_one_not_converged" and row["exit_status"] == "4"
+    assert "stage (i) (Ahn & Kim) did not converge on ramp.csv" in row["error"]
+    fit = json.loads((out / "relax" / "fit.json").read_text())
+    for warnings in (result.outcomes[0].warnings, fit["warnings"]):
+        assert any(
+            w.startswith("stage (i) (Ahn & Kim), ramp.csv: the fit did not converge")
+            for w in warnings
+        ), warnings
+    assert int(row["warnings"]) >= 1

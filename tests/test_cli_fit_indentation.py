@@ -319,5 +319,12 @@ def test_two_stage_says_when_stage_one_did_not_converge(
     err = capsys.readouterr().err
     assert status == 4, err
     assert "warptissue: warning: stage (i) (Ahn & Kim), ramp.csv: the fit did not converge" in err
-    assert "error: stage (i) (Ahn & Kim) did not converge" in err and "Traceback" not in err
-    assert (out / "fit.json").is_file()
+    assert "error: stage (i) (Ahn & Kim) did not converge on ramp.csv" in err
+    assert "Traceback" not in err
+    # The API's result says it too: its status and top-level warnings (fit.json's).
+    fit = json.loads((out / "fit.json").read_text())
+    assert fit["status"] == "stage_one_not_converged" and fit["success"] is False
+    assert any(
+        w.startswith("stage (i) (Ahn & Kim), ramp.csv: the fit did not converge")
+        for w in fit["warnings"]
+    )

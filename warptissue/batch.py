@@ -99,7 +99,8 @@ SUMMARY_COLUMNS: tuple[str, ...] = (
 """Columns of ``summary.csv``: the study file as given; its result folder under OUT; its kind
 (``simulation``, ``fit`` or empty when the file could not be read); its status (a
 simulation's ``completed``/``stopped_early``, a fit's ``converged``/
-``stopped_at_r_squared``/``max_iterations``/``failed``, or ``error``); the exit status its
+``stopped_at_r_squared``/``max_iterations``/``failed``/``stage_one_not_converged``, or
+``error``); the exit status its
 single-study command would have given (0 success); the task's wall time (s); how many
 studies its load steps were solved with in one batched FE run (1: alone); the GPU its
 worker was pinned to (``CUDA_VISIBLE_DEVICES``; empty where not pinned); the peak
@@ -426,7 +427,9 @@ def _fit_numbers(fit: Any, out_dir: Path, solved_together: int = 1) -> dict[str,
     if fit.status == "interrupted":  # Ctrl-C in this process: stop the batch
         raise KeyboardInterrupt
     error = ""
-    if not fit.success:
+    if fit.status == "stage_one_not_converged":
+        error = fit.message
+    elif not fit.success:
         what = "failed" if fit.status == "failed" else f"did not converge ({fit.status})"
         error = f"the fit {what}: {fit.message}"
     return {

@@ -31,9 +31,6 @@ if TYPE_CHECKING:
 __all__ = ["register_fit", "run", "summary"]
 
 STRATEGIES = ("joint", "two_stage")
-
-STAGE_ONE = "stage (i) (Ahn & Kim)"
-"""How the messages name the two-stage fit's first stage (the Prony series by fit_qlv)."""
 """``--strategy`` values: every free parameter at once, or Ahn & Kim's two stages."""
 CONTACT_POINTS = ("given", "fit")
 """``--contact-point`` values: :data:`warptissue.study.CONTACT_POINTS`."""
@@ -145,24 +142,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"outputs in {out_dir}: " + ", ".join(p.name for p in files.values()))
     for message in fit.warnings:
         print(f"warptissue: warning: {message}", file=sys.stderr)
-    stage_one = zip(fit.records, fit.stage_one_fits, strict=False)
-    unconverged = []
-    for record, stage in stage_one:
-        for message in stage.all_warnings:
-            print(f"warptissue: warning: {STAGE_ONE}, {record.file}: {message}", file=sys.stderr)
-        if not stage.success:
-            unconverged.append(record.file)
-    if unconverged and fit.exit_code == 0:
-        print(
-            f"warptissue: error: {STAGE_ONE} did not converge on {', '.join(unconverged)}; the "
-            f"outputs in {out_dir} hold the Prony terms it reached",
-            file=sys.stderr,
-        )
-        return ConvergenceError.exit_code
     if fit.status == "interrupted":
         print(
             f"warptissue: interrupted: the outputs in {out_dir} hold the best parameters "
             "found so far",
+            file=sys.stderr,
+        )
+    elif fit.status == "stage_one_not_converged":
+        print(
+            f"warptissue: error: {fit.message}; the outputs in {out_dir} hold the fit from them",
             file=sys.stderr,
         )
     elif fit.exit_code != 0:

@@ -93,6 +93,7 @@ from warptissue.study import Study
 __all__ = [
     "CORRELATION_LIMIT",
     "OFFSET_IDENTIFIED_SHARE",
+    "STAGE_ONE",
     "STATUSES",
     "IndentationFit",
     "IndentationFitProgress",
@@ -108,8 +109,13 @@ STATUSES: tuple[str, ...] = (
     "max_iterations",
     "interrupted",
     "failed",
+    "stage_one_not_converged",
 )
-"""``IndentationFit.status``: the first two are successes."""
+"""``IndentationFit.status``: the first two are successes. ``stage_one_not_converged``: the
+inverse FE converged but Ahn & Kim's stage (i) did not on a record (the two-stage strategy)."""
+STAGE_ONE = "stage (i) (Ahn & Kim)"
+"""How messages name the two-stage strategy's first stage (each record's Prony series by
+:func:`warptissue.viscoelastic.fitting.fit_qlv`)."""
 CORRELATION_LIMIT = 0.995
 """Two parameters whose correlation exceeds this in magnitude are reported: the data
 determine a combination of them rather than each."""
@@ -222,7 +228,9 @@ class IndentationFit:
         status: One of :data:`STATUSES`.
         message: One line on how the fit ended.
         seconds: Wall time of the fit (s).
-        warnings: Identifiability and plausibility warnings (no "warning:" prefix).
+        warnings: Identifiability and plausibility warnings (no "warning:" prefix); with the
+            two-stage strategy also every stage (i) finding of each record (not converged,
+            Prony terms not identified), as ``"stage (i) (Ahn & Kim), FILE: ..."``.
         start: The start values of the free parameters (name -> value).
         start_cost: The cost at the start values (before the first trial step of the
             engine; the history lists the cost after each), or None.
@@ -635,6 +643,17 @@ def _outcome(
             curve.depth_offset_m = float(result.x[j])
             curve.depth_offset_standard_error_m = None if errors is None else float(errors[j])
     warnings = _warnings(study, result, records, status, message)
+    unconverged = []
+    for record, stage in zip(study.data, plan.stage_one_fits, strict=False):
+        warnings.extend(f"{STAGE_ONE}, {record.file}: {text}" for text in stage.all_warnings)
+        if not stage.success:
+            unconverged.append(record.file)
+    if unconverged and status in ("converged", "stopped_at_r_squared"):
+        status = "stage_one_not_converged"
+        message = (
+            f"{STAGE_ONE} did not converge on {', '.join(unconverged)}: stage (ii) used the "
+            "Prony terms it reached"
+        )
     result.warnings.extend(warnings)
     fitted_material = model.material_at(best.x)
     return IndentationFit(
