@@ -378,3 +378,27 @@ def test_the_displacement_limit_follows_the_declared_test(tmp_path, capsys):
     assert main([*argv, "--max-displacement-m", "0.1"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--max-displacement-m" in err
+
+
+def test_qlv_honours_the_declared_test_s_displacement_limit(tmp_path, capsys):
+    """Issue 36: --gauge-length-m and --max-displacement-m set the displacement limit of the
+    Prony fits; --model qlv:N refused the same 0.12 m tensile relaxation whatever they said
+    (fit_qlv kept an indentation's 0.1 m). Now qlv follows them too, and gives back the
+    record's relaxation (g_i = k_i / (k0 + k1 + k2), tau_i) at that displacement."""
+    data = np.loadtxt(_record(tmp_path / "r.csv"), delimiter=",", skiprows=1)[::8]
+    path = tmp_path / "tensile.csv"
+    write_csv(
+        path, {"time_s": data[:, 0], "displacement_m": 60.0 * data[:, 1], "force_N": data[:, 2]}
+    )  # 0.12 m: stretch 2.5 of an 80 mm specimen
+    argv = ["relaxation", str(path), "--model", "qlv:2", "--out", str(tmp_path / "o")]
+    status, _, err = _fit_json(capsys, argv)
+    assert status == 2 and err.count("\n") == 1 and "more than 0.1 m" in err
+    status, printed, err = _fit_json(capsys, [*argv, "--gauge-length-m", "80mm"])
+    assert status == 0, err
+    fitted = _stiffness(printed)
+    assert (fitted["g1"], fitted["g2"]) == pytest.approx((6.0 / 15.0, 4.0 / 15.0), rel=0.05)
+    assert (fitted["tau1_s"], fitted["tau2_s"]) == pytest.approx((0.8, 15.0), rel=0.05)
+    status, _, err = _fit_json(capsys, [*argv, "--max-displacement-m", "0.2"])
+    assert status == 0, err
+    status, _, err = _fit_json(capsys, [*argv, "--max-displacement-m", "0.1"])
+    assert status == 2 and err.count("\n") == 1 and "--max-displacement-m" in err

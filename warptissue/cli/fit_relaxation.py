@@ -442,10 +442,15 @@ def _displacement_limit(args: argparse.Namespace) -> float:
 
 
 def _fit_qlv(
-    args: argparse.Namespace, records: list[_Record], terms: int, p0: list[float] | None
+    args: argparse.Namespace,
+    records: list[_Record],
+    terms: int,
+    p0: list[float] | None,
+    limit_m: float,
 ) -> FitResult:
     """``--model qlv:N``: :func:`warptissue.viscoelastic.fitting.fit_qlv` on the one record,
-    with the per-record statistics the other models give.
+    with the per-record statistics the other models give; ``limit_m``: the largest plausible
+    displacement (:func:`_displacement_limit`).
 
     Raises:
         InputError: Several records, the relative objective, or a record the fit refuses
@@ -466,7 +471,7 @@ def _fit_qlv(
     try:
         result = fit_qlv(
             record.time_s, record.displacement_m, record.force_N, terms=terms, p0=p0,
-            method=args.method,
+            method=args.method, max_displacement_m=limit_m,
         )  # fmt: skip
     except InputError as exc:
         raise _named(exc, record.path) from None
@@ -495,7 +500,7 @@ def run_relaxation(args: argparse.Namespace) -> int:
     floor = _floor(args, records)
     limit = _displacement_limit(args)
     if model == "qlv":
-        result = _fit_qlv(args, records, terms, p0)
+        result = _fit_qlv(args, records, terms, p0, limit)
     else:
         result = fit_relaxation_joint(
             [

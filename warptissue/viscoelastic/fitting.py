@@ -371,6 +371,7 @@ def fit_qlv(
     substeps: int = 4,
     method: str = "lm",
     max_iterations: int = 200,
+    max_displacement_m: float = MAX_INDENTATION_DEPTH_M,
 ) -> FitResult:
     """Fit QLV with an exponential elastic response to a real ramp-and-hold record.
 
@@ -385,12 +386,17 @@ def fit_qlv(
         substeps: Sub-intervals of the hereditary integral per sample interval.
         method: "lm" or "salm".
         max_iterations: Iteration limit of the engine.
+        max_displacement_m: The largest plausible displacement, m (an indentation's 0.1 m by
+            default; a specimen's tensile or compressive test allows more), as
+            :attr:`RelaxationRecord.max_displacement_m`.
 
     Returns:
         The FitResult (parameters A_N, B_per_m, g1.., tau1.._s); ``fitted_model`` is the
         :class:`QuasiLinearViscoelastic`.
     """
-    record = RelaxationRecord(time_s, displacement_m, force_N)
+    record = RelaxationRecord(
+        time_s, displacement_m, force_N, max_displacement_m=max_displacement_m
+    )
     data_warnings = record.plausibility_warnings()
     n = int(terms)
     if n < 1:
