@@ -975,3 +975,60 @@ def test_studies_fitted_together_equal_each_fitted_alone(tmp_path):
         fit_indentation([viscous, broken], progress=False)
     with pytest.raises(InputError, match="sequence of studies"):
         fit_indentation([], progress=False)
+
+
+def _follows_shear_study(folder: Path):
+    """A record of NEO_HOOKEAN (K/mu0 = 1000), and a study that starts at C10 = 200 Pa with
+    K/mu0 = 1000 and fits C10 with fit.bulk_modulus = "follows_shear"."""
+    start = {**NEO_HOOKEAN, "C10_Pa": 200.0, "bulk_modulus_Pa": 400_000.0}
+    return make_study(
+        folder,
+        truth=NEO_HOOKEAN,
+        start=start,
+        fit='free = ["C10_Pa"]\ntime_steps = 3\nstart_from = "material"\n'
+        'bulk_modulus = "follows_shear"\n',
+        history=ramp(0.3 * RADIUS_M, 3),
+        noise=0.0,
+        solver="tolerance = 1e-12",
+    )
+
+
+@pytest.mark.slow
+def test_the_jacobian_with_the_bulk_modulus_following_the_shear_is_exact(tmp_path):
+    """Issue 36: with fit.bulk_modulus = "follows_shear" K = (K/mu0 of [material]) mu0 at
+    every trial point; the Jacobian (dF/dC10 through K too: the chain rule with the FE's
+    dF/dK) equals central differences of the residuals, and differs from the column with K
+    held (the chain rule's term is not negligible)."""
+    study = _follows_shear_study(tmp_path)
+    assert study.fit.bulk_modulus == "follows_shear"
+    model = forward_model(study, study.material, ("C10_Pa",), device="cpu", progress=False)
+    x = np.array([250.0])
+    assert model.material_at(x).bulk_modulus == pytest.approx(1000.0 * 500.0, rel=1e-14)
+    jacobian = model.jac(x)
+    step = 1e-6 * x[0]
+    central = (model.fun(x + step) - model.fun(x - step)) / (2.0 * step)
+    scale = float(np.max(np.abs(central)))
+    np.testing.assert_allclose(jacobian[:, 0], central, rtol=0, atol=1e-6 * scale)
+    held = forward_model(
+        dataclasses.replace(study, fit=dataclasses.replace(study.fit, bulk_modulus="fixed")),
+        study.material,
+        ("C10_Pa",),
+        device="cpu",
+        progress=False,
+    )
+    assert not np.allclose(held.jac(x)[:, 0], central, rtol=0, atol=1e-3 * scale)
+
+
+@pytest.mark.slow
+def test_the_fitted_bulk_to_shear_ratio_is_the_start_s(tmp_path):
+    """Issue 36: only K itself could be held, so a nearly incompressible material's K/mu0
+    drifted as C10 was fitted (1000 at the start, 1000 * 200/287.5 = 696 fitted). With
+    fit.bulk_modulus = "follows_shear" the fitted K/mu0 is the start's, and C10 is recovered
+    from a record of that ratio."""
+    fit = fit_indentation(_follows_shear_study(tmp_path), progress=False)
+    assert fit.success, fit.message
+    material = fit.fitted_study.material
+    assert material.C10_Pa == pytest.approx(287.5, rel=1e-4)
+    assert material.bulk_modulus / material.initial_shear_modulus_Pa == pytest.approx(
+        1000.0, rel=1e-12
+    )

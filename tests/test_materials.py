@@ -392,3 +392,22 @@ def test_an_unknown_model_names_the_close_one():
     with pytest.raises(InputError, match="did you mean 'neo_hookean'") as error:
         material_from_dict({"model": "neo_hooken", "C10_Pa": 1.0, "bulk_modulus_Pa": 1e4})
     assert error.value.column == "model" and "[" not in error.value.message
+
+
+def test_a_viscoelastic_material_takes_another_bulk_modulus_and_keeps_its_prony_series():
+    """Viscoelastic.with_bulk_modulus (fit.bulk_modulus = "follows_shear" sets K on the
+    viscoelastic materials of a fit too): the elastic response's K changes, nothing else."""
+    material = material_from_dict(
+        {
+            "model": "neo_hookean",
+            "C10_Pa": 150.0,
+            "bulk_modulus_Pa": 3000.0,
+            "g1": 0.3,
+            "tau1_s": 2.0,
+        }
+    )
+    changed = material.with_bulk_modulus(6000.0)
+    assert changed.bulk_modulus == 6000.0 and changed.elastic == NeoHookean(150.0, 6000.0)
+    assert (changed.g, changed.tau_s) == (material.g, material.tau_s)
+    with pytest.raises(InputError):
+        material.with_bulk_modulus(-1.0)

@@ -997,6 +997,13 @@ BAD_V2 = [
     ),
     pytest.param(
         'method = "salm"',
+        'bulk_modulus = "ratio"',
+        "fit.bulk_modulus",
+        "'ratio'",
+        id="bulk-modulus-rule",
+    ),
+    pytest.param(
+        'method = "salm"',
         "[fit.start]\ndepth_offset_m = 1e-4",
         "fit.start.depth_offset_m",
         "0.0001",
@@ -1358,6 +1365,27 @@ def test_fit_strategy_and_time_steps_defaults_and_round_trip(tmp_path):
 
 
 VISCO_MATERIAL = "C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0\ng1 = 0.3\ntau1_s = 1.0\n"
+
+
+def test_the_bulk_modulus_rule_defaults_round_trips_and_needs_a_hyperelastic_model(tmp_path):
+    """Issue 36: fit.bulk_modulus = "follows_shear" (K/mu0 held) is read, written back and
+    refused in one line for a model with compressibility parameters of its own."""
+    study = load_study(write_v2(tmp_path))
+    assert study.fit.bulk_modulus == "fixed" and "bulk_modulus" not in study.fit.to_dict()
+    text = V2.replace('method = "salm"', 'method = "salm"\nbulk_modulus = "follows_shear"')
+    study = load_study(write_v2(tmp_path, text))
+    assert study.fit.bulk_modulus == "follows_shear"
+    assert study_from_dict(study.to_dict(), path=study.path).fit == study.fit
+    linear = text.replace('model = "neo_hookean"', 'model = "linear_elastic"').replace(
+        "C10_Pa = 287.5\nbulk_modulus_Pa = 575000.0",
+        "youngs_modulus_Pa = 1725.0\npoissons_ratio = 0.499",
+    )
+    linear = linear.replace('free = ["C10_Pa"]', 'free = ["youngs_modulus_Pa"]')
+    with pytest.raises(InputError) as caught:
+        load_study(write_v2(tmp_path, linear))
+    assert_names_key_and_line(
+        caught.value, linear, caught.value.path, "fit.bulk_modulus", "'follows_shear'"
+    )
 
 
 def test_contact_point_defaults_and_round_trips(tmp_path):

@@ -28,6 +28,8 @@ from warptissue.materials import Viscoelastic
 from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
 from warptissue.study import DEPTH_OFFSET, DataRecord, Study
 
+BULK_MODULUS = "bulk_modulus_Pa"
+"""The bulk modulus's name among a material's sensitivity names."""
 OFFSET_BOUND_SHARES = (0.5, 0.1)
 """Default bounds of a record's depth offset: from its shallowest recorded depth less this
 first share of its depth span, to its deepest less the second share (the probe touches
@@ -104,6 +106,14 @@ class ForwardModel:
                 value=missing[0],
             )
         self.index = [self.all_names.index(name) for name in names]
+        # fit.bulk_modulus = "follows_shear": K = ratio mu0(theta) at every point, so
+        # dF/dtheta_j = dF/dtheta_j|K + dF/dK ratio dmu0/dtheta_j (the FE gives dF/dK too).
+        self.bulk_ratio: float | None = None
+        self.sensitivity_names = names
+        if settings.bulk_modulus == "follows_shear":
+            self.bulk_ratio = float(material.bulk_modulus / material.initial_shear_modulus_Pa)
+            self.sensitivity_names = (*names, BULK_MODULUS)
+        self.shear_weights = [material.moduli_derivative(name)[0] for name in names]
 
         self.viscoelastic = isinstance(material, Viscoelastic)
         self.records = study.data
@@ -161,7 +171,10 @@ class ForwardModel:
     def material_at(self, x: np.ndarray) -> Any:
         vector = self.material.parameter_vector.copy()
         vector[self.index] = np.asarray(x)[: len(self.names)]
-        return self.material.with_parameters(vector)
+        material = self.material.with_parameters(vector)
+        if self.bulk_ratio is None:
+            return material
+        return material.with_bulk_modulus(self.bulk_ratio * material.initial_shear_modulus_Pa)
 
     def offsets_at(self, x: np.ndarray) -> np.ndarray:
         """The records' depth offsets (m) in ``x``: zeros when the contact is given."""
@@ -242,7 +255,7 @@ class ForwardModel:
                 progress=self.progress,
                 options=self.options,
                 assembler=self.assembler,
-                sensitivities=self.names if sensitivities else (),
+                sensitivities=self.sensitivity_names if sensitivities else (),
                 **extra,
             )
         except ConvergenceError as exc:
@@ -271,7 +284,7 @@ class ForwardModel:
                 RunRequest(
                     problems=[dataclasses.replace(self.problem, material=material)] * len(grids),
                     grids=list(grids),
-                    names=self.names if sensitivities else (),
+                    names=self.sensitivity_names if sensitivities else (),
                     options=self.options,
                     device=self.device,
                 ),
@@ -294,7 +307,7 @@ class ForwardModel:
             problems,
             [depths for _, depths in grids],
             options=self.options,
-            sensitivities=self.names if sensitivities else (),
+            sensitivities=self.sensitivity_names if sensitivities else (),
             assembler=self._packed_assembler,
             times_s=[times for times, _ in grids],
         )
@@ -347,6 +360,10 @@ class ForwardModel:
             sensitivity = np.asarray(run.force_sensitivity_N_per_unit, dtype=np.float64)
             curve = np.concatenate([[0.0], force])
             predicted.append(np.interp(at, where, curve))
+            if self.bulk_ratio is not None:  # K follows mu0: the chain rule through K
+                sensitivity = sensitivity[:, :-1] + self.bulk_ratio * np.outer(
+                    sensitivity[:, -1], self.shear_weights
+                )
             columns = [
                 np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
                 for j in range(len(self.names))

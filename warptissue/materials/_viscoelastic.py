@@ -153,6 +153,12 @@ class Viscoelastic(Material):
             tuple(values[k + n :].tolist()),
         )
 
+    def with_bulk_modulus(self, bulk_modulus_Pa: float | None) -> Viscoelastic:
+        """A copy whose elastic response has bulk modulus K (Pa, > 0; None:
+        incompressible); validated. The Prony series relaxes the deviatoric stress only, so
+        K is the instantaneous and the long-term bulk modulus alike."""
+        return Viscoelastic(self.elastic.with_bulk_modulus(bulk_modulus_Pa), self.g, self.tau_s)
+
     def with_prony(self, g: Sequence[float], tau_s: Sequence[float]) -> Viscoelastic:
         """A copy with another Prony series (same elastic response)."""
         return Viscoelastic(self.elastic, tuple(g), tuple(tau_s))

@@ -29,6 +29,7 @@ Example:
 
 from warptissue.study._reader import load_study, study_from_dict
 from warptissue.study._schema import (
+    BULK_MODULUS_RULES,
     CONTACT_POINTS,
     DEPTH_OFFSET,
     DEVICE_PATTERN,
@@ -57,6 +58,7 @@ __all__ = [
     "DEPTH_OFFSET",
     "DEVICE_PATTERN",
     "FIT_STRATEGIES",
+    "BULK_MODULUS_RULES",
     "PROTOCOL_KINDS",
     "SCHEMA_VERSION",
     "SCHEMA_VERSIONS",

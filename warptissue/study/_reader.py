@@ -25,6 +25,7 @@ from warptissue.mesh.size import size_near_for_force_accuracy
 from warptissue.study._records import condition_record, read_data, record_options
 from warptissue.study._schema import (
     BASE_KINDS,
+    BULK_MODULUS_RULES,
     CONTACT_POINTS,
     DEPTH_OFFSET,
     DEVICE_PATTERN,
@@ -487,6 +488,15 @@ def _read_fit(table: Table, material: Any) -> FitSettings:
                 "parameter too (C10_Pa, ...), or use 'joint'",
                 strategy,
             )
+    bulk_modulus = table.string("bulk_modulus", default="fixed", choices=BULK_MODULUS_RULES)
+    if bulk_modulus == "follows_shear" and not hasattr(material, "with_bulk_modulus"):
+        raise table.error(
+            "bulk_modulus",
+            "'follows_shear' holds K/mu0 of a hyperelastic model's bulk modulus (not a fit "
+            f"parameter); model {material.model_name!r} has its own compressibility "
+            "parameters: leave them out of fit.free to hold them",
+            bulk_modulus,
+        )
     time_steps = table.integer("time_steps", default=24, minimum=2)
     if time_steps > MAX_STEPS:
         raise table.error("time_steps", f"must be at most {MAX_STEPS}", time_steps)
@@ -504,6 +514,7 @@ def _read_fit(table: Table, material: Any) -> FitSettings:
         strategy=strategy,
         time_steps=time_steps,
         contact_point=contact_point,
+        bulk_modulus=bulk_modulus,
         **tolerances,
     )
     lower, upper = settings.parameter_bounds(material)

@@ -38,6 +38,10 @@ FIT_OBJECTIVES: tuple[str, ...] = ("absolute", "relative")
 """``fit.objective``: force residuals (N), or residuals divided by the measured force."""
 FIT_STRATEGIES: tuple[str, ...] = ("joint", "two_stage")
 """``fit.strategy``: all free parameters at once, or Ahn & Kim's Prony-first two stages."""
+BULK_MODULUS_RULES: tuple[str, ...] = ("fixed", "follows_shear")
+"""``fit.bulk_modulus``: the bulk modulus K stays at its ``[material]`` value while the shear
+moduli are fitted, or K follows the initial shear modulus mu0 at the ``[material]``'s ratio
+K/mu0 (its small-strain Poisson's ratio held)."""
 PROTOCOL_KINDS: tuple[str, ...] = ("quasi_static", "timed", "ramp_hold", "sine", "record")
 """``protocol.kind``: depths only, explicit depths and times, or a generated history."""
 START_FROM: tuple[str, ...] = ("record", "material")
@@ -496,6 +500,11 @@ class FitSettings:
             (docs/fitting.md "Contact point"). Its start and bounds
             are ``start["depth_offset_m"]`` and ``bounds["depth_offset_m"]`` (each record's),
             else from each record.
+        bulk_modulus: ``"fixed"``: the bulk modulus K (not a fit parameter of the
+            hyperelastic models) stays at its ``[material]`` value, so K/mu0 changes as the
+            shear moduli are fitted; ``"follows_shear"``: K = (K/mu0 of ``[material]``) mu0
+            at every trial point, so a nearly incompressible material stays as nearly
+            incompressible (:data:`BULK_MODULUS_RULES`).
     """
 
     free: tuple[str, ...]
@@ -513,6 +522,7 @@ class FitSettings:
     strategy: str = "joint"
     time_steps: int = 24
     contact_point: str = "given"
+    bulk_modulus: str = "fixed"
 
     def parameter_bounds(self, material: Any) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the free parameters, each shape (n,), in ``free`` order.
@@ -546,6 +556,8 @@ class FitSettings:
         }
         if self.contact_point != "given":
             table["contact_point"] = self.contact_point
+        if self.bulk_modulus != "fixed":
+            table["bulk_modulus"] = self.bulk_modulus
         if self.relative_floor_N is not None:
             table["relative_floor_N"] = self.relative_floor_N
         if self.stop_r_squared is not None:
