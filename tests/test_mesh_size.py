@@ -13,7 +13,9 @@ import pytest
 from warptissue.cli import main
 from warptissue.errors import InputError, MeshError
 from warptissue.mesh import (
+    FORCE_ACCURACY_DEPTH_RATIO,
     estimate_indentation_mesh,
+    force_accuracy_depth_warning,
     indentation_block,
     indentation_disc,
     near_size_choice,
@@ -218,3 +220,14 @@ def test_a_generator_takes_the_accuracy_instead_of_the_near_size():
         indentation_block(force_accuracy=0.02, size_near_m=size, **common)
     with pytest.raises(InputError, match="either size_near_m or force_accuracy"):
         indentation_disc(radius_m=0.01, thickness_m=0.01, probe_radius_m=1e-3, size_far_m=2e-3)
+
+
+def test_the_force_accuracy_s_depth_range_is_half_the_probe_radius():
+    """Issue 36: the size rule holds to the benchmark's depth (half the probe radius); a
+    deeper depth gets one line naming the key, the depth and the range."""
+    assert FORCE_ACCURACY_DEPTH_RATIO == 0.5
+    assert force_accuracy_depth_warning(0.01, depth_m=1e-3, probe_radius_m=2e-3) is None
+    message = force_accuracy_depth_warning(0.02, depth_m=2.08e-3, probe_radius_m=2e-3)
+    assert message is not None and "\n" not in message
+    assert "specimen.force_accuracy = 0.02" in message
+    assert "up to 0.5 probe radii (0.001 m)" in message and "0.00208 m (1.04 probe" in message

@@ -358,6 +358,28 @@ def test_a_force_accuracy_chooses_the_near_size(tmp_path, mesher):
     assert size_near_reason(load_study(write(tmp_path, MINIMAL))) is None
 
 
+def test_a_force_accuracy_beyond_its_measured_depths_is_a_warning(tmp_path):
+    """Issue 36: the size rule was measured to half the probe radius; deeper it was measured
+    +2.0 % off at depth / radius 0.8 for 0.01. A study deeper than the range gets one line
+    naming specimen.force_accuracy, the depth and the range; one within it, none."""
+    import warnings
+
+    accurate = MINIMAL.replace("thickness_m = 0.01", "thickness_m = 0.01\nforce_accuracy = 0.01")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_study(write(tmp_path, accurate))  # 0.5 mm = 0.5 probe radii: within
+    deep = accurate.replace("max_depth_m = 0.0005", "max_depth_m = 0.0008")
+    with pytest.warns(UserWarning) as caught:
+        load_study(write(tmp_path, deep))
+    (message,) = [str(w.message) for w in caught]
+    assert "\n" not in message and "study.toml" in message
+    assert "specimen.force_accuracy = 0.01" in message
+    assert "0.0008 m (0.8 probe radii)" in message and "up to 0.5 probe radii" in message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_study(write(tmp_path, deep.replace("force_accuracy = 0.01", "size_near_m = 2e-4")))
+
+
 def test_toml_syntax_error_names_the_line(tmp_path):
     text = MINIMAL.replace("radius_m = 0.001", "radius_m = 0.001 m")
     with pytest.raises(InputError) as caught:

@@ -32,10 +32,12 @@ from warptissue.mesh.quality import (
 )
 from warptissue.mesh.size import (
     FLAT_PUNCH_FORCE_ERRORS,
+    FORCE_ACCURACY_DEPTH_RATIO,
     FORCE_ACCURACY_FLOOR,
     MeshSizeEstimate,
     NearSizeChoice,
     estimate_indentation_mesh,
+    force_accuracy_depth_warning,
     near_size_choice,
     size_near_for_force_accuracy,
 )
@@ -43,6 +45,7 @@ from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 __all__ = [
     "FLAT_PUNCH_FORCE_ERRORS",
+    "FORCE_ACCURACY_DEPTH_RATIO",
     "FORCE_ACCURACY_FLOOR",
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
@@ -63,6 +66,7 @@ __all__ = [
     "edge_lengths",
     "estimate_indentation_mesh",
     "fix_orientation",
+    "force_accuracy_depth_warning",
     "extrude_triangles",
     "graded_coordinates",
     "graded_spacing",

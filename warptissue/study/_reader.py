@@ -21,7 +21,7 @@ from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indent
 from warptissue.loading import ramp_hold, sine
 from warptissue.materials import material_from_dict, prony_term
 from warptissue.mesh.generators import MESHERS
-from warptissue.mesh.size import size_near_for_force_accuracy
+from warptissue.mesh.size import force_accuracy_depth_warning, size_near_for_force_accuracy
 from warptissue.study._records import condition_record, read_data, record_options
 from warptissue.study._schema import (
     BASE_KINDS,
@@ -599,6 +599,19 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
             if root.has(key):
                 raise root.error(key, "needs schema_version = 2 (this file says 1)", None)
     root.finish()
+    if specimen.force_accuracy is not None:
+        deepest_m = max(
+            [max(protocol.depths_m, default=0.0)]
+            + [float(np.max(record.displacement_m)) for record in records]
+        )
+        message = force_accuracy_depth_warning(
+            specimen.force_accuracy,
+            depth_m=deepest_m,
+            probe_radius_m=mesh_probe_radius(indenter, specimen.half_size_m),
+        )
+        if message is not None:
+            where = source.path if source.path is not None else "the study"
+            warnings.warn(f"{where}: {message}", UserWarning, stacklevel=2)
     return Study(
         name=name,
         description=description,
