@@ -22,6 +22,7 @@ from warptissue.lsq import engine
 from warptissue.mesh import size_near_for_force_accuracy
 from warptissue.simulate import size_near_reason
 from warptissue.study import (
+    CONTACT_RADIUS_SAFETY,
     FIT_METHODS,
     SCHEMA_VERSION,
     load_study,
@@ -378,6 +379,46 @@ def test_a_force_accuracy_beyond_its_measured_depths_is_a_warning(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_study(write(tmp_path, deep.replace("force_accuracy = 0.01", "size_near_m = 2e-4")))
+
+
+def test_a_sphere_s_refined_zone_follows_the_contact_radius_of_the_deepest_depth(tmp_path):
+    """Issue 36: a sphere's refined zone was its whole r <= R cap. It is now
+    CONTACT_RADIUS_SAFETY times Hertz's contact radius a = sqrt(R d) at the study's deepest
+    depth (the protocol's or the records'), at most R, and the default near size a quarter of
+    it; a flat punch keeps its radius."""
+    sphere = MINIMAL.replace(
+        'kind = "flat_punch"\nradius_m = 0.001', 'kind = "sphere"\nradius_m = 0.002'
+    )
+    study = load_study(write(tmp_path, sphere))  # d = 0.5 mm: a = 1 mm
+    assert CONTACT_RADIUS_SAFETY == 1.5 and study.deepest_depth_m == 5e-4
+    assert study.mesh_probe_radius_m == pytest.approx(1.5 * np.sqrt(0.002 * 5e-4), rel=1e-12)
+    assert study.specimen.size_near_m == pytest.approx(study.mesh_probe_radius_m / 4.0)
+    shallow = load_study(
+        write(tmp_path, sphere.replace("max_depth_m = 0.0005", "max_depth_m = 2e-5"))
+    )
+    assert shallow.mesh_probe_radius_m == pytest.approx(1.5 * np.sqrt(0.002 * 2e-5), rel=1e-12)
+    deep = load_study(
+        write(tmp_path, sphere.replace("max_depth_m = 0.0005", "max_depth_m = 0.002"))
+    )
+    assert deep.mesh_probe_radius_m == 0.002  # 1.5 a = 3 mm: the cap R
+    punch = load_study(write(tmp_path, MINIMAL))
+    assert punch.mesh_probe_radius_m == 0.001 and punch.specimen.size_near_m == 0.00025
+    # A fit's records count: the study's deepest depth is its deepest record's.
+    record = tmp_path / "deep.csv"
+    write_csv(
+        record,
+        {
+            "time_s": np.linspace(0.0, 1.0, 11),
+            "displacement_m": np.linspace(0.0, 8e-4, 11),
+            "force_N": np.linspace(0.0, 1e-3, 11),
+        },
+    )
+    fitted = sphere.replace("schema_version = 1", "schema_version = 2") + (
+        '\n[[data]]\nfile = "deep.csv"\n\n[fit]\nfree = ["C10_Pa"]\n'
+    )
+    study = load_study(write(tmp_path, fitted))
+    assert study.deepest_depth_m == pytest.approx(8e-4)
+    assert study.mesh_probe_radius_m == pytest.approx(1.5 * np.sqrt(0.002 * 8e-4), rel=1e-12)
 
 
 def test_toml_syntax_error_names_the_line(tmp_path):

@@ -86,7 +86,7 @@ from warptissue.mesh import (
     near_size_choice,
     write_mesh,
 )
-from warptissue.study import Study, mesh_probe_radius
+from warptissue.study import Study
 
 __all__ = [
     "CONTACT_CURVE_COLUMNS",
@@ -171,10 +171,9 @@ def build_mesh(study: Study) -> Any:
     """
 
     specimen = study.specimen
-    half_size_m = specimen.half_size_m
     common = {
         "thickness_m": specimen.thickness_m,
-        "probe_radius_m": mesh_probe_radius(study.indenter, half_size_m),
+        "probe_radius_m": study.mesh_probe_radius_m,
         "quarter": specimen.quarter,
         "element": specimen.element,
         "size_near_m": specimen.size_near_m,
@@ -201,10 +200,9 @@ def size_near_reason(study: Study) -> str | None:
     specimen = study.specimen
     if specimen.force_accuracy is None:
         return None
-    half_size_m = specimen.half_size_m
     return near_size_choice(
         specimen.force_accuracy,
-        probe_radius_m=mesh_probe_radius(study.indenter, half_size_m),
+        probe_radius_m=study.mesh_probe_radius_m,
         mesher=specimen.mesher,
         element=specimen.element,
     ).reason()
@@ -227,7 +225,7 @@ def estimate_mesh(study: Study) -> Any:
         shape=specimen.shape,
         half_extent_m=half_size_m,
         thickness_m=specimen.thickness_m,
-        probe_radius_m=mesh_probe_radius(study.indenter, half_size_m),
+        probe_radius_m=study.mesh_probe_radius_m,
         quarter=specimen.quarter,
         element=specimen.element,
         size_near_m=specimen.size_near_m,

@@ -48,13 +48,14 @@ from warptissue.study._schema import (
     Specimen,
     Study,
 )
-from warptissue.study._sizing import mesh_probe_radius
+from warptissue.study._sizing import CONTACT_RADIUS_SAFETY, mesh_probe_radius
 from warptissue.study._writer import save_study
 
 __all__ = [
     "FIT_METHODS",
     "FIT_OBJECTIVES",
     "CONTACT_POINTS",
+    "CONTACT_RADIUS_SAFETY",
     "DEPTH_OFFSET",
     "DEVICE_PATTERN",
     "FIT_STRATEGIES",

@@ -46,12 +46,13 @@ from warptissue.study._schema import (
     Specimen,
     Study,
 )
-from warptissue.study._sizing import mesh_probe_radius, specimen_half_size_m
+from warptissue.study._sizing import deepest_depth_m, mesh_probe_radius, specimen_half_size_m
 from warptissue.study._toml import Source, Table, closest, plain
 
 
-def _read_specimen(table: Table, indenter: Indenter) -> Specimen:
-    probe_radius_m = indenter.radius_m
+def _read_specimen(table: Table, indenter: Indenter, *, deepest_m: float) -> Specimen:
+    """The ``[specimen]`` table; ``deepest_m``: the study's deepest depth (m), which sizes a
+    sphere's refined zone (:func:`warptissue.study.mesh_probe_radius`)."""
     shape = table.string("shape", choices=SPECIMEN_SHAPES)
     thickness_m = table.number("thickness_m")
     other_size_key = "radius_m" if shape == "block" else "width_m"
@@ -64,7 +65,7 @@ def _read_specimen(table: Table, indenter: Indenter) -> Specimen:
     width_m = table.number("width_m") if shape == "block" else None
     radius_m = table.number("radius_m") if shape == "disc" else None
     half_size_m = specimen_half_size_m(shape, width_m, radius_m)
-    probe_radius_m = mesh_probe_radius(indenter, half_size_m)
+    probe_radius_m = mesh_probe_radius(indenter, half_size_m, depth_m=deepest_m)
     size_key = "width_m" if shape == "block" else "radius_m"
     if half_size_m <= probe_radius_m:
         raise table.error(
@@ -562,11 +563,16 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         )
     description = root.string("description", default="")
     indenter = _read_indenter(root.table("indenter"))
-    specimen = _read_specimen(root.table("specimen"), indenter)
+    # The depths come before the rest of the specimen: they size a sphere's refined zone.
+    specimen_table = root.table("specimen")
+    thickness_m = specimen_table.number("thickness_m")
     base = source.path.parent if source.path is not None else Path.cwd()
-    protocol = _read_protocol(
-        root.table("protocol"), specimen.thickness_m, version=version, base=base
-    )
+    protocol = _read_protocol(root.table("protocol"), thickness_m, version=version, base=base)
+    records: tuple[DataRecord, ...] = ()
+    if version >= 2 and root.has("data"):
+        records = read_data(root, base, thickness_m)
+    deepest_m = deepest_depth_m(protocol, records)
+    specimen = _read_specimen(specimen_table, indenter, deepest_m=deepest_m)
     material = _read_material(root.table("material"))
     boundary = _read_boundary(_optional_table(root, "boundary"))
     solver = _read_solver(_optional_table(root, "solver"), specimen.element, material)
@@ -585,11 +591,8 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
             "specimen.size_near_m",
             solver.formulation,
         )
-    records: tuple[DataRecord, ...] = ()
     fit = None
     if version >= 2:
-        if root.has("data"):
-            records = read_data(root, base, specimen.thickness_m)
         if root.has("fit"):
             if not records:
                 raise root.error("fit", "a fit needs measured records: add [[data]] tables")
@@ -600,14 +603,10 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
                 raise root.error(key, "needs schema_version = 2 (this file says 1)", None)
     root.finish()
     if specimen.force_accuracy is not None:
-        deepest_m = max(
-            [max(protocol.depths_m, default=0.0)]
-            + [float(np.max(record.displacement_m)) for record in records]
-        )
         message = force_accuracy_depth_warning(
             specimen.force_accuracy,
             depth_m=deepest_m,
-            probe_radius_m=mesh_probe_radius(indenter, specimen.half_size_m),
+            probe_radius_m=mesh_probe_radius(indenter, specimen.half_size_m, depth_m=deepest_m),
         )
         if message is not None:
             where = source.path if source.path is not None else "the study"

@@ -22,7 +22,7 @@ from warptissue.fem.newton import NewtonOptions
 from warptissue.indenter import Indenter
 from warptissue.loading import resample_history
 from warptissue.lsq.engine import METHODS
-from warptissue.study._sizing import specimen_half_size_m
+from warptissue.study._sizing import deepest_depth_m, mesh_probe_radius, specimen_half_size_m
 
 if TYPE_CHECKING:
     from warptissue.acquisition.conditioning import FitRecord
@@ -299,6 +299,19 @@ class Study:
     schema_version: int = SCHEMA_VERSION
     data: tuple[DataRecord, ...] = ()
     fit: FitSettings | None = None
+
+    @property
+    def deepest_depth_m(self) -> float:
+        """The deepest depth the study asks for, m: its protocol's and its records'."""
+        return deepest_depth_m(self.protocol, self.data)
+
+    @property
+    def mesh_probe_radius_m(self) -> float:
+        """The radius of its mesh's refined zone under the probe, m
+        (:func:`warptissue.study.mesh_probe_radius` at :attr:`deepest_depth_m`)."""
+        return mesh_probe_radius(
+            self.indenter, self.specimen.half_size_m, depth_m=self.deepest_depth_m
+        )
 
     def to_dict(self, *, relative_to: str | Path | None = None) -> dict[str, Any]:
         """The study as a TOML-ready mapping, with every default filled in.
