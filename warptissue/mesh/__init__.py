@@ -1,5 +1,6 @@
 """Tetrahedral meshes: the container, generators, checks and file I/O."""
 
+from warptissue.mesh._ball import ball_mesh
 from warptissue.mesh._grading import graded_spacing
 from warptissue.mesh.core import (
     TET4_EDGES,
@@ -49,6 +50,7 @@ __all__ = [
     "FORCE_ACCURACY_FLOOR",
     "HEX_TO_FIVE_TETS",
     "HEX_TO_SIX_TETS",
+    "ball_mesh",
     "MeshQuality",
     "MeshSizeEstimate",
     "NearSizeChoice",
