@@ -83,3 +83,32 @@ def test_quiet_warp_starts_warp_without_a_word():
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
     )
     assert (done.stdout, done.stderr) == ("", "")
+
+
+def test_thread_lock_for_progress_bars_makes_no_semaphore(tmp_path):
+    """In a fresh process (tqdm's lock is per process): after the call, a bar makes no
+    multiprocessing semaphore (counted by wrapping SemLock's constructor; without the call a
+    disabled bar makes one)."""
+    import subprocess
+    import sys
+
+    script = """
+import multiprocessing.synchronize as synchronize
+made = []
+original = synchronize.SemLock.__init__
+def counting(self, *args, **kwargs):
+    made.append(1)
+    original(self, *args, **kwargs)
+synchronize.SemLock.__init__ = counting
+from tqdm import tqdm
+from warptissue.device import thread_lock_for_progress_bars
+thread_lock_for_progress_bars()
+with tqdm(total=1, disable=True) as bar:
+    bar.update(1)
+print(len(made))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "0"

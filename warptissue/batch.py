@@ -56,7 +56,7 @@ import numpy as np
 import warp as wp
 
 from warptissue import simulate
-from warptissue.device import quiet_warp
+from warptissue.device import quiet_warp, thread_lock_for_progress_bars
 from warptissue.errors import DeviceError, InputError, WarpTissueError
 from warptissue.fit.indentation import fit_indentation
 from warptissue.io import write_csv, write_json
@@ -970,17 +970,8 @@ def _run_group(group: Sequence[tuple[int, _Task]]) -> list[StudyOutcome]:
     """Run one group's task: a single study alone, several as :func:`run_group_task`."""
     tasks = [task for _, task in group]
     if tasks[0].on_dask:
-        _thread_lock_for_progress_bars()
+        thread_lock_for_progress_bars()
     return [run_study_task(tasks[0])] if len(tasks) == 1 else run_group_task(tasks)
-
-
-def _thread_lock_for_progress_bars() -> None:
-    """Give tqdm a thread lock in a Dask worker: its default lock holds a multiprocessing
-    semaphore, which a worker stopped under its task (Ctrl-C, a closed cluster) leaves behind
-    (the resource tracker's "leaked semaphore" warning); a worker shows no bars anyway."""
-    from tqdm import tqdm
-
-    tqdm.set_lock(threading.RLock())
 
 
 def _run_on_dask(

@@ -300,7 +300,9 @@ def run_acquire(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             if live is not None:
                 live.abandon("interrupted (Ctrl-C)")
-                _write_live_summary(args, live, status="interrupted", saved_s=None)
+                summary = _write_live_summary(args, live, status="interrupted", saved_s=None)
+                print(f"live fit: {live.state} ({live.stop_reason}); no final fit")
+                print(f"wrote {summary}")
             raise
         except CommandRefused as refusal:
             if refusal.reply.code in (ErrorCode.BAD_ARGUMENT, ErrorCode.OUT_OF_RANGE):
