@@ -32,6 +32,7 @@ import numpy as np
 
 from warptissue.acquisition import RampHold, Recorder, RigClient, RigConfig, RigServer, SimulatedRig
 from warptissue.acquisition.live import LiveFit, LumpedFitter
+from warptissue.device import quiet_warp
 from warptissue.fit.live import StudyFitter
 from warptissue.simulate import force_curve_tissue
 from warptissue.study import load_study
@@ -131,6 +132,7 @@ if __name__ == "__main__":
     unknown = [kind for kind in kinds if kind not in KINDS]
     if unknown:
         sys.exit(f"bench_live_fit.py: choose from {', '.join(KINDS)}, not {', '.join(unknown)}")
+    quiet_warp()  # the study rig's FE runs here: Warp's start-up notes off stdout
     with tempfile.TemporaryDirectory() as folder:
         for kind in kinds:
             print(run(kind, Path(folder)), flush=True)
