@@ -8,15 +8,13 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
-import subprocess
-import sys
 import time
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _scripts import cli_process, ctrl_c
 
 from warptissue.acquisition import (
     FaultPlan,
@@ -112,7 +110,6 @@ RELEASE = "WARPTISSUE_TEST_RELEASE_FIT"
 def blocking_fit(records, **options):
     """The real fit, once the file named by $WARPTISSUE_TEST_RELEASE_FIT exists (it runs in
     the fit process: a module-level function, pickled by reference)."""
-    import os
     import time
     from pathlib import Path
 
@@ -311,31 +308,17 @@ def test_sigint_to_acquire_keeps_every_sample_and_says_the_live_fit_stopped(tmp_
     out = tmp_path / "run.csv"
     command = ["acquire", "--port", server.url, "--depth", "4mm", "--speed", "8mm/s"]
     command += ["--hold", "60s", "--rate", "200Hz", "--out", str(out), "--no-progress"]
-    with server:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "warptissue.cli", *command, "--fit", "prony:2"],
-            cwd=tmp_path,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            start_new_session=True,
-            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-        )
-        try:
-            if when == "after a live estimate":
-                for line in process.stdout:  # the rig's test lasts 61 s at most
-                    if line.startswith("live fit @") and "+-" in line:
-                        break
-            else:
-                deadline = time.monotonic() + 60.0
-                while not (out.exists() and len(out.read_text().splitlines()) > 20):
-                    assert time.monotonic() < deadline and process.poll() is None
-                    time.sleep(0.01)
-            os.killpg(process.pid, signal.SIGINT)
-            printed, err = process.communicate(timeout=60)
-        finally:
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGKILL)
+    with server, cli_process(tmp_path, *command, "--fit", "prony:2") as process:
+        if when == "after a live estimate":
+            for line in process.stdout:  # the rig's test lasts 61 s at most
+                if line.startswith("live fit @") and "+-" in line:
+                    break
+        else:
+            deadline = time.monotonic() + 60.0
+            while not (out.exists() and len(out.read_text().splitlines()) > 20):
+                assert time.monotonic() < deadline and process.poll() is None
+                time.sleep(0.01)
+        printed, err = ctrl_c(process, timeout_s=60)
     assert process.returncode == 130, err
     assert err == "warptissue: interrupted\n"
     assert "live fit: stopped (interrupted (Ctrl-C)); no final fit" in printed

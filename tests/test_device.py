@@ -1,9 +1,17 @@
 import os
+import signal
+import subprocess
+import sys
+import threading
 
 import pytest
 import warp as wp
 
-from warptissue.device import available_host_memory_bytes, resolve_device
+from warptissue.device import (
+    available_host_memory_bytes,
+    resolve_device,
+    terminal_interrupts_ignored,
+)
 from warptissue.errors import DeviceError
 
 
@@ -71,9 +79,6 @@ def test_quiet_warp_starts_warp_without_a_word():
     """Issue 36: on a machine without a CUDA driver, Warp's start-up warned "Could not find or
     load the NVIDIA CUDA driver" on stderr even for the CPU; after :func:`quiet_warp` a CPU
     run starts silently (on a machine with CUDA there is nothing to say either)."""
-    import subprocess
-    import sys
-
     code = (
         "from warptissue.device import quiet_warp, resolve_device\n"
         "quiet_warp()\n"
@@ -89,9 +94,6 @@ def test_thread_lock_for_progress_bars_makes_no_semaphore(tmp_path):
     """In a fresh process (tqdm's lock is per process): after the call, a bar makes no
     multiprocessing semaphore (counted by wrapping SemLock's constructor; without the call a
     disabled bar makes one)."""
-    import subprocess
-    import sys
-
     script = """
 import multiprocessing.synchronize as synchronize
 made = []
@@ -112,3 +114,20 @@ print(len(made))
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "0"
+
+
+def test_terminal_interrupts_ignored_inside_restored_after_and_untouched_off_main():
+    before = signal.getsignal(signal.SIGINT)
+    with terminal_interrupts_ignored():
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    assert signal.getsignal(signal.SIGINT) is before
+    seen = []
+
+    def off_main() -> None:
+        with terminal_interrupts_ignored():
+            seen.append(signal.getsignal(signal.SIGINT))
+
+    thread = threading.Thread(target=off_main)
+    thread.start()
+    thread.join()
+    assert seen == [before]

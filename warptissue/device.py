@@ -25,6 +25,7 @@ __all__ = [
     "available_host_memory_bytes",
     "quiet_warp",
     "resolve_device",
+    "terminal_interrupts_ignored",
     "thread_lock_for_progress_bars",
 ]
 
@@ -77,6 +78,31 @@ def quiet_warp() -> None:
         wp.config.quiet = True
     with _stderr_without(CUDA_DRIVER_WARNING):
         wp.init()
+
+
+@contextlib.contextmanager
+def terminal_interrupts_ignored() -> Iterator[None]:
+    """Ignore SIGINT while worker processes start (a Dask local cluster's, the live fit's);
+    they inherit that.
+
+    Ctrl-C in a terminal interrupts every process of the foreground group: a worker would
+    print a traceback and die under its task (leaving semaphores behind), and a spawned
+    interpreter still importing would print one too. A Python started with SIGINT ignored
+    never installs its KeyboardInterrupt handler, so only this process is interrupted, and it
+    ends its workers itself. Restored on leaving (a Ctrl-C in between is lost). Outside the
+    main thread (where signals cannot be set) nothing changes.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def thread_lock_for_progress_bars() -> None:

@@ -32,14 +32,13 @@ from the file.
 
 from __future__ import annotations
 
-import contextlib
 import math
 import multiprocessing
 import re
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection
 from typing import Any, Protocol
@@ -47,7 +46,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from warptissue.acquisition.conditioning import condition_for_fit
-from warptissue.device import thread_lock_for_progress_bars
+from warptissue.device import terminal_interrupts_ignored, thread_lock_for_progress_bars
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.lsq import FitResult
 from warptissue.viscoelastic import RelaxationRecord, fit_relaxation_joint
@@ -359,7 +358,7 @@ class LiveFit:
             name="live-fit",
             daemon=True,
         )
-        with _sigint_ignored_by_children():
+        with terminal_interrupts_ignored():  # no traceback while it imports
             self._process.start()
         theirs.close()
         self._connection = ours
@@ -513,7 +512,7 @@ def _serve(
     line saying why the live fit must stop), then plot it and send None (or why the plot
     failed): the estimate, and with it the stop rule, never waits for the plot. None ends it.
     Ctrl-C is the parent's to handle (it terminates this process); this process starts with
-    SIGINT ignored (:func:`_sigint_ignored_by_children`) and keeps it so."""
+    SIGINT ignored (:func:`warptissue.device.terminal_interrupts_ignored`) and keeps it so."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     thread_lock_for_progress_bars()  # terminated (Ctrl-C): no semaphore left behind
     chunks: list[np.ndarray] = []
@@ -558,19 +557,3 @@ def _estimate(
     met = result is not None and stop_rule is not None and stop_rule.met(result)
     estimate = LiveEstimate(count, rig_time_s, result, message, met, time.perf_counter() - started)
     return estimate, curve
-
-
-@contextlib.contextmanager
-def _sigint_ignored_by_children() -> Iterator[None]:
-    """SIGINT ignored while a child process is started (main thread only): the spawned
-    interpreter inherits the ignored signal and then never installs Python's KeyboardInterrupt
-    handler, so a Ctrl-C at the terminal (SIGINT to the whole process group) while the child
-    is still importing prints no traceback. Restored at once; a Ctrl-C in between is lost."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
