@@ -166,6 +166,29 @@ def test_an_error_in_the_fit_process_stops_the_live_fit_not_the_recording(tmp_pa
     assert live.state == "stopped" and "no more memory" in live.stop_reason
 
 
+def broken_plot(estimate, curve):
+    raise OSError("no space left on the device")
+
+
+def test_a_failed_live_plot_stops_the_live_fit_after_its_estimate(tmp_path):
+    """The fit process sends the estimate before it plots: the estimate is kept, then the
+    plot's failure stops the live fit cleanly; the recording goes on."""
+    live = LiveFit(LumpedFitter(), every_samples=100, plot=broken_plot)
+    _, server = prony_rig(time_scale=math.inf)
+    with server, RigClient(server.url) as client:
+        recorder = Recorder(client, tmp_path / "run.csv", progress=False, listener=live)
+        live.start()
+        result = recorder.record(
+            RampHold(depth_m=2e-3, speed_m_per_s=8e-3, hold_s=1.0, dwell_s=0.5)
+        )
+    live.finish(timeout_s=60.0)
+    assert result.status == "complete" and result.samples_missing == 0
+    assert live.state == "stopped" and "the live plot failed" in live.stop_reason
+    assert "no space left" in live.stop_reason
+    fitted = [e.result is not None for e in live.estimates]
+    assert fitted[-1] and not any(fitted[:-1])  # the first fitted one was plotted, and failed
+
+
 def test_refits_at_the_end_of_each_segment(tmp_path):
     """Without a sample cadence the fit runs once the record passes the end of the dwell
     and of the ramp, and at the end of the record."""
