@@ -145,18 +145,20 @@ def simulate_force_curve(path, depth_m, force_N):
 
 def test_rig_sim_plays_simulates_force_curve(tmp_path, capsys):
     """simulate's force_curve.csv (extra columns, a zero row) drives rig-sim --tissue curve:
-    the recorded force at each depth is the curve's, interpolated linearly."""
+    the recorded force at each depth is the curve's, interpolated linearly, to the
+    --force-resolution quantum given (1 uN)."""
     depth = np.linspace(0.2e-3, 4e-3, 20)
     curve = simulate_force_curve(tmp_path / "force_curve.csv", depth, 3000.0 * depth**1.5)
     out = tmp_path / "run.csv"
     with rig_sim_process(
-        "--tissue", "curve", "--force-curve", str(curve), "--surface", "0mm", "--noise", "0mN"
-    ) as url:
+        "--tissue", "curve", "--force-curve", str(curve), "--surface", "0mm", "--noise", "0mN",
+        "--force-resolution", "0.001mN",
+    ) as url:  # fmt: skip
         command = ["acquire", "--port", url, "--depth", "4mm", "--speed", "8mm/s"]
         assert main([*command, "--hold", "0s", "--out", str(out), "--no-progress"]) == 0
     data = read_experiment_csv(out)
     expected = np.interp(data["displacement_m"], np.r_[0.0, depth], np.r_[0.0, 3000.0 * depth**1.5])
-    np.testing.assert_allclose(data["force_N"], expected, atol=0.7e-3)  # quantum 0.7 mN
+    np.testing.assert_allclose(data["force_N"], expected, atol=1e-6)  # the 1 uN quantum
     assert data["force_N"].max() > 0.7
 
 
@@ -236,6 +238,7 @@ RIG_SIM_ERRORS = [
     (["--instantaneous-stiffness=-40N/m"], "--instantaneous-stiffness must be positive"),
     (["--surface", "50mm"], "--surface is beyond the rig's travel"),
     (["--noise=-1mN"], "--noise must be zero or more"),
+    (["--force-resolution", "0mN"], "--force-resolution must be positive"),
     (["--respiration", "8mN@-1Hz"], "--respiration"),
     (["--time-scale", "0"], "--time-scale must be positive"),
     (["--seed=-1"], "--seed must be zero or more"),

@@ -15,14 +15,12 @@ import csv
 import json
 import os
 import re
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
+from _scripts import cli_process, ctrl_c
 
 from warptissue import batch
 from warptissue.cli import EXIT_STATUSES, main
@@ -580,22 +578,6 @@ def test_a_scheduler_that_never_answers_is_unreachable_within_the_timeout(
     assert err.count("\n") == 1 and "cannot reach the Dask scheduler 'not a url'" in err
 
 
-def _batch_process(cwd: Path, *args: str) -> subprocess.Popen:
-    """``warptissue batch ARGS`` in a process group of its own, with Ctrl-C's default
-    handling (a shell's background job would ignore SIGINT), stdout and stderr piped. It runs
-    in ``cwd``, outside the checkout: from the checkout's root, Python would import its
-    ``warptissue/`` (which has no ``kernels/``) instead of the installed package."""
-    return subprocess.Popen(
-        [sys.executable, "-m", "warptissue.cli", "batch", *args],
-        cwd=cwd,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-
-
 @pytest.mark.slow
 def test_quiet_batch_on_a_local_cluster_prints_nothing(tmp_path):
     """Issue 36: ``--quiet`` printed Warp's start-up notes (stdout) and its CUDA-driver
@@ -603,10 +585,9 @@ def test_quiet_batch_on_a_local_cluster_prints_nothing(tmp_path):
     pytest.importorskip("distributed")
     study = tmp_path / "punch.toml"
     study.write_text(_tiny_simulation(), encoding="utf-8")
-    process = _batch_process(
-        tmp_path, str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet"
-    )
-    out, err = process.communicate(timeout=300)
+    options = [str(study), "-o", str(tmp_path / "out"), "--workers", "1", "--quiet"]
+    with cli_process(tmp_path, "batch", *options) as process:
+        out, err = process.communicate(timeout=300)
     assert (process.returncode, out, err) == (0, "", "")
 
 
@@ -617,23 +598,12 @@ def test_ctrl_c_in_a_batch_is_one_line_and_leaves_no_temporary_file(tmp_path):
     says "interrupted", exits 130, and no atomic write's temporary file is left."""
     pytest.importorskip("distributed")
     out_dir = tmp_path / "out"
-    process = _batch_process(
-        tmp_path,
-        str(ROOT / "scenes" / "liver_fit.toml"),
-        "-o",
-        str(out_dir),
-        "--workers",
-        "1",
-        "--quiet",
-    )
-    try:
+    study = str(ROOT / "scenes" / "liver_fit.toml")
+    options = [study, "-o", str(out_dir), "--workers", "1", "--quiet"]
+    with cli_process(tmp_path, "batch", *options) as process:
         time.sleep(15.0)  # the cluster starts and the fit (about 90 s of CPU) is under way
         assert process.poll() is None, process.communicate()
-        os.killpg(process.pid, signal.SIGINT)
-        out, err = process.communicate(timeout=120)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
+        out, err = ctrl_c(process, timeout_s=120)
     assert process.returncode == 130, err
     assert err == "warptissue: interrupted\n"
     time.sleep(2.0)  # the workers' cleanup

@@ -1,9 +1,17 @@
 import os
+import signal
+import subprocess
+import sys
+import threading
 
 import pytest
 import warp as wp
 
-from warptissue.device import available_host_memory_bytes, resolve_device
+from warptissue.device import (
+    available_host_memory_bytes,
+    resolve_device,
+    terminal_interrupts_ignored,
+)
 from warptissue.errors import DeviceError
 
 
@@ -71,9 +79,6 @@ def test_quiet_warp_starts_warp_without_a_word():
     """Issue 36: on a machine without a CUDA driver, Warp's start-up warned "Could not find or
     load the NVIDIA CUDA driver" on stderr even for the CPU; after :func:`quiet_warp` a CPU
     run starts silently (on a machine with CUDA there is nothing to say either)."""
-    import subprocess
-    import sys
-
     code = (
         "from warptissue.device import quiet_warp, resolve_device\n"
         "quiet_warp()\n"
@@ -83,3 +88,46 @@ def test_quiet_warp_starts_warp_without_a_word():
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True
     )
     assert (done.stdout, done.stderr) == ("", "")
+
+
+def test_thread_lock_for_progress_bars_makes_no_semaphore(tmp_path):
+    """In a fresh process (tqdm's lock is per process): after the call, a bar makes no
+    multiprocessing semaphore (counted by wrapping SemLock's constructor; without the call a
+    disabled bar makes one)."""
+    script = """
+import multiprocessing.synchronize as synchronize
+made = []
+original = synchronize.SemLock.__init__
+def counting(self, *args, **kwargs):
+    made.append(1)
+    original(self, *args, **kwargs)
+synchronize.SemLock.__init__ = counting
+from tqdm import tqdm
+from warptissue.device import thread_lock_for_progress_bars
+thread_lock_for_progress_bars()
+with tqdm(total=1, disable=True) as bar:
+    bar.update(1)
+print(len(made))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "0"
+
+
+def test_terminal_interrupts_ignored_inside_restored_after_and_untouched_off_main():
+    before = signal.getsignal(signal.SIGINT)
+    with terminal_interrupts_ignored():
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    assert signal.getsignal(signal.SIGINT) is before
+    seen = []
+
+    def off_main() -> None:
+        with terminal_interrupts_ignored():
+            seen.append(signal.getsignal(signal.SIGINT))
+
+    thread = threading.Thread(target=off_main)
+    thread.start()
+    thread.join()
+    assert seen == [before]

@@ -5,6 +5,7 @@ STUDY.toml``, against a simulated rig whose specimen is a known neo-Hookean's FE
 from __future__ import annotations
 
 import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -16,65 +17,29 @@ from warptissue.errors import InputError
 from warptissue.fit.live import StudyFitter
 from warptissue.io import read_experiment_csv
 from warptissue.simulate import force_curve_tissue
-from warptissue.study import study_from_dict
+from warptissue.study import load_study, study_from_dict
 
 TRUE_C10_PA = 400.0
 """C10 of the simulated rig's specimen (the fit study starts from 287.5 Pa)."""
 
-SPECIMEN = """\
-[specimen]
-shape = "block"
-width_m = 0.008
-thickness_m = 0.004
-quarter = true
-element = "TET10"
-size_near_m = 0.0005
-size_far_m = 0.002
-growth = 1.5
+ROOT = Path(__file__).resolve().parents[1]
+SPECIMEN = ROOT / "scenes" / "live_punch_specimen.toml"
+"""The known neo-Hookean specimen (C10 = TRUE_C10_PA) served by the simulated rig."""
+FIT_STUDY = (ROOT / "scenes" / "live_punch_fit.toml").read_text(encoding="utf-8")
+"""The live fit study (the docs' example), its [[data]] file a placeholder."""
+PLACEHOLDER = 'file = "replaced-by-the-record.csv"'
 
-[indenter]
-kind = "flat_punch"
-radius_m = 0.001
 
-[protocol]
-max_depth_m = 0.0003
-steps = 6
-
-[solver]
-device = "cpu"
-"""
-
-FIT_STUDY = f"""\
-schema_version = 2
-name = "live_fit"
-
-{SPECIMEN}
-[material]
-model = "neo_hookean"
-C10_Pa = 287.5
-bulk_modulus_Pa = 575000.0
-
-[[data]]
-file = "RECORD"
-contact_position_m = 0.0001
-
-[fit]
-free = ["C10_Pa"]
-time_steps = 6
-"""
+def fit_study(record: Path | str) -> str:
+    """The live fit study with ``record`` as its [[data]] file."""
+    assert PLACEHOLDER in FIT_STUDY
+    return FIT_STUDY.replace(PLACEHOLDER, f"file = {json.dumps(str(record))}")
 
 
 def specimen_tissue():
     """The known neo-Hookean's FE force-depth curve to 0.3 mm (6 steps)."""
-    import tomllib
-
-    table = tomllib.loads(SPECIMEN)
-    table.update(
-        schema_version=1,
-        name="specimen",
-        material={"model": "neo_hookean", "C10_Pa": TRUE_C10_PA, "bulk_modulus_Pa": 575000.0},
-    )
-    return force_curve_tissue(study_from_dict(table))
+    assert tomllib.loads(SPECIMEN.read_text(encoding="utf-8"))["material"]["C10_Pa"] == TRUE_C10_PA
+    return force_curve_tissue(load_study(SPECIMEN))
 
 
 def test_the_study_tissue_is_the_fe_force_curve():
@@ -92,9 +57,7 @@ def test_the_study_tissue_is_the_fe_force_curve():
 
 
 def test_a_viscoelastic_study_tissue_is_refused():
-    import tomllib
-
-    table = tomllib.loads(SPECIMEN)
+    table = tomllib.loads(SPECIMEN.read_text(encoding="utf-8"))
     table.update(
         schema_version=2,
         name="visco",
@@ -118,7 +81,7 @@ def test_a_viscoelastic_study_tissue_is_refused():
 
 def test_a_live_study_takes_one_data_table(tmp_path):
     path = tmp_path / "two.toml"
-    path.write_text(FIT_STUDY + '\n[[data]]\nfile = "other.csv"\n', encoding="utf-8")
+    path.write_text(fit_study("live.csv") + '\n[[data]]\nfile = "other.csv"\n', encoding="utf-8")
     with pytest.raises(InputError, match=r"one \[\[data\]\] table"):
         StudyFitter.from_file(path, record_path=tmp_path / "live.csv")
     path.write_text(FIT_STUDY.split("[fit]")[0], encoding="utf-8")
@@ -142,7 +105,7 @@ def test_live_study_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, 
     )
     rig = SimulatedRig(specimen_tissue(), config)
     study = tmp_path / "study.toml"
-    study.write_text(FIT_STUDY.replace("RECORD", "not-yet-recorded.csv"), encoding="utf-8")
+    study.write_text(FIT_STUDY, encoding="utf-8")
     out = tmp_path / "run.csv"
     with RigServer(rig, transport="tcp") as server:
         status = main(["acquire", "--port", server.url, "--depth", "0.4mm", "--speed",
@@ -158,7 +121,7 @@ def test_live_study_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, 
     assert estimates[-1]["samples"] == read_experiment_csv(out).sample_count
     final = json.loads((folder / "fit.json").read_text())["parameters"]["C10_Pa"]["value"]
     offline_study = tmp_path / "offline.toml"
-    offline_study.write_text(FIT_STUDY.replace("RECORD", str(out)), encoding="utf-8")
+    offline_study.write_text(fit_study(out), encoding="utf-8")
     offline_dir = tmp_path / "offline"
     assert main(["fit", "indentation", str(offline_study), "--out", str(offline_dir),
                  "--quiet"]) == 0  # fmt: skip

@@ -43,7 +43,6 @@ import os
 import signal
 import socket
 import sys
-import threading
 import time
 import uuid
 import warnings
@@ -56,7 +55,11 @@ import numpy as np
 import warp as wp
 
 from warptissue import simulate
-from warptissue.device import quiet_warp
+from warptissue.device import (
+    quiet_warp,
+    terminal_interrupts_ignored,
+    thread_lock_for_progress_bars,
+)
 from warptissue.errors import DeviceError, InputError, WarpTissueError
 from warptissue.fit.indentation import fit_indentation
 from warptissue.io import write_csv, write_json
@@ -724,7 +727,7 @@ def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) 
     if gpus:
         from distributed import Nanny, Scheduler, SpecCluster
 
-        with _terminal_interrupts_ignored():
+        with terminal_interrupts_ignored():
             cluster = SpecCluster(
                 workers={
                     k: {
@@ -744,7 +747,7 @@ def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) 
                 silence_logs=logging.CRITICAL,
             )
         return Client(cluster), cluster
-    with _terminal_interrupts_ignored():
+    with terminal_interrupts_ignored():
         cluster = LocalCluster(
             n_workers=workers,
             threads_per_worker=1,
@@ -754,25 +757,6 @@ def _dask_client(scheduler: str | None, workers: int, gpus: Sequence[str] = ()) 
             silence_logs=logging.CRITICAL,
         )
     return Client(cluster), cluster
-
-
-@contextlib.contextmanager
-def _terminal_interrupts_ignored() -> Iterator[None]:
-    """Ignore SIGINT while a local cluster starts its worker processes, which inherit that.
-
-    Ctrl-C in a terminal interrupts every process of the foreground group: the workers would
-    each print a traceback and die under their tasks (leaving semaphores behind). Ignoring it
-    there, only this process is interrupted, and it cancels the tasks and closes the cluster.
-    Outside the main thread (where signals cannot be set) nothing changes.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
 
 
 def _check_scheduler(address: str, timeout_s: float) -> None:
@@ -970,17 +954,8 @@ def _run_group(group: Sequence[tuple[int, _Task]]) -> list[StudyOutcome]:
     """Run one group's task: a single study alone, several as :func:`run_group_task`."""
     tasks = [task for _, task in group]
     if tasks[0].on_dask:
-        _thread_lock_for_progress_bars()
+        thread_lock_for_progress_bars()
     return [run_study_task(tasks[0])] if len(tasks) == 1 else run_group_task(tasks)
-
-
-def _thread_lock_for_progress_bars() -> None:
-    """Give tqdm a thread lock in a Dask worker: its default lock holds a multiprocessing
-    semaphore, which a worker stopped under its task (Ctrl-C, a closed cluster) leaves behind
-    (the resource tracker's "leaked semaphore" warning); a worker shows no bars anyway."""
-    from tqdm import tqdm
-
-    tqdm.set_lock(threading.RLock())
 
 
 def _run_on_dask(

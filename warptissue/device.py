@@ -1,4 +1,5 @@
-"""Choosing the Warp device that host wrappers launch on, and the host memory available.
+"""Choosing the Warp device that host wrappers launch on, the host memory available, and the
+set-up of a worker process (a Dask worker, the live fit's process).
 
 Warp is imported on first use, so that code that only asks for the memory (the mesh
 generators) does not load it.
@@ -19,7 +20,14 @@ from warptissue.errors import DeviceError
 if TYPE_CHECKING:
     import warp as wp
 
-__all__ = ["CUDA_DRIVER_WARNING", "available_host_memory_bytes", "quiet_warp", "resolve_device"]
+__all__ = [
+    "CUDA_DRIVER_WARNING",
+    "available_host_memory_bytes",
+    "quiet_warp",
+    "resolve_device",
+    "terminal_interrupts_ignored",
+    "thread_lock_for_progress_bars",
+]
 
 
 def resolve_device(device: str | wp.Device | None = None) -> wp.Device:
@@ -70,6 +78,46 @@ def quiet_warp() -> None:
         wp.config.quiet = True
     with _stderr_without(CUDA_DRIVER_WARNING):
         wp.init()
+
+
+@contextlib.contextmanager
+def terminal_interrupts_ignored() -> Iterator[None]:
+    """Ignore SIGINT while worker processes start (a Dask local cluster's, the live fit's);
+    they inherit that.
+
+    Ctrl-C in a terminal interrupts every process of the foreground group: a worker would
+    print a traceback and die under its task (leaving semaphores behind), and a spawned
+    interpreter still importing would print one too. A Python started with SIGINT ignored
+    never installs its KeyboardInterrupt handler, so only this process is interrupted, and it
+    ends its workers itself. Restored on leaving (a Ctrl-C in between is lost). Outside the
+    main thread (where signals cannot be set) nothing changes.
+    """
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def thread_lock_for_progress_bars() -> None:
+    """Give tqdm a thread lock in a worker process (a Dask worker, the live fit's process).
+
+    tqdm's default lock holds a multiprocessing semaphore, made by the first bar (also a
+    disabled one: every least-squares fit makes one); a worker ended under its task (Ctrl-C,
+    a closed cluster, a terminated live fit) leaves it behind, and the resource tracker then
+    prints its "leaked semaphore" warning. A worker shows no bars anyway.
+    """
+    import threading
+
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
 
 
 CUDA_DRIVER_WARNING = "Could not find or load the NVIDIA CUDA driver"

@@ -46,6 +46,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from warptissue.acquisition.conditioning import condition_for_fit
+from warptissue.device import terminal_interrupts_ignored, thread_lock_for_progress_bars
 from warptissue.errors import ConvergenceError, InputError
 from warptissue.lsq import FitResult
 from warptissue.viscoelastic import RelaxationRecord, fit_relaxation_joint
@@ -357,7 +358,8 @@ class LiveFit:
             name="live-fit",
             daemon=True,
         )
-        self._process.start()
+        with terminal_interrupts_ignored():  # no traceback while it imports
+            self._process.start()
         theirs.close()
         self._connection = ours
         self.state = "running"
@@ -442,13 +444,21 @@ class LiveFit:
             return False
         self.estimates.append(reply)
         if reply.stop_rule_met:
-            self._stop.set()
+            self._stop.set()  # before the plot: the rig is stopped as soon as it is known
         if self.on_estimate is not None:
             try:
                 self.on_estimate(reply)
             except Exception as exc:  # noqa: BLE001 - the recording must go on
                 self._stopped(f"{type(exc).__name__}: {exc}")
                 return False
+        try:
+            plotted = self._connection.recv()  # None, or why the plot failed
+        except (EOFError, OSError) as exc:
+            self._stopped(f"the fit process ended ({type(exc).__name__})")
+            return False
+        if plotted is not None:
+            self._stopped(plotted)
+            return False
         return True
 
     def _stopped(self, reason: str) -> None:
@@ -499,9 +509,12 @@ def _serve(
     stop_rule: StopRule | None,
 ) -> None:
     """The fit process: take rows, refit the record so far, send back the estimate (or one
-    line saying why the live fit must stop); None ends it. Ctrl-C is the parent's to handle
-    (it terminates this process)."""
+    line saying why the live fit must stop), then plot it and send None (or why the plot
+    failed): the estimate, and with it the stop rule, never waits for the plot. None ends it.
+    Ctrl-C is the parent's to handle (it terminates this process); this process starts with
+    SIGINT ignored (:func:`warptissue.device.terminal_interrupts_ignored`) and keeps it so."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    thread_lock_for_progress_bars()  # terminated (Ctrl-C): no semaphore left behind
     chunks: list[np.ndarray] = []
     while True:
         try:
@@ -515,20 +528,25 @@ def _serve(
         chunks = [samples]
         started = time.perf_counter()
         try:
-            estimate = _estimate(fitter, samples, plot, stop_rule, started)
+            estimate, curve = _estimate(fitter, samples, stop_rule, started)
         except Exception as exc:  # noqa: BLE001 - said to the parent, which stops cleanly
-            estimate = f"{type(exc).__name__}: {exc}"
+            connection.send(f"{type(exc).__name__}: {exc}")
+            continue
         connection.send(estimate)
+        failure = None
+        if plot is not None and curve is not None:
+            try:
+                plot(estimate, curve)
+            except Exception as exc:  # noqa: BLE001 - said to the parent, which stops cleanly
+                failure = f"the live plot failed: {type(exc).__name__}: {exc}"
+        connection.send(failure)
 
 
 def _estimate(
-    fitter: LiveFitter,
-    samples: np.ndarray,
-    plot: Callable[[LiveEstimate, LiveCurve], None] | None,
-    stop_rule: StopRule | None,
-    started: float,
-) -> LiveEstimate:
-    """One refit of the record so far, as a :class:`LiveEstimate`, plotted."""
+    fitter: LiveFitter, samples: np.ndarray, stop_rule: StopRule | None, started: float
+) -> tuple[LiveEstimate, LiveCurve | None]:
+    """One refit of the record so far: the :class:`LiveEstimate` and the curve it fitted
+    (None when the fit could not run yet)."""
     count = samples.shape[0]
     rig_time_s = float(samples[-1, 0]) if count else 0.0
     result, curve, message = None, None, ""
@@ -538,6 +556,4 @@ def _estimate(
         message = f"not yet: {exc}"
     met = result is not None and stop_rule is not None and stop_rule.met(result)
     estimate = LiveEstimate(count, rig_time_s, result, message, met, time.perf_counter() - started)
-    if plot is not None and curve is not None:
-        plot(estimate, curve)
-    return estimate
+    return estimate, curve

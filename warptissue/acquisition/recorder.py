@@ -57,8 +57,8 @@ class SampleListener(Protocol):
     to end the protocol early.
 
     The recorder calls :meth:`add_samples` from its own thread after each chunk is on disk;
-    the call must return at once (a listener that works on the samples does so in its own
-    thread), so that it never delays the next chunk.
+    the call must return at once (a listener that works on the samples does so elsewhere:
+    ``LiveFit`` in a process of its own), so that it never delays the next chunk.
     """
 
     def add_samples(

@@ -158,6 +158,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--surface", default="0.3mm", help="specimen surface below the start")
     sim.add_argument("--noise", default="0.3mN", help="force noise (standard deviation)")
     sim.add_argument("--offset", default="0mN", help="force transducer offset")
+    sim.add_argument(
+        "--force-resolution",
+        default="0.7mN",
+        help="force transducer quantum (Ahn & Kim's rig: 0.7 mN); finer for a soft specimen "
+        "under a small probe, e.g. 0.0001mN",
+    )
     sim.add_argument("--respiration", help="respiration disturbance AMPLITUDE@RATE, 8mN@0.25Hz")
     sim.add_argument("--heartbeat", help="cardiac disturbance AMPLITUDE@RATE, 2mN@1.4Hz")
     sim.add_argument("--time-scale", default="1", help="rig seconds per wall second, or inf")
@@ -300,7 +306,9 @@ def run_acquire(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             if live is not None:
                 live.abandon("interrupted (Ctrl-C)")
-                _write_live_summary(args, live, status="interrupted", saved_s=None)
+                summary = _write_live_summary(args, live, status="interrupted", saved_s=None)
+                print(f"live fit: {live.state} ({live.stop_reason}); no final fit")
+                print(f"wrote {summary}")
             raise
         except CommandRefused as refusal:
             if refusal.reply.code in (ErrorCode.BAD_ARGUMENT, ErrorCode.OUT_OF_RANGE):
@@ -648,6 +656,7 @@ def run_rig_sim(args: argparse.Namespace) -> int:
         surface_position_m=surface_m,
         force_noise_N=_quantity(args, "noise", "force", sign="nonnegative"),
         force_offset_N=_quantity(args, "offset", "force"),
+        force_resolution_N=_quantity(args, "force_resolution", "force", sign="positive"),
         disturbance=_disturbance(args),
         time_scale=time_scale,
         seed=args.seed,
