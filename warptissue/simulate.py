@@ -79,6 +79,7 @@ from warptissue.fem import (
 from warptissue.io import INDENTATION_COLUMNS, software_versions, write_csv, write_json
 from warptissue.materials import prony_term
 from warptissue.mesh import (
+    MeshSizeEstimate,
     check_mesh,
     estimate_indentation_mesh,
     indentation_block,
@@ -86,7 +87,13 @@ from warptissue.mesh import (
     near_size_choice,
     write_mesh,
 )
-from warptissue.study import Study
+from warptissue.study import (
+    Study,
+    organ_mesh,
+    probe_placement,
+    specimen_mesh,
+    support_nodes,
+)
 
 __all__ = [
     "CONTACT_CURVE_COLUMNS",
@@ -171,6 +178,8 @@ def build_mesh(study: Study) -> Any:
     """
 
     specimen = study.specimen
+    if specimen.shape == "mesh":
+        return _organ_mesh(study)
     common = {
         "thickness_m": specimen.thickness_m,
         "probe_radius_m": study.mesh_probe_radius_m,
@@ -220,6 +229,15 @@ def estimate_mesh(study: Study) -> Any:
     """
 
     specimen = study.specimen
+    if specimen.shape == "mesh":
+        mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
+        return MeshSizeEstimate(  # the mesh is already made: its solve is not counted
+            tet_count=mesh.tet_count,
+            node_count=mesh.node_count,
+            element=specimen.element,
+            mesh_bytes=0,
+            solve_bytes=0,
+        )
     half_size_m = specimen.half_size_m
     return estimate_indentation_mesh(
         shape=specimen.shape,
@@ -245,6 +263,9 @@ def build_problem(study: Study, mesh: Any) -> Any:
         A :class:`warptissue.fem.IndentationProblem`.
     """
 
+    placement = {}
+    if study.site_m is not None:
+        placement = {"site_m": study.site_m, "direction": study.direction}
     return IndentationProblem(
         mesh,
         study.material,
@@ -253,7 +274,20 @@ def build_problem(study: Study, mesh: Any) -> Any:
         symmetry_planes=("symmetry_x", "symmetry_y") if study.specimen.quarter else (),
         formulation=study.solver.formulation,
         penalty_factor=study.solver.penalty_factor,
+        **placement,
     )
+
+
+def _organ_mesh(study: Study) -> Any:
+    """A mesh specimen's mesh with its support as ``"bottom"`` and the rest of its surface
+    as ``"top"`` (:mod:`warptissue.study`'s ``[specimen] mesh``)."""
+    specimen = study.specimen
+    mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
+    site, along = probe_placement(
+        mesh, study.site_m, study.direction, radius_m=study.indenter.radius_m
+    )
+    support = support_nodes(mesh, study.boundary.support, site_m=site, direction=along)
+    return organ_mesh(mesh, support)
 
 
 def penetration_warnings(depths_m: np.ndarray, max_penetration_m: np.ndarray) -> list[str]:

@@ -27,6 +27,13 @@ Example:
     0.0005
 """
 
+from warptissue.study._organ import (
+    MESH_UNITS,
+    organ_mesh,
+    probe_placement,
+    specimen_mesh,
+    support_nodes,
+)
 from warptissue.study._reader import load_study, study_from_dict
 from warptissue.study._schema import (
     BULK_MODULUS_RULES,
@@ -71,8 +78,13 @@ __all__ = [
     "Solver",
     "Specimen",
     "Study",
+    "MESH_UNITS",
     "load_study",
     "mesh_probe_radius",
+    "organ_mesh",
+    "probe_placement",
+    "specimen_mesh",
+    "support_nodes",
     "save_study",
     "study_from_dict",
 ]

@@ -21,7 +21,16 @@ from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indent
 from warptissue.loading import ramp_hold, sine
 from warptissue.materials import material_from_dict, prony_term
 from warptissue.mesh.generators import MESHERS
+from warptissue.mesh.quality import edge_lengths
 from warptissue.mesh.size import force_accuracy_depth_warning, size_near_for_force_accuracy
+from warptissue.study._organ import (
+    MESH_UNITS,
+    OPPOSITE,
+    extent_along,
+    probe_placement,
+    specimen_mesh,
+    support_nodes,
+)
 from warptissue.study._records import condition_record, read_data, record_options
 from warptissue.study._schema import (
     BASE_KINDS,
@@ -156,7 +165,9 @@ def _size_near_for_accuracy(
         raise table.error(key, exc.message, table.raw(key, None)) from exc
 
 
-def _read_indenter(table: Table) -> Indenter:
+def _read_indenter(table: Table) -> tuple[Indenter, tuple | None, tuple | None]:
+    """The ``[indenter]`` table: the probe, and ``site_m`` and ``direction`` (None where
+    not given)."""
     kind = table.string("kind", choices=SIMULATED_KINDS)
     # A plate needs no radius; given, it is the radius of the mesh's refined zone.
     radius_m = (
@@ -172,8 +183,62 @@ def _read_indenter(table: Table) -> Indenter:
     values["contact"] = table.string(
         "contact", default="frictionless" if rigid else "bonded", choices=CONTACTS
     )
+    placement = []
+    for key in ("site_m", "direction"):
+        vector = table.number_list(key) if table.has(key) else None
+        if vector is not None and len(vector) != 3:
+            raise table.error(key, "must be three numbers (x, y, z)", list(vector))
+        if key == "direction" and vector is not None and not np.any(vector):
+            raise table.error(key, "must not be the zero vector", list(vector))
+        placement.append(vector)
     table.finish()
-    return table.build(lambda values: Indenter(**values), values)
+    return table.build(lambda values: Indenter(**values), values), *placement
+
+
+def _read_mesh_specimen(
+    table: Table, *, base: Path, site_m: tuple | None, direction: tuple | None, probe: Indenter
+) -> tuple[Specimen, Any, np.ndarray, np.ndarray]:
+    """A ``[specimen]`` table with ``mesh``: the specimen, its mesh, and the snapped site
+    and the direction (:mod:`warptissue.study._organ`)."""
+    name = table.string("mesh")
+    unit = table.string("unit", default="m", choices=tuple(MESH_UNITS))
+    element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
+    table.finish()
+    path = (base / name) if not Path(name).is_absolute() else Path(name)
+    if site_m is None:
+        raise table.error(
+            "mesh", "a mesh specimen needs [indenter] site_m, the point the probe indents", name
+        )
+    try:
+        mesh = specimen_mesh(path, unit=unit, element=element)
+        site, along = probe_placement(mesh, site_m, direction, radius_m=probe.radius_m)
+    except InputError as exc:
+        where = f"{exc.path}: " if exc.path is not None else ""
+        raise table.source.error(
+            exc.column or "specimen.mesh", where + exc.message, exc.value
+        ) from exc
+    depth = extent_along(mesh, site, along)
+    if not depth > 0.0:
+        raise table.source.error(
+            "indenter.direction", "points out of the body at the site", list(direction or ())
+        )
+    lengths = edge_lengths(mesh.points, mesh.tets[:, :4])
+    specimen = Specimen(
+        shape="mesh",
+        thickness_m=depth,
+        width_m=None,
+        radius_m=None,
+        quarter=False,
+        element=element,
+        size_near_m=float(lengths.min()),
+        size_far_m=float(lengths.max()),
+        growth=1.0,
+        mesher="file",
+        mesh_file=name,
+        mesh_path=path,
+        unit=unit,
+    )
+    return specimen, mesh, site, along
 
 
 PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
@@ -334,10 +399,20 @@ def _read_material(table: Table) -> Any:
     return table.build(material_from_dict, values)
 
 
-def _read_boundary(table: Table) -> Boundary:
+def _read_boundary(table: Table, organ: tuple | None = None) -> Boundary:
+    """The ``[boundary]`` table; ``organ``: a mesh specimen's (mesh, site, direction), whose
+    ``support`` is checked against it."""
     base = table.string("base", default="fixed", choices=BASE_KINDS)
+    support = None
+    if organ is not None:
+        support = table.string("support", default=OPPOSITE)
+        mesh, site, along = organ
+        try:
+            support_nodes(mesh, support, site_m=site, direction=along)
+        except InputError as exc:
+            raise table.error("support", exc.message, exc.value) from exc
     table.finish()
-    return Boundary(base=base)
+    return Boundary(base=base, support=support)
 
 
 LOCKING_BULK_TO_SHEAR = 10.0
@@ -562,19 +637,34 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
             "name", "must be a plain name (it names the default output folder runs/<name>)", name
         )
     description = root.string("description", default="")
-    indenter = _read_indenter(root.table("indenter"))
+    indenter, site_m, direction = _read_indenter(root.table("indenter"))
     # The depths come before the rest of the specimen: they size a sphere's refined zone.
     specimen_table = root.table("specimen")
-    thickness_m = specimen_table.number("thickness_m")
     base = source.path.parent if source.path is not None else Path.cwd()
+    organ = None
+    if specimen_table.has("mesh"):
+        specimen, *organ = _read_mesh_specimen(
+            specimen_table, base=base, site_m=site_m, direction=direction, probe=indenter
+        )
+        thickness_m = specimen.thickness_m
+    else:
+        for key, value in (("site_m", site_m), ("direction", direction)):
+            if value is not None:
+                raise source.error(
+                    f"indenter.{key}",
+                    "needs [specimen] mesh (a block or a disc is indented at its top centre)",
+                    list(value),
+                )
+        thickness_m = specimen_table.number("thickness_m")
     protocol = _read_protocol(root.table("protocol"), thickness_m, version=version, base=base)
     records: tuple[DataRecord, ...] = ()
     if version >= 2 and root.has("data"):
         records = read_data(root, base, thickness_m)
     deepest_m = deepest_depth_m(protocol, records)
-    specimen = _read_specimen(specimen_table, indenter, deepest_m=deepest_m)
+    if organ is None:
+        specimen = _read_specimen(specimen_table, indenter, deepest_m=deepest_m)
     material = _read_material(root.table("material"))
-    boundary = _read_boundary(_optional_table(root, "boundary"))
+    boundary = _read_boundary(_optional_table(root, "boundary"), organ)
     solver = _read_solver(_optional_table(root, "solver"), specimen.element, material)
     if solver.formulation == "mixed" and specimen.element != "TET10":
         key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
@@ -624,6 +714,8 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         schema_version=version,
         data=records,
         fit=fit,
+        site_m=site_m,
+        direction=direction,
     )
 
 

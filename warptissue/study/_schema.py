@@ -87,6 +87,12 @@ class Specimen:
         force_accuracy: The relative force accuracy that ``size_near_m`` was chosen for
             (:func:`warptissue.mesh.size_near_for_force_accuracy`), or None when the near
             size was given (or defaulted).
+        mesh_file: ``shape == "mesh"``: the volume mesh file as the study names it (relative
+            to the study's folder); its ``thickness_m`` is then how deep the body reaches
+            below the probe's site along its direction, and its sizes are the file's
+            shortest and longest edges.
+        mesh_path: The mesh file, resolved.
+        unit: The mesh file's length unit (``"m"``, ``"mm"``, ...).
     """
 
     shape: str
@@ -100,15 +106,23 @@ class Specimen:
     growth: float
     mesher: str = "extruded"
     force_accuracy: float | None = None
+    mesh_file: str | None = None
+    mesh_path: Path | None = None
+    unit: str = "m"
 
     @property
     def half_size_m(self) -> float:
-        """The specimen's extent from the probe axis, m (:func:`specimen_half_size_m`)."""
+        """The specimen's extent from the probe axis, m (:func:`specimen_half_size_m`; a mesh
+        specimen's depth below the site)."""
+        if self.shape == "mesh":
+            return self.thickness_m
         return specimen_half_size_m(self.shape, self.width_m, self.radius_m)
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[specimen]`` table, with every default filled in; a near size chosen for a
         force accuracy is given as ``force_accuracy`` (which loads as the same size)."""
+        if self.shape == "mesh":
+            return {"mesh": self.mesh_file, "unit": self.unit, "element": self.element}
         table: dict[str, Any] = {"shape": self.shape}
         if self.width_m is not None:
             table["width_m"] = self.width_m
@@ -220,14 +234,21 @@ class Boundary:
 
     Attributes:
         base: ``"fixed"`` (all displacement of the base z = 0 is zero) or ``"sliding"``
-            (only z is held; the base slides freely in x and y).
+            (only z is held; the base slides freely in x and y); a mesh specimen's support.
+        support: A mesh specimen's support: a node set of its file, or ``"opposite"`` (the
+            surface farther than half the body's depth below the site); None for a block or
+            a disc (their base z = 0).
     """
 
     base: str
+    support: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[boundary]`` table."""
-        return {"base": self.base}
+        table: dict[str, Any] = {"base": self.base}
+        if self.support is not None:
+            table["support"] = self.support
+        return table
 
 
 @dataclass(frozen=True)
@@ -285,6 +306,10 @@ class Study:
         schema_version: The schema version of the record (1 or 2, as read).
         data: The measured records of ``[[data]]`` (version 2), conditioned; empty when none.
         fit: The ``[fit]`` settings (version 2), or None.
+        site_m: ``[indenter] site_m``, where a mesh specimen is indented (snapped to its
+            surface), (3,), m; None for a block or a disc (the top centre).
+        direction: ``[indenter] direction``, the probe's direction into the body (3,); None:
+            the inward normal over the probe's footprint (a mesh specimen) or -z.
     """
 
     name: str
@@ -299,6 +324,8 @@ class Study:
     schema_version: int = SCHEMA_VERSION
     data: tuple[DataRecord, ...] = ()
     fit: FitSettings | None = None
+    site_m: tuple[float, ...] | None = None
+    direction: tuple[float, ...] | None = None
 
     @property
     def deepest_depth_m(self) -> float:
@@ -327,12 +354,18 @@ class Study:
             "name": self.name,
             "description": self.description,
             "specimen": self.specimen.to_dict(),
-            "indenter": self.indenter.to_dict(),
+            "indenter": {
+                **self.indenter.to_dict(),
+                **({} if self.site_m is None else {"site_m": list(self.site_m)}),
+                **({} if self.direction is None else {"direction": list(self.direction)}),
+            },
             "protocol": self.protocol.to_dict(relative_to=relative_to),
             "material": dict(self.material.to_dict()),
             "boundary": self.boundary.to_dict(),
             "solver": self.solver.to_dict(),
         }
+        if self.specimen.mesh_path is not None and relative_to is not None:
+            record["specimen"]["mesh"] = os.path.relpath(self.specimen.mesh_path, relative_to)
         if self.data:
             record["data"] = [item.to_dict(relative_to=relative_to) for item in self.data]
         if self.fit is not None:

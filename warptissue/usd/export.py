@@ -141,6 +141,11 @@ def _read_indenter(spec: Any, path: Path) -> Indenter | None:
         return None
     if not isinstance(spec, Mapping):
         raise InputError("study.indenter must be a table", path=path, value=spec)
+    spec = dict(spec)
+    site = spec.pop("site_m", None)
+    spec.pop("direction", None)  # the Xform is placed at the site; its axis stays z
+    if site is not None:
+        spec.update(x_m=site[0], y_m=site[1], z_m=site[2])
     try:
         return Indenter.from_dict(spec)
     except InputError as exc:

@@ -1,0 +1,171 @@
+"""A specimen from a mesh file indented at a site (issue 34): ``[specimen] mesh``,
+``[indenter] site_m``/``direction``, ``[boundary] support``, through the study file."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+
+from warptissue.errors import InputError
+from warptissue.fem import simulate_indentation
+from warptissue.mesh import TetMesh, write_mesh
+from warptissue.simulate import build_mesh, build_problem
+from warptissue.study import load_study, study_from_dict
+
+BLOCK = """\
+schema_version = 1
+name = "block"
+
+[specimen]
+shape = "block"
+width_m = 0.008
+thickness_m = 0.004
+quarter = false
+element = "TET10"
+size_near_m = 0.001
+size_far_m = 0.002
+growth = 1.5
+
+[indenter]
+kind = "flat_punch"
+radius_m = 0.001
+contact = "bonded"
+
+[protocol]
+max_depth_m = 0.0002
+steps = 2
+
+[material]
+model = "neo_hookean"
+C10_Pa = 287.5
+bulk_modulus_Pa = 575000.0
+
+[solver]
+device = "cpu"
+"""
+
+
+def _organ_study(mesh_file: str, *, site, direction=None, support="bottom", unit="m") -> str:
+    text = BLOCK.split("[specimen]")[0] + f'[specimen]\nmesh = "{mesh_file}"\nunit = "{unit}"\n\n'
+    indenter = '[indenter]\nkind = "flat_punch"\nradius_m = 0.001\ncontact = "bonded"\n'
+    indenter += f"site_m = {_toml_vector(site)}\n"
+    if direction is not None:
+        indenter += f"direction = {_toml_vector(direction)}\n"
+    rest = BLOCK.split("[protocol]")[1]
+    return text + indenter + "\n[protocol]" + rest + f'\n[boundary]\nsupport = "{support}"\n'
+
+
+def _toml_vector(values) -> str:
+    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+
+@pytest.fixture(scope="module")
+def block_files(tmp_path_factory):
+    """The block study, its mesh as a VTU file, and a copy turned by a rotation."""
+    folder = tmp_path_factory.mktemp("organ")
+    (folder / "block.toml").write_text(BLOCK, encoding="utf-8")
+    block = load_study(folder / "block.toml")
+    mesh = build_mesh(block)
+    write_mesh(folder / "block.vtu", mesh)
+    rotation = _rotation()
+    turned = TetMesh(mesh.points @ rotation.T, mesh.tets, node_sets=dict(mesh.node_sets))
+    write_mesh(folder / "turned.vtu", turned)
+    return folder, block, rotation
+
+
+def _force_N(study) -> np.ndarray:
+    problem = build_problem(study, build_mesh(study))
+    result = simulate_indentation(problem, study.protocol.depths_m, progress=False)
+    assert result.completed
+    return result.reaction_force_N
+
+
+def _rotation() -> np.ndarray:
+    angles = np.radians([23.0, -41.0, 67.0])
+    c, s = np.cos(angles), np.sin(angles)
+    rx = np.array([[1, 0, 0], [0, c[0], -s[0]], [0, s[0], c[0]]])
+    ry = np.array([[c[1], 0, s[1]], [0, 1, 0], [-s[1], 0, c[1]]])
+    rz = np.array([[c[2], -s[2], 0], [s[2], c[2], 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def test_the_block_as_a_mesh_file_gives_the_block_s_force_curve(block_files):
+    """The same mesh through [specimen] mesh (site at the top centre, support = the file's
+    "bottom" node set): the block study's force curve to 1e-9; turned by a rotation together
+    with its site and direction: the same curve to 1e-6."""
+    folder, block, rotation = block_files
+    reference = _force_N(block)
+    top = [0.0, 0.0, 0.004]
+    path = folder / "organ.toml"
+    path.write_text(_organ_study("block.vtu", site=top), encoding="utf-8")
+    organ = load_study(path)
+    assert organ.specimen.shape == "mesh" and organ.specimen.thickness_m == pytest.approx(0.004)
+    force = _force_N(organ)
+    np.testing.assert_allclose(force, reference, rtol=1e-9)
+    path.write_text(
+        _organ_study("turned.vtu", site=rotation @ top, direction=rotation @ [0.0, 0.0, -1.0]),
+        encoding="utf-8",
+    )
+    turned = _force_N(load_study(path))
+    np.testing.assert_allclose(turned, reference, rtol=1e-6)
+
+
+def test_a_mesh_study_round_trips_and_finds_the_support_opposite(block_files):
+    folder, _, _ = block_files
+    path = folder / "opposite.toml"
+    path.write_text(_organ_study("block.vtu", site=[0.0, 0.0, 0.004], support="opposite"))
+    study = load_study(path)
+    again = study_from_dict(study.to_dict(), path=path)
+    assert again.site_m == study.site_m and again.boundary.support == "opposite"
+    mesh = build_mesh(study)
+    bottom = mesh.points[mesh.node_sets["bottom"]]
+    assert np.all(bottom[:, 2] < 0.002 + 1e-12) and np.any(np.isclose(bottom[:, 2], 0.0))
+    problem = build_problem(study, mesh)
+    np.testing.assert_allclose(problem.probe_direction, [0.0, 0.0, -1.0], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("change", "key", "message"),
+    [
+        ({"site": [0.0, 0.0, 0.009]}, "indenter.site_m", "from node set 'surface'"),
+        (
+            {"site": [0.0, 0.0, 0.004], "direction": [0.0, 0.0, 1.0]},
+            "indenter.direction",
+            "points out of the body",
+        ),  # fmt: skip
+        ({"site": [0.0, 0.0, 4.0], "unit": "mm"}, "indenter.site_m", "m from node set"),
+        ({"site": [0.0, 0.0, 0.004], "support": "base"}, "boundary.support", "no node set"),
+        ({"site": [0.0, 0.0, 0.004], "mesh": "missing.vtu"}, "specimen.mesh", "not found"),
+    ],
+)
+def test_bad_organ_input_is_one_line_naming_the_key(block_files, change, key, message):
+    folder, _, _ = block_files
+    path = folder / "bad.toml"
+    mesh_file = change.pop("mesh", "block.vtu")
+    path.write_text(_organ_study(mesh_file, **change), encoding="utf-8")
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    text = str(caught.value)
+    assert "bad.toml:" in text and f": {key}: " in text and message in text, text
+    assert "\n" not in text
+
+
+def test_a_mesh_in_millimetres_read_as_metres_is_refused(block_files):
+    folder, _, _ = block_files
+    mesh = build_mesh(load_study(folder / "block.toml"))
+    write_mesh(folder / "mm.vtu", TetMesh(mesh.points * 1e3, mesh.tets, node_sets=mesh.node_sets))
+    path = folder / "mm.toml"
+    path.write_text(_organ_study("mm.vtu", site=[0.0, 0.0, 4.0]), encoding="utf-8")
+    with pytest.raises(InputError, match='specimen.unit: .* give unit = "mm"'):
+        load_study(path)
+    # site_m is in metres whatever the file's unit
+    path.write_text(_organ_study("mm.vtu", site=[0.0, 0.0, 0.004], unit="mm"), encoding="utf-8")
+    assert load_study(path).specimen.thickness_m == pytest.approx(0.004)
+
+
+def test_site_m_needs_a_mesh_specimen(tmp_path):
+    text = BLOCK.replace('contact = "bonded"', 'contact = "bonded"\nsite_m = [0.0, 0.0, 0.004]')
+    with pytest.raises(InputError, match=r"indenter.site_m: needs \[specimen\] mesh"):
+        study_from_dict(tomllib.loads(text))
