@@ -169,3 +169,48 @@ def test_site_m_needs_a_mesh_specimen(tmp_path):
     text = BLOCK.replace('contact = "bonded"', 'contact = "bonded"\nsite_m = [0.0, 0.0, 0.004]')
     with pytest.raises(InputError, match=r"indenter.site_m: needs \[specimen\] mesh"):
         study_from_dict(tomllib.loads(text))
+
+
+def _cube_surface(folder, name: str, *, drop_one: bool = False) -> None:
+    """The surface of a 4 mm cube (z from 0 to 4 mm), as 12 triangles; ``drop_one``: open."""
+    import meshio
+
+    points = 0.004 * np.array(
+        [[x - 0.5, y - 0.5, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)]
+    )
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    if drop_one:
+        triangles = triangles[1:]
+    meshio.write(folder / name, meshio.Mesh(points, [("triangle", np.array(triangles))]))
+
+
+def test_a_closed_surface_is_filled_with_tetgen(tmp_path) -> None:
+    """An STL cube becomes a TET10 specimen (TetGen's tets fill exactly its volume), held on
+    the face opposite the site."""
+    _cube_surface(tmp_path, "cube.stl")
+    text = _organ_study("cube.stl", site=[0.0, 0.0, 0.004], support="opposite")
+    (tmp_path / "cube.toml").write_text(text, encoding="utf-8")
+    study = load_study(tmp_path / "cube.toml")
+    mesh = build_mesh(study)
+    assert mesh.nodes_per_tet == 10
+    corners = mesh.points[mesh.tets[:, :4]]
+    volumes = np.einsum(
+        "ij,ij->i",
+        np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]),
+        corners[:, 3] - corners[:, 0],
+    )
+    np.testing.assert_allclose(volumes.sum() / 6.0, 0.004**3, rtol=1e-12)
+    np.testing.assert_allclose(mesh.points[mesh.node_set("bottom"), 2], 0.0, atol=1e-15)
+    build_problem(study, mesh)
+
+
+def test_an_open_surface_is_refused_in_one_line(tmp_path) -> None:
+    _cube_surface(tmp_path, "open.stl", drop_one=True)
+    text = _organ_study("open.stl", site=[0.0, 0.0, 0.004], support="opposite")
+    (tmp_path / "open.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(InputError) as caught:
+        load_study(tmp_path / "open.toml")
+    message = str(caught.value)
+    assert "specimen.mesh" in message and "not a closed surface" in message
+    assert "\n" not in message

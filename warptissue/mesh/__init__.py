@@ -42,7 +42,12 @@ from warptissue.mesh.size import (
     near_size_choice,
     size_near_for_force_accuracy,
 )
-from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
+from warptissue.mesh.surface import (
+    SURFACE_SUFFIXES,
+    check_closed_surface,
+    fill_surface_file,
+    tetrahedralize_surface,
+)
 
 __all__ = [
     "FLAT_PUNCH_FORCE_ERRORS",
@@ -81,6 +86,8 @@ __all__ = [
     "signed_volumes",
     "size_near_for_force_accuracy",
     "tetrahedralize_surface",
+    "fill_surface_file",
+    "SURFACE_SUFFIXES",
     "tet10_jacobian_determinants",
     "to_tet10",
     "write_mesh",

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
+from pathlib import Path
 
 import numpy as np
 import tetgen
@@ -11,7 +13,15 @@ from warptissue.errors import InputError, MeshError
 from warptissue.mesh.core import TetMesh, boundary_faces
 from warptissue.mesh.quality import fix_orientation
 
-__all__ = ["check_closed_surface", "tetrahedralize_surface"]
+__all__ = [
+    "SURFACE_SUFFIXES",
+    "check_closed_surface",
+    "fill_surface_file",
+    "tetrahedralize_surface",
+]
+
+SURFACE_SUFFIXES: tuple[str, ...] = (".stl", ".obj", ".ply")
+"""The closed triangle surface files :func:`fill_surface_file` reads."""
 
 
 def check_closed_surface(vertices_m: np.ndarray, triangles: np.ndarray) -> None:
@@ -178,3 +188,48 @@ def _surface_markers(triangle_count: int, surface_sets: Mapping[str, np.ndarray]
         markers[indices] = marker
         owner[marker] = name
     return markers
+
+
+def fill_surface_file(
+    path: str | Path, *, unit_m: float = 1.0, max_volume_m3: float | None = None
+) -> TetMesh:
+    """Read a closed triangle surface (STL, OBJ, PLY) and fill it with TetGen's quality tets.
+
+    Args:
+        path: The surface file; its suffix is one of :data:`SURFACE_SUFFIXES`.
+        unit_m: Length of the file's coordinate unit in metres (1e-3 for a file in mm).
+        max_volume_m3: Largest tet volume, m^3 (:func:`tetrahedralize_surface`); None leaves
+            it unbounded.
+
+    Returns:
+        A TET4 mesh in metres.
+
+    Raises:
+        InputError: A missing or unreadable file, a file without triangles, or a surface
+            that is not closed (:func:`check_closed_surface`); the message names the file.
+    """
+    import meshio  # measured: 0.3 s; only a surface file needs it
+
+    file_path = Path(path)
+    if file_path.suffix.lower() not in SURFACE_SUFFIXES:
+        raise InputError(f"a surface file is one of {', '.join(SURFACE_SUFFIXES)}", path=file_path)
+    if not file_path.is_file():
+        raise InputError("no such file", path=file_path)
+    try:
+        with warnings.catch_warnings():  # meshio's binary-STL size test overflows on ASCII
+            warnings.simplefilter("ignore", RuntimeWarning)
+            surface = meshio.read(file_path)
+    except Exception as exc:  # meshio raises many kinds on a malformed file
+        raise InputError(f"cannot read the surface: {exc}", path=file_path) from None
+    blocks = [block.data for block in surface.cells if block.type == "triangle"]
+    if not blocks:
+        raise InputError("the file holds no triangles", path=file_path)
+    triangles = np.vstack(blocks).astype(np.int64)
+    vertices_m = np.asarray(surface.points, dtype=np.float64)[:, :3] * unit_m
+    try:
+        check_closed_surface(vertices_m, triangles)
+    except InputError as exc:
+        raise InputError(
+            f"not a closed surface TetGen can fill: {exc.message}", path=file_path
+        ) from None
+    return tetrahedralize_surface(vertices_m, triangles, max_volume_m3=max_volume_m3)

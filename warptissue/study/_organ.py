@@ -16,7 +16,14 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.fem.probe import footprint_normal, snap_to_surface
-from warptissue.mesh import TetMesh, boundary_faces, read_mesh, to_tet10
+from warptissue.mesh import (
+    SURFACE_SUFFIXES,
+    TetMesh,
+    boundary_faces,
+    fill_surface_file,
+    read_mesh,
+    to_tet10,
+)
 
 MESH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6}
 """``[specimen] unit``: the mesh file's length unit, in metres."""
@@ -34,7 +41,8 @@ def specimen_mesh(path: Path, *, unit: str, element: str) -> TetMesh:
     """The specimen's mesh in metres, TET4 promoted to TET10 where ``element`` asks.
 
     Args:
-        path: A volume mesh (.vtu, .msh, .inp).
+        path: A volume mesh (.vtu, .msh, .inp), or a closed surface (.stl, .obj, .ply)
+            that TetGen fills with quality tets (:func:`warptissue.mesh.fill_surface_file`).
         unit: The file's length unit, a key of :data:`MESH_UNITS`.
         element: ``"TET10"`` or ``"TET4"`` (a TET10 file is not demoted).
 
@@ -49,7 +57,10 @@ def specimen_mesh(path: Path, *, unit: str, element: str) -> TetMesh:
     key = (str(path.resolve()), path.stat().st_mtime_ns if path.is_file() else 0, unit_m, element)
     if key in _CACHE:
         return _CACHE[key]
-    mesh = read_mesh(path, unit_m=unit_m)
+    if path.suffix.lower() in SURFACE_SUFFIXES:
+        mesh = fill_surface_file(path, unit_m=unit_m)
+    else:
+        mesh = read_mesh(path, unit_m=unit_m)
     extent = float(np.max(np.ptp(mesh.points, axis=0)))
     if extent > LARGEST_SPECIMEN_M:
         raise InputError(
