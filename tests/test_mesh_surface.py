@@ -146,3 +146,30 @@ def test_surface_sets_must_index_distinct_existing_triangles():
         tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, surface_sets={"a": np.array([12])})
     with pytest.raises(InputError, match="1-D array of triangle indices"):
         tetrahedralize_surface(BOX_VERTICES, BOX_TRIANGLES, surface_sets={"a": np.array([0.5])})
+
+
+def test_fill_surface_file_reads_a_closed_stl_in_mm(tmp_path) -> None:
+    """A tetrahedron's surface in mm: filled, in metres, its volume exactly the solid's."""
+    import meshio
+
+    from warptissue.mesh import fill_surface_file
+
+    points = np.array([[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, 0.0, 3.0]])
+    faces = np.array([[0, 2, 1], [0, 1, 3], [1, 2, 3], [0, 3, 2]])
+    meshio.write(tmp_path / "tet.ply", meshio.Mesh(points, [("triangle", faces)]))
+    mesh = fill_surface_file(tmp_path / "tet.ply", unit_m=1e-3)
+    corners = mesh.points[mesh.tets]
+    volume = (
+        np.einsum(
+            "ij,ij->i",
+            np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]),
+            corners[:, 3] - corners[:, 0],
+        ).sum()
+        / 6.0
+    )
+    np.testing.assert_allclose(volume, 0.003**3 / 6.0, rtol=1e-12)
+    meshio.write(tmp_path / "open.ply", meshio.Mesh(points, [("triangle", faces[:3])]))
+    with pytest.raises(InputError, match="not a closed surface"):
+        fill_surface_file(tmp_path / "open.ply")
+    with pytest.raises(InputError, match="no such file"):
+        fill_surface_file(tmp_path / "absent.stl")

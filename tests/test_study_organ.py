@@ -214,3 +214,36 @@ def test_an_open_surface_is_refused_in_one_line(tmp_path) -> None:
     message = str(caught.value)
     assert "specimen.mesh" in message and "not a closed surface" in message
     assert "\n" not in message
+
+
+def _with_support(text: str, support: str) -> str:
+    head, _ = text.split("\n[boundary]\n")
+    return head + f"\n[boundary]\nsupport = {support}\n"
+
+
+def test_a_box_support_holds_the_nodes_inside_it(block_files):
+    """A box around the base z = 0 holds exactly the file's "bottom" node set; a box that
+    holds no node, or a malformed one, is refused in one line naming boundary.support."""
+    folder, _, _ = block_files
+    path = folder / "box.toml"
+    text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004])
+    path.write_text(_with_support(text, "{ box = [[-1.0, -1.0, -1e-9], [1.0, 1.0, 1e-9]] }"))
+    study = load_study(path)
+    assert study.boundary.support == {"box": [[-1.0, -1.0, -1e-9], [1.0, 1.0, 1e-9]]}
+    assert study_from_dict(study.to_dict(), path=path).boundary == study.boundary
+    path.write_text(text)
+    named = build_mesh(load_study(path))
+    boxed = build_mesh(study)
+    np.testing.assert_array_equal(
+        np.sort(boxed.node_sets["bottom"]), np.sort(named.node_sets["bottom"])
+    )
+    for support, message in (
+        ("{ box = [[1.0, 1.0, 1.0], [2.0, 2.0, 2.0]] }", "holds no node"),
+        ("{ box = [[1.0, 1.0, 1.0], [0.0, 2.0, 2.0]] }", "each min below its max"),
+        ("{ region = 'far' }", "each min below its max"),
+    ):
+        path.write_text(_with_support(text, support))
+        with pytest.raises(InputError) as caught:
+            load_study(path)
+        assert "boundary.support" in str(caught.value) and message in str(caught.value)
+        assert "\n" not in str(caught.value)

@@ -9,6 +9,7 @@ touch).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -119,16 +120,24 @@ def extent_along(mesh: TetMesh, site_m: np.ndarray, direction: np.ndarray) -> fl
 
 
 def support_nodes(
-    mesh: TetMesh, support: str, *, site_m: np.ndarray, direction: np.ndarray
+    mesh: TetMesh,
+    support: str | Mapping[str, Any],
+    *,
+    site_m: np.ndarray,
+    direction: np.ndarray,
 ) -> np.ndarray:
-    """The nodes a ``[boundary] support`` holds: a node set of the file, or
-    :data:`OPPOSITE` (the surface nodes farther than half the body's depth below the site).
+    """The nodes a ``[boundary] support`` holds: a node set of the file, :data:`OPPOSITE`
+    (the surface nodes farther than half the body's depth below the site), or
+    ``{"box": [[xmin, ymin, zmin], [xmax, ymax, zmax]]}`` (every node inside the box, m).
 
     Raises:
         InputError: A node set the file does not have, or a support that holds no node
             (``key`` ``boundary.support``).
     """
-    if support == OPPOSITE:
+    if isinstance(support, Mapping):
+        low, high = (np.asarray(corner, dtype=np.float64) for corner in support["box"])
+        nodes = np.flatnonzero(np.all((mesh.points >= low) & (mesh.points <= high), axis=1))
+    elif support == OPPOSITE:
         surface = mesh.node_sets["surface"]
         depth = (mesh.points[surface] - site_m) @ direction
         nodes = surface[depth > 0.5 * extent_along(mesh, site_m, direction)]

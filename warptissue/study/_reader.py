@@ -399,13 +399,40 @@ def _read_material(table: Table) -> Any:
     return table.build(material_from_dict, values)
 
 
+def _support(table: Table) -> str | dict[str, Any]:
+    """``[boundary] support``: a node set's name, ``"opposite"`` or ``{ box = [[xmin, ymin,
+    zmin], [xmax, ymax, zmax]] }`` (m, each min below its max)."""
+    support = table.raw("support", default=OPPOSITE)
+    if isinstance(support, str):
+        return support
+    box = support.get("box") if isinstance(support, Mapping) else None
+    corners_ok = (
+        isinstance(box, list)
+        and len(box) == 2
+        and all(isinstance(corner, list) and len(corner) == 3 for corner in box)
+        and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for corner in box
+            for v in corner
+        )
+    )
+    if len(support) != 1 or not corners_ok or not all(a < b for a, b in zip(*box, strict=True)):
+        raise table.error(
+            "support",
+            'must be a node set\'s name, "opposite" or { box = [[xmin, ymin, zmin], '
+            "[xmax, ymax, zmax]] } (m, each min below its max)",
+            support,
+        )
+    return {"box": [[float(v) for v in corner] for corner in box]}
+
+
 def _read_boundary(table: Table, organ: tuple | None = None) -> Boundary:
     """The ``[boundary]`` table; ``organ``: a mesh specimen's (mesh, site, direction), whose
     ``support`` is checked against it."""
     base = table.string("base", default="fixed", choices=BASE_KINDS)
     support = None
     if organ is not None:
-        support = table.string("support", default=OPPOSITE)
+        support = _support(table)
         mesh, site, along = organ
         try:
             support_nodes(mesh, support, site_m=site, direction=along)

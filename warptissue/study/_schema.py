@@ -235,13 +235,14 @@ class Boundary:
     Attributes:
         base: ``"fixed"`` (all displacement of the base z = 0 is zero) or ``"sliding"``
             (only z is held; the base slides freely in x and y); a mesh specimen's support.
-        support: A mesh specimen's support: a node set of its file, or ``"opposite"`` (the
-            surface farther than half the body's depth below the site); None for a block or
-            a disc (their base z = 0).
+        support: A mesh specimen's support: a node set of its file, ``"opposite"`` (the
+            surface farther than half the body's depth below the site), or
+            ``{"box": [[xmin, ymin, zmin], [xmax, ymax, zmax]]}`` (the nodes inside the box,
+            m); None for a block or a disc (their base z = 0).
     """
 
     base: str
-    support: str | None = None
+    support: str | dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[boundary]`` table."""
