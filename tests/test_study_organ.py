@@ -91,6 +91,7 @@ def _rotation() -> np.ndarray:
     return rz @ ry @ rx
 
 
+@pytest.mark.slow
 def test_the_block_as_a_mesh_file_gives_the_block_s_force_curve(block_files):
     """The same mesh through [specimen] mesh (site at the top centre, support = the file's
     "bottom" node set): the block study's force curve to 1e-9; turned by a rotation together
