@@ -26,6 +26,7 @@ from warptissue import batch
 from warptissue.cli import EXIT_STATUSES, main
 from warptissue.errors import InputError
 from warptissue.io import write_csv
+from warptissue.study import collect_studies, folder_names
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -322,24 +323,24 @@ def test_study_sources_and_folder_names(tmp_path, capsys):
         (tmp_path / folder / "liver.toml").write_text("", encoding="utf-8")
     (tmp_path / "a" / "kidney.toml").write_text("", encoding="utf-8")
     (tmp_path / "a" / "notes.txt").write_text("", encoding="utf-8")
-    found = batch.collect_studies([tmp_path / "a", str(tmp_path / "**" / "liver.toml")])
+    found = collect_studies([tmp_path / "a", str(tmp_path / "**" / "liver.toml")])
     assert found == [
         tmp_path / "a" / "kidney.toml",
         tmp_path / "a" / "liver.toml",
         tmp_path / "b" / "liver.toml",
     ]
-    names = batch.folder_names(found)
+    names = folder_names(found)
     assert names[0] == "kidney"
     assert re.fullmatch(r"liver-[0-9a-f]{8}", names[1]) and re.fullmatch(
         r"liver-[0-9a-f]{8}", names[2]
     )
     assert names[1] != names[2]
     # The same file gets the same folder whatever the rest of the batch and its order.
-    assert batch.folder_names([found[2], found[1]]) == [names[2], names[1]]
+    assert folder_names([found[2], found[1]]) == [names[2], names[1]]
     with pytest.raises(InputError, match="not found"):
-        batch.collect_studies([tmp_path / "missing.toml"])
+        collect_studies([tmp_path / "missing.toml"])
     with pytest.raises(InputError, match="no study file matches"):
-        batch.collect_studies([str(tmp_path / "*.nothing")])
+        collect_studies([str(tmp_path / "*.nothing")])
     assert main(["batch", str(tmp_path / "missing.toml"), "-o", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "study file not found" in err

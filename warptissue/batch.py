@@ -9,9 +9,9 @@ to ``together`` studies whose simulations that can share launches are solved in 
 batched FE run (:func:`run_group_task`, :func:`warptissue.simulate.run_studies_together`):
 
 - each study writes the files of its single-study command into ``OUT/<folder>``, the folder
-  named from the study file's stem (:func:`folder_names`), then, last and atomically, the
-  marker :data:`DONE_MARKER` (``batch_done.json``: the study's summary row and the SHA-256 of
-  its study file) when it succeeded;
+  named from the study file's stem (:func:`warptissue.study.folder_names`), then, last and
+  atomically, the marker :data:`DONE_MARKER` (``batch_done.json``: the study's summary row
+  and the SHA-256 of its study file) when it succeeded;
 - a study that fails (bad input, a mesh that cannot be used, no convergence, a device
   missing, any exception) is one row of the summary with its one-line error, and the others
   go on;
@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import glob
 import hashlib
 import json
 import logging
@@ -64,7 +63,7 @@ from warptissue.errors import DeviceError, InputError, WarpTissueError
 from warptissue.fit.indentation import fit_indentation
 from warptissue.io import write_csv, write_json
 from warptissue.report import write_indentation_fit_outputs
-from warptissue.study import load_study
+from warptissue.study import collect_studies, folder_names, load_study
 
 __all__ = [
     "DONE_MARKER",
@@ -72,8 +71,6 @@ __all__ = [
     "SUMMARY_COLUMNS",
     "BatchResult",
     "StudyOutcome",
-    "collect_studies",
-    "folder_names",
     "run_batch",
 ]
 
@@ -118,7 +115,6 @@ STUDY_KINDS: tuple[str, ...] = ("simulation", "fit")
 _KILL_ONCE_ENV = "WARPTISSUE_BATCH_TEST_KILL_ONCE"
 """Test hook (tests/test_batch.py): names a file; the first Dask task to create it kills its
 own worker process (SIGKILL) after writing its results and before its marker."""
-_GLOB_CHARACTERS = frozenset("*?[")
 SCHEDULER_TIMEOUT_S = 20.0
 """How long ``--scheduler`` waits for the scheduler to connect and answer, s: a port that
 accepts and never answers is an unreachable scheduler (exit 5) after this long."""
@@ -254,76 +250,6 @@ class _Task:
     folder: str
     device: str | None
     on_dask: bool
-
-
-def collect_studies(sources: Sequence[str | Path]) -> list[Path]:
-    """The study files named by files, folders and glob patterns.
-
-    A file is taken as it is; a folder gives its ``*.toml`` files (not those of its
-    subfolders), sorted by name; a pattern with ``*``, ``?`` or ``[`` gives the files it
-    matches (``**`` reaches into subfolders), sorted. A file named twice is run once.
-
-    Args:
-        sources: Study files, folders and patterns.
-
-    Returns:
-        The study files, in the order of ``sources``.
-
-    Raises:
-        InputError: Nothing given, a path that does not exist, or a folder or pattern that
-            holds no study file.
-    """
-    if not sources:
-        raise InputError("no study files given")
-    found: list[Path] = []
-    for source in sources:
-        text = str(source)
-        path = Path(text)
-        if path.is_dir():
-            matches = sorted(p for p in path.glob("*.toml") if p.is_file())
-            if not matches:
-                raise InputError("this folder holds no study files (*.toml)", path=path)
-        elif path.exists():
-            matches = [path]
-        elif _GLOB_CHARACTERS & set(text):
-            matches = sorted(Path(p) for p in glob.glob(text, recursive=True) if Path(p).is_file())
-            if not matches:
-                raise InputError(f"no study file matches the pattern {text!r}")
-        else:
-            raise InputError("study file not found", path=path)
-        found.extend(matches)
-    unique: dict[str, Path] = {}
-    for path in found:
-        unique.setdefault(os.path.realpath(path), path)
-    return list(unique.values())
-
-
-def folder_names(paths: Sequence[str | Path]) -> list[str]:
-    """The result folder of each study: its file's stem, made unique.
-
-    Studies whose stems are unique keep them (``liver.toml`` -> ``liver``). Where several
-    files share a stem (``a/liver.toml``, ``b/liver.toml``), each gets the stem and the first
-    8 hexadecimal digits of the SHA-1 of its resolved path (``liver-3f2a9c01``): the same
-    file gets the same folder whatever the other studies of the batch and their order.
-
-    Args:
-        paths: The study files.
-
-    Returns:
-        One folder name per path, in order.
-    """
-    stems = [Path(p).stem for p in paths]
-    counts: dict[str, int] = {}
-    for stem in stems:
-        counts[stem] = counts.get(stem, 0) + 1
-    names = []
-    for path, stem in zip(paths, stems, strict=True):
-        if counts[stem] == 1:
-            names.append(stem)
-        else:
-            digest = hashlib.sha1(os.path.realpath(path).encode("utf-8")).hexdigest()[:8]
-            names.append(f"{stem}-{digest}")
-    return names
 
 
 def _sha256(path: str | Path) -> str:
@@ -817,8 +743,8 @@ def run_batch(
     Args:
         paths: Study files, folders of them and glob patterns (:func:`collect_studies`);
             files inside ``out`` (the batch's own outputs) are left out.
-        out: The batch's output folder: one folder per study (:func:`folder_names`) and
-            ``summary.csv``.
+        out: The batch's output folder: one folder per study
+            (:func:`warptissue.study.folder_names`) and ``summary.csv``.
         device: Warp device of every study (``"cpu"``, ``"cuda"``, ``"cuda:N"``); None:
             each study's ``solver.device``. For ``cuda``, ``auto`` and None on a machine
             with GPUs, the local cluster's workers are pinned to them in turn by

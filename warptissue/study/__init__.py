@@ -27,6 +27,7 @@ Example:
     0.0005
 """
 
+from warptissue.study._collect import collect_studies, folder_names
 from warptissue.study._organ import (
     MESH_UNITS,
     organ_mesh,
@@ -79,6 +80,8 @@ __all__ = [
     "Specimen",
     "Study",
     "MESH_UNITS",
+    "collect_studies",
+    "folder_names",
     "load_study",
     "mesh_probe_radius",
     "organ_mesh",
