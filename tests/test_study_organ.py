@@ -11,7 +11,7 @@ import pytest
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.mesh import TetMesh, write_mesh
-from warptissue.simulate import build_mesh, build_problem
+from warptissue.simulate import build_mesh, build_problem, record_problems
 from warptissue.study import load_study, study_from_dict
 
 BLOCK = """\
@@ -248,3 +248,97 @@ def test_a_box_support_holds_the_nodes_inside_it(block_files):
             load_study(path)
         assert "boundary.support" in str(caught.value) and message in str(caught.value)
         assert "\n" not in str(caught.value)
+
+
+def _sites_study(folder, records: str) -> str:
+    """A version-2 study of the block as a mesh file with ``[[data]]`` ``records`` (each
+    record's CSV written: a short ramp)."""
+    csv = "time_s,displacement_m,force_N\n0.1,0.0001,0.001\n0.2,0.0002,0.002\n"
+    for name in ("a.csv", "b.csv", "c.csv"):
+        (folder / name).write_text(csv, encoding="utf-8")
+    text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004]).replace(
+        "schema_version = 1", "schema_version = 2"
+    )
+    return text + records
+
+
+SITES = """
+[[data]]
+file = "a.csv"
+
+[[data]]
+file = "b.csv"
+site_m = [0.0015, -0.001, 0.004]
+indenter = { kind = "sphere", radius_m = 0.0015 }
+
+[[data]]
+file = "c.csv"
+site_m = [0.0015, -0.001, 0.004]
+indenter = { kind = "sphere", radius_m = 0.0015 }
+"""
+
+
+def test_records_at_their_own_sites_read_write_back_and_share_problems(block_files):
+    """Each [[data]] record may carry its own site, direction and indenter: read, written
+    back, and one FE problem per distinct probe, all on one mesh where the support is one
+    node set."""
+    folder, _, _ = block_files
+    path = folder / "sites.toml"
+    path.write_text(_sites_study(folder, SITES), encoding="utf-8")
+    study = load_study(path)
+    first, second, third = study.data
+    assert not first.placed and second.placed
+    assert study.probe_of(second) == study.probe_of(third)
+    assert study.probe_of(first) == (study.indenter, study.site_m, None)
+    sphere, site, direction = study.probe_of(second)
+    assert sphere.kind == "sphere" and sphere.radius_m == 0.0015
+    assert site == (0.0015, -0.001, 0.004) and direction is None
+    again = study_from_dict(study.to_dict(relative_to=folder), path=path)
+    assert again.data[1].indenter == sphere and again.data[1].site_m == site
+    problems, index = record_problems(study)
+    assert index == [0, 1, 1] and len(problems) == 2
+    assert problems[0].mesh is problems[1].mesh  # one support: one mesh, one assembler
+    assert problems[1].is_contact and not problems[0].is_contact
+    np.testing.assert_allclose(problems[1].frame.origin_m, site, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("record", "key", "message"),
+    [
+        ("site_m = [0.0, 0.0, 0.009]", "data[1].site_m", "from node set 'surface'"),
+        (
+            "site_m = [0.0015, -0.001, 0.004]\ndirection = [0.0, 0.0, 1.0]",
+            "data[1].direction",
+            "points out of the body",
+        ),
+        ("site_m = [0.0, 0.0]", "data[1].site_m", "three numbers"),
+        ('indenter = { kind = "sphere" }', "data[1].indenter.radius_m", "missing"),
+        (
+            'indenter = { kind = "sphere", radius_m = 0.001, site_m = [0.0, 0.0, 0.004] }',
+            "data[1].indenter.site_m",
+            "unknown key",
+        ),
+    ],
+    ids=["off_surface", "out_of_body", "two_numbers", "no_radius", "site_in_indenter"],
+)
+def test_a_bad_record_probe_is_one_line_naming_the_key(block_files, record, key, message):
+    folder, _, _ = block_files
+    path = folder / "bad_sites.toml"
+    path.write_text(
+        _sites_study(folder, f'\n[[data]]\nfile = "a.csv"\n\n[[data]]\nfile = "b.csv"\n{record}\n'),
+        encoding="utf-8",
+    )
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    text = str(caught.value)
+    assert "bad_sites.toml:" in text and f": {key}: " in text and message in text, text
+    assert "\n" not in text
+
+
+def test_a_record_s_own_site_needs_a_mesh_specimen(tmp_path):
+    (tmp_path / "a.csv").write_text("time_s,displacement_m,force_N\n0.1,0.0001,0.001\n")
+    text = BLOCK.replace("schema_version = 1", "schema_version = 2")
+    text += '\n[[data]]\nfile = "a.csv"\nsite_m = [0.0, 0.0, 0.004]\n'
+    (tmp_path / "s.toml").write_text(text, encoding="utf-8")
+    with pytest.raises(InputError, match=r"data\[0\].site_m: a record's own probe needs"):
+        load_study(tmp_path / "s.toml")

@@ -57,7 +57,7 @@ import re
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +108,7 @@ __all__ = [
     "force_curve_warnings",
     "kernels_need_compiling",
     "penetration_warnings",
+    "record_problems",
     "prepare_study",
     "run_studies_together",
     "run_study",
@@ -278,16 +279,55 @@ def build_problem(study: Study, mesh: Any) -> Any:
     )
 
 
+def record_problems(study: Study, material: Any = None) -> tuple[list[Any], list[int]]:
+    """The indentation problems of a study's ``[[data]]`` records: one per distinct probe
+    (indenter, site and direction, :meth:`warptissue.study.Study.probe_of`).
+
+    Args:
+        study: A study with records.
+        material: The problems' material; None: the study's.
+
+    Returns:
+        ``(problems, index)``: the distinct problems, in the order their first record
+        comes, and for each record the index of its problem. Problems whose supports hold
+        the same nodes share one mesh (and so one assembler).
+    """
+    material = study.material if material is None else material
+    problems: list[Any] = []
+    keys: list[tuple] = []
+    index: list[int] = []
+    for record in study.data:
+        key = study.probe_of(record)
+        if key not in keys:
+            indenter, site_m, direction = key
+            placed = replace(
+                study, indenter=indenter, site_m=site_m, direction=direction, material=material
+            )
+            keys.append(key)
+            problems.append(build_problem(placed, build_mesh(placed)))
+        index.append(keys.index(key))
+    return problems, index
+
+
+_ORGAN_MESHES: dict[tuple[int, bytes], tuple[Any, Any]] = {}
+
+
 def _organ_mesh(study: Study) -> Any:
     """A mesh specimen's mesh with its support as ``"bottom"`` and the rest of its surface
-    as ``"top"`` (:mod:`warptissue.study`'s ``[specimen] mesh``)."""
+    as ``"top"`` (:mod:`warptissue.study`'s ``[specimen] mesh``); one object per support
+    (sites with one support share it)."""
     specimen = study.specimen
     mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
     site, along = probe_placement(
         mesh, study.site_m, study.direction, radius_m=study.indenter.radius_m
     )
     support = support_nodes(mesh, study.boundary.support, site_m=site, direction=along)
-    return organ_mesh(mesh, support)
+    key = (id(mesh), support.tobytes())  # the value holds the mesh: its id stays its own
+    if key not in _ORGAN_MESHES:
+        if len(_ORGAN_MESHES) >= 8:
+            _ORGAN_MESHES.pop(next(iter(_ORGAN_MESHES)))
+        _ORGAN_MESHES[key] = (mesh, organ_mesh(mesh, support))
+    return _ORGAN_MESHES[key][1]
 
 
 def penetration_warnings(depths_m: np.ndarray, max_penetration_m: np.ndarray) -> list[str]:

@@ -25,7 +25,7 @@ from warptissue.lsq.engine import RELATIVE_FLOOR_SHARE
 from warptissue.lsq.metrics import r_squared
 from warptissue.lsq.result import RejectStep
 from warptissue.materials import Viscoelastic
-from warptissue.simulate import build_mesh, build_problem, check_linear_solver, estimate_mesh
+from warptissue.simulate import check_linear_solver, estimate_mesh, record_problems
 from warptissue.study import DEPTH_OFFSET, DataRecord, Study
 
 BULK_MODULUS = "bulk_modulus_Pa"
@@ -61,9 +61,10 @@ class Evaluation:
 class ForwardModel:
     """The FE force of every record as a function of the free parameters, with a cache.
 
-    One evaluation runs the FE (once for an elastic material, once per record for a
-    viscoelastic one) with the sensitivities of the free parameters, and gives the
-    residuals and the Jacobian together: ``fun`` and ``jac`` at one point share one run.
+    One evaluation runs the FE (once per probe for an elastic material: per site where
+    the records were measured at several; once per record for a viscoelastic one) with the
+    sensitivities of the free parameters, and gives the residuals and the Jacobian together:
+    ``fun`` and ``jac`` at one point share one run.
 
     With ``offset_start`` (one depth offset per record, m) the parameter
     vector is the free material parameters followed by the records' depth offsets, and the
@@ -74,8 +75,9 @@ class ForwardModel:
         self,
         *,
         study: Study,
-        problem: Any,
-        assembler: Any,
+        problems: Sequence[Any],
+        problem_of: Sequence[int],
+        assemblers: Sequence[Any],
         material: Any,
         names: tuple[str, ...],
         device: Any,
@@ -88,8 +90,9 @@ class ForwardModel:
         self._packed_assembler: Any = None
         self.meeting: tuple[FitMeeting, int] | None = None
         self.study = study
-        self.problem = problem
-        self.assembler = assembler
+        self.problems = list(problems)
+        self.problem_of = list(problem_of)
+        self.assemblers = list(assemblers)
         self.material = material
         self.names = names
         self.device = device
@@ -158,10 +161,16 @@ class ForwardModel:
                     key=f"fit.start.{DEPTH_OFFSET}",
                 )
             self.depth_step_m = reach / steps
-            self.grids = [(None, self._lattice(np.asarray(offset_start, dtype=np.float64)))]
+            self.grids = self._lattices(np.asarray(offset_start, dtype=np.float64))
         else:
-            deepest = max(float(np.max(r.displacement_m)) for r in self.records)
-            self.grids = [(None, deepest * np.arange(1, steps + 1) / steps)]
+            self.grids = []
+            for g in range(len(self.problems)):
+                deepest = max(
+                    float(np.max(r.displacement_m))
+                    for r, p in zip(self.records, self.problem_of, strict=True)
+                    if p == g
+                )
+                self.grids.append((None, deepest * np.arange(1, steps + 1) / steps))
         self.forward_solves = 0
         self.solves_per_evaluation = len(self.grids)
         self.cache: dict[bytes, Evaluation] = {}
@@ -224,27 +233,42 @@ class ForwardModel:
             raise RejectStep(f"{record.file}: {exc.message}") from exc
         return touch, grid
 
-    def _reach(self, offsets: np.ndarray) -> float:
-        """The deepest true depth of the records at these offsets (m)."""
+    def _reach(self, offsets: np.ndarray, problem: int | None = None) -> float:
+        """The deepest true depth of the records (of one problem) at these offsets (m)."""
         return max(
             float(np.max(r.displacement_m)) - d0
-            for r, d0 in zip(self.records, offsets, strict=True)
+            for r, d0, p in zip(self.records, offsets, self.problem_of, strict=True)
+            if problem is None or p == problem
         )
 
-    def _lattice(self, offsets: np.ndarray) -> np.ndarray:
-        """FE depths: the fixed steps of ``depth_step_m`` to the deepest true depth."""
-        count = max(1, math.ceil(self._reach(offsets) / self.depth_step_m - 1e-9))
-        return self.depth_step_m * np.arange(1, count + 1)
+    def _lattices(self, offsets: np.ndarray) -> list[tuple[None, np.ndarray]]:
+        """Each problem's FE depths: the fixed steps of ``depth_step_m`` to the deepest true
+        depth of its records."""
+        grids = []
+        for g in range(len(self.problems)):
+            count = max(1, math.ceil(self._reach(offsets, g) / self.depth_step_m - 1e-9))
+            grids.append((None, self.depth_step_m * np.arange(1, count + 1)))
+        return grids
+
+    def _problem_at(self, g: int, material: Any) -> Any:
+        return dataclasses.replace(self.problems[g], material=material)
+
+    def _grid_problems(self, count: int) -> list[int]:
+        """The problem of each of ``count`` load paths: one per problem (an elastic
+        material's), or one per record (a viscoelastic material's)."""
+        del count  # the paths follow the material: one per problem or one per record
+        return list(self.problem_of if self.viscoelastic else range(len(self.problems)))
 
     def _run(
         self,
         material: Any,
+        g: int,
         times: np.ndarray | None,
         depths: np.ndarray,
         *,
         sensitivities: bool = True,
     ) -> Any:
-        problem = dataclasses.replace(self.problem, material=material)
+        problem = self._problem_at(g, material)
         extra = {} if times is None else {"times_s": times}
         self.forward_solves += 1
         try:
@@ -254,7 +278,7 @@ class ForwardModel:
                 device=self.device,
                 progress=self.progress,
                 options=self.options,
-                assembler=self.assembler,
+                assembler=self.assemblers[g],
                 sensitivities=self.sensitivity_names if sensitivities else (),
                 **extra,
             )
@@ -275,14 +299,17 @@ class ForwardModel:
         one batched run (:func:`warptissue.fem.simulate_indentation_batch`) where
         ``batch_records`` and there are several, else one after another. A fit of several
         studies hands them to its :class:`~warptissue.fit._forward.FitMeeting`, which
-        solves them with the other fits' runs."""
+        solves them with the other fits' runs. The paths are one per problem (an elastic
+        material) or one per record (a viscoelastic one)."""
+        which = self._grid_problems(len(grids))
+        problems = [self._problem_at(g, material) for g in which]
         if self.meeting is not None:
             meeting, fit = self.meeting
             self.forward_solves += len(grids)
             results = meeting.request(
                 fit,
                 RunRequest(
-                    problems=[dataclasses.replace(self.problem, material=material)] * len(grids),
+                    problems=problems,
                     grids=list(grids),
                     names=self.sensitivity_names if sensitivities else (),
                     options=self.options,
@@ -295,20 +322,19 @@ class ForwardModel:
             return results
         if not (self.batch_records and len(grids) > 1):
             return [
-                self._run(material, times, depths, sensitivities=sensitivities)
-                for times, depths in grids
+                self._run(material, g, times, depths, sensitivities=sensitivities)
+                for g, (times, depths) in zip(which, grids, strict=True)
             ]
 
-        problems = [dataclasses.replace(self.problem, material=material)] * len(grids)
-        if self._packed_assembler is None or self._packed_assembler.problem_count != len(grids):
-            self._packed_assembler = fem.batch_assembler(problems, device=self.device)
+        if self._packed_assembler is None or self._packed_assembler[0] != which:
+            self._packed_assembler = (which, fem.batch_assembler(problems, device=self.device))
         self.forward_solves += len(grids)
         results = fem.simulate_indentation_batch(
             problems,
             [depths for _, depths in grids],
             options=self.options,
             sensitivities=self.sensitivity_names if sensitivities else (),
-            assembler=self._packed_assembler,
+            assembler=self._packed_assembler[1],
             times_s=[times for times, _ in grids],
         )
         for result in results:
@@ -334,7 +360,7 @@ class ForwardModel:
             touches = [touch for touch, _ in timed]
             grids = [grid for _, grid in timed]
         elif self.offset_count:
-            grids = [(None, self._lattice(offsets))]
+            grids = self._lattices(offsets)
         else:
             grids = self.grids
         runs = self._runs(material, grids)
@@ -350,7 +376,7 @@ class ForwardModel:
                 where = np.concatenate([[0.0], fe_time])
                 at = record.time_s - touches[k]
             else:
-                run = runs[0]
+                run = runs[self.problem_of[k]]
                 fe_depth = np.asarray(run.depths_m, dtype=np.float64)
                 where = np.concatenate([[0.0], fe_depth])
                 shifted = record.displacement_m - offsets[k]
@@ -473,7 +499,8 @@ def forward_model(
     offset_start: np.ndarray | None = None,
     batch_records: bool | None = None,
 ) -> ForwardModel:
-    """The mesh, problem and assembler of a study (built once), as a :class:`ForwardModel`
+    """The meshes, problems (one per probe of its records) and assemblers of a study (built
+    once), as a :class:`ForwardModel`
     of the free parameters (and of the records' depth offsets, with ``offset_start``);
     ``batch_records`` (None: :func:`batches_records`) solves the records' runs together."""
 
@@ -481,13 +508,18 @@ def forward_model(
     warp_device = resolve_device(None if chosen == "auto" else chosen)
     check_linear_solver(study, warp_device)
     estimate_mesh(study).require_fits(solve=warp_device.is_cpu, what="study's mesh")
-    mesh = build_mesh(study)
-    problem = build_problem(dataclasses.replace(study, material=material), mesh)
-    assembler = fem.Assembler(mesh, material, formulation=problem.formulation, device=warp_device)
+    problems, problem_of = record_problems(study, material)
+    by_mesh: dict[int, Any] = {}
+    for problem in problems:
+        if id(problem.mesh) not in by_mesh:
+            by_mesh[id(problem.mesh)] = fem.Assembler(
+                problem.mesh, material, formulation=problem.formulation, device=warp_device
+            )
     return ForwardModel(
         study=study,
-        problem=problem,
-        assembler=assembler,
+        problems=problems,
+        problem_of=problem_of,
+        assemblers=[by_mesh[id(problem.mesh)] for problem in problems],
         material=material,
         names=free,
         device=warp_device,

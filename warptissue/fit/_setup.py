@@ -169,10 +169,11 @@ def parameter_space(study: Study, plan: FitPlan) -> ParameterSpace:
 
 
 def _check_probe_radius(study: Study) -> None:
-    """Refuse a record whose sidecar names another probe radius than the study's."""
+    """Refuse a record whose sidecar names another probe radius than its probe's (the
+    record's own ``indenter``, else the study's)."""
 
-    radius = study.indenter.radius_m
     for record in study.data:
+        radius = study.probe_of(record)[0].radius_m
         sidecar = read_sidecar(record.path)
         value = sidecar.get("probe_radius_m")
         if value is None:
@@ -189,8 +190,8 @@ def _check_probe_radius(study: Study) -> None:
         if not math.isclose(measured, radius, rel_tol=1e-3):
             raise InputError(
                 f"{record.file} was measured with probe_radius_m = {measured:g} m (its "
-                f"sidecar), the study's indenter has radius_m = {radius:g} m: fit it with a "
-                "study of that probe",
+                f"sidecar), its indenter in the study has radius_m = {radius:g} m: fit it with "
+                "that probe",
                 path=record.path,
                 key="probe_radius_m",
                 value=measured,

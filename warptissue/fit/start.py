@@ -56,15 +56,16 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
             "from (give start values in [fit.start], or set contact)",
             path=record.path,
         )
-    if study.indenter.kind in ("plate", "wedge"):
+    probe = study.probe_of(record)[0]
+    if probe.kind in ("plate", "wedge"):
         raise InputError(
-            f"no start value from an indentation formula for a {study.indenter.kind} (give "
+            f"no start value from an indentation formula for a {probe.kind} (give "
             "start values in [fit.start])",
             path=study.path,
             key="kind",
-            value=study.indenter.kind,
+            value=probe.kind,
         )
-    limit = START_DEPTH_SHARE * min(study.indenter.radius_m, study.specimen.thickness_m)
+    limit = START_DEPTH_SHARE * min(probe.radius_m, study.specimen.thickness_m)
     shallow = depth <= limit
     if np.count_nonzero(shallow) < 2:
         shallow = np.argsort(depth, kind="stable")[:2]
@@ -73,9 +74,9 @@ def record_youngs_modulus_Pa(study: Study, record: DataRecord) -> float:
         result = fit_punch_modulus(
             depth[shallow],
             force[shallow],
-            radius_m=study.indenter.radius_m,
+            radius_m=probe.radius_m,
             poissons_ratio=poissons_ratio,
-            geometry="sphere" if study.indenter.kind == "sphere" else "flat",
+            geometry="sphere" if probe.kind == "sphere" else "flat",
             thickness_m=study.specimen.thickness_m,
         )
     except InputError as exc:  # e.g. a layer beyond the range of the Hayes factor

@@ -168,6 +168,33 @@ def _size_near_for_accuracy(
 def _read_indenter(table: Table) -> tuple[Indenter, tuple | None, tuple | None]:
     """The ``[indenter]`` table: the probe, and ``site_m`` and ``direction`` (None where
     not given)."""
+    placement = _placement(table)
+    return _read_probe(table), *placement
+
+
+def _placement(table: Table) -> tuple[tuple | None, tuple | None]:
+    """A table's ``site_m`` and ``direction`` (None where not given)."""
+    placement = []
+    for key in ("site_m", "direction"):
+        vector = table.number_list(key) if table.has(key) else None
+        if vector is not None and len(vector) != 3:
+            raise table.error(key, "must be three numbers (x, y, z)", list(vector))
+        if key == "direction" and vector is not None and not np.any(vector):
+            raise table.error(key, "must not be the zero vector", list(vector))
+        placement.append(vector)
+    return placement[0], placement[1]
+
+
+def _record_probe(table: Table) -> dict[str, Any]:
+    """A ``[[data]]`` record's own probe: ``site_m``, ``direction`` and an ``indenter``
+    table (the keys of ``[indenter]`` but the placement)."""
+    site_m, direction = _placement(table)
+    indenter = _read_probe(table.table("indenter")) if table.has("indenter") else None
+    return {"site_m": site_m, "direction": direction, "indenter": indenter}
+
+
+def _read_probe(table: Table) -> Indenter:
+    """The probe of an ``[indenter]`` table (its placement read apart)."""
     kind = table.string("kind", choices=SIMULATED_KINDS)
     # A plate needs no radius; given, it is the radius of the mesh's refined zone.
     radius_m = (
@@ -183,16 +210,8 @@ def _read_indenter(table: Table) -> tuple[Indenter, tuple | None, tuple | None]:
     values["contact"] = table.string(
         "contact", default="frictionless" if rigid else "bonded", choices=CONTACTS
     )
-    placement = []
-    for key in ("site_m", "direction"):
-        vector = table.number_list(key) if table.has(key) else None
-        if vector is not None and len(vector) != 3:
-            raise table.error(key, "must be three numbers (x, y, z)", list(vector))
-        if key == "direction" and vector is not None and not np.any(vector):
-            raise table.error(key, "must not be the zero vector", list(vector))
-        placement.append(vector)
     table.finish()
-    return table.build(lambda values: Indenter(**values), values), *placement
+    return table.build(lambda values: Indenter(**values), values)
 
 
 def _read_mesh_specimen(
@@ -686,12 +705,13 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     protocol = _read_protocol(root.table("protocol"), thickness_m, version=version, base=base)
     records: tuple[DataRecord, ...] = ()
     if version >= 2 and root.has("data"):
-        records = read_data(root, base, thickness_m)
+        records = read_data(root, base, thickness_m, probe_reader=_record_probe)
     deepest_m = deepest_depth_m(protocol, records)
     if organ is None:
         specimen = _read_specimen(specimen_table, indenter, deepest_m=deepest_m)
     material = _read_material(root.table("material"))
     boundary = _read_boundary(_optional_table(root, "boundary"), organ)
+    _check_placed_records(records, root.source, organ, boundary, indenter)
     solver = _read_solver(_optional_table(root, "solver"), specimen.element, material)
     if solver.formulation == "mixed" and specimen.element != "TET10":
         key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
@@ -744,6 +764,61 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         site_m=site_m,
         direction=direction,
     )
+
+
+def _check_placed_records(
+    records: Sequence[DataRecord],
+    source: Source,
+    organ: Sequence[Any] | None,
+    boundary: Boundary,
+    indenter: Indenter,
+) -> None:
+    """Refuse, before any FE run, a ``[[data]]`` record's own probe that the specimen
+    cannot take: one on a block or a disc, a site off the mesh's surface, a direction out
+    of the body, a support that holds nothing seen from the site, a record deeper than the
+    body below its site."""
+    for k, record in enumerate(records):
+        if not record.placed:
+            continue
+        given = next(
+            key for key in ("site_m", "direction", "indenter") if getattr(record, key) is not None
+        )
+        if organ is None:
+            raise source.error(
+                f"data[{k}].{given}",
+                "a record's own probe needs [specimen] mesh (a block or a disc is indented "
+                "at its top centre by the [indenter])",
+                None if given == "indenter" else list(getattr(record, given)),
+            )
+        mesh, study_site, study_along = organ
+        site_m = record.site_m if record.site_m is not None else tuple(study_site)
+        direction = record.direction
+        if direction is None and record.site_m is None:
+            direction = tuple(study_along)
+        probe = record.indenter if record.indenter is not None else indenter
+        try:
+            site, along = probe_placement(mesh, site_m, direction, radius_m=probe.radius_m)
+        except InputError as exc:
+            raise source.error(f"data[{k}].site_m", exc.message, exc.value) from None
+        depth = extent_along(mesh, site, along)
+        if not depth > 0.0:
+            raise source.error(
+                f"data[{k}].direction", "points out of the body at the site", list(direction)
+            )
+        try:
+            support_nodes(mesh, boundary.support, site_m=site, direction=along)
+        except InputError as exc:
+            raise source.error(
+                "boundary.support", f"seen from data[{k}]'s site: {exc.message}", exc.value
+            ) from None
+        deepest = float(np.max(record.displacement_m))
+        if deepest >= depth:
+            raise source.error(
+                f"data[{k}].file",
+                f"{record.path}: the record goes {deepest:.6g} m deep and the body is "
+                f"{depth:.6g} m deep below its site: check the displacement's unit",
+                deepest,
+            )
 
 
 def _optional_table(root: Table, key: str) -> Table:

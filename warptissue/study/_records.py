@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +22,9 @@ _RECORD_KEYS = (
     "offset",
     "keep_depth_m",
     "window_s",
+    "site_m",
+    "direction",
+    "indenter",
 )
 """The keys of a ``[[data]]`` record."""
 
@@ -131,14 +134,23 @@ def condition_record(
     return DataRecord(**options, record=record)
 
 
-def _read_record(table: Table, base: Path, thickness_m: float) -> DataRecord:
+def _read_record(
+    table: Table, base: Path, thickness_m: float, probe_reader: ProbeReader
+) -> DataRecord:
     """One ``[[data]]`` record: validate its keys, read its CSV, condition it, and check it
-    against the specimen (:func:`check_record`)."""
+    against the specimen (:func:`check_record`); its own probe (``site_m``, ``direction``,
+    an ``indenter`` table) read by ``probe_reader``."""
     options = record_options(table, base)
+    options.update(probe_reader(table))
     table.finish(also_known=_RECORD_KEYS)
     record = condition_record(table, options)
-    check_record(table, record, thickness_m)
+    if not record.placed:  # a record at a site of its own is checked against the mesh there
+        check_record(table, record, thickness_m)
     return record
+
+
+ProbeReader = Callable[[Table], dict[str, Any]]
+"""Reads a ``[[data]]`` table's own probe: ``{"site_m", "direction", "indenter"}``."""
 
 
 def check_record(table: Table, record: DataRecord, thickness_m: float) -> None:
@@ -172,15 +184,17 @@ def check_record(table: Table, record: DataRecord, thickness_m: float) -> None:
         )
 
 
-def read_data(root: Table, base: Path, thickness_m: float) -> tuple[DataRecord, ...]:
+def read_data(
+    root: Table, base: Path, thickness_m: float, *, probe_reader: ProbeReader
+) -> tuple[DataRecord, ...]:
     """``[[data]]`` (one or more records) or a single ``[data]`` table, each checked against
-    the specimen's thickness (m)."""
+    the specimen's thickness (m); ``probe_reader`` reads a record's own probe."""
     value = root.raw("data")
     if isinstance(value, Mapping):
-        return (_read_record(root.table("data"), base, thickness_m),)
+        return (_read_record(root.table("data"), base, thickness_m, probe_reader),)
     if not isinstance(value, list) or not value:
         raise root.error("data", "must be one or more [[data]] tables", value)
     return tuple(
-        _read_record(Table(item, f"data[{i}]", root.source), base, thickness_m)
+        _read_record(Table(item, f"data[{i}]", root.source), base, thickness_m, probe_reader)
         for i, item in enumerate(value)
     )

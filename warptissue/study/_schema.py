@@ -328,6 +328,18 @@ class Study:
     site_m: tuple[float, ...] | None = None
     direction: tuple[float, ...] | None = None
 
+    def probe_of(
+        self, record: DataRecord
+    ) -> tuple[Indenter, tuple[float, ...] | None, tuple[float, ...] | None]:
+        """A record's probe: ``(indenter, site_m, direction)``, the record's own where it
+        gives them, else the study's (a record's own site comes with its own direction, or
+        the inward normal there: not the study's)."""
+        indenter = record.indenter if record.indenter is not None else self.indenter
+        if record.site_m is not None:
+            return indenter, record.site_m, record.direction
+        direction = record.direction if record.direction is not None else self.direction
+        return indenter, self.site_m, direction
+
     @property
     def deepest_depth_m(self) -> float:
         """The deepest depth the study asks for, m: its protocol's and its records'."""
@@ -397,6 +409,12 @@ class DataRecord:
         keep_depth_m: Keep only the loading ramp down to this depth below contact (m).
         window_s: Keep only ``start <= time_s <= stop`` (s).
         record: The conditioned samples and a summary of the conditioning.
+        site_m: Where a mesh specimen was indented for this record (3,), m; None: the
+            study's ``[indenter] site_m``. Records of several sites are fitted jointly.
+        direction: The probe's direction into the body for this record (3,); None: the
+            study's where the record has no site of its own, else the inward normal over
+            the probe's footprint at the record's site.
+        indenter: The probe of this record; None: the study's ``[indenter]``.
     """
 
     file: str
@@ -409,6 +427,14 @@ class DataRecord:
     keep_depth_m: float | None = None
     window_s: tuple[float, float] | None = None
     record: FitRecord | None = field(default=None, compare=False, repr=False)
+    site_m: tuple[float, ...] | None = None
+    direction: tuple[float, ...] | None = None
+    indenter: Indenter | None = None
+
+    @property
+    def placed(self) -> bool:
+        """Whether the record has a probe of its own (a site, a direction or an indenter)."""
+        return not (self.site_m is None and self.direction is None and self.indenter is None)
 
     @property
     def time_s(self) -> np.ndarray:
@@ -503,6 +529,11 @@ class DataRecord:
             table["keep_depth_m"] = self.keep_depth_m
         if self.window_s is not None:
             table["window_s"] = list(self.window_s)
+        for key in ("site_m", "direction"):
+            if getattr(self, key) is not None:
+                table[key] = list(getattr(self, key))
+        if self.indenter is not None:
+            table["indenter"] = self.indenter.to_dict()
         return table
 
 
