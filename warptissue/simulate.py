@@ -210,6 +210,13 @@ def size_near_reason(study: Study) -> str | None:
     specimen = study.specimen
     if specimen.force_accuracy is None:
         return None
+    if specimen.shape == "mesh":  # refined around its sites, TetGen's tets: the study's site
+        return near_size_choice(
+            specimen.force_accuracy,
+            probe_radius_m=specimen.refine_zones[0][3],
+            mesher="delaunay",
+            element=specimen.element,
+        ).reason()
     return near_size_choice(
         specimen.force_accuracy,
         probe_radius_m=study.mesh_probe_radius_m,
@@ -231,7 +238,12 @@ def estimate_mesh(study: Study) -> Any:
 
     specimen = study.specimen
     if specimen.shape == "mesh":
-        mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
+        mesh = specimen_mesh(
+            specimen.mesh_path,
+            unit=specimen.unit,
+            element=specimen.element,
+            zones=specimen.refine_zones,
+        )
         return MeshSizeEstimate(  # the mesh is already made: its solve is not counted
             tet_count=mesh.tet_count,
             node_count=mesh.node_count,
@@ -317,7 +329,12 @@ def _organ_mesh(study: Study) -> Any:
     as ``"top"`` (:mod:`warptissue.study`'s ``[specimen] mesh``); one object per support
     (sites with one support share it)."""
     specimen = study.specimen
-    mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
+    mesh = specimen_mesh(
+        specimen.mesh_path,
+        unit=specimen.unit,
+        element=specimen.element,
+        zones=specimen.refine_zones,
+    )
     site, along = probe_placement(
         mesh, study.site_m, study.direction, radius_m=study.indenter.radius_m
     )

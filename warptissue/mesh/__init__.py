@@ -2,6 +2,8 @@
 
 from warptissue.mesh._ball import ball_mesh
 from warptissue.mesh._grading import graded_spacing
+from warptissue.mesh._refine import refine_near_sites
+from warptissue.mesh._usd import FACE_SET_FAMILY, NODE_SET_FAMILY, REGION_FAMILY, USD_SUFFIXES
 from warptissue.mesh.core import (
     TET4_EDGES,
     TET4_FACES,
@@ -50,6 +52,10 @@ from warptissue.mesh.surface import (
 )
 
 __all__ = [
+    "FACE_SET_FAMILY",
+    "NODE_SET_FAMILY",
+    "REGION_FAMILY",
+    "USD_SUFFIXES",
     "FLAT_PUNCH_FORCE_ERRORS",
     "FORCE_ACCURACY_DEPTH_RATIO",
     "FORCE_ACCURACY_FLOOR",
@@ -82,6 +88,7 @@ __all__ = [
     "indentation_disc",
     "near_size_choice",
     "radius_ratios",
+    "refine_near_sites",
     "read_mesh",
     "signed_volumes",
     "size_near_for_force_accuracy",

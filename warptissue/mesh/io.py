@@ -17,6 +17,7 @@ import numpy as np
 
 from warptissue.errors import InputError, MeshError
 from warptissue.io import atomic_path
+from warptissue.mesh._usd import USD_SUFFIXES, read_usd
 from warptissue.mesh.core import TetMesh, boundary_faces
 from warptissue.mesh.quality import fix_orientation
 
@@ -34,8 +35,19 @@ _TET_TYPES = {"tetra": 4, "tetra10": 10}
 _GMSH_COMPONENTS = (1, 3, 9)
 
 
-def read_mesh(path: str | Path, *, unit_m: float = 1.0, reorient: bool = True) -> TetMesh:
-    """Read a tetrahedral mesh from a VTU, Gmsh MSH (v2 or v4) or Abaqus INP file.
+def read_mesh(
+    path: str | Path,
+    *,
+    unit_m: float = 1.0,
+    reorient: bool = True,
+    prim_path: str | None = None,
+) -> TetMesh:
+    """Read a tetrahedral mesh from a VTU, Gmsh MSH (v2 or v4), Abaqus INP or USD file.
+
+    A USD stage (.usd, .usda, .usdc, .usdz) gives its ``UsdGeom.TetMesh``: the rest shape,
+    node sets from ``nodeSet`` point subsets, regions from ``materialRegion`` subsets, face
+    sets from the sibling surface's ``faceSet`` subsets (as
+    :func:`warptissue.usd.write_simulation_usd` writes them).
 
     Only tets are kept (``tetra`` or ``tetra10``; a file may not mix them); nodes no tet uses
     are dropped and the rest renumbered in file order. Node sets come from, in this order:
@@ -46,10 +58,13 @@ def read_mesh(path: str | Path, *, unit_m: float = 1.0, reorient: bool = True) -
     a ``tet_region`` cell array, else from Gmsh physical tags of the tets, else are 0.
 
     Args:
-        path: The file; its suffix (.vtu, .msh, .inp) picks the format.
+        path: The file; its suffix (.vtu, .msh, .inp, .usd, .usda, .usdc, .usdz) picks the
+            format.
         unit_m: Length of the file's coordinate unit in metres (1e-3 for a file in mm).
         reorient: Turn negatively oriented tets positive (:func:`fix_orientation`); some
             tools write tets in the opposite orientation.
+        prim_path: A USD file's TetMesh prim; None takes the first TetMesh in traversal
+            order.
 
     Returns:
         The mesh, in metres.
@@ -63,10 +78,24 @@ def read_mesh(path: str | Path, *, unit_m: float = 1.0, reorient: bool = True) -
     file_path = Path(path)
     if not (np.isfinite(unit_m) and unit_m > 0):
         raise InputError("unit_m must be a positive length in metres", value=unit_m)
+    if file_path.suffix.lower() in USD_SUFFIXES:
+        mesh = read_usd(file_path, prim_path=prim_path)
+        if unit_m != 1.0:
+            mesh = TetMesh(
+                points=mesh.points * unit_m,
+                tets=mesh.tets,
+                node_sets=mesh.node_sets,
+                face_sets=mesh.face_sets,
+                tet_regions=mesh.tet_regions,
+            )
+        return fix_orientation(mesh) if reorient else mesh
+    if prim_path is not None:
+        raise InputError("prim_path is for a USD file", path=file_path, value=prim_path)
     file_format = _READ_FORMATS.get(file_path.suffix.lower())
     if file_format is None:
+        known = sorted([*_READ_FORMATS, *USD_SUFFIXES])
         raise InputError(
-            f"unknown mesh format {file_path.suffix!r}; expected one of {sorted(_READ_FORMATS)}",
+            f"unknown mesh format {file_path.suffix!r}; expected one of {known}",
             path=file_path,
         )
     if not file_path.is_file():

@@ -23,6 +23,7 @@ from warptissue.mesh import (
     boundary_faces,
     fill_surface_file,
     read_mesh,
+    refine_near_sites,
     to_tet10,
 )
 
@@ -35,17 +36,22 @@ SITE_TOLERANCE_SHARE = 0.01
 OPPOSITE = "opposite"
 """``[boundary] support``: the surface opposite the site (the far half along the probe)."""
 
-_CACHE: dict[tuple[str, int, float, str], TetMesh] = {}
+_CACHE: dict[tuple[str, int, float, str, tuple], TetMesh] = {}
 
 
-def specimen_mesh(path: Path, *, unit: str, element: str) -> TetMesh:
+def specimen_mesh(
+    path: Path, *, unit: str, element: str, zones: tuple[tuple[float, ...], ...] = ()
+) -> TetMesh:
     """The specimen's mesh in metres, TET4 promoted to TET10 where ``element`` asks.
 
     Args:
-        path: A volume mesh (.vtu, .msh, .inp), or a closed surface (.stl, .obj, .ply)
-            that TetGen fills with quality tets (:func:`warptissue.mesh.fill_surface_file`).
+        path: A volume mesh (.vtu, .msh, .inp, or a USD TetMesh asset), or a closed surface
+            (.stl, .obj, .ply) that TetGen fills with quality tets
+            (:func:`warptissue.mesh.fill_surface_file`).
         unit: The file's length unit, a key of :data:`MESH_UNITS`.
         element: ``"TET10"`` or ``"TET4"`` (a TET10 file is not demoted).
+        zones: Refine around sites: ``(x, y, z, zone radius, size)`` each, m
+            (:func:`warptissue.mesh.refine_near_sites`; :attr:`Specimen.refine_zones`).
 
     Returns:
         The mesh (shared: do not modify it), with node set ``"surface"``.
@@ -55,7 +61,8 @@ def specimen_mesh(path: Path, *, unit: str, element: str) -> TetMesh:
             wrong (``key`` names ``specimen.unit``).
     """
     unit_m = MESH_UNITS[unit]
-    key = (str(path.resolve()), path.stat().st_mtime_ns if path.is_file() else 0, unit_m, element)
+    stamp = path.stat().st_mtime_ns if path.is_file() else 0
+    key = (str(path.resolve()), stamp, unit_m, element, tuple(zones))
     if key in _CACHE:
         return _CACHE[key]
     if path.suffix.lower() in SURFACE_SUFFIXES:
@@ -71,6 +78,11 @@ def specimen_mesh(path: Path, *, unit: str, element: str) -> TetMesh:
             key="specimen.unit",
             value=unit,
         )
+    if zones:
+        table = np.asarray(zones, dtype=np.float64)
+        mesh = refine_near_sites(
+            mesh, sites_m=table[:, :3], zone_radii_m=table[:, 3], sizes_m=table[:, 4]
+        )
     if element == "TET10" and mesh.nodes_per_tet == 4:
         mesh = to_tet10(mesh)
     faces = boundary_faces(mesh.tets[:, :4])
@@ -82,7 +94,8 @@ def specimen_mesh(path: Path, *, unit: str, element: str) -> TetMesh:
         both = member[corners].all(axis=2)
         surface = np.union1d(surface, mesh.tets[:, 4:][both])
     mesh.node_sets["surface"] = surface.astype(np.int32)
-    _CACHE.clear()  # one organ at a time: a batch of studies of one organ shares it
+    if len(_CACHE) >= 4:  # an organ as read and refined; a batch of one organ's studies
+        _CACHE.pop(next(iter(_CACHE)))
     _CACHE[key] = mesh
     return mesh
 

@@ -3,6 +3,7 @@ the file, line and key path (:func:`load_study`, :func:`study_from_dict`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 import tomllib
@@ -222,6 +223,21 @@ def _read_mesh_specimen(
     name = table.string("mesh")
     unit = table.string("unit", default="m", choices=tuple(MESH_UNITS))
     element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
+    if table.has("force_accuracy") and table.has("size_near_m"):
+        raise table.error(
+            "size_near_m",
+            "give force_accuracy (the size follows from it) or size_near_m, not both",
+            table.raw("size_near_m"),
+        )
+    accuracy = size = None
+    if table.has("force_accuracy"):
+        accuracy = table.number("force_accuracy")
+        try:
+            size_near_for_force_accuracy(accuracy, probe_radius_m=1.0, mesher="delaunay")
+        except InputError as exc:
+            raise table.error("force_accuracy", exc.message, accuracy) from exc
+    elif table.has("size_near_m"):
+        size = table.number("size_near_m")
     table.finish()
     path = (base / name) if not Path(name).is_absolute() else Path(name)
     if site_m is None:
@@ -256,8 +272,53 @@ def _read_mesh_specimen(
         mesh_file=name,
         mesh_path=path,
         unit=unit,
+        force_accuracy=accuracy,
     )
+    if size is not None:
+        specimen = dataclasses.replace(specimen, size_near_m=size, refine_zones=((),))
     return specimen, mesh, site, along
+
+
+def _refined(specimen: Specimen, study: Study, source: Source) -> Specimen:
+    """A mesh specimen with ``force_accuracy`` or ``size_near_m``: the zone around every
+    probe's site (the study's and its records') refined to the size rule of the block's
+    (:func:`warptissue.study.mesh_probe_radius`, and
+    :func:`warptissue.mesh.size_near_for_force_accuracy` for TetGen's tets at that radius)."""
+    if specimen.force_accuracy is None and not specimen.refine_zones:
+        return specimen
+    mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
+    probes = [(study.indenter, study.site_m, study.direction)]
+    probes += [study.probe_of(record) for record in study.data if record.placed]
+    zones = []
+    for probe in dict.fromkeys(probes):
+        indenter, site_m, direction = probe
+        site, along = probe_placement(mesh, site_m, direction, radius_m=indenter.radius_m)
+        records = [r for r in study.data if study.probe_of(r) == probe]
+        depths = [float(np.max(record.displacement_m)) for record in records]
+        if probe == probes[0]:
+            depths.append(max(study.protocol.depths_m, default=0.0))
+        deepest = max(depths, default=0.0)
+        zone = mesh_probe_radius(indenter, extent_along(mesh, site, along), depth_m=deepest)
+        if specimen.force_accuracy is None:
+            size = specimen.size_near_m
+        else:
+            size = size_near_for_force_accuracy(
+                specimen.force_accuracy,
+                probe_radius_m=zone,
+                mesher="delaunay",
+                element=specimen.element,
+            )
+        zones.append((*map(float, site), float(zone), float(size)))
+    try:
+        specimen_mesh(
+            specimen.mesh_path, unit=specimen.unit, element=specimen.element, zones=tuple(zones)
+        )
+    except InputError as exc:
+        key = "specimen.force_accuracy" if specimen.force_accuracy else "specimen.size_near_m"
+        raise source.error(key, exc.message, exc.value) from exc
+    return dataclasses.replace(
+        specimen, refine_zones=tuple(zones), size_near_m=min(zone[4] for zone in zones)
+    )
 
 
 PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
@@ -748,7 +809,7 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         if message is not None:
             where = source.path if source.path is not None else "the study"
             warnings.warn(f"{where}: {message}", UserWarning, stacklevel=2)
-    return Study(
+    study = Study(
         name=name,
         description=description,
         specimen=specimen,
@@ -764,6 +825,9 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         site_m=site_m,
         direction=direction,
     )
+    if organ is not None:
+        study = dataclasses.replace(study, specimen=_refined(specimen, study, source))
+    return study
 
 
 def _check_placed_records(

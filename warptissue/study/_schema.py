@@ -93,6 +93,9 @@ class Specimen:
             shortest and longest edges.
         mesh_path: The mesh file, resolved.
         unit: The mesh file's length unit (``"m"``, ``"mm"``, ...).
+        refine_zones: A mesh specimen refined around its probes' sites (``force_accuracy``
+            or ``size_near_m`` given with ``mesh``): per site ``(x, y, z, zone radius,
+            size)``, m (:func:`warptissue.mesh.refine_near_sites`); empty: the file's mesh.
     """
 
     shape: str
@@ -109,6 +112,7 @@ class Specimen:
     mesh_file: str | None = None
     mesh_path: Path | None = None
     unit: str = "m"
+    refine_zones: tuple[tuple[float, float, float, float, float], ...] = ()
 
     @property
     def half_size_m(self) -> float:
@@ -122,7 +126,12 @@ class Specimen:
         """The ``[specimen]`` table, with every default filled in; a near size chosen for a
         force accuracy is given as ``force_accuracy`` (which loads as the same size)."""
         if self.shape == "mesh":
-            return {"mesh": self.mesh_file, "unit": self.unit, "element": self.element}
+            table = {"mesh": self.mesh_file, "unit": self.unit, "element": self.element}
+            if self.force_accuracy is not None:
+                table["force_accuracy"] = self.force_accuracy
+            elif self.refine_zones:
+                table["size_near_m"] = self.size_near_m
+            return table
         table: dict[str, Any] = {"shape": self.shape}
         if self.width_m is not None:
             table["width_m"] = self.width_m

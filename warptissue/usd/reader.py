@@ -6,18 +6,16 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pxr import Tf, Usd, UsdGeom, UsdShade
+from pxr import Usd, UsdGeom, UsdShade
 
-from warptissue.errors import InputError, MeshError
-from warptissue.mesh import TetMesh
+from warptissue._stage import open_stage
+from warptissue.errors import InputError
+from warptissue.mesh import TetMesh, read_mesh
 from warptissue.usd.schema import record_from_attributes
 from warptissue.usd.writer import (
-    FACE_SET_FAMILY,
     INDENTER,
     MATERIAL,
     MATERIAL_FIELD_PRIMVARS,
-    NODE_SET_FAMILY,
-    REGION_FAMILY,
 )
 
 __all__ = [
@@ -27,21 +25,6 @@ __all__ = [
     "read_probe_curve_usd",
     "read_tetmesh_usd",
 ]
-
-
-def open_stage(path: str | Path) -> Any:
-    """Open a USD stage with an error naming the file when it cannot be read."""
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("no such USD file", path=path)
-    try:
-        stage = Usd.Stage.Open(str(path))
-    except Tf.ErrorException as exc:
-        raise InputError(f"cannot open USD stage: {str(exc).strip()}", path=path) from None
-    if stage is None:
-        raise InputError("cannot open USD stage", path=path)
-    return stage
 
 
 def _find_tetmesh(stage: Any, path: Path, prim_path: str | None) -> Any:
@@ -56,11 +39,6 @@ def _find_tetmesh(stage: Any, path: Path, prim_path: str | None) -> Any:
     raise InputError("the stage holds no UsdGeom.TetMesh", path=path)
 
 
-def _subset_name(subset: Any) -> str:
-    name = subset.GetPrim().GetCustomDataByKey("warptissue:name")
-    return str(name) if name is not None else subset.GetPrim().GetName()
-
-
 def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMesh:
     """Read a tetrahedral mesh (rest shape) from a USD file.
 
@@ -73,52 +51,10 @@ def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMe
         USD), connectivity (left-handed meshes are reordered to positive orientation), node
         sets from ``nodeSet`` point subsets, material regions from ``materialRegion``
         tetrahedron subsets, and face sets from the ``faceSet`` subsets of the sibling surface
-        Mesh written by :func:`warptissue.usd.write_simulation_usd`.
+        Mesh written by :func:`warptissue.usd.write_simulation_usd`. The reading is
+        :func:`warptissue.mesh.read_mesh`'s for a USD file (a study's ``[specimen] mesh``).
     """
-
-    path = Path(path)
-    stage = open_stage(path)
-    prim = _find_tetmesh(stage, path, prim_path)
-    tetmesh = UsdGeom.TetMesh(prim)
-    points = tetmesh.GetPointsAttr().Get(Usd.TimeCode.Default())
-    tets = tetmesh.GetTetVertexIndicesAttr().Get()
-    if points is None or tets is None:
-        raise InputError(f"TetMesh {prim.GetPath()} lacks points or tetVertexIndices", path=path)
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    tets = np.asarray(tets, dtype=np.int32).reshape(-1, 4).copy()
-    if tetmesh.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
-        tets[:, [1, 2]] = tets[:, [2, 1]]
-    node_sets = {
-        _subset_name(subset): np.asarray(subset.GetIndicesAttr().Get(), dtype=np.int32)
-        for subset in UsdGeom.Subset.GetGeomSubsets(tetmesh, UsdGeom.Tokens.point, NODE_SET_FAMILY)
-    }
-    tet_regions = np.zeros(len(tets), dtype=np.int32)
-    for subset in UsdGeom.Subset.GetGeomSubsets(tetmesh, UsdGeom.Tokens.tetrahedron, REGION_FAMILY):
-        name = _subset_name(subset)
-        try:
-            region = int(name)
-        except ValueError:
-            raise MeshError(f"material region subset {name!r} is not an integer id") from None
-        tet_regions[np.asarray(subset.GetIndicesAttr().Get(), dtype=np.int64)] = region
-    face_sets = {}
-    for sibling in prim.GetParent().GetChildren():
-        volume_points = sibling.GetAttribute("tissue:volumePointIndices")
-        if not (sibling.IsA(UsdGeom.Mesh) and volume_points):
-            continue
-        mesh = UsdGeom.Mesh(sibling)
-        triangles = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(), dtype=np.int32).reshape(-1, 3)
-        triangles = np.asarray(volume_points.Get(), dtype=np.int32)[triangles]
-        for subset in UsdGeom.Subset.GetGeomSubsets(mesh, UsdGeom.Tokens.face, FACE_SET_FAMILY):
-            face_sets[_subset_name(subset)] = triangles[
-                np.asarray(subset.GetIndicesAttr().Get(), dtype=np.int64)
-            ]
-    return TetMesh(
-        points=points,
-        tets=tets,
-        node_sets=node_sets,
-        face_sets=face_sets,
-        tet_regions=tet_regions,
-    )
+    return read_mesh(path, prim_path=prim_path, reorient=False)
 
 
 def read_material_field_usd(

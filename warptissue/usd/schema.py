@@ -20,13 +20,12 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pxr import Plug
 
 from warptissue import materials
+from warptissue._stage import register_schema_plugin
 from warptissue.errors import InputError
 
 __all__ = [
@@ -54,8 +53,6 @@ VOLUME_DEFORMABLE_SIM_API = "PhysicsVolumeDeformableSimAPI"
 DEFORMABLE_BODY_API = "PhysicsDeformableBodyAPI"
 """Physics-deformables proposal: the deformable body that owns the simulation mesh."""
 
-PLUGIN_DIRECTORY = Path(__file__).resolve().parent / "plugin"
-"""Folder holding ``plugInfo.json`` and ``generatedSchema.usda``."""
 
 # ``warptissue.materials.Material.to_dict()`` is flat, with units in the keys: ``C10_Pa``,
 # ``C01_Pa``, ``C20_Pa``, ..., ``mu1_Pa``, ``alpha1``, ..., ``bulk_modulus_Pa``. The tuple form
@@ -75,8 +72,6 @@ _COEFFICIENT_NAME = re.compile(r"^C([0-9])([0-9])$")
 _OGDEN_KEY = re.compile(r"^(mu|alpha)([1-9][0-9]*)(_Pa)?$")
 _TUPLE_KEYS: dict[str, str] = {"mu_Pa": "mu", "alpha": "alpha"}
 
-_registered = False
-
 
 def applied_schema_names(prim: Any) -> list[str]:
     """Every API schema name applied to a prim, registered or not.
@@ -86,20 +81,6 @@ def applied_schema_names(prim: Any) -> list[str]:
     """
     list_op = prim.GetMetadata("apiSchemas")
     return list(list_op.ApplyOperations([])) if list_op else []
-
-
-def register_schema_plugin() -> None:
-    """Register the ``TissueMaterialAPI`` plugin with USD (once per process).
-
-    Registration has to happen before USD's schema registry is first used, which is why
-    :mod:`warptissue.usd` calls this on import. Later calls do nothing.
-    """
-    global _registered
-    if _registered:
-        return
-
-    Plug.Registry().RegisterPlugins([PLUGIN_DIRECTORY.as_posix()])
-    _registered = True
 
 
 @dataclass(frozen=True)

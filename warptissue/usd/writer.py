@@ -34,7 +34,7 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 from warptissue.errors import InputError, MeshError
 from warptissue.indenter import Indenter
 from warptissue.io import atomic_path, software_versions, to_jsonable
-from warptissue.mesh import TetMesh
+from warptissue.mesh import FACE_SET_FAMILY, NODE_SET_FAMILY, REGION_FAMILY, TetMesh
 from warptissue.usd.schema import (
     DEFORMABLE_BODY_API,
     TISSUE_MATERIAL_API,
@@ -45,22 +45,13 @@ from warptissue.usd.schema import (
 
 __all__ = [
     "CONTACT_RESULTS",
-    "FACE_SET_FAMILY",
     "MATERIAL_FIELD_PRIMVARS",
-    "NODE_SET_FAMILY",
-    "REGION_FAMILY",
     "UsdScenePaths",
     "material_field_problems",
     "write_material_usd",
     "write_simulation_usd",
 ]
 
-NODE_SET_FAMILY = "nodeSet"
-"""GeomSubset family of the TetMesh's boundary node sets (elementType point)."""
-REGION_FAMILY = "materialRegion"
-"""GeomSubset family of the TetMesh's material regions (elementType tetrahedron, partition)."""
-FACE_SET_FAMILY = "faceSet"
-"""GeomSubset family of the surface Mesh's boundary face sets (elementType face)."""
 MATERIAL_FIELD_PRIMVARS = {
     "youngs_modulus_Pa": ("tissue:youngsModulus", "Pa"),
     "poissons_ratio": ("tissue:poissonsRatio", "1"),
