@@ -240,3 +240,47 @@ def test_unit_scaling(tmp_path):
     np.testing.assert_allclose(mesh.points[mesh.tets[0, :4]], CORNERS * 1e-3)
     with pytest.raises(InputError, match="unit_m"):
         read_mesh(path, unit_m=0.0)
+
+
+def test_a_usd_tetmesh_asset_reads_as_a_mesh(tmp_path):
+    """A scene written by warptissue.usd reads back through read_mesh: points (float32 in
+    USD), tets, the surface node sets; in millimetres with unit_m; a prim that is not a
+    TetMesh, or a prim_path for another format, is refused."""
+    from warptissue.usd import write_simulation_usd
+
+    grid = np.linspace(0.0, 0.004, 3)
+    mesh = block_mesh(grid, grid, grid)
+    paths = write_simulation_usd(tmp_path / "cube.usda", mesh)
+    for path in (paths.root, paths.asset):
+        read = read_mesh(path)
+        np.testing.assert_allclose(read.points, mesh.points, atol=1e-9)
+        np.testing.assert_array_equal(read.tets, mesh.tets)
+        np.testing.assert_array_equal(np.sort(read.node_sets["zmax"]), mesh.node_sets["zmax"])
+    in_mm = read_mesh(paths.asset, unit_m=1e-3)
+    np.testing.assert_allclose(in_mm.points, mesh.points * 1e-3, atol=1e-12)
+    with pytest.raises(InputError, match="no TetMesh prim at /World"):
+        read_mesh(paths.asset, prim_path="/World")
+    write_mesh(tmp_path / "cube.vtu", mesh)
+    with pytest.raises(InputError, match="prim_path is for a USD file"):
+        read_mesh(tmp_path / "cube.vtu", prim_path="/World/Specimen/Volume")
+
+
+def test_reading_a_usd_mesh_first_keeps_the_tissue_schema_registered(tmp_path):
+    """USD builds its schema registry once: a USD mesh read (a study's specimen) before
+    warptissue.usd is imported must not leave TissueMaterialAPI unknown."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    scene = Path(__file__).resolve().parents[1] / "scenes" / "liver_organ.asset.usda"
+    code = (
+        "from warptissue.mesh import read_mesh\n"
+        f"read_mesh({str(scene)!r})\n"
+        "import warptissue.usd\n"
+        "from pxr import Usd\n"
+        "print(Usd.SchemaRegistry().FindAppliedAPIPrimDefinition('TissueMaterialAPI') is not None)"
+    )
+    shown = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path, check=True
+    )
+    assert shown.stdout.strip().splitlines()[-1] == "True"

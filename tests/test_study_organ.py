@@ -4,13 +4,14 @@
 from __future__ import annotations
 
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
-from warptissue.mesh import TetMesh, write_mesh
+from warptissue.mesh import TetMesh, boundary_faces, check_mesh, write_mesh
 from warptissue.simulate import build_mesh, build_problem, record_problems
 from warptissue.study import load_study, study_from_dict
 
@@ -342,3 +343,70 @@ def test_a_record_s_own_site_needs_a_mesh_specimen(tmp_path):
     (tmp_path / "s.toml").write_text(text, encoding="utf-8")
     with pytest.raises(InputError, match=r"data\[0\].site_m: a record's own probe needs"):
         load_study(tmp_path / "s.toml")
+
+
+ORGAN = Path(__file__).resolve().parents[1] / "scenes" / "liver_organ.asset.usda"
+
+
+def _liver_study(folder, specimen_extra: str = "") -> Path:
+    text = f"""\
+schema_version = 1
+name = "liver"
+
+[specimen]
+mesh = "{ORGAN.as_posix()}"
+{specimen_extra}
+[indenter]
+kind = "sphere"
+radius_m = 0.008
+site_m = [0.0, 0.0, 0.045]
+
+[protocol]
+max_depth_m = 0.002
+steps = 2
+
+[material]
+model = "neo_hookean"
+C10_Pa = 287.5
+bulk_modulus_Pa = 575000.0
+
+[boundary]
+support = {{ box = [[-1.0, -1.0, -1.0], [1.0, 1.0, -0.035]] }}
+"""
+    path = folder / "liver.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_a_usd_tetmesh_asset_is_a_specimen(tmp_path):
+    """The liver organ's USD asset as [specimen] mesh: its TetMesh read (TET4, promoted to
+    TET10), the site on its top, the support a box under it."""
+    study = load_study(_liver_study(tmp_path))
+    assert study.specimen.shape == "mesh" and not study.specimen.refine_zones
+    assert study.specimen.thickness_m == pytest.approx(0.113, rel=0.02)  # along the normal
+    mesh = build_mesh(study)
+    assert mesh.nodes_per_tet == 10 and mesh.tet_count == 10_733
+    assert np.all(mesh.points[mesh.node_sets["bottom"], 2] <= -0.035)
+
+
+def test_size_near_m_refines_the_organ_around_the_site(tmp_path):
+    """size_near_m with a mesh: the surface within the sphere's zone (1.5 sqrt(R d) = 6 mm)
+    is no coarser than it; the organ's volume is kept; the key is written back."""
+    coarse = build_mesh(load_study(_liver_study(tmp_path)))
+    study = load_study(_liver_study(tmp_path, "size_near_m = 0.003\n"))
+    (zone,) = study.specimen.refine_zones
+    assert zone[3] == pytest.approx(1.5 * np.sqrt(0.008 * 0.002)) and zone[4] == 0.003
+    assert study.to_dict()["specimen"]["size_near_m"] == 0.003
+    mesh = build_mesh(study)
+    site = np.array(zone[:3])
+    faces = boundary_faces(mesh.tets[:, :4])
+    edges = np.sort(faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
+    ends = mesh.points[np.unique(edges, axis=0)]
+    near = np.linalg.norm(ends.mean(axis=1) - site, axis=1) < zone[3]
+    assert np.linalg.norm(ends[near, 1] - ends[near, 0], axis=1).max() <= 0.003 + 1e-9
+    assert np.count_nonzero(near) > 30
+    assert check_mesh(mesh).total_volume_m3 == pytest.approx(
+        check_mesh(coarse).total_volume_m3, rel=1e-6
+    )
+    with pytest.raises(InputError, match="force_accuracy .* or size_near_m, not both"):
+        load_study(_liver_study(tmp_path, "size_near_m = 0.003\nforce_accuracy = 0.05\n"))
