@@ -225,7 +225,8 @@ def _with_support(text: str, support: str) -> str:
 
 def test_a_box_support_holds_the_nodes_inside_it(block_files):
     """A box around the base z = 0 holds exactly the file's "bottom" node set; a box that
-    holds no node, or a malformed one, is refused in one line naming boundary.support."""
+    holds no node or only the nodes of one edge (the body could turn about it), or a
+    malformed one, is refused in one line naming boundary.support."""
     folder, _, _ = block_files
     path = folder / "box.toml"
     text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004])
@@ -241,6 +242,7 @@ def test_a_box_support_holds_the_nodes_inside_it(block_files):
     )
     for support, message in (
         ("{ box = [[1.0, 1.0, 1.0], [2.0, 2.0, 2.0]] }", "holds no node"),
+        ("{ box = [[-1.0, -1.0, -1e-9], [-0.0039, 1.0, 1e-9]] }", "on one line"),
         ("{ box = [[1.0, 1.0, 1.0], [0.0, 2.0, 2.0]] }", "each min below its max"),
         ("{ region = 'far' }", "each min below its max"),
     ):

@@ -169,6 +169,15 @@ def support_nodes(
             key="boundary.support",
             value=support,
         )
+    held = mesh.points[nodes] - mesh.points[nodes].mean(axis=0)
+    spread = np.linalg.svd(held, compute_uv=False) if nodes.size > 1 else np.zeros(3)
+    if nodes.size < 3 or spread[1] <= 1e-9 * max(float(spread[0]), 1e-300):
+        raise InputError(
+            f"holds {nodes.size} node(s) on one line: the body could still turn about it "
+            "(rigid-body modes); hold a patch of its surface",
+            key="boundary.support",
+            value=support,
+        )
     return nodes.astype(np.int32)
 
 
