@@ -227,4 +227,3 @@ def test_liver_organ_sites_recovers_c10_and_writes_a_valid_usd(tmp_path):
     assert summary["usd_findings"] == [], out
     assert all(value > 0.99 for value in summary["r_squared"]), out
     assert (tmp_path / "organ" / "liver_organ_sites.usda").is_file()
-
