@@ -9,8 +9,12 @@ docstring and in the docs pages that quote them.
 
 from __future__ import annotations
 
+import importlib.util
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -226,4 +230,15 @@ def test_liver_organ_sites_recovers_c10_and_writes_a_valid_usd(tmp_path):
     assert abs(summary["c10_Pa"] / 287.5 - 1.0) < 0.02, out
     assert summary["usd_findings"] == [], out
     assert all(value > 0.99 for value in summary["r_squared"]), out
-    assert (tmp_path / "organ" / "liver_organ_sites.usda").is_file()
+    scene = tmp_path / "organ" / "liver_organ_sites.usda"
+    assert scene.is_file()
+    newton = os.environ.get("WARPTISSUE_NEWTON_PYTHON")
+    if newton is None and importlib.util.find_spec("newton") is not None:
+        newton = sys.executable
+    if newton is not None:  # NVIDIA Newton loads it as one soft body (tests/test_usd_newton.py)
+        check = ROOT / "scripts" / "tools" / "newton_import_check.py"
+        shown = subprocess.run(
+            [newton, str(check), "--scene", str(scene)], capture_output=True, text=True, cwd=ROOT
+        )
+        report = json.loads(shown.stdout.strip().splitlines()[-1])
+        assert report["ok"] and all(report["checks"].values()), report
