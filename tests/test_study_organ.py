@@ -412,3 +412,45 @@ def test_size_near_m_refines_the_organ_around_the_site(tmp_path):
     )
     with pytest.raises(InputError, match="force_accuracy .* or size_near_m, not both"):
         load_study(_liver_study(tmp_path, "size_near_m = 0.003\nforce_accuracy = 0.05\n"))
+
+
+def _wedge_study(folder, edge, mesh_file: str = "block.vtu") -> Path:
+    text = _organ_study(mesh_file, site=[0.0, 0.0, 0.004]).replace(
+        'kind = "flat_punch"\nradius_m = 0.001\ncontact = "bonded"\n',
+        'kind = "wedge"\nradius_m = 0.0005\nangle_deg = 30.0\n'
+        + ("" if edge is None else f"edge = {_toml_vector(edge)}\n"),
+    )
+    path = folder / "wedge.toml"
+    path.write_text(text.replace("max_depth_m = 0.0002", "max_depth_m = 0.0001"))
+    return path
+
+
+@pytest.mark.slow
+def test_a_wedge_s_edge_turns_with_the_study_s_edge_key(block_files):
+    """[indenter] edge: the block turned a quarter about z, indented by a wedge whose edge
+    is turned with it (-x), gives the unturned block's force with the default edge (y) to
+    1e-6; the frame's second axis is the edge given; an edge along the direction, or on
+    another indenter, is one line naming indenter.edge."""
+    folder, block, _ = block_files
+    mesh = build_mesh(block)
+    quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    write_mesh(
+        folder / "quarter.vtu",
+        TetMesh(mesh.points @ quarter.T, mesh.tets, node_sets=dict(mesh.node_sets)),
+    )
+    along_y = load_study(_wedge_study(folder, None))
+    reference = _force_N(along_y)
+    turned = load_study(_wedge_study(folder, quarter @ [0.0, 1.0, 0.0], "quarter.vtu"))
+    assert turned.edge == (-1.0, 0.0, 0.0)
+    assert turned.to_dict()["indenter"]["edge"] == [-1.0, 0.0, 0.0]
+    problem = build_problem(turned, build_mesh(turned))
+    np.testing.assert_allclose(problem.frame.axes[1], [-1.0, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(_force_N(turned), reference, rtol=1e-6)
+    with pytest.raises(InputError, match="indenter.edge: the edge must not be along"):
+        load_study(_wedge_study(folder, [0.0, 0.0, 1.0]))
+    sphere = _organ_study("block.vtu", site=[0.0, 0.0, 0.004]).replace(
+        'contact = "bonded"\n', 'contact = "bonded"\nedge = [1.0, 0.0, 0.0]\n'
+    )
+    (folder / "edge.toml").write_text(sphere)
+    with pytest.raises(InputError, match=r"indenter.edge: is the edge of a wedge"):
+        load_study(folder / "edge.toml")

@@ -278,7 +278,7 @@ def build_problem(study: Study, mesh: Any) -> Any:
 
     placement = {}
     if study.site_m is not None:
-        placement = {"site_m": study.site_m, "direction": study.direction}
+        placement = {"site_m": study.site_m, "direction": study.direction, "edge": study.edge}
     return IndentationProblem(
         mesh,
         study.material,

@@ -18,6 +18,7 @@ from warptissue.errors import InputError
 from warptissue.fem.assembly import FORMULATIONS
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
 from warptissue.fem.newton import NewtonOptions
+from warptissue.fem.probe import probe_frame
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
 from warptissue.loading import ramp_hold, sine
 from warptissue.materials import material_from_dict, prony_term
@@ -166,11 +167,18 @@ def _size_near_for_accuracy(
         raise table.error(key, exc.message, table.raw(key, None)) from exc
 
 
-def _read_indenter(table: Table) -> tuple[Indenter, tuple | None, tuple | None]:
-    """The ``[indenter]`` table: the probe, and ``site_m`` and ``direction`` (None where
-    not given)."""
+def _read_indenter(table: Table) -> tuple[Indenter, tuple | None, tuple | None, tuple | None]:
+    """The ``[indenter]`` table: the probe, and ``site_m``, ``direction`` and a wedge's
+    ``edge`` (None where not given)."""
     placement = _placement(table)
-    return _read_probe(table), *placement
+    edge = None
+    if table.has("edge"):
+        edge = table.number_list("edge")
+        if len(edge) != 3 or not np.any(edge):
+            raise table.error("edge", "must be three numbers (x, y, z), not all zero", list(edge))
+        if table.raw("kind", None) != "wedge":
+            raise table.error("edge", 'is the edge of a wedge (kind = "wedge")', list(edge))
+    return _read_probe(table), *placement, edge
 
 
 def _placement(table: Table) -> tuple[tuple | None, tuple | None]:
@@ -744,7 +752,7 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
             "name", "must be a plain name (it names the default output folder runs/<name>)", name
         )
     description = root.string("description", default="")
-    indenter, site_m, direction = _read_indenter(root.table("indenter"))
+    indenter, site_m, direction, edge = _read_indenter(root.table("indenter"))
     # The depths come before the rest of the specimen: they size a sphere's refined zone.
     specimen_table = root.table("specimen")
     base = source.path.parent if source.path is not None else Path.cwd()
@@ -755,7 +763,7 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         )
         thickness_m = specimen.thickness_m
     else:
-        for key, value in (("site_m", site_m), ("direction", direction)):
+        for key, value in (("site_m", site_m), ("direction", direction), ("edge", edge)):
             if value is not None:
                 raise source.error(
                     f"indenter.{key}",
@@ -824,7 +832,14 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
         fit=fit,
         site_m=site_m,
         direction=direction,
+        edge=edge,
     )
+    if organ is not None and edge is not None:
+        _, site, along = organ
+        try:
+            probe_frame(origin_m=site, direction=along, edge=edge)
+        except InputError as exc:
+            raise source.error("indenter.edge", exc.message, list(edge)) from None
     if organ is not None:
         study = dataclasses.replace(study, specimen=_refined(specimen, study, source))
     return study

@@ -320,6 +320,9 @@ class Study:
             surface), (3,), m; None for a block or a disc (the top centre).
         direction: ``[indenter] direction``, the probe's direction into the body (3,); None:
             the inward normal over the probe's footprint (a mesh specimen) or -z.
+        edge: ``[indenter] edge``, a wedge's edge direction on a mesh specimen (3,; its part
+            perpendicular to the direction); None: the frame's default (y for a probe
+            along -z).
     """
 
     name: str
@@ -336,6 +339,7 @@ class Study:
     fit: FitSettings | None = None
     site_m: tuple[float, ...] | None = None
     direction: tuple[float, ...] | None = None
+    edge: tuple[float, ...] | None = None
 
     def probe_of(
         self, record: DataRecord
@@ -380,6 +384,7 @@ class Study:
                 **self.indenter.to_dict(),
                 **({} if self.site_m is None else {"site_m": list(self.site_m)}),
                 **({} if self.direction is None else {"direction": list(self.direction)}),
+                **({} if self.edge is None else {"edge": list(self.edge)}),
             },
             "protocol": self.protocol.to_dict(relative_to=relative_to),
             "material": dict(self.material.to_dict()),
