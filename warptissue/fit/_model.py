@@ -253,10 +253,9 @@ class ForwardModel:
     def _problem_at(self, g: int, material: Any) -> Any:
         return dataclasses.replace(self.problems[g], material=material)
 
-    def _grid_problems(self, count: int) -> list[int]:
-        """The problem of each of ``count`` load paths: one per problem (an elastic
-        material's), or one per record (a viscoelastic material's)."""
-        del count  # the paths follow the material: one per problem or one per record
+    def _path_problems(self) -> list[int]:
+        """The problem of each load path: one path per problem (an elastic material's), or
+        one per record (a viscoelastic material's)."""
         return list(self.problem_of if self.viscoelastic else range(len(self.problems)))
 
     def _run(
@@ -301,7 +300,7 @@ class ForwardModel:
         studies hands them to its :class:`~warptissue.fit._forward.FitMeeting`, which
         solves them with the other fits' runs. The paths are one per problem (an elastic
         material) or one per record (a viscoelastic one)."""
-        which = self._grid_problems(len(grids))
+        which = self._path_problems()
         problems = [self._problem_at(g, material) for g in which]
         if self.meeting is not None:
             meeting, fit = self.meeting

@@ -282,7 +282,7 @@ def _read_mesh_specimen(
         unit=unit,
         force_accuracy=accuracy,
     )
-    if size is not None:
+    if size is not None:  # zones to come (_refined, once the records' sites are known)
         specimen = dataclasses.replace(specimen, size_near_m=size, refine_zones=((),))
     return specimen, mesh, site, along
 
