@@ -233,3 +233,34 @@ def test_cli_out_must_be_usda_and_source_must_exist(simulate_folder, tmp_path, c
     assert not list(tmp_path.glob("x.*"))
     assert main(["export", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "y.usda")]) == 2
     assert "no such simulate output folder or study file" in capsys.readouterr().err
+
+
+def test_a_probe_at_a_site_is_drawn_turned_to_its_direction(simulate_folder, tmp_path):
+    """result.json's ``probe`` (a probe at a site, issue 34): the indenter's Xform stands at
+    the site, its z turned to the frame's e3 (= -direction, the shape above the contact),
+    and step k moves it by depth_k along the direction; the scene validates."""
+    from pxr import Gf, Usd, UsdGeom
+
+    from warptissue.fem.probe import probe_frame
+
+    folder, *_ = simulate_folder
+    frame = probe_frame(origin_m=[0.005, 0.004, 0.005], direction=[0.3, -0.2, -1.0])
+    summary = json.loads((folder / "result.json").read_text())
+    summary["probe"] = {
+        "site_m": frame.origin_m.tolist(),
+        "direction": frame.direction.tolist(),
+        "axes": frame.axes.tolist(),
+    }
+    (folder / "result.json").write_text(json.dumps(summary))
+    paths = export_result_dir(folder, tmp_path / "turned.usda")
+    assert validate_stage(paths.root) == []
+    stage = Usd.Stage.Open(str(paths.root))
+    indenter = UsdGeom.Xformable(stage.GetPrimAtPath("/World/Indenter"))
+    for time_code, depth in enumerate([0.0, 1e-4, 2e-4, 3e-4]):
+        matrix = indenter.ComputeLocalToWorldTransform(time_code)
+        position = np.array(matrix.ExtractTranslation())
+        np.testing.assert_allclose(position, frame.origin_m + depth * frame.direction, atol=1e-12)
+        up = np.array(matrix.TransformDir(Gf.Vec3d(0.0, 0.0, 1.0)))
+        np.testing.assert_allclose(up, -frame.direction, atol=1e-12)
+        edge = np.array(matrix.TransformDir(Gf.Vec3d(0.0, 1.0, 0.0)))
+        np.testing.assert_allclose(edge, frame.axes[1], atol=1e-12)

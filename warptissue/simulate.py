@@ -878,6 +878,17 @@ def write_study_outputs(
             **contact_curve,
         },
         **contact_summary,
+        **(
+            {}
+            if problem.frame is None
+            else {
+                "probe": {
+                    "site_m": problem.frame.origin_m.tolist(),
+                    "direction": problem.frame.direction.tolist(),
+                    "axes": problem.frame.axes.tolist(),
+                }
+            }
+        ),
         "steps_requested": study.protocol.step_count,
         "steps_converged": converged,
         "warnings": force_curve_warnings(depths, forces)

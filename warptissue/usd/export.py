@@ -15,6 +15,7 @@ writes a study's specimen and material without results. ``warptissue simulate --
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 from collections.abc import Mapping
@@ -143,7 +144,8 @@ def _read_indenter(spec: Any, path: Path) -> Indenter | None:
         raise InputError("study.indenter must be a table", path=path, value=spec)
     spec = dict(spec)
     site = spec.pop("site_m", None)
-    spec.pop("direction", None)  # the Xform is placed at the site; its axis stays z
+    spec.pop("direction", None)  # the frame is result.json's "probe" (export_result_dir)
+    spec.pop("edge", None)
     if site is not None:
         spec.update(x_m=site[0], y_m=site[1], z_m=site[2])
     try:
@@ -212,6 +214,16 @@ def export_result_dir(
             "message": summary.get("message"),
         }
     indenter = _read_indenter(study.get("indenter"), summary_path)
+    axes = None
+    probe = summary.get("probe")
+    if indenter is not None and isinstance(probe, Mapping):  # a probe at a site: its frame
+        site = np.asarray(probe.get("site_m"), dtype=np.float64)
+        axes = np.asarray(probe.get("axes"), dtype=np.float64)
+        if site.shape != (3,) or axes.shape != (3, 3):
+            raise InputError(
+                "result.json's probe has no site_m (3,) and axes (3, 3)", path=summary_path
+            )
+        indenter = dataclasses.replace(indenter, x_m=site[0], y_m=site[1], z_m=site[2])
     info: dict[str, Any] = {
         "result_dir": str(result_dir.resolve()),
         "study_file": str(study.get("path", "")),
@@ -228,6 +240,7 @@ def export_result_dir(
         provenance=info,
         density_kg_per_m3=density_kg_per_m3,
         indenter=indenter,
+        indenter_axes=axes,
     )
 
 

@@ -188,7 +188,11 @@ def _define_subsets(
 
 
 def _indenter_prims(
-    stage: Any, indenter: Indenter, top_z_m: float, footprint_m: np.ndarray | None = None
+    stage: Any,
+    indenter: Indenter,
+    top_z_m: float,
+    footprint_m: np.ndarray | None = None,
+    axes: np.ndarray | None = None,
 ) -> None:
     """The indenter's Xform at its contact point and its shape (``/World/Indenter/Shape``).
 
@@ -196,12 +200,19 @@ def _indenter_prims(
     a thin box over the specimen's footprint ``footprint_m`` (``[[x_min, y_min], [x_max,
     y_max]]`` of the modelled part, m; a quarter model's quarter), a twentieth of its larger
     side thick, resting on the top; a platen with ``length_m`` > 0 is a square of that side
-    centred on the probe.
+    centred on the probe. ``axes`` (the probe's frame at a site, rows ``e1, e2, e3`` with
+    ``e3 = -direction``; :class:`warptissue.fem.probe.ProbeFrame`) turns the Xform by an
+    orient op after its translate: the shape's z is the frame's e3, a wedge's edge (y) e2.
     """
 
     contact_z = top_z_m if indenter.z_m is None else indenter.z_m
     xform = UsdGeom.Xform.Define(stage, INDENTER)
     xform.AddTranslateOp().Set(Gf.Vec3d(indenter.x_m, indenter.y_m, contact_z))
+    if axes is not None:  # USD's row vectors: the rows are the local axes' images
+        rotation = Gf.Matrix3d(*np.asarray(axes, dtype=np.float64).ravel().tolist())
+        xform.AddOrientOp(UsdGeom.XformOp.PrecisionDouble).Set(
+            Gf.Matrix4d().SetRotate(rotation).ExtractRotationQuat()
+        )
     prim = xform.GetPrim()
     prim.CreateAttribute("tissue:indenter:kind", Sdf.ValueTypeNames.Token, custom=True).Set(
         indenter.kind
@@ -538,8 +549,13 @@ def _write_results(
     surface = UsdGeom.Mesh(stage.GetPrimAtPath(SURFACE))
     volume_api = UsdGeom.PrimvarsAPI(volume)
     indenter = stage.GetPrimAtPath(INDENTER)
-    translate = UsdGeom.Xformable(indenter).GetOrderedXformOps()[0]
+    operations = UsdGeom.Xformable(indenter).GetOrderedXformOps()
+    translate = operations[0]
     contact = translate.Get()
+    along = Gf.Vec3d(0.0, 0.0, -1.0)  # the probe's direction: -z, or the frame's -e3
+    if len(operations) > 1 and operations[1].GetOpType() == UsdGeom.XformOp.TypeOrient:
+        turn = Gf.Matrix4d().SetRotate(operations[1].Get())
+        along = -Gf.Vec3d(turn.GetRow3(2))
     points_attr, surface_points, displacement_attr = (
         volume.GetPointsAttr(),
         surface.GetPointsAttr(),
@@ -560,9 +576,7 @@ def _write_results(
     depths = np.concatenate([[0.0], arrays["depths_m"]])
     forces = np.concatenate([[0.0], arrays["reaction_force_N"]])
     for time_code, (depth, force) in enumerate(zip(depths, forces, strict=True)):
-        position = Gf.Vec3d(contact)
-        position[2] -= float(depth)
-        translate.Set(position, time_code)
+        translate.Set(Gf.Vec3d(contact) + float(depth) * along, time_code)
         indenter.GetAttribute("tissue:probe:depth").Set(float(depth), time_code)
         indenter.GetAttribute("tissue:probe:reactionForce").Set(float(force), time_code)
     if "time_s" in arrays:
@@ -693,6 +707,7 @@ def write_simulation_usd(
     density_kg_per_m3: float = 1000.0,
     indenter: Indenter | None = None,
     material_field: Mapping[str, Any] | None = None,
+    indenter_axes: np.ndarray | None = None,
 ) -> UsdScenePaths:
     """Write a specimen mesh, its material and a simulation result as a layered USD scene.
 
@@ -717,6 +732,9 @@ def write_simulation_usd(
             customData under ``warptissue``, with software versions added.
         density_kg_per_m3: Mass density written as ``physics:density``.
         indenter: The indenter to draw; None draws none.
+        indenter_axes: The probe's frame at a site, (3, 3), rows ``e1, e2, e3`` with
+            ``e3 = -direction`` (``IndentationProblem.frame.axes``): the indenter is turned
+            to it and its time samples move along the direction; None: along -z.
         material_field: A heterogeneous linear elastic field, ``{"youngs_modulus_Pa": (M,),
             "poissons_ratio": (M,)}`` with E > 0 Pa and -1 < nu < 0.5, one value per tet of
             ``mesh`` (TET10: per corner tet, one to one). Written to the asset layer as the
@@ -780,7 +798,11 @@ def write_simulation_usd(
         )
     if indenter is not None:
         _indenter_prims(
-            stage, indenter, float(rest[:, 2].max()), np.stack([rest.min(0)[:2], rest.max(0)[:2]])
+            stage,
+            indenter,
+            float(rest[:, 2].max()),
+            np.stack([rest.min(0)[:2], rest.max(0)[:2]]),
+            axes=indenter_axes,
         )
     arrays = None
     if result is not None:
