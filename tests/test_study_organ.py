@@ -454,3 +454,26 @@ def test_a_wedge_s_edge_turns_with_the_study_s_edge_key(block_files):
     (folder / "edge.toml").write_text(sphere)
     with pytest.raises(InputError, match=r"indenter.edge: is the edge of a wedge"):
         load_study(folder / "edge.toml")
+
+
+@pytest.mark.slow
+def test_a_run_at_a_site_records_its_probe_frame_and_exports_it(block_files, tmp_path):
+    """warptissue simulate of a mesh specimen writes the probe's frame (the snapped site, the
+    direction, the axes) to result.json; warptissue export draws the indenter there."""
+    import json
+
+    from warptissue.simulate import run_study
+    from warptissue.usd import validate_stage
+    from warptissue.usd.export import export_result_dir
+
+    folder, _, rotation = block_files
+    path = folder / "turned_run.toml"
+    site, direction = rotation @ [0.0, 0.0, 0.004], rotation @ [0.0, 0.0, -1.0]
+    path.write_text(_organ_study("turned.vtu", site=site, direction=direction))
+    run_study(load_study(path), out_dir=tmp_path / "run", progress=False, announce=False)
+    probe = json.loads((tmp_path / "run" / "result.json").read_text())["probe"]
+    np.testing.assert_allclose(probe["site_m"], site, atol=1e-12)
+    np.testing.assert_allclose(probe["direction"], direction, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(probe["axes"])[2], -direction, atol=1e-12)
+    paths = export_result_dir(tmp_path / "run", tmp_path / "turned.usda")
+    assert validate_stage(paths.root) == []
