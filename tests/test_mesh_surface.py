@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from warptissue.errors import InputError
-from warptissue.mesh import check_mesh
+from warptissue.mesh import check_mesh, fill_surface_file
 from warptissue.mesh.surface import check_closed_surface, tetrahedralize_surface
 
 BOX_VERTICES = (
@@ -173,3 +173,35 @@ def test_fill_surface_file_reads_a_closed_stl_in_mm(tmp_path) -> None:
         fill_surface_file(tmp_path / "open.ply")
     with pytest.raises(InputError, match="no such file"):
         fill_surface_file(tmp_path / "absent.stl")
+
+
+def _usd_cube(path, *, drop_face: bool = False) -> None:
+    """A 10 mm cube of six quads under an Xform scaled by 1e-3 (drawn in millimetres)."""
+    from pxr import Gf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.Xform.Define(stage, "/Organ").AddScaleOp().Set(Gf.Vec3f(1e-3, 1e-3, 1e-3))
+    mesh = UsdGeom.Mesh.Define(stage, "/Organ/Surface")
+    corners = [(x, y, z) for z in (0, 10) for y in (0, 10) for x in (0, 10)]
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    if drop_face:
+        quads = quads[:-1]
+    mesh.CreatePointsAttr(corners)
+    mesh.CreateFaceVertexCountsAttr([4] * len(quads))
+    mesh.CreateFaceVertexIndicesAttr([i for quad in quads for i in quad])
+    stage.GetRootLayer().Save()
+
+
+def test_a_usd_mesh_surface_is_filled_where_its_xforms_place_it(tmp_path) -> None:
+    """A USD stage with a closed Mesh (quads, under a scaled Xform) and no TetMesh is a
+    surface to fill: 1e-6 m^3 for the 10 mm cube; an open one is refused naming the file."""
+    from warptissue.mesh import usd_holds_tetmesh
+
+    _usd_cube(tmp_path / "cube.usda")
+    assert not usd_holds_tetmesh(tmp_path / "cube.usda")
+    mesh = fill_surface_file(tmp_path / "cube.usda")
+    assert check_mesh(mesh).total_volume_m3 == pytest.approx(1e-6, rel=1e-9)
+    np.testing.assert_allclose(np.ptp(mesh.points, axis=0), 0.01, rtol=1e-6)
+    _usd_cube(tmp_path / "open.usda", drop_face=True)
+    with pytest.raises(InputError, match="open.usda.*not a closed surface"):
+        fill_surface_file(tmp_path / "open.usda")

@@ -207,6 +207,27 @@ def test_a_closed_surface_is_filled_with_tetgen(tmp_path) -> None:
     build_problem(study, mesh)
 
 
+def test_a_usd_mesh_without_a_tetmesh_is_a_surface_to_fill(tmp_path) -> None:
+    """[specimen] mesh naming a USD stage with a closed Mesh and no TetMesh: TetGen fills it,
+    as an STL surface is (the same 4 mm cube, its volume exactly)."""
+    from pxr import Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "cube.usda"))
+    surface = UsdGeom.Mesh.Define(stage, "/Cube")
+    corners = [(0.004 * (x - 0.5), 0.004 * (y - 0.5), 0.004 * z) for z in (0, 1) for y in (0, 1)
+               for x in (0, 1)]  # fmt: skip
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    surface.CreatePointsAttr(corners)
+    surface.CreateFaceVertexCountsAttr([4] * 6)
+    surface.CreateFaceVertexIndicesAttr([i for quad in quads for i in quad])
+    stage.GetRootLayer().Save()
+    text = _organ_study("cube.usda", site=[0.0, 0.0, 0.004], support="opposite")
+    (tmp_path / "cube.toml").write_text(text, encoding="utf-8")
+    mesh = build_mesh(load_study(tmp_path / "cube.toml"))
+    assert mesh.nodes_per_tet == 10
+    assert check_mesh(mesh).total_volume_m3 == pytest.approx(0.004**3, rel=1e-12)
+
+
 def test_an_open_surface_is_refused_in_one_line(tmp_path) -> None:
     _cube_surface(tmp_path, "open.stl", drop_one=True)
     text = _organ_study("open.stl", site=[0.0, 0.0, 0.004], support="opposite")

@@ -3,7 +3,13 @@
 from warptissue.mesh._ball import ball_mesh
 from warptissue.mesh._grading import graded_spacing
 from warptissue.mesh._refine import refine_near_sites
-from warptissue.mesh._usd import FACE_SET_FAMILY, NODE_SET_FAMILY, REGION_FAMILY, USD_SUFFIXES
+from warptissue.mesh._usd import (
+    FACE_SET_FAMILY,
+    NODE_SET_FAMILY,
+    REGION_FAMILY,
+    USD_SUFFIXES,
+    usd_holds_tetmesh,
+)
 from warptissue.mesh.core import (
     TET4_EDGES,
     TET4_FACES,
@@ -97,5 +103,6 @@ __all__ = [
     "SURFACE_SUFFIXES",
     "tet10_jacobian_determinants",
     "to_tet10",
+    "usd_holds_tetmesh",
     "write_mesh",
 ]

@@ -105,3 +105,50 @@ def read_usd(path: str | Path, *, prim_path: str | None = None) -> TetMesh:
         face_sets=face_sets,
         tet_regions=tet_regions,
     )
+
+
+def usd_holds_tetmesh(path: str | Path) -> bool:
+    """Whether a USD stage holds a ``UsdGeom.TetMesh`` (else a study fills its surface)."""
+    from pxr import UsdGeom
+
+    stage = open_stage(path)
+    return any(prim.IsA(UsdGeom.TetMesh) for prim in stage.Traverse())
+
+
+def read_usd_surface(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """The first ``UsdGeom.Mesh`` of a USD stage as a triangle surface.
+
+    Polygons are split into fans of triangles; the points are taken at the default time and
+    carried through the prim's local-to-world transform (an asset scaled or placed by its
+    Xforms is read where it stands).
+
+    Returns:
+        ``(vertices, triangles)``: shape (V, 3) in the stage's units, and (F, 3) indices.
+
+    Raises:
+        InputError: No Mesh in the stage, or one without points or faces (naming the file).
+    """
+    from pxr import Usd, UsdGeom
+
+    path = Path(path)
+    stage = open_stage(path)
+    prim = next((p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)), None)
+    if prim is None:
+        raise InputError("the stage holds no UsdGeom.Mesh (nor a TetMesh)", path=path)
+    mesh = UsdGeom.Mesh(prim)
+    points = mesh.GetPointsAttr().Get(Usd.TimeCode.Default())
+    counts = mesh.GetFaceVertexCountsAttr().Get()
+    indices = mesh.GetFaceVertexIndicesAttr().Get()
+    if not points or not counts or indices is None:
+        raise InputError(f"Mesh {prim.GetPath()} lacks points or faces", path=path)
+    world = np.array(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(Usd.TimeCode.Default()))
+    local = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    vertices = local @ world[:3, :3] + world[3, :3]  # USD's row vectors
+    flat = np.asarray(indices, dtype=np.int64)
+    triangles = []
+    start = 0
+    for count in counts:
+        face = flat[start : start + count]
+        triangles += [(face[0], face[k], face[k + 1]) for k in range(1, count - 1)]
+        start += count
+    return vertices, np.asarray(triangles, dtype=np.int64).reshape(-1, 3)

@@ -10,6 +10,7 @@ import numpy as np
 import tetgen
 
 from warptissue.errors import InputError, MeshError
+from warptissue.mesh._usd import USD_SUFFIXES, read_usd_surface
 from warptissue.mesh.core import TetMesh, boundary_faces
 from warptissue.mesh.quality import fix_orientation
 
@@ -193,10 +194,12 @@ def _surface_markers(triangle_count: int, surface_sets: Mapping[str, np.ndarray]
 def fill_surface_file(
     path: str | Path, *, unit_m: float = 1.0, max_volume_m3: float | None = None
 ) -> TetMesh:
-    """Read a closed triangle surface (STL, OBJ, PLY) and fill it with TetGen's quality tets.
+    """Read a closed surface (STL, OBJ, PLY, or a USD stage's first ``UsdGeom.Mesh``) and
+    fill it with TetGen's quality tets.
 
     Args:
-        path: The surface file; its suffix is one of :data:`SURFACE_SUFFIXES`.
+        path: The surface file; its suffix is one of :data:`SURFACE_SUFFIXES` or
+            ``USD_SUFFIXES`` (polygons split into triangles, the Mesh's transform applied).
         unit_m: Length of the file's coordinate unit in metres (1e-3 for a file in mm).
         max_volume_m3: Largest tet volume, m^3 (:func:`tetrahedralize_surface`); None leaves
             it unbounded.
@@ -211,8 +214,12 @@ def fill_surface_file(
     import meshio  # measured: 0.3 s; only a surface file needs it
 
     file_path = Path(path)
+    if file_path.suffix.lower() in USD_SUFFIXES:
+        vertices, triangles = read_usd_surface(file_path)
+        return _fill(vertices * unit_m, triangles, file_path, max_volume_m3)
     if file_path.suffix.lower() not in SURFACE_SUFFIXES:
-        raise InputError(f"a surface file is one of {', '.join(SURFACE_SUFFIXES)}", path=file_path)
+        known = ", ".join((*SURFACE_SUFFIXES, *USD_SUFFIXES))
+        raise InputError(f"a surface file is one of {known}", path=file_path)
     if not file_path.is_file():
         raise InputError("no such file", path=file_path)
     try:
@@ -226,10 +233,15 @@ def fill_surface_file(
         raise InputError("the file holds no triangles", path=file_path)
     triangles = np.vstack(blocks).astype(np.int64)
     vertices_m = np.asarray(surface.points, dtype=np.float64)[:, :3] * unit_m
+    return _fill(vertices_m, triangles, file_path, max_volume_m3)
+
+
+def _fill(
+    vertices_m: np.ndarray, triangles: np.ndarray, path: Path, max_volume_m3: float | None
+) -> TetMesh:
     try:
         check_closed_surface(vertices_m, triangles)
     except InputError as exc:
-        raise InputError(
-            f"not a closed surface TetGen can fill: {exc.message}", path=file_path
-        ) from None
+        message = f"not a closed surface TetGen can fill: {exc.message}"
+        raise InputError(message, path=path) from None
     return tetrahedralize_surface(vertices_m, triangles, max_volume_m3=max_volume_m3)

@@ -19,12 +19,14 @@ from warptissue.errors import InputError
 from warptissue.fem.probe import footprint_normal, snap_to_surface
 from warptissue.mesh import (
     SURFACE_SUFFIXES,
+    USD_SUFFIXES,
     TetMesh,
     boundary_faces,
     fill_surface_file,
     read_mesh,
     refine_near_sites,
     to_tet10,
+    usd_holds_tetmesh,
 )
 
 MESH_UNITS: dict[str, float] = {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "um": 1e-6}
@@ -65,7 +67,10 @@ def specimen_mesh(
     key = (str(path.resolve()), stamp, unit_m, element, tuple(zones))
     if key in _CACHE:
         return _CACHE[key]
-    if path.suffix.lower() in SURFACE_SUFFIXES:
+    surface = path.suffix.lower() in SURFACE_SUFFIXES
+    if path.suffix.lower() in USD_SUFFIXES and path.is_file():
+        surface = not usd_holds_tetmesh(path)  # a USD Mesh alone: a surface to fill
+    if surface:
         mesh = fill_surface_file(path, unit_m=unit_m)
     else:
         mesh = read_mesh(path, unit_m=unit_m)
