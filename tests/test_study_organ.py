@@ -147,10 +147,15 @@ def test_bad_organ_input_is_one_line_naming_the_key(block_files, change, key, me
     path = folder / "bad.toml"
     mesh_file = change.pop("mesh", "block.vtu")
     path.write_text(_organ_study(mesh_file, **change), encoding="utf-8")
+    _assert_refused_in_one_line(path, key, message)
+
+
+def _assert_refused_in_one_line(path, key: str, message: str) -> None:
+    """Loading the study at ``path`` raises one line naming the file, ``key`` and ``message``."""
     with pytest.raises(InputError) as caught:
         load_study(path)
     text = str(caught.value)
-    assert "bad.toml:" in text and f": {key}: " in text and message in text, text
+    assert f"{path.name}:" in text and f": {key}: " in text and message in text, text
     assert "\n" not in text
 
 
@@ -352,11 +357,7 @@ def test_a_bad_record_probe_is_one_line_naming_the_key(block_files, record, key,
         _sites_study(folder, f'\n[[data]]\nfile = "a.csv"\n\n[[data]]\nfile = "b.csv"\n{record}\n'),
         encoding="utf-8",
     )
-    with pytest.raises(InputError) as caught:
-        load_study(path)
-    text = str(caught.value)
-    assert "bad_sites.toml:" in text and f": {key}: " in text and message in text, text
-    assert "\n" not in text
+    _assert_refused_in_one_line(path, key, message)
 
 
 def test_a_record_s_own_site_needs_a_mesh_specimen(tmp_path):

@@ -315,19 +315,22 @@ def record_problems(study: Study, material: Any = None) -> tuple[list[Any], list
             placed = replace(
                 study, indenter=indenter, site_m=site_m, direction=direction, material=material
             )
+            mesh = build_mesh(placed)
+            held = mesh.node_sets["bottom"]
+            for earlier in problems:  # one organ, one support: the earlier site's mesh
+                other = earlier.mesh
+                if other.points is mesh.points and np.array_equal(other.node_sets["bottom"], held):
+                    mesh = other
+                    break
             keys.append(key)
-            problems.append(build_problem(placed, build_mesh(placed)))
+            problems.append(build_problem(placed, mesh))
         index.append(keys.index(key))
     return problems, index
 
 
-_ORGAN_MESHES: dict[tuple[int, bytes], tuple[Any, Any]] = {}
-
-
 def _organ_mesh(study: Study) -> Any:
     """A mesh specimen's mesh with its support as ``"bottom"`` and the rest of its surface
-    as ``"top"`` (:mod:`warptissue.study`'s ``[specimen] mesh``); one object per support
-    (sites with one support share it)."""
+    as ``"top"`` (:mod:`warptissue.study`'s ``[specimen] mesh``)."""
     specimen = study.specimen
     mesh = specimen_mesh(
         specimen.mesh_path,
@@ -339,12 +342,7 @@ def _organ_mesh(study: Study) -> Any:
         mesh, study.site_m, study.direction, radius_m=study.indenter.radius_m
     )
     support = support_nodes(mesh, study.boundary.support, site_m=site, direction=along)
-    key = (id(mesh), support.tobytes())  # the value holds the mesh: its id stays its own
-    if key not in _ORGAN_MESHES:
-        if len(_ORGAN_MESHES) >= 8:
-            _ORGAN_MESHES.pop(next(iter(_ORGAN_MESHES)))
-        _ORGAN_MESHES[key] = (mesh, organ_mesh(mesh, support))
-    return _ORGAN_MESHES[key][1]
+    return organ_mesh(mesh, support)
 
 
 def penetration_warnings(depths_m: np.ndarray, max_penetration_m: np.ndarray) -> list[str]:

@@ -8,6 +8,7 @@ from warptissue.mesh._usd import (
     NODE_SET_FAMILY,
     REGION_FAMILY,
     USD_SUFFIXES,
+    tetmesh_prim,
     usd_holds_tetmesh,
 )
 from warptissue.mesh.core import (
@@ -102,6 +103,7 @@ __all__ = [
     "fill_surface_file",
     "SURFACE_SUFFIXES",
     "tet10_jacobian_determinants",
+    "tetmesh_prim",
     "to_tet10",
     "usd_holds_tetmesh",
     "write_mesh",

@@ -26,7 +26,9 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 """The suffixes :func:`warptissue.mesh.read_mesh` reads as USD stages."""
 
 
-def _find_tetmesh(stage: Any, path: Path, prim_path: str | None) -> Any:
+def tetmesh_prim(stage: Any, path: Path, prim_path: str | None = None) -> Any:
+    """The stage's ``UsdGeom.TetMesh`` prim at ``prim_path``, or its first one (``path``,
+    the stage's file, names it in the error)."""
     from pxr import UsdGeom
 
     if prim_path is not None:
@@ -64,7 +66,7 @@ def read_usd(path: str | Path, *, prim_path: str | None = None) -> TetMesh:
 
     path = Path(path)
     stage = open_stage(path)
-    prim = _find_tetmesh(stage, path, prim_path)
+    prim = tetmesh_prim(stage, path, prim_path)
     tetmesh = UsdGeom.TetMesh(prim)
     points = tetmesh.GetPointsAttr().Get(Usd.TimeCode.Default())
     tets = tetmesh.GetTetVertexIndicesAttr().Get()

@@ -273,17 +273,16 @@ def _read_mesh_specimen(
         radius_m=None,
         quarter=False,
         element=element,
-        size_near_m=float(lengths.min()),
+        size_near_m=float(lengths.min()) if size is None else size,
         size_far_m=float(lengths.max()),
         growth=1.0,
-        mesher="file",
+        # "refined": meshed again around the sites (_refined, once the records are read)
+        mesher="file" if accuracy is None and size is None else "refined",
         mesh_file=name,
         mesh_path=path,
         unit=unit,
         force_accuracy=accuracy,
     )
-    if size is not None:  # zones to come (_refined, once the records' sites are known)
-        specimen = dataclasses.replace(specimen, size_near_m=size, refine_zones=((),))
     return specimen, mesh, site, along
 
 
@@ -292,7 +291,7 @@ def _refined(specimen: Specimen, study: Study, source: Source) -> Specimen:
     probe's site (the study's and its records') refined to the size rule of the block's
     (:func:`warptissue.study.mesh_probe_radius`, and
     :func:`warptissue.mesh.size_near_for_force_accuracy` for TetGen's tets at that radius)."""
-    if specimen.force_accuracy is None and not specimen.refine_zones:
+    if specimen.mesher != "refined":
         return specimen
     mesh = specimen_mesh(specimen.mesh_path, unit=specimen.unit, element=specimen.element)
     probes = [(study.indenter, study.site_m, study.direction)]

@@ -83,7 +83,9 @@ class Specimen:
         growth: Size ratio of neighbouring cells along the grading, outward and downward.
         mesher: ``"extruded"`` (layers of split prisms) or ``"delaunay"`` (TetGen's quality
             tets inside the same graded surface); see
-            :func:`warptissue.mesh.indentation_block`.
+            :func:`warptissue.mesh.indentation_block`. A mesh specimen: ``"file"`` (the
+            file's mesh as it is) or ``"refined"`` (meshed again around its probes' sites,
+            :attr:`refine_zones`).
         force_accuracy: The relative force accuracy that ``size_near_m`` was chosen for
             (:func:`warptissue.mesh.size_near_for_force_accuracy`), or None when the near
             size was given (or defaulted).
@@ -129,7 +131,7 @@ class Specimen:
             table = {"mesh": self.mesh_file, "unit": self.unit, "element": self.element}
             if self.force_accuracy is not None:
                 table["force_accuracy"] = self.force_accuracy
-            elif self.refine_zones:
+            elif self.mesher == "refined":
                 table["size_near_m"] = self.size_near_m
             return table
         table: dict[str, Any] = {"shape": self.shape}

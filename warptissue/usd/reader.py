@@ -10,7 +10,7 @@ from pxr import Usd, UsdGeom, UsdShade
 
 from warptissue._stage import open_stage
 from warptissue.errors import InputError
-from warptissue.mesh import TetMesh, read_mesh
+from warptissue.mesh import TetMesh, read_mesh, tetmesh_prim
 from warptissue.usd.schema import record_from_attributes
 from warptissue.usd.writer import (
     INDENTER,
@@ -25,18 +25,6 @@ __all__ = [
     "read_probe_curve_usd",
     "read_tetmesh_usd",
 ]
-
-
-def _find_tetmesh(stage: Any, path: Path, prim_path: str | None) -> Any:
-    if prim_path is not None:
-        prim = stage.GetPrimAtPath(prim_path)
-        if not prim or not prim.IsA(UsdGeom.TetMesh):
-            raise InputError(f"no TetMesh prim at {prim_path}", path=path)
-        return prim
-    for prim in stage.Traverse():
-        if prim.IsA(UsdGeom.TetMesh):
-            return prim
-    raise InputError("the stage holds no UsdGeom.TetMesh", path=path)
 
 
 def read_tetmesh_usd(path: str | Path, *, prim_path: str | None = None) -> TetMesh:
@@ -79,7 +67,7 @@ def read_material_field_usd(
 
     path = Path(path)
     stage = open_stage(path)
-    prim = _find_tetmesh(stage, path, prim_path)
+    prim = tetmesh_prim(stage, path, prim_path)
     tetmesh = UsdGeom.TetMesh(prim)
     tet_count = len(tetmesh.GetTetVertexIndicesAttr().Get() or [])
     primvars = UsdGeom.PrimvarsAPI(prim)
@@ -116,7 +104,7 @@ def read_material_usd(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     stage = open_stage(path)
     if any(prim.IsA(UsdGeom.TetMesh) for prim in stage.Traverse()):
-        prim = _find_tetmesh(stage, path, None)
+        prim = tetmesh_prim(stage, path, None)
         bound, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial("physics")
         if not bound:
             raise InputError(f"TetMesh {prim.GetPath()} has no physics material", path=path)
