@@ -202,3 +202,34 @@ def rigid_contact_kernel(
     if with_tangent != 0:
         block = k * (wp.outer(hit.normal, hit.normal) + hit.gap * hit.normal_gradient)
         wp.atomic_add(matrix_values, diagonal_blocks[i], block)
+
+
+@wp.kernel(module=FE_MODULE)
+def support_spring_kernel(
+    rows: wp.array(dtype=wp.int32),
+    columns: wp.array(dtype=wp.int32),
+    block_ids: wp.array(dtype=wp.int32),
+    spring_problem: wp.array(dtype=wp.int32),
+    blocks: wp.array(dtype=wp.mat33d),
+    displacement: wp.array(dtype=wp.vec3d),
+    with_tangent: int,
+    residual: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+):
+    """Linear springs from the nodes to the ground (an elastic foundation): a constant
+    symmetric stiffness matrix ``S`` given by its nonzero 3x3 blocks.
+
+    Entry ``e`` is the block ``S_ij = blocks[e]`` (N/m) of node ``i = rows[e]`` and node
+    ``j = columns[e]`` of problem ``spring_problem[e]``: ``R_i += S_ij u_j``, the problem's
+    ``energy`` gains ``u_i . S_ij u_j / 2`` (J) and the tangent's block ``block_ids[e]`` (BSR)
+    gains ``S_ij``.
+    """
+    e = wp.tid()
+    s = blocks[e]
+    force = s @ displacement[columns[e]]
+    row = rows[e]
+    wp.atomic_add(residual, row, force)
+    wp.atomic_add(energy, spring_problem[e], wp.float64(0.5) * wp.dot(displacement[row], force))
+    if with_tangent != 0:
+        wp.atomic_add(matrix_values, block_ids[e], s)

@@ -284,6 +284,7 @@ def build_problem(study: Study, mesh: Any) -> Any:
         study.material,
         study.indenter,
         base=study.boundary.base,
+        foundation=study.boundary.foundation,
         symmetry_planes=("symmetry_x", "symmetry_y") if study.specimen.quarter else (),
         formulation=study.solver.formulation,
         penalty_factor=study.solver.penalty_factor,

@@ -47,6 +47,7 @@ from warptissue.fem.newton import (
     solve_quasistatic,
     solve_quasistatic_batch,
 )
+from warptissue.fem.support import Foundation
 from warptissue.fem.timing import NewtonTimings
 
 __all__ = [
@@ -56,6 +57,7 @@ __all__ = [
     "Assembly",
     "DirichletConditions",
     "ElementGeometry",
+    "Foundation",
     "ForceSensitivity",
     "IndentationProblem",
     "IndentationResult",

@@ -21,6 +21,7 @@ from warptissue.errors import InputError
 from warptissue.fem.contact import ContactState, RigidContact, RigidContacts
 from warptissue.fem.elements import element_geometry
 from warptissue.fem.sparsity import block_ranges, packed_ranges, sparsity_pattern, tet_problems
+from warptissue.fem.support import SupportSprings, SupportSpringSet
 from warptissue.fem.viscous import ViscousHistory, elastic_step
 from warptissue.kernels import assembly as ka
 from warptissue.kernels import sparse as ks
@@ -282,6 +283,13 @@ class Assembler:
             problem_count=count,
             device=dev,
         )
+        self._springs = SupportSpringSet(
+            pattern_offsets=self._pattern_offsets,
+            pattern_columns=self._pattern_columns,
+            node_offsets=self._node_offsets,
+            problem_count=count,
+            device=dev,
+        )
         self._residual = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._displacement = wp.zeros(self.node_count, dtype=wp.vec3d, device=dev)
         self._no_history = wp.zeros((1, 1), dtype=wp.mat33d, device=dev)
@@ -360,6 +368,32 @@ class Assembler:
     def has_contact(self) -> bool:
         """Whether any problem has a rigid contact."""
         return self._rigid.has_contact
+
+    def set_springs(self, springs: SupportSprings | Sequence[SupportSprings | None] | None) -> None:
+        """Hold nodes by linear springs to the ground from the next assembly on (an elastic
+        foundation, :mod:`warptissue.fem.support`; None: none).
+
+        Every later :meth:`assemble` adds ``S u`` to the residual, ``S`` to the tangent's
+        diagonal blocks and ``u . S u / 2`` to its problem's energy.
+
+        Args:
+            springs: For one problem, its :class:`warptissue.fem.support.SupportSprings` or
+                None; for K packed problems, K entries in their own problems' numbering.
+
+        Raises:
+            InputError: Not one entry per problem, or a node outside its problem.
+        """
+        self._springs.set(springs)
+
+    @property
+    def has_springs(self) -> bool:
+        """Whether any problem is held by support springs."""
+        return self._springs.has_springs
+
+    def spring_product(self, values: np.ndarray) -> np.ndarray:
+        """``S x``: the support springs' stiffness times nodal vectors ``values`` (N, 3), (N, 3)
+        (zero where no spring holds a node)."""
+        return self._springs.product(values)
 
     @property
     def contact(self) -> RigidContact | None:
@@ -515,6 +549,7 @@ class Assembler:
                 self._energy,
                 self._rigid.force,
             )
+        self._springs.launch(u, int(with_tangent), self._residual, self.matrix.values, self._energy)
         scalars = self._scalars.numpy()
         energies, min_jacobians = scalars[: self.problem_count], scalars[self.problem_count :]
         return Assembly(
@@ -773,6 +808,7 @@ class Assembler:
                 energy,
                 self._part_force,
             )
+        self._springs.launch(u, int(with_tangent), self._part_residual, self.matrix.values, energy)
         gather_vectors(self._part_residual, part.device_nodes, part.forces)
         values = scalars.numpy()
         return (

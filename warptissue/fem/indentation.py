@@ -8,8 +8,11 @@ in -z; the base is z = 0. Quarter models keep x >= 0, y >= 0 with symmetry plane
   r <= a gets ``(ux, uy, uz) = (0, 0, -depth)``.
 - Frictionless punch: only ``uz = -depth`` on those nodes.
 - Symmetry planes: the normal displacement component is zero on each named node set.
-- Base ``"fixed"``: all components zero on "bottom"; ``"sliding"``: ``uz = 0`` on "bottom",
-  plus pins that remove the in-plane rigid motions the other conditions leave free.
+- Base ``"fixed"``: all components zero on "bottom"; ``"sliding"``: the normal component zero
+  on "bottom" (``uz`` on a block's base; a mesh specimen's support must lie on a plane x, y or
+  z = const), plus pins that remove the in-plane rigid motions the other conditions leave
+  free; ``"foundation"``: "bottom" rests on an elastic foundation (springs per unit area,
+  :mod:`warptissue.fem.support`), no node held.
 
 - Sphere and plate (rigid indenters, :mod:`warptissue.fem.contact`): no node is prescribed
   under them; a frictionless penalty pushes the surface nodes out of the indenter, whose depth
@@ -53,6 +56,7 @@ from warptissue.fem.newton.path import check_packed_assembler
 from warptissue.fem.newton.sensitivity import check_sensitivity_names
 from warptissue.fem.packing import PackedMeshes, pack_meshes
 from warptissue.fem.probe import DOWN, ProbeFrame, footprint_normal, probe_frame, snap_to_surface
+from warptissue.fem.support import Foundation, SupportSprings
 from warptissue.fem.timing import NewtonTimings
 from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
@@ -66,21 +70,28 @@ __all__ = [
     "simulate_indentation_batch",
 ]
 
-BASES = ("fixed", "sliding")
+BASES = ("fixed", "sliding", "foundation")
 
 
-def _plane_component(mesh: TetMesh, name: str) -> int:
+def plane_axis(mesh: TetMesh, name: str, *, key: str = "symmetry_planes") -> int:
     """The axis normal to a planar node set (the coordinate that does not vary on it)."""
     nodes = mesh.node_set(name)
+    what = "symmetry node set" if key == "symmetry_planes" else "the sliding support"
     if nodes.size == 0:
-        raise InputError(f"symmetry node set {name!r} is empty", key="symmetry_planes")
+        raise InputError(f"{what} {name!r} is empty", key=key)
     points = mesh.points[nodes]
     spread = np.ptp(points, axis=0)
     size = float(np.ptp(mesh.points, axis=0).max())
     axis = int(np.argmin(spread))
     if spread[axis] > 1e-9 * size:
+        if key == "symmetry_planes":
+            raise InputError(f"{what} {name!r} is not an axis-aligned plane", key=key)
         raise InputError(
-            f"symmetry node set {name!r} is not an axis-aligned plane", key="symmetry_planes"
+            f"{what} (node set {name!r}) is not flat on a plane x, y or z = const (it spans "
+            f"{spread[axis]:.3g} m along {'xyz'[axis]}, its thinnest extent): a sliding base "
+            'holds the normal of one plane; hold it "fixed" or set it on a "foundation"',
+            key=key,
+            value="sliding",
         )
     return axis
 
@@ -95,7 +106,8 @@ class IndentationProblem:
         material: A :mod:`warptissue.materials` material.
         indenter: The probe, a :class:`warptissue.indenter.Indenter` of kind ``"flat_punch"``
             on the axis (``x_m = y_m = 0``); its ``contact`` sets the conditions under it.
-        base: ``"fixed"`` or ``"sliding"``.
+        base: ``"fixed"``, ``"sliding"`` (the normal of a flat "bottom" held) or
+            ``"foundation"`` ("bottom" on the springs of ``foundation``).
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
         surface: Node set of the indented surface; under a rigid indenter its boundary
@@ -117,6 +129,8 @@ class IndentationProblem:
             None: y (:func:`warptissue.fem.probe.probe_frame`).
         site_tolerance_m: How far ``site_m`` may lie from the surface, m; None: 1 % of the
             mesh's largest extent.
+        foundation: The elastic foundation of ``base="foundation"``
+            (:class:`warptissue.fem.support.Foundation`); None otherwise.
     """
 
     mesh: TetMesh
@@ -131,6 +145,7 @@ class IndentationProblem:
     direction: Sequence[float] | None = field(default=None, kw_only=True)
     edge: Sequence[float] | None = field(default=None, kw_only=True)
     site_tolerance_m: float | None = field(default=None, kw_only=True)
+    foundation: Foundation | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         if not isinstance(self.indenter, Indenter):
@@ -156,6 +171,19 @@ class IndentationProblem:
             )
         if self.base not in BASES:
             raise InputError(f"base must be one of {BASES}", key="base", value=self.base)
+        if (self.base == "foundation") != (self.foundation is not None):
+            raise InputError(
+                'base "foundation" takes a foundation (warptissue.fem.support.Foundation), '
+                "and only it",
+                key="foundation",
+                value=self.base,
+            )
+        if self.foundation is not None and not isinstance(self.foundation, Foundation):
+            raise InputError(
+                "the foundation must be a warptissue.fem.support.Foundation",
+                key="foundation",
+                value=type(self.foundation).__name__,
+            )
         if self.formulation not in FORMULATIONS:
             raise InputError(
                 f"formulation must be one of {FORMULATIONS}",
@@ -181,6 +209,10 @@ class IndentationProblem:
             if getattr(self, key) is not None:
                 object.__setattr__(self, key, tuple(float(v) for v in np.ravel(getattr(self, key))))
         object.__setattr__(self, "_frame", self._placed_frame())
+        if self.base == "sliding":
+            plane_axis(self.mesh, "bottom", key="base")
+        if self.base == "foundation":
+            self.support_springs()  # refuses a "bottom" that holds no boundary triangle
         if self.is_contact:
             self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
             # The contact outputs need the surface's triangles: refused here, not after a run.
@@ -290,6 +322,19 @@ class IndentationProblem:
             frame=self.frame,
         )
 
+    def support_springs(self) -> SupportSprings | None:
+        """The springs of the elastic foundation under "bottom" (None on another base)."""
+        if self.foundation is None:
+            return None
+        try:
+            return SupportSprings.foundation(self.mesh, self.foundation, surface="bottom")
+        except InputError as exc:
+            raise InputError(
+                "the foundation needs the support's boundary triangles: " + exc.message,
+                key="base",
+                value=self.base,
+            ) from None
+
     def reaction_weights(self) -> np.ndarray:
         """Weights (N, 3) of the internal forces summed into the probe force: -factor on the
         punch nodes' z (flat punch), +factor on the "bottom" nodes' z (sphere, plate)."""
@@ -335,25 +380,30 @@ class IndentationProblem:
             parts.append(_fixed(punch, comp, float(along[comp])))
         planes = {}
         for name in self.symmetry_planes:
-            axis = _plane_component(self.mesh, name)
+            axis = plane_axis(self.mesh, name)
             planes[axis] = name
             parts.append(_fixed(self.mesh.node_set(name), axis, 0.0))
         bottom = self.mesh.node_set("bottom").astype(np.int64)
-        base_components = (0, 1, 2) if self.base == "fixed" else (2,)
+        if self.base == "foundation":
+            return DirichletConditions.combine(*parts)  # the springs hold "bottom"
+        normal = 2 if self.base == "fixed" else plane_axis(self.mesh, "bottom", key="base")
+        base_components = (0, 1, 2) if self.base == "fixed" else (normal,)
         for comp in base_components:
             parts.append(_fixed(bottom, comp, 0.0))
         if self.base == "sliding" and (self.indenter.contact == "frictionless" or self.is_contact):
-            parts.extend(self._rigid_body_pins(bottom, planes))
+            parts.extend(self._rigid_body_pins(bottom, planes, normal))
         return DirichletConditions.combine(*parts)
 
-    def _rigid_body_pins(self, bottom: np.ndarray, planes: dict[int, str]) -> list:
-        """Pins on the base for the in-plane translations and the rotation about z."""
-        points = self.mesh.points[bottom]
-        centre = bottom[int(np.argmin(np.einsum("ij,ij->i", points[:, :2], points[:, :2])))]
-        pins = [_fixed(np.array([centre]), axis, 0.0) for axis in (0, 1) if axis not in planes]
+    def _rigid_body_pins(self, bottom: np.ndarray, planes: dict[int, str], normal: int) -> list:
+        """Pins on the base for the in-plane translations and the rotation about its normal
+        (axis ``normal``; z for a block's base)."""
+        a, b = (axis for axis in range(3) if axis != normal)
+        points = self.mesh.points[bottom][:, [a, b]]
+        centre = bottom[int(np.argmin(np.einsum("ij,ij->i", points, points)))]
+        pins = [_fixed(np.array([centre]), axis, 0.0) for axis in (a, b) if axis not in planes]
         if not planes:
             far = bottom[int(np.argmax(points[:, 0]))]
-            pins.append(_fixed(np.array([far]), 1, 0.0))
+            pins.append(_fixed(np.array([far]), b, 0.0))
         return pins
 
 
@@ -564,6 +614,7 @@ def simulate_indentation(
     else:
         assembler.set_material(problem.material)  # also resets a viscous history
     assembler.set_contact(problem.rigid_contact())
+    assembler.set_springs(problem.support_springs())
     weights = problem.reaction_weights()
     conditions = problem.dirichlet_conditions()
     names = check_sensitivity_names(sensitivities)
@@ -796,6 +847,7 @@ def simulate_indentation_batch(
         assembler.set_material([problem.material for problem in problems])
     # Each contact's stiffness follows its problem's material: set on every call.
     assembler.set_contact([problem.rigid_contact() for problem in problems])
+    assembler.set_springs([problem.support_springs() for problem in problems])
     paths = solve_quasistatic_batch(
         assembler,
         packed,

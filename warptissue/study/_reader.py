@@ -17,8 +17,10 @@ import numpy as np
 from warptissue.errors import InputError
 from warptissue.fem.assembly import FORMULATIONS
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
+from warptissue.fem.indentation import plane_axis
 from warptissue.fem.newton import NewtonOptions
 from warptissue.fem.probe import probe_frame
+from warptissue.fem.support import Foundation
 from warptissue.indenter import CONTACT_KINDS, CONTACTS, SIMULATED_KINDS, Indenter
 from warptissue.loading import ramp_hold, sine
 from warptissue.materials import material_from_dict, prony_term
@@ -29,6 +31,7 @@ from warptissue.study._organ import (
     MESH_UNITS,
     OPPOSITE,
     extent_along,
+    organ_mesh,
     probe_placement,
     specimen_mesh,
     support_nodes,
@@ -517,16 +520,37 @@ def _read_boundary(table: Table, organ: tuple | None = None) -> Boundary:
     """The ``[boundary]`` table; ``organ``: a mesh specimen's (mesh, site, direction), whose
     ``support`` is checked against it."""
     base = table.string("base", default="fixed", choices=BASE_KINDS)
+    foundation = None
+    if base == "foundation":
+        if not table.has("foundation_Pa_per_m"):
+            raise table.error(
+                "foundation_Pa_per_m",
+                'is needed with base = "foundation": the bed\'s stiffness per unit area, Pa/m',
+            )
+        normal = table.number("foundation_Pa_per_m")
+        tangential = table.number("foundation_tangential_Pa_per_m", default=normal)
+        foundation = Foundation(normal, tangential)
+    else:
+        for key in ("foundation_Pa_per_m", "foundation_tangential_Pa_per_m"):
+            if table.has(key):
+                raise table.error(
+                    key, f'needs base = "foundation" (base is {base!r})', table.raw(key)
+                )
     support = None
     if organ is not None:
         support = _support(table)
         mesh, site, along = organ
         try:
-            support_nodes(mesh, support, site_m=site, direction=along)
+            held = support_nodes(mesh, support, site_m=site, direction=along)
         except InputError as exc:
             raise table.error("support", exc.message, exc.value) from exc
+        if base == "sliding":
+            try:
+                plane_axis(organ_mesh(mesh, held), "bottom", key="base")
+            except InputError as exc:
+                raise table.error("base", exc.message, base) from exc
     table.finish()
-    return Boundary(base=base, support=support)
+    return Boundary(base=base, support=support, foundation=foundation)
 
 
 LOCKING_BULK_TO_SHEAR = 10.0

@@ -19,6 +19,7 @@ import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.fem.newton import NewtonOptions
+from warptissue.fem.support import Foundation
 from warptissue.indenter import Indenter
 from warptissue.loading import resample_history
 from warptissue.lsq.engine import METHODS
@@ -61,7 +62,7 @@ DEFAULT_COLUMNS: dict[str, str] = {
 
 SPECIMEN_SHAPES: tuple[str, ...] = ("block", "disc")
 ELEMENT_TYPES: tuple[str, ...] = ("TET10", "TET4")
-BASE_KINDS: tuple[str, ...] = ("fixed", "sliding")
+BASE_KINDS: tuple[str, ...] = ("fixed", "sliding", "foundation")
 MAX_STEPS: int = 10_000
 """Most load steps a study may have: the run keeps every converged state in memory."""
 DEVICE_PATTERN = re.compile(r"^(auto|cpu|cuda(:\d+)?)$")
@@ -244,22 +245,31 @@ class Boundary:
     """Boundary conditions besides the probe and the symmetry planes.
 
     Attributes:
-        base: ``"fixed"`` (all displacement of the base z = 0 is zero) or ``"sliding"``
-            (only z is held; the base slides freely in x and y); a mesh specimen's support.
+        base: ``"fixed"`` (all displacement of the base z = 0 is zero), ``"sliding"``
+            (only z is held; the base slides freely in x and y; a mesh specimen's support
+            must be flat on a plane x, y or z = const, whose normal is held) or
+            ``"foundation"`` (the base, or a mesh specimen's support, rests on the springs of
+            ``foundation``); a mesh specimen's support.
         support: A mesh specimen's support: a node set of its file, ``"opposite"`` (the
             surface farther than half the body's depth below the site), or
             ``{"box": [[xmin, ymin, zmin], [xmax, ymax, zmax]]}`` (the nodes inside the box,
             m); None for a block or a disc (their base z = 0).
+        foundation: The elastic foundation of ``base = "foundation"``
+            (``foundation_Pa_per_m`` and ``foundation_tangential_Pa_per_m``); None otherwise.
     """
 
     base: str
     support: str | dict[str, Any] | None = None
+    foundation: Foundation | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[boundary]`` table."""
         table: dict[str, Any] = {"base": self.base}
         if self.support is not None:
             table["support"] = self.support
+        if self.foundation is not None:
+            table["foundation_Pa_per_m"] = float(self.foundation.normal_Pa_per_m)
+            table["foundation_tangential_Pa_per_m"] = float(self.foundation.tangential_Pa_per_m)
         return table
 
 

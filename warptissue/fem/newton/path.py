@@ -47,7 +47,8 @@ class QuasistaticResult:
     Attributes:
         loads: Load factors reached, shape (S,) (a prefix of the requested ones).
         displacement_m: Nodal displacements at each, shape (S, N, 3).
-        reaction: ``sum(reaction_weights * f_int)`` at each, shape (S,).
+        reaction: ``sum(reaction_weights * f_int)`` at each, shape (S,) (``f_int``: the
+            internal and contact forces, without support springs' forces).
         newton_iterations: Newton iterations per requested load (all substeps), shape (S,).
         linear_iterations: Linear-solver iterations per requested load, shape (S,).
         local_iterations: Local Newton iterations of the nonlinear elimination per requested
@@ -354,6 +355,11 @@ def _follow_paths(
         problems = Problems(arrays, offsets)
         u, free_x, weights_x = arrays.asarray(u), arrays.asarray(free), arrays.asarray(weights)
         constrained_x = arrays.asarray(constrained)
+        # Support springs (an elastic foundation): the reaction sums w . (R - S u), the
+        # internal and contact forces alone (warptissue.fem.support).
+        springs_x = None
+        if assembler.has_springs:
+            springs_x = arrays.asarray(-assembler.spring_product(weights))
     sensitivity_count = 0 if sensitivity is None else len(sensitivity.names)
     # A plate touches the whole surface: no contact edge crosses nodes, and the ramp would
     # only repeat its iterations (4 -> 8-13 per step measured). Of K problems, all take the
@@ -464,7 +470,10 @@ def _follow_paths(
                 if at_target.any():
                     # The internal force of the converged states (with the step's frozen
                     # history), as Newton's last assembly left it.
-                    (reactions,) = problems.read(problems.dot(weights_x, step.residual))
+                    reductions = [problems.dot(weights_x, step.residual)]
+                    if springs_x is not None:
+                        reductions.append(problems.dot(springs_x, step.displacement))
+                    reactions = np.sum(problems.read(*reductions), axis=0)
                 derivatives = None
                 if sensitivity is not None:
                     wanted = at_target if viscous is None else active & step.converged

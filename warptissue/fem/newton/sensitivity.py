@@ -10,6 +10,10 @@ one linear solve with the tangent per parameter, and the reaction ``F = w . R(u,
 
     dF/dtheta = w . (dR/dtheta + K du/dtheta).
 
+On a body held by support springs ``S`` (an elastic foundation, :mod:`warptissue.fem.support`)
+``w`` also lies on the sprung free dofs and the reaction is ``F = w . (R - S u)``: the
+derivative gains ``-(S w) . du/dtheta`` (``S`` does not depend on theta).
+
 ``dR/dtheta`` comes from the Warp element kernels
 (:meth:`warptissue.fem.Assembler.parameter_residual`): the internal force is linear in every
 material parameter but the Ogden exponents, and those have a hand-written kernel. Everything
@@ -201,11 +205,13 @@ class ForceSensitivity:
         # K du on the prescribed rows needs the tangent before elimination.
         matrix.values.assign(full_values)
         product = wp.zeros(assembler.node_count, dtype=wp.vec3d, device=assembler.device)
+        # Support springs: the reaction is w . (R - S u), so dF/dtheta gains -(S w) . du.
+        springs = -assembler.spring_product(self.reaction_weights) if assembler.has_springs else 0
         out = np.empty(count) if offsets is None else np.zeros((len(offsets) - 1, count))
         for i, (d_residual, du) in enumerate(zip(derivatives, steps, strict=True)):
             du_wp = wp.array(du, dtype=wp.vec3d, device=assembler.device)
             wps.bsr_mv(matrix, du_wp, product, alpha=1.0, beta=0.0)
-            contributions = self.reaction_weights * (d_residual + product.numpy())
+            contributions = self.reaction_weights * (d_residual + product.numpy()) + springs * du
             if offsets is None:
                 out[i] = float(np.sum(contributions))
             else:
