@@ -499,3 +499,129 @@ def test_a_run_at_a_site_records_its_probe_frame_and_exports_it(block_files, tmp
     np.testing.assert_allclose(np.asarray(probe["axes"])[2], -direction, atol=1e-12)
     paths = export_result_dir(tmp_path / "run", tmp_path / "turned.usda")
     assert validate_stage(paths.root) == []
+
+
+def _with_boundary(text: str, lines: str) -> str:
+    head, _ = text.split("\n[boundary]\n")
+    return head + "\n[boundary]\n" + lines
+
+
+def test_a_half_space_support_holds_the_nodes_beyond_its_plane(block_files):
+    folder, _, _ = block_files
+    path = folder / "half.toml"
+    text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004])
+    path.write_text(_with_support(text, "{ half_space = [[0.0, 0.0, 0.0], [0.0, 0.0, -1.0]] }"))
+    study = load_study(path)
+    assert study_from_dict(study.to_dict(), path=path).boundary == study.boundary
+    path.write_text(text)
+    named = build_mesh(load_study(path))
+    np.testing.assert_array_equal(
+        np.sort(build_mesh(study).node_sets["bottom"]), np.sort(named.node_sets["bottom"])
+    )
+    for support in (
+        "{ half_space = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]] }",
+        "{ half_space = [[0.0, 0.0], [0.0, 0.0, 1.0]] }",
+    ):
+        path.write_text(_with_support(text, support))
+        _assert_refused_in_one_line(path, "boundary.support", "a nonzero normal")
+
+
+def test_a_flat_support_slides_and_one_that_is_not_flat_is_refused(block_files):
+    """base = "sliding" on a mesh specimen holds the normal of its flat support (z on the
+    base z = 0 of the block as a file); the "opposite" support (the base and the lower half
+    of the sides) is not flat: one line naming boundary.base."""
+    folder, _, _ = block_files
+    path = folder / "sliding.toml"
+    text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004])
+    path.write_text(_with_boundary(text, 'base = "sliding"\nsupport = "bottom"\n'))
+    study = load_study(path)
+    conditions = build_problem(study, build_mesh(study)).dirichlet_conditions()
+    bottom = build_mesh(study).node_sets["bottom"]
+    on_base = np.isin(conditions.nodes, bottom)
+    assert np.all(conditions.components[on_base] == 2)  # a bonded punch: no pins needed
+    assert np.sum(on_base) == len(bottom)
+    path.write_text(_with_boundary(text, 'base = "sliding"\nsupport = "opposite"\n'))
+    _assert_refused_in_one_line(path, "boundary.base", "not flat on a plane")
+
+
+@pytest.mark.parametrize(
+    ("lines", "key", "message"),
+    [
+        ('base = "foundation"\n', "boundary.foundation_Pa_per_m", "is needed with base"),
+        ('base = "foundation"\nfoundation_Pa_per_m = -5.0\n', "boundary.foundation_Pa_per_m",
+         "must be positive"),
+        ('base = "foundation"\nfoundation_Pa_per_m = 5.0\nfoundation_tangential_Pa_per_m = 0\n',
+         "boundary.foundation_tangential_Pa_per_m", "must be positive"),
+        ("foundation_Pa_per_m = 5.0\n", "boundary.foundation_Pa_per_m",
+         'needs base = "foundation"'),
+    ],
+)  # fmt: skip
+def test_bad_foundation_keys_are_one_line_naming_the_key(block_files, lines, key, message):
+    folder, _, _ = block_files
+    path = folder / "bed.toml"
+    path.write_text(_with_boundary(_organ_study("block.vtu", site=[0.0, 0.0, 0.004]), lines))
+    _assert_refused_in_one_line(path, key, message)
+
+
+def test_an_organ_on_a_foundation_round_trips_and_is_held_by_springs(block_files):
+    folder, _, _ = block_files
+    path = folder / "bed.toml"
+    text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004], support="opposite")
+    path.write_text(_with_boundary(text, 'base = "foundation"\nfoundation_Pa_per_m = 2e5\n'))
+    study = load_study(path)
+    assert study.boundary.foundation.tangential_Pa_per_m == 2e5
+    again = study_from_dict(study.to_dict(), path=path)
+    assert again.boundary == study.boundary
+    problem = build_problem(study, build_mesh(study))
+    assert len(problem.dirichlet_conditions().nodes) == len(problem.punch_nodes) * 3
+    springs = problem.support_springs()  # the support's triangles: the base, the sides' lower half
+    held = problem.mesh.node_sets["bottom"]
+    assert set(springs.nodes) <= set(held)
+    base = held[np.isclose(problem.mesh.points[held, 2], 0.0)]
+    assert set(base) <= set(springs.nodes)
+    assert np.any(problem.mesh.points[springs.nodes, 2] > 1e-3)
+
+
+def test_a_block_on_a_stiff_foundation_gives_the_held_block_s_curve(block_files):
+    """The block as a file, on a foundation of 1e12 Pa/m under its base: the held block's
+    force curve to 1e-6; on 1e5 Pa/m it gives way."""
+    folder, block, _ = block_files
+    reference = _force_N(block)
+    path = folder / "stiff_bed.toml"
+    text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004])
+    forces = []
+    for stiffness in (1e12, 1e5):
+        lines = f'base = "foundation"\nfoundation_Pa_per_m = {stiffness}\nsupport = "bottom"\n'
+        path.write_text(_with_boundary(text, lines))
+        forces.append(_force_N(load_study(path)))
+    np.testing.assert_allclose(forces[0], reference, rtol=1e-6)
+    assert np.all(forces[1] < 0.9 * reference)
+
+
+def test_a_self_intersecting_surface_is_refused_in_one_line(tmp_path) -> None:
+    """Two closed cubes that overlap, in one STL: each is closed, their union crosses itself
+    (TetGen finds the intersecting faces); one line naming specimen.mesh, exit status 2."""
+    import meshio
+
+    from warptissue.cli import main
+
+    _cube_surface(tmp_path, "one.stl")
+    cube = meshio.read(tmp_path / "one.stl")
+    shifted = cube.points + np.array([0.002, 0.001, 0.0015])
+    triangles = cube.cells_dict["triangle"]
+    meshio.write(
+        tmp_path / "crossed.stl",
+        meshio.Mesh(
+            np.vstack([cube.points, shifted]),
+            [("triangle", np.vstack([triangles, triangles + len(cube.points)]))],
+        ),
+    )
+    text = _organ_study("crossed.stl", site=[0.0, 0.0, 0.004], support="opposite")
+    path = tmp_path / "crossed.toml"
+    path.write_text(text, encoding="utf-8")
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    message = str(caught.value)
+    assert "specimen.mesh" in message and "crossed.stl" in message and "\n" not in message
+    assert main(["simulate", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 2
+    assert not (tmp_path / "out").exists()

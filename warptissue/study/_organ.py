@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from warptissue.errors import InputError
+from warptissue.errors import InputError, MeshError
 from warptissue.fem.probe import footprint_normal, snap_to_surface
 from warptissue.mesh import (
     SURFACE_SUFFIXES,
@@ -70,10 +70,10 @@ def specimen_mesh(
     surface = path.suffix.lower() in SURFACE_SUFFIXES
     if path.suffix.lower() in USD_SUFFIXES and path.is_file():
         surface = not usd_holds_tetmesh(path)  # a USD Mesh alone: a surface to fill
-    if surface:
-        mesh = fill_surface_file(path, unit_m=unit_m)
-    else:
-        mesh = read_mesh(path, unit_m=unit_m)
+    try:
+        mesh = fill_surface_file(path, unit_m=unit_m) if surface else read_mesh(path, unit_m=unit_m)
+    except MeshError as exc:  # e.g. TetGen: a surface that crosses itself
+        raise InputError(str(exc), path=path, key="specimen.mesh", value=path.name) from None
     extent = float(np.max(np.ptp(mesh.points, axis=0)))
     if extent > LARGEST_SPECIMEN_M:
         raise InputError(
@@ -145,14 +145,21 @@ def support_nodes(
     direction: np.ndarray,
 ) -> np.ndarray:
     """The nodes a ``[boundary] support`` holds: a node set of the file, :data:`OPPOSITE`
-    (the surface nodes farther than half the body's depth below the site), or
-    ``{"box": [[xmin, ymin, zmin], [xmax, ymax, zmax]]}`` (every node inside the box, m).
+    (the surface nodes farther than half the body's depth below the site),
+    ``{"box": [[xmin, ymin, zmin], [xmax, ymax, zmax]]}`` (every node inside the box, m), or
+    ``{"half_space": [point, normal]}`` (every node on the side of the plane through
+    ``point`` (m) that ``normal`` points to, the plane included to 1e-9 of the mesh's size).
 
     Raises:
         InputError: A node set the file does not have, or a support that holds no node
             (``key`` ``boundary.support``).
     """
-    if isinstance(support, Mapping):
+    if isinstance(support, Mapping) and "half_space" in support:
+        point, normal = (np.asarray(v, dtype=np.float64) for v in support["half_space"])
+        side = (mesh.points - point) @ (normal / np.linalg.norm(normal))
+        size = float(np.max(np.ptp(mesh.points, axis=0)))
+        nodes = np.flatnonzero(side >= -1e-9 * size)
+    elif isinstance(support, Mapping):
         low, high = (np.asarray(corner, dtype=np.float64) for corner in support["box"])
         nodes = np.flatnonzero(np.all((mesh.points >= low) & (mesh.points <= high), axis=1))
     elif support == OPPOSITE:

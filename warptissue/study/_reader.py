@@ -490,30 +490,37 @@ def _read_material(table: Table) -> Any:
 
 
 def _support(table: Table) -> str | dict[str, Any]:
-    """``[boundary] support``: a node set's name, ``"opposite"`` or ``{ box = [[xmin, ymin,
-    zmin], [xmax, ymax, zmax]] }`` (m, each min below its max)."""
+    """``[boundary] support``: a node set's name, ``"opposite"``, ``{ box = [[xmin, ymin,
+    zmin], [xmax, ymax, zmax]] }`` (m, each min below its max) or ``{ half_space = [[x, y, z],
+    [nx, ny, nz]] }`` (a point of the plane, m, and the normal pointing into the held side)."""
     support = table.raw("support", default=OPPOSITE)
     if isinstance(support, str):
         return support
-    box = support.get("box") if isinstance(support, Mapping) else None
-    corners_ok = (
-        isinstance(box, list)
-        and len(box) == 2
-        and all(isinstance(corner, list) and len(corner) == 3 for corner in box)
+    shape = next(iter(support)) if isinstance(support, Mapping) and len(support) == 1 else None
+    pair = support.get(shape) if shape in ("box", "half_space") else None
+    vectors_ok = (
+        isinstance(pair, list)
+        and len(pair) == 2
+        and all(isinstance(corner, list) and len(corner) == 3 for corner in pair)
         and all(
             isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-            for corner in box
+            for corner in pair
             for v in corner
         )
     )
-    if len(support) != 1 or not corners_ok or not all(a < b for a, b in zip(*box, strict=True)):
+    if vectors_ok and shape == "box":
+        vectors_ok = all(a < b for a, b in zip(*pair, strict=True))
+    if vectors_ok and shape == "half_space":
+        vectors_ok = any(v != 0 for v in pair[1])
+    if not vectors_ok:
         raise table.error(
             "support",
-            'must be a node set\'s name, "opposite" or { box = [[xmin, ymin, zmin], '
-            "[xmax, ymax, zmax]] } (m, each min below its max)",
+            'must be a node set\'s name, "opposite", { box = [[xmin, ymin, zmin], '
+            "[xmax, ymax, zmax]] } (m, each min below its max) or { half_space = [[x, y, z], "
+            "[nx, ny, nz]] } (a point of the plane, m, and a nonzero normal into the held side)",
             support,
         )
-    return {"box": [[float(v) for v in corner] for corner in box]}
+    return {shape: [[float(v) for v in corner] for corner in pair]}
 
 
 def _read_boundary(table: Table, organ: tuple | None = None) -> Boundary:

@@ -253,7 +253,9 @@ class Boundary:
         support: A mesh specimen's support: a node set of its file, ``"opposite"`` (the
             surface farther than half the body's depth below the site), or
             ``{"box": [[xmin, ymin, zmin], [xmax, ymax, zmax]]}`` (the nodes inside the box,
-            m); None for a block or a disc (their base z = 0).
+            m), or ``{"half_space": [[x, y, z], [nx, ny, nz]]}`` (the nodes on the side of
+            the plane through the point, m, that the normal points to); None for a block or
+            a disc (their base z = 0).
         foundation: The elastic foundation of ``base = "foundation"``
             (``foundation_Pa_per_m`` and ``foundation_tangential_Pa_per_m``); None otherwise.
     """
