@@ -264,3 +264,110 @@ def test_a_probe_at_a_site_is_drawn_turned_to_its_direction(simulate_folder, tmp
         np.testing.assert_allclose(up, -frame.direction, atol=1e-12)
         edge = np.array(matrix.TransformDir(Gf.Vec3d(0.0, 1.0, 0.0)))
         np.testing.assert_allclose(edge, frame.axes[1], atol=1e-12)
+
+
+ORGAN_STUDY = """\
+schema_version = 1
+name = "layered"
+[specimen]
+mesh = "{asset}"
+element = "TET10"
+[indenter]
+kind = "sphere"
+radius_m = 0.003
+site_m = [0.0, 0.0, 0.004]
+[protocol]
+max_depth_m = 0.0002
+steps = 2
+[material]
+model = "neo_hookean"
+C10_Pa = 287.5
+bulk_modulus_Pa = 575000.0
+[boundary]
+support = "zmin"
+[solver]
+device = "cpu"
+"""
+
+
+@pytest.fixture(scope="module")
+def organ_run(tmp_path_factory):
+    """An organ's asset (a block written by write_simulation_usd, with a flat punch drawn and
+    its own material), a study that indents it with a sphere, and the run's output folder."""
+    from warptissue.indenter import Indenter
+    from warptissue.materials import NeoHookean
+    from warptissue.usd import write_simulation_usd
+
+    folder = tmp_path_factory.mktemp("layered")
+    grid = np.linspace(-4e-3, 4e-3, 5)
+    organ = block_mesh(grid, grid, np.linspace(0.0, 4e-3, 3))
+    write_simulation_usd(
+        folder / "organ.usda",
+        organ,
+        material=NeoHookean(500.0, 1e6),
+        indenter=Indenter("flat_punch", radius_m=1e-3),
+    )
+    (folder / "study.toml").write_text(ORGAN_STUDY.format(asset="organ.asset.usda"))
+    run = ["simulate", str(folder / "study.toml"), "--out", str(folder / "run")]
+    assert main([*run, "--quiet", "--vtu-every-step"]) == 0
+    return folder
+
+
+def test_a_run_is_layered_over_the_organ_s_own_asset(organ_run, tmp_path):
+    """`export --over`: the organ's asset is referenced unchanged under an overlay and a
+    results layer; the composed TetMesh moves by the run's displacement at every time code,
+    the indenter is the run's sphere (the asset's punch blocked), the material the run's."""
+    from pxr import Usd, UsdGeom
+
+    asset = organ_run / "organ.asset.usda"
+    before = asset.read_bytes()
+    root = tmp_path / "scene" / "layered.usda"
+    status = main(["export", str(organ_run / "run"), "--over", str(asset), "--out", str(root)])
+    assert status == 0
+    assert asset.read_bytes() == before
+    assert validate_stage(root) == []
+    stage = Usd.Stage.Open(str(root))
+    layers = [layer.identifier for layer in stage.GetLayerStack(includeSessionLayers=False)]
+    assert layers[-1].endswith("organ.asset.usda") and str(tmp_path) not in layers[-1]
+    rest = read_tetmesh_usd(asset).points
+    volume = UsdGeom.TetMesh(stage.GetPrimAtPath("/World/Specimen/Volume"))
+    summary = json.loads((organ_run / "run" / "result.json").read_text())
+    steps = len(summary["force_curve"]["depth_m"])
+    for k in range(1, steps + 1):
+        _, point_data, _ = read_fields_vtu(organ_run / "run" / f"fields_{k:03d}.vtu")
+        moved = np.asarray(volume.GetPointsAttr().Get(k), dtype=np.float64)
+        expected = rest + point_data["displacement_m"][: len(rest)]
+        np.testing.assert_allclose(moved, expected, atol=1e-9)
+    np.testing.assert_allclose(volume.GetPointsAttr().Get(0), rest, atol=1e-9)
+    shape = stage.GetPrimAtPath("/World/Indenter/Shape")
+    assert shape.GetTypeName() == "Sphere" and shape.GetAttribute("radius").Get() == 0.003
+    assert shape.GetAttribute("height").Get() is None  # the asset's punch, blocked
+    assert read_material_usd(root)["material"]["C10_Pa"] == pytest.approx(287.5)
+    force = read_probe_curve_usd(root)
+    np.testing.assert_allclose(
+        force["reaction_force_N"][1:], summary["force_curve"]["reaction_force_N"]
+    )
+
+
+def test_a_run_on_another_mesh_or_units_is_not_layered(organ_run, tmp_path, capsys):
+    from warptissue.usd import write_simulation_usd
+
+    grid = np.linspace(-4e-3, 4e-3, 4)
+    write_simulation_usd(
+        tmp_path / "other.usda",
+        block_mesh(grid, grid, np.linspace(0.0, 4e-3, 3)),
+        material=MATERIAL,
+    )
+    millimetres = tmp_path / "mm.asset.usda"
+    text = (organ_run / "organ.asset.usda").read_text()
+    millimetres.write_text(text.replace("metersPerUnit = 1", "metersPerUnit = 0.001", 1))
+    for asset, message in (
+        (tmp_path / "other.asset.usda", "is not the asset's"),
+        (millimetres, "layering needs an asset in metres"),
+        (tmp_path / "missing.usda", "over an existing USD asset"),
+    ):
+        root = tmp_path / "out" / "scene.usda"
+        status = main(["export", str(organ_run / "run"), "--over", str(asset), "--out", str(root)])
+        err = capsys.readouterr().err.strip()
+        assert status == 2 and "--over" in err and message in err and "\n" not in err, err
+        assert not root.parent.exists()

@@ -50,6 +50,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=1000.0,
         help="mass density written as physics:density, kg/m^3 (default 1000)",
     )
+    parser.add_argument(
+        "--over",
+        type=Path,
+        metavar="ASSET.usda",
+        help=(
+            "layer the run over this organ's USD asset (the one its [specimen] mesh named, "
+            "not refined) instead of writing its own asset layer"
+        ),
+    )
     parser.add_argument("--json", action="store_true", help="print the written paths as JSON")
     parser.set_defaults(handler=run_export)
 
@@ -63,8 +72,16 @@ def run_export(args: argparse.Namespace) -> int:
     check_usda_path(args.out, "--out")
     if not source.exists():
         raise InputError("no such simulate output folder or study file", path=source)
+    if args.over is not None and not (source.is_dir() and args.over.is_file()):
+        raise InputError(
+            "--over layers a simulate output folder over an existing USD asset",
+            path=args.over,
+            key="--over",
+        )
     if source.is_dir():
-        paths = export_result_dir(source, args.out, density_kg_per_m3=args.density_kg_per_m3)
+        paths = export_result_dir(
+            source, args.out, density_kg_per_m3=args.density_kg_per_m3, over=args.over
+        )
     elif source.suffix == ".toml" and source.is_file():
         paths = export_study(source, args.out, density_kg_per_m3=args.density_kg_per_m3)
     else:

@@ -18,6 +18,7 @@ from warptissue.usd.validation import validate_stage  # noqa: E402
 from warptissue.usd.writer import (  # noqa: E402
     UsdScenePaths,
     write_material_usd,
+    write_results_over_asset,
     write_simulation_usd,
 )
 
@@ -29,5 +30,6 @@ __all__ = [
     "register_schema_plugin",
     "validate_stage",
     "write_material_usd",
+    "write_results_over_asset",
     "write_simulation_usd",
 ]

@@ -29,7 +29,11 @@ from warptissue.indenter import Indenter
 from warptissue.mesh import NODE_SET_PREFIX, TET_REGION_KEY, TetMesh
 from warptissue.simulate import build_mesh
 from warptissue.study import load_study
-from warptissue.usd.writer import UsdScenePaths, write_simulation_usd
+from warptissue.usd.writer import (
+    UsdScenePaths,
+    write_results_over_asset,
+    write_simulation_usd,
+)
 
 __all__ = ["export_result_dir", "export_study", "read_fields_vtu"]
 
@@ -163,6 +167,7 @@ def export_result_dir(
     material: Any = None,
     provenance: Mapping[str, Any] | None = None,
     density_kg_per_m3: float = 1000.0,
+    over: str | Path | None = None,
 ) -> UsdScenePaths:
     """Write a ``warptissue simulate`` output folder as a layered USD scene.
 
@@ -173,6 +178,9 @@ def export_result_dir(
             (a fit passes its fitted material here).
         provenance: Extra provenance (data file, fit quality, ...) for ``/World``'s customData.
         density_kg_per_m3: Mass density for ``physics:density``.
+        over: An organ's USD asset that the run's mesh was read from: the result is layered
+            over it (:func:`warptissue.usd.writer.write_results_over_asset`) instead of
+            written with its own asset layer.
 
     Returns:
         The paths written. Every step's deformed shape is written when ``fields_NNN.vtu``
@@ -232,6 +240,20 @@ def export_result_dir(
     }
     if provenance:
         info.update(provenance)
+    if over is not None:
+        if result is None:
+            raise InputError("the run has no converged step to layer", path=summary_path)
+        return write_results_over_asset(
+            usd_path,
+            over,
+            mesh,
+            result=result,
+            material=material,
+            provenance=info,
+            density_kg_per_m3=density_kg_per_m3,
+            indenter=indenter,
+            indenter_axes=axes,
+        )
     return write_simulation_usd(
         usd_path,
         mesh,

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -49,6 +50,7 @@ __all__ = [
     "UsdScenePaths",
     "material_field_problems",
     "write_material_usd",
+    "write_results_over_asset",
     "write_simulation_usd",
 ]
 
@@ -478,11 +480,20 @@ def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str,
     return arrays
 
 
-def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> None:
-    """Declare (type, interpolation, unit; no values) the attributes the results layer samples."""
+def _declare_result_attributes(
+    stage: Any,
+    arrays: Mapping[str, np.ndarray],
+    *,
+    volume_path: str = VOLUME,
+    surface_path: str | None = SURFACE,
+) -> None:
+    """Declare (type, interpolation, unit; no values) the attributes the results layer samples
+    (on the surface Mesh only where ``surface_path`` is given)."""
 
-    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(VOLUME))
-    surface = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(SURFACE))
+    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(volume_path))
+    surface = (
+        None if surface_path is None else UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(surface_path))
+    )
     declared = [
         (
             volume.CreatePrimvar(
@@ -498,7 +509,7 @@ def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> 
         stress.GetAttr().SetCustomDataByKey("components", "xx, yy, zz, yz, xz, xy")
         declared.append((stress, "Pa"))
     if "von_mises_Pa" in arrays:
-        for api in (volume, surface):
+        for api in (volume, surface) if surface is not None else (volume,):
             declared.append(
                 (
                     api.CreatePrimvar(
@@ -507,7 +518,7 @@ def _declare_result_attributes(stage: Any, arrays: Mapping[str, np.ndarray]) -> 
                     "Pa",
                 )
             )
-    if "contact_pressure_Pa" in arrays:
+    if "contact_pressure_Pa" in arrays and surface is not None:
         declared.append(
             (
                 surface.CreatePrimvar(
@@ -539,14 +550,17 @@ def _write_results(
     arrays: Mapping[str, np.ndarray],
     *,
     kept: np.ndarray,
-    surface_nodes: np.ndarray,
-    owners: np.ndarray,
+    surface_nodes: np.ndarray | None,
+    owners: np.ndarray | None,
     rest: np.ndarray,
+    volume_path: str = VOLUME,
+    surface_path: str | None = SURFACE,
 ) -> None:
-    """Author the time samples (stage's edit target: the results layer)."""
+    """Author the time samples (stage's edit target: the results layer); ``surface_path``
+    None: no surface Mesh to sample."""
 
-    volume = UsdGeom.TetMesh(stage.GetPrimAtPath(VOLUME))
-    surface = UsdGeom.Mesh(stage.GetPrimAtPath(SURFACE))
+    volume = UsdGeom.TetMesh(stage.GetPrimAtPath(volume_path))
+    surface = None if surface_path is None else UsdGeom.Mesh(stage.GetPrimAtPath(surface_path))
     volume_api = UsdGeom.PrimvarsAPI(volume)
     indenter = stage.GetPrimAtPath(INDENTER)
     operations = UsdGeom.Xformable(indenter).GetOrderedXformOps()
@@ -556,9 +570,8 @@ def _write_results(
     if len(operations) > 1 and operations[1].GetOpType() == UsdGeom.XformOp.TypeOrient:
         turn = Gf.Matrix4d().SetRotate(operations[1].Get())
         along = -Gf.Vec3d(turn.GetRow3(2))
-    points_attr, surface_points, displacement_attr = (
+    points_attr, displacement_attr = (
         volume.GetPointsAttr(),
-        surface.GetPointsAttr(),
         volume_api.GetPrimvar("tissue:displacement").GetAttr(),
     )
     step_count = len(arrays["depths_m"])
@@ -571,7 +584,8 @@ def _write_results(
     for time_code, nodal in shapes.items():
         deformed = (rest + nodal).astype(np.float32)
         points_attr.Set(Vt.Vec3fArray.FromNumpy(deformed), time_code)
-        surface_points.Set(Vt.Vec3fArray.FromNumpy(deformed[surface_nodes]), time_code)
+        if surface is not None:
+            surface.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(deformed[surface_nodes]), time_code)
         displacement_attr.Set(Vt.Vec3fArray.FromNumpy(nodal.astype(np.float32)), time_code)
     depths = np.concatenate([[0.0], arrays["depths_m"]])
     forces = np.concatenate([[0.0], arrays["reaction_force_N"]])
@@ -586,7 +600,7 @@ def _write_results(
         area_attr = indenter.GetAttribute("tissue:probe:contactArea")
         for time_code, area in enumerate(np.concatenate([[0.0], arrays["contact_area_m2"]])):
             area_attr.Set(float(area), time_code)
-    if "contact_pressure_Pa" in arrays:
+    if "contact_pressure_Pa" in arrays and surface is not None:
         pressure = arrays["contact_pressure_Pa"]
         pressure_attr = UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:contactPressure")
         rest_pressure = np.zeros(len(surface_nodes))
@@ -605,9 +619,10 @@ def _write_results(
     if "von_mises_Pa" in arrays:
         von_mises = arrays["von_mises_Pa"]
         volume_api.GetPrimvar("tissue:vonMises").Set(Vt.DoubleArray.FromNumpy(von_mises), last)
-        UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:vonMises").Set(
-            Vt.DoubleArray.FromNumpy(von_mises[owners]), last
-        )
+        if surface is not None:
+            UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:vonMises").Set(
+                Vt.DoubleArray.FromNumpy(von_mises[owners]), last
+            )
 
 
 def _volume_prim(
@@ -851,6 +866,208 @@ def write_simulation_usd(
     root_layer.subLayerPaths.append(f"./{asset_name}")
     with atomic_path(paths.asset) as temporary:
         asset_layer.Export(str(temporary))
+    with atomic_path(paths.root) as temporary:
+        root_layer.Export(str(temporary))
+    return paths
+
+
+def _clear_transforms(stage: Any, root: str) -> None:
+    """Empty the ``xformOpOrder`` of every Xformable under ``root`` in the edit target, so
+    that prims redefined there add their own ops over an asset's."""
+    top = stage.GetPrimAtPath(root)
+    if top:
+        for prim in list(Usd.PrimRange(top)):
+            if prim.IsA(UsdGeom.Xformable):
+                UsdGeom.Xformable(prim).ClearXformOpOrder()
+
+
+def _block_leftovers(stage: Any, root: str, layer: Any, kept: tuple[str, ...]) -> None:
+    """Hide what weaker layers hold under ``root`` and the edit target ``layer`` did not
+    write: prims other than ``kept`` are deactivated and the attributes of ``kept`` prims
+    without an opinion in ``layer`` blocked, so that a prim redefined over an asset (its
+    indenter, its material) keeps none of the asset's values."""
+    top = stage.GetPrimAtPath(root)
+    if not top:
+        return
+    inactive, blocked = [], []
+    for prim in Usd.PrimRange(top):
+        if str(prim.GetPath()) not in kept:
+            inactive.append(prim)
+            continue
+        blocked.extend(
+            attribute
+            for attribute in prim.GetAuthoredAttributes()
+            if not layer.GetAttributeAtPath(attribute.GetPath())
+        )
+    for attribute in blocked:
+        attribute.Block()
+    for prim in inactive:
+        prim.SetActive(False)
+
+
+def write_results_over_asset(
+    root_path: str | Path,
+    asset_path: str | Path,
+    mesh: TetMesh,
+    *,
+    result: Any,
+    material: Any = None,
+    provenance: Mapping[str, Any] | None = None,
+    density_kg_per_m3: float = 1000.0,
+    indenter: Indenter | None = None,
+    indenter_axes: np.ndarray | None = None,
+) -> UsdScenePaths:
+    """Write a simulation result layered over an organ's own USD asset, which is referenced,
+    not copied: the scene the asset pipeline already holds, with the run on top.
+
+    Layout: ``NAME.usda`` (root: SI metadata and the time range) sublayers
+    ``NAME.results.usdc`` (time samples only: the TetMesh's deformed ``points`` and
+    ``tissue:displacement``, the stress primvars at the last step, the surface Mesh's points
+    and contact pressure where the asset has the surface Mesh of
+    :func:`write_simulation_usd`, the probe's curves and motion), over ``NAME.asset.usda`` (no
+    time samples: the result attributes' declarations, the run's material bound to the
+    TetMesh, the indenter at its site, provenance; what the asset held under
+    ``/World/Indenter`` and ``/World/Materials/Tissue`` and the run does not is deactivated or
+    blocked), over the organ's asset by its relative path.
+
+    Args:
+        root_path: The root layer, ``NAME.usda``.
+        asset_path: The organ's USD asset (a TetMesh, metersPerUnit 1), the one the run's
+            mesh was read from (``[specimen] mesh``) without refinement.
+        mesh: The run's mesh, metres: its corner nodes and tets must be the asset's (TET10:
+            the asset's TET4 promoted).
+        result: As :func:`write_simulation_usd`'s.
+        material, provenance, density_kg_per_m3, indenter, indenter_axes: As
+            :func:`write_simulation_usd`'s.
+
+    Returns:
+        The paths written (``asset`` is the overlay ``NAME.asset.usda``).
+
+    Raises:
+        InputError: A root that is not ``.usda``, an asset not in metres, or a run's mesh
+            that is not the asset's (refined or refilled): one line naming ``--over``.
+    """
+    from warptissue._stage import open_stage
+    from warptissue.mesh import tetmesh_prim
+
+    root_path, asset_path = Path(root_path), Path(asset_path)
+    if root_path.suffix != ".usda":
+        raise InputError("the root layer must be a .usda file", path=root_path)
+    _check_density(density_kg_per_m3)
+    organ = open_stage(asset_path)
+    units = UsdGeom.GetStageMetersPerUnit(organ)
+    if units != 1.0:
+        raise InputError(
+            f"the asset is in metersPerUnit {units:g}: a result layered over it would be read "
+            "in its units; layering needs an asset in metres",
+            path=asset_path,
+            key="--over",
+        )
+    volume_path = str(tetmesh_prim(organ, asset_path).GetPath())
+    asset_mesh = UsdGeom.TetMesh(organ.GetPrimAtPath(volume_path))
+    asset_points = np.asarray(asset_mesh.GetPointsAttr().Get(), dtype=np.float64).reshape(-1, 3)
+    asset_tets = np.asarray(asset_mesh.GetTetVertexIndicesAttr().Get(), dtype=np.int64)
+    asset_tets = asset_tets.reshape(-1, 4)
+    kept, tets, _ = _corner_mesh(mesh)
+    rest = mesh.points[kept]
+    extent = float(np.ptp(asset_points, axis=0).max())
+    same = (
+        rest.shape == asset_points.shape
+        and tets.shape == asset_tets.shape
+        and np.array_equal(np.sort(tets, axis=1), np.sort(asset_tets, axis=1))
+        and float(np.abs(rest - asset_points).max()) <= 1e-6 * extent
+    )
+    if not same:
+        raise InputError(
+            f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the asset's "
+            f"({len(asset_points)} nodes, {len(asset_tets)} tets at {volume_path}): a mesh "
+            "refined or refilled around the sites cannot be layered over it; export the run "
+            "as its own scene (without --over)",
+            path=asset_path,
+            key="--over",
+        )
+    surface_path = None
+    for sibling in organ.GetPrimAtPath(volume_path).GetParent().GetChildren():
+        indices = sibling.GetAttribute("tissue:volumePointIndices")
+        if sibling.IsA(UsdGeom.Mesh) and indices:
+            surface_path = str(sibling.GetPath())
+            surface_nodes = np.asarray(indices.Get(), dtype=np.int64)
+            owners = np.asarray(sibling.GetAttribute("tissue:volumeTetIndices").Get())
+            break
+    else:
+        surface_nodes = owners = None
+    del organ
+    arrays = _result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
+
+    stem = root_path.name[: -len(".usda")]
+    paths = UsdScenePaths(
+        root=root_path,
+        asset=root_path.with_name(f"{stem}.asset.usda"),
+        results=root_path.with_name(f"{stem}.results.usdc"),
+    )
+    overlay = Sdf.Layer.CreateAnonymous(".usda")
+    results_layer = Sdf.Layer.CreateAnonymous(".usdc")
+    root_layer = Sdf.Layer.CreateAnonymous(".usda")
+    _set_stage_metadata(root_layer)
+    relative = Path(os.path.relpath(asset_path.resolve(), root_path.resolve().parent))
+    for layer in (results_layer, overlay):
+        root_layer.subLayerPaths.append(layer.identifier)
+    root_layer.subLayerPaths.append(str(asset_path.resolve()))
+    stage = Usd.Stage.Open(root_layer)
+    stage.SetEditTarget(Usd.EditTarget(overlay))
+    world = stage.GetPrimAtPath(WORLD)
+    info = {"software": software_versions(), "layered_over": relative.as_posix()}
+    if provenance:
+        info.update(provenance)
+    world.SetCustomDataByKey("warptissue", _vt_dictionary(info))
+    summary = {
+        "step_count": len(arrays["depths_m"]),
+        "time_code_of_step_k": "k (time code 0 is the rest state)",
+    }
+    for name in ("completed", "message"):
+        if _field(result, name) is not None:
+            summary[name] = _field(result, name)
+    world.SetCustomDataByKey("warptissue:result", _vt_dictionary(summary))
+    if material is not None:
+        tissue = _material_prims(stage, material_record(material), density_kg_per_m3)
+        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(volume_path)).Bind(
+            tissue, UsdShade.Tokens.fallbackStrength, "physics"
+        )
+        _block_leftovers(stage, MATERIAL, overlay, (MATERIAL,))
+    _clear_transforms(stage, INDENTER)
+    if indenter is not None:
+        _indenter_prims(
+            stage,
+            indenter,
+            float(rest[:, 2].max()),
+            np.stack([rest.min(0)[:2], rest.max(0)[:2]]),
+            axes=indenter_axes,
+        )
+    drawn = () if indenter is None else (INDENTER, f"{INDENTER}/Shape")
+    _block_leftovers(stage, INDENTER, overlay, drawn)
+    _declare_result_attributes(stage, arrays, volume_path=volume_path, surface_path=surface_path)
+    stage.SetEditTarget(Usd.EditTarget(results_layer))
+    _write_results(
+        stage,
+        arrays,
+        kept=kept,
+        surface_nodes=surface_nodes,
+        owners=owners,
+        rest=rest,
+        volume_path=volume_path,
+        surface_path=surface_path,
+    )
+    del stage
+    root_layer.startTimeCode = 0.0
+    root_layer.endTimeCode = float(len(arrays["depths_m"]))
+    del root_layer.subLayerPaths[:]
+    root_layer.subLayerPaths.append(f"./{paths.results.name}")
+    root_layer.subLayerPaths.append(f"./{paths.asset.name}")
+    root_layer.subLayerPaths.append(relative.as_posix())
+    with atomic_path(paths.results) as temporary:
+        results_layer.Export(str(temporary))
+    with atomic_path(paths.asset) as temporary:
+        overlay.Export(str(temporary))
     with atomic_path(paths.root) as temporary:
         root_layer.Export(str(temporary))
     return paths
