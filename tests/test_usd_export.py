@@ -306,6 +306,7 @@ def organ_run(tmp_path_factory):
         organ,
         material=NeoHookean(500.0, 1e6),
         indenter=Indenter("flat_punch", radius_m=1e-3),
+        density_kg_per_m3=1060.0,
     )
     (folder / "study.toml").write_text(ORGAN_STUDY.format(asset="organ.asset.usda"))
     run = ["simulate", str(folder / "study.toml"), "--out", str(folder / "run")]
@@ -342,7 +343,9 @@ def test_a_run_is_layered_over_the_organ_s_own_asset(organ_run, tmp_path):
     shape = stage.GetPrimAtPath("/World/Indenter/Shape")
     assert shape.GetTypeName() == "Sphere" and shape.GetAttribute("radius").Get() == 0.003
     assert shape.GetAttribute("height").Get() is None  # the asset's punch, blocked
-    assert read_material_usd(root)["material"]["C10_Pa"] == pytest.approx(287.5)
+    material = read_material_usd(root)
+    assert material["material"]["C10_Pa"] == pytest.approx(287.5)
+    assert material["density_kg_per_m3"] == pytest.approx(1060.0)  # the asset's, kept
     force = read_probe_curve_usd(root)
     np.testing.assert_allclose(
         force["reaction_force_N"][1:], summary["force_curve"]["reaction_force_N"]

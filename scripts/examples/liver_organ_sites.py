@@ -21,8 +21,11 @@ study (its site in ``[indenter]``) run with the forward FE at C10 = 287.5 Pa (K 
 nu = 0.49), to 2 mm in 12 samples, with 1 % Gaussian noise of the peak force (seeded). The
 default run fits the three records jointly for one C10 (the sites' forward runs are one per
 site per evaluation, batched on a GPU), prints C10 against the value that made the records,
-then runs the fitted organ at site A and writes it as USD (``warptissue export``'s scene,
-validated: its findings are printed).
+then runs the fitted organ at site A and writes it as USD twice, each scene validated (its
+findings are printed): the run on the refined mesh as its own scene (``warptissue export``),
+and a run on the organ asset's own mesh (not refined) layered over the asset itself
+(``warptissue export --over scenes/liver_organ.asset.usda``: the asset is referenced, not
+copied, and the run's deformed points, stress and probe sit in layers over it).
 
 Usage:
     python scripts/examples/liver_organ_sites.py [--out DIR] [--device cpu]
@@ -114,6 +117,16 @@ def fit_and_export(out: Path, *, device: str | None) -> dict:
     paths = export_result_dir(out / "site_a", out / "liver_organ_sites.usda")
     findings = validate_stage(paths.root)
     print(f"USD: {paths.root} ({len(findings)} validation findings)")
+    # The asset's own mesh (no refinement), so that the run layers over the asset itself.
+    asset = single.specimen.mesh_path
+    unrefined = dataclasses.replace(
+        single, specimen=dataclasses.replace(single.specimen, mesher="file", refine_zones=())
+    )
+    run_study(unrefined, out_dir=out / "site_a_asset", device=device, progress=False,
+              announce=False, vtu_every_step=True)  # fmt: skip
+    layered = export_result_dir(out / "site_a_asset", out / "liver_organ_over.usda", over=asset)
+    layered_findings = validate_stage(layered.root)
+    print(f"USD over {asset.name}: {layered.root} ({len(layered_findings)} validation findings)")
     summary = {
         "status": fit.status,
         "c10_Pa": fitted,
@@ -123,6 +136,8 @@ def fit_and_export(out: Path, *, device: str | None) -> dict:
         "r_squared": [record.r_squared for record in fit.records],
         "usd": str(paths.root),
         "usd_findings": [str(finding) for finding in findings],
+        "usd_over_asset": str(layered.root),
+        "usd_over_asset_findings": [str(finding) for finding in layered_findings],
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n", encoding="utf-8")
     return summary

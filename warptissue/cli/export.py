@@ -47,8 +47,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--density",
         dest="density_kg_per_m3",
         type=float,
-        default=1000.0,
-        help="mass density written as physics:density, kg/m^3 (default 1000)",
+        default=None,
+        help="mass density written as physics:density, kg/m^3 (default 1000; with --over, "
+        "the asset's)",
     )
     parser.add_argument(
         "--over",
@@ -83,7 +84,8 @@ def run_export(args: argparse.Namespace) -> int:
             source, args.out, density_kg_per_m3=args.density_kg_per_m3, over=args.over
         )
     elif source.suffix == ".toml" and source.is_file():
-        paths = export_study(source, args.out, density_kg_per_m3=args.density_kg_per_m3)
+        density = 1000.0 if args.density_kg_per_m3 is None else args.density_kg_per_m3
+        paths = export_study(source, args.out, density_kg_per_m3=density)
     else:
         raise InputError("expected a simulate output folder or a study .toml file", path=source)
     findings = validate_stage(paths.root)

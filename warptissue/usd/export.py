@@ -166,7 +166,7 @@ def export_result_dir(
     *,
     material: Any = None,
     provenance: Mapping[str, Any] | None = None,
-    density_kg_per_m3: float = 1000.0,
+    density_kg_per_m3: float | None = None,
     over: str | Path | None = None,
 ) -> UsdScenePaths:
     """Write a ``warptissue simulate`` output folder as a layered USD scene.
@@ -177,7 +177,8 @@ def export_result_dir(
         material: The material to record; None takes ``result.json``'s ``study.material``
             (a fit passes its fitted material here).
         provenance: Extra provenance (data file, fit quality, ...) for ``/World``'s customData.
-        density_kg_per_m3: Mass density for ``physics:density``.
+        density_kg_per_m3: Mass density for ``physics:density``; None: 1000, or layered
+            over an asset the asset's.
         over: An organ's USD asset that the run's mesh was read from: the result is layered
             over it (:func:`warptissue.usd.writer.write_results_over_asset`) instead of
             written with its own asset layer.
@@ -260,7 +261,7 @@ def export_result_dir(
         material=material,
         result=result,
         provenance=info,
-        density_kg_per_m3=density_kg_per_m3,
+        density_kg_per_m3=1000.0 if density_kg_per_m3 is None else density_kg_per_m3,
         indenter=indenter,
         indenter_axes=axes,
     )

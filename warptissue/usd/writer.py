@@ -913,7 +913,7 @@ def write_results_over_asset(
     result: Any,
     material: Any = None,
     provenance: Mapping[str, Any] | None = None,
-    density_kg_per_m3: float = 1000.0,
+    density_kg_per_m3: float | None = None,
     indenter: Indenter | None = None,
     indenter_axes: np.ndarray | None = None,
 ) -> UsdScenePaths:
@@ -937,8 +937,9 @@ def write_results_over_asset(
         mesh: The run's mesh, metres: its corner nodes and tets must be the asset's (TET10:
             the asset's TET4 promoted).
         result: As :func:`write_simulation_usd`'s.
-        material, provenance, density_kg_per_m3, indenter, indenter_axes: As
-            :func:`write_simulation_usd`'s.
+        density_kg_per_m3: Mass density for ``physics:density``; None keeps the asset's
+            (``physics:density`` of its ``/World/Materials/Tissue``; 1000 without one).
+        material, provenance, indenter, indenter_axes: As :func:`write_simulation_usd`'s.
 
     Returns:
         The paths written (``asset`` is the overlay ``NAME.asset.usda``).
@@ -953,8 +954,12 @@ def write_results_over_asset(
     root_path, asset_path = Path(root_path), Path(asset_path)
     if root_path.suffix != ".usda":
         raise InputError("the root layer must be a .usda file", path=root_path)
-    _check_density(density_kg_per_m3)
     organ = open_stage(asset_path)
+    if density_kg_per_m3 is None:
+        held = organ.GetPrimAtPath(MATERIAL)
+        held = held.GetAttribute("physics:density").Get() if held else None
+        density_kg_per_m3 = 1000.0 if held is None else float(held)
+    _check_density(density_kg_per_m3)
     units = UsdGeom.GetStageMetersPerUnit(organ)
     if units != 1.0:
         raise InputError(
