@@ -625,3 +625,4 @@ def test_a_self_intersecting_surface_is_refused_in_one_line(tmp_path) -> None:
     assert "specimen.mesh" in message and "crossed.stl" in message and "\n" not in message
     assert main(["simulate", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert not (tmp_path / "out").exists()
+    assert not list(Path.cwd().glob("_skipped.*"))  # TetGen's report of the crossing faces

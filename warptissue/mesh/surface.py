@@ -134,10 +134,18 @@ def tetrahedralize_surface(
         np.ascontiguousarray(triangles, dtype=np.int32),
         markers,
     )
+    # TetGen writes the faces it finds crossing each other to _skipped.face/.node in the
+    # working folder: removed again where this call made them.
+    leftovers = [Path(name) for name in ("_skipped.face", "_skipped.node")]
+    before = {path: path.exists() for path in leftovers}
     try:
         nodes, tets, _, face_markers = generator.tetrahedralize(**options)
     except RuntimeError as exc:
         raise MeshError(f"TetGen failed: {exc}") from exc
+    finally:
+        for path, existed in before.items():
+            if not existed:
+                path.unlink(missing_ok=True)
     if len(tets) == 0:
         raise MeshError("TetGen produced no tetrahedra (is the surface self-intersecting?)")
     mesh = fix_orientation(TetMesh(points=nodes, tets=tets))
