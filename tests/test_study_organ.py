@@ -605,15 +605,16 @@ def test_a_self_intersecting_surface_is_refused_in_one_line(tmp_path) -> None:
 
     from warptissue.cli import main
 
-    _cube_surface(tmp_path, "one.stl")
-    cube = meshio.read(tmp_path / "one.stl")
-    shifted = cube.points + np.array([0.002, 0.001, 0.0015])
-    triangles = cube.cells_dict["triangle"]
+    points = 0.004 * np.array(
+        [[x - 0.5, y - 0.5, z] for z in (0.0, 1.0) for y in (0.0, 1.0) for x in (0.0, 1.0)]
+    )
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5)]
+    triangles = np.array([t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))])
+    shifted = points + np.array([0.002, 0.001, 0.0015])
     meshio.write(
         tmp_path / "crossed.stl",
         meshio.Mesh(
-            np.vstack([cube.points, shifted]),
-            [("triangle", np.vstack([triangles, triangles + len(cube.points)]))],
+            np.vstack([points, shifted]), [("triangle", np.vstack([triangles, triangles + 8]))]
         ),
     )
     text = _organ_study("crossed.stl", site=[0.0, 0.0, 0.004], support="opposite")
