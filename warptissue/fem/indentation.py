@@ -87,7 +87,7 @@ def plane_axis(mesh: TetMesh, name: str, *, key: str = "symmetry_planes") -> int
         if key == "symmetry_planes":
             raise InputError(f"{what} {name!r} is not an axis-aligned plane", key=key)
         raise InputError(
-            f"{what} (node set {name!r}) is not flat on a plane x, y or z = const (it spans "
+            f"{what} is not flat on a plane x, y or z = const (it spans "
             f"{spread[axis]:.3g} m along {'xyz'[axis]}, its thinnest extent): a sliding base "
             'holds the normal of one plane; hold it "fixed" or set it on a "foundation"',
             key=key,
