@@ -524,6 +524,8 @@ def test_a_half_space_support_holds_the_nodes_beyond_its_plane(block_files):
     ):
         path.write_text(_with_support(text, support))
         _assert_refused_in_one_line(path, "boundary.support", "a nonzero normal")
+    path.write_text(_with_support(text, "{ half_space = [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]] }"))
+    _assert_refused_in_one_line(path, "boundary.support", "holds no node")
 
 
 def test_a_flat_support_slides_and_one_that_is_not_flat_is_refused(block_files):
