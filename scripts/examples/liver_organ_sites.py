@@ -103,10 +103,10 @@ def fit_and_export(out: Path, *, device: str | None) -> dict:
     study = load_study(STUDY)
     start = time.perf_counter()
     fit = fit_indentation(study, device=device, progress=False)
+    fit_s = time.perf_counter() - start
     fitted = float(fit.result.x[0])
     error = fitted / TRUE_C10_PA - 1.0
-    print(f"status: {fit.status} ({fit.forward_solves} forward runs, "
-          f"{time.perf_counter() - start:.0f} s)")  # fmt: skip
+    print(f"status: {fit.status} ({fit.forward_solves} forward runs, {fit_s:.0f} s)")
     print(f"C10: {fitted:.2f} Pa against {TRUE_C10_PA} Pa that made the records ({error:+.2%})")
     for record in fit.records:
         print(f"  {record.file}: R^2 = {record.r_squared:.4f}, RMSE = {record.rmse_N:.3g} N")
@@ -129,6 +129,7 @@ def fit_and_export(out: Path, *, device: str | None) -> dict:
         "true_c10_Pa": TRUE_C10_PA,
         "relative_error": error,
         "forward_solves": fit.forward_solves,
+        "fit_s": fit_s,
         "r_squared": [record.r_squared for record in fit.records],
         "usd": str(layered.root),
         "usd_over": str(asset),
