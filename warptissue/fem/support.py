@@ -66,20 +66,14 @@ class Foundation:
             object.__setattr__(self, "tangential_Pa_per_m", self.normal_Pa_per_m)
         for key in ("normal_Pa_per_m", "tangential_Pa_per_m"):
             value = getattr(self, key)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            number = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (number and math.isfinite(value) and value > 0):
                 raise InputError(
                     "a foundation's stiffness must be a positive number of Pa/m (a bed that "
                     "does not hold tangentially leaves the body free to slide)",
                     key=key,
                     value=value,
                 )
-
-    def to_dict(self) -> dict[str, float]:
-        """The stiffnesses under their keys, Pa/m."""
-        return {
-            "normal_Pa_per_m": float(self.normal_Pa_per_m),
-            "tangential_Pa_per_m": float(self.tangential_Pa_per_m),
-        }
 
 
 # Dunavant's 6-point rule on the reference triangle (xi, eta): points and weights (sum 1/2).
