@@ -15,18 +15,21 @@ ROOT = Path(__file__).resolve().parents[1]
 """The repository root."""
 
 
-def run_script(path: str, *args: str, cwd: Path, expect_status: int = 0) -> str:
+def run_script(
+    path: str, *args: str, cwd: Path, expect_status: int = 0, timeout_s: float = 900.0
+) -> str:
     """Run ``python ROOT/path args...`` in ``cwd``; return its stdout.
 
     Fails the test, with the end of the script's standard error, when the exit status is not
     ``expect_status``; with ``expect_status`` other than 0 it returns the standard error.
+    ``timeout_s``: a safety net against a hung script, not a speed assertion.
     """
     completed = subprocess.run(
         [sys.executable, str(ROOT / path), *args],
         capture_output=True,
         text=True,
         cwd=cwd,
-        timeout=900,
+        timeout=timeout_s,
     )
     assert completed.returncode == expect_status, completed.stderr[-4000:]
     return completed.stdout if expect_status == 0 else completed.stderr
