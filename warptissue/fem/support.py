@@ -14,10 +14,11 @@ integrated by the 6-point degree-4 rule of Dunavant (1985), exact on a flat tria
 residual gains ``S u``, the tangent ``S`` and the energy ``u . S u / 2`` (device code:
 ``support_spring_kernel`` in ``kernels/contact.py``). The springs are linear: the model is a
 bed for small support motions, like the foundations of FEBio and Abaqus (``*FOUNDATION``).
-The row sums of S would give a 6-node triangle's corners no spring (``integral of N_a dA =
-0``): a lumped bed leaves them free, and measured 2.3 % off the analytic column of
-tests/test_fem_support.py (and 0.57 % softer than the fixed base at 1e12 Pa/m); the consistent
-matrix holds every node of the support.
+Lumped beds were measured and not kept: the row sums of S give a 6-node triangle's corners
+no spring (``integral of N_a dA = 0``), so a bed of 1e12 Pa/m stayed 0.57 % softer than the
+fixed base; a positive lumping (A/12 per corner, A/4 per mid-edge node) was 2.3 % off the
+analytic column of tests/test_fem_support.py. The consistent matrix holds every node of the
+support and meets both to 1e-5.
 
 The probe force of a body on a foundation is the springs' reaction: ``F = d . sum S u`` along
 the probe's direction d, which equals the force on the probe at equilibrium (the internal
