@@ -20,6 +20,7 @@ from warptissue.device import resolve_device
 from warptissue.errors import InputError
 from warptissue.fem.contact import ContactState, RigidContact, RigidContacts
 from warptissue.fem.elements import element_geometry
+from warptissue.fem.gather import gather_bsr_blocks, gather_vectors
 from warptissue.fem.sparsity import block_ranges, packed_ranges, sparsity_pattern, tet_problems
 from warptissue.fem.support import SupportSprings, SupportSpringSet
 from warptissue.fem.viscous import ViscousHistory, elastic_step
@@ -34,9 +35,6 @@ __all__ = [
     "Assembler",
     "Assembly",
     "ElementPart",
-    "gather_bsr_blocks",
-    "gather_vectors",
-    "scatter_vectors",
     "von_mises",
 ]
 
@@ -76,67 +74,6 @@ def von_mises(cauchy_stress_Pa: np.ndarray) -> np.ndarray:
     return np.sqrt(
         0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
         + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2)
-    )
-
-
-def gather_bsr_blocks(matrix: wps.BsrMatrix, block_ids: wp.array, gathered: wp.array) -> None:
-    """Copy selected 3x3 blocks of a BSR matrix into ``gathered``, in place.
-
-    Args:
-        matrix: 3x3-block float64 BSR matrix.
-        block_ids: Indices into the matrix's blocks, (k,) int32 on the matrix's device.
-        gathered: Output, (k,) mat33d on the matrix's device.
-    """
-    if block_ids.shape[0] == 0:
-        return
-    if gathered.shape[0] != block_ids.shape[0]:
-        raise ValueError(
-            f"gathered holds {gathered.shape[0]} blocks, block_ids asks for {block_ids.shape[0]}"
-        )
-    wp.launch(
-        ks.gather_blocks_kernel,
-        dim=block_ids.shape[0],
-        inputs=[matrix.values, block_ids],
-        outputs=[gathered],
-        device=matrix.device,
-    )
-
-
-def gather_vectors(values: wp.array, indices: wp.array, gathered: wp.array) -> None:
-    """``gathered[i] = values[indices[i]]`` for vec3d arrays on one device, in place.
-
-    Args:
-        values: (N,) vec3d.
-        indices: (k,) int32, each in [0, N).
-        gathered: Output, (k,) vec3d.
-    """
-    if indices.shape[0] == 0:
-        return
-    wp.launch(
-        ks.gather_vectors_kernel,
-        dim=indices.shape[0],
-        inputs=[values, indices],
-        outputs=[gathered],
-        device=values.device,
-    )
-
-
-def scatter_vectors(values: wp.array, indices: wp.array, target: wp.array) -> None:
-    """``target[indices[i]] = values[i]`` for vec3d arrays on one device, in place.
-
-    Args:
-        values: (k,) vec3d.
-        indices: (k,) int32, distinct, each in [0, N).
-        target: (N,) vec3d, changed at ``indices`` only.
-    """
-    if indices.shape[0] == 0:
-        return
-    wp.launch(
-        ks.scatter_vectors_kernel,
-        dim=indices.shape[0],
-        inputs=[values, indices],
-        outputs=[target],
-        device=target.device,
     )
 
 

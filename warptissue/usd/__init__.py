@@ -9,6 +9,7 @@ from warptissue.usd.schema import register_schema_plugin
 
 register_schema_plugin()
 
+from warptissue.usd.over import write_results_over_asset  # noqa: E402
 from warptissue.usd.reader import (  # noqa: E402
     read_material_field_usd,
     read_material_usd,
@@ -18,7 +19,6 @@ from warptissue.usd.validation import validate_stage  # noqa: E402
 from warptissue.usd.writer import (  # noqa: E402
     UsdScenePaths,
     write_material_usd,
-    write_results_over_asset,
     write_simulation_usd,
 )
 

@@ -29,11 +29,8 @@ from warptissue.indenter import Indenter
 from warptissue.mesh import NODE_SET_PREFIX, TET_REGION_KEY, TetMesh
 from warptissue.simulate import build_mesh
 from warptissue.study import load_study
-from warptissue.usd.writer import (
-    UsdScenePaths,
-    write_results_over_asset,
-    write_simulation_usd,
-)
+from warptissue.usd.over import write_results_over_asset
+from warptissue.usd.writer import UsdScenePaths, write_simulation_usd
 
 __all__ = ["export_result_dir", "export_study", "read_fields_vtu"]
 
@@ -180,7 +177,7 @@ def export_result_dir(
         density_kg_per_m3: Mass density for ``physics:density``; None: 1000, or layered
             over an asset the asset's.
         over: An organ's USD asset that the run's mesh was read from: the result is layered
-            over it (:func:`warptissue.usd.writer.write_results_over_asset`) instead of
+            over it (:func:`warptissue.usd.over.write_results_over_asset`) instead of
             written with its own asset layer.
 
     Returns:

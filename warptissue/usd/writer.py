@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,7 +49,6 @@ __all__ = [
     "UsdScenePaths",
     "material_field_problems",
     "write_material_usd",
-    "write_results_over_asset",
     "write_simulation_usd",
 ]
 
@@ -89,13 +87,14 @@ class UsdScenePaths:
     results: Path | None
 
 
-def _field(result: Any, name: str) -> Any:
+def result_field(result: Any, name: str) -> Any:
+    """A result's field ``name``: a mapping's key or an object's attribute (None without)."""
     if isinstance(result, Mapping):
         return result.get(name)
     return getattr(result, name, None)
 
 
-def _corner_mesh(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def corner_mesh(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Corner nodes of a TET4/TET10 mesh: (kept node ids (n,), renumbered tets (M,4), map)."""
     corners = mesh.tets[:, :4]
     kept = np.unique(corners)
@@ -104,13 +103,13 @@ def _corner_mesh(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return kept, new_index[corners].astype(np.int32), new_index
 
 
-def _vt_dictionary(data: Mapping[str, Any]) -> dict[str, Any]:
+def vt_dictionary(data: Mapping[str, Any]) -> dict[str, Any]:
     """JSON-like data as values USD customData accepts (nested dicts, str, float, int, bool)."""
 
     converted: dict[str, Any] = {}
     for key, value in to_jsonable(data).items():
         if isinstance(value, Mapping):
-            converted[key] = _vt_dictionary(value)
+            converted[key] = vt_dictionary(value)
         elif isinstance(value, (str, bool, int, float)):
             converted[key] = value
         elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
@@ -189,7 +188,7 @@ def _define_subsets(
     UsdGeom.Subset.SetFamilyType(geom, family, family_type)
 
 
-def _indenter_prims(
+def indenter_prims(
     stage: Any,
     indenter: Indenter,
     top_z_m: float,
@@ -302,7 +301,8 @@ def _wedge_mesh(stage: Any, indenter: Indenter) -> None:
     shape.CreateExtentAttr([(min(xs), -length / 2, 0.0), (max(xs), length / 2, height)])
 
 
-def _check_density(density_kg_per_m3: float) -> None:
+def check_density(density_kg_per_m3: float) -> None:
+    """Refuse a mass density that is not a positive number (kg/m^3)."""
     if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
         raise InputError("density must be positive", value=density_kg_per_m3)
 
@@ -382,7 +382,7 @@ def _material_field_primvars(
             primvar.GetAttr().SetCustomDataByKey("unit", unit)
 
 
-def _set_stage_metadata(layer: Any) -> None:
+def set_stage_metadata(layer: Any) -> None:
     """SI units and z up: the project's coordinates (indentation along -z) need no rotation."""
     layer.defaultPrim = "World"
     metadata = {"metersPerUnit": 1.0, "kilogramsPerUnit": 1.0, "upAxis": "Z"}
@@ -391,7 +391,7 @@ def _set_stage_metadata(layer: Any) -> None:
         pseudo.SetInfo(key, value)
 
 
-def _material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
+def material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
     """The physics material: proposal small-strain attributes plus the ``tissue:`` schema.
 
     Returns:
@@ -433,20 +433,20 @@ def _material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
         prim.CreateAttribute(
             attr_name, type_name, custom=False, variability=Sdf.VariabilityUniform
         ).Set(usd_value)
-    prim.SetCustomDataByKey("warptissue:material", _vt_dictionary(record.source))
+    prim.SetCustomDataByKey("warptissue:material", vt_dictionary(record.source))
     return material
 
 
-def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str, np.ndarray]:
+def result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str, np.ndarray]:
     """Validated result arrays (see :func:`write_simulation_usd`)."""
     arrays: dict[str, np.ndarray] = {}
     for name in ("depths_m", "reaction_force_N", "displacement_m"):
-        value = _field(result, name)
+        value = result_field(result, name)
         if value is None:
             raise InputError(f"the result has no {name!r}", value=type(result).__name__)
         arrays[name] = np.asarray(value, dtype=np.float64)
     for name in ("cauchy_stress_Pa", "von_mises_Pa", "time_s", *CONTACT_RESULTS):
-        value = _field(result, name)
+        value = result_field(result, name)
         if value is not None:
             arrays[name] = np.asarray(value, dtype=np.float64)
     for name in CONTACT_RESULTS:  # a sharp flat punch's result holds them empty
@@ -480,7 +480,20 @@ def _result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str,
     return arrays
 
 
-def _declare_result_attributes(
+def result_summary(arrays: Mapping[str, np.ndarray], result: Any) -> dict[str, Any]:
+    """The result's ``customData`` on ``/World``: its step count, the time-code rule, and
+    ``completed`` and ``message`` where the result has them."""
+    summary: dict[str, Any] = {
+        "step_count": len(arrays["depths_m"]),
+        "time_code_of_step_k": "k (time code 0 is the rest state)",
+    }
+    for name in ("completed", "message"):
+        if result_field(result, name) is not None:
+            summary[name] = result_field(result, name)
+    return summary
+
+
+def declare_result_attributes(
     stage: Any,
     arrays: Mapping[str, np.ndarray],
     *,
@@ -545,7 +558,7 @@ def _declare_result_attributes(
         attr.SetCustomDataByKey("unit", unit)
 
 
-def _write_results(
+def write_results(
     stage: Any,
     arrays: Mapping[str, np.ndarray],
     *,
@@ -765,7 +778,7 @@ def write_simulation_usd(
     root_path = Path(root_path)
     if root_path.suffix != ".usda":
         raise InputError("the root layer must be a .usda file", path=root_path)
-    _check_density(density_kg_per_m3)
+    check_density(density_kg_per_m3)
     if mesh.tet_count == 0:
         raise MeshError("cannot export a mesh without tetrahedra")
     field_arrays = (
@@ -784,17 +797,17 @@ def write_simulation_usd(
     stem = root_path.name[: -len(".usda")]
     asset_name = f"{stem}.asset.usda"
     results_name = f"{stem}.results.usdc"
-    kept, tets, new_index = _corner_mesh(mesh)
+    kept, tets, new_index = corner_mesh(mesh)
     rest = mesh.points[kept]
 
     asset_layer = Sdf.Layer.CreateAnonymous(".usda")
-    _set_stage_metadata(asset_layer)
+    set_stage_metadata(asset_layer)
     stage = Usd.Stage.Open(asset_layer)
     world = UsdGeom.Xform.Define(stage, WORLD)
     info = {"software": software_versions(), "element_type_source": mesh.element_type}
     if provenance:
         info.update(provenance)
-    world.GetPrim().SetCustomDataByKey("warptissue", _vt_dictionary(info))
+    world.GetPrim().SetCustomDataByKey("warptissue", vt_dictionary(info))
 
     specimen = UsdGeom.Xform.Define(stage, SPECIMEN)
     specimen.GetPrim().AddAppliedSchema(DEFORMABLE_BODY_API)
@@ -807,12 +820,12 @@ def write_simulation_usd(
         _material_field_primvars(stage, field_arrays, owners=owners)
 
     if material is not None:
-        tissue = _material_prims(stage, material_record(material), density_kg_per_m3)
+        tissue = material_prims(stage, material_record(material), density_kg_per_m3)
         UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
             tissue, UsdShade.Tokens.fallbackStrength, "physics"
         )
     if indenter is not None:
-        _indenter_prims(
+        indenter_prims(
             stage,
             indenter,
             float(rest[:, 2].max()),
@@ -821,19 +834,14 @@ def write_simulation_usd(
         )
     arrays = None
     if result is not None:
-        arrays = _result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
-        _declare_result_attributes(stage, arrays)
-        summary = {
-            "step_count": len(arrays["depths_m"]),
-            "time_code_of_step_k": "k (time code 0 is the rest state)",
-        }
-        for name in ("completed", "message"):
-            if _field(result, name) is not None:
-                summary[name] = _field(result, name)
-        world.GetPrim().SetCustomDataByKey("warptissue:result", _vt_dictionary(summary))
+        arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
+        declare_result_attributes(stage, arrays)
+        world.GetPrim().SetCustomDataByKey(
+            "warptissue:result", vt_dictionary(result_summary(arrays, result))
+        )
 
     root_layer = Sdf.Layer.CreateAnonymous(".usda")
-    _set_stage_metadata(root_layer)
+    set_stage_metadata(root_layer)
     results_layer = None
     if arrays is not None:
         results_layer = Sdf.Layer.CreateAnonymous(".usdc")
@@ -841,7 +849,7 @@ def write_simulation_usd(
         root_layer.subLayerPaths.append(asset_layer.identifier)
         composed = Usd.Stage.Open(root_layer)
         composed.SetEditTarget(Usd.EditTarget(results_layer))
-        _write_results(
+        write_results(
             composed,
             arrays,
             kept=kept,
@@ -866,213 +874,6 @@ def write_simulation_usd(
     root_layer.subLayerPaths.append(f"./{asset_name}")
     with atomic_path(paths.asset) as temporary:
         asset_layer.Export(str(temporary))
-    with atomic_path(paths.root) as temporary:
-        root_layer.Export(str(temporary))
-    return paths
-
-
-def _clear_transforms(stage: Any, root: str) -> None:
-    """Empty the ``xformOpOrder`` of every Xformable under ``root`` in the edit target, so
-    that prims redefined there add their own ops over an asset's."""
-    top = stage.GetPrimAtPath(root)
-    if top:
-        for prim in list(Usd.PrimRange(top)):
-            if prim.IsA(UsdGeom.Xformable):
-                UsdGeom.Xformable(prim).ClearXformOpOrder()
-
-
-def _block_leftovers(stage: Any, root: str, layer: Any, kept: tuple[str, ...]) -> None:
-    """Hide what weaker layers hold under ``root`` and the edit target ``layer`` did not
-    write: prims other than ``kept`` are deactivated and the attributes of ``kept`` prims
-    without an opinion in ``layer`` blocked, so that a prim redefined over an asset (its
-    indenter, its material) keeps none of the asset's values."""
-    top = stage.GetPrimAtPath(root)
-    if not top:
-        return
-    inactive, blocked = [], []
-    for prim in Usd.PrimRange(top):
-        if str(prim.GetPath()) not in kept:
-            inactive.append(prim)
-            continue
-        blocked.extend(
-            attribute
-            for attribute in prim.GetAuthoredAttributes()
-            if not layer.GetAttributeAtPath(attribute.GetPath())
-        )
-    for attribute in blocked:
-        attribute.Block()
-    for prim in inactive:
-        prim.SetActive(False)
-
-
-def write_results_over_asset(
-    root_path: str | Path,
-    asset_path: str | Path,
-    mesh: TetMesh,
-    *,
-    result: Any,
-    material: Any = None,
-    provenance: Mapping[str, Any] | None = None,
-    density_kg_per_m3: float | None = None,
-    indenter: Indenter | None = None,
-    indenter_axes: np.ndarray | None = None,
-) -> UsdScenePaths:
-    """Write a simulation result layered over an organ's own USD asset, which is referenced,
-    not copied: the scene the asset pipeline already holds, with the run on top.
-
-    Layout: ``NAME.usda`` (root: SI metadata and the time range) sublayers
-    ``NAME.results.usdc`` (time samples only: the TetMesh's deformed ``points`` and
-    ``tissue:displacement``, the stress primvars at the last step, the surface Mesh's points
-    and contact pressure where the asset has the surface Mesh of
-    :func:`write_simulation_usd`, the probe's curves and motion), over ``NAME.asset.usda`` (no
-    time samples: the result attributes' declarations, the run's material bound to the
-    TetMesh, the indenter at its site, provenance; what the asset held under
-    ``/World/Indenter`` and ``/World/Materials/Tissue`` and the run does not is deactivated or
-    blocked), over the organ's asset by its relative path.
-
-    Args:
-        root_path: The root layer, ``NAME.usda``.
-        asset_path: The organ's USD asset (a TetMesh, metersPerUnit 1), the one the run's
-            mesh was read from (``[specimen] mesh``) without refinement.
-        mesh: The run's mesh, metres: its corner nodes and tets must be the asset's (TET10:
-            the asset's TET4 promoted).
-        result: As :func:`write_simulation_usd`'s.
-        density_kg_per_m3: Mass density for ``physics:density``; None keeps the asset's
-            (``physics:density`` of its ``/World/Materials/Tissue``; 1000 without one).
-        material, provenance, indenter, indenter_axes: As :func:`write_simulation_usd`'s.
-
-    Returns:
-        The paths written (``asset`` is the overlay ``NAME.asset.usda``).
-
-    Raises:
-        InputError: A root that is not ``.usda``, an asset not in metres, or a run's mesh
-            that is not the asset's (refined or refilled): one line naming ``--over``.
-    """
-    from warptissue._stage import open_stage
-    from warptissue.mesh import tetmesh_prim
-
-    root_path, asset_path = Path(root_path), Path(asset_path)
-    if root_path.suffix != ".usda":
-        raise InputError("the root layer must be a .usda file", path=root_path)
-    organ = open_stage(asset_path)
-    if density_kg_per_m3 is None:
-        held = organ.GetPrimAtPath(MATERIAL)
-        held = held.GetAttribute("physics:density").Get() if held else None
-        density_kg_per_m3 = 1000.0 if held is None else float(held)
-    _check_density(density_kg_per_m3)
-    units = UsdGeom.GetStageMetersPerUnit(organ)
-    if units != 1.0:
-        raise InputError(
-            f"the asset is in metersPerUnit {units:g}: a result layered over it would be read "
-            "in its units; layering needs an asset in metres",
-            path=asset_path,
-            key="--over",
-        )
-    volume_path = str(tetmesh_prim(organ, asset_path).GetPath())
-    asset_mesh = UsdGeom.TetMesh(organ.GetPrimAtPath(volume_path))
-    asset_points = np.asarray(asset_mesh.GetPointsAttr().Get(), dtype=np.float64).reshape(-1, 3)
-    asset_tets = np.asarray(asset_mesh.GetTetVertexIndicesAttr().Get(), dtype=np.int64)
-    asset_tets = asset_tets.reshape(-1, 4)
-    kept, tets, _ = _corner_mesh(mesh)
-    rest = mesh.points[kept]
-    extent = float(np.ptp(asset_points, axis=0).max())
-    same = (
-        rest.shape == asset_points.shape
-        and tets.shape == asset_tets.shape
-        and np.array_equal(np.sort(tets, axis=1), np.sort(asset_tets, axis=1))
-        and float(np.abs(rest - asset_points).max()) <= 1e-6 * extent
-    )
-    if not same:
-        raise InputError(
-            f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the asset's "
-            f"({len(asset_points)} nodes, {len(asset_tets)} tets at {volume_path}): a mesh "
-            "refined or refilled around the sites cannot be layered over it; export the run "
-            "as its own scene (without --over)",
-            path=asset_path,
-            key="--over",
-        )
-    surface_path = None
-    for sibling in organ.GetPrimAtPath(volume_path).GetParent().GetChildren():
-        indices = sibling.GetAttribute("tissue:volumePointIndices")
-        if sibling.IsA(UsdGeom.Mesh) and indices:
-            surface_path = str(sibling.GetPath())
-            surface_nodes = np.asarray(indices.Get(), dtype=np.int64)
-            owners = np.asarray(sibling.GetAttribute("tissue:volumeTetIndices").Get())
-            break
-    else:
-        surface_nodes = owners = None
-    del organ
-    arrays = _result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
-
-    stem = root_path.name[: -len(".usda")]
-    paths = UsdScenePaths(
-        root=root_path,
-        asset=root_path.with_name(f"{stem}.asset.usda"),
-        results=root_path.with_name(f"{stem}.results.usdc"),
-    )
-    overlay = Sdf.Layer.CreateAnonymous(".usda")
-    results_layer = Sdf.Layer.CreateAnonymous(".usdc")
-    root_layer = Sdf.Layer.CreateAnonymous(".usda")
-    _set_stage_metadata(root_layer)
-    relative = Path(os.path.relpath(asset_path.resolve(), root_path.resolve().parent))
-    for layer in (results_layer, overlay):
-        root_layer.subLayerPaths.append(layer.identifier)
-    root_layer.subLayerPaths.append(str(asset_path.resolve()))
-    stage = Usd.Stage.Open(root_layer)
-    stage.SetEditTarget(Usd.EditTarget(overlay))
-    world = stage.GetPrimAtPath(WORLD)
-    info = {"software": software_versions(), "layered_over": relative.as_posix()}
-    if provenance:
-        info.update(provenance)
-    world.SetCustomDataByKey("warptissue", _vt_dictionary(info))
-    summary = {
-        "step_count": len(arrays["depths_m"]),
-        "time_code_of_step_k": "k (time code 0 is the rest state)",
-    }
-    for name in ("completed", "message"):
-        if _field(result, name) is not None:
-            summary[name] = _field(result, name)
-    world.SetCustomDataByKey("warptissue:result", _vt_dictionary(summary))
-    if material is not None:
-        tissue = _material_prims(stage, material_record(material), density_kg_per_m3)
-        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(volume_path)).Bind(
-            tissue, UsdShade.Tokens.fallbackStrength, "physics"
-        )
-        _block_leftovers(stage, MATERIAL, overlay, (MATERIAL,))
-    _clear_transforms(stage, INDENTER)
-    if indenter is not None:
-        _indenter_prims(
-            stage,
-            indenter,
-            float(rest[:, 2].max()),
-            np.stack([rest.min(0)[:2], rest.max(0)[:2]]),
-            axes=indenter_axes,
-        )
-    drawn = () if indenter is None else (INDENTER, f"{INDENTER}/Shape")
-    _block_leftovers(stage, INDENTER, overlay, drawn)
-    _declare_result_attributes(stage, arrays, volume_path=volume_path, surface_path=surface_path)
-    stage.SetEditTarget(Usd.EditTarget(results_layer))
-    _write_results(
-        stage,
-        arrays,
-        kept=kept,
-        surface_nodes=surface_nodes,
-        owners=owners,
-        rest=rest,
-        volume_path=volume_path,
-        surface_path=surface_path,
-    )
-    del stage
-    root_layer.startTimeCode = 0.0
-    root_layer.endTimeCode = float(len(arrays["depths_m"]))
-    del root_layer.subLayerPaths[:]
-    root_layer.subLayerPaths.append(f"./{paths.results.name}")
-    root_layer.subLayerPaths.append(f"./{paths.asset.name}")
-    root_layer.subLayerPaths.append(relative.as_posix())
-    with atomic_path(paths.results) as temporary:
-        results_layer.Export(str(temporary))
-    with atomic_path(paths.asset) as temporary:
-        overlay.Export(str(temporary))
     with atomic_path(paths.root) as temporary:
         root_layer.Export(str(temporary))
     return paths
@@ -1108,17 +909,17 @@ def write_material_usd(
     path = Path(path)
     if path.suffix != ".usda":
         raise InputError("the material layer must be a .usda file", path=path)
-    _check_density(density_kg_per_m3)
+    check_density(density_kg_per_m3)
     record = material_record(material)
     layer = Sdf.Layer.CreateAnonymous(".usda")
-    _set_stage_metadata(layer)
+    set_stage_metadata(layer)
     stage = Usd.Stage.Open(layer)
     world = UsdGeom.Xform.Define(stage, WORLD)
     info = {"software": software_versions()}
     if provenance:
         info.update(provenance)
-    world.GetPrim().SetCustomDataByKey("warptissue", _vt_dictionary(info))
-    _material_prims(stage, record, density_kg_per_m3)
+    world.GetPrim().SetCustomDataByKey("warptissue", vt_dictionary(info))
+    material_prims(stage, record, density_kg_per_m3)
     with atomic_path(path) as temporary:
         layer.Export(str(temporary))
     return path

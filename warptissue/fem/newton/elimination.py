@@ -18,7 +18,8 @@ import scipy.sparse.linalg
 import warp as wp
 
 from warptissue.fem.arrays import DeviceArrays
-from warptissue.fem.assembly import Assembler, Assembly, scatter_vectors
+from warptissue.fem.assembly import Assembler, Assembly
+from warptissue.fem.gather import scatter_vectors
 
 __all__ = ["nonlinear_elimination", "patch_solve"]
 

@@ -1,0 +1,239 @@
+"""A run layered over an organ's own USD asset (``warptissue export RUN --over ASSET``): the
+asset is referenced, never copied or changed, and the run sits in an overlay and a results
+layer over it. The building blocks (material and indenter prims, result attributes and their
+time samples) are :mod:`warptissue.usd.writer`'s; the layout of a scene of its own is there.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pxr import Sdf, Usd, UsdGeom, UsdShade
+
+from warptissue.errors import InputError
+from warptissue.indenter import Indenter
+from warptissue.io import atomic_path, software_versions
+from warptissue.mesh import TetMesh
+from warptissue.usd.schema import material_record
+from warptissue.usd.writer import (
+    INDENTER,
+    MATERIAL,
+    WORLD,
+    UsdScenePaths,
+    check_density,
+    corner_mesh,
+    declare_result_attributes,
+    indenter_prims,
+    material_prims,
+    result_arrays,
+    result_summary,
+    set_stage_metadata,
+    vt_dictionary,
+    write_results,
+)
+
+__all__ = ["write_results_over_asset"]
+
+
+def _clear_transforms(stage: Any, root: str) -> None:
+    """Empty the ``xformOpOrder`` of every Xformable under ``root`` in the edit target, so
+    that prims redefined there add their own ops over an asset's."""
+    top = stage.GetPrimAtPath(root)
+    if top:
+        for prim in list(Usd.PrimRange(top)):
+            if prim.IsA(UsdGeom.Xformable):
+                UsdGeom.Xformable(prim).ClearXformOpOrder()
+
+
+def _block_leftovers(stage: Any, root: str, layer: Any, kept: tuple[str, ...]) -> None:
+    """Hide what weaker layers hold under ``root`` and the edit target ``layer`` did not
+    write: prims other than ``kept`` are deactivated and the attributes of ``kept`` prims
+    without an opinion in ``layer`` blocked, so that a prim redefined over an asset (its
+    indenter, its material) keeps none of the asset's values."""
+    top = stage.GetPrimAtPath(root)
+    if not top:
+        return
+    inactive, blocked = [], []
+    for prim in Usd.PrimRange(top):
+        if str(prim.GetPath()) not in kept:
+            inactive.append(prim)
+            continue
+        blocked.extend(
+            attribute
+            for attribute in prim.GetAuthoredAttributes()
+            if not layer.GetAttributeAtPath(attribute.GetPath())
+        )
+    for attribute in blocked:
+        attribute.Block()
+    for prim in inactive:
+        prim.SetActive(False)
+
+
+def write_results_over_asset(
+    root_path: str | Path,
+    asset_path: str | Path,
+    mesh: TetMesh,
+    *,
+    result: Any,
+    material: Any = None,
+    provenance: Mapping[str, Any] | None = None,
+    density_kg_per_m3: float | None = None,
+    indenter: Indenter | None = None,
+    indenter_axes: np.ndarray | None = None,
+) -> UsdScenePaths:
+    """Write a simulation result layered over an organ's own USD asset, which is referenced,
+    not copied: the scene the asset pipeline already holds, with the run on top.
+
+    Layout: ``NAME.usda`` (root: SI metadata and the time range) sublayers
+    ``NAME.results.usdc`` (time samples only: the TetMesh's deformed ``points`` and
+    ``tissue:displacement``, the stress primvars at the last step, the surface Mesh's points
+    and contact pressure where the asset has the surface Mesh of
+    :func:`write_simulation_usd`, the probe's curves and motion), over ``NAME.asset.usda`` (no
+    time samples: the result attributes' declarations, the run's material bound to the
+    TetMesh, the indenter at its site, provenance; what the asset held under
+    ``/World/Indenter`` and ``/World/Materials/Tissue`` and the run does not is deactivated or
+    blocked), over the organ's asset by its relative path.
+
+    Args:
+        root_path: The root layer, ``NAME.usda``.
+        asset_path: The organ's USD asset (a TetMesh, metersPerUnit 1), the one the run's
+            mesh was read from (``[specimen] mesh``) without refinement.
+        mesh: The run's mesh, metres: its corner nodes and tets must be the asset's (TET10:
+            the asset's TET4 promoted).
+        result: As :func:`write_simulation_usd`'s.
+        density_kg_per_m3: Mass density for ``physics:density``; None keeps the asset's
+            (``physics:density`` of its ``/World/Materials/Tissue``; 1000 without one).
+        material, provenance, indenter, indenter_axes: As :func:`write_simulation_usd`'s.
+
+    Returns:
+        The paths written (``asset`` is the overlay ``NAME.asset.usda``).
+
+    Raises:
+        InputError: A root that is not ``.usda``, an asset not in metres, or a run's mesh
+            that is not the asset's (refined or refilled): one line naming ``--over``.
+    """
+    from warptissue._stage import open_stage
+    from warptissue.mesh import tetmesh_prim
+
+    root_path, asset_path = Path(root_path), Path(asset_path)
+    if root_path.suffix != ".usda":
+        raise InputError("the root layer must be a .usda file", path=root_path)
+    organ = open_stage(asset_path)
+    if density_kg_per_m3 is None:
+        held = organ.GetPrimAtPath(MATERIAL)
+        held = held.GetAttribute("physics:density").Get() if held else None
+        density_kg_per_m3 = 1000.0 if held is None else float(held)
+    check_density(density_kg_per_m3)
+    units = UsdGeom.GetStageMetersPerUnit(organ)
+    if units != 1.0:
+        raise InputError(
+            f"the asset is in metersPerUnit {units:g}: a result layered over it would be read "
+            "in its units; layering needs an asset in metres",
+            path=asset_path,
+            key="--over",
+        )
+    volume_path = str(tetmesh_prim(organ, asset_path).GetPath())
+    asset_mesh = UsdGeom.TetMesh(organ.GetPrimAtPath(volume_path))
+    asset_points = np.asarray(asset_mesh.GetPointsAttr().Get(), dtype=np.float64).reshape(-1, 3)
+    asset_tets = np.asarray(asset_mesh.GetTetVertexIndicesAttr().Get(), dtype=np.int64)
+    asset_tets = asset_tets.reshape(-1, 4)
+    kept, tets, _ = corner_mesh(mesh)
+    rest = mesh.points[kept]
+    extent = float(np.ptp(asset_points, axis=0).max())
+    same = (
+        rest.shape == asset_points.shape
+        and tets.shape == asset_tets.shape
+        and np.array_equal(np.sort(tets, axis=1), np.sort(asset_tets, axis=1))
+        and float(np.abs(rest - asset_points).max()) <= 1e-6 * extent
+    )
+    if not same:
+        raise InputError(
+            f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the asset's "
+            f"({len(asset_points)} nodes, {len(asset_tets)} tets at {volume_path}): a mesh "
+            "refined or refilled around the sites cannot be layered over it; export the run "
+            "as its own scene (without --over)",
+            path=asset_path,
+            key="--over",
+        )
+    surface_path = None
+    for sibling in organ.GetPrimAtPath(volume_path).GetParent().GetChildren():
+        indices = sibling.GetAttribute("tissue:volumePointIndices")
+        if sibling.IsA(UsdGeom.Mesh) and indices:
+            surface_path = str(sibling.GetPath())
+            surface_nodes = np.asarray(indices.Get(), dtype=np.int64)
+            owners = np.asarray(sibling.GetAttribute("tissue:volumeTetIndices").Get())
+            break
+    else:
+        surface_nodes = owners = None
+    del organ
+    arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
+
+    stem = root_path.name[: -len(".usda")]
+    paths = UsdScenePaths(
+        root=root_path,
+        asset=root_path.with_name(f"{stem}.asset.usda"),
+        results=root_path.with_name(f"{stem}.results.usdc"),
+    )
+    overlay = Sdf.Layer.CreateAnonymous(".usda")
+    results_layer = Sdf.Layer.CreateAnonymous(".usdc")
+    root_layer = Sdf.Layer.CreateAnonymous(".usda")
+    set_stage_metadata(root_layer)
+    relative = Path(os.path.relpath(asset_path.resolve(), root_path.resolve().parent))
+    for layer in (results_layer, overlay):
+        root_layer.subLayerPaths.append(layer.identifier)
+    root_layer.subLayerPaths.append(str(asset_path.resolve()))
+    stage = Usd.Stage.Open(root_layer)
+    stage.SetEditTarget(Usd.EditTarget(overlay))
+    world = stage.GetPrimAtPath(WORLD)
+    info = {"software": software_versions(), "layered_over": relative.as_posix()}
+    if provenance:
+        info.update(provenance)
+    world.SetCustomDataByKey("warptissue", vt_dictionary(info))
+    world.SetCustomDataByKey("warptissue:result", vt_dictionary(result_summary(arrays, result)))
+    if material is not None:
+        tissue = material_prims(stage, material_record(material), density_kg_per_m3)
+        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(volume_path)).Bind(
+            tissue, UsdShade.Tokens.fallbackStrength, "physics"
+        )
+        _block_leftovers(stage, MATERIAL, overlay, (MATERIAL,))
+    _clear_transforms(stage, INDENTER)
+    if indenter is not None:
+        indenter_prims(
+            stage,
+            indenter,
+            float(rest[:, 2].max()),
+            np.stack([rest.min(0)[:2], rest.max(0)[:2]]),
+            axes=indenter_axes,
+        )
+    drawn = () if indenter is None else (INDENTER, f"{INDENTER}/Shape")
+    _block_leftovers(stage, INDENTER, overlay, drawn)
+    declare_result_attributes(stage, arrays, volume_path=volume_path, surface_path=surface_path)
+    stage.SetEditTarget(Usd.EditTarget(results_layer))
+    write_results(
+        stage,
+        arrays,
+        kept=kept,
+        surface_nodes=surface_nodes,
+        owners=owners,
+        rest=rest,
+        volume_path=volume_path,
+        surface_path=surface_path,
+    )
+    del stage
+    root_layer.startTimeCode = 0.0
+    root_layer.endTimeCode = float(len(arrays["depths_m"]))
+    del root_layer.subLayerPaths[:]
+    root_layer.subLayerPaths.append(f"./{paths.results.name}")
+    root_layer.subLayerPaths.append(f"./{paths.asset.name}")
+    root_layer.subLayerPaths.append(relative.as_posix())
+    with atomic_path(paths.results) as temporary:
+        results_layer.Export(str(temporary))
+    with atomic_path(paths.asset) as temporary:
+        overlay.Export(str(temporary))
+    with atomic_path(paths.root) as temporary:
+        root_layer.Export(str(temporary))
+    return paths
