@@ -37,6 +37,7 @@ import numpy as np
 import warp as wp
 
 from warptissue.errors import InputError
+from warptissue.fem.packing import per_problem
 from warptissue.fem.probe import ProbeFrame, probe_frame
 from warptissue.indenter import Indenter
 from warptissue.kernels import contact as kc
@@ -431,39 +432,16 @@ class RigidContacts:
                 contacts on problems that are not packed in contiguous node ranges.
         """
         count = self.problem_count
-        if contact is None:
-            contacts: tuple[RigidContact | None, ...] = (None,) * count
-        elif isinstance(contact, RigidContact):
-            if count > 1:
-                raise InputError(
-                    f"one contact (or None) per packed problem: {count} expected",
-                    key="contact",
-                    value=1,
-                )
-            contacts = (contact,)
-        else:
-            contacts = tuple(contact)
-            if len(contacts) != count:
-                raise InputError(
-                    f"one contact (or None) per packed problem: {count} expected",
-                    key="contact",
-                    value=len(contacts),
-                )
-        for k, each in enumerate(contacts):
-            if each is not None and not isinstance(each, RigidContact):
-                raise InputError(
-                    f"problem {k}: a contact must be a RigidContact or None",
-                    key="contact",
-                    value=type(each).__name__,
-                )
-        used = [k for k, each in enumerate(contacts) if each is not None]
         offsets = self._node_offsets
-        if used and offsets is None:
-            raise InputError(
-                "rigid contacts of several problems need them packed in contiguous node "
-                "ranges (warptissue.fem.packing.pack_meshes)",
-                key="element_problem",
-            )
+        contacts, used = per_problem(
+            contact,
+            RigidContact,
+            count=count,
+            node_offsets=offsets,
+            key="contact",
+            one="contact",
+            many="rigid contacts",
+        )
         counts = np.zeros(count, dtype=np.int64)
         nodes, problems = [], []
         for k in used:

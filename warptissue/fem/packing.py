@@ -12,13 +12,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from warptissue.errors import InputError
 from warptissue.mesh import TetMesh
 
-__all__ = ["PackedMeshes", "pack_meshes"]
+__all__ = ["PackedMeshes", "pack_meshes", "per_problem"]
 
 
 @dataclass(frozen=True)
@@ -116,3 +117,62 @@ def pack_meshes(meshes: Sequence[TetMesh]) -> PackedMeshes:
         node_offsets=node_offsets.astype(np.int64),
         tet_offsets=tet_offsets.astype(np.int64),
     )
+
+
+def per_problem(
+    value: Any,
+    kind: type,
+    *,
+    count: int,
+    node_offsets: np.ndarray | None,
+    key: str,
+    one: str,
+    many: str,
+) -> tuple[tuple[Any, ...], list[int]]:
+    """Per-problem entries of an assembler's boundary terms (rigid contacts, support springs).
+
+    Args:
+        value: One ``kind`` (one problem), a sequence of K entries (each a ``kind`` or None),
+            or None (none anywhere).
+        kind: The entries' class.
+        count: K, the packed problems.
+        node_offsets: First node of each problem and N at the end, (K + 1,); None where the
+            problems are not packed in contiguous node ranges.
+        key: The ``InputError`` key of a wrong count or entry.
+        one: What one entry is, for the messages ("contact").
+        many: What the entries are, for the messages ("rigid contacts").
+
+    Returns:
+        (the K entries, the problems that have one).
+
+    Raises:
+        InputError: Not one entry per problem, an entry that is not a ``kind`` or None, or
+            entries on problems that are not packed in contiguous node ranges.
+    """
+    if value is None:
+        entries: tuple[Any, ...] = (None,) * count
+    elif isinstance(value, kind):
+        entries = (value,) if count == 1 else ()
+    else:
+        entries = tuple(value)
+    if len(entries) != count:
+        raise InputError(
+            f"one {one} (or None) per packed problem: {count} expected",
+            key=key,
+            value=len(entries) if value is not None and not isinstance(value, kind) else 1,
+        )
+    for k, each in enumerate(entries):
+        if each is not None and not isinstance(each, kind):
+            raise InputError(
+                f"problem {k}: a {one} must be a {kind.__name__} or None",
+                key=key,
+                value=type(each).__name__,
+            )
+    used = [k for k, each in enumerate(entries) if each is not None]
+    if used and node_offsets is None:
+        raise InputError(
+            f"{many} of several problems need them packed in contiguous node ranges "
+            "(warptissue.fem.packing.pack_meshes)",
+            key="element_problem",
+        )
+    return entries, used

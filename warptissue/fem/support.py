@@ -40,6 +40,7 @@ import warp as wp
 
 from warptissue.errors import InputError
 from warptissue.fem.contact import ContactSurface
+from warptissue.fem.packing import per_problem
 from warptissue.kernels import contact as kc
 from warptissue.mesh import TetMesh
 
@@ -202,26 +203,16 @@ class SupportSpringSet:
                 contiguous node ranges.
         """
         count = self.problem_count
-        if springs is None:
-            entries: tuple[SupportSprings | None, ...] = (None,) * count
-        elif isinstance(springs, SupportSprings):
-            entries = (springs,) if count == 1 else ()
-        else:
-            entries = tuple(springs)
-        if len(entries) != count:
-            raise InputError(
-                f"one set of support springs (or None) per packed problem: {count} expected",
-                key="springs",
-                value=len(entries) if springs is not None else 1,
-            )
-        used = [k for k, each in enumerate(entries) if each is not None]
         offsets = self._node_offsets
-        if used and offsets is None:
-            raise InputError(
-                "support springs of several problems need them packed in contiguous node "
-                "ranges (warptissue.fem.packing.pack_meshes)",
-                key="element_problem",
-            )
+        entries, used = per_problem(
+            springs,
+            SupportSprings,
+            count=count,
+            node_offsets=offsets,
+            key="springs",
+            one="set of support springs",
+            many="support springs",
+        )
         rows, columns, blocks, problems = [], [], [], []
         for k in used:
             own = entries[k]
