@@ -127,8 +127,9 @@ def quadrature_point_response(
 
 @wp.kernel
 def assemble_elements_kernel(
-    problem_params: wp.array(dtype=MaterialParams),
+    material_params: wp.array(dtype=MaterialParams),
     element_problem: wp.array(dtype=wp.int32),
+    element_material: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     quadrature_volumes: wp.array2d(dtype=wp.float64),
@@ -147,9 +148,10 @@ def assemble_elements_kernel(
     """Add element internal forces to ``residual`` and tangent blocks to ``matrix_values``.
 
     One thread per entry of ``elements``, the tets to assemble (all of them, or a patch's).
-    Tet e belongs to problem ``k = element_problem[e]`` and has its material
-    ``problem_params[k]`` (one problem: all zeros; packed problems: one per problem,
-    :mod:`warptissue.fem.packing`).
+    Tet e belongs to problem ``k = element_problem[e]`` and has the material
+    ``material_params[element_material[e]]``: one per problem (packed problems,
+    :mod:`warptissue.fem.packing`), more where a problem's body has several material regions
+    (:mod:`warptissue.fem.regions`); problem k's own, or its default region's, is entry k.
     ``block_index[e, a * nodes_per_tet + b]`` is the BSR block of node pair (a, b) of tet e.
     ``energy[k]`` accumulates problem k's stored energy (J) and ``min_jacobian[k]`` its
     smallest J. Problem k's time step is ``viscous[k]``: a viscoelastic one reads the frozen
@@ -157,7 +159,7 @@ def assemble_elements_kernel(
     """
     e = elements[wp.tid()]
     problem = element_problem[e]
-    params = problem_params[problem]
+    params = material_params[element_material[e]]
     step = viscous[problem]
     npe = tets.shape[1]
     nq = quadrature_volumes.shape[1]
@@ -314,8 +316,9 @@ def eliminate_dirichlet_kernel(
 
 @wp.kernel
 def cauchy_stress_kernel(
-    problem_params: wp.array(dtype=MaterialParams),
+    material_params: wp.array(dtype=MaterialParams),
     element_problem: wp.array(dtype=wp.int32),
+    element_material: wp.array(dtype=wp.int32),
     tets: wp.array2d(dtype=wp.int32),
     shape_gradients: wp.array3d(dtype=wp.vec3d),
     quadrature_volumes: wp.array2d(dtype=wp.float64),
@@ -330,10 +333,10 @@ def cauchy_stress_kernel(
     sigma = P F^T / J at each quadrature point; in the mixed formulation the pressure part is
     U'(Jbar) I, constant over the element. A viscoelastic state passes ``gamma = g_inf`` and
     ``frozen = sum_i H_i`` (the committed stress). Tet e has the material
-    ``problem_params[element_problem[e]]`` (as in ``assemble_elements_kernel``).
+    ``material_params[element_material[e]]`` (as in ``assemble_elements_kernel``).
     """
     e = wp.tid()
-    params = problem_params[element_problem[e]]
+    params = material_params[element_material[e]]
     step = viscous[element_problem[e]]
     nq = quadrature_volumes.shape[1]
     volume = wp.float64(0.0)

@@ -21,13 +21,14 @@ from warptissue.errors import InputError
 from warptissue.fem.contact import ContactState, RigidContact, RigidContacts
 from warptissue.fem.elements import element_geometry
 from warptissue.fem.gather import gather_bsr_blocks, gather_vectors
+from warptissue.fem.regions import MaterialSlots, material_slots, zero_derivative
 from warptissue.fem.sparsity import block_ranges, packed_ranges, sparsity_pattern, tet_problems
 from warptissue.fem.support import SupportSprings, SupportSpringSet
 from warptissue.fem.viscous import ViscousHistory, elastic_step
 from warptissue.kernels import assembly as ka
 from warptissue.kernels import sparse as ks
 from warptissue.kernels.materials import MaterialParams
-from warptissue.materials import Material, Viscoelastic
+from warptissue.materials import Material, MaterialRegions, Viscoelastic
 from warptissue.mesh import TetMesh
 
 __all__ = [
@@ -121,7 +122,9 @@ class Assembler:
         mesh: TET4 or TET10 mesh (metres).
         material: Any :mod:`warptissue.materials` material; or, for K independent problems
             packed into one mesh (:func:`warptissue.fem.packing.pack_meshes`), one elastic
-            material per problem.
+            material per problem. A :class:`warptissue.materials.MaterialRegions` gives the
+            tets of each of its named regions (by :attr:`warptissue.mesh.TetMesh.tet_regions`)
+            that region's material.
         formulation: ``"mixed"`` (TET10 only: element mean dilatation, locking free) or
             ``"displacement"``.
         device: Warp device; None for Warp's default.
@@ -185,6 +188,7 @@ class Assembler:
         self._node_elements: tuple[np.ndarray, np.ndarray] | None = None
         self._part_residual = wp.zeros(mesh.node_count, dtype=wp.vec3d, device=dev)
         self._element_problem = wp.array(problems, dtype=wp.int32, device=dev)
+        self._tet_regions_host = mesh.tet_regions
         count = self.problem_count
         node_problem = np.zeros(self.node_count, dtype=np.int32)
         node_problem[mesh.tets] = problems[:, None]
@@ -256,9 +260,26 @@ class Assembler:
         for each in materials:
             if not isinstance(each, Material):
                 raise InputError("material must be a warptissue.materials material", value=each)
+        regions = any(isinstance(each, MaterialRegions) for each in materials)
+        if regions and any(isinstance(each, Viscoelastic) for each in materials):
+            raise InputError(
+                "packed problems with material regions are elastic: a viscoelastic problem "
+                "goes in an assembler of its own",
+                key="material",
+            )
         self.materials = materials
+        self._slots: MaterialSlots = material_slots(
+            materials, self._element_problem_host, self._tet_regions_host
+        )
+        # Entry k is problem k's material (the viscous kernels read it by problem), then the
+        # named regions' (warptissue.fem.regions).
         self._problem_params = wp.array(
-            [each.device_params() for each in materials], dtype=MaterialParams, device=self.device
+            [each.device_params() for each in self._slots.materials],
+            dtype=MaterialParams,
+            device=self.device,
+        )
+        self._element_material = wp.array(
+            self._slots.element_material, dtype=wp.int32, device=self.device
         )
         if any(isinstance(each, Viscoelastic) for each in materials):
             counts = tuple(
@@ -277,7 +298,7 @@ class Assembler:
         else:
             self.viscous = None
         self.material = materials[0] if self.problem_count == 1 else None
-        self._params = materials[0].device_params()
+        self._params = self._slots.materials[0].device_params()
 
     def set_contact(self, contact: RigidContact | Sequence[RigidContact | None] | None) -> None:
         """Press rigid indenters into the bodies from the next assembly on (None: no contact).
@@ -509,7 +530,9 @@ class Assembler:
 
         Packed problems (K > 1) are differentiated each by its own parameter of that name in
         one launch: the rows of problem k hold ``dR_k / d theta_k`` (the Ogden exponents,
-        which need their own kernel, are refused there).
+        which need their own kernel, are refused there). A body of several material regions
+        is differentiated by one region's parameter (``tumour.C10_Pa``; the default's
+        unqualified): the other regions' tets contribute nothing.
 
         Args:
             displacement_m: Nodal displacements, (N, 3) or a vec3d Warp array, metres.
@@ -523,15 +546,19 @@ class Assembler:
         """
         derivatives, alpha_term = [], -1
         for k, material in enumerate(self.materials):
-            derivative, alpha_term = material.device_params_derivative(name)
-            if alpha_term >= 0 and self.problem_count > 1:
+            alpha_term = material.device_params_derivative(name)[1]  # names a bad one
+            if alpha_term >= 0 and (self.problem_count > 1 or len(self._slots.materials) > 1):
                 raise InputError(
                     f"problem {k}: the derivative by an Ogden exponent is available for one "
-                    "problem per assembler",
+                    "problem of one material per assembler",
                     key="sensitivities",
                     value=name,
                 )
-            derivatives.append(derivative)
+        for slot, part in enumerate(self._slots.materials):
+            local = self._slots.owner(slot, name)
+            derivatives.append(
+                zero_derivative(part) if local is None else part.device_params_derivative(local)[0]
+            )
         u = self.device_displacement(displacement_m)
         self._residual.zero_()
         viscous = self.viscous
@@ -567,7 +594,8 @@ class Assembler:
                 device=self.device,
             )
             explicit = self._residual.numpy().copy()
-        d_shears = np.array([float(derivative.shear_modulus) for derivative in derivatives])
+        count = self.problem_count  # a problem's contact scales with entry k's modulus
+        d_shears = np.array([float(derivative.shear_modulus) for derivative in derivatives[:count]])
         moduli = np.array([material.initial_shear_modulus_Pa for material in self.materials])
         explicit = explicit + self._rigid.parameter_residual(
             u, self.matrix.values, d_shears, moduli
@@ -904,11 +932,13 @@ class Assembler:
         self, displacement: wp.array, *, problem_params: wp.array | None = None
     ) -> list[Any]:
         """The leading inputs of ``assemble_elements_kernel`` and ``cauchy_stress_kernel``:
-        ``[problem_params, element_problem, tets, shape_gradients, quadrature_volumes,
-        displacement]`` (``problem_params``: the materials' by default)."""
+        ``[material_params, element_problem, element_material, tets, shape_gradients,
+        quadrature_volumes, displacement]`` (``problem_params``: the materials' table,
+        :mod:`warptissue.fem.regions`, by default)."""
         return [
             self._problem_params if problem_params is None else problem_params,
             self._element_problem,
+            self._element_material,
             *self._element_inputs(displacement)[1:],
         ]
 

@@ -18,6 +18,10 @@ mu_i, alpha_i, D1 = 2/K), in the manner of FElupe's ``ConstitutiveMaterial``: th
 - is serialized: ``to_dict()`` / :func:`material_from_dict` with flat keys (``C10_Pa``,
   ``mu1_Pa``, ``alpha1``, ``bulk_modulus_Pa``, ...), as study files and USD layers store them.
 
+A body of several materials, one per group of its mesh's tet regions (an organ with a tumour),
+is a :class:`MaterialRegions`: the FE gives each tet its region's material, and a fit frees
+each region's parameters under their qualified names (``tumour.C10_Pa``).
+
 The four Abaqus hyperelastic models (:class:`NeoHookean`, :class:`MooneyRivlin`,
 :class:`ReducedPolynomial` with :func:`Yeoh`, :class:`Ogden`) take an optional bulk modulus:
 without one (``bulk_modulus_Pa=None``, D1 = 0 as in Abaqus) the model is incompressible, which
@@ -74,6 +78,7 @@ from warptissue.materials._evaluate import MaterialEvaluation, evaluate_material
 from warptissue.materials._from_dict import material_from_dict
 from warptissue.materials._ogden import Ogden
 from warptissue.materials._polynomial import MooneyRivlin, NeoHookean, ReducedPolynomial, Yeoh
+from warptissue.materials._regions import MaterialRegions
 from warptissue.materials._rules import positive_bounds, prony_term
 from warptissue.materials._viscoelastic import Viscoelastic
 
@@ -84,6 +89,7 @@ __all__ = [
     "LinearElastic",
     "Material",
     "MaterialEvaluation",
+    "MaterialRegions",
     "MooneyRivlin",
     "NeoHookean",
     "Ogden",

@@ -13,6 +13,7 @@ from warptissue.materials._base import Material, check_finite, check_positive, c
 from warptissue.materials._compressible import CompressibleNeoHookean, LinearElastic
 from warptissue.materials._ogden import Ogden
 from warptissue.materials._polynomial import MooneyRivlin, NeoHookean, ReducedPolynomial
+from warptissue.materials._regions import MaterialRegions
 from warptissue.materials._rules import PRONY_KEY
 from warptissue.materials._viscoelastic import Viscoelastic
 
@@ -32,6 +33,11 @@ _MODELS: dict[str, type[Material]] = {
 def material_from_dict(data: Mapping[str, Any]) -> Material:
     """Build a material from ``{"model": name, parameters...}`` (the ``to_dict`` layout).
 
+    A ``regions`` table makes a body of several materials (:class:`MaterialRegions`):
+    ``{"regions": {name: {"tet_regions": [id, ...], parameters...}}}``; the rest of the table
+    is the default material, and a region's table takes the default's keys it does not give
+    (all of them, with its own ``model``, where it names another model).
+
     ``model`` is one of ``neo_hookean``, ``mooney_rivlin``, ``reduced_polynomial``, ``yeoh``,
     ``ogden``, ``compressible_neo_hookean``, ``linear_elastic``. Parameters are the flat keys of
     ``to_dict`` (``C10_Pa``, ``C20_Pa``, ``mu1_Pa``, ``alpha1``, ``bulk_modulus_Pa``, ...);
@@ -44,6 +50,8 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
     if not isinstance(data, Mapping):
         raise InputError("material must be a table of parameters", value=data)
     values = dict(data)
+    if "regions" in values:
+        return _material_regions(values)
     prony = _pop_prony(values)
     name = values.pop("model", None)
     if name == "yeoh":
@@ -110,6 +118,46 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
     if prony is None:
         return material
     return Viscoelastic(material, *prony)
+
+
+def _material_regions(values: dict[str, Any]) -> MaterialRegions:
+    """A :class:`MaterialRegions` from a material table with a ``regions`` table; an error in
+    a region's table names ``regions.<name>.<key>``."""
+    regions = values.pop("regions")
+    if not isinstance(regions, Mapping) or not regions:
+        raise InputError(
+            "must be a table of named regions, e.g. [material.regions.tumour]",
+            key="regions",
+            value=regions,
+        )
+    default = material_from_dict(values)
+    materials, tet_regions = {}, {}
+    for name, table in regions.items():
+        if not isinstance(table, Mapping):
+            raise InputError(
+                "must be a table with tet_regions and parameters", key=f"regions.{name}"
+            )
+        own = dict(table)
+        if "tet_regions" not in own:
+            raise InputError(
+                "missing: the mesh's tet region ids this region holds",
+                key=f"regions.{name}.tet_regions",
+            )
+        tet_regions[name] = own.pop("tet_regions")
+        merged = own if "model" in own else {**values, **own}
+        if "D1_per_Pa" in own and "model" not in own:
+            merged.pop("bulk_modulus_Pa", None)
+        if "bulk_modulus_Pa" in own and "model" not in own:
+            merged.pop("D1_per_Pa", None)
+        try:
+            materials[name] = material_from_dict(merged)
+        except InputError as exc:
+            raise InputError(
+                exc.message,
+                key=f"regions.{name}.{exc.key}" if exc.key else f"regions.{name}",
+                value=exc.value,
+            ) from None
+    return MaterialRegions(default, materials, tet_regions)
 
 
 def _pop_prony(values: dict[str, Any]) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
