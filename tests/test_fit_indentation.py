@@ -32,7 +32,7 @@ from warptissue.io import write_csv
 from warptissue.lsq.result import RejectStep
 from warptissue.materials import material_from_dict
 from warptissue.mesh import indentation_block, write_mesh
-from warptissue.simulate import build_mesh, build_problem, run_study
+from warptissue.simulate import build_mesh, build_problem, record_problems, run_study
 from warptissue.study import load_study, save_study
 
 RADIUS_M = 1e-3
@@ -1125,3 +1125,132 @@ def test_records_at_three_sites_are_fitted_jointly_for_one_c10(tmp_path):
 def _write(path: Path, text: str) -> Path:
     path.write_text(text, encoding="utf-8")
     return path
+
+
+REGIONS_STUDY = """\
+schema_version = 2
+name = "two_regions"
+
+[specimen]
+mesh = "halves.vtu"
+
+[indenter]
+kind = "sphere"
+radius_m = 0.0015
+site_m = [-0.003, 0.0, 0.003]
+
+[protocol]
+max_depth_m = 0.0004
+steps = 4
+
+[material]
+model = "neo_hookean"
+C10_Pa = {default}
+bulk_modulus_Pa = {bulk}
+
+[material.regions.right]
+tet_regions = [1]
+C10_Pa = {right}
+bulk_modulus_Pa = {right_bulk}
+
+[boundary]
+support = "bottom"
+
+[solver]
+device = "cpu"
+tolerance = 1e-12
+
+[[data]]
+file = "left.csv"
+
+[[data]]
+file = "right.csv"
+site_m = [0.003, 0.0, 0.003]
+
+[fit]
+free = ["C10_Pa", "right.C10_Pa"]
+bulk_modulus = "follows_shear"
+time_steps = 10
+start_from = "material"
+"""
+
+
+def _regions_study(folder: Path, *, truth=(200.0, 600.0), start=(200.0, 600.0)):
+    """A block 12 x 6 x 3 mm whose half x > 0 is tet region 1 ("right"), indented by a
+    sphere at the middle of each half; the records are the FE's of ``truth`` (C10 of the
+    left half, of the right) with 1 % noise; the study starts from ``start``."""
+    from warptissue.mesh import block_mesh, to_tet10
+
+    mesh = to_tet10(
+        block_mesh(
+            np.linspace(-0.006, 0.006, 9), np.linspace(-0.003, 0.003, 5), np.linspace(0, 0.003, 3)
+        )
+    )
+    mesh.tet_regions = (mesh.points[mesh.tets[:, :4]].mean(axis=1)[:, 0] > 0).astype(np.int32)
+    mesh.node_sets["bottom"] = mesh.node_sets["zmin"]
+    folder.mkdir(parents=True, exist_ok=True)
+    write_mesh(folder / "halves.vtu", mesh)
+    time, depth = ramp(0.0004, 40)
+    csv = {"time_s": time, "displacement_m": depth, "force_N": 1e-4 * depth}
+    for name in ("left.csv", "right.csv"):
+        write_csv(folder / name, csv)
+
+    def text(values):
+        return REGIONS_STUDY.format(
+            default=values[0], bulk=100.0 * values[0], right=values[1], right_bulk=100.0 * values[1]
+        )
+
+    path = folder / "study.toml"
+    path.write_text(text(truth))
+    made = load_study(path)
+    problems, _ = record_problems(made)
+    rng = np.random.default_rng(3)
+    for name, problem in zip(("left.csv", "right.csv"), problems, strict=True):
+        result = simulate_indentation(problem, depth, device="cpu", progress=False)
+        assert result.completed, result.message
+        force = result.reaction_force_N
+        noisy = force + rng.normal(0.0, 0.01 * force.max(), force.size)
+        write_csv(folder / name, {"time_s": time, "displacement_m": depth, "force_N": noisy})
+    path.write_text(text(start))
+    return load_study(path)
+
+
+@pytest.mark.slow
+def test_a_region_s_columns_of_the_jacobian_equal_central_differences(tmp_path):
+    """Two regions, each K following its own mu0: the Jacobian's columns of C10_Pa and
+    right.C10_Pa equal central differences of the residuals."""
+    study = _regions_study(tmp_path)
+    assert study.material.parameter_names == ("C10_Pa", "right.C10_Pa")
+    free = study.fit.free
+    model = forward_model(study, study.material, free, device="cpu", progress=False)
+    x = np.array([180.0, 700.0])
+    jacobian = model.jac(x)
+    material = model.material_at(x)
+    assert material.materials["right"].bulk_modulus == pytest.approx(100.0 * 700.0)
+    assert material.default.bulk_modulus == pytest.approx(100.0 * 180.0)
+    for j, name in enumerate(free):
+        step = 1e-6 * x[j]
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
+        scale = float(np.max(np.abs(central)))
+        assert scale > 0.0
+        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale, err_msg=name)
+    # Each record sees mostly its own half.
+    rows = len(study.data[0].force_N)
+    assert abs(jacobian[:rows, 0]).sum() > 3.0 * abs(jacobian[:rows, 1]).sum()
+    assert abs(jacobian[rows:, 1]).sum() > 3.0 * abs(jacobian[rows:, 0]).sum()
+
+
+@pytest.mark.slow
+def test_each_region_s_c10_is_recovered_by_a_joint_fit_over_two_sites(tmp_path):
+    study = _regions_study(tmp_path, start=(300.0, 300.0))
+    fit = fit_indentation(study, device="cpu", progress=False)
+    assert fit.success, fit.message
+    assert_recovered(fit, {"C10_Pa": 200.0, "right.C10_Pa": 600.0}, 0.02)
+    fitted = fit.fitted_study.material
+    assert fitted.materials["right"].bulk_modulus == pytest.approx(
+        100.0 * fit.parameters["right.C10_Pa"]
+    )
+    assert fit.to_dict()["fitted_material"]["regions"]["right"]["tet_regions"] == [1]

@@ -109,14 +109,21 @@ class ForwardModel:
                 value=missing[0],
             )
         self.index = [self.all_names.index(name) for name in names]
-        # fit.bulk_modulus = "follows_shear": K = ratio mu0(theta) at every point, so
-        # dF/dtheta_j = dF/dtheta_j|K + dF/dK ratio dmu0/dtheta_j (the FE gives dF/dK too).
-        self.bulk_ratio: float | None = None
+        # fit.bulk_modulus = "follows_shear": each material b of the body (one, or one per
+        # region) keeps K_b = ratio_b mu0_b(theta) at every point, so dF/dtheta_j =
+        # dF/dtheta_j|K + sum_b dF/dK_b ratio_b dmu0_b/dtheta_j (the FE gives dF/dK_b too).
+        self.bulk_ratios: np.ndarray | None = None
         self.sensitivity_names = names
+        parts = material.parts
         if settings.bulk_modulus == "follows_shear":
-            self.bulk_ratio = float(material.bulk_modulus / material.initial_shear_modulus_Pa)
-            self.sensitivity_names = (*names, BULK_MODULUS)
-        self.shear_weights = [material.moduli_derivative(name)[0] for name in names]
+            self.bulk_ratios = np.array(
+                [part.bulk_modulus / part.initial_shear_modulus_Pa for _, part in parts]
+            )
+            self.sensitivity_names = (*names, *(prefix + BULK_MODULUS for prefix, _ in parts))
+        self.shear_weights = np.zeros((len(parts), len(names)))
+        for j, name in enumerate(names):
+            b, local = material.part_of(name)
+            self.shear_weights[b, j] = parts[b][1].moduli_derivative(local)[0]
 
         self.viscoelastic = isinstance(material, Viscoelastic)
         self.records = study.data
@@ -181,9 +188,14 @@ class ForwardModel:
         vector = self.material.parameter_vector.copy()
         vector[self.index] = np.asarray(x)[: len(self.names)]
         material = self.material.with_parameters(vector)
-        if self.bulk_ratio is None:
+        if self.bulk_ratios is None:
             return material
-        return material.with_bulk_modulus(self.bulk_ratio * material.initial_shear_modulus_Pa)
+        return material.with_parts(
+            [
+                part.with_bulk_modulus(ratio * part.initial_shear_modulus_Pa)
+                for (_, part), ratio in zip(material.parts, self.bulk_ratios, strict=True)
+            ]
+        )
 
     def offsets_at(self, x: np.ndarray) -> np.ndarray:
         """The records' depth offsets (m) in ``x``: zeros when the contact is given."""
@@ -350,8 +362,8 @@ class ForwardModel:
             material = self.material_at(x)
         except InputError as exc:
             raise RejectStep(str(exc)) from exc
-        if float(material.initial_shear_modulus_Pa) <= 0.0:
-            raise RejectStep("the initial shear modulus is not positive")
+        if min(float(part.initial_shear_modulus_Pa) for _, part in material.parts) <= 0.0:
+            raise RejectStep("an initial shear modulus is not positive")
         offsets = self.offsets_at(x)
         touches = list(self.contact_s)
         if self.viscoelastic and self.offset_count:
@@ -385,10 +397,11 @@ class ForwardModel:
             sensitivity = np.asarray(run.force_sensitivity_N_per_unit, dtype=np.float64)
             curve = np.concatenate([[0.0], force])
             predicted.append(np.interp(at, where, curve))
-            if self.bulk_ratio is not None:  # K follows mu0: the chain rule through K
-                sensitivity = sensitivity[:, :-1] + self.bulk_ratio * np.outer(
-                    sensitivity[:, -1], self.shear_weights
-                )
+            if self.bulk_ratios is not None:  # K follows mu0: the chain rule through each K
+                n = len(self.names)
+                sensitivity = sensitivity[:, :n] + (
+                    sensitivity[:, n:] * self.bulk_ratios
+                ) @ self.shear_weights
             columns = [
                 np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
                 for j in range(len(self.names))

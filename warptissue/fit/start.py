@@ -98,6 +98,9 @@ def start_values_from_record(study: Study, record: DataRecord | None = None) -> 
     factor, chosen so that mu0 equals the record's small-depth shear modulus
     mu = E / (2 (1 + nu)), E from :func:`record_youngs_modulus_Pa`; the other free
     parameters (C20, C30, the Ogden alpha<i>, a Poisson's ratio) start from ``[material]``.
+    On a body of several material regions mu0 is the default material's; the free moduli of
+    the named regions are multiplied by the same factor (they start from ``[material]`` where
+    none of the default's is free).
     For neo-Hookean and reduced-polynomial models this is C10 = mu / 2; for Mooney-Rivlin
     with both free it splits mu / 2 in the ratio of the ``[material]`` values of C10 and C01,
     and with one free it gives that one what the fixed one leaves; for Ogden it scales the
@@ -130,13 +133,18 @@ def start_values_from_record(study: Study, record: DataRecord | None = None) -> 
         youngs_Pa = record_youngs_modulus_Pa(study, record)
         nu = min(material.small_strain_equivalent()[1], 0.5)
         target = youngs_Pa / (2.0 * (1.0 + nu))
-        free_part = sum(material.shear_modulus_weight(name) * current[name] for name in scaled)
+        # The body's mu0 (the default material's where the body has regions): a region's
+        # free moduli scale with the same factor, keeping their [material] ratios.
+        weight = {name: material.moduli_derivative(name)[0] for name in current}
+        free_part = sum(weight[name] * current[name] for name in scaled)
         fixed_part = sum(
-            material.shear_modulus_weight(name) * start.get(name, value)
+            weight[name] * start.get(name, value)
             for name, value in current.items()
             if name not in scaled
         )
         factor = (target - fixed_part) / free_part if free_part > 0.0 else math.nan
+        if free_part == 0.0 and len(material.parts) > 1:
+            factor = 1.0  # only regions' moduli are free: they start from [material]
         if not factor > 0.0:
             raise InputError(
                 f"fit.free: scaling {', '.join(scaled)} cannot reach the record's small-depth "

@@ -9,7 +9,7 @@ import abc
 import dataclasses
 import difflib
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -178,6 +178,24 @@ class Material:
         return self._from_flat(
             {**self._flat_parameters(), **dict(zip(names, values.tolist(), strict=True))}
         )
+
+    @property
+    def parts(self) -> tuple[tuple[str, Material], ...]:
+        """``(parameter-name prefix, material)`` of each material of the body: ``(("",
+        self),)``; a body of several materials
+        (:class:`~warptissue.materials.MaterialRegions`) has one per region."""
+        return (("", self),)
+
+    def part_of(self, name: str) -> tuple[int, str]:
+        """The index in :attr:`parts` of the material that parameter ``name`` belongs to, and
+        the name within it: ``(0, name)``."""
+        return 0, name
+
+    def with_parts(self, materials: Sequence[Material]) -> Material:
+        """A copy with new materials, one per entry of :attr:`parts`: the one given."""
+        if len(materials) != 1:
+            raise InputError("one material per part: 1 expected", value=len(materials))
+        return materials[0]
 
     def to_dict(self) -> dict[str, Any]:
         """``{"model": name, <parameter>_<unit>: value, ...}``, as read by material_from_dict.

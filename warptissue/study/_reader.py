@@ -809,6 +809,20 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     if organ is None:
         specimen = _read_specimen(specimen_table, indenter, deepest_m=deepest_m)
     material = _read_material(root.table("material"))
+    if len(material.parts) > 1:
+        if organ is None:
+            raise source.error(
+                "material.regions",
+                "material regions are the tet regions of a mesh file: give [specimen] mesh (a "
+                "generated block or disc is one material)",
+            )
+        if specimen.refine_zones:
+            raise source.error(
+                "material.regions",
+                "a mesh of several material regions is used as it is: remove "
+                "specimen.size_near_m and specimen.force_accuracy (refining around the sites "
+                "would lose the regions) and give the mesh refined",
+            )
     boundary = _read_boundary(_optional_table(root, "boundary"), organ)
     _check_placed_records(records, root.source, organ, boundary, indenter)
     solver = _read_solver(_optional_table(root, "solver"), specimen.element, material)
