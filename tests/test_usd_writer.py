@@ -627,3 +627,34 @@ def test_a_plate_is_drawn_over_the_specimen_footprint(tmp_path, specimen):
         top = specimen.points[:, 2].max()
         assert low[2] == pytest.approx(top, abs=1e-9) and high[2] > top
         assert validate_stage(paths.root) == []
+
+
+def test_each_region_s_material_is_bound_to_its_subsets(tmp_path, specimen):
+    """A body of several materials: the default bound to the TetMesh, the named region's to
+    the materialRegion subset of its tet region (purpose physics); a region whose tet
+    region has no subset is refused with nothing written."""
+    from pxr import Usd, UsdShade
+
+    from warptissue.materials import MaterialRegions, NeoHookean
+
+    body = MaterialRegions(
+        NeoHookean(200.0, 2.0e4), {"stiff": NeoHookean(900.0, 9.0e4)}, {"stiff": (4,)}
+    )
+    paths = write_simulation_usd(tmp_path / "r.usda", specimen, material=body)
+    stage = Usd.Stage.Open(str(paths.root))
+    volume = "/World/Specimen/Volume"
+    bound = {}
+    for path in (volume, f"{volume}/materialRegion_3", f"{volume}/materialRegion_4"):
+        prim = stage.GetPrimAtPath(path)
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial("physics")
+        bound[path] = material.GetPrim().GetAttribute("tissue:hyperelastic:C10").Get()
+    assert bound == {
+        volume: 200.0,
+        f"{volume}/materialRegion_3": 200.0,
+        f"{volume}/materialRegion_4": 900.0,
+    }
+    assert validate_stage(paths.root) == []
+    elsewhere = MaterialRegions(body.default, {"stiff": body.materials["stiff"]}, {"stiff": (9,)})
+    with pytest.raises(InputError, match="no materialRegion subset of tet region 9"):
+        write_simulation_usd(tmp_path / "bad.usda", specimen, material=elsewhere)
+    assert not list(tmp_path.glob("bad*"))

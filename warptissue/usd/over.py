@@ -12,23 +12,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom, UsdShade
+from pxr import Sdf, Usd, UsdGeom
 
 from warptissue.errors import InputError
 from warptissue.indenter import Indenter
 from warptissue.io import atomic_path, software_versions
 from warptissue.mesh import TetMesh
-from warptissue.usd.schema import material_record
 from warptissue.usd.writer import (
     INDENTER,
     MATERIAL,
     WORLD,
     UsdScenePaths,
+    bind_materials,
     check_density,
     corner_mesh,
     declare_result_attributes,
     indenter_prims,
-    material_prims,
     result_arrays,
     result_summary,
     set_stage_metadata,
@@ -195,10 +194,7 @@ def write_results_over_asset(
     world.SetCustomDataByKey("warptissue", vt_dictionary(info))
     world.SetCustomDataByKey("warptissue:result", vt_dictionary(result_summary(arrays, result)))
     if material is not None:
-        tissue = material_prims(stage, material_record(material), density_kg_per_m3)
-        UsdShade.MaterialBindingAPI.Apply(stage.GetPrimAtPath(volume_path)).Bind(
-            tissue, UsdShade.Tokens.fallbackStrength, "physics"
-        )
+        bind_materials(stage, stage.GetPrimAtPath(volume_path), material, density_kg_per_m3)
         _block_leftovers(stage, MATERIAL, overlay, (MATERIAL,))
     _clear_transforms(stage, INDENTER)
     if indenter is not None:

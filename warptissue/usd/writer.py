@@ -34,6 +34,7 @@ from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
 from warptissue.errors import InputError, MeshError
 from warptissue.indenter import Indenter
 from warptissue.io import atomic_path, software_versions, to_jsonable
+from warptissue.materials import material_from_dict
 from warptissue.mesh import FACE_SET_FAMILY, NODE_SET_FAMILY, REGION_FAMILY, TetMesh
 from warptissue.usd.schema import (
     DEFORMABLE_BODY_API,
@@ -391,15 +392,17 @@ def set_stage_metadata(layer: Any) -> None:
         pseudo.SetInfo(key, value)
 
 
-def material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
+def material_prims(
+    stage: Any, record: Any, density_kg_per_m3: float, *, path: str = MATERIAL
+) -> Any:
     """The physics material: proposal small-strain attributes plus the ``tissue:`` schema.
 
     Returns:
-        The ``UsdShade.Material`` at ``/World/Materials/Tissue``.
+        The ``UsdShade.Material`` at ``path`` (``/World/Materials/Tissue``).
     """
 
-    UsdGeom.Scope.Define(stage, MATERIAL.rsplit("/", 1)[0])
-    material = UsdShade.Material.Define(stage, MATERIAL)
+    UsdGeom.Scope.Define(stage, path.rsplit("/", 1)[0])
+    material = UsdShade.Material.Define(stage, path)
     prim = material.GetPrim()
     prim.AddAppliedSchema(VOLUME_DEFORMABLE_MATERIAL_API)
     prim.AddAppliedSchema(TISSUE_MATERIAL_API)
@@ -435,6 +438,47 @@ def material_prims(stage: Any, record: Any, density_kg_per_m3: float) -> Any:
         ).Set(usd_value)
     prim.SetCustomDataByKey("warptissue:material", vt_dictionary(record.source))
     return material
+
+
+def bind_materials(stage: Any, volume_prim: Any, material: Any, density_kg_per_m3: float) -> Any:
+    """The run's materials, bound with purpose ``physics``: the material (a body of several
+    regions: its default) at ``/World/Materials/Tissue`` to the TetMesh, and each named region's
+    (:class:`warptissue.materials.MaterialRegions`) at ``/World/Materials/<name>`` to the
+    TetMesh's ``materialRegion`` subsets of its tet regions.
+
+    Returns:
+        The ``UsdShade.Material`` bound to the TetMesh.
+
+    Raises:
+        InputError: The TetMesh has no ``materialRegion`` subset of a region's tet region.
+    """
+    if isinstance(material, Mapping) and "regions" in material:  # result.json's table
+        material = material_from_dict(material)
+    parts = material.parts if hasattr(material, "parts") else (("", material),)
+    tissue = material_prims(stage, material_record(material), density_kg_per_m3)
+    UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
+        tissue, UsdShade.Tokens.fallbackStrength, "physics"
+    )
+    for prefix, part in parts[1:]:
+        name = prefix[:-1]
+        region = material_prims(
+            stage,
+            material_record(part),
+            density_kg_per_m3,
+            path=f"{MATERIAL.rsplit('/', 1)[0]}/{Tf.MakeValidIdentifier(name)}",
+        )
+        for each in material.tet_regions[name]:
+            subset = volume_prim.GetChild(Tf.MakeValidIdentifier(f"{REGION_FAMILY}_{each}"))
+            if not subset.IsValid():
+                raise InputError(
+                    f"the TetMesh has no {REGION_FAMILY} subset of tet region {each} to bind "
+                    f"region {name!r}'s material to",
+                    key=f"material.regions.{name}.tet_regions",
+                )
+            UsdShade.MaterialBindingAPI.Apply(subset).Bind(
+                region, UsdShade.Tokens.fallbackStrength, "physics"
+            )
+    return tissue
 
 
 def result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str, np.ndarray]:
@@ -820,10 +864,7 @@ def write_simulation_usd(
         _material_field_primvars(stage, field_arrays, owners=owners)
 
     if material is not None:
-        tissue = material_prims(stage, material_record(material), density_kg_per_m3)
-        UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
-            tissue, UsdShade.Tokens.fallbackStrength, "physics"
-        )
+        bind_materials(stage, volume_prim, material, density_kg_per_m3)
     if indenter is not None:
         indenter_prims(
             stage,
