@@ -13,7 +13,7 @@ from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.mesh import TetMesh, boundary_faces, check_mesh, write_mesh
 from warptissue.simulate import build_mesh, build_problem, record_problems
-from warptissue.study import load_study, study_from_dict
+from warptissue.study import load_study, save_study, study_from_dict
 
 BLOCK = """\
 schema_version = 1
@@ -629,3 +629,65 @@ def test_a_self_intersecting_surface_is_refused_in_one_line(tmp_path) -> None:
     assert main(["simulate", str(path), "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert not (tmp_path / "out").exists()
     assert not list(Path.cwd().glob("_skipped.*"))  # TetGen's report of the crossing faces
+
+
+REGIONS = """
+[material.regions.right]
+tet_regions = [1]
+C10_Pa = 900.0
+"""
+
+
+def _halves(block_files) -> Path:
+    """The block as a mesh file whose half x > 0 is tet region 1, the other half 0."""
+    folder, block, _ = block_files
+    mesh = build_mesh(block)
+    mesh.tet_regions = (mesh.points[mesh.tets[:, :4]].mean(axis=1)[:, 0] > 0).astype(np.int32)
+    write_mesh(folder / "halves.vtu", mesh)
+    return folder
+
+
+def test_material_regions_are_read_and_written_back(block_files):
+    folder = _halves(block_files)
+    path = folder / "regions.toml"
+    path.write_text(_organ_study("halves.vtu", site=[0.0, 0.0, 0.004]) + REGIONS)
+    study = load_study(path)
+    assert study.material.parameter_names == ("C10_Pa", "right.C10_Pa")
+    right = study.material.materials["right"]
+    assert (right.C10_Pa, right.bulk_modulus_Pa) == (900.0, 575000.0)  # the default's K
+    assert study.material.tet_regions == {"right": (1,)}
+    saved = folder / "saved.toml"
+    save_study(study, saved)
+    assert load_study(saved).material == study.material
+
+
+@pytest.mark.parametrize(
+    ("change", "key", "message"),
+    [
+        ({"tet_regions = [1]": "tet_regions = [5]"}, "material.regions.right.tet_regions",
+         "tet region 5 is not in the mesh"),
+        ({"C10_Pa = 900.0": "C10_pa = 900.0"}, "material.regions.right.C10_pa",
+         "unknown parameter for model"),
+        ({"regions.right]": 'regions."my.tumour"]'}, "material.regions.my.tumour",
+         "a region's name is a letter"),
+        ({'unit = "m"': 'unit = "m"\nsize_near_m = 0.001'}, "specimen.size_near_m",
+         "cannot be refined around a site"),
+    ],
+    ids=["region_not_in_mesh", "typo", "dotted_name", "refined"],
+)  # fmt: skip
+def test_bad_material_regions_are_one_line_naming_the_key(block_files, change, key, message):
+    folder = _halves(block_files)
+    text = _organ_study("halves.vtu", site=[0.0, 0.0, 0.004]) + REGIONS
+    for old, new in change.items():
+        assert old in text
+        text = text.replace(old, new)
+    path = folder / "bad_regions.toml"
+    path.write_text(text)
+    _assert_refused_in_one_line(path, key, message)
+
+
+def test_material_regions_need_a_mesh_file(block_files):
+    folder, _, _ = block_files
+    path = folder / "block_regions.toml"
+    path.write_text(BLOCK + REGIONS)
+    _assert_refused_in_one_line(path, "material.regions", "the tet regions of a mesh file")

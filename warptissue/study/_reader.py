@@ -816,13 +816,16 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
                 "material regions are the tet regions of a mesh file: give [specimen] mesh (a "
                 "generated block or disc is one material)",
             )
-        if specimen.refine_zones:
-            raise source.error(
-                "material.regions",
-                "a mesh of several material regions is used as it is: remove "
-                "specimen.size_near_m and specimen.force_accuracy (refining around the sites "
-                "would lose the regions) and give the mesh refined",
-            )
+        present = np.unique(organ[0].tet_regions)
+        for region, ids in material.tet_regions.items():
+            missing = sorted(set(ids) - set(present.tolist()))
+            if missing:
+                raise source.error(
+                    f"material.regions.{region}.tet_regions",
+                    f"tet region {missing[0]} is not in the mesh (its tet regions: "
+                    f"{present.tolist()[:20]})",
+                    list(ids),
+                )
     boundary = _read_boundary(_optional_table(root, "boundary"), organ)
     _check_placed_records(records, root.source, organ, boundary, indenter)
     solver = _read_solver(_optional_table(root, "solver"), specimen.element, material)
