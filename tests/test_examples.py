@@ -223,8 +223,9 @@ def test_liver_organ_sites_recovers_c10_and_writes_a_valid_usd(tmp_path):
     bonded flat punch of 5 mm at the top, one of 4 mm beside it, a rigid sphere of 8 mm on
     the flank along its normal) fitted jointly for one C10 from records made from the organ
     itself at 287.5 Pa with 1 % noise (scenes/data/liver_organ_site_*.csv): C10 within 2 %;
-    the fitted organ at the top site, run on the asset's own mesh and layered over the asset,
-    validates with 0 findings and Newton loads it."""
+    the fitted organ at the top site, run on the fit's refined mesh and layered over the asset
+    (its fields transferred onto the asset's mesh), validates with 0 findings and Newton loads
+    it."""
     # About 11 minutes alone on a 2-core CPU; more where the cores are shared.
     out = run_example(
         "liver_organ_sites.py", "--out", "organ", "--device", "cpu", cwd=tmp_path, timeout_s=2400
@@ -236,6 +237,7 @@ def test_liver_organ_sites_recovers_c10_and_writes_a_valid_usd(tmp_path):
     assert all(value > 0.99 for value in summary["r_squared"]), out
     scene = tmp_path / "organ" / "liver_organ_sites.usda"
     assert "liver_organ.asset.usda" in scene.read_text()  # layered over the organ's asset
+    assert "transferred_from" in (tmp_path / "organ" / "liver_organ_sites.asset.usda").read_text()
     newton = os.environ.get("WARPTISSUE_NEWTON_PYTHON")
     if newton is None and importlib.util.find_spec("newton") is not None:
         newton = sys.executable

@@ -374,3 +374,54 @@ def test_a_run_on_another_mesh_or_units_is_not_layered(organ_run, tmp_path, caps
         err = capsys.readouterr().err.strip()
         assert status == 2 and "--over" in err and message in err and "\n" not in err, err
         assert not root.parent.exists()
+
+
+def test_a_run_refined_from_the_asset_is_transferred_onto_it(organ_run, tmp_path):
+    """A run on a mesh refined around a site (TetGen's fill of the asset's bisected surface)
+    layers over the asset: a quadratic displacement field of the run arrives at the asset's
+    nodes exactly (TET10 interpolation), a uniform stress as it is, and /World says the
+    fields were transferred."""
+    from pxr import Usd, UsdGeom
+
+    from warptissue.indenter import Indenter
+    from warptissue.mesh import refine_near_sites, to_tet10
+    from warptissue.usd import write_results_over_asset
+
+    asset = organ_run / "organ.asset.usda"
+    organ = read_tetmesh_usd(asset)
+    organ.tet_regions[:] = 0  # the block's regions are its hexahedra, one material
+    refined = to_tet10(
+        refine_near_sites(organ, sites_m=[[0.0, 0.0, 4e-3]], zone_radii_m=[2e-3], sizes_m=[1e-3])
+    )
+    assert refined.node_count > 2 * organ.node_count
+
+    def field(points, scale):
+        return scale * np.column_stack(
+            [points[:, 0] * points[:, 2], points[:, 1] ** 2, -(points[:, 2] ** 2)]
+        )
+
+    steps = (1.0, 2.0)
+    stress = np.tile(np.arange(1.0, 7.0), (refined.tet_count, 1))
+    result = {
+        "depths_m": np.array([1e-4, 2e-4]),
+        "reaction_force_N": np.array([1e-3, 2e-3]),
+        "displacement_m": np.stack([field(refined.points, s) for s in steps]),
+        "cauchy_stress_Pa": stress,
+        "von_mises_Pa": np.full(refined.tet_count, 5.0),
+    }
+    root = tmp_path / "refined.usda"
+    write_results_over_asset(
+        root, asset, refined, result=result, indenter=Indenter("sphere", radius_m=3e-3)
+    )
+    assert validate_stage(root) == []
+    stage = Usd.Stage.Open(str(root))
+    volume = UsdGeom.TetMesh(stage.GetPrimAtPath("/World/Specimen/Volume"))
+    for k, scale in enumerate(steps, start=1):
+        moved = np.asarray(volume.GetPointsAttr().Get(k), dtype=np.float64)
+        np.testing.assert_allclose(moved, organ.points + field(organ.points, scale), atol=1e-12)
+    written = np.asarray(volume.GetPrim().GetAttribute("primvars:tissue:cauchyStress").Get(2))
+    np.testing.assert_allclose(
+        written.reshape(-1, 6), np.tile(np.arange(1.0, 7.0), (organ.tet_count, 1))
+    )
+    how = stage.GetPrimAtPath("/World").GetCustomDataByKey("warptissue")["transferred_from"]
+    assert how["nodes"] == refined.node_count

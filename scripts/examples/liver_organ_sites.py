@@ -21,11 +21,12 @@ study (its site in ``[indenter]``) run with the forward FE at C10 = 287.5 Pa (K 
 nu = 0.49), to 2 mm in 12 samples, with 1 % Gaussian noise of the peak force (seeded). The
 default run fits the three records jointly for one C10 (the sites' forward runs are one per
 site per evaluation, batched on a GPU), prints C10 against the value that made the records,
-then runs the fitted organ at site A on the organ asset's own mesh (not refined) and layers
-the run over the asset itself (``warptissue export RUN --over
-scenes/liver_organ.asset.usda``: the asset is referenced, not copied, and the run's deformed
-points, stress and probe sit in layers over it); the scene is validated and its findings
-printed.
+then runs the fitted organ at site A on the fit's own mesh (refined around the sites) and
+layers the run over the asset itself (``warptissue export RUN --over
+scenes/liver_organ.asset.usda``: the asset is referenced, not copied, the run's fields are
+transferred onto the asset's mesh, whose surface nodes the refined mesh shares, and the
+deformed points, stress and probe sit in layers over it); the scene is validated and its
+findings printed.
 
 Usage:
     python scripts/examples/liver_organ_sites.py [--out DIR] [--device cpu]
@@ -112,15 +113,12 @@ def fit_and_export(out: Path, *, device: str | None) -> dict:
         print(f"  {record.file}: R^2 = {record.r_squared:.4f}, RMSE = {record.rmse_N:.3g} N")
     out.mkdir(parents=True, exist_ok=True)
     save_study(fit.fitted_study, out / "fitted.toml")
+    # The fit's mesh, refined around the sites; export transfers its fields onto the asset's.
     single = dataclasses.replace(fit.fitted_study, data=(), fit=None)
-    # The asset's own mesh (no refinement), so that the run layers over the asset itself.
     asset = single.specimen.mesh_path
-    unrefined = dataclasses.replace(
-        single, specimen=dataclasses.replace(single.specimen, mesher="file", refine_zones=())
-    )
-    run_study(unrefined, out_dir=out / "site_a_asset", device=device, progress=False,
-              announce=False, vtu_every_step=True)  # fmt: skip
-    layered = export_result_dir(out / "site_a_asset", out / "liver_organ_sites.usda", over=asset)
+    run_study(single, out_dir=out / "site_a", device=device, progress=False, announce=False,
+              vtu_every_step=True)  # fmt: skip
+    layered = export_result_dir(out / "site_a", out / "liver_organ_sites.usda", over=asset)
     findings = validate_stage(layered.root)
     print(f"USD over {asset.name}: {layered.root} ({len(findings)} validation findings)")
     summary = {

@@ -57,9 +57,11 @@ def _block_leftovers(stage: Any, root: str, layer: Any, kept: tuple[str, ...]) -
     if not top:
         return
     inactive, blocked = [], []
-    for prim in Usd.PrimRange(top):
+    prims = iter(Usd.PrimRange(top))
+    for prim in prims:
         if str(prim.GetPath()) not in kept:
-            inactive.append(prim)
+            inactive.append(prim)  # its descendants go with it
+            prims.PruneChildren()
             continue
         blocked.extend(
             attribute
@@ -70,6 +72,64 @@ def _block_leftovers(stage: Any, root: str, layer: Any, kept: tuple[str, ...]) -
         attribute.Block()
     for prim in inactive:
         prim.SetActive(False)
+
+
+def _transfer_onto_asset(
+    mesh: TetMesh,
+    arrays: dict[str, np.ndarray],
+    asset_points: np.ndarray,
+    asset_tets: np.ndarray,
+    *,
+    extent: float,
+    volume_path: str,
+) -> tuple[dict[str, np.ndarray], dict[str, Any] | None]:
+    """A run on a mesh refined from the asset's (its surface nodes among the run's nodes),
+    its results on the asset's mesh: nodal fields interpolated with the run's shape
+    functions at the asset's nodes (exact at the surface nodes, which the run shares), and
+    each asset tet's stress the mean of the run's tets' at its four quadrature points.
+
+    Returns:
+        ``(arrays, how)``; ``(arrays, None)`` where the run's mesh is not refined from the
+        asset's.
+    """
+    from scipy.spatial import cKDTree
+
+    from warptissue.errors import MeshError
+    from warptissue.fem.elements import quadrature_rule
+    from warptissue.mesh import boundary_faces, interpolation_matrix, locate_points
+
+    surface = np.unique(boundary_faces(asset_tets))
+    distance, _ = cKDTree(mesh.points).query(asset_points[surface])
+    if float(distance.max()) > 1e-6 * extent:
+        return arrays, None
+    try:
+        nodal = interpolation_matrix(mesh, asset_points)
+        reference, _ = quadrature_rule(10)
+        lam = np.column_stack([1.0 - reference.sum(axis=1), reference])  # (4, 4)
+        samples = np.einsum("qc,mcx->mqx", lam, asset_points[asset_tets]).reshape(-1, 3)
+        holders = locate_points(mesh, samples)[0].reshape(len(asset_tets), -1)
+    except MeshError as exc:
+        raise InputError(
+            f"the asset's mesh at {volume_path} does not lie in the run's: {exc}", key="--over"
+        ) from None
+    out = dict(arrays)
+    u = arrays["displacement_m"]
+    out["displacement_m"] = np.stack([nodal @ step for step in u]) if u.ndim == 3 else nodal @ u
+    if "contact_pressure_Pa" in arrays:
+        pressure = arrays["contact_pressure_Pa"]
+        out["contact_pressure_Pa"] = (
+            (nodal @ pressure.T).T if pressure.ndim == 2 else nodal @ pressure
+        )
+    for name in ("cauchy_stress_Pa", "von_mises_Pa"):
+        if name in arrays:
+            out[name] = arrays[name][holders].mean(axis=1)
+    how = {
+        "nodes": int(mesh.node_count),
+        "tets": int(mesh.tet_count),
+        "nodal_fields": "the run's shape functions at the asset's nodes",
+        "tet_fields": "mean of the run's tets at each asset tet's four quadrature points",
+    }
+    return out, how
 
 
 def write_results_over_asset(
@@ -100,9 +160,15 @@ def write_results_over_asset(
     Args:
         root_path: The root layer, ``NAME.usda``.
         asset_path: The organ's USD asset (a TetMesh, metersPerUnit 1), the one the run's
-            mesh was read from (``[specimen] mesh``) without refinement.
-        mesh: The run's mesh, metres: its corner nodes and tets must be the asset's (TET10:
-            the asset's TET4 promoted).
+            mesh was read from (``[specimen] mesh``).
+        mesh: The run's mesh, metres: the asset's (its corner nodes and tets; TET10: the
+            asset's TET4 promoted), or one refined from it around the sites (every surface
+            node of the asset is a node of the run, as
+            :func:`warptissue.mesh.refine_near_sites` keeps them): the run's fields are then
+            transferred onto the asset's mesh (nodal fields by the run's shape functions at
+            the asset's nodes, exact at its surface; each tet's stress the mean of the run's
+            at its four quadrature points), and ``/World``'s customData says so
+            (``transferred_from``).
         result: As :func:`write_simulation_usd`'s.
         density_kg_per_m3: Mass density for ``physics:density``; None keeps the asset's
             (``physics:density`` of its ``/World/Materials/Tissue``; 1000 without one).
@@ -113,7 +179,7 @@ def write_results_over_asset(
 
     Raises:
         InputError: A root that is not ``.usda``, an asset not in metres, or a run's mesh
-            that is not the asset's (refined or refilled): one line naming ``--over``.
+            that is neither the asset's nor refined from it: one line naming ``--over``.
     """
     from warptissue._stage import open_stage
     from warptissue.mesh import tetmesh_prim
@@ -149,15 +215,22 @@ def write_results_over_asset(
         and np.array_equal(np.sort(tets, axis=1), np.sort(asset_tets, axis=1))
         and float(np.abs(rest - asset_points).max()) <= 1e-6 * extent
     )
-    if not same:
-        raise InputError(
-            f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the asset's "
-            f"({len(asset_points)} nodes, {len(asset_tets)} tets at {volume_path}): a mesh "
-            "refined or refilled around the sites cannot be layered over it; export the run "
-            "as its own scene (without --over)",
-            path=asset_path,
-            key="--over",
+    arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
+    transferred: dict[str, Any] | None = None
+    if not same:  # a mesh refined around the sites: its fields onto the asset's mesh
+        arrays, transferred = _transfer_onto_asset(
+            mesh, arrays, asset_points, asset_tets, extent=extent, volume_path=volume_path
         )
+        if transferred is None:
+            raise InputError(
+                f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the "
+                f"asset's ({len(asset_points)} nodes, {len(asset_tets)} tets at "
+                f"{volume_path}), nor refined from it (the asset's surface nodes are not "
+                "nodes of the run): export the run as its own scene (without --over)",
+                path=asset_path,
+                key="--over",
+            )
+        kept, rest = np.arange(len(asset_points)), asset_points
     surface_path = None
     for sibling in organ.GetPrimAtPath(volume_path).GetParent().GetChildren():
         indices = sibling.GetAttribute("tissue:volumePointIndices")
@@ -169,7 +242,6 @@ def write_results_over_asset(
     else:
         surface_nodes = owners = None
     del organ
-    arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
 
     stem = root_path.name[: -len(".usda")]
     paths = UsdScenePaths(
@@ -188,7 +260,9 @@ def write_results_over_asset(
     stage = Usd.Stage.Open(root_layer)
     stage.SetEditTarget(Usd.EditTarget(overlay))
     world = stage.GetPrimAtPath(WORLD)
-    info = {"software": software_versions(), "layered_over": relative.as_posix()}
+    info: dict[str, Any] = {"software": software_versions(), "layered_over": relative.as_posix()}
+    if transferred is not None:
+        info["transferred_from"] = transferred
     if provenance:
         info.update(provenance)
     world.SetCustomDataByKey("warptissue", vt_dictionary(info))
