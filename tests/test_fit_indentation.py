@@ -28,6 +28,7 @@ from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
 from warptissue.fit._model import ForwardModel, forward_model
 from warptissue.fit.indentation import depth_offset_start_m
+from warptissue.fit.start import start_values_from_record
 from warptissue.io import write_csv
 from warptissue.lsq.result import RejectStep
 from warptissue.materials import material_from_dict
@@ -1175,12 +1176,22 @@ start_from = "material"
 """
 
 
-def _regions_study(folder: Path, *, truth=(200.0, 600.0), start=(200.0, 600.0)):
+def _regions_text(c10: tuple[float, float], start_from: str = "material") -> str:
+    """The two-region study with C10 of the left and right halves ``c10`` (K = 100 C10)."""
+    text = REGIONS_STUDY.format(
+        default=c10[0], bulk=100.0 * c10[0], right=c10[1], right_bulk=100.0 * c10[1]
+    )
+    return text.replace('start_from = "material"', f'start_from = "{start_from}"')
+
+
+@pytest.fixture(scope="module")
+def regions_folder(tmp_path_factory) -> Path:
     """A block 12 x 6 x 3 mm whose half x > 0 is tet region 1 ("right"), indented by a
-    sphere at the middle of each half; the records are the FE's of ``truth`` (C10 of the
-    left half, of the right) with 1 % noise; the study starts from ``start``."""
+    sphere at the middle of each half; the records are the FE's at C10 = 200 Pa (left) and
+    600 Pa (right) with 1 % noise."""
     from warptissue.mesh import block_mesh, to_tet10
 
+    folder = tmp_path_factory.mktemp("regions")
     mesh = to_tet10(
         block_mesh(
             np.linspace(-0.006, 0.006, 9), np.linspace(-0.003, 0.003, 5), np.linspace(0, 0.003, 3)
@@ -1188,22 +1199,13 @@ def _regions_study(folder: Path, *, truth=(200.0, 600.0), start=(200.0, 600.0)):
     )
     mesh.tet_regions = (mesh.points[mesh.tets[:, :4]].mean(axis=1)[:, 0] > 0).astype(np.int32)
     mesh.node_sets["bottom"] = mesh.node_sets["zmin"]
-    folder.mkdir(parents=True, exist_ok=True)
     write_mesh(folder / "halves.vtu", mesh)
     time, depth = ramp(0.0004, 40)
-    csv = {"time_s": time, "displacement_m": depth, "force_N": 1e-4 * depth}
     for name in ("left.csv", "right.csv"):
-        write_csv(folder / name, csv)
-
-    def text(values):
-        return REGIONS_STUDY.format(
-            default=values[0], bulk=100.0 * values[0], right=values[1], right_bulk=100.0 * values[1]
-        )
-
-    path = folder / "study.toml"
-    path.write_text(text(truth))
-    made = load_study(path)
-    problems, _ = record_problems(made)
+        write_csv(folder / name, {"time_s": time, "displacement_m": depth, "force_N": 1e-4 * depth})
+    path = folder / "truth.toml"
+    path.write_text(_regions_text((200.0, 600.0)))
+    problems, _ = record_problems(load_study(path))
     rng = np.random.default_rng(3)
     for name, problem in zip(("left.csv", "right.csv"), problems, strict=True):
         result = simulate_indentation(problem, depth, device="cpu", progress=False)
@@ -1211,15 +1213,29 @@ def _regions_study(folder: Path, *, truth=(200.0, 600.0), start=(200.0, 600.0)):
         force = result.reaction_force_N
         noisy = force + rng.normal(0.0, 0.01 * force.max(), force.size)
         write_csv(folder / name, {"time_s": time, "displacement_m": depth, "force_N": noisy})
-    path.write_text(text(start))
+    return folder
+
+
+def _regions_study(folder: Path, start: tuple[float, float], start_from: str = "material"):
+    path = folder / f"start_{start[0]:g}_{start[1]:g}_{start_from}.toml"
+    path.write_text(_regions_text(start, start_from))
     return load_study(path)
 
 
+def test_a_record_start_scales_every_region_s_moduli_by_one_factor(regions_folder):
+    """start_from = "record": the default's C10 from the first record's stiffness, the
+    region's by the same factor (their [material] ratio kept)."""
+    start = start_values_from_record(_regions_study(regions_folder, (400.0, 1200.0), "record"))
+    assert start["right.C10_Pa"] == pytest.approx(3.0 * start["C10_Pa"])
+    # The left half's 200 Pa by the small-depth rule on this coarse mesh (135 Pa), not 400.
+    assert 100.0 < start["C10_Pa"] < 300.0
+
+
 @pytest.mark.slow
-def test_a_region_s_columns_of_the_jacobian_equal_central_differences(tmp_path):
+def test_a_region_s_columns_of_the_jacobian_equal_central_differences(regions_folder):
     """Two regions, each K following its own mu0: the Jacobian's columns of C10_Pa and
     right.C10_Pa equal central differences of the residuals."""
-    study = _regions_study(tmp_path)
+    study = _regions_study(regions_folder, (200.0, 600.0))
     assert study.material.parameter_names == ("C10_Pa", "right.C10_Pa")
     free = study.fit.free
     model = forward_model(study, study.material, free, device="cpu", progress=False)
@@ -1244,8 +1260,8 @@ def test_a_region_s_columns_of_the_jacobian_equal_central_differences(tmp_path):
 
 
 @pytest.mark.slow
-def test_each_region_s_c10_is_recovered_by_a_joint_fit_over_two_sites(tmp_path):
-    study = _regions_study(tmp_path, start=(300.0, 300.0))
+def test_each_region_s_c10_is_recovered_by_a_joint_fit_over_two_sites(regions_folder):
+    study = _regions_study(regions_folder, (300.0, 300.0))
     fit = fit_indentation(study, device="cpu", progress=False)
     assert fit.success, fit.message
     assert_recovered(fit, {"C10_Pa": 200.0, "right.C10_Pa": 600.0}, 0.02)

@@ -399,9 +399,10 @@ class ForwardModel:
             predicted.append(np.interp(at, where, curve))
             if self.bulk_ratios is not None:  # K follows mu0: the chain rule through each K
                 n = len(self.names)
-                sensitivity = sensitivity[:, :n] + (
-                    sensitivity[:, n:] * self.bulk_ratios
-                ) @ self.shear_weights
+                sensitivity = (
+                    sensitivity[:, :n]
+                    + (sensitivity[:, n:] * self.bulk_ratios) @ self.shear_weights
+                )
             columns = [
                 np.interp(at, where, np.concatenate([[0.0], sensitivity[:, j]]))
                 for j in range(len(self.names))

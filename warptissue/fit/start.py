@@ -135,7 +135,10 @@ def start_values_from_record(study: Study, record: DataRecord | None = None) -> 
         target = youngs_Pa / (2.0 * (1.0 + nu))
         # The body's mu0 (the default material's where the body has regions): a region's
         # free moduli scale with the same factor, keeping their [material] ratios.
-        weight = {name: material.moduli_derivative(name)[0] for name in current}
+        weight = {
+            name: material.shear_modulus_weight(name) if material.part_of(name)[0] == 0 else 0.0
+            for name in current
+        }
         free_part = sum(weight[name] * current[name] for name in scaled)
         fixed_part = sum(
             weight[name] * start.get(name, value)
