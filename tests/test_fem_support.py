@@ -5,6 +5,8 @@ differences), the stiff-bed limit, batches, and the refusals."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -201,6 +203,45 @@ def test_a_sliding_base_holds_the_normal_of_any_axis_plane():
     np.testing.assert_allclose(forces[1], forces[0], rtol=1e-8)
 
 
+def test_a_tilted_sliding_support_rests_on_a_frictionless_bed():
+    """The column turned by an arbitrary rotation (its base on a tilted plane, the bonded
+    plate along the turned axis) rests on the sliding bed: its force is the exact sliding
+    base's to within the bed's penalty (1/beta: 9e-4 at beta = 1000, 6e-5 at 10 times the
+    stiffness), and the base barely moves along its normal."""
+    from scipy.spatial.transform import Rotation
+
+    mesh = _column(cells=4, layers=3)
+    material = NeoHookean(SHEAR_PA / 2.0, 20.0 * SHEAR_PA)
+    punch = Indenter("flat_punch", radius_m=1e-3, contact="bonded")
+    depths = [5e-5, 1e-4]
+    top = np.array([0.0, 0.0, HEIGHT_M])
+    turn = Rotation.from_euler("xyz", [23.0, -41.0, 67.0], degrees=True).as_matrix()
+    turned_mesh = TetMesh(mesh.points @ turn.T, mesh.tets, node_sets=dict(mesh.node_sets))
+    flat = IndentationProblem(
+        mesh, material, punch, base="sliding", symmetry_planes=(), site_m=top,
+        direction=(0.0, 0.0, -1.0),
+    )  # fmt: skip
+    exact = simulate_indentation(flat, depths, device="cpu", progress=False).reaction_force_N
+    turned = IndentationProblem(
+        turned_mesh, material, punch, base="sliding", symmetry_planes=(), site_m=turn @ top,
+        direction=turn @ [0.0, 0.0, -1.0],
+    )  # fmt: skip
+    assert turned.on_sliding_bed and not flat.on_sliding_bed
+    held = turned.dirichlet_conditions().nodes
+    assert not np.isin(held, mesh.node_sets["bottom"]).any()  # the bed holds the base
+    run = simulate_indentation(turned, depths, device="cpu", progress=False)
+    error = run.reaction_force_N / exact - 1.0
+    assert np.all(np.abs(error) < 2e-3), error
+    normal = turn @ [0.0, 0.0, 1.0]
+    base = mesh.node_sets["bottom"]
+    assert np.abs(run.displacement_m[-1][base] @ normal).max() < 2e-3 * depths[-1]
+    stiffer = dataclasses.replace(
+        turned, sliding_bed_Pa_per_m=10.0 * turned.sliding_bed_stiffness()
+    )
+    closer = simulate_indentation(stiffer, depths, device="cpu", progress=False)
+    assert np.all(np.abs(closer.reaction_force_N / exact - 1.0) < 0.15 * np.abs(error))
+
+
 def test_bad_supports_are_refused_naming_the_key():
     mesh = _column()
     material = NeoHookean(SHEAR_PA / 2.0, 20.0 * SHEAR_PA)
@@ -210,9 +251,11 @@ def test_bad_supports_are_refused_naming_the_key():
         tets=mesh.tets,
         node_sets=dict(mesh.node_sets),
     )
-    with pytest.raises(InputError, match="not flat on a plane") as caught:
-        IndentationProblem(tilted, material, punch, base="sliding", symmetry_planes=())
-    assert caught.value.key == "base"
+    with pytest.raises(InputError, match="positive number of Pa/m") as caught:
+        IndentationProblem(
+            tilted, material, punch, base="sliding", symmetry_planes=(), sliding_bed_Pa_per_m=0.0
+        )
+    assert caught.value.key == "sliding_bed_Pa_per_m"
     with pytest.raises(InputError) as caught:
         IndentationProblem(mesh, material, punch, base="foundation", symmetry_planes=())
     assert caught.value.key == "foundation"

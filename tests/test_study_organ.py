@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import tomllib
 from pathlib import Path
 
@@ -11,6 +12,8 @@ import pytest
 
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
+from warptissue.fem.support import support_edge_m
+from warptissue.materials import NeoHookean
 from warptissue.mesh import TetMesh, boundary_faces, check_mesh, write_mesh
 from warptissue.simulate import build_mesh, build_problem, record_problems
 from warptissue.study import load_study, save_study, study_from_dict
@@ -528,10 +531,11 @@ def test_a_half_space_support_holds_the_nodes_beyond_its_plane(block_files):
     _assert_refused_in_one_line(path, "boundary.support", "holds no node")
 
 
-def test_a_flat_support_slides_and_one_that_is_not_flat_is_refused(block_files):
+def test_a_flat_support_slides_and_one_that_is_not_flat_rests_on_a_bed(block_files):
     """base = "sliding" on a mesh specimen holds the normal of its flat support (z on the
     base z = 0 of the block as a file); the "opposite" support (the base and the lower half
-    of the sides) is not flat: one line naming boundary.base."""
+    of the sides) is not flat: it rests on the frictionless bed, whose stiffness the study's
+    problem fixes from the [material] (a fit keeps it as the parameters move)."""
     folder, _, _ = block_files
     path = folder / "sliding.toml"
     text = _organ_study("block.vtu", site=[0.0, 0.0, 0.004])
@@ -543,7 +547,15 @@ def test_a_flat_support_slides_and_one_that_is_not_flat_is_refused(block_files):
     assert np.all(conditions.components[on_base] == 2)  # a bonded punch: no pins needed
     assert np.sum(on_base) == len(bottom)
     path.write_text(_with_boundary(text, 'base = "sliding"\nsupport = "opposite"\n'))
-    _assert_refused_in_one_line(path, "boundary.base", "not flat on a plane")
+    study = load_study(path)
+    problem = build_problem(study, build_mesh(study))
+    assert problem.on_sliding_bed
+    held = problem.dirichlet_conditions().nodes
+    assert not np.isin(held, problem.mesh.node_sets["bottom"]).any()
+    expected = 1000.0 * 2.0 * 287.5 / support_edge_m(problem.mesh, "bottom")
+    assert problem.sliding_bed_Pa_per_m == pytest.approx(expected)
+    softer = dataclasses.replace(problem, material=NeoHookean(100.0, 575000.0))
+    assert softer.sliding_bed_stiffness() == pytest.approx(expected)
 
 
 @pytest.mark.parametrize(

@@ -9,9 +9,11 @@ in -z; the base is z = 0. Quarter models keep x >= 0, y >= 0 with symmetry plane
 - Frictionless punch: only ``uz = -depth`` on those nodes.
 - Symmetry planes: the normal displacement component is zero on each named node set.
 - Base ``"fixed"``: all components zero on "bottom"; ``"sliding"``: the normal component zero
-  on "bottom" (``uz`` on a block's base; a mesh specimen's support must lie on a plane x, y or
-  z = const), plus pins that remove the in-plane rigid motions the other conditions leave
-  free; ``"foundation"``: "bottom" rests on an elastic foundation (springs per unit area,
+  on "bottom" (``uz`` on a block's base) where it lies flat on a plane x, y or z = const, plus
+  pins that remove the in-plane rigid motions the other conditions leave free; a sliding
+  support that is not flat on an axis plane (tilted, curved) rests on a frictionless bed of
+  stiff normal springs with pin springs (:meth:`warptissue.fem.support.SupportSprings.
+  sliding_bed`); ``"foundation"``: "bottom" rests on an elastic foundation (springs per unit area,
   :mod:`warptissue.fem.support`), no node held.
 
 - Sphere and plate (rigid indenters, :mod:`warptissue.fem.contact`): no node is prescribed
@@ -29,6 +31,7 @@ result reports both); as it is a reaction of prescribed dofs, the exact sensitiv
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -56,7 +59,7 @@ from warptissue.fem.newton.path import check_packed_assembler
 from warptissue.fem.newton.sensitivity import check_sensitivity_names
 from warptissue.fem.packing import PackedMeshes, pack_meshes
 from warptissue.fem.probe import DOWN, ProbeFrame, footprint_normal, probe_frame, snap_to_surface
-from warptissue.fem.support import Foundation, SupportSprings
+from warptissue.fem.support import Foundation, SupportSprings, support_edge_m
 from warptissue.fem.timing import NewtonTimings
 from warptissue.indenter import SIMULATED_KINDS, Indenter
 from warptissue.materials import Material, Viscoelastic
@@ -106,8 +109,9 @@ class IndentationProblem:
         material: A :mod:`warptissue.materials` material.
         indenter: The probe, a :class:`warptissue.indenter.Indenter` of kind ``"flat_punch"``
             on the axis (``x_m = y_m = 0``); its ``contact`` sets the conditions under it.
-        base: ``"fixed"``, ``"sliding"`` (the normal of a flat "bottom" held) or
-            ``"foundation"`` ("bottom" on the springs of ``foundation``).
+        base: ``"fixed"``, ``"sliding"`` (the normal of "bottom" held: exactly where it is
+            flat on an axis plane, else by a frictionless bed) or ``"foundation"``
+            ("bottom" on the springs of ``foundation``).
         symmetry_planes: Node sets with zero normal displacement; each doubles the force.
         formulation: ``"mixed"`` (locking free, TET10) or ``"displacement"``.
         surface: Node set of the indented surface; under a rigid indenter its boundary
@@ -131,6 +135,11 @@ class IndentationProblem:
             mesh's largest extent.
         foundation: The elastic foundation of ``base="foundation"``
             (:class:`warptissue.fem.support.Foundation`); None otherwise.
+        sliding_bed_Pa_per_m: The normal stiffness per unit area of the frictionless bed
+            of a sliding support that is not flat on an axis plane, Pa/m; None:
+            ``penalty_factor mu0 / h`` (the rigid contact's penalty, ``h`` the support's
+            mean edge) of this problem's material. A fit gives the start material's, so that
+            the bed stays one as its parameters move (and the sensitivities exact).
     """
 
     mesh: TetMesh
@@ -146,6 +155,7 @@ class IndentationProblem:
     edge: Sequence[float] | None = field(default=None, kw_only=True)
     site_tolerance_m: float | None = field(default=None, kw_only=True)
     foundation: Foundation | None = field(default=None, kw_only=True)
+    sliding_bed_Pa_per_m: float | None = field(default=None, kw_only=True)
 
     def __post_init__(self) -> None:
         if not isinstance(self.indenter, Indenter):
@@ -178,6 +188,15 @@ class IndentationProblem:
                 key="foundation",
                 value=self.base,
             )
+        bed = self.sliding_bed_Pa_per_m
+        if bed is not None and not (
+            isinstance(bed, int | float) and math.isfinite(bed) and bed > 0
+        ):
+            raise InputError(
+                "the sliding bed's stiffness must be a positive number of Pa/m",
+                key="sliding_bed_Pa_per_m",
+                value=bed,
+            )
         if self.foundation is not None and not isinstance(self.foundation, Foundation):
             raise InputError(
                 "the foundation must be a warptissue.fem.support.Foundation",
@@ -209,9 +228,7 @@ class IndentationProblem:
             if getattr(self, key) is not None:
                 object.__setattr__(self, key, tuple(float(v) for v in np.ravel(getattr(self, key))))
         object.__setattr__(self, "_frame", self._placed_frame())
-        if self.base == "sliding":
-            plane_axis(self.mesh, "bottom", key="base")
-        if self.base == "foundation":
+        if self.base == "foundation" or self.on_sliding_bed:
             self.support_springs()  # refuses a "bottom" that holds no boundary triangle
         if self.is_contact:
             self.rigid_contact()  # refuses a bad penalty factor or a sphere over no node
@@ -322,15 +339,40 @@ class IndentationProblem:
             frame=self.frame,
         )
 
+    @property
+    def on_sliding_bed(self) -> bool:
+        """Whether a sliding "bottom" that is not flat on an axis plane rests on a bed."""
+        if self.base != "sliding":
+            return False
+        try:
+            plane_axis(self.mesh, "bottom", key="base")
+        except InputError:
+            return True
+        return False
+
+    def sliding_bed_stiffness(self) -> float:
+        """The normal stiffness of the sliding bed, Pa/m: ``sliding_bed_Pa_per_m``, or
+        ``penalty_factor mu0 / h`` of this problem's material and support."""
+        if self.sliding_bed_Pa_per_m is not None:
+            return float(self.sliding_bed_Pa_per_m)
+        edge = support_edge_m(self.mesh, "bottom")
+        return self.penalty_factor * self.material.initial_shear_modulus_Pa / edge
+
     def support_springs(self) -> SupportSprings | None:
-        """The springs of the elastic foundation under "bottom" (None on another base)."""
-        if self.foundation is None:
+        """The springs of the elastic foundation, or of the frictionless bed of a sliding
+        support that is not flat on an axis plane, under "bottom" (None on another base)."""
+        if self.foundation is None and not self.on_sliding_bed:
             return None
         try:
+            if self.foundation is None:
+                return SupportSprings.sliding_bed(
+                    self.mesh, surface="bottom", normal_Pa_per_m=self.sliding_bed_stiffness()
+                )
             return SupportSprings.foundation(self.mesh, self.foundation, surface="bottom")
         except InputError as exc:
             raise InputError(
-                "the foundation needs the support's boundary triangles: " + exc.message,
+                "a foundation or a sliding bed needs the support's boundary triangles: "
+                + exc.message,
                 key="base",
                 value=self.base,
             ) from None
@@ -384,7 +426,7 @@ class IndentationProblem:
             planes[axis] = name
             parts.append(_fixed(self.mesh.node_set(name), axis, 0.0))
         bottom = self.mesh.node_set("bottom").astype(np.int64)
-        if self.base == "foundation":
+        if self.base == "foundation" or self.on_sliding_bed:
             return DirichletConditions.combine(*parts)  # the springs hold "bottom"
         normal = 2 if self.base == "fixed" else plane_axis(self.mesh, "bottom", key="base")
         base_components = (0, 1, 2) if self.base == "fixed" else (normal,)

@@ -26,6 +26,13 @@ forces sum to zero). With reaction weights ``w`` on the support
 (:meth:`warptissue.fem.IndentationProblem.reaction_weights`) the solver sums
 ``w . (R - S u)``, the internal and contact forces alone; :mod:`warptissue.fem.newton.path`
 and :class:`warptissue.fem.ForceSensitivity` add ``-(S w) . u`` for that.
+
+A sliding support that is not flat on a plane x, y or z = const (a tilted table, a curved
+bed) is a frictionless bed (:meth:`SupportSprings.sliding_bed`): the same consistent springs
+with ``k_t = 0`` and a stiff ``k_n`` (a penalty on the normal displacement, as the rigid
+contact's), plus pin springs at two nodes across the support's mean normal that hold the
+rigid motions the bed leaves free (the two slides and the turn about the normal), as the
+pins of a flat sliding base do.
 """
 
 from __future__ import annotations
@@ -44,7 +51,11 @@ from warptissue.fem.packing import per_problem
 from warptissue.kernels import contact as kc
 from warptissue.mesh import TetMesh
 
-__all__ = ["Foundation", "SupportSprings"]
+__all__ = ["SLIDING_PIN_SHARE", "Foundation", "SupportSprings", "support_edge_m"]
+
+SLIDING_PIN_SHARE = 1.0
+"""A pin spring of a sliding bed: its stiffness (N/m) as a share of ``k_n`` times the
+support's mean triangle area (the springs of about one node)."""
 
 
 @dataclass(frozen=True)
@@ -131,9 +142,16 @@ class SupportSprings:
             InputError: No boundary triangle lies on ``surface``.
         """
         tri = ContactSurface.for_mesh(mesh, surface=surface).triangles
+        return cls._integrated(
+            mesh, tri, foundation.normal_Pa_per_m, foundation.tangential_Pa_per_m
+        )
+
+    @classmethod
+    def _integrated(cls, mesh: TetMesh, tri: np.ndarray, k_n: float, k_t: float) -> SupportSprings:
+        """``S_ab = integral of N_a N_b (k_n n n^T + k_t (I - n n^T)) dA`` over triangles
+        ``tri`` (F, 3 or 6)."""
         corners = mesh.points[tri]  # (F, n, 3)
         count = tri.shape[1]
-        k_n, k_t = foundation.normal_Pa_per_m, foundation.tangential_Pa_per_m
         local = np.zeros((len(tri), count, count, 3, 3))
         for (xi, eta), weight in zip(_QUADRATURE_POINTS, _QUADRATURE_WEIGHTS, strict=True):
             shapes, slopes = _triangle_shapes(xi, eta, count)
@@ -143,14 +161,60 @@ class SupportSprings:
             normal = cross / jacobian[:, None]
             bed = k_t * np.eye(3) + (k_n - k_t) * np.einsum("fi,fj->fij", normal, normal)
             local += np.einsum("f,ab,fij->fabij", weight * jacobian, np.outer(shapes, shapes), bed)
-        rows = np.repeat(tri, count, axis=1).reshape(-1)
-        columns = np.tile(tri, (1, count)).reshape(-1)
-        keys, inverse = np.unique(rows * mesh.node_count + columns, return_inverse=True)
-        blocks = np.zeros((len(keys), 3, 3))
-        np.add.at(blocks, inverse.reshape(-1), local.reshape(-1, 3, 3))
         return cls(
-            rows=(keys // mesh.node_count).astype(np.int64),
-            columns=(keys % mesh.node_count).astype(np.int64),
+            rows=np.repeat(tri, count, axis=1).reshape(-1).astype(np.int64),
+            columns=np.tile(tri, (1, count)).reshape(-1).astype(np.int64),
+            blocks=local.reshape(-1, 3, 3),
+        ).merged(mesh.node_count)
+
+    @classmethod
+    def sliding_bed(cls, mesh: TetMesh, *, surface: str, normal_Pa_per_m: float) -> SupportSprings:
+        """A frictionless bed under node set ``surface``: normal springs of
+        ``normal_Pa_per_m`` per unit area (consistent, tangential stiffness 0) and pin
+        springs for the rigid motions it leaves free (module docstring).
+
+        Raises:
+            InputError: No boundary triangle lies on ``surface``, or a stiffness that is not
+                a positive number.
+        """
+        if not (math.isfinite(normal_Pa_per_m) and normal_Pa_per_m > 0.0):
+            raise InputError(
+                "the sliding bed's stiffness must be a positive number of Pa/m",
+                key="sliding_bed_Pa_per_m",
+                value=normal_Pa_per_m,
+            )
+        tri = ContactSurface.for_mesh(mesh, surface=surface).triangles
+        corners = mesh.points[tri[:, :3]]
+        cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        areas = 0.5 * np.linalg.norm(cross, axis=1)
+        normal = cross.sum(axis=0)
+        normal /= np.linalg.norm(normal)
+        bed = cls._integrated(mesh, tri, normal_Pa_per_m, 0.0)
+        nodes = np.unique(tri[:, :3])
+        points = mesh.points[nodes]
+        centre = int(np.argmin(np.linalg.norm(points - points.mean(axis=0), axis=1)))
+        reach = points - points[centre]
+        reach -= np.outer(reach @ normal, normal)
+        far = int(np.argmax(np.linalg.norm(reach, axis=1)))
+        turn = np.cross(normal, reach[far])
+        turn /= np.linalg.norm(turn)
+        pin = SLIDING_PIN_SHARE * normal_Pa_per_m * float(areas.mean())
+        pins = np.stack([pin * (np.eye(3) - np.outer(normal, normal)), pin * np.outer(turn, turn)])
+        pinned = nodes[[centre, far]].astype(np.int64)
+        return cls(
+            rows=np.concatenate([bed.rows, pinned]),
+            columns=np.concatenate([bed.columns, pinned]),
+            blocks=np.concatenate([bed.blocks, pins]),
+        ).merged(mesh.node_count)
+
+    def merged(self, node_count: int) -> SupportSprings:
+        """The same springs with one block per node pair (repeated pairs summed)."""
+        keys, inverse = np.unique(self.rows * node_count + self.columns, return_inverse=True)
+        blocks = np.zeros((len(keys), 3, 3))
+        np.add.at(blocks, inverse.reshape(-1), self.blocks)
+        return SupportSprings(
+            rows=(keys // node_count).astype(np.int64),
+            columns=(keys % node_count).astype(np.int64),
             blocks=blocks,
         )
 
@@ -287,3 +351,11 @@ class SupportSpringSet:
             products = np.einsum("mij,mj->mi", self._blocks_host, values[self._columns])
             np.add.at(out, self._rows, products)
         return out
+
+
+def support_edge_m(mesh: TetMesh, surface: str) -> float:
+    """The mean corner-edge length of the boundary triangles on node set ``surface``, m."""
+    tri = ContactSurface.for_mesh(mesh, surface=surface).triangles[:, :3]
+    corners = mesh.points[tri]
+    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+    return float(lengths.mean())

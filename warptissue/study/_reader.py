@@ -17,7 +17,6 @@ import numpy as np
 from warptissue.errors import InputError
 from warptissue.fem.assembly import FORMULATIONS
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
-from warptissue.fem.indentation import plane_axis
 from warptissue.fem.newton import NewtonOptions
 from warptissue.fem.probe import probe_frame
 from warptissue.fem.support import Foundation
@@ -31,7 +30,6 @@ from warptissue.study._organ import (
     MESH_UNITS,
     OPPOSITE,
     extent_along,
-    organ_mesh,
     probe_placement,
     specimen_mesh,
     support_nodes,
@@ -548,14 +546,9 @@ def _read_boundary(table: Table, organ: tuple | None = None) -> Boundary:
         support = _support(table)
         mesh, site, along = organ
         try:
-            held = support_nodes(mesh, support, site_m=site, direction=along)
+            support_nodes(mesh, support, site_m=site, direction=along)
         except InputError as exc:
             raise table.error("support", exc.message, exc.value) from exc
-        if base == "sliding":
-            try:
-                plane_axis(organ_mesh(mesh, held), "bottom", key="base")
-            except InputError as exc:
-                raise table.error("base", exc.message, base) from exc
     table.finish()
     return Boundary(base=base, support=support, foundation=foundation)
 
