@@ -247,7 +247,8 @@ class Boundary:
     Attributes:
         base: ``"fixed"`` (all displacement of the base z = 0 is zero), ``"sliding"``
             (only z is held; the base slides freely in x and y; a mesh specimen's support
-            must be flat on a plane x, y or z = const, whose normal is held) or
+            has its normal held: exactly where it is flat on a plane x, y or z = const, by a
+            frictionless bed where it is tilted or curved) or
             ``"foundation"`` (the base, or a mesh specimen's support, rests on the springs of
             ``foundation``); a mesh specimen's support.
         support: A mesh specimen's support: a node set of its file, ``"opposite"`` (the
