@@ -6,10 +6,16 @@ import numpy as np
 import pytest
 import warp as wp
 
+from warptissue._stage import register_schema_plugin
 from warptissue.device import quiet_warp
 
 quiet_warp()
 wp.init()
+# USD builds its schema registry once per process: a test that builds a stage with pxr itself
+# before any warptissue.usd import (e.g. first on an xdist worker) would leave the project's
+# TissueMaterialAPI unknown to every later test there. The package's own readers register it
+# (warptissue._stage.open_stage); tests/test_mesh_io.py checks that in a fresh process.
+register_schema_plugin()
 
 DEVICES: list[str] = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
 
