@@ -256,6 +256,10 @@ def test_bad_supports_are_refused_naming_the_key():
             tilted, material, punch, base="sliding", symmetry_planes=(), sliding_bed_Pa_per_m=0.0
         )
     assert caught.value.key == "sliding_bed_Pa_per_m"
+    with pytest.raises(InputError, match="positive number of Pa/m"):
+        IndentationProblem(
+            tilted, material, punch, base="sliding", symmetry_planes=(), sliding_bed_Pa_per_m=True
+        )
     with pytest.raises(InputError) as caught:
         IndentationProblem(mesh, material, punch, base="foundation", symmetry_planes=())
     assert caught.value.key == "foundation"

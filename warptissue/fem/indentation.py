@@ -189,9 +189,8 @@ class IndentationProblem:
                 value=self.base,
             )
         bed = self.sliding_bed_Pa_per_m
-        if bed is not None and not (
-            isinstance(bed, int | float) and math.isfinite(bed) and bed > 0
-        ):
+        number = isinstance(bed, int | float) and not isinstance(bed, bool)
+        if bed is not None and not (number and math.isfinite(bed) and bed > 0):
             raise InputError(
                 "the sliding bed's stiffness must be a positive number of Pa/m",
                 key="sliding_bed_Pa_per_m",
