@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import warp as wp
@@ -18,6 +20,23 @@ wp.init()
 register_schema_plugin()
 
 DEVICES: list[str] = ["cpu"] + (["cuda:0"] if wp.is_cuda_available() else [])
+
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+_THREADS_AT_START = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+
+
+@pytest.fixture(autouse=True)
+def _thread_limits_as_at_start():
+    """Put the thread limits back after each test: a Dask nanny sets OMP, MKL and OpenBLAS
+    to 1 thread in this process's environment when it spawns a worker, and every later
+    subprocess (the examples' scripts) would inherit that (a slow test that ran the organ
+    example in 15 min alone took over 25 min after the batch tests)."""
+    yield
+    for name, value in _THREADS_AT_START.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
 
 
 @pytest.fixture(params=DEVICES)
