@@ -279,7 +279,7 @@ def build_problem(study: Study, mesh: Any) -> Any:
     placement = {}
     if study.site_m is not None:
         placement = {"site_m": study.site_m, "direction": study.direction, "edge": study.edge}
-    problem = IndentationProblem(
+    return IndentationProblem(
         mesh,
         study.material,
         study.indenter,
@@ -290,9 +290,6 @@ def build_problem(study: Study, mesh: Any) -> Any:
         penalty_factor=study.solver.penalty_factor,
         **placement,
     )
-    if problem.on_sliding_bed:  # one bed, whatever material a fit tries
-        problem = replace(problem, sliding_bed_Pa_per_m=problem.sliding_bed_stiffness())
-    return problem
 
 
 def record_problems(study: Study, material: Any = None) -> tuple[list[Any], list[int]]:

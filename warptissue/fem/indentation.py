@@ -136,10 +136,11 @@ class IndentationProblem:
         foundation: The elastic foundation of ``base="foundation"``
             (:class:`warptissue.fem.support.Foundation`); None otherwise.
         sliding_bed_Pa_per_m: The normal stiffness per unit area of the frictionless bed
-            of a sliding support that is not flat on an axis plane, Pa/m; None:
-            ``penalty_factor mu0 / h`` (the rigid contact's penalty, ``h`` the support's
-            mean edge) of this problem's material. A fit gives the start material's, so that
-            the bed stays one as its parameters move (and the sensitivities exact).
+            of a sliding support that is not flat on an axis plane, Pa/m; None: set on
+            construction to ``penalty_factor mu0 / h`` (the rigid contact's penalty, ``h`` the
+            support's mean edge) of this problem's material, which a copy with another
+            material (``dataclasses.replace``, as a fit makes its trial problems) keeps: the
+            bed stays one as the parameters move, and the sensitivities exact.
     """
 
     mesh: TetMesh
@@ -227,6 +228,9 @@ class IndentationProblem:
             if getattr(self, key) is not None:
                 object.__setattr__(self, key, tuple(float(v) for v in np.ravel(getattr(self, key))))
         object.__setattr__(self, "_frame", self._placed_frame())
+        if self.on_sliding_bed and self.sliding_bed_Pa_per_m is None:
+            # Fixed from this material: a copy with another one (a fit's) keeps the bed.
+            object.__setattr__(self, "sliding_bed_Pa_per_m", self.sliding_bed_stiffness())
         if self.base == "foundation" or self.on_sliding_bed:
             self.support_springs()  # refuses a "bottom" that holds no boundary triangle
         if self.is_contact:
