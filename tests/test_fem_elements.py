@@ -14,6 +14,7 @@ from warptissue.fem import (
     solve_quasistatic,
 )
 from warptissue.fem.elements import (
+    interpolation_matrix,
     quadrature_rule,
     shape_function_derivatives,
     shape_functions,
@@ -117,3 +118,20 @@ def test_patch_test_reproduces_affine_displacement(npe, formulation, material, r
     assert error <= 1e-10 * np.abs(affine).max()
     forces = assembler.assemble(path.displacement_m[-1], with_tangent=False).residual.numpy()
     assert np.abs(forces[interior]).max() <= 1e-9 * np.abs(forces).max()
+
+
+def test_tet10_interpolates_a_quadratic_field_and_tet4_a_linear_one(rng):
+    """interpolation_matrix at random points inside a block and at its nodes."""
+    grid = np.linspace(0.0, 1e-2, 4)
+    block = block_mesh(grid, grid, np.linspace(0.0, 5e-3, 3))
+    inside = rng.uniform([0.0, 0.0, 0.0], [1e-2, 1e-2, 5e-3], size=(200, 3))
+    points = np.vstack([inside, block.points])  # nodes of the surface too
+    quadratic = to_tet10(block)
+
+    def field(x):
+        return np.column_stack([x[:, 0] * x[:, 1], x[:, 2] ** 2 - x[:, 0], 3.0 * x[:, 1]])
+
+    values = interpolation_matrix(quadratic, points) @ field(quadratic.points)
+    np.testing.assert_allclose(values, field(points), atol=1e-15)
+    linear = interpolation_matrix(block, points) @ (block.points @ np.diag([1.0, -2.0, 3.0]))
+    np.testing.assert_allclose(linear, points @ np.diag([1.0, -2.0, 3.0]), atol=1e-15)

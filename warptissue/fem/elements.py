@@ -10,13 +10,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse
 
 from warptissue.errors import MeshError
-from warptissue.mesh import TetMesh
+from warptissue.mesh import TetMesh, locate_points
 
 __all__ = [
     "ElementGeometry",
     "element_geometry",
+    "interpolation_matrix",
     "quadrature_rule",
     "shape_function_derivatives",
     "shape_functions",
@@ -130,4 +132,30 @@ def element_geometry(mesh: TetMesh) -> ElementGeometry:
     return ElementGeometry(
         shape_gradients=np.ascontiguousarray(grads),
         quadrature_volumes=np.ascontiguousarray(det * weights[None, :]),
+    )
+
+
+def interpolation_matrix(mesh: TetMesh, points_m: np.ndarray) -> scipy.sparse.csr_matrix:
+    """``P`` with ``values_at_points = P @ nodal_values``: each point's tet
+    (:func:`warptissue.mesh.locate_points`) and its :func:`shape_functions` at the point
+    (TET4 linear; TET10 quadratic, at the corner tet's barycentric coordinates, exact where
+    the mid-edge nodes lie at the edges' midpoints, as :func:`warptissue.mesh.to_tet10` puts
+    them).
+
+    Args:
+        mesh: TET4 or TET10 mesh, metres.
+        points_m: Points inside it, (n, 3), m.
+
+    Returns:
+        A sparse (n, node_count) matrix whose rows sum to 1.
+
+    Raises:
+        MeshError: A point outside the mesh.
+    """
+    tets, lam = locate_points(mesh, points_m)
+    weights = shape_functions(mesh.nodes_per_tet, lam[:, 1:])
+    rows = np.repeat(np.arange(len(tets)), mesh.nodes_per_tet)
+    return scipy.sparse.csr_matrix(
+        (weights.ravel(), (rows, mesh.tets[tets].ravel())),
+        shape=(len(tets), mesh.node_count),
     )

@@ -2,7 +2,7 @@
 
 from warptissue.mesh._ball import ball_mesh
 from warptissue.mesh._grading import graded_spacing
-from warptissue.mesh._locate import interpolation_matrix, locate_points
+from warptissue.mesh._locate import locate_points
 from warptissue.mesh._refine import refine_near_sites
 from warptissue.mesh._usd import (
     FACE_SET_FAMILY,
@@ -94,7 +94,6 @@ __all__ = [
     "hex_to_tets",
     "indentation_block",
     "indentation_disc",
-    "interpolation_matrix",
     "locate_points",
     "near_size_choice",
     "radius_ratios",

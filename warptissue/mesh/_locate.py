@@ -1,10 +1,9 @@
-"""Points located in a tet mesh, and the interpolation of nodal values to them:
-:func:`locate_points`, :func:`interpolation_matrix`."""
+"""Points located in a tet mesh: :func:`locate_points` (the interpolation of nodal values to
+them is :func:`warptissue.fem.elements.interpolation_matrix`)."""
 
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
 from scipy.spatial import cKDTree
 
 from warptissue.errors import MeshError
@@ -71,34 +70,3 @@ def locate_points(mesh: TetMesh, points_m: np.ndarray) -> tuple[np.ndarray, np.n
             f"(barycentric coordinate {best_margin[first]:.3g} in its nearest tet)"
         )
     return best_tet, best
-
-
-def interpolation_matrix(mesh: TetMesh, points_m: np.ndarray) -> scipy.sparse.csr_matrix:
-    """``P`` with ``values_at_points = P @ nodal_values``: each point's tet's shape functions
-    at the point (TET4 linear; TET10 quadratic, at the corner tet's barycentric coordinates,
-    exact where the mid-edge nodes lie at the edges' midpoints, as
-    :func:`warptissue.mesh.to_tet10` puts them).
-
-    Args:
-        mesh: TET4 or TET10 mesh, metres.
-        points_m: Points inside it, (n, 3), m.
-
-    Returns:
-        A sparse (n, node_count) matrix whose rows sum to 1.
-
-    Raises:
-        MeshError: A point outside the mesh.
-    """
-    tets, lam = locate_points(mesh, points_m)
-    if mesh.nodes_per_tet == 4:
-        weights = lam
-    else:
-        edges = np.array([[0, 1], [1, 2], [0, 2], [0, 3], [1, 3], [2, 3]])
-        weights = np.hstack(
-            [lam * (2.0 * lam - 1.0), 4.0 * lam[:, edges[:, 0]] * lam[:, edges[:, 1]]]
-        )
-    rows = np.repeat(np.arange(len(tets)), mesh.nodes_per_tet)
-    return scipy.sparse.csr_matrix(
-        (weights.ravel(), (rows, mesh.tets[tets].ravel())),
-        shape=(len(tets), mesh.node_count),
-    )

@@ -95,8 +95,8 @@ def _transfer_onto_asset(
     from scipy.spatial import cKDTree
 
     from warptissue.errors import MeshError
-    from warptissue.fem.elements import quadrature_rule
-    from warptissue.mesh import boundary_faces, interpolation_matrix, locate_points
+    from warptissue.fem.elements import interpolation_matrix, quadrature_rule
+    from warptissue.mesh import boundary_faces, locate_points
 
     surface = np.unique(boundary_faces(asset_tets))
     distance, _ = cKDTree(mesh.points).query(asset_points[surface])
