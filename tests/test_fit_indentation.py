@@ -150,6 +150,22 @@ def assert_recovered(fit: IndentationFit, truth: dict, rtol: float) -> None:
         assert abs(value - truth[name]) <= 3.0 * error, (name, value, error)
 
 
+def assert_jacobian_is_central_differences(
+    model: ForwardModel, x: np.ndarray, jacobian: np.ndarray, steps, names=None
+) -> None:
+    """Each column j of ``jacobian`` at ``x`` equals the central difference of the model's
+    residuals with step ``steps[j]``, to 1e-5 of the column's largest entry."""
+    for j, step in enumerate(steps):
+        up, down = x.copy(), x.copy()
+        up[j] += step
+        down[j] -= step
+        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
+        scale = float(np.max(np.abs(central)))
+        assert scale > 0.0
+        name = None if names is None else names[j]
+        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale, err_msg=name)
+
+
 @pytest.fixture(scope="module")
 def neo_hookean_fit(tmp_path_factory) -> IndentationFit:
     study = make_study(
@@ -300,15 +316,7 @@ def test_the_jacobian_equals_central_differences_of_the_residuals(
     assert model.forward_solves == model.solves_per_evaluation  # fun and jac: one run
     model.fun(x)
     assert model.forward_solves == model.solves_per_evaluation
-    for j, name in enumerate(free):
-        step = 1e-6 * x[j]
-        up, down = x.copy(), x.copy()
-        up[j] += step
-        down[j] -= step
-        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
-        scale = float(np.max(np.abs(central)))
-        assert scale > 0.0
-        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale, err_msg=name)
+    assert_jacobian_is_central_differences(model, x, jacobian, 1e-6 * x, free)
 
 
 def test_ctrl_c_keeps_the_best_parameters_evaluated(tmp_path):
@@ -688,14 +696,7 @@ def test_the_offset_column_of_the_jacobian_equals_central_differences(tmp_path):
     jacobian = model.jac(x)
     assert jacobian.shape == (21, 3)
     assert model.forward_solves == 1  # the offset's column costs no FE run
-    for j, step in enumerate((1e-6 * x[0], 1e-6 * x[1], 1e-10)):
-        up, down = x.copy(), x.copy()
-        up[j] += step
-        down[j] -= step
-        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
-        scale = float(np.max(np.abs(central)))
-        assert scale > 0.0
-        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale)
+    assert_jacobian_is_central_differences(model, x, jacobian, (1e-6 * x[0], 1e-6 * x[1], 1e-10))
     # The FE lattice is fixed in true depth: a deeper trial adds steps of the same size.
     assert model.depth_step_m == pytest.approx((0.45e-3 - 1e-4) / 6)
     deeper = model.evaluate(np.array([260.0, 380.0, 0.2e-4]))
@@ -1244,15 +1245,7 @@ def test_a_region_s_columns_of_the_jacobian_equal_central_differences(regions_fo
     material = model.material_at(x)
     assert material.materials["right"].bulk_modulus == pytest.approx(100.0 * 700.0)
     assert material.default.bulk_modulus == pytest.approx(100.0 * 180.0)
-    for j, name in enumerate(free):
-        step = 1e-6 * x[j]
-        up, down = x.copy(), x.copy()
-        up[j] += step
-        down[j] -= step
-        central = (model.fun(up) - model.fun(down)) / (2.0 * step)
-        scale = float(np.max(np.abs(central)))
-        assert scale > 0.0
-        np.testing.assert_allclose(jacobian[:, j], central, rtol=0, atol=1e-5 * scale, err_msg=name)
+    assert_jacobian_is_central_differences(model, x, jacobian, 1e-6 * x, free)
     # Each record sees mostly its own half.
     rows = len(study.data[0].force_N)
     assert abs(jacobian[:rows, 0]).sum() > 3.0 * abs(jacobian[:rows, 1]).sum()

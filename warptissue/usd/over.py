@@ -272,13 +272,7 @@ def write_results_over_asset(
         _block_leftovers(stage, MATERIAL, overlay, (MATERIAL,))
     _clear_transforms(stage, INDENTER)
     if indenter is not None:
-        indenter_prims(
-            stage,
-            indenter,
-            float(rest[:, 2].max()),
-            np.stack([rest.min(0)[:2], rest.max(0)[:2]]),
-            axes=indenter_axes,
-        )
+        indenter_prims(stage, indenter, rest, axes=indenter_axes)
     drawn = () if indenter is None else (INDENTER, f"{INDENTER}/Shape")
     _block_leftovers(stage, INDENTER, overlay, drawn)
     declare_result_attributes(stage, arrays, volume_path=volume_path, surface_path=surface_path)

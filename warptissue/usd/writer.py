@@ -190,23 +190,22 @@ def _define_subsets(
 
 
 def indenter_prims(
-    stage: Any,
-    indenter: Indenter,
-    top_z_m: float,
-    footprint_m: np.ndarray | None = None,
-    axes: np.ndarray | None = None,
+    stage: Any, indenter: Indenter, rest_m: np.ndarray, *, axes: np.ndarray | None = None
 ) -> None:
     """The indenter's Xform at its contact point and its shape (``/World/Indenter/Shape``).
 
-    A ``"plate"`` (a rigid plane in the FE) and a ``"platen"`` of ``length_m`` 0 are drawn as
-    a thin box over the specimen's footprint ``footprint_m`` (``[[x_min, y_min], [x_max,
-    y_max]]`` of the modelled part, m; a quarter model's quarter), a twentieth of its larger
-    side thick, resting on the top; a platen with ``length_m`` > 0 is a square of that side
+    ``rest_m`` are the specimen's rest points (n, 3), m: the contact point is on their top
+    (largest z) unless the indenter has its own ``z_m``. A ``"plate"`` (a rigid plane in the
+    FE) and a ``"platen"`` of ``length_m`` 0 are drawn as a thin box over their footprint
+    (their x-y extent: a quarter model's quarter), a twentieth of its larger side thick,
+    resting on the top; a platen with ``length_m`` > 0 is a square of that side
     centred on the probe. ``axes`` (the probe's frame at a site, rows ``e1, e2, e3`` with
     ``e3 = -direction``; :class:`warptissue.fem.probe.ProbeFrame`) turns the Xform by an
     orient op after its translate: the shape's z is the frame's e3, a wedge's edge (y) e2.
     """
 
+    rest_m = np.asarray(rest_m, dtype=np.float64)
+    top_z_m = float(rest_m[:, 2].max())
     contact_z = top_z_m if indenter.z_m is None else indenter.z_m
     xform = UsdGeom.Xform.Define(stage, INDENTER)
     xform.AddTranslateOp().Set(Gf.Vec3d(indenter.x_m, indenter.y_m, contact_z))
@@ -241,11 +240,11 @@ def indenter_prims(
     elif indenter.kind == "wedge":
         _wedge_mesh(stage, indenter)
     else:
-        if indenter.length_m > 0 or footprint_m is None:
+        if indenter.length_m > 0:
             sides = (indenter.length_m, indenter.length_m)
             centre = (0.0, 0.0)
         else:
-            low, high = np.asarray(footprint_m, dtype=np.float64)
+            low, high = rest_m[:, :2].min(axis=0), rest_m[:, :2].max(axis=0)
             sides = (float(high[0] - low[0]), float(high[1] - low[1]))
             centre = (
                 float(0.5 * (low[0] + high[0]) - indenter.x_m),
@@ -866,13 +865,7 @@ def write_simulation_usd(
     if material is not None:
         bind_materials(stage, volume_prim, material, density_kg_per_m3)
     if indenter is not None:
-        indenter_prims(
-            stage,
-            indenter,
-            float(rest[:, 2].max()),
-            np.stack([rest.min(0)[:2], rest.max(0)[:2]]),
-            axes=indenter_axes,
-        )
+        indenter_prims(stage, indenter, rest, axes=indenter_axes)
     arrays = None
     if result is not None:
         arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
