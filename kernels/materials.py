@@ -30,6 +30,11 @@ Notes:
       ``psi_dev = mu/2 (I1 - 3)`` and ``U = -mu ln J + lambda/2 (ln J)^2``.
     - Linear elastic (small strain, not frame invariant): ``psi = mu eps:eps + lambda/2
       tr(eps)^2`` with ``eps = sym(F) - I``; ``U = 0``.
+    - Stable neo-Hookean (Smith, de Goes and Kim 2018, with the Lame-matched parameters of
+      NVIDIA Newton's VBD tets): ``psi = mu/2 (I1 - 3) + lambda_nh/2 (J - alpha)^2`` with
+      ``lambda_nh = lambda + mu`` and ``alpha = 1 + mu / lambda_nh``; here
+      ``psi_dev = mu/2 (I1 - 3)`` and, up to a constant,
+      ``U = lambda_nh/2 (J - 1)^2 - mu (J - 1)``, so that ``U' = lambda_nh (J - alpha)``.
 
     Invariant models are evaluated through ``psi(I1, I2, I3)`` of ``C = F^T F`` with
     ``S = 2 dpsi/dC``; Ogden through the eigenvalues ``c_a`` of ``C`` with the spectral
@@ -49,6 +54,7 @@ MODEL_INVARIANT = wp.constant(0)
 MODEL_OGDEN = wp.constant(1)
 MODEL_COMPRESSIBLE_NEO_HOOKEAN = wp.constant(2)
 MODEL_LINEAR_ELASTIC = wp.constant(3)
+MODEL_STABLE_NEO_HOOKEAN = wp.constant(4)
 
 EQUAL_EIGENVALUE_TOLERANCE = wp.constant(wp.float64(1.0e-8))
 
@@ -58,8 +64,8 @@ class MaterialParams:
     """Parameters of one material, all in SI units (Pa or dimensionless).
 
     Attributes:
-        model: Which energy: MODEL_INVARIANT, MODEL_OGDEN, MODEL_COMPRESSIBLE_NEO_HOOKEAN or
-            MODEL_LINEAR_ELASTIC.
+        model: Which energy: MODEL_INVARIANT, MODEL_OGDEN, MODEL_COMPRESSIBLE_NEO_HOOKEAN,
+            MODEL_LINEAR_ELASTIC or MODEL_STABLE_NEO_HOOKEAN.
         polynomial_terms: Number N of used ``C_i0`` (invariant models).
         c_i0: ``C10, C20, ..., C60`` (Pa); entries past ``polynomial_terms`` are zero.
         c01: ``C01`` (Pa), Mooney-Rivlin.
@@ -67,8 +73,9 @@ class MaterialParams:
         ogden_mu: ``mu_1..mu_N`` (Pa).
         ogden_alpha: ``alpha_1..alpha_N`` (dimensionless).
         bulk_modulus: ``K = 2 / D1`` (Pa).
-        shear_modulus: ``mu`` (Pa), compressible neo-Hookean and linear elastic.
-        lame_lambda: Lame's first parameter (Pa), compressible neo-Hookean and linear elastic.
+        shear_modulus: ``mu`` (Pa), compressible and stable neo-Hookean, linear elastic.
+        lame_lambda: Lame's first parameter (Pa), compressible and stable neo-Hookean, linear
+            elastic.
     """
 
     model: wp.int32
@@ -181,7 +188,8 @@ def invariant_energy_derivatives(params: MaterialParams, i1b: wp.float64, i2b: w
 
 @wp.func
 def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
-    """Deviatoric part of invariant-based models and the compressible neo-Hookean."""
+    """Deviatoric part of invariant-based models and the compressible and stable
+    neo-Hookean."""
     c = wp.transpose(f) @ f
     eye = wp.identity(n=3, dtype=wp.float64)
     i1 = wp.trace(c)
@@ -192,7 +200,7 @@ def invariant_model(params: MaterialParams, f: wp.mat33d, with_tangent: int):
     d = wp.vec3d()
     h = wp.mat33d()
     psi = wp.float64(0.0)
-    if params.model == MODEL_COMPRESSIBLE_NEO_HOOKEAN:
+    if params.model == MODEL_COMPRESSIBLE_NEO_HOOKEAN or params.model == MODEL_STABLE_NEO_HOOKEAN:
         psi = wp.float64(0.5) * params.shear_modulus * (i1 - wp.float64(3.0))
         d[0] = wp.float64(0.5) * params.shear_modulus
     else:
@@ -406,10 +414,20 @@ def volumetric_energy(params: MaterialParams, j: wp.float64):
     """U(J), U'(J) and U''(J) of the volumetric part (Pa).
 
     Abaqus models: U = K/2 (J - 1)^2 = (J - 1)^2 / D1. Compressible neo-Hookean:
-    U = -mu ln J + lambda/2 (ln J)^2. Linear elastic: U = 0.
+    U = -mu ln J + lambda/2 (ln J)^2. Linear elastic: U = 0. Stable neo-Hookean:
+    U = (lambda + mu)/2 (J - 1)^2 - mu (J - 1), linear in mu and lambda as the sensitivities
+    need.
     """
     if params.model == MODEL_LINEAR_ELASTIC:
         return wp.float64(0.0), wp.float64(0.0), wp.float64(0.0)
+    if params.model == MODEL_STABLE_NEO_HOOKEAN:
+        lam_nh = params.lame_lambda + params.shear_modulus
+        dj = j - wp.float64(1.0)
+        return (
+            wp.float64(0.5) * lam_nh * dj * dj - params.shear_modulus * dj,
+            lam_nh * dj - params.shear_modulus,
+            lam_nh,
+        )
     if params.model == MODEL_COMPRESSIBLE_NEO_HOOKEAN:
         log_j = wp.log(j)
         mu = params.shear_modulus

@@ -13,6 +13,7 @@ from warptissue.materials import (
     CompressibleNeoHookean,
     HyperelasticMaterial,
     LinearElastic,
+    StableNeoHookean,
     MooneyRivlin,
     NeoHookean,
     Ogden,
@@ -34,6 +35,7 @@ MATERIALS = {
     "ogden_3": Ogden((250.0, -30.0, 5.0), (3.0, -2.0, 8.0), 4000.0),
     "compressible_neo_hookean": CompressibleNeoHookean(200.0, 1500.0),
     "linear_elastic": LinearElastic(600.0, 0.3),
+    "stable_neo_hookean": StableNeoHookean(600.0, 0.45),
 }
 FINITE_STRAIN = [name for name in MATERIALS if name != "linear_elastic"]
 
@@ -150,6 +152,22 @@ def test_dictionary_round_trip_and_parameter_vector(name):
     vector = material.parameter_vector
     assert len(vector) == len(material.parameter_names)
     assert material.with_parameters(vector) == material
+
+
+def test_stable_neo_hookean_is_newtons_vbd_tet_energy(rng):
+    """P = mu F + lambda_nh (J - alpha) cof F with Newton's Lame matching (Smith et al. 2018,
+    Eq. 13 as NVIDIA Newton 1.8's VBD tets evaluate it), written out independently here."""
+    e, nu = 1725.0, 0.42
+    mu = e / (2 * (1 + nu))
+    lam = e * nu / ((1 + nu) * (1 - 2 * nu))
+    lam_nh = lam + mu
+    alpha = 1 + mu / lam_nh
+    f = np.eye(3) + 0.2 * rng.standard_normal((6, 3, 3))
+    got = evaluate_material(StableNeoHookean(e, nu), f, device="cpu")
+    for k in range(len(f)):
+        cof = np.linalg.det(f[k]) * np.linalg.inv(f[k]).T
+        expected = mu * f[k] + lam_nh * (np.linalg.det(f[k]) - alpha) * cof
+        np.testing.assert_allclose(got.first_piola_Pa[k], expected, rtol=1e-12, atol=1e-9)
 
 
 def test_small_strain_equivalent_and_d1():

@@ -47,6 +47,9 @@ Notes:
     - ``CompressibleNeoHookean``: ``W = mu/2 (I1 - 3) - mu ln J + lambda/2 (ln J)^2`` with
       ``lambda = K - 2 mu / 3``.
     - ``LinearElastic``: small strain, ``W = mu eps:eps + lambda/2 (tr eps)^2``.
+    - ``StableNeoHookean``: ``W = mu/2 (I1 - 3) + (lambda + mu)/2 (J - alpha)^2``,
+      ``alpha = 1 + mu / (lambda + mu)``: NVIDIA Newton's VBD tet energy (Smith et al. 2018),
+      parametrized by E and nu as a simulator reads them.
 
     Homogeneous tests (incompressible, principal stretches l1, l2, l3 with l1 l2 l3 = 1):
     uniaxial (l, l^-1/2, l^-1/2), equibiaxial (l, l, l^-2), planar (l, 1, l^-1). Invariant
@@ -73,7 +76,11 @@ from warptissue.materials._base import (
     principal_log_strains,
     principal_stretches,
 )
-from warptissue.materials._compressible import CompressibleNeoHookean, LinearElastic
+from warptissue.materials._compressible import (
+    CompressibleNeoHookean,
+    LinearElastic,
+    StableNeoHookean,
+)
 from warptissue.materials._evaluate import MaterialEvaluation, evaluate_material
 from warptissue.materials._from_dict import material_from_dict
 from warptissue.materials._ogden import Ogden
@@ -87,6 +94,7 @@ __all__ = [
     "CompressibleNeoHookean",
     "HyperelasticMaterial",
     "LinearElastic",
+    "StableNeoHookean",
     "Material",
     "MaterialEvaluation",
     "MaterialRegions",

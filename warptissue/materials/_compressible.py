@@ -110,3 +110,26 @@ class LinearElastic(Material):
     @classmethod
     def _from_flat(cls, values: Mapping[str, float]) -> LinearElastic:
         return cls(values["youngs_modulus_Pa"], values["poissons_ratio"])
+
+
+@dataclass(frozen=True)
+class StableNeoHookean(LinearElastic):
+    """Stable neo-Hookean ``W = mu/2 (I1 - 3) + lambda_nh/2 (J - alpha)^2``: the tet energy of
+    NVIDIA Newton's VBD solver, the model a trainer's linear tets run.
+
+    Args:
+        youngs_modulus_Pa: E, Pa, > 0 (what a simulator reads as ``physics:youngsModulus``).
+        poissons_ratio: nu, -1 < nu < 0.5 (``physics:poissonsRatio``).
+
+    Notes:
+        Smith, de Goes and Kim (2018), with Newton's Lame matching (its Eq. 13):
+        ``mu = E / (2 (1 + nu))``, ``lambda = E nu / ((1 + nu)(1 - 2 nu))``,
+        ``lambda_nh = lambda + mu`` and ``alpha = 1 + mu / lambda_nh``, so that the rest
+        state is stress free and the small-strain limit is linear elasticity with E and nu:
+        ``P = mu F + lambda_nh (J - alpha) cof F``. Newton drops the log barrier of the
+        paper, and so does this model. :mod:`warptissue.trainer` calibrates E and nu of this
+        model on a trainer's mesh.
+    """
+
+    model_name: ClassVar[str] = "stable_neo_hookean"
+    _device_model: ClassVar[int] = 4

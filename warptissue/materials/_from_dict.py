@@ -10,7 +10,11 @@ from typing import Any
 
 from warptissue.errors import InputError
 from warptissue.materials._base import Material, check_finite, check_positive, check_terms
-from warptissue.materials._compressible import CompressibleNeoHookean, LinearElastic
+from warptissue.materials._compressible import (
+    CompressibleNeoHookean,
+    LinearElastic,
+    StableNeoHookean,
+)
 from warptissue.materials._ogden import Ogden
 from warptissue.materials._polynomial import MooneyRivlin, NeoHookean, ReducedPolynomial
 from warptissue.materials._regions import MaterialRegions
@@ -26,6 +30,7 @@ _MODELS: dict[str, type[Material]] = {
         Ogden,
         CompressibleNeoHookean,
         LinearElastic,
+        StableNeoHookean,
     )
 }
 
