@@ -37,8 +37,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "Write a 'warptissue simulate' output folder (result.json, fields.vtu, optional "
             "fields_NNN.vtu) or a study TOML (specimen and material, no results) as a layered "
             "USD scene: NAME.usda (root), NAME.asset.usda and, with results, "
-            "NAME.results.usdc. The scene is validated after writing. Exit status: 0 valid, "
-            "1 validation findings, 2 bad input."
+            "NAME.results.usdc; with --trainer, the specimen as a trainer's asset with a "
+            "calibrated physics material. The scene is validated after writing. Exit status: "
+            "0 valid, 1 validation findings, 2 bad input, 4 a calibration run that did not "
+            "converge."
         ),
     )
     parser.add_argument("source", type=Path, help="a simulate output folder or a study .toml")
@@ -60,6 +62,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "not refined) instead of writing its own asset layer"
         ),
     )
+    parser.add_argument(
+        "--trainer",
+        action="store_true",
+        help=(
+            "write the specimen as a trainer's asset: the whole body on linear tets, with "
+            "physics:youngsModulus and physics:poissonsRatio calibrated so that those tets "
+            "(NVIDIA Newton's VBD) reproduce the locking-free force of the study's probes, "
+            "and particle sizes for contact; the source is a study .toml or a fit output "
+            "folder. Without it the physics material holds the tissue's true small-strain "
+            "E and nu (for simulators with locking-free elements)"
+        ),
+    )
+    parser.add_argument(
+        "--max-tets",
+        type=int,
+        default=None,
+        metavar="N",
+        help="with --trainer: the most tets of the trainer's mesh (a coarser mesh is made)",
+    )
+    parser.add_argument(
+        "--device", default="cpu", help="with --trainer: Warp device of the calibration"
+    )
     parser.add_argument("--json", action="store_true", help="print the written paths as JSON")
     parser.set_defaults(handler=run_export)
 
@@ -67,7 +91,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_export(args: argparse.Namespace) -> int:
     """Handle ``warptissue export``."""
     from warptissue.usd import validate_stage
-    from warptissue.usd.export import export_result_dir, export_study
+    from warptissue.usd.export import export_result_dir, export_study, export_trainer
 
     source: Path = args.source
     check_usda_path(args.out, "--out")
@@ -79,7 +103,17 @@ def run_export(args: argparse.Namespace) -> int:
             path=args.over,
             key="--over",
         )
-    if source.is_dir():
+    if args.max_tets is not None and not args.trainer:
+        raise InputError("--max-tets needs --trainer", key="--max-tets", value=args.max_tets)
+    calibration = None
+    if args.trainer:
+        if args.over is not None:
+            raise InputError("--trainer writes its own asset: no --over", key="--over")
+        density = 1000.0 if args.density_kg_per_m3 is None else args.density_kg_per_m3
+        paths, calibration = export_trainer(
+            source, args.out, max_tets=args.max_tets, density_kg_per_m3=density, device=args.device
+        )
+    elif source.is_dir():
         paths = export_result_dir(
             source, args.out, density_kg_per_m3=args.density_kg_per_m3, over=args.over
         )
@@ -95,9 +129,13 @@ def run_export(args: argparse.Namespace) -> int:
         "results": None if paths.results is None else str(paths.results),
         "findings": findings,
     }
+    if calibration is not None:
+        written["trainer"] = calibration.to_dict()
     if args.json:
         print(json.dumps(written, indent=2))
     else:
+        if calibration is not None:
+            print("\n".join(calibration.report_lines()))
         layers = ", ".join(str(p) for p in (paths.root, paths.asset, paths.results) if p)
         print(f"wrote {layers}; {len(findings)} validation findings")
         for finding in findings:

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from warptissue.errors import InputError
+from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.fem.probe import surface_triangles
 from warptissue.materials import StableNeoHookean
@@ -65,6 +65,9 @@ class TrainerProbe:
         depths_m: Depths, (S,), m.
         reference_force_N: The locking-free FE force, (S,), N.
         trainer_force_N: The calibrated trainer model's force, (S,), N.
+        punch_nodes: The trainer mesh's nodes the bonded punch moves (none under a rigid
+            indenter), (P,).
+        direction: The probe's direction into the body, (3,).
     """
 
     label: str
@@ -73,6 +76,8 @@ class TrainerProbe:
     depths_m: np.ndarray
     reference_force_N: np.ndarray
     trainer_force_N: np.ndarray
+    punch_nodes: np.ndarray
+    direction: np.ndarray
 
     @property
     def relative_error(self) -> np.ndarray:
@@ -88,6 +93,8 @@ class TrainerProbe:
             "reference_force_N": self.reference_force_N.tolist(),
             "trainer_force_N": self.trainer_force_N.tolist(),
             "relative_error": self.relative_error.tolist(),
+            "punch_nodes": [int(n) for n in self.punch_nodes],
+            "direction": [float(v) for v in self.direction],
         }
 
 
@@ -140,7 +147,7 @@ class TrainerCalibration:
             "tet_count": self.tet_count,
             "node_count": self.node_count,
             "nu_bounds": list(self.nu_bounds),
-            "probes": [p.to_dict() for p in self.probes],
+            "probes": {f"probe_{i}": p.to_dict() for i, p in enumerate(self.probes)},
             "not_matched": [
                 "volume: the trainer's body changes volume where the tissue keeps it "
                 "(volume_change_of_swept)",
@@ -254,9 +261,8 @@ def _simulate(problem: IndentationProblem, depths: np.ndarray, device: str) -> A
         problem, depths, device=device, progress=False, options=NewtonOptions(tolerance=1e-8)
     )
     if not result.completed:
-        raise InputError(
-            f"the trainer calibration's {_label(problem)} run stopped: {result.message}",
-            key="trainer",
+        raise ConvergenceError(
+            f"the trainer calibration's {_label(problem)} run stopped: {result.message}"
         )
     return result
 
@@ -311,7 +317,8 @@ def calibrate_trainer_material(
         The calibration.
 
     Raises:
-        InputError: Bad options, or a run that does not converge.
+        InputError: Bad options.
+        ConvergenceError: A run that does not converge.
 
     Notes:
         For the trainer's energy ``W(F; mu, lambda)`` linear in ``(mu, lambda)``, scaling E
@@ -326,6 +333,10 @@ def calibrate_trainer_material(
         )
     if isinstance(depth_count, bool) or int(depth_count) != depth_count or depth_count < 1:
         raise InputError("must be a positive integer", key="depth_count", value=depth_count)
+    factors = [float(f) for f in check_radius_factors]
+    for factor in factors:
+        if not (math.isfinite(factor) and factor > 0):
+            raise InputError("must be positive", key="check_radius_factors", value=factor)
     trainer = trainer_mesh(study, max_tets=max_tets) if mesh is None else mesh
     depths = _depths(study, int(depth_count))
     references = _reference_problems(study)
@@ -360,46 +371,29 @@ def calibrate_trainer_material(
     minimize_scalar(misfit, bounds=(low, high), method="bounded", options={"xatol": 2e-3})
     nu, youngs, _ = min(scan, key=lambda entry: entry[2])
 
-    calibrated = [
-        _simulate(
-            dataclasses.replace(trainer_problem(p, nu), material=StableNeoHookean(youngs, nu)),
-            depths,
-            device,
+    def checked(problem: IndentationProblem, force: np.ndarray, fitted: bool) -> tuple:
+        placed = dataclasses.replace(
+            trainer_problem(problem, nu), material=StableNeoHookean(youngs, nu)
         )
-        for p in references
-    ]
-    probes = [
-        TrainerProbe(
-            label=_label(p),
-            radius_m=p.indenter.radius_m,
-            fitted=True,
+        run = _simulate(placed, depths, device)
+        probe = TrainerProbe(
+            label=_label(problem),
+            radius_m=problem.indenter.radius_m,
+            fitted=fitted,
             depths_m=depths,
-            reference_force_N=f,
-            trainer_force_N=np.asarray(r.reaction_force_N, dtype=np.float64),
+            reference_force_N=np.asarray(force, dtype=np.float64),
+            trainer_force_N=np.asarray(run.reaction_force_N, dtype=np.float64),
+            punch_nodes=np.asarray(placed.punch_nodes, dtype=np.int64),
+            direction=np.asarray(placed.probe_direction, dtype=np.float64),
         )
-        for p, f, r in zip(references, reference_forces, calibrated, strict=True)
-    ]
-    for factor in check_radius_factors:
-        if not (math.isfinite(factor) and factor > 0):
-            raise InputError("must be positive", key="check_radius_factors", value=factor)
-        for p in (_other_radius(study, base, float(factor)) for base in references):
-            ref = _simulate(p, depths, device).reaction_force_N
-            run = _simulate(
-                dataclasses.replace(trainer_problem(p, nu), material=StableNeoHookean(youngs, nu)),
-                depths,
-                device,
-            )
-            probes.append(
-                TrainerProbe(
-                    label=_label(p),
-                    radius_m=p.indenter.radius_m,
-                    fitted=False,
-                    depths_m=depths,
-                    reference_force_N=np.asarray(ref, dtype=np.float64),
-                    trainer_force_N=np.asarray(run.reaction_force_N, dtype=np.float64),
-                )
-            )
-    volume = _volume_change(trainer, np.asarray(calibrated[0].displacement_m)[-1])
+        return probe, run
+
+    fitted_runs = [checked(p, f, True) for p, f in zip(references, reference_forces, strict=True)]
+    probes = [probe for probe, _ in fitted_runs]
+    for factor in factors:
+        for p in (_other_radius(study, base, factor) for base in references):
+            probes.append(checked(p, _simulate(p, depths, device).reaction_force_N, False)[0])
+    volume = _volume_change(trainer, np.asarray(fitted_runs[0][1].displacement_m)[-1])
     return TrainerCalibration(
         youngs_modulus_Pa=float(youngs),
         poissons_ratio=float(nu),

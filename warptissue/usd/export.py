@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import InputError
+from warptissue.fit.trainer import TrainerCalibration, calibrate_trainer_material, trainer_mesh
 from warptissue.indenter import Indenter
 from warptissue.mesh import NODE_SET_PREFIX, TET_REGION_KEY, TetMesh
 from warptissue.simulate import build_mesh
@@ -32,7 +33,7 @@ from warptissue.study import load_study
 from warptissue.usd.over import write_results_over_asset
 from warptissue.usd.writer import UsdScenePaths, write_simulation_usd
 
-__all__ = ["export_result_dir", "export_study", "read_fields_vtu"]
+__all__ = ["export_result_dir", "export_study", "export_trainer", "read_fields_vtu"]
 
 _CELL_TYPES = {"tetra": 4, "tetra10": 10}
 
@@ -287,3 +288,53 @@ def export_study(
         density_kg_per_m3=density_kg_per_m3,
         indenter=study.indenter,
     )
+
+
+def export_trainer(
+    source: str | Path,
+    usd_path: str | Path,
+    *,
+    max_tets: int | None = None,
+    density_kg_per_m3: float = 1000.0,
+    device: str = "cpu",
+) -> tuple[UsdScenePaths, TrainerCalibration]:
+    """Write a study's specimen as a trainer's asset: the whole body on linear tets, its
+    physics material calibrated for them (:func:`warptissue.fit.trainer.
+    calibrate_trainer_material`), the fitted model kept in ``tissue:*``, particle sizes for
+    contact (:mod:`warptissue.usd.trainer`).
+
+    Args:
+        source: A study TOML, or a ``warptissue fit indentation`` output folder (its
+            ``fitted_study.toml``).
+        usd_path: The root layer to write, ``NAME.usda``.
+        max_tets: The most tets of the trainer's mesh (None: the study's sizes).
+        density_kg_per_m3: Mass density for ``physics:density``.
+        device: Warp device of the calibration's FE runs.
+
+    Returns:
+        The paths written and the calibration.
+    """
+    source = Path(source)
+    study_path = source / "fitted_study.toml" if source.is_dir() else source
+    if not study_path.is_file() or study_path.suffix != ".toml":
+        raise InputError(
+            "--trainer takes a study .toml or a fit output folder with fitted_study.toml",
+            path=source,
+        )
+    study = load_study(study_path)
+    mesh = trainer_mesh(study, max_tets=max_tets)
+    calibration = calibrate_trainer_material(study, mesh=mesh, device=device)
+    paths = write_simulation_usd(
+        usd_path,
+        mesh,
+        material=study.material,
+        provenance={
+            "study_file": str(study_path.resolve()),
+            "study_name": study.name,
+            "physics_material": "trainer",
+        },
+        density_kg_per_m3=density_kg_per_m3,
+        indenter=study.indenter,
+        trainer=calibration.to_dict(),
+    )
+    return paths, calibration

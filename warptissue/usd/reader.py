@@ -12,6 +12,7 @@ from warptissue._stage import open_stage
 from warptissue.errors import InputError
 from warptissue.mesh import TetMesh, read_mesh, tetmesh_prim
 from warptissue.usd.schema import record_from_attributes
+from warptissue.usd.trainer import SMALL_STRAIN, TRAINER_KEY
 from warptissue.usd.writer import (
     INDENTER,
     MATERIAL,
@@ -22,6 +23,7 @@ __all__ = [
     "open_stage",
     "read_material_field_usd",
     "read_material_usd",
+    "read_particle_radii_usd",
     "read_probe_curve_usd",
     "read_tetmesh_usd",
 ]
@@ -97,8 +99,11 @@ def read_material_usd(path: str | Path) -> dict[str, Any]:
 
     Returns:
         ``{"material": to_dict()-form record (Prony terms as prony_g / prony_tau_s),
-        "density_kg_per_m3", "youngs_modulus_Pa", "poissons_ratio"}`` (the last two are the
-        small-strain equivalents under ``physics:``).
+        "density_kg_per_m3", "youngs_modulus_Pa", "poissons_ratio", "trainer"}``: the
+        ``physics:`` values (the tissue's small-strain equivalents, or in a trainer's asset
+        the calibrated ones) and the trainer calibration (None in an asset with the true
+        values); a trainer's asset also gives the tissue's own as
+        ``"small_strain_youngs_modulus_Pa"`` and ``"small_strain_poissons_ratio"``.
     """
 
     path = Path(path)
@@ -126,14 +131,49 @@ def read_material_usd(path: str | Path) -> dict[str, Any]:
                 values[name[len(namespace) :]] = (
                     list(value) if hasattr(value, "__len__") else float(value)
                 )
-    return {
+    record = {
         "material": record_from_attributes(
             str(material.GetAttribute("tissue:hyperelastic:model").Get()), values
         ),
         "density_kg_per_m3": float(material.GetAttribute("physics:density").Get()),
         "youngs_modulus_Pa": float(material.GetAttribute("physics:youngsModulus").Get()),
         "poissons_ratio": float(material.GetAttribute("physics:poissonsRatio").Get()),
+        "trainer": _plain(material.GetCustomDataByKey(TRAINER_KEY)),
     }
+    for key, name in zip(
+        ("small_strain_youngs_modulus_Pa", "small_strain_poissons_ratio"), SMALL_STRAIN, strict=True
+    ):
+        attr = material.GetAttribute(name)
+        if attr and attr.HasAuthoredValue():
+            record[key] = float(attr.Get())
+    return record
+
+
+def read_particle_radii_usd(path: str | Path, *, prim_path: str | None = None) -> np.ndarray | None:
+    """The TetMesh's particle radii, ``primvars:widths`` / 2, (N,), m, in the order of its
+    points; None where the asset has none (written without ``--trainer``).
+
+    NVIDIA Newton 1.8's ``add_usd`` does not read widths of a TetMesh: set them with
+    ``builder.particle_radius[start:end] = radii`` after the import.
+    """
+    path = Path(path)
+    stage = open_stage(path)
+    prim = tetmesh_prim(stage, path, prim_path)
+    primvar = UsdGeom.PrimvarsAPI(prim).GetPrimvar("widths")
+    if not primvar or not primvar.HasValue():
+        return None
+    return 0.5 * np.asarray(primvar.Get(), dtype=np.float64)
+
+
+def _plain(value: Any) -> Any:
+    """customData as plain Python (dicts, lists, floats); None stays None."""
+    if value is None:
+        return None
+    if hasattr(value, "items"):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)) or type(value).__name__.endswith("Array"):
+        return [_plain(v) for v in value]
+    return value
 
 
 def read_probe_curve_usd(path: str | Path) -> dict[str, np.ndarray]:

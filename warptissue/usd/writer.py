@@ -43,6 +43,7 @@ from warptissue.usd.schema import (
     VOLUME_DEFORMABLE_SIM_API,
     material_record,
 )
+from warptissue.usd.trainer import author_contact_sizes, author_trainer_material
 
 __all__ = [
     "CONTACT_RESULTS",
@@ -779,6 +780,7 @@ def write_simulation_usd(
     indenter: Indenter | None = None,
     material_field: Mapping[str, Any] | None = None,
     indenter_axes: np.ndarray | None = None,
+    trainer: Mapping[str, Any] | None = None,
 ) -> UsdScenePaths:
     """Write a specimen mesh, its material and a simulation result as a layered USD scene.
 
@@ -813,12 +815,19 @@ def write_simulation_usd(
             ``primvars:tissue:poissonsRatio`` (unit ``1``) of the TetMesh, and per face
             (the value of the tet each face bounds) of the surface Mesh. ``material`` stays
             the one homogeneous material bound for simulators that read a single one.
+        trainer: A trainer calibration (:meth:`warptissue.fit.trainer.TrainerCalibration.
+            to_dict`, with ``youngs_modulus_Pa`` and ``poissons_ratio``): the physics
+            material's E and nu become the calibrated ones, the tissue's move to
+            ``tissue:smallStrain:*``, the calibration goes to the material's customData, and
+            the TetMesh gets its particle sizes (:mod:`warptissue.usd.trainer`).
 
     Returns:
         The paths written.
     """
 
     root_path = Path(root_path)
+    if trainer is not None and material is None:
+        raise InputError("a trainer calibration needs the material", key="trainer")
     if root_path.suffix != ".usda":
         raise InputError("the root layer must be a .usda file", path=root_path)
     check_density(density_kg_per_m3)
@@ -863,7 +872,10 @@ def write_simulation_usd(
         _material_field_primvars(stage, field_arrays, owners=owners)
 
     if material is not None:
-        bind_materials(stage, volume_prim, material, density_kg_per_m3)
+        tissue = bind_materials(stage, volume_prim, material, density_kg_per_m3)
+        if trainer is not None:
+            author_trainer_material(tissue.GetPrim(), trainer, vt_dictionary(trainer))
+            author_contact_sizes(volume_prim, rest, tets)
     if indenter is not None:
         indenter_prims(stage, indenter, rest, axes=indenter_axes)
     arrays = None
