@@ -14,6 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,4 +48,50 @@ def test_newton_imports_soft_body(scene):
         "poissons_ratio": True,
         "density": True,
     }, report
+    assert completed.returncode == 0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(
+    _newton_python() is None,
+    reason="NVIDIA Newton is not installed here; set WARPTISSUE_NEWTON_PYTHON to a Python with "
+    "newton 1.8 (scripts/tools/newton_import_check.sh builds one)",
+)
+def test_newton_reproduces_the_trainer_asset_force(tmp_path):
+    """A trainer asset (export --trainer of the tutorial's block, the whole body on linear
+    tets) pressed in Newton's VBD: the fitted probe within 10 % of the locking-free force at
+    every depth, Newton equal to warptissue's linear-tet model of the same material to 0.1 %,
+    and every load step settled in at most 2 000 sweeps."""
+    from warptissue.cli import main
+
+    scene = tmp_path / "trainer.usda"
+    assert (
+        main(
+            [
+                "export",
+                str(ROOT / "scenes" / "tutorial_punch.toml"),
+                "--trainer",
+                "--out",
+                str(scene),
+            ]
+        )
+        == 0
+    )
+    command = [
+        _newton_python(),
+        str(ROOT / "scripts" / "tools" / "newton_probe_check.py"),
+        "--scene",
+        str(scene),
+        "--probes",
+        "fitted",
+        "--max-sweeps",
+        "2000",
+    ]
+    completed = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=ROOT)
+    report = json.loads(completed.stdout.strip().splitlines()[-1])
+    assert report["ok"], report
+    (probe,) = report["probes"]
+    assert probe["max_sweeps_per_step"] <= 2000
+    assert np.allclose(probe["newton_over_warptissue_tet4"], 1.0, atol=1e-3)
+    assert np.all(np.abs(np.asarray(probe["newton_over_reference"]) - 1.0) <= 0.10)
     assert completed.returncode == 0

@@ -6,7 +6,9 @@ Run inside an environment with ``newton`` (1.8) and this project (``.venv-newton
 holds the ``bottom`` subset, moves each bonded punch's nodes (the calibration's
 ``punch_nodes``) along its direction depth by depth, and runs ``SolverVBD`` quasi-statically
 (gravity off, velocities zeroed after every step) until no particle moves by more than
-``--rtol`` times the depth in ``--check-every`` sweeps. The force is the reaction of Newton's
+``--rtol`` times the depth in ``--check-every`` sweeps (1e-4: Newton's positions are float32,
+whose resolution at centimetre coordinates is about 1e-5 of a 0.1 mm depth, so a tighter
+rule waits on rounding; the forces then equal warptissue's linear-tet model to 1e-4). The force is the reaction of Newton's
 own tet energy (stable neo-Hookean, its Lame parameters and rest poses) on the punch nodes,
 checked against the base's reaction. ``--physics true`` runs the tissue's true small-strain
 E and nu instead of the calibrated ones (the asset before calibration).
@@ -129,7 +131,7 @@ def main() -> int:
     parser.add_argument("--depths", type=int, default=0, help="only the first N depths (0: all)")
     parser.add_argument("--check-every", type=int, default=25)
     parser.add_argument("--max-sweeps", type=int, default=2000)
-    parser.add_argument("--rtol", type=float, default=1e-5)
+    parser.add_argument("--rtol", type=float, default=1e-4)
     parser.add_argument("--tolerance", type=float, default=0.10)
     args = parser.parse_args()
 
