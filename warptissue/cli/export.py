@@ -107,6 +107,9 @@ def run_export(args: argparse.Namespace) -> int:
         raise InputError("--max-tets needs --trainer", key="--max-tets", value=args.max_tets)
     calibration = None
     if args.trainer:
+        from warptissue.device import quiet_warp
+
+        quiet_warp()
         if args.over is not None:
             raise InputError("--trainer writes its own asset: no --over", key="--over")
         density = 1000.0 if args.density_kg_per_m3 is None else args.density_kg_per_m3
