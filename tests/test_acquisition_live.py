@@ -389,7 +389,7 @@ def test_the_live_plot_is_refreshed_after_each_refit_atomically(tmp_path):
     ("options", "message"),
     [
         (["--stop-when", "se<2%"], "--stop-when needs --fit"),
-        (["--fit", "wiechert"], "sls, prony:N or a study"),
+        (["--fit", "maxwell"], "unknown model"),
         (["--fit", "sls", "--usd"], "--usd needs a study fit"),
         (["--usd"], "--usd needs --fit"),
         (["--fit", "missing.toml"], "missing.toml"),

@@ -79,7 +79,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument(
         "--fit",
         metavar="MODEL|STUDY.toml",
-        help="sls or prony:N: a lumped model refitted every --fit-every samples; or a fit "
+        help="a lumped model as 'fit relaxation --model' takes it (sls, prony:N, qlv:N, "
+        "wiechert, wiechert-nonlinear), refitted every --fit-every samples; or a fit "
         "study with one [[data]] table, whose record the test replaces: its inverse FE "
         "refitted at the end of each ramp or hold (warm-started from the last estimate)",
     )
@@ -102,7 +103,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--stop-when",
         metavar="se<LIMIT",
         help="stop the protocol once every parameter's relative standard error is below "
-        "LIMIT (e.g. se<2%%) and the fit is identified; the record keeps every sample",
+        "LIMIT (e.g. se<2%%), the fit is identified and its residuals are not systematic "
+        "(Durbin-Watson in each window of the record); each progress line says what it "
+        "still waits for; the record keeps every sample",
     )
     live.add_argument(
         "--fit-out",
@@ -402,8 +405,6 @@ def _live_fit(args: argparse.Namespace, test) -> LiveFit | None:
                 value=args.fit,
             )
         model, terms = parse_model(args.fit)
-        if model not in ("sls", "prony"):
-            raise InputError("--fit: a live fit takes sls, prony:N or a study", value=args.fit)
         contact: str | float = args.contact
         if contact not in ("none", "auto"):
             try:
@@ -461,6 +462,13 @@ def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> int:
             f"{live.stop_rule}; {saved_s:.4g} s of the protocol saved"
         )
     print(f"live fit: {live.state}" + (f" ({live.stop_reason})" if live.stop_reason else ""))
+    waits = live.estimates[-1].stop_rule_waits_for if live.estimates else ()
+    if live.stop_rule is not None and not live.stop_requested and waits:
+        print(
+            f"warptissue: warning: --stop-when {live.stop_rule} never held; the last estimate "
+            f"waits for: {'; '.join(waits)}",
+            file=sys.stderr,
+        )
     print(f"wrote {_write_live_summary(args, live, status=result.status, saved_s=saved_s)}")
     final = _final_study_fit if _study_fit(args) else _final_lumped_fit
     try:
