@@ -99,3 +99,15 @@ def test_a_live_fit_takes_the_other_models_of_fit_relaxation(model):
     result, _ = fitter.refit(np.column_stack([time_s, depth_m, force_N]))
     offline = fit_relaxation_joint([(time_s, depth_m, force_N)], model=model)
     np.testing.assert_allclose(result.x, offline.x, rtol=1e-6)
+
+
+def test_a_qlv_fit_travels_to_the_recorder_process():
+    """The live fit sends its FitResult through a pipe: fit_qlv's fitted model pickles."""
+    import pickle
+
+    time_s, depth_m, force_N = ramp_hold(qlv_tissue(), hold_s=3.0, rate_Hz=50.0)
+    result = fit_qlv(time_s, depth_m, force_N, terms=2)
+    copy = pickle.loads(pickle.dumps(result))
+    np.testing.assert_array_equal(
+        copy.fitted_model.force_N(time_s, depth_m), result.fitted_model.force_N(time_s, depth_m)
+    )

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -420,7 +421,7 @@ def fit_qlv(
         return QuasiLinearViscoelastic(
             tuple(p[2 : 2 + n]),
             tuple(p[2 + n :]),
-            lambda x: exponential_elastic_force(x, scale_N=p[0], rate_per_m=p[1]),
+            partial(exponential_elastic_force, scale_N=float(p[0]), rate_per_m=float(p[1])),
         )
 
     def predict(p: np.ndarray) -> np.ndarray:
