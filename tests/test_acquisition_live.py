@@ -474,15 +474,19 @@ def test_rig_sim_bad_tissue_options(options, message):
 
 
 # -- a QLV tissue: the stop rule stops on the right model only ------------------------------
-QLV_TRUTH = {"A_N": 0.01, "B_per_m": 500.0, "g1": 0.3, "g2": 0.35, "tau1_s": 0.5, "tau2_s": 30.0}
-"""A QLV tissue with a fast relaxation time (the ramp's 0.5 s) and a slow one (60 ramps)."""
+QLV_TRUTH = {"k0_N_per_m": 5.0, "B_per_m": 500.0, "g1": 0.3, "g2": 0.35, "tau1_s": 0.5,
+             "tau2_s": 30.0}  # fmt: skip
+"""A QLV tissue with a fast relaxation time (the ramp's 0.5 s) and a slow one (60 ramps);
+its elastic force is 10 mN (exp(B x) - 1), k0 = A B."""
 
 
 def qlv_rig(*, time_scale: float):
-    from warptissue.viscoelastic import QuasiLinearViscoelastic, exponential_elastic_force
+    from warptissue.viscoelastic import QuasiLinearViscoelastic, exponential_spring_force
 
     elastic = partial(
-        exponential_elastic_force, scale_N=QLV_TRUTH["A_N"], rate_per_m=QLV_TRUTH["B_per_m"]
+        exponential_spring_force,
+        stiffness_N_per_m=QLV_TRUTH["k0_N_per_m"],
+        rate_per_m=QLV_TRUTH["B_per_m"],
     )
     tissue = QuasiLinearViscoelastic(
         (QLV_TRUTH["g1"], QLV_TRUTH["g2"]), (QLV_TRUTH["tau1_s"], QLV_TRUTH["tau2_s"]), elastic
@@ -494,7 +498,7 @@ def qlv_rig(*, time_scale: float):
 @pytest.mark.slow
 def test_qlv_stops_early_on_the_tissue_and_prony_does_not_stop_silently(tmp_path, capsys):
     """rig-sim's QLV tissue, a 120 s hold at 10x, the contact point known (--contact 0.3mm:
-    the detected one shifts A and B by tens of percent): --fit qlv:2 --stop-when se<2% stops
+    the detected one shifts k0 and B by tens of percent): --fit qlv:2 --stop-when se<2% stops
     the test early and every parameter of the final fit lies within 3 standard errors of
     the tissue's; --fit prony:2 on the same tissue reaches standard errors below 2 % too, but
     its residuals are systematic over the loading and the fast relaxation, so the rule never
