@@ -204,7 +204,8 @@ def test_refits_at_the_end_of_each_segment(tmp_path):
     assert live.state == "finished" and result.status == "complete"
     assert test.segment_ends_s() == (0.5, 0.75, 1.75)
     assert times[-1] == pytest.approx(float(read_experiment_csv(result.csv_path)["time_s"][-1]))
-    assert times[0] >= 0.5 and len(times) <= 3  # a fit slower than the ramp skips one
+    # A fit slower than the ramp skips one; the final refit may refit the same samples.
+    assert times[0] >= 0.5 and len(set(times)) <= 3
 
 
 # -- the command line -----------------------------------------------------------------------
@@ -212,7 +213,8 @@ def test_refits_at_the_end_of_each_segment(tmp_path):
 def test_live_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, capsys):
     """acquire --fit prony:2 against the known Prony tissue: the final parameters are those
     of 'warptissue fit relaxation' run afterwards on the saved CSV (to 1e-6 relative), the
-    last live estimate (warm-started, the whole record) agrees with them to 1e-6, and both
+    last live estimate (the whole record, started as the offline fit) agrees with them to
+    1e-12, and both
     recover the tissue (k_inf = G0 (1 - g1 - g2), k_i = G0 g_i, tau_i) to 2 % (the
     detected contact point is biased by the noise by more than the standard errors)."""
     _, server = prony_rig(time_scale=math.inf)
@@ -232,7 +234,7 @@ def test_live_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, capsys
     offline = json.loads((offline_dir / "run_prony2.json").read_text())
     np.testing.assert_allclose(values(final), values(offline), rtol=1e-6)
     last_live = values(live["estimates"][-1])
-    np.testing.assert_allclose(last_live, values(offline), rtol=1e-6)
+    np.testing.assert_allclose(last_live, values(offline), rtol=1e-12)  # a cold last refit
     truth = np.array([G0_N_PER_M * (1 - sum(G)), G0_N_PER_M * G[0], G0_N_PER_M * G[1], *TAU_S])
     np.testing.assert_allclose(values(final), truth, rtol=0.02)  # the contact point's bias
     assert (tmp_path / "run_relaxation_fit" / "run_live.png").stat().st_size > 0
@@ -514,9 +516,13 @@ def test_qlv_stops_early_on_the_tissue_and_prony_does_not_stop_silently(tmp_path
     assert live["recording_status"] == "stopped_early" and live["stop_rule_met"]
     assert live["saved_time_s"] > 20.0
     final = json.loads((tmp_path / "run_relaxation_fit" / "run_qlv2.json").read_text())
+    last_live = live["estimates"][-1]["parameters"]
     for name, truth in QLV_TRUTH.items():
         entry = final["parameters"][name]
         assert abs(entry["value"] - truth) < 3.0 * entry["standard_error"], name
+        # The last refit starts cold, as the offline fit: the same optimum (a warm start
+        # ended up to 9e-6 away on such a tissue, its parameters correlated at -0.99).
+        assert last_live[name]["value"] == pytest.approx(entry["value"], rel=1e-12), name
 
     prony = tmp_path / "prony"
     _, server = qlv_rig(time_scale=10.0)

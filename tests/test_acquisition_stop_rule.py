@@ -47,7 +47,9 @@ def test_a_prony_series_on_a_qlv_record_meets_the_errors_but_not_the_rule():
     assert np.all(rule.relative_errors(result) < 0.02)
     assert rule.unmet(result) == []  # standard errors and identifiability alone: met
     waits = rule.unmet(result, curve)
-    assert waits and all(w.startswith("systematic residuals at 0") or "1.01-3 s" in w for w in waits)
+    assert waits and all(
+        w.startswith("systematic residuals at 0") or "1.01-3 s" in w for w in waits
+    )
     assert "Durbin-Watson" in waits[0] and not rule.met(result, curve)
 
 

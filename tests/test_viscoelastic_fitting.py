@@ -250,7 +250,9 @@ def stage_one_record(tau_s, *, elastic: str, noise: float, seed: int = 2):
     (28 N/m, as a flat punch's nearly is) or exponential (10 mN (exp(500 x) - 1)); Gaussian
     noise of ``noise`` times the peak force."""
     ramp_s = 3.6e-3 / 8e-3
-    time = np.concatenate([np.arange(0.0, ramp_s, 1 / 800), np.arange(ramp_s, ramp_s + 120, 1 / 20)])
+    time = np.concatenate(
+        [np.arange(0.0, ramp_s, 1 / 800), np.arange(ramp_s, ramp_s + 120, 1 / 20)]
+    )
     depth = np.minimum(time / ramp_s, 1.0) * 3.6e-3
     law = (
         (lambda d: 28.0 * d)
