@@ -170,7 +170,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--respiration", help="respiration disturbance AMPLITUDE@RATE, 8mN@0.25Hz")
     sim.add_argument("--heartbeat", help="cardiac disturbance AMPLITUDE@RATE, 2mN@1.4Hz")
     sim.add_argument("--time-scale", default="1", help="rig seconds per wall second, or inf")
-    sim.add_argument("--faults", default="", help="e.g. garbage=200,corrupt=300,drop=400")
+    sim.add_argument(
+        "--faults",
+        default="",
+        metavar="NAME=N,...",
+        help="link faults, counted on sample lines (each count 1 or more, each name once): "
+        "garbage=N (a garbage burst after every N-th sample), split=N (every N-th line sent in "
+        "two writes), corrupt=N (every N-th line with a wrong CRC), drop=N (every N-th sample "
+        "never sent), disconnect=N (close the connection once after N samples; --tcp only), "
+        "stall=N (freeze once after N samples) with stall_s=SECONDS (default 1; inf: for "
+        "ever). At exit the counters go to stderr: delivered counts the sample lines put on "
+        "the link whole, corrupted ones included",
+    )
     sim.add_argument("--seed", type=int, default=0)
     sim.set_defaults(handler=run_rig_sim)
 
