@@ -120,7 +120,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(as 'fit indentation --usd'; a lumped model has no continuum material: refused)",
     )
     acquire.set_defaults(handler=run_acquire)
+    _register_rig_sim(subparsers)
 
+
+def _register_rig_sim(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``rig-sim`` command."""
     sim = subparsers.add_parser(
         "rig-sim",
         help="serve a simulated indentation rig on a pty or a loopback TCP socket",
