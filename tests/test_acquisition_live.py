@@ -5,6 +5,7 @@ ramp-and-hold force."""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -537,3 +538,22 @@ def test_qlv_stops_early_on_the_tissue_and_prony_does_not_stop_silently(tmp_path
     assert any(w.startswith("systematic residuals") for w in last["stop_rule_waits_for"])
     assert "stop rule waits for: systematic residuals" in printed.out
     assert "--stop-when se<2% never held" in printed.err and "Durbin-Watson" in printed.err
+
+
+def test_the_final_refit_is_the_offline_fit_not_a_warm_start():
+    """Issue 45, item 3: the last refit of the whole record starts as the offline fit does,
+    so it ends at the offline optimum (to rounding); a warm start from an earlier estimate
+    ends elsewhere within the engine's tolerance."""
+    from test_acquisition_stop_rule import qlv_tissue, ramp_hold
+
+    from warptissue.viscoelastic.fitting import fit_qlv
+
+    time_s, depth_m, force_N = ramp_hold(qlv_tissue(), hold_s=20.0, rate_Hz=50.0)
+    samples = np.column_stack([time_s, depth_m, force_N])
+    offline = fit_qlv(time_s, depth_m, force_N, terms=2)
+    fitter = LumpedFitter(model="qlv", terms=2, contact="none")
+    fitter.refit(samples[: samples.shape[0] // 2])  # an earlier estimate: the warm start
+    warm, _ = LumpedFitter.refit(copy.deepcopy(fitter), samples)
+    final, _ = fitter.refit(samples, final=True)
+    np.testing.assert_allclose(final.x, offline.x, rtol=1e-12)
+    assert np.max(np.abs(warm.x / offline.x - 1.0)) > 1e-12  # what the cold start removes
