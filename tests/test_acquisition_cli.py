@@ -304,3 +304,26 @@ def test_a_test_that_did_not_run_to_its_end_exits_5(tmp_path, capsys, monkeypatc
         assert main([*command, "--hold", "0s", "--out", str(out), "--no-progress"]) == 5
     assert "data so far are kept" in one_error_line(capsys)
     assert read_experiment_csv(out).sample_count > 0
+
+
+def test_rig_sim_help_names_every_documented_fault_and_what_delivered_counts(capsys):
+    """Issue 45: --help named three of the seven fault options docs/rig.md lists, and
+    neither said whether 'delivered' counts corrupted lines (it does)."""
+    import re
+    from pathlib import Path
+
+    from warptissue.acquisition.simulator import FAULT_OPTIONS
+
+    rig_md = (Path(__file__).resolve().parents[1] / "docs" / "rig.md").read_text()
+    (listed,) = re.findall(r"`--faults ([a-z_=0-9.,]+)`", rig_md)
+    documented = [item.split("=")[0] for item in listed.split(",")]
+    assert sorted(documented) == sorted(FAULT_OPTIONS)
+    with pytest.raises(SystemExit):
+        main(["rig-sim", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    for name in FAULT_OPTIONS:
+        assert f"{name}=" in text, name
+    assert (
+        "delivered counts the sample lines put on the link whole, corrupted ones included" in text
+    )
+    assert "**corrupted\nones included**" in rig_md and "`delivered - corrupted`" in rig_md

@@ -184,3 +184,82 @@ def test_rfc2217_url_through_a_network_serial_server(tmp_path):
     assert result.status == "complete"
     assert result.samples_received == result.samples_sent == rig.counters.emitted
     assert read_experiment_csv(tmp_path / "rfc.csv").sample_count == result.samples_received
+
+
+class _StreamingServer:
+    """A loopback server (127.0.0.1 only) that streams numbered, CRC-framed sample lines from
+    the instant it accepts a connection, ``lines`` per connection, then closes it; it drops
+    every ``drop_every``-th line and corrupts the CRC of every ``corrupt_every``-th, and
+    counts what it put on the link."""
+
+    def __init__(self, *, connections: int, lines: int, drop_every: int, corrupt_every: int):
+        import socket
+        import threading
+
+        self.connections, self.lines = connections, lines
+        self.drop_every, self.corrupt_every = drop_every, corrupt_every
+        self.intact: list[int] = []
+        self.dropped = self.corrupted = self.served = 0
+        self._listener = socket.create_server(("127.0.0.1", 0))
+        self._listener.settimeout(10.0)
+        self.url = f"socket://127.0.0.1:{self._listener.getsockname()[1]}"
+        self.done = threading.Event()
+        self._thread = threading.Thread(target=self._serve, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        import socket
+
+        number = 0
+        try:
+            for _ in range(self.connections):
+                connection, _ = self._listener.accept()
+                connection.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                for _ in range(self.lines):  # from the instant of accept, no pause
+                    number += 1
+                    if number % self.drop_every == 0:
+                        self.dropped += 1
+                        continue
+                    line = wire.format_sample(wire.Sample(number, 1000 * number, 1.0, 2.0))
+                    if number % self.corrupt_every == 0:
+                        line = line[:-3] + (b"0" if line[-3:-2] != b"0" else b"1") + b"\r\n"
+                        self.corrupted += 1
+                    else:
+                        self.intact.append(number)
+                    connection.sendall(line)
+                connection.shutdown(socket.SHUT_WR)
+                connection.close()
+                self.served += 1
+        finally:
+            self._listener.close()
+            self.done.set()
+
+
+def test_reconnects_to_a_rig_that_streams_at_once_lose_nothing():
+    """100 reconnects to a server that streams from the instant of accept: every intact line
+    it sent is received exactly once; missing = dropped + corrupted (pyserial's socket://
+    open() empties the input that arrived while connecting; RigClient keeps it)."""
+    server = _StreamingServer(connections=101, lines=60, drop_every=37, corrupt_every=23)
+    client = RigClient(server.url, read_timeout_s=0.05, reconnect_delay_s=0.001).open()
+    received: list[int] = []
+    deadline = time.monotonic() + 60.0
+    try:
+        while time.monotonic() < deadline:
+            try:
+                message = client.read_message()
+            except LinkLost:
+                if server.done.is_set() and server.served == server.connections:
+                    break
+                assert client.reconnect()
+                continue
+            if isinstance(message, wire.Sample):
+                received.append(message.sequence)
+    finally:
+        client.close()
+    assert server.served == server.connections
+    assert client.counters.reconnections == 100
+    sent = server.connections * server.lines
+    assert len(received) == len(set(received))
+    assert received == server.intact
+    assert sent - len(received) == server.dropped + server.corrupted
+    assert client.counters.checksum_errors == server.corrupted

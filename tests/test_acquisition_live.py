@@ -5,6 +5,7 @@ ramp-and-hold force."""
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import os
@@ -204,7 +205,8 @@ def test_refits_at_the_end_of_each_segment(tmp_path):
     assert live.state == "finished" and result.status == "complete"
     assert test.segment_ends_s() == (0.5, 0.75, 1.75)
     assert times[-1] == pytest.approx(float(read_experiment_csv(result.csv_path)["time_s"][-1]))
-    assert times[0] >= 0.5 and len(times) <= 3  # a fit slower than the ramp skips one
+    # A fit slower than the ramp skips one; the final refit may refit the same samples.
+    assert times[0] >= 0.5 and len(set(times)) <= 3
 
 
 # -- the command line -----------------------------------------------------------------------
@@ -212,7 +214,8 @@ def test_refits_at_the_end_of_each_segment(tmp_path):
 def test_live_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, capsys):
     """acquire --fit prony:2 against the known Prony tissue: the final parameters are those
     of 'warptissue fit relaxation' run afterwards on the saved CSV (to 1e-6 relative), the
-    last live estimate (warm-started, the whole record) agrees with them to 1e-6, and both
+    last live estimate (the whole record, started as the offline fit) agrees with them to
+    1e-12, and both
     recover the tissue (k_inf = G0 (1 - g1 - g2), k_i = G0 g_i, tau_i) to 2 % (the
     detected contact point is biased by the noise by more than the standard errors)."""
     _, server = prony_rig(time_scale=math.inf)
@@ -232,7 +235,7 @@ def test_live_fit_ends_with_the_offline_fit_of_the_saved_record(tmp_path, capsys
     offline = json.loads((offline_dir / "run_prony2.json").read_text())
     np.testing.assert_allclose(values(final), values(offline), rtol=1e-6)
     last_live = values(live["estimates"][-1])
-    np.testing.assert_allclose(last_live, values(offline), rtol=1e-6)
+    np.testing.assert_allclose(last_live, values(offline), rtol=1e-12)  # a cold last refit
     truth = np.array([G0_N_PER_M * (1 - sum(G)), G0_N_PER_M * G[0], G0_N_PER_M * G[1], *TAU_S])
     np.testing.assert_allclose(values(final), truth, rtol=0.02)  # the contact point's bias
     assert (tmp_path / "run_relaxation_fit" / "run_live.png").stat().st_size > 0
@@ -389,7 +392,7 @@ def test_the_live_plot_is_refreshed_after_each_refit_atomically(tmp_path):
     ("options", "message"),
     [
         (["--stop-when", "se<2%"], "--stop-when needs --fit"),
-        (["--fit", "wiechert"], "sls, prony:N or a study"),
+        (["--fit", "maxwell"], "unknown model"),
         (["--fit", "sls", "--usd"], "--usd needs a study fit"),
         (["--usd"], "--usd needs --fit"),
         (["--fit", "missing.toml"], "missing.toml"),
@@ -471,3 +474,86 @@ def test_rig_sim_bad_tissue_options(options, message):
 
     with pytest.raises(InputError, match=message.replace("-", r"\-")):
         tissue_from_args(build_parser().parse_args(["rig-sim", *options]))
+
+
+# -- a QLV tissue: the stop rule stops on the right model only ------------------------------
+QLV_TRUTH = {"k0_N_per_m": 5.0, "B_per_m": 500.0, "g1": 0.3, "g2": 0.35, "tau1_s": 0.5,
+             "tau2_s": 30.0}  # fmt: skip
+"""A QLV tissue with a fast relaxation time (the ramp's 0.5 s) and a slow one (60 ramps);
+its elastic force is 10 mN (exp(B x) - 1), k0 = A B."""
+
+
+def qlv_rig(*, time_scale: float):
+    from warptissue.viscoelastic import QuasiLinearViscoelastic, exponential_spring_force
+
+    elastic = partial(
+        exponential_spring_force,
+        stiffness_N_per_m=QLV_TRUTH["k0_N_per_m"],
+        rate_per_m=QLV_TRUTH["B_per_m"],
+    )
+    tissue = QuasiLinearViscoelastic(
+        (QLV_TRUTH["g1"], QLV_TRUTH["g2"]), (QLV_TRUTH["tau1_s"], QLV_TRUTH["tau2_s"]), elastic
+    )
+    rig = SimulatedRig(tissue, RigConfig(time_scale=time_scale, force_noise_N=3e-4, seed=5))
+    return rig, RigServer(rig, transport="tcp")
+
+
+@pytest.mark.slow
+def test_qlv_stops_early_on_the_tissue_and_prony_does_not_stop_silently(tmp_path, capsys):
+    """rig-sim's QLV tissue, a 120 s hold at 10x, the contact point known (--contact 0.3mm:
+    the detected one shifts k0 and B by tens of percent): --fit qlv:2 --stop-when se<2% stops
+    the test early and every parameter of the final fit lies within 3 standard errors of
+    the tissue's; --fit prony:2 on the same tissue reaches standard errors below 2 % too, but
+    its residuals are systematic over the loading and the fast relaxation, so the rule never
+    holds: the test runs to its end and a warning names the misfit."""
+    options = ["--stop-when", "se<2%", "--fit-every", "1000", "--contact", "0.3mm"]
+    _, server = qlv_rig(time_scale=10.0)
+    with server:
+        assert acquire(server.url, tmp_path / "run.csv", "--fit", "qlv:2", *options,
+                       hold="120s") == 0  # fmt: skip
+    capsys.readouterr()
+    live = live_json(tmp_path)
+    assert live["model"] == "qlv:2"
+    assert live["recording_status"] == "stopped_early" and live["stop_rule_met"]
+    assert live["saved_time_s"] > 20.0
+    final = json.loads((tmp_path / "run_relaxation_fit" / "run_qlv2.json").read_text())
+    last_live = live["estimates"][-1]["parameters"]
+    for name, truth in QLV_TRUTH.items():
+        entry = final["parameters"][name]
+        assert abs(entry["value"] - truth) < 3.0 * entry["standard_error"], name
+        # The last refit starts cold, as the offline fit: the same optimum (a warm start
+        # ended up to 9e-6 away on such a tissue, its parameters correlated at -0.99).
+        assert last_live[name]["value"] == pytest.approx(entry["value"], rel=1e-12), name
+
+    prony = tmp_path / "prony"
+    _, server = qlv_rig(time_scale=10.0)
+    with server:
+        assert acquire(server.url, prony / "run.csv", *options, hold="120s") == 0
+    printed = capsys.readouterr()
+    live = live_json(prony)
+    assert live["recording_status"] == "complete" and not live["stop_rule_met"]
+    last = live["estimates"][-1]
+    relative = [p["standard_error"] / abs(p["value"]) for p in last["parameters"].values()]
+    assert last["identified"] and max(relative) < 0.02  # the old rule would have stopped
+    assert any(w.startswith("systematic residuals") for w in last["stop_rule_waits_for"])
+    assert "stop rule waits for: systematic residuals" in printed.out
+    assert "--stop-when se<2% never held" in printed.err and "Durbin-Watson" in printed.err
+
+
+def test_the_final_refit_is_the_offline_fit_not_a_warm_start():
+    """Issue 45, item 3: the last refit of the whole record starts as the offline fit does,
+    so it ends at the offline optimum (to rounding); a warm start from an earlier estimate
+    ends elsewhere within the engine's tolerance."""
+    from test_acquisition_stop_rule import qlv_tissue, ramp_hold
+
+    from warptissue.viscoelastic.fitting import fit_qlv
+
+    time_s, depth_m, force_N = ramp_hold(qlv_tissue(), hold_s=20.0, rate_Hz=50.0)
+    samples = np.column_stack([time_s, depth_m, force_N])
+    offline = fit_qlv(time_s, depth_m, force_N, terms=2)
+    fitter = LumpedFitter(model="qlv", terms=2, contact="none")
+    fitter.refit(samples[: samples.shape[0] // 2])  # an earlier estimate: the warm start
+    warm, _ = LumpedFitter.refit(copy.deepcopy(fitter), samples)
+    final, _ = fitter.refit(samples, final=True)
+    np.testing.assert_allclose(final.x, offline.x, rtol=1e-12)
+    assert np.max(np.abs(warm.x / offline.x - 1.0)) > 1e-12  # what the cold start removes

@@ -313,7 +313,7 @@ def fit_experiment(experiment: int, settings: dict, device: str, seed: int, fold
         "stage_one": {
             "parameters": stage_one_values,
             "exponential_elastic_force": {
-                "A_N": float(stage_one.parameters["A_N"]),
+                "k0_N_per_m": float(stage_one.parameters["k0_N_per_m"]),
                 "B_per_m": float(stage_one.parameters["B_per_m"]),
             },
             "errors": _errors(stage_one_values, truth),

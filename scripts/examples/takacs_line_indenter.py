@@ -17,7 +17,7 @@ The FE material is fitted to the nonlinear Wiechert model itself, with the proje
 1. the Wiechert model (Table I, the paper's 20 mm cube) compressed uniformly at the strip
    test's 10 mm/min to 6 mm and held 120 s gives a force record;
 2. :func:`warptissue.viscoelastic.fit_qlv` fits Fung's QLV to it (elastic force
-   A (exp(B x) - 1), two Prony terms);
+   A (exp(B x) - 1) = (k0 / B) (exp(B x) - 1), two Prony terms);
 3. the elastic force F_e(x) on the cube, as nominal stress F_e / (20 mm)^2 against nominal
    strain x / 20 mm in uniaxial compression, is fitted with
    :func:`warptissue.fit.hyperelastic.fit_hyperelastic` (reduced polynomial N = 3);
@@ -56,6 +56,7 @@ from warptissue.mesh import TetMesh, block_mesh, graded_coordinates, to_tet10
 from warptissue.viscoelastic import (
     NonlinearWiechert,
     QuasiLinearViscoelastic,
+    exponential_spring_force,
     fit_qlv,
     line_indenter_force_N,
     quadratic_profile,
@@ -90,10 +91,11 @@ def fit_material() -> tuple[Viscoelastic, dict]:
     """QLV fitted to the cube record, its elastic force fitted by a hyperelastic model."""
     time_s, displacement, force = cube_record()
     qlv = fit_qlv(time_s, displacement, force, terms=2)
-    a_N, b_per_m = qlv.x[0], qlv.x[1]
     g, tau = tuple(qlv.x[2:4]), tuple(qlv.x[4:6])
     x = np.linspace(0.0, MAX_DEPTH_M, 61)[1:]
-    elastic_force = a_N * np.expm1(b_per_m * x)
+    elastic_force = exponential_spring_force(
+        x, stiffness_N_per_m=qlv.parameters["k0_N_per_m"], rate_per_m=qlv.parameters["B_per_m"]
+    )
     test = HomogeneousTest.from_force_displacement(
         x,
         elastic_force,

@@ -10,6 +10,8 @@ disconnect, and, used as a context manager, stops the rig on the way out, Ctrl-C
 
 from __future__ import annotations
 
+import contextlib
+import socket
 import struct
 import time
 from collections import deque
@@ -134,7 +136,10 @@ class RigClient:
         if not self.url.startswith("rfc2217://"):  # pyserial's RFC 2217 client has none
             options["write_timeout"] = 2.0
         try:
-            self._port = serial.serial_for_url(self.url, **options)
+            if self.url.startswith("socket://"):
+                self._port = _KeepingSocket(self.url, **options)
+            else:
+                self._port = serial.serial_for_url(self.url, **options)
         except (serial.SerialException, OSError, ValueError) as exc:
             raise LinkLost(f"cannot open {self.url}: {exc}") from exc
         self._buffer.clear()
@@ -399,6 +404,44 @@ class RigClient:
                 break
         self.pending.extend(seen)
         return seen
+
+
+class _KeepingSocket(protocol_socket.Serial):
+    """pyserial's ``socket://`` port, less two things a rig link cannot afford.
+
+    Its ``open()`` ends with ``reset_input_buffer()``, which reads and discards whatever the
+    peer sent between the connection and that call: a rig keeps streaming across a link
+    reset (docs/rig-protocol.md), so its first samples after a reconnect would be lost. And
+    its ``close()`` sleeps 0.3 s "to give the server some time"; :meth:`RigClient.reconnect`
+    has its own back-off. This port keeps every byte that arrives once connected, and closes
+    at once.
+    """
+
+    _opening = False
+
+    def open(self) -> None:
+        """Connect; nothing that arrives meanwhile is discarded."""
+        self._opening = True
+        try:
+            super().open()
+        finally:
+            self._opening = False
+
+    def reset_input_buffer(self) -> None:
+        """Discard pending input, except while opening (see the class docstring)."""
+        if not self._opening:
+            super().reset_input_buffer()
+
+    def close(self) -> None:
+        """Close the socket (idempotent), without pyserial's 0.3 s pause."""
+        if self.is_open:
+            if self._socket is not None:
+                with contextlib.suppress(OSError):
+                    self._socket.shutdown(socket.SHUT_RDWR)
+                with contextlib.suppress(OSError):
+                    self._socket.close()
+                self._socket = None
+            self.is_open = False
 
 
 def parse_status(reply: wire.Reply) -> tuple[str, int] | None:

@@ -38,6 +38,7 @@ from warptissue.errors import InputError
 from warptissue.io import read_experiment_csv
 
 __all__ = [
+    "FAULT_OPTIONS",
     "FaultPlan",
     "ForceCurveTissue",
     "PhysiologicalDisturbance",
@@ -148,6 +149,12 @@ class PhysiologicalDisturbance:
         return total
 
 
+FAULT_OPTIONS = {"garbage": "garbage_every", "split": "split_every", "corrupt": "corrupt_every",
+                 "drop": "drop_every", "disconnect": "disconnect_after", "stall": "stall_after",
+                 "stall_s": "stall_s"}  # fmt: skip
+"""``--faults NAME=VALUE`` names and the :class:`FaultPlan` fields they set."""
+
+
 @dataclass(frozen=True)
 class FaultPlan:
     """Link faults to inject, counted on sample lines (n-th sample of the session, 1-based).
@@ -181,15 +188,7 @@ class FaultPlan:
     def parse(cls, text: str) -> FaultPlan:
         """Parse ``"garbage=200,split=500,corrupt=300,drop=400,disconnect=1000,stall=2000"``
         (plus ``stall_s=1.5``); the empty string is no faults."""
-        names = {
-            "garbage": "garbage_every",
-            "split": "split_every",
-            "corrupt": "corrupt_every",
-            "drop": "drop_every",
-            "disconnect": "disconnect_after",
-            "stall": "stall_after",
-            "stall_s": "stall_s",
-        }
+        names = FAULT_OPTIONS
         options: dict[str, float | int] = {}
         for item in filter(None, (part.strip() for part in text.split(","))):
             key, sep, value = item.partition("=")
@@ -216,7 +215,8 @@ class RigCounters:
 
     Attributes:
         emitted: Samples numbered by the rig (across all motions of the session).
-        delivered: Sample lines handed whole to the link (corrupted ones included).
+        delivered: Sample lines the rig put on the link whole, corrupted ones included
+            (intact lines: ``delivered - corrupted``; split lines count once, when whole).
         corrupted: Sample lines sent with a wrong CRC.
         dropped: Samples emitted but never transmitted (``drop_every``).
         undelivered: Samples emitted while no host was connected, or lost in the rig's

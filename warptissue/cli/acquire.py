@@ -79,7 +79,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     live.add_argument(
         "--fit",
         metavar="MODEL|STUDY.toml",
-        help="sls or prony:N: a lumped model refitted every --fit-every samples; or a fit "
+        help="a lumped model as 'fit relaxation --model' takes it (sls, prony:N, qlv:N, "
+        "wiechert, wiechert-nonlinear), refitted every --fit-every samples; or a fit "
         "study with one [[data]] table, whose record the test replaces: its inverse FE "
         "refitted at the end of each ramp or hold (warm-started from the last estimate)",
     )
@@ -102,7 +103,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--stop-when",
         metavar="se<LIMIT",
         help="stop the protocol once every parameter's relative standard error is below "
-        "LIMIT (e.g. se<2%%) and the fit is identified; the record keeps every sample",
+        "LIMIT (e.g. se<2%%), the fit is identified and its residuals are not systematic "
+        "(Durbin-Watson in each window of the record); each progress line says what it "
+        "still waits for; the record keeps every sample",
     )
     live.add_argument(
         "--fit-out",
@@ -117,7 +120,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(as 'fit indentation --usd'; a lumped model has no continuum material: refused)",
     )
     acquire.set_defaults(handler=run_acquire)
+    _register_rig_sim(subparsers)
 
+
+def _register_rig_sim(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``rig-sim`` command."""
     sim = subparsers.add_parser(
         "rig-sim",
         help="serve a simulated indentation rig on a pty or a loopback TCP socket",
@@ -167,7 +174,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sim.add_argument("--respiration", help="respiration disturbance AMPLITUDE@RATE, 8mN@0.25Hz")
     sim.add_argument("--heartbeat", help="cardiac disturbance AMPLITUDE@RATE, 2mN@1.4Hz")
     sim.add_argument("--time-scale", default="1", help="rig seconds per wall second, or inf")
-    sim.add_argument("--faults", default="", help="e.g. garbage=200,corrupt=300,drop=400")
+    sim.add_argument(
+        "--faults",
+        default="",
+        metavar="NAME=N,...",
+        help="link faults, counted on sample lines (each count 1 or more, each name once): "
+        "garbage=N (a garbage burst after every N-th sample), split=N (every N-th line sent in "
+        "two writes), corrupt=N (every N-th line with a wrong CRC), drop=N (every N-th sample "
+        "never sent), disconnect=N (close the connection once after N samples; --tcp only), "
+        "stall=N (freeze once after N samples) with stall_s=SECONDS (default 1; inf: for "
+        "ever). At exit the counters go to stderr: delivered counts the sample lines put on "
+        "the link whole, corrupted ones included",
+    )
     sim.add_argument("--seed", type=int, default=0)
     sim.set_defaults(handler=run_rig_sim)
 
@@ -402,8 +420,6 @@ def _live_fit(args: argparse.Namespace, test) -> LiveFit | None:
                 value=args.fit,
             )
         model, terms = parse_model(args.fit)
-        if model not in ("sls", "prony"):
-            raise InputError("--fit: a live fit takes sls, prony:N or a study", value=args.fit)
         contact: str | float = args.contact
         if contact not in ("none", "auto"):
             try:
@@ -461,6 +477,13 @@ def _finish_live(args: argparse.Namespace, live: LiveFit, result, test) -> int:
             f"{live.stop_rule}; {saved_s:.4g} s of the protocol saved"
         )
     print(f"live fit: {live.state}" + (f" ({live.stop_reason})" if live.stop_reason else ""))
+    waits = live.estimates[-1].stop_rule_waits_for if live.estimates else ()
+    if live.stop_rule is not None and not live.stop_requested and waits:
+        print(
+            f"warptissue: warning: --stop-when {live.stop_rule} never held; the last estimate "
+            f"waits for: {'; '.join(waits)}",
+            file=sys.stderr,
+        )
     print(f"wrote {_write_live_summary(args, live, status=result.status, saved_s=saved_s)}")
     final = _final_study_fit if _study_fit(args) else _final_lumped_fit
     try:

@@ -118,11 +118,13 @@ class StudyFitter:
             table["fit"]["start"] = {**table["fit"].get("start", {}), **start}
         return study_from_dict(table, path=self.study_path)
 
-    def refit(self, samples: np.ndarray) -> tuple[FitResult, LiveCurve]:
+    def refit(self, samples: np.ndarray, *, final: bool = False) -> tuple[FitResult, LiveCurve]:
         """Fit the study to the record so far, warm-started from the last converged fit.
 
         Args:
             samples: Shape (n, 3): time_s (s), displacement_m (m), force_N (N).
+            final: The last refit, of the whole record (warm-started all the same: an FE
+                fit from the study's own start costs as much as the final offline fit).
 
         Raises:
             InputError: The record so far is refused (no contact yet, too few samples).

@@ -21,6 +21,7 @@ from warptissue.viscoelastic.linear import (
     QuasiLinearViscoelastic,
     StandardLinearSolid,
     exponential_elastic_force,
+    exponential_spring_force,
 )
 from warptissue.viscoelastic.springs import ParallelNonlinearSprings, blatz_pressure_Pa, fit_blatz
 from warptissue.viscoelastic.wiechert import (
@@ -52,4 +53,5 @@ __all__ = [
     "QuasiLinearViscoelastic",
     "StandardLinearSolid",
     "exponential_elastic_force",
+    "exponential_spring_force",
 ]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -34,7 +35,7 @@ from warptissue.viscoelastic.linear import (
     PronySeries,
     QuasiLinearViscoelastic,
     StandardLinearSolid,
-    exponential_elastic_force,
+    exponential_spring_force,
 )
 from warptissue.viscoelastic.wiechert import LinearWiechert, NonlinearWiechert
 
@@ -376,13 +377,21 @@ def fit_qlv(
     """Fit QLV with an exponential elastic response to a real ramp-and-hold record.
 
     Model: F(t) = integral G(t - s) dF_e(x(s)), G(t) = 1 - sum g_i (1 - exp(-t/tau_i)) (Ahn
-    & Kim Eq. 2, sign fixed) and F_e(x) = A (exp(B x) - 1), both fitted at once on the measured
-    history, finite ramp included.
+    & Kim Eq. 2, sign fixed) and F_e(x) = A (exp(B x) - 1) = (k0 / B) (exp(B x) - 1), both
+    fitted at once on the measured history, finite ramp included.
+
+    The elastic response is fitted as (k0, B), k0 = A B its stiffness at zero displacement
+    (:func:`~warptissue.viscoelastic.exponential_spring_force`): an indentation's force is
+    often nearly linear in depth, and then A grows without bound while B falls to 0 along a
+    valley of equal cost; Levenberg-Marquardt crawled along it to its iteration limit (Ahn &
+    Kim's experiment 2 made by FE: 200 iterations, g and tau within 0.9 %). In (k0, B) the
+    linear response is the ordinary point B = 0, and B may also come out negative (a
+    softening response).
 
     Args:
         time_s, displacement_m, force_N: The record, shape (n,) each.
         terms: Prony terms N.
-        p0: (A_N, B_per_m, g1..gN, tau1..tauN_s); default from the data.
+        p0: (k0_N_per_m, B_per_m, g1..gN, tau1..tauN_s); default from the data.
         substeps: Sub-intervals of the hereditary integral per sample interval.
         method: "lm" or "salm".
         max_iterations: Iteration limit of the engine.
@@ -391,8 +400,8 @@ def fit_qlv(
             :attr:`RelaxationRecord.max_displacement_m`.
 
     Returns:
-        The FitResult (parameters A_N, B_per_m, g1.., tau1.._s); ``fitted_model`` is the
-        :class:`QuasiLinearViscoelastic`.
+        The FitResult (parameters k0_N_per_m, B_per_m, g1.., tau1.._s; A = k0 / B);
+        ``fitted_model`` is the :class:`QuasiLinearViscoelastic`.
     """
     record = RelaxationRecord(
         time_s, displacement_m, force_N, max_displacement_m=max_displacement_m
@@ -408,19 +417,23 @@ def fit_qlv(
         depth = float(np.max(np.abs(record.displacement_m)))
         rate = 1.0 / depth
         scale = instantaneous * depth / math.expm1(rate * depth) if depth > 0 else 1.0
-        p0 = np.concatenate([[scale, rate], prony[1 : 1 + n] / instantaneous, prony[1 + n :]])
+        p0 = np.concatenate(
+            [[scale * rate, rate], prony[1 : 1 + n] / instantaneous, prony[1 + n :]]
+        )
     start = np.asarray(p0, dtype=np.float64)
     if start.size != 2 + 2 * n:
         raise InputError(f"p0 needs {2 + 2 * n} values", value=start.tolist())
-    names = ("A_N", "B_per_m") + tuple(f"g{i + 1}" for i in range(n))
+    names = ("k0_N_per_m", "B_per_m") + tuple(f"g{i + 1}" for i in range(n))
     names += tuple(f"tau{i + 1}_s" for i in range(n))
-    units = ("N", "1/m") + ("",) * n + ("s",) * n
+    units = ("N/m", "1/m") + ("",) * n + ("s",) * n
 
     def build(p: np.ndarray) -> QuasiLinearViscoelastic:
         return QuasiLinearViscoelastic(
             tuple(p[2 : 2 + n]),
             tuple(p[2 + n :]),
-            lambda x: exponential_elastic_force(x, scale_N=p[0], rate_per_m=p[1]),
+            partial(
+                exponential_spring_force, stiffness_N_per_m=float(p[0]), rate_per_m=float(p[1])
+            ),
         )
 
     def predict(p: np.ndarray) -> np.ndarray:

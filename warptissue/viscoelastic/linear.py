@@ -29,6 +29,7 @@ __all__ = [
     "QuasiLinearViscoelastic",
     "StandardLinearSolid",
     "exponential_elastic_force",
+    "exponential_spring_force",
 ]
 
 
@@ -312,6 +313,29 @@ def exponential_elastic_force(
     """
     x = np.asarray(displacement_m, dtype=np.float64)
     return scale_N * np.expm1(rate_per_m * x)
+
+
+def exponential_spring_force(
+    displacement_m: np.ndarray, *, stiffness_N_per_m: float, rate_per_m: float
+) -> np.ndarray:
+    """Fung's exponential elastic response by its stiffness at zero displacement,
+    F_e(x) = (k0 / B) (exp(B x) - 1), k0 = A B of :func:`exponential_elastic_force`.
+
+    Unlike (A, B), (k0, B) stays finite for a nearly linear response: B = 0 is the linear
+    spring k0 x, and B < 0 a softening one.
+
+    Args:
+        displacement_m: Displacement, any shape, in metres.
+        stiffness_N_per_m: k0 = F_e'(0), in N/m.
+        rate_per_m: B, in 1/m.
+
+    Returns:
+        Elastic force, the shape of ``displacement_m``, in newtons.
+    """
+    x = np.asarray(displacement_m, dtype=np.float64)
+    if rate_per_m == 0.0:
+        return stiffness_N_per_m * x
+    return stiffness_N_per_m * np.expm1(rate_per_m * x) / rate_per_m
 
 
 @dataclass(frozen=True)
