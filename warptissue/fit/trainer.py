@@ -38,9 +38,9 @@ from warptissue.errors import ConvergenceError, InputError
 from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.fem.probe import surface_triangles
 from warptissue.materials import StableNeoHookean
-from warptissue.mesh import TetMesh
+from warptissue.mesh import TetMesh, coarsen_mesh
 from warptissue.simulate import build_mesh, build_problem, record_problems
-from warptissue.study import Study
+from warptissue.study import Study, organ_mesh, probe_placement, support_nodes
 
 __all__ = [
     "TrainerCalibration",
@@ -180,8 +180,10 @@ def trainer_mesh(study: Study, *, max_tets: int | None = None) -> TetMesh:
     at the study's sizes, or coarser until it has at most ``max_tets`` tets.
 
     A generated block or disc is meshed again at sizes scaled by 1.25 per try; an organ's
-    mesh file is used as it is (corner nodes, no refinement around the sites), and refused
-    where it has more than ``max_tets`` tets.
+    mesh file is used as it is (corner nodes, no refinement around the sites), or where it
+    has more than ``max_tets`` tets, its boundary decimated and filled again
+    (:func:`warptissue.mesh.coarsen_mesh`), with the support and the surface found on the new
+    boundary as the study finds them on the file's.
 
     Raises:
         InputError: ``max_tets`` is not a positive integer, or cannot be met.
@@ -194,14 +196,14 @@ def trainer_mesh(study: Study, *, max_tets: int | None = None) -> TetMesh:
     if specimen.shape == "mesh":
         whole = dataclasses.replace(specimen, element="TET4", refine_zones=())
         mesh = build_mesh(dataclasses.replace(study, specimen=whole))
-        if max_tets is not None and mesh.tet_count > max_tets:
-            raise InputError(
-                f"the organ's mesh has {mesh.tet_count} tets; a coarser trainer mesh of an "
-                "organ is made from a coarser mesh file",
-                key="--max-tets",
-                value=max_tets,
-            )
-        return mesh
+        if max_tets is None or mesh.tet_count <= max_tets:
+            return mesh
+        coarse = coarsen_mesh(mesh, max_tets=int(max_tets))
+        site, along = probe_placement(
+            coarse, study.site_m, study.direction, radius_m=study.indenter.radius_m
+        )
+        support = support_nodes(coarse, study.boundary.support, site_m=site, direction=along)
+        return organ_mesh(coarse, support)
     scale = 1.0
     for _ in range(20):
         whole = dataclasses.replace(

@@ -1,6 +1,7 @@
 """Tetrahedral meshes: the container, generators, checks and file I/O."""
 
 from warptissue.mesh._ball import ball_mesh
+from warptissue.mesh._coarsen import coarsen_mesh
 from warptissue.mesh._grading import graded_spacing
 from warptissue.mesh._locate import locate_points
 from warptissue.mesh._refine import refine_near_sites
@@ -83,6 +84,7 @@ __all__ = [
     "boundary_faces",
     "check_closed_surface",
     "check_mesh",
+    "coarsen_mesh",
     "dihedral_angles",
     "edge_lengths",
     "estimate_indentation_mesh",
