@@ -51,9 +51,14 @@ PAGES = [ROOT / "README.md"] + sorted(
 LINKED = ("scenes", "scripts")
 """Folders of the repository that the examples see in their working directory."""
 
-SLOW_PAGES = {"README.md", "docs/tutorial.md", "docs/live-fitting.md"}
+SLOW_PAGES = {
+    "README.md",
+    "docs/tutorial.md",
+    "docs/live-fitting.md",
+    "docs/trainer-assets.md",
+}
 """Pages whose examples run FE simulations (tens of seconds with a cold Warp cache; the live
-fitting page also records two tests in real time)."""
+fitting page also records two tests in real time; the trainer page calibrates an asset)."""
 
 AMBIGUOUS = {"py", "python3", "pycon", "ipython", "sh", "shell", "zsh"}
 """Languages that look runnable but are not run: write ``python`` or ``bash`` (or ``text``)."""

@@ -299,6 +299,7 @@ def calibrate_trainer_material(
     max_tets: int | None = None,
     depth_count: int = 6,
     nu_bounds: tuple[float, float] = DEFAULT_NU_BOUNDS,
+    fit_radius_factors: Sequence[float] = (),
     check_radius_factors: Sequence[float] = (0.5, 2.0),
     device: str = "cpu",
 ) -> TrainerCalibration:
@@ -311,6 +312,8 @@ def calibrate_trainer_material(
         max_tets: With ``mesh=None``: the most tets of the trainer's mesh.
         depth_count: Depths per probe, evenly spaced to the study's deepest depth.
         nu_bounds: The Poisson's ratios searched, ``0 <= low < high < 0.5``.
+        fit_radius_factors: Probes of these multiples of each probe's radius are fitted too
+            (a trainer whose tools come in several sizes).
         check_radius_factors: Probes of these multiples of each probe's radius are
             simulated with the calibrated material and reported, not fitted.
         device: Warp device of the FE runs.
@@ -336,12 +339,17 @@ def calibrate_trainer_material(
     if isinstance(depth_count, bool) or int(depth_count) != depth_count or depth_count < 1:
         raise InputError("must be a positive integer", key="depth_count", value=depth_count)
     factors = [float(f) for f in check_radius_factors]
-    for factor in factors:
-        if not (math.isfinite(factor) and factor > 0):
-            raise InputError("must be positive", key="check_radius_factors", value=factor)
+    fit_factors = [float(f) for f in fit_radius_factors]
+    for key, values in (("check_radius_factors", factors), ("fit_radius_factors", fit_factors)):
+        for factor in values:
+            if not (math.isfinite(factor) and factor > 0):
+                raise InputError("must be positive", key=key, value=factor)
     trainer = trainer_mesh(study, max_tets=max_tets) if mesh is None else mesh
     depths = _depths(study, int(depth_count))
-    references = _reference_problems(study)
+    study_probes = _reference_problems(study)
+    references = study_probes + [
+        _other_radius(study, base, factor) for factor in fit_factors for base in study_probes
+    ]
     true_e, true_nu = _elastic(study.material).small_strain_equivalent()
     reference_forces = [
         np.asarray(_simulate(p, depths, device).reaction_force_N, dtype=np.float64)
@@ -393,7 +401,7 @@ def calibrate_trainer_material(
     fitted_runs = [checked(p, f, True) for p, f in zip(references, reference_forces, strict=True)]
     probes = [probe for probe, _ in fitted_runs]
     for factor in factors:
-        for p in (_other_radius(study, base, factor) for base in references):
+        for p in (_other_radius(study, base, factor) for base in study_probes):
             probes.append(checked(p, _simulate(p, depths, device).reaction_force_N, False)[0])
     volume = _volume_change(trainer, np.asarray(fitted_runs[0][1].displacement_m)[-1])
     return TrainerCalibration(
