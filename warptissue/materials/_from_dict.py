@@ -45,9 +45,9 @@ def material_from_dict(data: Mapping[str, Any]) -> Material:
 
     ``model`` is one of ``neo_hookean``, ``mooney_rivlin``, ``reduced_polynomial``, ``yeoh``,
     ``ogden``, ``compressible_neo_hookean``, ``linear_elastic``, ``stable_neo_hookean``.
-    Parameters are the flat keys of ``to_dict`` (``C10_Pa``, ``C20_Pa``, ``mu1_Pa``, ``alpha1``, ``bulk_modulus_Pa``, ...);
-    ``D1_per_Pa`` may replace ``bulk_modulus_Pa``; polynomial and Ogden coefficients may also be
-    given as lists ``C_Pa``, ``mu_Pa`` and ``alpha``.
+    Parameters are the flat keys of ``to_dict`` (``C10_Pa``, ``C20_Pa``, ``mu1_Pa``,
+    ``alpha1``, ``bulk_modulus_Pa``, ...); ``D1_per_Pa`` may replace ``bulk_modulus_Pa``;
+    polynomial and Ogden coefficients may also be given as lists ``C_Pa``, ``mu_Pa`` and ``alpha``.
 
     Raises:
         InputError: Unknown model, missing or unknown key, or a bad value (named).
