@@ -115,6 +115,7 @@ class TrainerCalibration:
         node_count: Nodes of the trainer's mesh.
         scan: ``(nu, E, rms relative error)`` of every Poisson's ratio evaluated.
         nu_bounds: The Poisson's ratios searched.
+        unchecked: The probes of other radii whose run did not converge, with why.
     """
 
     youngs_modulus_Pa: float
@@ -127,6 +128,7 @@ class TrainerCalibration:
     node_count: int
     scan: tuple[tuple[float, float, float], ...]
     nu_bounds: tuple[float, float]
+    unchecked: tuple[str, ...] = ()
 
     @property
     def max_relative_error(self) -> float:
@@ -147,6 +149,7 @@ class TrainerCalibration:
             "tet_count": self.tet_count,
             "node_count": self.node_count,
             "nu_bounds": list(self.nu_bounds),
+            "unchecked": list(self.unchecked),
             "probes": {f"probe_{i}": p.to_dict() for i, p in enumerate(self.probes)},
             "not_matched": [
                 "volume: the trainer's body changes volume where the tissue keeps it "
@@ -167,6 +170,7 @@ class TrainerCalibration:
             errors = ", ".join(f"{100 * e:+.1f}" for e in probe.relative_error)
             kind = "fitted" if probe.fitted else "checked"
             lines.append(f"  {probe.label} ({kind}): force error % by depth: {errors}")
+        lines.extend(f"  not checked: {reason}" for reason in self.unchecked)
         lines.append(
             f"  cost: the body's volume changes by {100 * self.volume_change:+.1f} % of the "
             "volume the indented surface swept in at the deepest depth (the tissue keeps its "
@@ -400,9 +404,13 @@ def calibrate_trainer_material(
 
     fitted_runs = [checked(p, f, True) for p, f in zip(references, reference_forces, strict=True)]
     probes = [probe for probe, _ in fitted_runs]
+    unchecked = []
     for factor in factors:
         for p in (_other_radius(study, base, factor) for base in study_probes):
-            probes.append(checked(p, _simulate(p, depths, device).reaction_force_N, False)[0])
+            try:
+                probes.append(checked(p, _simulate(p, depths, device).reaction_force_N, False)[0])
+            except ConvergenceError as exc:  # a check that fails says so; the asset stands
+                unchecked.append(f"{_label(p)}: {exc}")
     volume = _volume_change(trainer, np.asarray(fitted_runs[0][1].displacement_m)[-1])
     return TrainerCalibration(
         youngs_modulus_Pa=float(youngs),
@@ -415,4 +423,5 @@ def calibrate_trainer_material(
         node_count=trainer.node_count,
         scan=tuple(sorted(scan)),
         nu_bounds=(low, high),
+        unchecked=tuple(unchecked),
     )
