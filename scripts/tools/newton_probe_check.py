@@ -8,10 +8,11 @@ holds the ``bottom`` subset, moves each bonded punch's nodes (the calibration's
 (gravity off, velocities zeroed after every step) until no particle moves by more than
 ``--rtol`` times the depth in ``--check-every`` sweeps (1e-4: Newton's positions are float32,
 whose resolution at centimetre coordinates is about 1e-5 of a 0.1 mm depth, so a tighter
-rule waits on rounding; the forces then equal warptissue's linear-tet model to 1e-4). The force is the reaction of Newton's
-own tet energy (stable neo-Hookean, its Lame parameters and rest poses) on the punch nodes,
-checked against the base's reaction. ``--physics true`` runs the tissue's true small-strain
-E and nu instead of the calibrated ones (the asset before calibration).
+rule waits on rounding; the forces then equal warptissue's linear-tet model to 1e-4). The
+force is the reaction of Newton's own tet energy (stable neo-Hookean, its Lame parameters and
+rest poses) on the punch nodes, checked against the base's reaction. ``--physics true`` runs
+the tissue's true small-strain E and nu instead of the calibrated ones (the asset before
+calibration).
 
 Prints one JSON line and exits 0 when every fitted probe is within ``--tolerance`` of the
 locking-free force at every depth and every load step settled within ``--max-sweeps``.
@@ -156,6 +157,8 @@ def main() -> int:
     for _, probe in sorted(calibration["probes"].items(), key=lambda kv: int(kv[0][6:])):
         if args.probes == "fitted" and not probe["fitted"]:
             continue
+        if isinstance(probe["punch_nodes"], str):  # customData keeps an empty list as "[]"
+            probe = {**probe, "punch_nodes": json.loads(probe["punch_nodes"])}
         if len(probe["punch_nodes"]) == 0:
             continue  # a rigid indenter: Newton's contact is not what this checks
         if args.depths:

@@ -53,6 +53,10 @@ __all__ = [
 #: Newton's VBD still settles a load step in about 2 000 sweeps (docs/usd.md).
 DEFAULT_NU_BOUNDS = (0.30, 0.48)
 
+#: A bonded punch needs at least this many nodes of the trainer's mesh under it (the centre
+#: and a ring) for its force to mean something.
+MIN_PUNCH_NODES = 7
+
 
 @dataclasses.dataclass(frozen=True)
 class TrainerProbe:
@@ -150,6 +154,7 @@ class TrainerCalibration:
             "node_count": self.node_count,
             "nu_bounds": list(self.nu_bounds),
             "unchecked": list(self.unchecked),
+            "unresolved": self.unresolved,
             "probes": {f"probe_{i}": p.to_dict() for i, p in enumerate(self.probes)},
             "not_matched": [
                 "volume: the trainer's body changes volume where the tissue keeps it "
@@ -158,6 +163,16 @@ class TrainerCalibration:
                 "damping for volume deformables)",
             ],
         }
+
+    @property
+    def unresolved(self) -> list[str]:
+        """The bonded punches that hold fewer than :data:`MIN_PUNCH_NODES` nodes of the
+        trainer's mesh: its surface does not resolve them, and their force means little."""
+        return [
+            f"{p.label}: {len(p.punch_nodes)} node(s) under the punch"
+            for p in self.probes
+            if 0 < len(p.punch_nodes) < MIN_PUNCH_NODES
+        ]
 
     def report_lines(self) -> list[str]:
         """The calibration as the CLI prints it."""
@@ -171,6 +186,10 @@ class TrainerCalibration:
             kind = "fitted" if probe.fitted else "checked"
             lines.append(f"  {probe.label} ({kind}): force error % by depth: {errors}")
         lines.extend(f"  not checked: {reason}" for reason in self.unchecked)
+        lines.extend(
+            f"  warning: the trainer's mesh does not resolve {what}; refine it there"
+            for what in self.unresolved
+        )
         lines.append(
             f"  cost: the body's volume changes by {100 * self.volume_change:+.1f} % of the "
             "volume the indented surface swept in at the deepest depth (the tissue keeps its "
@@ -184,8 +203,9 @@ def trainer_mesh(study: Study, *, max_tets: int | None = None) -> TetMesh:
     at the study's sizes, or coarser until it has at most ``max_tets`` tets.
 
     A generated block or disc is meshed again at sizes scaled by 1.25 per try; an organ's
-    mesh file is used as it is (corner nodes, no refinement around the sites), or where it
-    has more than ``max_tets`` tets, its boundary decimated and filled again
+    mesh file is refined around the study's sites as its fit refines it (a probe needs
+    nodes under it: the liver organ's own surface has one node under a 5 mm punch), or where
+    it has more than ``max_tets`` tets, its boundary decimated and filled again
     (:func:`warptissue.mesh.coarsen_mesh`), with the support and the surface found on the new
     boundary as the study finds them on the file's.
 
@@ -198,7 +218,7 @@ def trainer_mesh(study: Study, *, max_tets: int | None = None) -> TetMesh:
         raise InputError("must be a positive integer", key="--max-tets", value=max_tets)
     specimen = study.specimen
     if specimen.shape == "mesh":
-        whole = dataclasses.replace(specimen, element="TET4", refine_zones=())
+        whole = dataclasses.replace(specimen, element="TET4")
         mesh = build_mesh(dataclasses.replace(study, specimen=whole))
         if max_tets is None or mesh.tet_count <= max_tets:
             return mesh
