@@ -29,7 +29,7 @@ deformed points, stress and probe sit in layers over it); the scene is validated
 findings printed.
 
 Usage:
-    python scripts/examples/liver_organ_sites.py [--out DIR] [--device cpu] [--size-near-m 0.008]
+    python scripts/examples/liver_organ_sites.py [--out DIR] [--device cpu]
     python scripts/examples/liver_organ_sites.py --make-records scenes/data
 """
 
@@ -49,7 +49,7 @@ from warptissue.fem import simulate_indentation
 from warptissue.fit import fit_indentation
 from warptissue.io import write_csv, write_json
 from warptissue.simulate import build_mesh, build_problem, run_study
-from warptissue.study import Study, load_study, save_study, study_from_dict
+from warptissue.study import load_study, save_study, study_from_dict
 from warptissue.usd import validate_stage
 from warptissue.usd.export import export_result_dir
 
@@ -99,19 +99,9 @@ def make_records(folder: Path) -> None:
         print(f"{name}: {study.indenter.kind} at {where} m, {force[-1]:.4g} N at 2 mm")
 
 
-def organ_study(size_near_m: float | None = None) -> Study:
-    """The study, its mesh refined around the sites to ``size_near_m`` (m; None: the
-    study's own 4 mm)."""
-    if size_near_m is None:
-        return load_study(STUDY)
-    text = tomllib.loads(STUDY.read_text(encoding="utf-8"))
-    text["specimen"]["size_near_m"] = size_near_m
-    return study_from_dict(text, path=STUDY)
-
-
-def fit_and_export(out: Path, *, device: str | None, size_near_m: float | None = None) -> dict:
+def fit_and_export(out: Path, *, device: str | None) -> dict:
     """The joint fit, C10 against the truth, and the fitted organ at site A as USD."""
-    study = organ_study(size_near_m)
+    study = load_study(STUDY)
     start = time.perf_counter()
     fit = fit_indentation(study, device=device, progress=False)
     fit_s = time.perf_counter() - start
@@ -134,7 +124,6 @@ def fit_and_export(out: Path, *, device: str | None, size_near_m: float | None =
     summary = {
         "status": fit.status,
         "c10_Pa": fitted,
-        "size_near_m": study.specimen.size_near_m,
         "true_c10_Pa": TRUE_C10_PA,
         "relative_error": error,
         "forward_solves": fit.forward_solves,
@@ -153,19 +142,11 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/liver_organ_sites"))
     parser.add_argument("--device", default=None, help="cpu, cuda, ... (default: the study's)")
     parser.add_argument("--make-records", type=Path, metavar="FOLDER")
-    parser.add_argument(
-        "--size-near-m",
-        type=float,
-        default=None,
-        help="refine the organ around the sites to this size (m) instead of the study's 4 mm: "
-        "a coarser mesh, a faster fit, C10 off by the coarser mesh's force error "
-        "(docs/organs.md; the slow test runs 0.008)",
-    )
     arguments = parser.parse_args()
     if arguments.make_records is not None:
         make_records(arguments.make_records)
         return
-    fit_and_export(arguments.out, device=arguments.device, size_near_m=arguments.size_near_m)
+    fit_and_export(arguments.out, device=arguments.device)
 
 
 if __name__ == "__main__":

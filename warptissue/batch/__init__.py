@@ -312,52 +312,14 @@ def run_batch(
     """
     started = time.perf_counter()
     out_dir = Path(out)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError("the output folder is a file", path=out_dir)
-    # The batch's own outputs (a fit's fitted_study.toml) are not studies of the batch, even
-    # where a pattern such as '**/*.toml' reaches into OUT.
-    inside = os.path.realpath(out_dir) + os.sep
-    studies = [p for p in collect_studies(paths) if not os.path.realpath(p).startswith(inside)]
-    if not studies:
-        raise InputError("every study file given lies inside the output folder", path=out_dir)
-    if scheduler is not None and workers is not None:
-        raise InputError(
-            "--workers sets the size of a LocalCluster; a running scheduler has its own "
-            "workers: give one of them",
-            option="--workers",
-            value=workers,
-        )
-    if workers is not None and workers < 0:
-        raise InputError("must be 0 or more", option="--workers", value=workers)
-    if together < 1:
-        raise InputError("must be 1 or more", option="--together", value=together)
+    studies = _batch_studies(paths, out_dir, scheduler, workers, together)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary_path = out_dir / SUMMARY_FILE
     names = folder_names(studies)
-    outcomes: list[StudyOutcome | None] = [None] * len(studies)
-    pending: list[tuple[int, Task]] = []
-    use_dask = scheduler is not None or workers != 0
-    if use_dask and scheduler is None and workers is None and not _have_dask():
-        warnings.warn(
-            "Dask distributed is not installed (pip install 'warptissue[batch]'): the studies "
-            "run one after another in this process",
-            stacklevel=2,
-        )
-        use_dask = False
-    for index, (path, name) in enumerate(zip(studies, names, strict=True)):
-        done = None if force else completed_outcome(out_dir / name, file_sha256(path))
-        if done is not None:
-            outcomes[index] = replace(done, study=str(path), folder=name, skipped=True)
-            continue
-        task = Task(
-            path=os.path.abspath(path),
-            study=str(path),
-            out_dir=os.path.abspath(out_dir),
-            folder=name,
-            device=device,
-            on_dask=use_dask,
-        )
-        pending.append((index, task))
+    use_dask = _uses_dask(scheduler, workers)
+    outcomes, pending = _pending(
+        studies, names, out_dir, force=force, device=device, on_dask=use_dask
+    )
 
     from tqdm.auto import tqdm
 
@@ -381,20 +343,17 @@ def run_batch(
     for outcome in outcomes:
         if outcome is not None:
             finish(None, outcome)
-    worker_count = 0
     try:
-        if not pending:
-            finish(None, None)
-        elif not use_dask:
-            for group in _groups(pending, together):
-                for (index, _), outcome in zip(group, _run_group(group), strict=True):
-                    finish(index, outcome)
-        else:
-            groups = _groups(pending, together)
-            gpus = [] if scheduler is not None else worker_gpus(device)
-            if workers is None:
-                workers = max(1, len(gpus))  # one worker per GPU, else one
-            worker_count = _run_on_dask(groups, scheduler, workers, retries, finish, gpus)
+        worker_count = _run_pending(
+            pending,
+            finish,
+            together=together,
+            use_dask=use_dask,
+            scheduler=scheduler,
+            workers=workers,
+            retries=retries,
+            device=device,
+        )
     finally:
         bar.close()
     return BatchResult(
@@ -404,6 +363,111 @@ def run_batch(
         seconds=time.perf_counter() - started,
         workers=worker_count,
     )
+
+
+def _batch_studies(
+    paths: Sequence[str | Path],
+    out_dir: Path,
+    scheduler: str | None,
+    workers: int | None,
+    together: int,
+) -> list[Path]:
+    """The batch's study files (:func:`collect_studies`), those inside ``out_dir`` left out,
+    with :func:`run_batch`'s options checked."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("the output folder is a file", path=out_dir)
+    # The batch's own outputs (a fit's fitted_study.toml) are not studies of the batch, even
+    # where a pattern such as '**/*.toml' reaches into OUT.
+    inside = os.path.realpath(out_dir) + os.sep
+    studies = [p for p in collect_studies(paths) if not os.path.realpath(p).startswith(inside)]
+    if not studies:
+        raise InputError("every study file given lies inside the output folder", path=out_dir)
+    if scheduler is not None and workers is not None:
+        raise InputError(
+            "--workers sets the size of a LocalCluster; a running scheduler has its own "
+            "workers: give one of them",
+            option="--workers",
+            value=workers,
+        )
+    if workers is not None and workers < 0:
+        raise InputError("must be 0 or more", option="--workers", value=workers)
+    if together < 1:
+        raise InputError("must be 1 or more", option="--together", value=together)
+    return studies
+
+
+def _pending(
+    studies: Sequence[Path],
+    names: Sequence[str],
+    out_dir: Path,
+    *,
+    force: bool,
+    device: str | None,
+    on_dask: bool,
+) -> tuple[list[StudyOutcome | None], list[tuple[int, Task]]]:
+    """Each study's outcome where its folder holds a complete result of the same study file
+    (skipped; None for the others unless ``force``), and the tasks of the others as
+    (index, task)."""
+    outcomes: list[StudyOutcome | None] = [None] * len(studies)
+    pending: list[tuple[int, Task]] = []
+    for index, (path, name) in enumerate(zip(studies, names, strict=True)):
+        done = None if force else completed_outcome(out_dir / name, file_sha256(path))
+        if done is not None:
+            outcomes[index] = replace(done, study=str(path), folder=name, skipped=True)
+            continue
+        task = Task(
+            path=os.path.abspath(path),
+            study=str(path),
+            out_dir=os.path.abspath(out_dir),
+            folder=name,
+            device=device,
+            on_dask=on_dask,
+        )
+        pending.append((index, task))
+    return outcomes, pending
+
+
+def _uses_dask(scheduler: str | None, workers: int | None) -> bool:
+    """Whether the batch runs on Dask: not with ``workers=0``, nor by default where Dask
+    distributed is not installed (said in a warning)."""
+    if scheduler is None and workers == 0:
+        return False
+    if scheduler is None and workers is None and not _have_dask():
+        warnings.warn(
+            "Dask distributed is not installed (pip install 'warptissue[batch]'): the studies "
+            "run one after another in this process",
+            stacklevel=3,
+        )
+        return False
+    return True
+
+
+def _run_pending(
+    pending: Sequence[tuple[int, Task]],
+    finish: Callable[[int | None, StudyOutcome | None], None],
+    *,
+    together: int,
+    use_dask: bool,
+    scheduler: str | None,
+    workers: int | None,
+    retries: int,
+    device: str | None,
+) -> int:
+    """Run the pending studies' tasks, in this process or on Dask, each outcome to
+    ``finish`` as it ends; returns the number of Dask workers (0 in this process)."""
+    if not pending:
+        finish(None, None)
+        return 0
+    if not use_dask:
+        for group in _groups(pending, together):
+            for (index, _), outcome in zip(group, _run_group(group), strict=True):
+                finish(index, outcome)
+        return 0
+    groups = _groups(pending, together)
+    gpus = [] if scheduler is not None else worker_gpus(device)
+    if workers is None:
+        workers = max(1, len(gpus))  # one worker per GPU, else one
+    return _run_on_dask(groups, scheduler, workers, retries, finish, gpus)
 
 
 def _groups(pending: Sequence[tuple[int, Task]], together: int) -> list[list[tuple[int, Task]]]:

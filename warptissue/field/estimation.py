@@ -452,30 +452,14 @@ def estimate_field(
     alpha0 = initial.alpha_Pa
     nu_scale = NU_SCALE
     scales, prior, x0, bounds = _normalized_unknowns(initial, start, groups)
-    _check_memory(
-        rows=(
-            problem.free_dofs.size if objective == "force" else problem.marker_displacement_m.size
-        )
-        + 2 * groups,
-        unknowns=2 * groups,
-    )
+    rows = problem.free_dofs.size if objective == "force" else problem.marker_displacement_m.size
+    _check_memory(rows=rows + 2 * groups, unknowns=2 * groups)
     data_residual, data_jacobian = data_objective(
         problem, objective=objective, alpha0_Pa=alpha0, nu_scale=nu_scale
     )
-    result = _tikhonov_fit(
-        data_residual,
-        data_jacobian,
-        x0,
-        prior,
-        bounds,
-        gamma=gamma,
-        method=method,
-        max_iterations=max_iterations,
-        ftol=ftol,
-        xtol=xtol,
-        gtol=gtol,
-        progress=progress,
-    )
+    lm_options = {"method": method, "max_iterations": max_iterations, "progress": progress}
+    lm_options.update(ftol=ftol, xtol=xtol, gtol=gtol)
+    result = _tikhonov_fit(data_residual, data_jacobian, x0, prior, bounds, gamma, **lm_options)
     alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu_scale
     if alpha_deviation is None:
         alpha_deviation = float(np.abs(alpha / alpha0 - 1.0).max())
@@ -534,8 +518,8 @@ def _tikhonov_fit(
     x0: np.ndarray,
     prior: np.ndarray,
     bounds: tuple[np.ndarray, np.ndarray],
-    *,
     gamma: float,
+    *,
     method: str,
     max_iterations: int,
     ftol: float,

@@ -20,6 +20,7 @@ from warptissue.mesh import (
     write_mesh,
 )
 from warptissue.simulate.build import StudySetup
+from warptissue.study import Study
 
 FORCE_CURVE_COLUMNS: tuple[str, ...] = (*INDENTATION_COLUMNS, "step", "newton_iterations")
 """Columns of ``force_curve.csv``: an indentation record's
@@ -207,11 +208,9 @@ def write_study_outputs(
     depths = np.asarray(result.depths_m, dtype=np.float64)
     forces = np.asarray(result.reaction_force_N, dtype=np.float64)
     # Real time for a timed protocol; for a quasi-static one a pseudo-time, the step number.
-    step_times = (
-        np.asarray(result.times_s, dtype=np.float64)[:converged]
-        if times is not None
-        else steps.astype(np.float64)
-    )
+    step_times = steps.astype(np.float64)
+    if times is not None:
+        step_times = np.asarray(result.times_s, dtype=np.float64)[:converged]
     is_contact = bool(problem.is_contact)
     curve_columns = {
         "time_s": np.concatenate([[0.0], step_times]),
@@ -220,33 +219,11 @@ def write_study_outputs(
         "step": np.arange(converged + 1, dtype=np.int64),
         "newton_iterations": np.concatenate([[0], newton]).astype(np.int64),
     }
-    contact_curve: dict[str, Any] = {}
-    contact_summary: dict[str, Any] = {}
+    contact_curve, contact_summary = (
+        _contact_outputs(study, problem, result, converged) if is_contact else ({}, {})
+    )
     if is_contact:
-        area = np.asarray(result.contact_area_m2, dtype=np.float64)[:converged]
-        penetration = np.asarray(result.max_penetration_m, dtype=np.float64)[:converged]
-        pressure = np.asarray(result.contact_pressure_Pa, dtype=np.float64)[:converged]
-        curve_columns["contact_area_m2"] = np.concatenate([[0.0], area])
-        contact_curve = {
-            "contact_force_N": np.asarray(result.contact_force_N, dtype=np.float64)[:converged],
-            "contact_area_m2": area,
-            "max_penetration_m": penetration,
-            "max_contact_pressure_Pa": (
-                pressure.max(axis=1) if pressure.size else np.zeros(converged)
-            ),
-        }
-        contact_summary = {
-            "contact": {
-                "indenter": study.indenter.kind,
-                "penalty_factor": float(problem.penalty_factor),
-                "penalty_stiffness_N_per_m": float(problem.rigid_contact().stiffness_N_per_m),
-                "max_penetration_m": float(penetration.max()) if penetration.size else 0.0,
-                "max_penetration_step": (
-                    int(np.argmax(penetration)) + 1 if penetration.size else None
-                ),
-                "contact_area_m2": float(area[-1]) if area.size else 0.0,
-            }
-        }
+        curve_columns["contact_area_m2"] = np.concatenate([[0.0], contact_curve["contact_area_m2"]])
     writing = time.perf_counter()
     files: dict[str, Path] = {
         "result": out_path / "result.json",
@@ -275,29 +252,14 @@ def write_study_outputs(
             **contact_curve,
         },
         **contact_summary,
-        **(
-            {}
-            if problem.frame is None
-            else {
-                "probe": {
-                    "site_m": problem.frame.origin_m.tolist(),
-                    "direction": problem.frame.direction.tolist(),
-                    "axes": problem.frame.axes.tolist(),
-                }
-            }
-        ),
+        **_probe_summary(problem),
         "steps_requested": study.protocol.step_count,
         "steps_converged": converged,
         "warnings": force_curve_warnings(depths, forces)
         + (penetration_warnings(depths, contact_curve["max_penetration_m"]) if is_contact else []),
         "mesh": setup.mesh_statistics,
         "solved_together": int(solved_together),
-        "timings_s": {
-            "mesh_and_setup": setup.setup_s,
-            "solve": solve_s,
-            "write_fields": written - writing,
-            "total": setup.setup_s + solve_s + (written - writing),
-        },
+        "timings_s": _timings(setup.setup_s, solve_s, written - writing),
         "newton_profile": None if result.timings is None else result.timings.to_dict(),
         "linear_solver_statistics": dict(result.linear_solver_statistics),
         "files": {kind: path.name for kind, path in files.items()},
@@ -312,3 +274,56 @@ def write_study_outputs(
         out_dir=out_path,
         files=files,
     )
+
+
+def _contact_outputs(
+    study: Study, problem: Any, result: Any, converged: int
+) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Under a rigid indenter: the per-step contact columns of ``result.json``'s
+    ``force_curve`` (contact force, N; area, m^2; largest penetration, m; largest pressure,
+    Pa; each shape (converged,)) and its ``contact`` summary."""
+    area = np.asarray(result.contact_area_m2, dtype=np.float64)[:converged]
+    penetration = np.asarray(result.max_penetration_m, dtype=np.float64)[:converged]
+    pressure = np.asarray(result.contact_pressure_Pa, dtype=np.float64)[:converged]
+    contact_curve = {
+        "contact_force_N": np.asarray(result.contact_force_N, dtype=np.float64)[:converged],
+        "contact_area_m2": area,
+        "max_penetration_m": penetration,
+        "max_contact_pressure_Pa": (pressure.max(axis=1) if pressure.size else np.zeros(converged)),
+    }
+    contact_summary = {
+        "contact": {
+            "indenter": study.indenter.kind,
+            "penalty_factor": float(problem.penalty_factor),
+            "penalty_stiffness_N_per_m": float(problem.rigid_contact().stiffness_N_per_m),
+            "max_penetration_m": float(penetration.max()) if penetration.size else 0.0,
+            "max_penetration_step": (int(np.argmax(penetration)) + 1 if penetration.size else None),
+            "contact_area_m2": float(area[-1]) if area.size else 0.0,
+        }
+    }
+    return contact_curve, contact_summary
+
+
+def _probe_summary(problem: Any) -> dict[str, Any]:
+    """``result.json``'s ``probe`` (site, direction and axes of a probe placed on a mesh
+    specimen), or nothing."""
+    if problem.frame is None:
+        return {}
+    return {
+        "probe": {
+            "site_m": problem.frame.origin_m.tolist(),
+            "direction": problem.frame.direction.tolist(),
+            "axes": problem.frame.axes.tolist(),
+        }
+    }
+
+
+def _timings(setup_s: float, solve_s: float, write_s: float) -> dict[str, float]:
+    """``result.json``'s ``timings_s``: meshing and set-up, load steps, writing the fields
+    and their total, s."""
+    return {
+        "mesh_and_setup": setup_s,
+        "solve": solve_s,
+        "write_fields": write_s,
+        "total": setup_s + solve_s + write_s,
+    }
