@@ -45,7 +45,7 @@ def _tiny_study(c10_Pa: float) -> str:
 
 
 def _tasks(folder: Path, count: int, *, on_dask: bool) -> list:
-    from warptissue.batch import _Task
+    from warptissue.batch import Task
 
     studies = folder / "studies"
     studies.mkdir(parents=True, exist_ok=True)
@@ -54,7 +54,7 @@ def _tasks(folder: Path, count: int, *, on_dask: bool) -> list:
         path = studies / f"punch{k}.toml"
         path.write_text(_tiny_study(250.0 + 25.0 * k), encoding="utf-8")
         tasks.append(
-            _Task(
+            Task(
                 path=str(path),
                 study=str(path),
                 out_dir=str(folder / "out"),
@@ -74,7 +74,7 @@ def _ray_study(task):  # the Ray task: the same study function, the same kill ho
     from warptissue import batch
 
     outcome = batch.run_study_task(task)
-    batch._kill_once_hook()
+    batch.kill_once_hook()
     return outcome
 
 

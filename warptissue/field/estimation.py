@@ -24,12 +24,14 @@ import scipy.sparse as sp
 from warptissue.device import available_host_memory_bytes
 from warptissue.errors import InputError
 from warptissue.field.fe import (
-    LinearSolution,
-    LinearTetModel,
     alpha_from_youngs,
     youngs_from_alpha,
 )
 from warptissue.field.markers import MarkerGrid
+from warptissue.field.problem import (  # noqa: F401
+    FieldProblem,
+    data_objective,
+)
 from warptissue.lsq import FitResult, least_squares
 
 __all__ = [
@@ -60,56 +62,6 @@ CONSTRAINED_YOUNGS_ERROR = 0.10
 
 CONSTRAINED_NU_ERROR = 0.02
 """Largest error bound of nu, absolute, of a cell whose nu counts as constrained."""
-
-
-@dataclass(frozen=True)
-class FieldProblem:
-    """One load set of a field estimation.
-
-    Attributes:
-        model: The grouped linear TET4 model.
-        fixed_nodes: Nodes held at zero displacement (the base), shape (f,).
-        force_N: External nodal forces, shape (node_count, 3), newtons.
-        marker_interpolation: Nodes to the (training) markers, shape (k, node_count).
-        marker_displacement_m: Measured displacements of those markers, shape (k, 3), metres.
-        nodal_displacement_m: Displacement of every node, measured or filled in from the
-            markers (:func:`fill_nodal_displacements`), shape (node_count, 3); the force
-            objective (Eq. 5-6) needs it.
-    """
-
-    model: LinearTetModel
-    fixed_nodes: np.ndarray
-    force_N: np.ndarray
-    marker_interpolation: sp.csr_matrix
-    marker_displacement_m: np.ndarray
-    nodal_displacement_m: np.ndarray
-
-    def __post_init__(self) -> None:
-        nodes = self.model.mesh.node_count
-        if self.force_N.shape != (nodes, 3) or self.nodal_displacement_m.shape != (nodes, 3):
-            raise InputError(f"force and nodal displacement need shape ({nodes}, 3)")
-        if self.marker_interpolation.shape != (len(self.marker_displacement_m), nodes):
-            raise InputError("marker_interpolation must have shape (markers, nodes)")
-        if not np.any(self.force_N):
-            raise InputError("the load set has no applied force")
-
-    @property
-    def free_dofs(self) -> np.ndarray:
-        """Degrees of freedom not held by ``fixed_nodes``."""
-        fixed = np.zeros(self.model.dof_count, dtype=bool)
-        fixed[(3 * self.fixed_nodes[:, None] + np.arange(3)).ravel()] = True
-        return np.flatnonzero(~fixed)
-
-    @property
-    def force_scale_N(self) -> float:
-        """The largest nodal force magnitude, N (scales force residuals)."""
-        return float(np.linalg.norm(self.force_N, axis=1).max())
-
-    @property
-    def displacement_scale_m(self) -> float:
-        """The largest measured marker displacement, m (scales displacement residuals)."""
-        scale = float(np.linalg.norm(self.marker_displacement_m, axis=1).max())
-        return scale if scale > 0 else 1.0
 
 
 def fill_nodal_displacements(
@@ -428,78 +380,6 @@ def _leakage(rows: np.ndarray, groups: int) -> np.ndarray:
     return np.column_stack([magnitude[:, :groups].sum(axis=1), magnitude[:, groups:].sum(axis=1)])
 
 
-def data_objective(
-    problem: FieldProblem, *, objective: str, alpha0_Pa: float, nu_scale: float = 0.1
-) -> tuple[Callable[[np.ndarray], np.ndarray], Callable[[np.ndarray], np.ndarray]]:
-    """The data residual of :func:`estimate_field` and its exact Jacobian.
-
-    Args:
-        problem: The load set.
-        objective: "force" or "displacement".
-        alpha0_Pa, nu_scale: Normalization: x = (alpha_g / alpha0, nu_g / nu_scale).
-
-    Returns:
-        ``(residual(x) -> (m,), jacobian(x) -> (m, 2 groups))``.
-    """
-    groups = problem.model.group_count
-    alpha0 = alpha0_Pa
-
-    def split(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[:groups] * alpha0, x[groups:] * nu_scale
-
-    free = problem.free_dofs
-    model = problem.model
-
-    def sensitivity_columns(
-        force_g: sp.csr_matrix, force_h: sp.csr_matrix, alpha: np.ndarray, nu: np.ndarray
-    ) -> np.ndarray:
-        """d(K u)/dx on the free dofs, dense (free, 2 groups)."""
-        d_alpha = (force_g + force_h @ sp.diags(nu)) * alpha0
-        d_nu = force_h @ sp.diags(alpha * nu_scale)
-        return sp.hstack([d_alpha, d_nu]).tocsr()[free].toarray()
-
-    if objective == "force":
-        force_g, force_h = model.group_forces(problem.nodal_displacement_m)
-        target = problem.force_N.ravel()[free]
-        scale = problem.force_scale_N
-
-        def data_residual(x: np.ndarray) -> np.ndarray:
-            alpha, nu = split(x)
-            return ((force_g @ alpha + force_h @ (alpha * nu))[free] - target) / scale
-
-        def data_jacobian(x: np.ndarray) -> np.ndarray:
-            alpha, nu = split(x)
-            return sensitivity_columns(force_g, force_h, alpha, nu) / scale
-
-    else:
-        markers = problem.marker_interpolation
-        expand = sp.kron(markers, sp.eye(3)).tocsr()[:, free]
-        measured = problem.marker_displacement_m.ravel()
-        scale = problem.displacement_scale_m
-        cache: dict[bytes, LinearSolution] = {}
-
-        def forward(x: np.ndarray) -> LinearSolution:
-            key = x.tobytes()
-            if key not in cache:
-                cache.clear()
-                alpha, nu = split(x)
-                cache[key] = model.solve(alpha, nu, problem.force_N, problem.fixed_nodes)
-            return cache[key]
-
-        def data_residual(x: np.ndarray) -> np.ndarray:
-            solution = forward(x)
-            return (markers @ solution.displacement_m).ravel() / scale - measured / scale
-
-        def data_jacobian(x: np.ndarray) -> np.ndarray:
-            solution = forward(x)
-            alpha, nu = split(x)
-            force_g, force_h = model.group_forces(solution.displacement_m)
-            columns = sensitivity_columns(force_g, force_h, alpha, nu)
-            return -(expand @ solution.solve_free(columns)) / scale
-
-    return data_residual, data_jacobian
-
-
 def estimate_field(
     problem: FieldProblem,
     *,
@@ -566,6 +446,45 @@ def estimate_field(
         bias bound plus 2 standard errors is within the tolerance. The resolution alone
         bounds nothing: a cell with R >= 0.9 still averages its neighbours.
     """
+    _check_options(objective, gamma, alpha_deviation, nu_deviation)
+    initial = homogeneous_estimate(problem) if initial is None else initial
+    groups = problem.model.group_count
+    alpha0 = initial.alpha_Pa
+    nu_scale = NU_SCALE
+    scales, prior, x0, bounds = _normalized_unknowns(initial, start, groups)
+    rows = problem.free_dofs.size if objective == "force" else problem.marker_displacement_m.size
+    _check_memory(rows=rows + 2 * groups, unknowns=2 * groups)
+    data_residual, data_jacobian = data_objective(
+        problem, objective=objective, alpha0_Pa=alpha0, nu_scale=nu_scale
+    )
+    lm_options = {"method": method, "max_iterations": max_iterations, "progress": progress}
+    lm_options.update(ftol=ftol, xtol=xtol, gtol=gtol)
+    result = _tikhonov_fit(data_residual, data_jacobian, x0, prior, bounds, gamma, **lm_options)
+    alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu_scale
+    if alpha_deviation is None:
+        alpha_deviation = float(np.abs(alpha / alpha0 - 1.0).max())
+    if nu_deviation is None:
+        nu_deviation = float(np.abs(nu - initial.poissons_ratio).max())
+    return FieldEstimate(
+        alpha_Pa=alpha,
+        poissons_ratio=nu,
+        youngs_modulus_Pa=youngs_from_alpha(alpha, nu),
+        initial=initial,
+        objective=objective,
+        gamma=gamma,
+        fit=result,
+        **_confidence(data_jacobian(result.x), data_residual(result.x), gamma, alpha, nu, alpha0),
+        alpha_deviation=float(alpha_deviation),
+        nu_deviation=float(nu_deviation),
+        identifiability=_physical(result, scales, groups).identifiability,
+    )
+
+
+def _check_options(
+    objective: str, gamma: float, alpha_deviation: float | None, nu_deviation: float | None
+) -> None:
+    """Refuse a bad objective, Tikhonov weight or assumed deviation of
+    :func:`estimate_field`."""
     if objective not in ("force", "displacement"):
         raise InputError("objective must be 'force' or 'displacement'", value=objective)
     if not gamma >= 0:
@@ -573,10 +492,15 @@ def estimate_field(
     for name, deviation in (("alpha_deviation", alpha_deviation), ("nu_deviation", nu_deviation)):
         if deviation is not None and not (np.isfinite(deviation) and deviation >= 0):
             raise InputError(f"{name} must be a finite number >= 0", value=float(deviation))
-    initial = homogeneous_estimate(problem) if initial is None else initial
-    groups = problem.model.group_count
-    alpha0 = initial.alpha_Pa
-    nu_scale = NU_SCALE
+
+
+def _normalized_unknowns(
+    initial: HomogeneousEstimate, start: tuple[np.ndarray, np.ndarray] | None, groups: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """The normalized unknowns x = (alpha_g / alpha0, nu_g / NU_SCALE) of
+    :func:`estimate_field`: (their scales, the prior x0 of the Tikhonov term, the start
+    within the bounds, the bounds (lower, upper)), each of shape (2 groups,)."""
+    alpha0, nu_scale = initial.alpha_Pa, NU_SCALE
     scales = np.concatenate([np.full(groups, alpha0), np.full(groups, nu_scale)])
     prior = np.concatenate([np.ones(groups), np.full(groups, initial.poissons_ratio / nu_scale)])
     if start is None:
@@ -585,18 +509,28 @@ def estimate_field(
         x0 = np.concatenate([np.asarray(start[0]), np.asarray(start[1])]) / scales
     lower = np.concatenate([np.full(groups, 1e-3), np.zeros(groups)])
     upper = np.concatenate([np.full(groups, np.inf), np.full(groups, NU_UPPER / nu_scale)])
-    x0 = np.clip(x0, lower, upper)
-    _check_memory(
-        rows=(
-            problem.free_dofs.size if objective == "force" else problem.marker_displacement_m.size
-        )
-        + 2 * groups,
-        unknowns=2 * groups,
-    )
+    return scales, prior, np.clip(x0, lower, upper), (lower, upper)
+
+
+def _tikhonov_fit(
+    data_residual: Callable[[np.ndarray], np.ndarray],
+    data_jacobian: Callable[[np.ndarray], np.ndarray],
+    x0: np.ndarray,
+    prior: np.ndarray,
+    bounds: tuple[np.ndarray, np.ndarray],
+    gamma: float,
+    *,
+    method: str,
+    max_iterations: int,
+    ftol: float,
+    xtol: float,
+    gtol: float,
+    progress: bool,
+) -> FitResult:
+    """Least squares of r(x) = [data residual; sqrt(gamma) (x - prior)] in the normalized
+    unknowns (Tong et al., Eq. 6), from ``x0`` within ``bounds``."""
     root_gamma = np.sqrt(gamma)
-    data_residual, data_jacobian = data_objective(
-        problem, objective=objective, alpha0_Pa=alpha0, nu_scale=nu_scale
-    )
+    groups = x0.size // 2
 
     def residual(x: np.ndarray) -> np.ndarray:
         return np.concatenate([data_residual(x), root_gamma * (x - prior)])
@@ -605,11 +539,11 @@ def estimate_field(
         return np.vstack([data_jacobian(x), root_gamma * np.eye(x.size)])
 
     names = [f"alpha[{g}]" for g in range(groups)] + [f"nu[{g}]" for g in range(groups)]
-    result = least_squares(
+    return least_squares(
         residual,
         x0,
         jac=jacobian,
-        bounds=(lower, upper),
+        bounds=bounds,
         method=method,
         max_iterations=max_iterations,
         ftol=ftol,
@@ -618,9 +552,23 @@ def estimate_field(
         progress=progress,
         parameter_names=names,
     )
-    alpha, nu = result.x[:groups] * alpha0, result.x[groups:] * nu_scale
+
+
+def _confidence(
+    data_jacobian: np.ndarray,
+    data_residual: np.ndarray,
+    gamma: float,
+    alpha: np.ndarray,
+    nu: np.ndarray,
+    alpha0: float,
+) -> dict[str, np.ndarray]:
+    """The estimate's resolution, standard errors and regularization-bias leakage per group
+    (docs/field.md, "Confidence"), from the data Jacobian (m, 2 groups) and residual (m,) at
+    the estimate (alpha, nu per group; alpha0, Pa: the normalization): the
+    :class:`FieldEstimate` fields of those names."""
+    groups, nu_scale = alpha.size, NU_SCALE
     resolution, covariance, bias_operator = _resolution_and_spread(
-        data_jacobian(result.x), data_residual(result.x), max(gamma, 1e-300)
+        data_jacobian, data_residual, max(gamma, 1e-300)
     )
     # d(ln E)/dx: d alpha / alpha + (1 / (1 + nu) - 2 / (1 - 2 nu)) d nu, x normalized.
     cells = np.arange(groups)
@@ -635,28 +583,14 @@ def estimate_field(
         weights_alpha[:, None] * bias_operator[:groups]
         + weights_nu[:, None] * bias_operator[groups:]
     )
-    if alpha_deviation is None:
-        alpha_deviation = float(np.abs(alpha / alpha0 - 1.0).max())
-    if nu_deviation is None:
-        nu_deviation = float(np.abs(nu - initial.poissons_ratio).max())
-    return FieldEstimate(
-        alpha_Pa=alpha,
-        poissons_ratio=nu,
-        youngs_modulus_Pa=youngs_from_alpha(alpha, nu),
-        initial=initial,
-        objective=objective,
-        gamma=gamma,
-        fit=result,
-        resolution_alpha=resolution[:groups],
-        resolution_nu=resolution[groups:],
-        youngs_relative_error=np.sqrt(np.maximum(variance_e, 0.0)),
-        poissons_ratio_error=np.sqrt(np.maximum(np.diag(covariance)[groups:], 0.0)) * nu_scale,
-        youngs_leakage=_leakage(youngs_rows, groups),
-        poissons_ratio_leakage=_leakage(nu_scale * bias_operator[groups:], groups),
-        alpha_deviation=float(alpha_deviation),
-        nu_deviation=float(nu_deviation),
-        identifiability=_physical(result, scales, groups).identifiability,
-    )
+    return {
+        "resolution_alpha": resolution[:groups],
+        "resolution_nu": resolution[groups:],
+        "youngs_relative_error": np.sqrt(np.maximum(variance_e, 0.0)),
+        "poissons_ratio_error": np.sqrt(np.maximum(np.diag(covariance)[groups:], 0.0)) * nu_scale,
+        "youngs_leakage": _leakage(youngs_rows, groups),
+        "poissons_ratio_leakage": _leakage(nu_scale * bias_operator[groups:], groups),
+    }
 
 
 def dense_memory_bytes(*, rows: int, unknowns: int) -> int:

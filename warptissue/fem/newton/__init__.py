@@ -2,7 +2,7 @@
 
 :func:`solve_quasistatic` follows one displacement-controlled load path,
 :func:`solve_quasistatic_batch` follows K paths of problems packed into one mesh in the same
-launches; both run the one loop of :mod:`~warptissue.fem.newton.path`, whose increments
+launches; both run the one loop of :mod:`~warptissue.fem.newton.loop`, whose increments
 (:mod:`~warptissue.fem.newton.increment`) take every decision per problem: the predictor,
 the step search (:mod:`~warptissue.fem.newton.search`), Levenberg-Marquardt damping and
 factorization reuse (:mod:`~warptissue.fem.newton.steering`), the nonlinear elimination
