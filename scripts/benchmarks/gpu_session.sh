@@ -24,8 +24,8 @@ stats() {  # pstats file -> text summary (tottime and cumtime, top 45 each)
   python3 - "$1" > "$1.txt" <<'PY'
 import pstats, sys
 s = pstats.Stats(sys.argv[1])
-s.sort_stats("tottime").print_stats(45)
-s.sort_stats("cumulative").print_stats(45)
+s.sort_stats("tottime").print_stats("warptissue|nvmath|cupy|warp", 70)
+s.sort_stats("cumulative").print_stats("warptissue|nvmath|cupy|warp", 70)
 PY
   rm -f "$1"
 }
@@ -47,9 +47,13 @@ if [ "$mode" = profile ] || [ "$mode" = time ]; then
   cp runs/fit/fit.json "$out/fit.json"
   timed flat_punch python3 scripts/benchmarks/bench_flat_punch.py --device cuda --mesher delaunay \
     --sizes 3k,10k --profile --label "$label" --out "$out/flat_punch.json"
+  timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
+    --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
   cp runs/warm/result.json "$out/simulate_cuda_result.json"
 fi
 if [ "$mode" = time ]; then
+  timed flat_punch_plain python3 scripts/benchmarks/bench_flat_punch.py --device cuda \
+    --mesher delaunay --sizes 3k,10k --label "$label" --out "$out/flat_punch_plain.json"
   timed fit2 "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit2
   cp runs/fit2/fit.json "$out/fit2.json"
 fi
@@ -60,6 +64,12 @@ if [ "$mode" = profile ]; then
   timed fit_cprofile python3 -m cProfile -o "$out/fit.prof" -m warptissue.cli \
     fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit3
   stats "$out/fit.prof"
+fi
+if [ "$mode" = time ] && [ "$label" = after ]; then
+  # the main job with every factorization fresh (no GMRES with old factors)
+  sed 's/^\[solver\]$/[solver]\nreuse_factorization = false/' scenes/liver_fit.toml > scenes/liver_fit_fresh.toml
+  timed fit_no_reuse "${cli[@]}" fit indentation scenes/liver_fit_fresh.toml --device cuda --quiet --out runs/fitnr
+  cp runs/fitnr/fit.json "$out/fit_no_reuse.json"
 fi
 if [ "$mode" = batch ]; then
   timed batch_fits python3 scripts/benchmarks/bench_batch_fe.py --device cuda --tets 1.3k \
