@@ -51,12 +51,6 @@ if [ "$mode" = profile ] || [ "$mode" = time ]; then
     --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
   cp runs/warm/result.json "$out/simulate_cuda_result.json"
 fi
-if [ "$mode" = time ]; then
-  timed flat_punch_plain python3 scripts/benchmarks/bench_flat_punch.py --device cuda \
-    --mesher delaunay --sizes 3k,10k --label "$label" --out "$out/flat_punch_plain.json"
-  timed fit2 "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit2
-  cp runs/fit2/fit.json "$out/fit2.json"
-fi
 if [ "$mode" = profile ]; then
   timed simulate_cprofile python3 -m cProfile -o "$out/simulate.prof" -m warptissue.cli \
     simulate scenes/liver_fit.toml --device cuda --quiet --out runs/sim3
