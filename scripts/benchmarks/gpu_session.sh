@@ -40,13 +40,10 @@ timed() {  # name command...: wall time into $out/walls.txt
 if [ "$mode" = profile ] || [ "$mode" = time ]; then
   # warm the kernel cache (the first run compiles) and CuPy's kernels
   timed warm_simulate "${cli[@]}" simulate scenes/liver_fit.toml --device cuda --quiet --out runs/warm
-  timed simulate_profile "${cli[@]}" simulate scenes/liver_fit.toml --device cuda --quiet --profile --out runs/sim
-  cp runs/sim/result.json "$out/simulate_profile_result.json"
-  timed fit_warm "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit0
   timed fit "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit
   cp runs/fit/fit.json "$out/fit.json"
   timed flat_punch python3 scripts/benchmarks/bench_flat_punch.py --device cuda --mesher delaunay \
-    --sizes 3k,10k --profile --label "$label" --out "$out/flat_punch.json"
+    --sizes 3k,10k --elimination on,off --profile --label "$label" --out "$out/flat_punch.json"
   timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
     --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
   cp runs/warm/result.json "$out/simulate_cuda_result.json"
