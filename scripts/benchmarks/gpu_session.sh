@@ -43,7 +43,7 @@ if [ "$mode" = profile ] || [ "$mode" = time ]; then
   timed fit "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit
   cp runs/fit/fit.json "$out/fit.json"
   timed flat_punch python3 scripts/benchmarks/bench_flat_punch.py --device cuda --mesher delaunay \
-    --sizes 3k,10k --elimination on,off --profile --label "$label" --out "$out/flat_punch.json"
+    --sizes 3k,10k --elimination on --profile --label "$label" --out "$out/flat_punch.json"
   timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
     --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
   cp runs/warm/result.json "$out/simulate_cuda_result.json"
