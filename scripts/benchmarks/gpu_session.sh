@@ -8,7 +8,7 @@
 # LABEL names the code measured (e.g. before, after), SITE is the folder the project was
 # installed into (pip --target; its dependencies in /tmp/site), MODE is "profile" (cProfile
 # of the main job and its forward run, the per-phase profiles), "time" (the timed runs for the
-# tables) or "batch" (the batched fits at K = 8, 32 with a cProfile of K = 32). Every output
+# tables), "quick" (the main job's forward-run latency and fit alone) or "batch" (the batched fits at K = 8, 32 with a cProfile of K = 32). Every output
 # goes to $OUT/LABEL/ (JSON, pstats summaries as text, logs); nothing is asserted here.
 set -uo pipefail
 label=$1 site=$2 mode=$3
@@ -47,6 +47,12 @@ if [ "$mode" = profile ] || [ "$mode" = time ]; then
   timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
     --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
   cp runs/warm/result.json "$out/simulate_cuda_result.json"
+fi
+if [ "$mode" = quick ]; then  # the forward run's latency (its warm-up compiles) and the fit
+  timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
+    --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
+  timed fit "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit
+  cp runs/fit/fit.json "$out/fit.json"
 fi
 if [ "$mode" = profile ]; then
   timed simulate_cprofile python3 -m cProfile -o "$out/simulate.prof" -m warptissue.cli \
