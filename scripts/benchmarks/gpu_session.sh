@@ -1,15 +1,17 @@
 #!/usr/bin/env bash
 # One GPU lease's measurements for the Newton loop's latency and the batched fits (issue 46).
 #
-# Runs on the device machine (docs/performance.md, "Small problems' Newton iterations"):
+# Runs on the device machine (docs/performance.md, "Newton iterations of small problems on a
+# GPU"):
 #
 #   bash gpu_session.sh LABEL SITE MODE
 #
 # LABEL names the code measured (e.g. before, after), SITE is the folder the project was
 # installed into (pip --target; its dependencies in /tmp/site), MODE is "profile" (cProfile
 # of the main job and its forward run, the per-phase profiles), "time" (the timed runs for the
-# tables), "quick" (the main job's forward-run latency and fit alone) or "batch" (the batched fits at K = 8, 32 with a cProfile of K = 32). Every output
-# goes to $OUT/LABEL/ (JSON, pstats summaries as text, logs); nothing is asserted here.
+# tables), "quick" (the main job's forward-run latency and fit alone) or "batch" (the batched
+# fits at K = 8, 32 with a cProfile of K = 32). Every output goes to $OUT/LABEL/ (JSON,
+# pstats summaries as text, logs); nothing is asserted here.
 set -uo pipefail
 label=$1 site=$2 mode=$3
 here=$(cd "$(dirname "$0")" && pwd)
