@@ -9,6 +9,7 @@ import re
 import shlex
 from pathlib import Path
 
+import numpy as np
 import pytest
 from _scripts import ROOT, run_script
 
@@ -102,6 +103,23 @@ def test_the_flat_punch_benchmark_sweeps_the_near_size_and_tolerances(tmp_path):
     assert first.endswith("| 0 |") and re.search(r"\| \d\.\de-\d\d \|$", second)
     stderr = run_script(BENCHMARK, "--size-near-ratios", "2", cwd=tmp_path, expect_status=2)
     assert "--size-near-ratios must lie in (0, 1]" in stderr
+
+
+@pytest.mark.slow
+def test_the_newton_latency_benchmark_times_a_study_and_compares_runs(tmp_path):
+    """The tutorial study's load path: one plain and one profiled run after the warm-up, the
+    same iterations and forces (the CPU's reuse decisions follow measured times, so the
+    forces agree to the Newton tolerance, not bitwise), and --compare reads the file."""
+    study = ROOT / "scenes/tutorial_punch.toml"
+    run_benchmark("bench_newton_latency.py", str(study), "--device", "cpu", "--repeats", "1",
+                  "--out", "l.json", cwd=tmp_path)  # fmt: skip
+    plain, profiled = json.loads((tmp_path / "l.json").read_text())["runs"]
+    assert not plain["profile"] and profiled["profile"]
+    assert plain["newton_iterations"] > 0 and plain["ms_per_iteration"] > 0.0
+    assert profiled["newton_profile"]["newton_iterations"] == profiled["newton_iterations"]
+    np.testing.assert_allclose(profiled["force_N"], plain["force_N"], rtol=1e-7)
+    report = run_benchmark("bench_newton_latency.py", "--compare", "l.json", cwd=tmp_path)
+    assert re.search(r"l\.json: [\d.]+ ms/iteration .* largest force difference", report)
 
 
 @pytest.mark.parametrize(

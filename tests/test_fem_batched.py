@@ -96,6 +96,29 @@ def test_per_problem_sums_and_spreads_follow_the_node_ranges(device, rng):
     assert whole[0] == pytest.approx(np.sum(vectors**2), rel=1e-14)
 
 
+def test_reductions_and_scalars_come_back_in_one_read(device, rng):
+    """``read(..., scalars=)`` gives the reductions of ``read`` and the scalars array
+    (flattened, a copy), for one problem and for three, and the scalars alone."""
+    vectors = rng.standard_normal((13, 3))
+    values = rng.standard_normal(6)
+    arrays = DeviceArrays(wp.get_device(device))
+    with arrays.context():
+        x, scalars = arrays.asarray(vectors), arrays.asarray(values)
+        for offsets in ([0, 5, 6, 13], [0, 13]):
+            problems = Problems(arrays, offsets)
+            expected = problems.read(problems.squared(x), problems.dot(x, x))
+            squares, dots, read = problems.read(
+                problems.squared(x), problems.dot(x, x), scalars=scalars
+            )
+            np.testing.assert_array_equal(squares, expected[0])
+            np.testing.assert_array_equal(dots, expected[1])
+            np.testing.assert_array_equal(read, values)
+            (alone,) = problems.read(scalars=scalars)
+            np.testing.assert_array_equal(alone, values)
+    read[0] = np.nan  # a copy, not a view of the device array
+    assert np.isfinite(arrays.host(scalars)[0])
+
+
 @pytest.mark.slow
 def test_batched_curves_equal_sequential_ones(device):
     """Three problems (different meshes, materials, contact conditions and depths, one of

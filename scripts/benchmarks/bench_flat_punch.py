@@ -546,9 +546,9 @@ def run_warptissue(
     if profile:  # count this run's assemblies (an instance attribute hides the method)
         assemble = assembler.assemble
 
-        def counted(displacement: Any, *, with_tangent: bool = True) -> Any:
+        def counted(displacement: Any, *, with_tangent: bool = True, **options: Any) -> Any:
             assemblies["with_tangent" if with_tangent else "residual_only"] += 1
-            return assemble(displacement, with_tangent=with_tangent)
+            return assemble(displacement, with_tangent=with_tangent, **options)
 
         assembler.assemble = counted
     started = time.perf_counter()

@@ -70,8 +70,9 @@ class DeviceArrays:
         return stack
 
     def view(self, array: wp.array) -> Any:
-        """A vec3d Warp array (N,) as an (N, 3) float64 array of the module: a view sharing
-        its memory on CUDA (CuPy) and on the CPU (NumPy), a host copy otherwise."""
+        """A vec3d Warp array (N,) as an (N, 3) float64 array of the module (any other Warp
+        array as its own shape and type): a view sharing its memory on CUDA (CuPy) and on
+        the CPU (NumPy), a host copy otherwise."""
         if self.resident:
             return self.xp.asarray(array)
         return array.numpy()

@@ -18,6 +18,7 @@ import warp.sparse as wps
 
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
+from warptissue.fem.assembled import Assembly, von_mises
 from warptissue.fem.contact import ContactState, RigidContact, RigidContacts
 from warptissue.fem.elements import element_geometry
 from warptissue.fem.gather import gather_bsr_blocks, gather_vectors
@@ -41,41 +42,6 @@ __all__ = [
 
 FORMULATIONS = ("mixed", "displacement")
 """``mixed``: TET10 with element mean dilatation (P2/P0); ``displacement``: pure displacement."""
-
-
-@dataclass
-class Assembly:
-    """One evaluation of the discrete system at a displacement.
-
-    Attributes:
-        residual: Internal nodal forces f_int (no external loads) less the rigid contact's
-            forces on the body where the assembler has one, Warp array (N,) vec3d, N.
-        matrix: Tangent stiffness d f_int / d u as a 3x3-block BSR matrix (N/m), or None when
-            only the residual was assembled. Shared with the assembler: the next assembly
-            overwrites it.
-        energy_J: Stored strain energy, J (of every packed problem together).
-        min_jacobian: Smallest det F over all quadrature points (<= 0 means inverted).
-        problem_energies_J: The energy of each packed problem, (K,), J; None where not
-            assembled (one entry for an assembler of one problem).
-        problem_min_jacobians: The smallest det F of each packed problem, (K,); None where
-            not assembled.
-    """
-
-    residual: wp.array
-    matrix: wps.BsrMatrix | None
-    energy_J: float
-    min_jacobian: float
-    problem_energies_J: np.ndarray | None = None
-    problem_min_jacobians: np.ndarray | None = None
-
-
-def von_mises(cauchy_stress_Pa: np.ndarray) -> np.ndarray:
-    """Von Mises stress from Voigt Cauchy stress (xx, yy, zz, yz, xz, xy), shape (M, 6) -> (M,)."""
-    s = np.asarray(cauchy_stress_Pa, dtype=np.float64)
-    return np.sqrt(
-        0.5 * ((s[:, 0] - s[:, 1]) ** 2 + (s[:, 1] - s[:, 2]) ** 2 + (s[:, 2] - s[:, 0]) ** 2)
-        + 3.0 * (s[:, 3] ** 2 + s[:, 4] ** 2 + s[:, 5] ** 2)
-    )
 
 
 @dataclass(frozen=True)
@@ -464,7 +430,11 @@ class Assembler:
         self.block_count = nnz
 
     def assemble(
-        self, displacement_m: np.ndarray | wp.array, *, with_tangent: bool = True
+        self,
+        displacement_m: np.ndarray | wp.array,
+        *,
+        with_tangent: bool = True,
+        read_scalars: bool = True,
     ) -> Assembly:
         """Internal forces, tangent and energy at a nodal displacement.
 
@@ -472,6 +442,8 @@ class Assembler:
             displacement_m: Nodal displacements, shape (N, 3) (NumPy or a vec3d Warp array on
                 the assembler's device), metres.
             with_tangent: Also assemble the tangent matrix.
+            read_scalars: Read the energies and smallest det F now (False: the caller reads
+                :attr:`Assembly.scalars` itself, on a GPU with other values in one copy).
 
         Returns:
             An :class:`Assembly`; its arrays live on the assembler's device and are reused by
@@ -508,16 +480,9 @@ class Assembler:
                 self._rigid.force,
             )
         self._springs.launch(u, int(with_tangent), self._residual, self.matrix.values, self._energy)
-        scalars = self._scalars.numpy()
-        energies, min_jacobians = scalars[: self.problem_count], scalars[self.problem_count :]
-        return Assembly(
-            residual=self._residual,
-            matrix=self.matrix if with_tangent else None,
-            energy_J=float(energies.sum()),
-            min_jacobian=float(min_jacobians.min()),
-            problem_energies_J=energies.copy(),
-            problem_min_jacobians=min_jacobians.copy(),
-        )
+        matrix = self.matrix if with_tangent else None
+        assembly = Assembly(self._residual, matrix, np.nan, np.nan, scalars=self._scalars)
+        return assembly.with_scalars(self._scalars.numpy()) if read_scalars else assembly
 
     def parameter_residual(self, displacement_m: np.ndarray | wp.array, name: str) -> np.ndarray:
         """``dR/d theta``: the internal forces' derivative by one material parameter at fixed u.

@@ -428,6 +428,7 @@ class CudssSolver:
         self._rhs = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=device)
         self._rhs_view = _cupy_view(self._rhs, cupy)
         self._stream = cupy.cuda.Stream.from_external(device.stream)
+        self._events = (cupy.cuda.Event(), cupy.cuda.Event())  # around the last solve
         with cupy.cuda.Device(device.ordinal), self._stream:
             self._csr = cupyx.scipy.sparse.csr_matrix(
                 (
@@ -520,14 +521,27 @@ class CudssSolver:
             x, shape (N, 3): NumPy for a NumPy ``rhs`` (copied to the host, which waits for
             the device); a new CuPy array on the device for a CuPy one (nothing waits).
         """
-        bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
         with self._cupy.cuda.Device(self.device.ordinal), self._stream:
+            self._events[0].record(self._stream)
+            bsr33_csr_values(self.matrix, self._block_rows, self._csr_values)
             on_host = self._set_rhs(rhs)
             with self.timer.phase("factorization"):
                 self._solver.factorize()
             self.factorizations += 1
             with self.timer.phase("solve"):
-                return self._solution(on_host)
+                x = self._solution(on_host)
+            self._events[1].record(self._stream)
+            return x
+
+    def last_solve_device_s(self) -> float:
+        """The device time of the last :meth:`solve` (the values' copy, the factorization
+        and the solve), s, from CUDA events; waits for that solve to end. :meth:`solve`
+        itself returns before the device has done its work."""
+        if self.factorizations == 0:
+            raise RuntimeError("last_solve_device_s needs a factorization: call solve first")
+        start, end = self._events
+        end.synchronize()
+        return self._cupy.cuda.get_elapsed_time(start, end) / 1e3
 
     def solve_factorized(self, rhs: Any) -> Any:
         """Solve with the factors of the last :meth:`solve`, without a new factorization.

@@ -100,15 +100,16 @@ def gmres(
     while k < m:
         z = precondition(basis[k].reshape(shape)).reshape(-1)
         w = matvec(z.reshape(shape)).reshape(-1)
-        if not bool(xp.all(xp.isfinite(w))):
-            break
-        # classical Gram-Schmidt, twice
+        # classical Gram-Schmidt, twice; its coefficients and the norm in one read (a
+        # non-finite w makes them non-finite)
         h = basis[: k + 1] @ w
         w = w - basis[: k + 1].T @ h
         h2 = basis[: k + 1] @ w
         w = w - basis[: k + 1].T @ h2
-        column = _host(h, xp) + _host(h2, xp)
-        norm = float(xp.linalg.norm(w))
+        read = _host(xp.concatenate([h, h2, xp.linalg.norm(w).reshape(1)]), xp)
+        column, norm = read[: k + 1] + read[k + 1 : -1], float(read[-1])
+        if not (np.all(np.isfinite(column)) and math.isfinite(norm)):
+            break
         hessenberg[: k + 1, k] = column
         hessenberg[k + 1, k] = norm
         for i in range(k):  # earlier rotations

@@ -263,7 +263,7 @@ class LinearSolver:
             or not math.isfinite(self._factorization_s)
         ):
             return self.solve(matrix, rhs)
-        budget_s = REUSE_BUDGET * self._factorization_s
+        budget_s = REUSE_BUDGET * self._last_factorization_s()
         started = perf_counter()
 
         def keep_going(iterations: int, relative_residual: float) -> bool:
@@ -287,6 +287,14 @@ class LinearSolver:
         self.failed_reuses += 1
         x, _ = self.solve(matrix, rhs)
         return x, 1 + outcome.iterations
+
+    def _last_factorization_s(self) -> float:
+        """The wall time of the last factorization with its solve, s. cuDSS returns before
+        the device has done that work, so its host time alone may be the launches' only:
+        the device time (CUDA events) counts where it is longer."""
+        if self.method == "cudss" and self._cudss is not None:
+            return max(self._factorization_s, self._cudss.last_solve_device_s())
+        return self._factorization_s
 
     def _gmres(self, matrix: wps.BsrMatrix, rhs: Any, *, rtol: float, keep_going):
         """GMRES on ``matrix`` preconditioned by the current factors; x (N, 3) of ``rhs``'s

@@ -178,10 +178,14 @@ def newton_increment(
         )
         with timer.phase("assembly"):
             assembler.eliminate(frozen_wp, damping=factor)
-        (rhs_squared,) = problems.read(problems.squared(rhs))
-        rtol = forcing_term(limits, np.sqrt(rhs_squared), iterating)
+        try_old, rhs_squared = (
+            reuse.promising(u, factor, problems, iterating, problems.squared(rhs))
+            if reuse_factorization
+            else (False, [])
+        )
+        # The forcing term matters only to a solve with the old factors.
+        rtol = forcing_term(limits, np.sqrt(rhs_squared[0]), iterating) if try_old else 1.0
         factorizations = solver.factorizations
-        try_old = reuse_factorization and reuse.promising(u, factor, problems, iterating)
         du, linear_iterations = solver.solve_newton(assembly.matrix, rhs, rtol=rtol, reuse=try_old)
         if solver.factorizations > factorizations:
             reuse.factorized(u, factor)
@@ -189,12 +193,15 @@ def newton_increment(
         linear[iterating] += linear_iterations
         free_du = du * free if on is None else du * free * on
         free_residual = residual * free
-        du_squared, old_squared, slopes, free_du_squared = problems.read(
+        du_squared, old_squared, slopes, free_du_squared, *scalars = problems.read(
             problems.squared(du if on is None else du * on),
             problems.squared(free_residual),
             problems.dot(free_residual, du),
             problems.squared(free_du),
+            scalars=None if assembly.scalars is None else arrays.view(assembly.scalars),
         )
+        if scalars:  # the tangent's energies, read with the step's reductions
+            assembly = assembly.with_scalars(scalars[0])
         broken = iterating & ~np.isfinite(du_squared)
         for k in np.flatnonzero(broken):
             reasons[k] = "the linear solve gave non-finite values"
@@ -237,7 +244,8 @@ def newton_increment(
             with timer.phase("assembly"):
                 assembly = assembler.assemble(u)
         residual = arrays.view(assembly.residual)
-        free_norms, reaction_norms, limits = norms(residual)
+        moves = _moves(problems, alpha, free_du, u, u_start)
+        free_norms, reaction_norms, limits, *moved = norms(residual, *moves)
         relax = iterating & (free_norms > limits) if nonlinear_elimination_on else None
         if relax is not None and relax.any():
             u, assembly, steps = _relax(
@@ -246,8 +254,9 @@ def newton_increment(
             local += steps
             residual = arrays.view(assembly.residual)
             if steps.any():
-                free_norms, reaction_norms, limits = norms(residual)
-        at_roundoff = _at_roundoff(problems, alpha, free_du, u, u_start, free_norms, reaction_norms)
+                moves = _moves(problems, alpha, free_du, u, u_start)
+                free_norms, reaction_norms, limits, *moved = norms(residual, *moves)
+        at_roundoff = _at_roundoff(*moved, free_norms, reaction_norms)
         done = iterating & ((free_norms <= limits) | at_roundoff)
         converged |= done
         for k in np.flatnonzero(done):
@@ -258,9 +267,9 @@ def newton_increment(
         iterating &= ~done & ~broken
         if not iterating.any():
             break
-        if assembly.matrix is None:  # the next iteration's tangent
+        if assembly.matrix is None:  # the next iteration's tangent (its energies read later)
             with timer.phase("assembly"):
-                assembly = assembler.assemble(u)
+                assembly = assembler.assemble(u, read_scalars=False)
             residual = arrays.view(assembly.residual)
     for k in np.flatnonzero(iterating):
         reasons[k] = f"no convergence in {max_iterations} iterations"
@@ -288,13 +297,16 @@ class _ResidualNorms:
         self.problems, self.free, self.fixed = problems, free, fixed
         self.tolerance, self.floors = tolerance, floors
 
-    def __call__(self, residual: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def __call__(self, residual: Any, *also: Any) -> list[np.ndarray]:
+        """(free norms, reaction norms, limits, then the values of the reductions ``also``
+        read in the same copy), each (K,)."""
         problems = self.problems
-        free_squared, reaction_squared = problems.read(
-            problems.squared(residual * self.free), problems.squared(residual * self.fixed)
+        free_squared, reaction_squared, *values = problems.read(
+            problems.squared(residual * self.free), problems.squared(residual * self.fixed), *also
         )
         free_norms, reaction_norms = np.sqrt(free_squared), np.sqrt(reaction_squared)
-        return free_norms, reaction_norms, np.maximum(self.tolerance * reaction_norms, self.floors)
+        limits = np.maximum(self.tolerance * reaction_norms, self.floors)
+        return [free_norms, reaction_norms, limits, *values]
 
 
 def _newton_rhs(
@@ -322,21 +334,25 @@ def _newton_rhs(
     return rhs if on is None else rhs * on
 
 
+def _moves(problems: Problems, alpha: np.ndarray, free_du: Any, u: Any, u_start: Any) -> list:
+    """The reductions of :func:`_at_roundoff`: each problem's squared last correction
+    ``alpha du`` and squared displacement over the increment, to :meth:`Problems.read`."""
+    return [
+        problems.squared(problems.per_node(alpha) * free_du),
+        problems.squared(u - u_start),
+    ]
+
+
 def _at_roundoff(
-    problems: Problems,
-    alpha: np.ndarray,
-    free_du: Any,
-    u: Any,
-    u_start: Any,
+    step_squared: np.ndarray,
+    moved_squared: np.ndarray,
     free_norms: np.ndarray,
     reaction_norms: np.ndarray,
 ) -> np.ndarray:
     """The problems whose last correction ``alpha du`` is at roundoff (1e-10) relative to
-    the increment's displacement and whose residual is small anyway (1e-6 of the reaction):
-    the residual sits at its roundoff floor (large bulk moduli raise it), (K,) bool."""
-    step_squared, moved_squared = problems.read(
-        problems.squared(problems.per_node(alpha) * free_du), problems.squared(u - u_start)
-    )
+    the increment's displacement (the values of :func:`_moves`, (K,)) and whose residual is
+    small anyway (1e-6 of the reaction): the residual sits at its roundoff floor (large bulk
+    moduli raise it), (K,) bool."""
     return (np.sqrt(step_squared) <= 1e-10 * np.sqrt(moved_squared)) & (
         free_norms <= 1e-6 * reaction_norms
     )

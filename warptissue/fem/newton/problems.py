@@ -141,15 +141,31 @@ class Problems:
             return self.arrays.squared_norm(values)
         return (values * values).sum(axis=1)
 
-    def read(self, *reductions: Any) -> list[np.ndarray]:
-        """The reductions' values, each as a (K,) NumPy array, in one copy from the device."""
-        if self.count == 1:
-            return [np.array([value]) for value in self.arrays.floats(*reductions)]
+    def read(self, *reductions: Any, scalars: Any = None) -> list[np.ndarray]:
+        """The reductions' values, each as a (K,) NumPy array, in one copy from the device.
+
+        ``scalars``: an array of the library (any shape, e.g. an assembly's energies and
+        smallest J per problem) read in the same copy and returned last, flattened (a copy).
+        """
         xp = self.arrays.xp
-        padded = xp.zeros((len(reductions), int(self.offsets[-1]) + 1))
-        padded[:, :-1] = xp.stack(reductions)
-        host = self.arrays.host(padded[:, self._rows].sum(axis=2))
-        return [host[i] for i in range(len(reductions))]
+        if self.count == 1 and scalars is None:
+            return [np.array([value]) for value in self.arrays.floats(*reductions)]
+        if self.count == 1:
+            sums = [xp.asarray(each, dtype=xp.float64).reshape(1) for each in reductions]
+        elif reductions:
+            padded = xp.zeros((len(reductions), int(self.offsets[-1]) + 1))
+            padded[:, :-1] = xp.stack(reductions)
+            sums = [padded[:, self._rows].sum(axis=2).ravel()]
+        else:
+            sums = []
+        if scalars is not None:
+            sums.append(xp.ravel(xp.asarray(scalars, dtype=xp.float64)))
+        host = self.arrays.host(xp.concatenate(sums)) if sums else np.zeros(0)
+        count = self.count
+        values = [host[i * count : (i + 1) * count] for i in range(len(reductions))]
+        if scalars is not None:
+            values.append(np.array(host[len(reductions) * count :]))
+        return values
 
     def per_node(self, values: np.ndarray) -> Any:
         """A per-problem value (K,) at every node: a float for K = 1, else an (N, 1) array."""

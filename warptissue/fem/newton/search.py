@@ -125,18 +125,23 @@ def search_steps(
         evaluations[pending] += 1
         trial_alpha = np.where(pending, alpha, np.nan_to_num(accepted))
         trial = base + problems.per_node(trial_alpha) * direction
-        check = assembler.assemble(trial, with_tangent=False)
-        energy = np.asarray(check.problem_energies_J, dtype=np.float64)
-        ok = (np.asarray(check.problem_min_jacobians) > 0.0) & np.isfinite(energy)
-        accept = pending & first & ok
+        check = assembler.assemble(trial, with_tangent=False, read_scalars=False)
+        scalars = problems.arrays.view(check.scalars)
         searched = pending & line
-        if searched.any():
+        if searched.any():  # the energies with the slopes, in one read
             free_residual = problems.arrays.view(check.residual) * free
-            g, squared = problems.read(
-                problems.dot(free_residual, direction), problems.squared(free_residual)
+            g, squared, values = problems.read(
+                problems.dot(free_residual, direction),
+                problems.squared(free_residual),
+                scalars=scalars,
             )
         else:
             g, squared = np.full(count, math.nan), np.full(count, math.nan)
+            (values,) = problems.read(scalars=scalars)
+        check = check.with_scalars(values)
+        energy = np.asarray(check.problem_energies_J, dtype=np.float64)
+        ok = (np.asarray(check.problem_min_jacobians) > 0.0) & np.isfinite(energy)
+        accept = pending & first & ok
         with np.errstate(invalid="ignore"):
             decrease = ok & (
                 (energy <= energies_J + ARMIJO * alpha * slopes)

@@ -39,12 +39,14 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import warp as wp
 import warp.sparse as wps
 
 from warptissue.errors import InputError
+from warptissue.fem.arrays import DeviceArrays
 from warptissue.fem.assembly import Assembler
 from warptissue.fem.linear import LinearSolver
 from warptissue.fem.newton.problems import DirichletConditions
@@ -98,6 +100,7 @@ class ForceSensitivity:
     factorizations: int = field(default=0, init=False)
     refinement_steps: int = field(default=0, init=False)
     seconds: float = field(default=0.0, init=False)
+    _arrays: Any = field(default=None, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.names = check_sensitivity_names(self.names)
@@ -226,39 +229,48 @@ class ForceSensitivity:
     ) -> tuple[np.ndarray, bool]:
         """Solve ``matrix x = rhs`` with the existing factors plus iterative refinement.
 
+        The refinement works in the arrays of the matrix's device (CuPy on a GPU, NumPy on
+        the CPU): on a GPU the right-hand side goes to the device once and ``x`` comes back
+        once, and each step reads one pair of norms.
+
         Returns:
-            (x, whether the refinement failed and a factorization is needed).
+            (x as NumPy, whether the refinement failed and a factorization is needed).
         """
+        if self._arrays is None:
+            self._arrays = DeviceArrays(matrix.device)
+        arrays = self._arrays
+        with arrays.context():
+            x, failed = self._refine(arrays, solver, matrix, arrays.asarray(rhs))
+            return arrays.host(x), failed
+
+    def _refine(
+        self, arrays: DeviceArrays, solver: LinearSolver, matrix: wps.BsrMatrix, rhs: Any
+    ) -> tuple[Any, bool]:
         x, _ = solver.solve_factorized(matrix, rhs)
         self.solves += 1
         if self.max_refinements == 0:
             return x, False
-        scale = _norm(rhs)
-        if scale == 0.0:
-            return np.zeros_like(rhs), False
+        (scale_squared,) = arrays.floats(arrays.squared_norm(rhs))
+        if scale_squared == 0.0:
+            return arrays.xp.zeros_like(rhs), False
+        scale = math.sqrt(scale_squared)
         product = wp.zeros(matrix.nrow, dtype=wp.vec3d, device=matrix.device)
         for _ in range(self.max_refinements):
-            if not np.all(np.isfinite(x)):
-                return x, True
-            wps.bsr_mv(
-                matrix,
-                wp.array(x, dtype=wp.vec3d, device=matrix.device),
-                product,
-                alpha=1.0,
-                beta=0.0,
+            x_wp = arrays.warp(arrays.xp.ascontiguousarray(x))  # ``x`` stays alive meanwhile
+            wps.bsr_mv(matrix, x_wp, product, alpha=1.0, beta=0.0)
+            residual = rhs - arrays.view(product)
+            residual_squared, x_squared = arrays.floats(
+                arrays.squared_norm(residual), arrays.squared_norm(x)
             )
-            residual = rhs - product.numpy()
-            if _norm(residual) <= self.refinement_tolerance * scale:
+            if not math.isfinite(x_squared):  # (non-finite entries)
+                return x, True
+            if math.sqrt(residual_squared) <= self.refinement_tolerance * scale:
                 return x, False
             correction, _ = solver.solve_factorized(matrix, residual)
             self.solves += 1
             self.refinement_steps += 1
             x = x + correction
         return x, True
-
-
-def _norm(values: np.ndarray) -> float:
-    return math.sqrt(float(np.einsum("ij,ij->", values, values)))
 
 
 def check_sensitivity_names(names: Sequence[str] | str) -> tuple[str, ...]:

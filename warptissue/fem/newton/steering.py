@@ -95,19 +95,26 @@ class ReuseTracker:
     step_scale: np.ndarray | None = None
 
     def promising(
-        self, u: Any, damping: np.ndarray, problems: Problems, iterating: np.ndarray
-    ) -> bool:
+        self, u: Any, damping: np.ndarray, problems: Problems, iterating: np.ndarray, *also: Any
+    ) -> tuple[bool, list[np.ndarray]]:
         """Whether a solve at ``u`` with ``damping`` (K,) should try the old factors: for
         every ``iterating`` problem the damping is that of the factorization and the state
-        is close to it (one scalar read)."""
+        is close to it.
+
+        ``also``: reductions of :class:`Problems` that the caller needs only where the old
+        factors are tried, read in the same copy as the state's change.
+
+        Returns:
+            (whether to try, the values of ``also`` where read, else an empty list).
+        """
         if self.state is None or self.damping is None:
-            return False
+            return False, []
         if np.any(damping[iterating] != self.damping[iterating]):
-            return False
-        (moved,) = problems.read(problems.squared(u - self.state))
+            return False, []
+        moved, *values = problems.read(problems.squared(u - self.state), *also)
         scale = np.full(problems.count, math.inf) if self.step_scale is None else self.step_scale
         close = np.sqrt(moved) <= REUSE_STATE_CHANGE * scale
-        return bool(np.all(close[iterating]))
+        return bool(np.all(close[iterating])), values
 
     def factorized(self, u: Any, damping: np.ndarray) -> None:
         """The tangent at ``u`` with ``damping`` (K,) was just factorized."""

@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# One GPU lease's measurements for the Newton loop's latency and the batched fits (issue 46).
+#
+# Runs on the device machine (docs/performance.md, "Newton iterations of small problems on a
+# GPU"):
+#
+#   bash gpu_session.sh LABEL SITE MODE
+#
+# LABEL names the code measured (e.g. before, after), SITE is the folder the project was
+# installed into (pip --target; its dependencies in /tmp/site), MODE is "profile" (cProfile
+# of the main job and its forward run, the per-phase profiles), "time" (the timed runs for the
+# tables), "quick" (the main job's forward-run latency and fit alone) or "batch" (the batched
+# fits at K = 8, 32 with a cProfile of K = 32). Every output goes to $OUT/LABEL/ (JSON,
+# pstats summaries as text, logs); nothing is asserted here.
+set -uo pipefail
+label=$1 site=$2 mode=$3
+here=$(cd "$(dirname "$0")" && pwd)
+export PYTHONPATH="$site:/tmp/site" PYTHONUNBUFFERED=1 OMP_NUM_THREADS=4
+out="$OUT/$label"
+mkdir -p "$out"
+work=/tmp/w-$label
+rm -rf "$work" && mkdir -p "$work" && cp -r "$here/../../scenes" "$here/../../scripts" "$work/"
+cd "$work" || exit 1
+cli=(python3 -m warptissue.cli)
+stats() {  # pstats file -> text summary (tottime and cumtime, top 45 each)
+  python3 - "$1" > "$1.txt" <<'PY'
+import pstats, sys
+s = pstats.Stats(sys.argv[1])
+s.sort_stats("tottime").print_stats("warptissue|nvmath|cupy|warp", 70)
+s.sort_stats("cumulative").print_stats("warptissue|nvmath|cupy|warp", 70)
+PY
+  rm -f "$1"
+}
+timed() {  # name command...: wall time into $out/walls.txt
+  local name=$1; shift
+  local t0=$(date +%s.%N)
+  "$@" > "$out/$name.log" 2>&1
+  local rc=$?
+  local t1=$(date +%s.%N)
+  echo "$name rc=$rc wall_s=$(python3 -c "print(round($t1 - $t0, 2))")" | tee -a "$out/walls.txt"
+}
+if [ "$mode" = profile ] || [ "$mode" = time ]; then
+  # warm the kernel cache (the first run compiles) and CuPy's kernels
+  timed warm_simulate "${cli[@]}" simulate scenes/liver_fit.toml --device cuda --quiet --out runs/warm
+  timed fit "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit
+  cp runs/fit/fit.json "$out/fit.json"
+  timed flat_punch python3 scripts/benchmarks/bench_flat_punch.py --device cuda --mesher delaunay \
+    --sizes 3k,10k --elimination on --profile --label "$label" --out "$out/flat_punch.json"
+  timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
+    --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
+  cp runs/warm/result.json "$out/simulate_cuda_result.json"
+fi
+if [ "$mode" = quick ]; then  # the forward run's latency (its warm-up compiles) and the fit
+  timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
+    --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
+  timed fit "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit
+  cp runs/fit/fit.json "$out/fit.json"
+fi
+if [ "$mode" = profile ]; then
+  timed simulate_cprofile python3 -m cProfile -o "$out/simulate.prof" -m warptissue.cli \
+    simulate scenes/liver_fit.toml --device cuda --quiet --out runs/sim3
+  stats "$out/simulate.prof"
+  timed fit_cprofile python3 -m cProfile -o "$out/fit.prof" -m warptissue.cli \
+    fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit3
+  stats "$out/fit.prof"
+fi
+if [ "$mode" = time ] && [ "$label" = after ]; then
+  # the main job with every factorization fresh (no GMRES with old factors)
+  sed 's/^\[solver\]$/[solver]\nreuse_factorization = false/' scenes/liver_fit.toml > scenes/liver_fit_fresh.toml
+  timed fit_no_reuse "${cli[@]}" fit indentation scenes/liver_fit_fresh.toml --device cuda --quiet --out runs/fitnr
+  cp runs/fitnr/fit.json "$out/fit_no_reuse.json"
+fi
+if [ "$mode" = batch ]; then
+  timed batch_fits python3 scripts/benchmarks/bench_batch_fe.py --device cuda --tets 1.3k \
+    --what fits --counts 1,8,32 --sequential-limit 2 --label "$label" --out "$out/batch_fits.json"
+  timed batch_cprofile python3 -m cProfile -o "$out/batch32.prof" \
+    scripts/benchmarks/bench_batch_fe.py --device cuda --tets 1.3k --what fits --counts 32 \
+    --sequential-limit 1 --label "$label"
+  stats "$out/batch32.prof"
+fi
+cat "$out/walls.txt"
