@@ -41,6 +41,7 @@ from warptissue.fem.packing import per_problem
 from warptissue.fem.probe import ProbeFrame, probe_frame
 from warptissue.fem.surface_contact import (
     CONTACT_INTEGRATIONS,
+    SURFACE_PENALTY_SCALE,
     SurfaceContactArrays,
     SurfaceQuadrature,
     block_ids,
@@ -170,7 +171,8 @@ class RigidContact:
     ) -> RigidContact:
         """The contact of ``indenter`` with the nodes of ``surface``, its stiffness from the
         material and the mesh (``k = beta mu0 h``, module docstring; ``integration =
-        "surface"``: the penalty per unit area ``eps = beta mu0 / h`` at the quadrature
+        "surface"``: the penalty per unit area ``eps = 10 beta mu0 / h``
+        (:data:`~warptissue.fem.surface_contact.SURFACE_PENALTY_SCALE`) at the quadrature
         points of the triangles whose corners are candidate nodes,
         :mod:`warptissue.fem.surface_contact`).
 
@@ -221,7 +223,7 @@ class RigidContact:
         stiffness = float(penalty_factor) * shear_modulus_Pa * h
         quadrature = None
         if integration == "surface":
-            stiffness /= h * h
+            stiffness *= SURFACE_PENALTY_SCALE / (h * h)
             faces = surface_triangles(mesh, nodes)
             quadrature = SurfaceQuadrature.for_faces(mesh.points, faces)
         origin = float(frame.origin_m[2])
@@ -480,7 +482,10 @@ class RigidContacts:
             self._problem = wp.array(np.concatenate(problems), dtype=wp.int32, device=dev)
             self._node_force = wp.zeros(len(union), dtype=wp.vec3d, device=dev)
             self._gap = wp.zeros(len(union), dtype=wp.float64, device=dev)
-        self._surface = _surface_arrays(contacts, used, offsets, self._pattern, self.device)
+        quadratures = [None if each is None else each.quadrature for each in contacts]
+        self._surface = SurfaceContactArrays.for_problems(
+            quadratures, used, node_offsets=offsets, pattern=self._pattern, device=self.device
+        )
         self._ranges = np.concatenate([[0], np.cumsum(counts)])
         self._bodies_key = self._stiffness_key = None  # uploaded at the next launch
         self.contacts = contacts
@@ -654,32 +659,3 @@ class RigidContacts:
         if self.problem_count == 1:
             return shares[0] * scratch.numpy()
         return scratch.numpy() * shares[self._node_problem][:, None]
-
-
-def _surface_arrays(
-    contacts: Sequence[RigidContact | None],
-    used: Sequence[int],
-    offsets: np.ndarray,
-    pattern: tuple[np.ndarray, np.ndarray],
-    device: Any,
-) -> SurfaceContactArrays | None:
-    """The surface-integrated contacts' device arrays, None where every contact is nodal.
-
-    Raises:
-        InputError: Nodal and surface contacts mixed.
-    """
-    surface = [contacts[k].quadrature is not None for k in used]
-    if not any(surface):
-        return None
-    if not all(surface):
-        raise InputError(
-            "surface-integrated contacts of one assembler need every contact integrated so",
-            key="integration",
-        )
-    return SurfaceContactArrays(
-        [None if each is None else each.quadrature for each in contacts],
-        node_offsets=offsets,
-        pattern_offsets=pattern[0],
-        pattern_columns=pattern[1],
-        device=device,
-    )

@@ -21,8 +21,9 @@ the three-point rule of degree 2 on each (:func:`triangle_rule`), so that the co
 is resolved to a fraction ``1 / (2 s)`` of an element.
 
 Device code: ``rigid_surface_contact_kernel`` in ``kernels/contact.py``; launched by
-:class:`warptissue.fem.contact.RigidContacts` when a :class:`~warptissue.fem.contact.
-RigidContact` carries a :class:`SurfaceQuadrature`.
+:class:`warptissue.fem.contact.RigidContacts` when a
+:class:`~warptissue.fem.contact.RigidContact` carries a :class:`SurfaceQuadrature`
+(``IndentationProblem(..., contact_integration="surface")``).
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
 
 __all__ = [
     "CONTACT_INTEGRATIONS",
+    "SURFACE_PENALTY_SCALE",
     "SURFACE_SUBDIVISIONS",
     "SurfaceQuadrature",
     "block_ids",
@@ -49,6 +51,13 @@ __all__ = [
 CONTACT_INTEGRATIONS: tuple[str, ...] = ("nodes", "surface")
 """How a rigid contact is discretized: ``"nodes"`` (node-to-surface penalty, the default) or
 ``"surface"`` (integrated at quadrature points of the surface's triangles, this module)."""
+
+SURFACE_PENALTY_SCALE = 10.0
+"""The surface penalty per unit area is ``eps = SURFACE_PENALTY_SCALE beta mu0 / h``
+(``beta`` the problem's penalty factor, ``h`` the mean edge under the indenter): with the
+nodal ``k = beta mu0 h`` alone, ``eps = beta mu0 / h`` let the sphere in 24 times deeper
+than the nodal penalty does and lowered the force by 1 % at d = 0.005 R (docs/design-notes/
+surface-contact.md); ten times that gives 0.04 % of the depth at 9-12 Newton iterations."""
 
 SURFACE_SUBDIVISIONS = 3
 """``s`` of :func:`triangle_rule`: each triangle is split into ``s^2`` sub-triangles of three
@@ -277,3 +286,35 @@ class SurfaceContactArrays:
             wp.array(self.point_areas_m2, dtype=wp.float64, device=device),
         ]
         self.gap = wp.zeros(self.point_count, dtype=wp.float64, device=device)
+
+    @classmethod
+    def for_problems(
+        cls,
+        quadratures: list[SurfaceQuadrature | None],
+        used: list[int],
+        *,
+        node_offsets: np.ndarray,
+        pattern: tuple[np.ndarray, np.ndarray],
+        device: Any,
+    ) -> SurfaceContactArrays | None:
+        """The arrays of the problems ``used`` (those with a rigid contact), None where
+        every one of them is nodal (``quadratures[k]`` None).
+
+        Raises:
+            InputError: Nodal and surface-integrated contacts mixed.
+        """
+        surface = [quadratures[k] is not None for k in used]
+        if not any(surface):
+            return None
+        if not all(surface):
+            raise InputError(
+                "surface-integrated contacts of one assembler need every contact integrated so",
+                key="integration",
+            )
+        return cls(
+            quadratures,
+            node_offsets=node_offsets,
+            pattern_offsets=pattern[0],
+            pattern_columns=pattern[1],
+            device=device,
+        )
