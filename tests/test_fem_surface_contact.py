@@ -156,3 +156,39 @@ def test_an_unknown_integration_is_refused_by_key():
             base="sliding",
             contact_integration="faces",
         )
+
+
+@pytest.mark.slow
+def test_a_sphere_on_the_coarse_layer_agrees_with_the_nodal_contact():
+    """The test block of tests/test_fem_contact.py under the sphere (d = 0.02, 0.04 R): the
+    surface-integrated force within 2 % of the node-to-surface one (on the benchmark's block
+    refined within 0.3 R to 0.1 R: 0.02 % and 0.4 % apart at these depths,
+    docs/design-notes/surface-contact.md), the contact force equal to the base reaction,
+    and no more than 15 Newton iterations per depth."""
+    from test_fem_contact import SPHERE_DEPTHS_M, _sphere_problem
+
+    from warptissue.fem import simulate_indentation
+    from warptissue.mesh import indentation_block
+
+    radius = 1e-3
+    mesh = indentation_block(
+        width_m=3.0 * radius,
+        thickness_m=1.5 * radius,
+        probe_radius_m=0.2 * radius,
+        size_near_m=0.1 * radius,
+        size_far_m=0.6 * radius,
+    )
+    runs = {
+        integration: simulate_indentation(
+            _sphere_problem(mesh, contact_integration=integration),
+            SPHERE_DEPTHS_M,
+            device="cpu",
+            progress=False,
+        )
+        for integration in ("nodes", "surface")
+    }
+    surface = runs["surface"]
+    assert surface.completed, surface.message
+    np.testing.assert_allclose(surface.reaction_force_N, runs["nodes"].reaction_force_N, rtol=2e-2)
+    np.testing.assert_allclose(surface.contact_force_N, surface.reaction_force_N, rtol=1e-6)
+    assert np.all(np.asarray(surface.newton_iterations) <= 15)
