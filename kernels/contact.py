@@ -233,3 +233,67 @@ def support_spring_kernel(
     wp.atomic_add(energy, spring_problem[e], wp.float64(0.5) * wp.dot(displacement[row], force))
     if with_tangent != 0:
         wp.atomic_add(matrix_values, block_ids[e], s)
+
+
+@wp.kernel(module=FE_MODULE)
+def rigid_surface_contact_kernel(
+    points: wp.array(dtype=wp.vec3d),
+    displacement: wp.array(dtype=wp.vec3d),
+    face_nodes: wp.array2d(dtype=wp.int32),
+    face_blocks: wp.array2d(dtype=wp.int32),
+    face_problem: wp.array(dtype=wp.int32),
+    point_face: wp.array(dtype=wp.int32),
+    point_shape: wp.array2d(dtype=wp.float64),
+    point_area: wp.array(dtype=wp.float64),
+    bodies: wp.array(dtype=RigidBody),
+    stiffness: wp.array(dtype=wp.float64),
+    with_tangent: int,
+    residual: wp.array(dtype=wp.vec3d),
+    matrix_values: wp.array(dtype=wp.mat33d),
+    energy: wp.array(dtype=wp.float64),
+    contact_force: wp.array(dtype=wp.vec3d),
+    point_gap: wp.array(dtype=wp.float64),
+):
+    """Frictionless penalty contact of rigid bodies integrated over the surface's triangles
+    (a segment-to-analytical-surface formulation).
+
+    Quadrature point ``q`` lies on triangle ``f = point_face[q]`` (nodes ``face_nodes[f]``,
+    3 or 6 of them: corners, then the mid-edge nodes of (0, 1), (1, 2), (2, 0)), with the
+    triangle's shape functions ``N_a = point_shape[q, a]`` there and the reference area it
+    stands for ``w = point_area[q]`` (m^2, the rule's weight times the reference area
+    Jacobian). Its current position ``x = sum_a N_a (X_a + u_a)`` meets problem
+    ``k = face_problem[f]``'s body at the signed distance ``g`` with outward normal ``n``;
+    where ``g < 0`` the penalty ``eps = stiffness[k]`` (Pa/m) presses with the pressure
+    ``-eps g``: the energy ``eps g^2 w / 2``, the nodal forces ``f_a = -eps g w N_a n``
+    (``R -= f_a``) and the tangent blocks ``K_ab = eps w N_a N_b (n n^T + g dn/dx)`` at
+    ``face_blocks[f, a * count + b]`` (BSR), ``count`` the triangle's node count.
+    ``point_gap[q]`` holds ``g`` (m).
+    """
+    q = wp.tid()
+    f = point_face[q]
+    problem = face_problem[f]
+    body = bodies[problem]
+    count = face_nodes.shape[1]
+    x = wp.vec3d()
+    for a in range(count):
+        node = face_nodes[f, a]
+        x = x + point_shape[q, a] * (points[node] + displacement[node])
+    hit = rigid_contact_point(body, body.axes @ x)
+    point_gap[q] = hit.gap
+    if hit.gap >= wp.float64(0.0):
+        return
+    back = wp.transpose(body.axes)
+    normal = back @ hit.normal
+    weight = stiffness[problem] * point_area[q]
+    force = -weight * hit.gap * normal
+    wp.atomic_add(contact_force, problem, force)
+    wp.atomic_add(energy, problem, wp.float64(0.5) * weight * hit.gap * hit.gap)
+    for a in range(count):
+        wp.atomic_sub(residual, face_nodes[f, a], point_shape[q, a] * force)
+    if with_tangent != 0:
+        gradient = back @ hit.normal_gradient @ body.axes
+        block = weight * (wp.outer(normal, normal) + hit.gap * gradient)
+        for a in range(count):
+            for b in range(count):
+                scale = point_shape[q, a] * point_shape[q, b]
+                wp.atomic_add(matrix_values, face_blocks[f, a * count + b], scale * block)

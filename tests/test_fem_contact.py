@@ -223,16 +223,18 @@ def test_sphere_force_is_insensitive_to_the_penalty_factor(sphere_mesh, sphere_r
 
 
 @pytest.mark.slow
-def test_sensitivities_through_contact_match_central_differences(sphere_mesh):
+@pytest.mark.parametrize("integration", ["nodes", "surface"])
+def test_sensitivities_through_contact_match_central_differences(sphere_mesh, integration):
     """Exact dF/dtheta (the penalty's own dependence on mu0 included) against central
     differences of whole runs with a tight Newton tolerance, relative step 1e-6 (measured
-    6e-8 for C10, 2e-6 for K)."""
+    6e-8 for C10, 2e-6 for K), for the nodal and the surface-integrated contact
+    (warptissue.fem.surface_contact)."""
     tight = NewtonOptions(tolerance=1e-12)
     material = NeoHookean(C10_PA, 50.0 * C10_PA)
     names = ("C10_Pa", "bulk_modulus_Pa")
     depths = SPHERE_DEPTHS_M[-1:]
     exact = simulate_indentation(
-        _sphere_problem(sphere_mesh, material),
+        _sphere_problem(sphere_mesh, material, contact_integration=integration),
         depths,
         device="cpu",
         progress=False,
@@ -247,7 +249,7 @@ def test_sensitivities_through_contact_match_central_differences(sphere_mesh):
         for sign in (1.0, -1.0):
             moved = material_from_dict({**flat, name: flat[name] + sign * step})
             run = simulate_indentation(
-                _sphere_problem(sphere_mesh, moved),
+                _sphere_problem(sphere_mesh, moved, contact_integration=integration),
                 depths,
                 device="cpu",
                 progress=False,

@@ -8,6 +8,7 @@ from warptissue.mesh.quality import (
     dihedral_angles,
     edge_lengths,
     fix_orientation,
+    move_midnodes_keeping_jacobian,
     radius_ratios,
     tet10_jacobian_determinants,
 )
@@ -209,3 +210,18 @@ def test_curved_disc_volume_converges_to_the_cylinder():
     curved_error = cylinder - isoparametric_volume(curved).sum()
     assert polygon_error > 0
     assert abs(curved_error) < 0.01 * polygon_error  # quadratic arcs: O(h^4) against O(h^2)
+
+
+def test_a_midnode_that_would_invert_its_element_stops_short():
+    """move_midnodes_keeping_jacobian on one tet: a mid node pushed past the opposite face
+    would invert the element; it stops where det J / 6V >= 0.1 and a harmless move is whole."""
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 0.05]], dtype=float)
+    mesh = to_tet10(TetMesh(points=corners, tets=np.array([[0, 1, 2, 3]], dtype=np.int32)))
+    edge01 = mesh.tets[0, 4]  # the mid node of edge (0, 1)
+    target = mesh.points[edge01] + [0.0, 0.0, 0.2]  # far past the tet's height of 0.05
+    fraction = move_midnodes_keeping_jacobian(mesh, np.array([edge01]), target[None, :])
+    assert 0.0 < fraction[0] < 1.0
+    assert check_mesh(mesh).min_scaled_jacobian >= 0.1
+    straight = to_tet10(TetMesh(points=corners, tets=np.array([[0, 1, 2, 3]], dtype=np.int32)))
+    small = straight.points[edge01] + [0.0, 0.0, 0.001]
+    assert move_midnodes_keeping_jacobian(straight, np.array([edge01]), small[None, :])[0] == 1

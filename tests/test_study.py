@@ -421,6 +421,41 @@ def test_a_sphere_s_refined_zone_follows_the_contact_radius_of_the_deepest_depth
     assert study.mesh_probe_radius_m == pytest.approx(1.5 * np.sqrt(0.002 * 8e-4), rel=1e-12)
 
 
+def test_a_sphere_wider_than_the_specimen_is_refused(tmp_path):
+    """Issue 44: a sphere's refined zone is its contact's (1.5 sqrt(R d)), so a sphere of
+    15 mm on a block 20 mm wide passed the zone's check and loaded; its radius must be less
+    than the half width (docs/study-files.md)."""
+    text = MINIMAL.replace(
+        'kind = "flat_punch"\nradius_m = 0.001', 'kind = "sphere"\nradius_m = 0.015'
+    )
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    assert_names_key_and_line(caught.value, text, path, "specimen.width_m", "0.02")
+    assert "indenter.radius_m (0.015 m)" in str(caught.value)
+    assert "half the width (0.01 m)" in str(caught.value)
+    assert load_study(write(tmp_path, text.replace("0.015", "0.009"))).indenter.radius_m == 0.009
+
+
+def test_a_near_size_beyond_a_sphere_s_zone_names_the_zone_and_its_values(tmp_path):
+    """Issue 44: the message said "must not exceed the probe radius (0.000335 m)" for a
+    probe of radius 1 mm; it names the zone 1.5 sqrt(R d) and R and d."""
+    text = MINIMAL.replace('kind = "flat_punch"', 'kind = "sphere"').replace(
+        "max_depth_m = 0.0005", "max_depth_m = 5e-5"
+    )
+    text = text.replace("thickness_m = 0.01", "thickness_m = 0.01\nsize_near_m = 0.0005")
+    path = write(tmp_path, text)
+    with pytest.raises(InputError) as caught:
+        load_study(path)
+    assert_names_key_and_line(caught.value, text, path, "specimen.size_near_m", "0.0005")
+    message = str(caught.value)
+    assert "1.5 sqrt(R d) = 0.00033541 m" in message, message
+    assert "indenter.radius_m = 0.001 m" in message and "deepest depth = 5e-05 m" in message
+    punch = MINIMAL.replace("thickness_m = 0.01", "thickness_m = 0.01\nsize_near_m = 0.002")
+    with pytest.raises(InputError, match=r"must not exceed the probe radius \(0.001 m\)"):
+        load_study(write(tmp_path, punch))
+
+
 def test_toml_syntax_error_names_the_line(tmp_path):
     text = MINIMAL.replace("radius_m = 0.001", "radius_m = 0.001 m")
     with pytest.raises(InputError) as caught:

@@ -184,7 +184,7 @@ class Assembler:
         self._last_submatrix: _SubmatrixBlocks | None = None
         self._rigid = RigidContacts(
             points=wp.array(mesh.points, dtype=wp.vec3d, device=dev),
-            diagonal_blocks=self._diagonal_blocks,
+            pattern=(self._pattern_offsets, self._pattern_columns),
             node_offsets=self._node_offsets,
             node_problem=node_problem,
             problem_count=count,

@@ -39,9 +39,17 @@ import warp as wp
 from warptissue.errors import InputError
 from warptissue.fem.packing import per_problem
 from warptissue.fem.probe import ProbeFrame, probe_frame
+from warptissue.fem.surface_contact import (
+    CONTACT_INTEGRATIONS,
+    SURFACE_PENALTY_SCALE,
+    SurfaceContactArrays,
+    SurfaceQuadrature,
+    block_ids,
+    surface_triangles,
+)
 from warptissue.indenter import Indenter
 from warptissue.kernels import contact as kc
-from warptissue.mesh import TET4_EDGES, TetMesh, boundary_faces
+from warptissue.mesh import TetMesh
 
 __all__ = [
     "DEFAULT_PENALTY_FACTOR",
@@ -84,6 +92,10 @@ class RigidContact:
         frame: The probe's frame (:class:`warptissue.fem.probe.ProbeFrame`): its origin is
             the contact point at depth 0 and the indenter moves ``depth_m`` along its
             direction. None: along -z from ``(x_m, y_m, top_z_m)`` of the indenter.
+        quadrature: None: the node-to-surface penalty on ``nodes``; else the contact is
+            integrated at these points of the surface's triangles
+            (:mod:`warptissue.fem.surface_contact`) and ``stiffness_N_per_m`` is the
+            penalty per unit area ``eps``, Pa/m (``nodes`` still give the outputs' gaps).
     """
 
     indenter: Indenter
@@ -92,6 +104,7 @@ class RigidContact:
     stiffness_N_per_m: float
     depth_m: float = 0.0
     frame: ProbeFrame | None = None
+    quadrature: SurfaceQuadrature | None = None
 
     def __post_init__(self) -> None:
         if not self.indenter.is_rigid_contact:
@@ -154,17 +167,27 @@ class RigidContact:
         surface: str = "top",
         penalty_factor: float = DEFAULT_PENALTY_FACTOR,
         frame: ProbeFrame | None = None,
+        integration: str = "nodes",
     ) -> RigidContact:
         """The contact of ``indenter`` with the nodes of ``surface``, its stiffness from the
-        material and the mesh (``k = beta mu0 h``, module docstring).
+        material and the mesh (``k = beta mu0 h``, module docstring; ``integration =
+        "surface"``: the penalty per unit area ``eps = 10 beta mu0 / h``
+        (:data:`~warptissue.fem.surface_contact.SURFACE_PENALTY_SCALE`) at the quadrature
+        points of the triangles whose corners are candidate nodes,
+        :mod:`warptissue.fem.surface_contact`).
 
         ``frame`` (None: along -z from ``(x_m, y_m)`` and the top of ``surface``) places the
         indenter; the nodes "under" it are measured perpendicular to its direction, within
         its radius of the site along it (so that the far side of a body does not count).
 
         Raises:
-            InputError: A non-positive ``penalty_factor``, or no node under the indenter.
+            InputError: A non-positive ``penalty_factor``, no node under the indenter, or an
+                unknown ``integration``.
         """
+        if integration not in CONTACT_INTEGRATIONS:
+            raise InputError(
+                f"must be one of {CONTACT_INTEGRATIONS}", key="integration", value=integration
+            )
         if isinstance(penalty_factor, bool) or not (
             isinstance(penalty_factor, int | float)
             and math.isfinite(penalty_factor)
@@ -198,7 +221,13 @@ class RigidContact:
             )
         h = mean_edge_length(mesh, under)
         stiffness = float(penalty_factor) * shear_modulus_Pa * h
-        return cls(indenter, nodes, float(frame.origin_m[2]), stiffness, frame=frame)
+        quadrature = None
+        if integration == "surface":
+            stiffness *= SURFACE_PENALTY_SCALE / (h * h)
+            faces = surface_triangles(mesh, nodes)
+            quadrature = SurfaceQuadrature.for_faces(mesh.points, faces)
+        origin = float(frame.origin_m[2])
+        return cls(indenter, nodes, origin, stiffness, frame=frame, quadrature=quadrature)
 
 
 @dataclass(frozen=True)
@@ -273,26 +302,10 @@ class ContactSurface:
         Raises:
             InputError: No boundary triangle lies on ``surface``.
         """
-        member = np.zeros(mesh.node_count, dtype=bool)
-        member[np.asarray(mesh.node_set(surface), dtype=np.int64)] = True
-        corners = boundary_faces(mesh.tets).astype(np.int64)
-        corners = corners[member[corners].all(axis=1)]
-        if len(corners) == 0:
+        triangles = surface_triangles(mesh, mesh.node_set(surface))
+        if len(triangles) == 0:
             raise InputError(f"no boundary triangle lies on node set {surface!r}", key="surface")
-        if mesh.nodes_per_tet == 4:
-            return cls(corners)
-        # Mid-edge node of each tet edge, looked up by the edge's sorted corner pair.
-        n = np.int64(mesh.node_count)
-        tet_edges = np.sort(mesh.tets[:, :4][:, TET4_EDGES].reshape(-1, 2).astype(np.int64), 1)
-        keys = tet_edges[:, 0] * n + tet_edges[:, 1]
-        mids = mesh.tets[:, 4:10].reshape(-1).astype(np.int64)
-        order = np.argsort(keys)
-        keys, mids = keys[order], mids[order]
-        columns = []
-        for a, b in ((0, 1), (1, 2), (2, 0)):
-            pair = np.sort(corners[:, [a, b]], axis=1)
-            columns.append(mids[np.searchsorted(keys, pair[:, 0] * n + pair[:, 1])])
-        return cls(np.column_stack([corners, *columns]))
+        return cls(triangles)
 
     def triangle_areas_m2(self, points_m: np.ndarray) -> np.ndarray:
         """Area of each triangle at node positions ``points_m`` (N, 3), m^2, shape (F,)."""
@@ -384,7 +397,9 @@ class RigidContacts:
 
     Args:
         points: Reference node coordinates, vec3d (N,), m, on the assembler's device.
-        diagonal_blocks: Each node's diagonal block in the tangent's BSR values, (N,) int32.
+        pattern: The tangent's BSR row offsets and columns, (N + 1,) and (B,): each node's
+            diagonal block, and a surface-integrated contact's blocks between the nodes of a
+            triangle.
         node_offsets: First node of each packed problem and N at the end, (K + 1,); None
             where the problems are not packed in contiguous node ranges.
         node_problem: The problem of each node, (N,).
@@ -403,17 +418,20 @@ class RigidContacts:
         self,
         *,
         points: wp.array,
-        diagonal_blocks: np.ndarray,
+        pattern: tuple[np.ndarray, np.ndarray],
         node_offsets: np.ndarray | None,
         node_problem: np.ndarray,
         problem_count: int,
         device: Any,
     ) -> None:
         count = problem_count
+        self._pattern = pattern
+        diagonal = np.arange(len(pattern[0]) - 1)
+        self._surface: SurfaceContactArrays | None = None
         self.problem_count = count
         self.device = device
         self._points = points
-        self._diagonal_blocks = diagonal_blocks
+        self._diagonal_blocks = block_ids(*pattern, diagonal, diagonal)
         self._node_offsets = node_offsets
         self._node_problem = node_problem
         self.contact: RigidContact | None = None
@@ -464,6 +482,10 @@ class RigidContacts:
             self._problem = wp.array(np.concatenate(problems), dtype=wp.int32, device=dev)
             self._node_force = wp.zeros(len(union), dtype=wp.vec3d, device=dev)
             self._gap = wp.zeros(len(union), dtype=wp.float64, device=dev)
+        quadratures = [None if each is None else each.quadrature for each in contacts]
+        self._surface = SurfaceContactArrays.for_problems(
+            quadratures, used, node_offsets=offsets, pattern=self._pattern, device=self.device
+        )
         self._ranges = np.concatenate([[0], np.cumsum(counts)])
         self._bodies_key = self._stiffness_key = None  # uploaded at the next launch
         self.contacts = contacts
@@ -514,6 +536,9 @@ class RigidContacts:
         force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
         self.launch(u, 0, scratch, values, energy, force)
         gaps, forces = self._gap.numpy(), self._node_force.numpy()
+        if self._surface is not None:  # the nodes' gaps, and the forces the points put on them
+            self._launch_nodes(u, 0, wp.zeros_like(scratch), values, energy, wp.zeros_like(force))
+            gaps, forces = self._gap.numpy(), -scratch.numpy()[self._nodes.numpy()]
         ranges = self._ranges
         return [
             None
@@ -566,7 +591,29 @@ class RigidContacts:
         """One launch of ``rigid_contact_kernel`` over every problem's candidate nodes at the
         contacts' current depths: subtracts the contact forces from ``residual`` (vec3d (N,)),
         adds to the diagonal blocks of ``values`` where ``with_tangent``, and to ``energy``
-        (J) and ``force`` (N), one entry per problem."""
+        (J) and ``force`` (N), one entry per problem; of ``rigid_surface_contact_kernel``
+        over the quadrature points instead where the contacts are surface-integrated."""
+        if self._surface is None:
+            self._launch_nodes(u, with_tangent, residual, values, energy, force)
+            return
+        surface = self._surface
+        wp.launch(
+            kc.rigid_surface_contact_kernel,
+            dim=surface.point_count,
+            inputs=[self._points, u, *surface.inputs, *self._inputs(), with_tangent],
+            outputs=[residual, values, energy, force, surface.gap],
+            device=self.device,
+        )
+
+    def _launch_nodes(
+        self,
+        u: wp.array,
+        with_tangent: int,
+        residual: wp.array,
+        values: wp.array,
+        energy: wp.array,
+        force: wp.array,
+    ) -> None:
         wp.launch(
             kc.rigid_contact_kernel,
             dim=int(self._ranges[-1]),

@@ -119,6 +119,8 @@ class IndentationProblem:
             (:class:`warptissue.fem.contact.ContactSurface`: a set holding none is refused).
         penalty_factor: ``beta`` of the contact penalty ``k = beta mu0 h`` of a sphere or a
             plate (:mod:`warptissue.fem.contact`; unused by a flat punch).
+        contact_integration: ``"nodes"`` (node-to-surface penalty) or ``"surface"`` (at
+            quadrature points of the triangles, :mod:`warptissue.fem.surface_contact`).
         site_m: Where the probe meets the specimen, (3,), m: snapped to the nearest point of
             ``surface``'s boundary triangles (:func:`warptissue.fem.probe.snap_to_surface`).
             None: ``(x_m, y_m)`` of the indenter on the top of ``surface`` (today's probe on
@@ -151,6 +153,7 @@ class IndentationProblem:
     formulation: str = field(default="mixed", kw_only=True)
     surface: str = field(default="top", kw_only=True)
     penalty_factor: float = field(default=DEFAULT_PENALTY_FACTOR, kw_only=True)
+    contact_integration: str = field(default="nodes", kw_only=True)
     site_m: Sequence[float] | None = field(default=None, kw_only=True)
     direction: Sequence[float] | None = field(default=None, kw_only=True)
     edge: Sequence[float] | None = field(default=None, kw_only=True)
@@ -238,17 +241,12 @@ class IndentationProblem:
             # The contact outputs need the surface's triangles: refused here, not after a run.
             ContactSurface.for_mesh(self.mesh, surface=self.surface)
             return
-        if self.punch_nodes.size == 0 and self.frame is not None:
-            raise InputError(
-                f"no node of {self.surface!r} lies within the punch radius "
-                f"{self.indenter.radius_m} m of the probe's axis through the site "
-                f"{self.frame.origin_m.tolist()}",
-                key="radius_m",
-            )
         if self.punch_nodes.size == 0:
+            axis = "the axis x = y = 0" if self.frame is None else "the probe's axis through "
+            axis += "" if self.frame is None else f"the site {self.frame.origin_m.tolist()}"
             raise InputError(
                 f"no node of {self.surface!r} lies within the punch radius "
-                f"{self.indenter.radius_m} m of the axis x = y = 0",
+                f"{self.indenter.radius_m} m of {axis}",
                 key="radius_m",
             )
         if self.indenter.z_m is not None and self.frame is None:
@@ -340,6 +338,7 @@ class IndentationProblem:
             surface=self.surface,
             penalty_factor=self.penalty_factor,
             frame=self.frame,
+            integration=self.contact_integration,
         )
 
     @property

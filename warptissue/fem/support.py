@@ -48,6 +48,7 @@ import warp as wp
 from warptissue.errors import InputError
 from warptissue.fem.contact import ContactSurface
 from warptissue.fem.packing import per_problem
+from warptissue.fem.surface_contact import block_ids
 from warptissue.kernels import contact as kc
 from warptissue.mesh import TetMesh
 
@@ -297,15 +298,12 @@ class SupportSpringSet:
         if not self._count:
             return
         row, column = np.concatenate(rows), np.concatenate(columns)
-        offsets = self._pattern_offsets
-        n = len(offsets) - 1
-        pattern_rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(offsets))
-        keys = pattern_rows * n + self._pattern_columns  # ascending: the pattern is row-major
-        wanted = row * n + column
-        ids = np.minimum(np.searchsorted(keys, wanted), len(keys) - 1)
-        found = keys[ids] == wanted
-        if not np.all(found):
-            raise InputError("support springs couple nodes that share no element", key="springs")
+        try:
+            ids = block_ids(self._pattern_offsets, self._pattern_columns, row, column)
+        except InputError:
+            raise InputError(
+                "support springs couple nodes that share no element", key="springs"
+            ) from None
         dev = self.device
         self._rows, self._columns = row, column
         self._blocks_host = np.concatenate(blocks)

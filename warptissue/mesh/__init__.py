@@ -39,6 +39,7 @@ from warptissue.mesh.quality import (
     dihedral_angles,
     edge_lengths,
     fix_orientation,
+    move_midnodes_keeping_jacobian,
     radius_ratios,
     tet10_jacobian_determinants,
 )
@@ -98,6 +99,7 @@ __all__ = [
     "indentation_disc",
     "locate_points",
     "near_size_choice",
+    "move_midnodes_keeping_jacobian",
     "radius_ratios",
     "refine_near_sites",
     "read_mesh",

@@ -5,7 +5,9 @@ The surface is rings of points at polar angles graded from ``pole_size_m`` at th
 (+z) to ``far_size_m``, triangulated as their convex hull (every point of a sphere is a
 vertex of the hull); TetGen fills it with quality tetrahedra, whose size follows the
 surface's. TET10 mid-edge nodes on the boundary are moved onto the sphere, so that the
-quadratic faces follow its curvature.
+quadratic faces follow its curvature, each only as far as the elements' Jacobians stay
+positive (a flat tet against the surface would otherwise invert), so that the mesh passes
+:func:`warptissue.mesh.check_mesh` for every size it accepts.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from scipy.spatial import ConvexHull
 
 from warptissue.errors import InputError
 from warptissue.mesh.core import TET4_EDGES, TetMesh, boundary_faces, to_tet10
+from warptissue.mesh.quality import move_midnodes_keeping_jacobian
 from warptissue.mesh.surface import tetrahedralize_surface
 
 
@@ -34,7 +37,8 @@ def ball_mesh(
         far_size_m: Largest element edge length, m.
         growth: How fast the surface's element size grows with the arc length s from the
             pole: h(s) = min(far, pole + growth s) (0.25: a quarter of a metre per metre).
-        element: ``"TET10"`` (boundary mid-edge nodes on the sphere) or ``"TET4"``.
+        element: ``"TET10"`` (boundary mid-edge nodes on the sphere, or as near it as the
+            element's Jacobian allows) or ``"TET4"``.
 
     Returns:
         The mesh, with node sets ``"surface"``, ``"top"`` (the surface with z >= 0, the
@@ -117,7 +121,9 @@ def _boundary_midnodes(mesh: TetMesh, faces: np.ndarray) -> np.ndarray:
 
 
 def _midnodes_onto_sphere(mesh: TetMesh, faces: np.ndarray, radius_m: float) -> None:
-    """Move the boundary mid-edge nodes radially onto the sphere (the corners are on it)."""
+    """Move the boundary mid-edge nodes radially onto the sphere (the corners are on it), each
+    only as far as its elements' Jacobians stay positive."""
     nodes = _boundary_midnodes(mesh, faces)
     points = mesh.points[nodes]
-    mesh.points[nodes] = radius_m * points / np.linalg.norm(points, axis=1, keepdims=True)
+    targets = radius_m * points / np.linalg.norm(points, axis=1, keepdims=True)
+    move_midnodes_keeping_jacobian(mesh, nodes, targets)

@@ -23,9 +23,14 @@ __all__ = [
     "dihedral_angles",
     "edge_lengths",
     "fix_orientation",
+    "move_midnodes_keeping_jacobian",
     "radius_ratios",
     "tet10_jacobian_determinants",
 ]
+
+CURVED_MIN_SCALED_JACOBIAN = 0.1
+"""Smallest scaled Jacobian (det J over 6 V, 1 straight-sided) that
+:func:`move_midnodes_keeping_jacobian` leaves in an element it curves."""
 
 TET10_SWAP_1_2: np.ndarray = np.array([0, 2, 1, 3, 6, 5, 4, 7, 9, 8], dtype=np.int32)
 """Node permutation that swaps corners 1 and 2 of a TET10 and its mid-edge nodes with them:
@@ -206,6 +211,57 @@ def fix_orientation(mesh: TetMesh) -> TetMesh:
         face_sets={k: v.copy() for k, v in mesh.face_sets.items()},
         tet_regions=mesh.tet_regions.copy(),
     )
+
+
+def move_midnodes_keeping_jacobian(
+    mesh: TetMesh,
+    nodes: np.ndarray,
+    targets_m: np.ndarray,
+    *,
+    min_scaled_jacobian: float = CURVED_MIN_SCALED_JACOBIAN,
+) -> np.ndarray:
+    """Move TET10 mid-edge nodes toward targets (a curved boundary), each only as far as the
+    elements around it keep a positive Jacobian, in place.
+
+    Args:
+        mesh: A TET10 mesh whose elements are valid as they are (straight-sided, say).
+            Modified in place.
+        nodes: Mid-edge node indices, shape (n,).
+        targets_m: Where each node should go, shape (n, 3), m.
+        min_scaled_jacobian: An element that the move would leave with det J / (6 V) below
+            this, at any of the samples of :func:`tet10_jacobian_determinants`, has its moved
+            nodes' moves halved, up to 10 times, then undone (the straight position, det J =
+            6 V, is valid).
+
+    Returns:
+        The fraction of its move each node made, shape (n,): 1 where it reached its target.
+
+    Notes:
+        Projecting a boundary edge's mid node onto a curved surface bends the element; a flat
+        element against the surface (a sliver with four corners on it) inverts when its mid
+        node moves farther than about its height. Such a node stops part of the way, so the
+        face follows the surface a little less there and the element stays valid (the
+        :func:`check_mesh` test).
+    """
+    nodes = np.asarray(nodes, dtype=np.int64)
+    start = mesh.points[nodes].copy()
+    move = np.asarray(targets_m, dtype=float) - start
+    fraction = np.ones(len(nodes))
+    position = np.full(mesh.node_count, -1, dtype=np.int64)
+    position[nodes] = np.arange(len(nodes))
+    touched = np.flatnonzero((position[mesh.tets[:, 4:]] >= 0).any(axis=1))
+    tets = mesh.tets[touched]
+    volumes = signed_volumes(mesh.points, tets[:, :4])
+    for attempt in range(11):
+        mesh.points[nodes] = start + fraction[:, None] * move
+        scaled = tet10_jacobian_determinants(mesh.points, tets).min(axis=1) / (6.0 * volumes)
+        bad = scaled < min_scaled_jacobian
+        if not bad.any():
+            break
+        held = position[tets[bad, 4:]]
+        held = np.unique(held[held >= 0])
+        fraction[held] = 0.0 if attempt == 9 else 0.5 * fraction[held]
+    return fraction
 
 
 def radius_ratios(points: np.ndarray, tets: np.ndarray) -> np.ndarray:

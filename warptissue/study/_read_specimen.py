@@ -26,7 +26,12 @@ from warptissue.study._schema import (
     Specimen,
     Study,
 )
-from warptissue.study._sizing import mesh_probe_radius, specimen_half_size_m
+from warptissue.study._sizing import (
+    mesh_probe_radius,
+    near_size_too_coarse,
+    probe_outside_specimen,
+    specimen_half_size_m,
+)
 from warptissue.study._toml import Source, Table
 
 
@@ -46,14 +51,10 @@ def read_specimen(table: Table, indenter: Indenter, *, deepest_m: float) -> Spec
     radius_m = table.number("radius_m") if shape == "disc" else None
     half_size_m = specimen_half_size_m(shape, width_m, radius_m)
     probe_radius_m = mesh_probe_radius(indenter, half_size_m, depth_m=deepest_m)
-    size_key = "width_m" if shape == "block" else "radius_m"
-    if half_size_m <= probe_radius_m:
-        raise table.error(
-            size_key,
-            f"the specimen must extend beyond the probe radius {probe_radius_m!r} m"
-            + (" (half the width is compared)" if shape == "block" else ""),
-            width_m if shape == "block" else radius_m,
-        )
+    too_small = probe_outside_specimen(indenter, shape, half_size_m, probe_radius_m)
+    if too_small:
+        size_key = "width_m" if shape == "block" else "radius_m"
+        raise table.error(size_key, too_small, width_m if shape == "block" else radius_m)
     quarter = table.boolean("quarter", default=True)
     element = table.string("element", default="TET10", choices=ELEMENT_TYPES)
     force_accuracy = table.number("force_accuracy", default=None)
@@ -83,12 +84,8 @@ def read_specimen(table: Table, indenter: Indenter, *, deepest_m: float) -> Spec
             "size_near_m", f"must not exceed size_far_m ({size_far_m!r} m)", size_near_m
         )
     if size_near_m > probe_radius_m:
-        raise table.error(
-            "size_near_m",
-            f"must not exceed the probe radius ({probe_radius_m!r} m), or the probe is not "
-            "resolved",
-            size_near_m,
-        )
+        message = near_size_too_coarse(indenter, probe_radius_m, depth_m=deepest_m)
+        raise table.error("size_near_m", message, size_near_m)
     growth = table.number("growth", default=1.2)
     if growth < 1.0:
         raise table.error("growth", "must be at least 1", growth)

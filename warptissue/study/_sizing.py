@@ -66,3 +66,45 @@ def mesh_probe_radius(indenter: Indenter, half_size_m: float, *, depth_m: float)
         contact_m = math.sqrt(indenter.radius_m * depth_m)
         return min(indenter.radius_m, CONTACT_RADIUS_SAFETY * contact_m)
     return indenter.radius_m
+
+
+def probe_outside_specimen(
+    indenter: Indenter, shape: str, half_size_m: float, zone_m: float
+) -> str | None:
+    """Why the specimen is too small for the probe, or None where it fits.
+
+    The probe's radius must be less than the specimen's half size (a plate's radius only
+    sets the refined zone, so it is not compared), and so must the refined zone
+    (:func:`mesh_probe_radius`, ``zone_m``).
+
+    Args:
+        indenter: The probe.
+        shape: ``"block"`` (its half width is compared) or ``"disc"`` (its radius).
+        half_size_m: The specimen's extent from the probe axis, m.
+        zone_m: The refined zone's radius, m.
+    """
+    half = "half the width" if shape == "block" else "the radius"
+    if indenter.kind != "plate" and indenter.radius_m >= half_size_m:
+        return (
+            f"the specimen's {half} ({half_size_m!r} m) must exceed the {indenter.kind}'s "
+            f"indenter.radius_m ({indenter.radius_m!r} m)"
+        )
+    if half_size_m <= zone_m:
+        return f"the specimen's {half} must extend beyond the probe radius {zone_m!r} m"
+    return None
+
+
+def near_size_too_coarse(indenter: Indenter, zone_m: float, *, depth_m: float) -> str:
+    """The message for a ``size_near_m`` above the refined zone ``zone_m`` of
+    :func:`mesh_probe_radius` (m), naming the zone and the values it came from: "the probe
+    radius (0.001 m)" or, for a sphere whose zone is its contact's, "the sphere's refined
+    zone 1.5 sqrt(R d) = 0.000335 m (R = indenter.radius_m = 0.001 m, d = the deepest depth
+    = 5e-05 m)"; ``depth_m``: the deepest depth, m."""
+    zone = f"the probe radius ({zone_m!r} m)"
+    if indenter.kind == "sphere" and depth_m > 0.0 and zone_m < indenter.radius_m:
+        zone = (
+            f"the sphere's refined zone {CONTACT_RADIUS_SAFETY:g} sqrt(R d) = {zone_m:.6g} m "
+            f"(R = indenter.radius_m = {indenter.radius_m!r} m, d = the deepest depth = "
+            f"{depth_m!r} m)"
+        )
+    return f"must not exceed {zone}, or the probe is not resolved"

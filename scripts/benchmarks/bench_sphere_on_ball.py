@@ -1,0 +1,117 @@
+"""A rigid sphere on an elastic ball against Hertz (issue 44): node-to-surface against
+surface-integrated contact, at the pole and at a site turned off it, over radius ratios and
+near sizes; F / Hertz and Newton iterations per load step.
+
+The ball (radius R2, neo-Hookean C10 = 500 Pa, K = 1000 mu) is meshed by
+:func:`warptissue.mesh.ball_mesh` finer around its pole (pole size ``c sqrt(R* d_min)``),
+turned so that the pole lies ``--site-deg`` degrees from +z about y, and held on the half
+opposite the site. The sphere (R1) comes in along the inward normal at the site. Hertz with
+R* = R1 R2 / (R1 + R2), E* = E / (1 - nu^2).
+
+Usage:
+    python scripts/benchmarks/bench_sphere_on_ball.py --ratios 0.05 0.0741 0.5 \
+        --site-deg 0 45 --pole 0.3 --integration nodes surface --device cuda --out table.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from warptissue.fem import IndentationProblem, simulate_indentation
+from warptissue.indenter import Indenter
+from warptissue.materials import NeoHookean
+from warptissue.mesh import TetMesh, ball_mesh
+
+BALL_RADIUS_M = 10e-3
+C10_PA = 500.0
+BULK_OVER_SHEAR = 1000.0
+DEPTHS_OVER_RSTAR = np.array([0.005, 0.01, 0.02, 0.03, 0.04])
+
+
+def hertz_N(depth_m: np.ndarray, reduced_radius_m: float) -> np.ndarray:
+    mu = 2.0 * C10_PA
+    nu = (3.0 * BULK_OVER_SHEAR - 2.0) / (2.0 * (3.0 * BULK_OVER_SHEAR + 1.0))
+    reduced = 2.0 * mu * (1.0 + nu) / (1.0 - nu**2)
+    return 4.0 / 3.0 * reduced * np.sqrt(reduced_radius_m) * depth_m**1.5
+
+
+def turned_ball(pole_m: float, site_deg: float) -> tuple[TetMesh, np.ndarray]:
+    mesh = ball_mesh(BALL_RADIUS_M, pole_size_m=pole_m, far_size_m=0.15 * BALL_RADIUS_M)
+    angle = np.radians(site_deg)
+    c, s = np.cos(angle), np.sin(angle)
+    rotation = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    points = mesh.points @ rotation.T
+    turned = TetMesh(points=points, tets=mesh.tets, node_sets=dict(mesh.node_sets))
+    return turned, rotation @ [0.0, 0.0, 1.0]
+
+
+def run_case(ratio: float, site_deg: float, pole: float, integration: str, device: str) -> dict:
+    probe_radius = ratio * BALL_RADIUS_M
+    reduced_radius = probe_radius * BALL_RADIUS_M / (probe_radius + BALL_RADIUS_M)
+    contact = np.sqrt(reduced_radius * DEPTHS_OVER_RSTAR.min() * reduced_radius)
+    mesh, normal = turned_ball(pole * contact, site_deg)
+    problem = IndentationProblem(
+        mesh,
+        NeoHookean(C10_PA, BULK_OVER_SHEAR * 2.0 * C10_PA),
+        Indenter("sphere", radius_m=probe_radius),
+        site_m=BALL_RADIUS_M * normal,
+        direction=-normal,
+        symmetry_planes=(),
+        contact_integration=integration,
+    )
+    depths = DEPTHS_OVER_RSTAR * reduced_radius
+    start = time.perf_counter()
+    result = simulate_indentation(problem, depths, device=device, progress=False)
+    seconds = time.perf_counter() - start
+    count = len(result.reaction_force_N)
+    ratio_to_hertz = result.reaction_force_N / hertz_N(depths[:count], reduced_radius)
+    return {
+        "R1_over_R2": ratio,
+        "site_deg": site_deg,
+        "pole_over_contact": pole,
+        "integration": integration,
+        "nodes": mesh.node_count,
+        "seconds": seconds,
+        "completed": bool(result.completed),
+        "message": result.message,
+        "d_over_Rstar": DEPTHS_OVER_RSTAR[:count].tolist(),
+        "F_over_hertz": ratio_to_hertz.tolist(),
+        "newton_iterations": np.asarray(result.newton_iterations).tolist(),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ratios", type=float, nargs="+", default=[1 / 13.5])
+    parser.add_argument("--site-deg", type=float, nargs="+", default=[0.0])
+    parser.add_argument("--pole", type=float, nargs="+", default=[0.3])
+    parser.add_argument("--integration", nargs="+", default=["nodes", "surface"])
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args()
+    rows = []
+    for ratio in args.ratios:
+        for site in args.site_deg:
+            for pole in args.pole:
+                for integration in args.integration:
+                    row = run_case(ratio, site, pole, integration, args.device)
+                    rows.append(row)
+                    print(
+                        f"R1/R2 {ratio:.4g} site {site:g} pole {pole:g} {integration:8s} "
+                        f"nodes {row['nodes']} {row['seconds']:.0f} s "
+                        f"F/H {np.round(row['F_over_hertz'], 4).tolist()} "
+                        f"its {row['newton_iterations']} "
+                        + ("" if row["completed"] else row["message"]),
+                        flush=True,
+                    )
+    if args.out:
+        with open(args.out, "w", encoding="utf-8") as handle:
+            json.dump(rows, handle, indent=1)
+
+
+if __name__ == "__main__":
+    main()
