@@ -17,29 +17,58 @@ ratio, :data:`MATERIAL_FIELD_PRIMVARS`) is written as uniform primvars of the Te
 the surface Mesh (each face takes the value of the tet it bounds), in the asset layer.
 Under a rigid indenter in contact the results layer also samples the contact pressure on the
 surface Mesh and the contact area on the indenter (:data:`CONTACT_RESULTS`).
+
+This module puts the layers together; the pieces live beside it and are re-exported here:
+``_layout`` (prim paths, the written paths, customData values, stage metadata),
+``_material`` (the physics material, its bindings and the material field) and ``_results``
+(a result's arrays and time samples).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, UsdShade, Vt
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, Vt
 
 from warptissue.errors import InputError, MeshError
 from warptissue.indenter import Indenter
-from warptissue.io import atomic_path, software_versions, to_jsonable
-from warptissue.materials import material_from_dict
+from warptissue.io import atomic_path, software_versions
 from warptissue.mesh import FACE_SET_FAMILY, NODE_SET_FAMILY, REGION_FAMILY, TetMesh
+from warptissue.usd._layout import (  # noqa: F401 (the scene's paths, re-exported)
+    INDENTER,
+    MATERIAL,
+    SPECIMEN,
+    SURFACE,
+    VOLUME,
+    WORLD,
+    UsdScenePaths,
+    check_density,
+    corner_mesh,
+    set_stage_metadata,
+    vt_dictionary,
+)
+from warptissue.usd._material import (  # noqa: F401 (re-exported)
+    MATERIAL_FIELD_PRIMVARS,
+    bind_materials,
+    material_field_arrays,
+    material_field_primvars,
+    material_field_problems,
+    material_prims,
+)
+from warptissue.usd._results import (  # noqa: F401 (re-exported)
+    CONTACT_RESULTS,
+    declare_result_attributes,
+    result_arrays,
+    result_field,
+    result_summary,
+    write_results,
+)
 from warptissue.usd.schema import (
     DEFORMABLE_BODY_API,
-    TISSUE_MATERIAL_API,
-    VOLUME_DEFORMABLE_MATERIAL_API,
     VOLUME_DEFORMABLE_SIM_API,
     material_record,
 )
@@ -53,78 +82,6 @@ __all__ = [
     "write_material_usd",
     "write_simulation_usd",
 ]
-
-MATERIAL_FIELD_PRIMVARS = {
-    "youngs_modulus_Pa": ("tissue:youngsModulus", "Pa"),
-    "poissons_ratio": ("tissue:poissonsRatio", "1"),
-}
-"""Per-tet material field: ``material_field`` key -> (uniform primvar name, unit customData)."""
-
-CONTACT_RESULTS = ("contact_area_m2", "contact_pressure_Pa")
-"""Optional results of a rigid indenter in contact: the contact area per step (S,), m^2,
-written as ``tissue:probe:contactArea`` on ``/World/Indenter``, and the nodal contact
-pressure (S, N) (or (N,): the last step), Pa, written as the vertex primvar
-``primvars:tissue:contactPressure`` of the surface Mesh."""
-
-WORLD = "/World"
-SPECIMEN = "/World/Specimen"
-VOLUME = "/World/Specimen/Volume"
-SURFACE = "/World/Specimen/Surface"
-MATERIAL = "/World/Materials/Tissue"
-INDENTER = "/World/Indenter"
-
-
-@dataclass(frozen=True)
-class UsdScenePaths:
-    """The files of a written scene.
-
-    Attributes:
-        root: The root layer (open this one).
-        asset: The asset layer.
-        results: The results layer, or None when no result was written.
-    """
-
-    root: Path
-    asset: Path
-    results: Path | None
-
-
-def result_field(result: Any, name: str) -> Any:
-    """A result's field ``name``: a mapping's key or an object's attribute (None without)."""
-    if isinstance(result, Mapping):
-        return result.get(name)
-    return getattr(result, name, None)
-
-
-def corner_mesh(mesh: TetMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Corner nodes of a TET4/TET10 mesh: (kept node ids (n,), renumbered tets (M,4), map)."""
-    corners = mesh.tets[:, :4]
-    kept = np.unique(corners)
-    new_index = np.full(mesh.node_count, -1, dtype=np.int64)
-    new_index[kept] = np.arange(kept.size)
-    return kept, new_index[corners].astype(np.int32), new_index
-
-
-def vt_dictionary(data: Mapping[str, Any]) -> dict[str, Any]:
-    """JSON-like data as values USD customData accepts (nested dicts, str, float, int, bool)."""
-
-    converted: dict[str, Any] = {}
-    for key, value in to_jsonable(data).items():
-        if isinstance(value, Mapping):
-            converted[key] = vt_dictionary(value)
-        elif isinstance(value, (str, bool, int, float)):
-            converted[key] = value
-        elif isinstance(value, list) and value and all(isinstance(v, str) for v in value):
-            converted[key] = Vt.StringArray(value)
-        elif (
-            isinstance(value, list)
-            and value
-            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
-        ):
-            converted[key] = Vt.DoubleArray([float(v) for v in value])
-        elif value is not None:
-            converted[key] = json.dumps(value)
-    return converted
 
 
 def _surface_owners(tets: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -302,386 +259,6 @@ def _wedge_mesh(stage: Any, indenter: Indenter) -> None:
     shape.CreateExtentAttr([(min(xs), -length / 2, 0.0), (max(xs), length / 2, height)])
 
 
-def check_density(density_kg_per_m3: float) -> None:
-    """Refuse a mass density that is not a positive number (kg/m^3)."""
-    if not (np.isfinite(density_kg_per_m3) and density_kg_per_m3 > 0):
-        raise InputError("density must be positive", value=density_kg_per_m3)
-
-
-def material_field_problems(key: str, values: Any, *, count: int) -> list[str]:
-    """What is wrong with one array of a per-tet material field (empty when it is valid).
-
-    Args:
-        key: ``"youngs_modulus_Pa"`` (must be > 0) or ``"poissons_ratio"`` (must lie in the
-            open interval (-1, 0.5): a linear elastic solid is stable there, and nu = 0.5
-            makes the bulk modulus infinite).
-        values: The array, one value per element.
-        count: The expected number of values (tets, or faces of the surface Mesh).
-
-    Returns:
-        One sentence per problem: shape, non-finite values, values out of range (the first
-        offending index and value named).
-    """
-    try:
-        array = np.asarray(values, dtype=np.float64)
-    except (TypeError, ValueError):
-        return [f"{key} is not an array of numbers"]
-    if array.shape != (count,):
-        return [f"{key} has shape {array.shape}, expected ({count},)"]
-    problems = []
-    finite = np.isfinite(array)
-    if not finite.all():
-        bad = int(np.flatnonzero(~finite)[0])
-        problems.append(f"{key} holds non-finite values (first at index {bad}: {array[bad]})")
-    if key == "youngs_modulus_Pa":
-        invalid = finite & ~(array > 0.0)
-        allowed = "> 0"
-    else:
-        invalid = finite & ~((array > -1.0) & (array < 0.5))
-        allowed = "in (-1, 0.5)"
-    if invalid.any():
-        bad = int(np.flatnonzero(invalid)[0])
-        problems.append(
-            f"{key} must be {allowed}: {int(invalid.sum())} values are not "
-            f"(first at index {bad}: {float(array[bad])!r})"
-        )
-    return problems
-
-
-def _material_field_arrays(material_field: Mapping[str, Any], *, tet_count: int) -> dict:
-    """Validated per-tet arrays of ``material_field`` (see :func:`write_simulation_usd`)."""
-    if not isinstance(material_field, Mapping) or set(material_field) != set(
-        MATERIAL_FIELD_PRIMVARS
-    ):
-        keys = sorted(material_field) if isinstance(material_field, Mapping) else None
-        raise InputError(
-            f"material_field must map exactly {sorted(MATERIAL_FIELD_PRIMVARS)} to per-tet arrays",
-            value=keys,
-        )
-    arrays = {}
-    for key in MATERIAL_FIELD_PRIMVARS:
-        problems = material_field_problems(key, material_field[key], count=tet_count)
-        if problems:
-            raise InputError(f"material_field: {problems[0]}")
-        arrays[key] = np.asarray(material_field[key], dtype=np.float64)
-    return arrays
-
-
-def _material_field_primvars(
-    stage: Any, arrays: Mapping[str, np.ndarray], *, owners: np.ndarray
-) -> None:
-    """Per-tet values on the TetMesh and per-face values (of the owning tet) on the surface."""
-
-    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(VOLUME))
-    surface = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(SURFACE))
-    for key, (name, unit) in MATERIAL_FIELD_PRIMVARS.items():
-        for api, values in ((volume, arrays[key]), (surface, arrays[key][owners])):
-            primvar = api.CreatePrimvar(
-                name, Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform
-            )
-            primvar.Set(Vt.DoubleArray.FromNumpy(np.ascontiguousarray(values)))
-            primvar.GetAttr().SetCustomDataByKey("unit", unit)
-
-
-def set_stage_metadata(layer: Any) -> None:
-    """SI units and z up: the project's coordinates (indentation along -z) need no rotation."""
-    layer.defaultPrim = "World"
-    metadata = {"metersPerUnit": 1.0, "kilogramsPerUnit": 1.0, "upAxis": "Z"}
-    pseudo = layer.pseudoRoot
-    for key, value in metadata.items():
-        pseudo.SetInfo(key, value)
-
-
-def material_prims(
-    stage: Any, record: Any, density_kg_per_m3: float, *, path: str = MATERIAL
-) -> Any:
-    """The physics material: proposal small-strain attributes plus the ``tissue:`` schema.
-
-    Returns:
-        The ``UsdShade.Material`` at ``path`` (``/World/Materials/Tissue``).
-    """
-
-    UsdGeom.Scope.Define(stage, path.rsplit("/", 1)[0])
-    material = UsdShade.Material.Define(stage, path)
-    prim = material.GetPrim()
-    prim.AddAppliedSchema(VOLUME_DEFORMABLE_MATERIAL_API)
-    prim.AddAppliedSchema(TISSUE_MATERIAL_API)
-    for name, value in (
-        ("density", density_kg_per_m3),
-        ("youngsModulus", record.youngs_modulus_Pa),
-        ("poissonsRatio", record.poissons_ratio),
-    ):
-        prim.CreateAttribute(f"physics:{name}", Sdf.ValueTypeNames.Float, custom=False).Set(
-            float(value)
-        )
-    # Declared types and variability match generatedSchema.usda, so the values are written
-    # the same whether or not the schema registry saw the plugin.
-    tissue_values: list[tuple[str, Any]] = [
-        ("tissue:convention", "abaqus"),
-        ("tissue:hyperelastic:model", record.model),
-    ]
-    tissue_values += [(f"tissue:hyperelastic:{k}", v) for k, v in record.hyperelastic.items()]
-    if record.prony_g.size:
-        tissue_values += [
-            ("tissue:viscoelastic:pronyG", record.prony_g),
-            ("tissue:viscoelastic:pronyTau", record.prony_tau_s),
-        ]
-    for attr_name, value in tissue_values:
-        if isinstance(value, str):
-            type_name, usd_value = Sdf.ValueTypeNames.Token, value
-        elif isinstance(value, np.ndarray):
-            type_name, usd_value = Sdf.ValueTypeNames.DoubleArray, Vt.DoubleArray.FromNumpy(value)
-        else:
-            type_name, usd_value = Sdf.ValueTypeNames.Double, float(value)
-        prim.CreateAttribute(
-            attr_name, type_name, custom=False, variability=Sdf.VariabilityUniform
-        ).Set(usd_value)
-    prim.SetCustomDataByKey("warptissue:material", vt_dictionary(record.source))
-    return material
-
-
-def bind_materials(stage: Any, volume_prim: Any, material: Any, density_kg_per_m3: float) -> Any:
-    """The run's materials, bound with purpose ``physics``: the material (a body of several
-    regions: its default) at ``/World/Materials/Tissue`` to the TetMesh, and each named region's
-    (:class:`warptissue.materials.MaterialRegions`) at ``/World/Materials/<name>`` to the
-    TetMesh's ``materialRegion`` subsets of its tet regions.
-
-    Returns:
-        The ``UsdShade.Material`` bound to the TetMesh.
-
-    Raises:
-        InputError: The TetMesh has no ``materialRegion`` subset of a region's tet region.
-    """
-    if isinstance(material, Mapping) and "regions" in material:  # result.json's table
-        material = material_from_dict(material)
-    parts = material.parts if hasattr(material, "parts") else (("", material),)
-    tissue = material_prims(stage, material_record(material), density_kg_per_m3)
-    UsdShade.MaterialBindingAPI.Apply(volume_prim).Bind(
-        tissue, UsdShade.Tokens.fallbackStrength, "physics"
-    )
-    for prefix, part in parts[1:]:
-        name = prefix[:-1]
-        region = material_prims(
-            stage,
-            material_record(part),
-            density_kg_per_m3,
-            path=f"{MATERIAL.rsplit('/', 1)[0]}/{Tf.MakeValidIdentifier(name)}",
-        )
-        for each in material.tet_regions[name]:
-            subset = volume_prim.GetChild(Tf.MakeValidIdentifier(f"{REGION_FAMILY}_{each}"))
-            if not subset.IsValid():
-                raise InputError(
-                    f"the TetMesh has no {REGION_FAMILY} subset of tet region {each} to bind "
-                    f"region {name!r}'s material to",
-                    key=f"material.regions.{name}.tet_regions",
-                )
-            UsdShade.MaterialBindingAPI.Apply(subset).Bind(
-                region, UsdShade.Tokens.fallbackStrength, "physics"
-            )
-    return tissue
-
-
-def result_arrays(result: Any, *, node_count: int, tet_count: int) -> dict[str, np.ndarray]:
-    """Validated result arrays (see :func:`write_simulation_usd`)."""
-    arrays: dict[str, np.ndarray] = {}
-    for name in ("depths_m", "reaction_force_N", "displacement_m"):
-        value = result_field(result, name)
-        if value is None:
-            raise InputError(f"the result has no {name!r}", value=type(result).__name__)
-        arrays[name] = np.asarray(value, dtype=np.float64)
-    for name in ("cauchy_stress_Pa", "von_mises_Pa", "time_s", *CONTACT_RESULTS):
-        value = result_field(result, name)
-        if value is not None:
-            arrays[name] = np.asarray(value, dtype=np.float64)
-    for name in CONTACT_RESULTS:  # a sharp flat punch's result holds them empty
-        if name in arrays and arrays[name].size == 0:
-            del arrays[name]
-    step_count = arrays["depths_m"].shape[0] if arrays["depths_m"].ndim == 1 else -1
-    expected = {
-        "depths_m": (step_count,),
-        "reaction_force_N": (step_count,),
-        "time_s": (step_count,),
-        "displacement_m": (step_count, node_count, 3),
-        "cauchy_stress_Pa": (tet_count, 6),
-        "von_mises_Pa": (tet_count,),
-        "contact_area_m2": (step_count,),
-        "contact_pressure_Pa": (step_count, node_count),
-    }
-    if arrays["displacement_m"].ndim == 2:
-        expected["displacement_m"] = (node_count, 3)
-    if "contact_pressure_Pa" in arrays and arrays["contact_pressure_Pa"].ndim == 1:
-        expected["contact_pressure_Pa"] = (node_count,)
-    for name, array in arrays.items():
-        if array.shape != expected[name]:
-            raise InputError(
-                f"result {name!r} has shape {array.shape}, expected {expected[name]}",
-                value=array.shape,
-            )
-        if not np.all(np.isfinite(array)):
-            raise InputError(f"result {name!r} holds non-finite values")
-    if step_count < 1:
-        raise InputError("the result has no load steps", value=step_count)
-    return arrays
-
-
-def result_summary(arrays: Mapping[str, np.ndarray], result: Any) -> dict[str, Any]:
-    """The result's ``customData`` on ``/World``: its step count, the time-code rule, and
-    ``completed`` and ``message`` where the result has them."""
-    summary: dict[str, Any] = {
-        "step_count": len(arrays["depths_m"]),
-        "time_code_of_step_k": "k (time code 0 is the rest state)",
-    }
-    for name in ("completed", "message"):
-        if result_field(result, name) is not None:
-            summary[name] = result_field(result, name)
-    return summary
-
-
-def declare_result_attributes(
-    stage: Any,
-    arrays: Mapping[str, np.ndarray],
-    *,
-    volume_path: str = VOLUME,
-    surface_path: str | None = SURFACE,
-) -> None:
-    """Declare (type, interpolation, unit; no values) the attributes the results layer samples
-    (on the surface Mesh only where ``surface_path`` is given)."""
-
-    volume = UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(volume_path))
-    surface = (
-        None if surface_path is None else UsdGeom.PrimvarsAPI(stage.GetPrimAtPath(surface_path))
-    )
-    declared = [
-        (
-            volume.CreatePrimvar(
-                "tissue:displacement", Sdf.ValueTypeNames.Vector3fArray, UsdGeom.Tokens.vertex
-            ),
-            "m",
-        ),
-    ]
-    if "cauchy_stress_Pa" in arrays:
-        stress = volume.CreatePrimvar(
-            "tissue:cauchyStress", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform, 6
-        )
-        stress.GetAttr().SetCustomDataByKey("components", "xx, yy, zz, yz, xz, xy")
-        declared.append((stress, "Pa"))
-    if "von_mises_Pa" in arrays:
-        for api in (volume, surface) if surface is not None else (volume,):
-            declared.append(
-                (
-                    api.CreatePrimvar(
-                        "tissue:vonMises", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.uniform
-                    ),
-                    "Pa",
-                )
-            )
-    if "contact_pressure_Pa" in arrays and surface is not None:
-        declared.append(
-            (
-                surface.CreatePrimvar(
-                    "tissue:contactPressure", Sdf.ValueTypeNames.DoubleArray, UsdGeom.Tokens.vertex
-                ),
-                "Pa",
-            )
-        )
-    for primvar, unit in declared:
-        primvar.GetAttr().SetCustomDataByKey("unit", unit)
-    indenter = stage.GetPrimAtPath(INDENTER)
-    if not indenter:
-        UsdGeom.Xform.Define(stage, INDENTER).AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 0.0))
-        indenter = stage.GetPrimAtPath(INDENTER)
-    curves = [("depth", "m"), ("reactionForce", "N")] + (
-        [("time", "s")] if "time_s" in arrays else []
-    )
-    if "contact_area_m2" in arrays:
-        curves.append(("contactArea", "m2"))
-    for name, unit in curves:
-        attr = indenter.CreateAttribute(
-            f"tissue:probe:{name}", Sdf.ValueTypeNames.Double, custom=True
-        )
-        attr.SetCustomDataByKey("unit", unit)
-
-
-def write_results(
-    stage: Any,
-    arrays: Mapping[str, np.ndarray],
-    *,
-    kept: np.ndarray,
-    surface_nodes: np.ndarray | None,
-    owners: np.ndarray | None,
-    rest: np.ndarray,
-    volume_path: str = VOLUME,
-    surface_path: str | None = SURFACE,
-) -> None:
-    """Author the time samples (stage's edit target: the results layer); ``surface_path``
-    None: no surface Mesh to sample."""
-
-    volume = UsdGeom.TetMesh(stage.GetPrimAtPath(volume_path))
-    surface = None if surface_path is None else UsdGeom.Mesh(stage.GetPrimAtPath(surface_path))
-    volume_api = UsdGeom.PrimvarsAPI(volume)
-    indenter = stage.GetPrimAtPath(INDENTER)
-    operations = UsdGeom.Xformable(indenter).GetOrderedXformOps()
-    translate = operations[0]
-    contact = translate.Get()
-    along = Gf.Vec3d(0.0, 0.0, -1.0)  # the probe's direction: -z, or the frame's -e3
-    if len(operations) > 1 and operations[1].GetOpType() == UsdGeom.XformOp.TypeOrient:
-        turn = Gf.Matrix4d().SetRotate(operations[1].Get())
-        along = -Gf.Vec3d(turn.GetRow3(2))
-    points_attr, displacement_attr = (
-        volume.GetPointsAttr(),
-        volume_api.GetPrimvar("tissue:displacement").GetAttr(),
-    )
-    step_count = len(arrays["depths_m"])
-    displacement = arrays["displacement_m"]
-    if displacement.ndim == 2:
-        shapes = {0: np.zeros_like(rest), step_count: displacement[kept]}
-    else:
-        shapes = {0: np.zeros_like(rest)}
-        shapes.update({k + 1: displacement[k, kept] for k in range(step_count)})
-    for time_code, nodal in shapes.items():
-        deformed = (rest + nodal).astype(np.float32)
-        points_attr.Set(Vt.Vec3fArray.FromNumpy(deformed), time_code)
-        if surface is not None:
-            surface.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy(deformed[surface_nodes]), time_code)
-        displacement_attr.Set(Vt.Vec3fArray.FromNumpy(nodal.astype(np.float32)), time_code)
-    depths = np.concatenate([[0.0], arrays["depths_m"]])
-    forces = np.concatenate([[0.0], arrays["reaction_force_N"]])
-    for time_code, (depth, force) in enumerate(zip(depths, forces, strict=True)):
-        translate.Set(Gf.Vec3d(contact) + float(depth) * along, time_code)
-        indenter.GetAttribute("tissue:probe:depth").Set(float(depth), time_code)
-        indenter.GetAttribute("tissue:probe:reactionForce").Set(float(force), time_code)
-    if "time_s" in arrays:
-        for k, time in enumerate(arrays["time_s"]):
-            indenter.GetAttribute("tissue:probe:time").Set(float(time), k + 1)
-    if "contact_area_m2" in arrays:
-        area_attr = indenter.GetAttribute("tissue:probe:contactArea")
-        for time_code, area in enumerate(np.concatenate([[0.0], arrays["contact_area_m2"]])):
-            area_attr.Set(float(area), time_code)
-    if "contact_pressure_Pa" in arrays and surface is not None:
-        pressure = arrays["contact_pressure_Pa"]
-        pressure_attr = UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:contactPressure")
-        rest_pressure = np.zeros(len(surface_nodes))
-        if pressure.ndim == 1:
-            samples = {0: rest_pressure, step_count: pressure[kept][surface_nodes]}
-        else:
-            samples = {0: rest_pressure}
-            samples.update({k + 1: pressure[k, kept][surface_nodes] for k in range(step_count)})
-        for time_code, values in samples.items():
-            pressure_attr.Set(Vt.DoubleArray.FromNumpy(np.ascontiguousarray(values)), time_code)
-    last = step_count
-    if "cauchy_stress_Pa" in arrays:
-        volume_api.GetPrimvar("tissue:cauchyStress").Set(
-            Vt.DoubleArray.FromNumpy(arrays["cauchy_stress_Pa"].ravel()), last
-        )
-    if "von_mises_Pa" in arrays:
-        von_mises = arrays["von_mises_Pa"]
-        volume_api.GetPrimvar("tissue:vonMises").Set(Vt.DoubleArray.FromNumpy(von_mises), last)
-        if surface is not None:
-            UsdGeom.PrimvarsAPI(surface).GetPrimvar("tissue:vonMises").Set(
-                Vt.DoubleArray.FromNumpy(von_mises[owners]), last
-            )
-
-
 def _volume_prim(
     stage: Any, mesh: TetMesh, *, tets: np.ndarray, rest: np.ndarray, new_index: np.ndarray
 ) -> tuple[Any, np.ndarray]:
@@ -836,7 +413,7 @@ def write_simulation_usd(
     field_arrays = (
         None
         if material_field is None
-        else _material_field_arrays(material_field, tet_count=mesh.tet_count)
+        else material_field_arrays(material_field, tet_count=mesh.tet_count)
     )
     volumes = mesh.volumes()
     if np.any(volumes <= 0):
@@ -869,7 +446,7 @@ def write_simulation_usd(
         stage, mesh, tets=tets, rest=rest, faces=faces, new_index=new_index
     )
     if field_arrays is not None:
-        _material_field_primvars(stage, field_arrays, owners=owners)
+        material_field_primvars(stage, field_arrays, owners=owners)
 
     if material is not None:
         tissue = bind_materials(stage, volume_prim, material, density_kg_per_m3)
