@@ -58,10 +58,10 @@ def test_newton_imports_soft_body(scene):
     "newton 1.8 (scripts/tools/newton_import_check.sh builds one)",
 )
 def test_newton_reproduces_the_trainer_asset_force(tmp_path):
-    """A trainer asset (export --trainer of the tutorial's block, the whole body on linear
-    tets) pressed in Newton's VBD: the fitted probe within 10 % of the locking-free force at
-    every depth, Newton equal to warptissue's linear-tet model of the same material to 0.1 %,
-    and every load step settled in at most 2 000 sweeps."""
+    """A trainer asset (export --trainer --max-tets 2000 of the tutorial's block, the whole
+    body on linear tets) pressed in Newton's VBD: the fitted probe within 10 % of the
+    locking-free force at every depth, Newton equal to warptissue's linear-tet model of the
+    same material to 0.1 %, and every load step settled in at most 2 000 sweeps."""
     from warptissue.cli import main
 
     scene = tmp_path / "trainer.usda"
@@ -71,6 +71,8 @@ def test_newton_reproduces_the_trainer_asset_force(tmp_path):
                 "export",
                 str(ROOT / "scenes" / "tutorial_punch.toml"),
                 "--trainer",
+                "--max-tets",
+                "2000",
                 "--out",
                 str(scene),
             ]
