@@ -537,7 +537,8 @@ class RigidContacts:
         self.launch(u, 0, scratch, values, energy, force)
         gaps, forces = self._gap.numpy(), self._node_force.numpy()
         if self._surface is not None:  # the nodes' gaps, and the forces the points put on them
-            self._launch_nodes(u, 0, wp.zeros_like(scratch), values, energy, wp.zeros_like(force))
+            zeros = wp.zeros_like(scratch)
+            self.launch(u, 0, zeros, values, energy, wp.zeros_like(force), nodes=True)
             gaps, forces = self._gap.numpy(), -scratch.numpy()[self._nodes.numpy()]
         ranges = self._ranges
         return [
@@ -587,33 +588,25 @@ class RigidContacts:
         values: wp.array,
         energy: wp.array,
         force: wp.array,
+        *,
+        nodes: bool = False,
     ) -> None:
         """One launch of ``rigid_contact_kernel`` over every problem's candidate nodes at the
         contacts' current depths: subtracts the contact forces from ``residual`` (vec3d (N,)),
         adds to the diagonal blocks of ``values`` where ``with_tangent``, and to ``energy``
         (J) and ``force`` (N), one entry per problem; of ``rigid_surface_contact_kernel``
-        over the quadrature points instead where the contacts are surface-integrated."""
-        if self._surface is None:
-            self._launch_nodes(u, with_tangent, residual, values, energy, force)
-            return
+        over the quadrature points instead where the contacts are surface-integrated, unless
+        ``nodes`` asks for the node kernel (its gaps and node forces, for the states)."""
         surface = self._surface
-        wp.launch(
-            kc.rigid_surface_contact_kernel,
-            dim=surface.point_count,
-            inputs=[self._points, u, *surface.inputs, *self._inputs(), with_tangent],
-            outputs=[residual, values, energy, force, surface.gap],
-            device=self.device,
-        )
-
-    def _launch_nodes(
-        self,
-        u: wp.array,
-        with_tangent: int,
-        residual: wp.array,
-        values: wp.array,
-        energy: wp.array,
-        force: wp.array,
-    ) -> None:
+        if surface is not None and not nodes:
+            wp.launch(
+                kc.rigid_surface_contact_kernel,
+                dim=surface.point_count,
+                inputs=[self._points, u, *surface.inputs, *self._inputs(), with_tangent],
+                outputs=[residual, values, energy, force, surface.gap],
+                device=self.device,
+            )
+            return
         wp.launch(
             kc.rigid_contact_kernel,
             dim=int(self._ranges[-1]),
