@@ -391,11 +391,11 @@ def calibrate_trainer_material(
         )
 
     scan: list[tuple[float, float, float]] = []
+    runs: dict[float, list[Any]] = {}  # each nu's runs at E0, which scale to any E
 
     def misfit(nu: float) -> float:
-        forces = np.concatenate(
-            [_simulate(trainer_problem(p, nu), depths, device).reaction_force_N for p in references]
-        )
+        runs[float(nu)] = [_simulate(trainer_problem(p, nu), depths, device) for p in references]
+        forces = np.concatenate([run.reaction_force_N for run in runs[float(nu)]])
         ratio = forces / reference
         scale = ratio.sum() / (ratio**2).sum()
         rms = float(np.sqrt(np.mean((scale * ratio - 1.0) ** 2)))
@@ -405,24 +405,35 @@ def calibrate_trainer_material(
     minimize_scalar(misfit, bounds=(low, high), method="bounded", options={"xatol": 2e-3})
     nu, youngs, _ = min(scan, key=lambda entry: entry[2])
 
-    def checked(problem: IndentationProblem, force: np.ndarray, fitted: bool) -> tuple:
+    def checked(
+        problem: IndentationProblem, force: np.ndarray, fitted: bool, run: Any = None
+    ) -> tuple:
+        """The probe's curves at the calibrated material: from its run at E0 scaled to E (the
+        same equilibrium) where the search made one, else from a run of its own."""
         placed = dataclasses.replace(
             trainer_problem(problem, nu), material=StableNeoHookean(youngs, nu)
         )
-        run = _simulate(placed, depths, device)
+        scale = 1.0
+        if run is None:
+            run = _simulate(placed, depths, device)
+        else:
+            scale = youngs / true_e
         probe = TrainerProbe(
             label=_label(problem),
             radius_m=problem.indenter.radius_m,
             fitted=fitted,
             depths_m=depths,
             reference_force_N=np.asarray(force, dtype=np.float64),
-            trainer_force_N=np.asarray(run.reaction_force_N, dtype=np.float64),
+            trainer_force_N=scale * np.asarray(run.reaction_force_N, dtype=np.float64),
             punch_nodes=np.asarray(placed.punch_nodes, dtype=np.int64),
             direction=np.asarray(placed.probe_direction, dtype=np.float64),
         )
         return probe, run
 
-    fitted_runs = [checked(p, f, True) for p, f in zip(references, reference_forces, strict=True)]
+    fitted_runs = [
+        checked(p, f, True, run)
+        for p, f, run in zip(references, reference_forces, runs[nu], strict=True)
+    ]
     probes = [probe for probe, _ in fitted_runs]
     unchecked = []
     for factor in factors:
