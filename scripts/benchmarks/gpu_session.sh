@@ -9,9 +9,13 @@
 # LABEL names the code measured (e.g. before, after), SITE is the folder the project was
 # installed into (pip --target; its dependencies in /tmp/site), MODE is "profile" (cProfile
 # of the main job and its forward run, the per-phase profiles), "time" (the timed runs for the
-# tables), "quick" (the main job's forward-run latency and fit alone) or "batch" (the batched
-# fits at K = 8, 32 with a cProfile of K = 32). Every output goes to $OUT/LABEL/ (JSON,
-# pstats summaries as text, logs); nothing is asserted here.
+# tables, each with the factorization reused by GMRES and without), "quick" (the main job's
+# forward-run latency and fit alone), "batch" (the batched fits at K = 1, 8, 32, 128 with a
+# cProfile of K = 32), "cluster" (32 fits batched on the GPU against a warmed Dask
+# LocalCluster of 16 CPU workers), "equality" (the main job and its forward run on this host's
+# CPU, compared with the GPU's of "time") or "suite" (the fast test suite, `pytest -n 14`, run
+# from a copy of the checkout). Every output goes to $OUT/LABEL/ (JSON, pstats summaries as
+# text, logs); nothing is asserted here.
 set -uo pipefail
 label=$1 site=$2 mode=$3
 here=$(cd "$(dirname "$0")" && pwd)
@@ -45,9 +49,14 @@ if [ "$mode" = profile ] || [ "$mode" = time ]; then
   timed fit "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit
   cp runs/fit/fit.json "$out/fit.json"
   timed flat_punch python3 scripts/benchmarks/bench_flat_punch.py --device cuda --mesher delaunay \
-    --sizes 3k,10k --elimination on --profile --label "$label" --out "$out/flat_punch.json"
+    --sizes 3k,10k --elimination auto --reuse on,off --profile --label "$label" \
+    --out "$out/flat_punch.json"
   timed latency python3 scripts/benchmarks/bench_newton_latency.py scenes/liver_fit.toml \
     --device cuda --repeats 3 --label "$label" --out "$out/latency.json"
+  sed 's/^\[solver\]$/[solver]\nreuse_factorization = false/' scenes/liver_fit.toml > scenes/liver_fit_fresh.toml
+  timed latency_no_reuse python3 scripts/benchmarks/bench_newton_latency.py \
+    scenes/liver_fit_fresh.toml --device cuda --repeats 3 --label "$label no reuse" \
+    --out "$out/latency_no_reuse.json"
   cp runs/warm/result.json "$out/simulate_cuda_result.json"
 fi
 if [ "$mode" = quick ]; then  # the forward run's latency (its warm-up compiles) and the fit
@@ -64,18 +73,67 @@ if [ "$mode" = profile ]; then
     fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fit3
   stats "$out/fit.prof"
 fi
-if [ "$mode" = time ] && [ "$label" = after ]; then
+if [ "$mode" = time ]; then
   # the main job with every factorization fresh (no GMRES with old factors)
-  sed 's/^\[solver\]$/[solver]\nreuse_factorization = false/' scenes/liver_fit.toml > scenes/liver_fit_fresh.toml
   timed fit_no_reuse "${cli[@]}" fit indentation scenes/liver_fit_fresh.toml --device cuda --quiet --out runs/fitnr
   cp runs/fitnr/fit.json "$out/fit_no_reuse.json"
 fi
 if [ "$mode" = batch ]; then
   timed batch_fits python3 scripts/benchmarks/bench_batch_fe.py --device cuda --tets 1.3k \
-    --what fits --counts 1,8,32 --sequential-limit 2 --label "$label" --out "$out/batch_fits.json"
+    --what fits --counts 1,8,32,128 --sequential-limit 2 --label "$label" --out "$out/batch_fits.json"
   timed batch_cprofile python3 -m cProfile -o "$out/batch32.prof" \
     scripts/benchmarks/bench_batch_fe.py --device cuda --tets 1.3k --what fits --counts 32 \
     --sequential-limit 1 --label "$label"
   stats "$out/batch32.prof"
+  # the K tangents' factorization at the batched fits' size: block-diagonal cuDSS, batch API,
+  # a loop, and the dense batched LU of cuSOLVER (through CuPy)
+  timed cudss_batch python3 scripts/benchmarks/bench_cudss_batch.py --tets 1.3k \
+    --counts 1,8,32,128 --dense-limit-gib 40 --label "$label" --out "$out/cudss_batch_1k.json"
+fi
+if [ "$mode" = cluster ]; then  # the same 32 fits: batched on the GPU, and on 16 warm CPU workers
+  timed cluster python3 scripts/benchmarks/bench_batch_fe.py --device cuda --tets 1.3k \
+    --what fits --counts 32 --sequential-limit 1 --cluster-workers 16 --label "$label" \
+    --out "$out/batch_cluster.json"
+fi
+if [ "$mode" = equality ]; then  # this host's CPU against the GPU's runs of "time"
+  timed simulate_cpu "${cli[@]}" simulate scenes/liver_fit.toml --device cpu --quiet --out runs/simcpu
+  timed fit_cpu "${cli[@]}" fit indentation scenes/liver_fit.toml --device cpu --quiet --out runs/fitcpu
+  cp runs/simcpu/result.json "$out/simulate_cpu_result.json"
+  cp runs/fitcpu/fit.json "$out/fit_cpu.json"
+  python3 - "$out" > "$out/equality.json" <<'PY'
+import json, sys
+from pathlib import Path
+out = Path(sys.argv[1])
+def forces(name):
+    data = json.loads((out / name).read_text())
+    return data["force_curve"]["reaction_force_N"]
+row = {}
+try:
+    gpu, cpu = forces("simulate_cuda_result.json"), forces("simulate_cpu_result.json")
+    scale = max(abs(f) for f in cpu)
+    row["force_max_rel_difference"] = max(abs(a - b) for a, b in zip(gpu, cpu)) / scale
+except (OSError, KeyError, ValueError) as exc:
+    row["force_error"] = repr(exc)
+try:
+    gpu = json.loads((out / "fit.json").read_text())["parameters"]
+    cpu = json.loads((out / "fit_cpu.json").read_text())["parameters"]
+    row["parameter_rel_difference"] = {
+        k: abs(gpu[k]["value"] / cpu[k]["value"] - 1.0) for k in cpu if cpu[k]["value"]
+    }
+except (OSError, KeyError, ValueError) as exc:
+    row["parameter_error"] = repr(exc)
+print(json.dumps(row, indent=1))
+PY
+  cat "$out/equality.json"
+fi
+if [ "$mode" = suite ]; then  # the fast suite on this machine's CPU and GPU, 14 processes
+  suite=/tmp/suite-$label
+  rm -rf "$suite" && cp -r "$here/../.." "$suite" && ln -sfn ../kernels "$suite/warptissue/kernels"
+  mkdir -p /tmp/bin && printf '#!/bin/sh\nexec python3 -m warptissue.cli "$@"\n' > /tmp/bin/warptissue
+  chmod +x /tmp/bin/warptissue
+  cd "$suite" || exit 1
+  PYTHONPATH="$suite:/tmp/site" PATH="/tmp/bin:$PATH" timed suite python3 -m pytest -n 14 -q \
+    -p no:cacheprovider -o addopts='-ra -m "not slow"' --durations=15 tests
+  tail -40 "$out/suite.log"
 fi
 cat "$out/walls.txt"
