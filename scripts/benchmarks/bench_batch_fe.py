@@ -402,7 +402,10 @@ def cpu_cluster_fits(folder: Path, count: int, workers: int) -> dict[str, Any]:
             with tempfile.TemporaryDirectory(prefix="bench_batch_cluster_") as out:
                 started = time.perf_counter()
                 result = run_batch(
-                    paths, out=out, device="cpu", scheduler=cluster.scheduler_address,
+                    paths,
+                    out=out,
+                    device="cpu",
+                    scheduler=cluster.scheduler_address,
                     progress=False,
                 )
                 seconds = time.perf_counter() - started
