@@ -26,7 +26,12 @@ from warptissue.fem.linear import solver as linear_solver_module
 from warptissue.fem.linear.direct import pardiso_available
 from warptissue.fem.newton import increment as newton_increments
 from warptissue.fem.newton.elimination import nonlinear_elimination, patch_solve
-from warptissue.fem.newton.options import ELIMINATION_MIN_TETS_CUDA, elimination_pays
+from warptissue.fem.newton.options import (
+    ELIMINATION_MIN_TETS_CUDA,
+    REUSE_MIN_TETS_CUDA,
+    elimination_pays,
+    reuse_pays,
+)
 from warptissue.fem.newton.problems import Problems
 from warptissue.fem.newton.search import search_steps
 from warptissue.fem.newton.steering import DAMPING_START, next_damping
@@ -605,6 +610,8 @@ def test_newton_options_refuse_bad_values_by_name():
         ("damping", "yes"),
         ("nonlinear_elimination", 1),
         ("nonlinear_elimination", "yes"),
+        ("reuse_factorization", 1),
+        ("reuse_factorization", "always"),
     ):
         with pytest.raises(InputError) as error:
             NewtonOptions(**{key: value})
@@ -633,6 +640,51 @@ def test_nonlinear_elimination_auto_follows_the_measured_rule():
                 given.eliminates(is_cuda=is_cuda, tets_per_problem=tets, problem_count=count)
                 is value
             )
+
+
+def test_reuse_factorization_auto_follows_the_measured_rule():
+    """ "auto": on the CPU always; on CUDA from 5 000 tets of the whole system on (the main
+    job's 576 tets, three records batched, factorize at every iteration; docs/performance.md);
+    true and false are kept as given."""
+    assert reuse_pays(is_cuda=False, tet_count=100)
+    assert not reuse_pays(is_cuda=True, tet_count=3 * 576)
+    assert not reuse_pays(is_cuda=True, tet_count=2_471)
+    assert reuse_pays(is_cuda=True, tet_count=REUSE_MIN_TETS_CUDA)
+    assert reuse_pays(is_cuda=True, tet_count=8_828)
+    auto = NewtonOptions()
+    assert auto.reuse_factorization == "auto"
+    for is_cuda, tets in ((False, 10), (True, 10), (True, 10**5)):
+        assert auto.reuses(is_cuda=is_cuda, tet_count=tets) is reuse_pays(
+            is_cuda=is_cuda, tet_count=tets
+        )
+        for value in (True, False):
+            given = NewtonOptions(reuse_factorization=value)
+            assert given.reuses(is_cuda=is_cuda, tet_count=tets) is value
+
+
+def test_the_loop_takes_the_reuse_rule_of_its_system(monkeypatch):
+    """The Newton loop solves with earlier factors where the rule says so for its whole
+    system: with the CPU taken for a CUDA device of the rule, a small mesh factorizes at every
+    iteration under "auto" and reuses factors under true."""
+    mesh = _cube()
+    conditions = compression_conditions(mesh)
+    monkeypatch.setattr(
+        "warptissue.fem.newton.options.reuse_pays",
+        lambda *, is_cuda, tet_count: tet_count >= 10**6,
+    )
+    counts = {}
+    for value in ("auto", True):
+        assembler = Assembler(mesh, NeoHookean(100.0, 1e5), device="cpu")
+        result = solve_quasistatic(
+            assembler,
+            conditions,
+            [1e-4, 2e-4, 3e-4],
+            options=NewtonOptions(reuse_factorization=value),
+        )
+        counts[value] = result.linear_solver_statistics
+    assert counts["auto"]["reused_solves"] == 0
+    assert counts["auto"]["failed_reuses"] == 0
+    assert counts[True]["reused_solves"] + counts[True]["failed_reuses"] > 0
 
 
 @pytest.mark.parametrize("method", ["superlu", "pardiso"])

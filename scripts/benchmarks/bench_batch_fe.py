@@ -117,6 +117,7 @@ def run(
     steps: int,
     sequential_limit: int,
     elimination: bool | str = "auto",
+    reuse: bool | str = "auto",
 ) -> dict:
     """One row: K problems batched, and the first ``sequential_limit`` of them alone."""
     import warp as wp
@@ -130,7 +131,9 @@ def run(
     )
 
     warp_device = resolve_device(device)
-    options = NewtonOptions(tolerance=NEWTON_TOLERANCE, nonlinear_elimination=elimination)
+    options = NewtonOptions(
+        tolerance=NEWTON_TOLERANCE, nonlinear_elimination=elimination, reuse_factorization=reuse
+    )
     problems = problems_for(mesh, count)
     depths = depths_m()[:steps]
     started = time.perf_counter()
@@ -164,6 +167,7 @@ def run(
         "batched_completed": sum(result.completed for result in batched),
         "batched_newton_iterations": int(sum(r.newton_iterations.sum() for r in batched)),
         "nonlinear_elimination": elimination,
+        "reuse_factorization": reuse,
         "max_force_difference": difference,
     }
 
@@ -199,6 +203,7 @@ bulk_modulus_Pa = {bulk_modulus_Pa!r}
 device = "{device}"
 tolerance = {tolerance!r}
 nonlinear_elimination = {elimination}
+reuse_factorization = {reuse}
 
 [[data]]
 file = "record.csv"
@@ -219,6 +224,7 @@ def fit_studies(
     mesher: str,
     device: str,
     elimination: bool | str,
+    reuse: bool | str,
 ) -> list[Any]:
     """One study per synthetic curve in ``folder``: the benchmark's block (its sizes; the
     near size at most the probe radius, as a study needs) and punch, its curve as the
@@ -253,6 +259,7 @@ def fit_studies(
             device=device,
             tolerance=NEWTON_TOLERANCE,
             elimination=json.dumps(elimination),
+            reuse=json.dumps(reuse),
         )
         (here / "study.toml").write_text(text, encoding="utf-8")
         studies.append(load_study(here / "study.toml"))
@@ -269,6 +276,7 @@ def run_fits(
     size_near_m: float,
     mesher: str,
     elimination: bool | str = "auto",
+    reuse: bool | str = "auto",
     cluster_workers: int = 0,
 ) -> dict:
     """One row of fits: K studies whose records are synthetic curves (made by the FE at each
@@ -291,7 +299,11 @@ def run_fits(
         truths,
         [depths] * count,
         device=warp_device,
-        options=NewtonOptions(tolerance=NEWTON_TOLERANCE, nonlinear_elimination=elimination),
+        options=NewtonOptions(
+            tolerance=NEWTON_TOLERANCE,
+            nonlinear_elimination=elimination,
+            reuse_factorization=reuse,
+        ),
     )
     with tempfile.TemporaryDirectory(prefix="bench_batch_fits_") as folder:
         studies = fit_studies(
@@ -303,6 +315,7 @@ def run_fits(
             mesher=mesher,
             device=str(warp_device),
             elimination=elimination,
+            reuse=reuse,
         )
         started = time.perf_counter()
         fits = fit_indentation(studies, device=str(warp_device), progress=False)
@@ -327,6 +340,7 @@ def run_fits(
         "batched_completed": sum(fit.success for fit in fits),
         "batched_lm_iterations": int(sum(fit.result.nfev for fit in fits)),
         "nonlinear_elimination": elimination,
+        "reuse_factorization": reuse,
         "max_parameter_difference": difference,
         "max_truth_error": max(
             abs(value / float(truth.material.parameter_vector[0]) - 1.0)
@@ -499,6 +513,13 @@ def main(argv: list[str] | None = None) -> int:
         "auto: its measured rule)",
     )
     parser.add_argument(
+        "--reuse",
+        choices=("auto", "on", "off"),
+        default="auto",
+        help="Newton's solves with earlier factors (NewtonOptions.reuse_factorization; auto: "
+        "its measured rule)",
+    )
+    parser.add_argument(
         "--cluster-workers",
         type=int,
         default=0,
@@ -536,6 +557,7 @@ def main(argv: list[str] | None = None) -> int:
                 "steps": args.steps,
                 "sequential_limit": args.sequential_limit,
                 "elimination": {"auto": "auto", "on": True, "off": False}[args.elimination],
+                "reuse": {"auto": "auto", "on": True, "off": False}[args.reuse],
             }
             if kind == "fits":
                 options.update(

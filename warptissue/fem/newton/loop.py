@@ -224,6 +224,7 @@ class NewtonLoop:
     springs_x: Any
     ramped: bool
     eliminating: bool
+    reusing: bool
     force_floors: np.ndarray
 
     @property
@@ -293,7 +294,7 @@ class NewtonLoop:
             free_guess=guess,
             guessed=guessed if guess is not None else None,
             damping=options.damping,
-            reuse_factorization=options.reuse_factorization,
+            reuse_factorization=self.reusing,
             reuse=self.reuse,
             timer=self.timer,
         )
@@ -485,6 +486,7 @@ def start_loop(
         springs_x=springs_x,
         ramped=ramped,
         eliminating=eliminating,
+        reusing=options.reuses(is_cuda=assembler.device.is_cuda, tet_count=assembler.tet_count),
         force_floors=force_floors,
     )
     return loop, u

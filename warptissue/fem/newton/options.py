@@ -12,9 +12,11 @@ from warptissue.fem.linear import LINEAR_SOLVERS
 __all__ = [
     "ELIMINATION_MIN_TETS_CUDA",
     "PREDICTORS",
+    "REUSE_MIN_TETS_CUDA",
     "NewtonOptions",
     "checked_options",
     "elimination_pays",
+    "reuse_pays",
 ]
 
 PREDICTORS = ("linearized", "extrapolated")
@@ -49,6 +51,33 @@ def elimination_pays(*, is_cuda: bool, tets_per_problem: int, problem_count: int
     return problem_count == 1 and tets_per_problem >= ELIMINATION_MIN_TETS_CUDA
 
 
+REUSE_MIN_TETS_CUDA = 5_000
+"""Tets of the whole system (all problems solved together) from which solving a Newton
+iteration by GMRES with earlier factors pays on a CUDA device.
+
+Measured on an H100 (docs/performance.md, "Newton iterations of small problems on a GPU";
+docs/design-notes/device-newton-loop.md): with a factorization at every iteration instead,
+the main job's forward run (576 tets) took 7.0 ms per Newton iteration against 9.1 and its
+fit 8.0 s against 10.0 s; the flat-punch curve of 2 471 tets 1.15 s against 1.25 s; at
+8 828 tets the reuse was faster, 2.42 s against 2.55 s. On a small system cuDSS factorizes
+in about the time of a GMRES attempt's kernel launches, so an attempt saves little where it
+succeeds and costs the most where it fails."""
+
+
+def reuse_pays(*, is_cuda: bool, tet_count: int) -> bool:
+    """Whether Newton's solves with earlier factors are on where the options say ``"auto"``.
+
+    The rule, as measured: on the CPU always (a solve with existing factors costs about a
+    tenth of a PARDISO factorization); on a CUDA device from :data:`REUSE_MIN_TETS_CUDA` tets
+    of the whole system on.
+
+    Args:
+        is_cuda: The device is a CUDA device.
+        tet_count: Tets of all the problems solved together (the factorized system's).
+    """
+    return not is_cuda or tet_count >= REUSE_MIN_TETS_CUDA
+
+
 @dataclass(frozen=True, kw_only=True)
 class NewtonOptions:
     """Settings of the load-stepping Newton solver: one object from the study to the solver.
@@ -80,8 +109,9 @@ class NewtonOptions:
             search cut below a quarter of its length.
         reuse_factorization: Solve a Newton iteration's tangent by GMRES preconditioned with
             the last factorization where that is measured to cost less than a new one
-            (:meth:`LinearSolver.solve_newton`); off, every iteration factorizes (direct
-            solvers only; CG ignores it).
+            (:meth:`LinearSolver.solve_newton`): ``True``, ``False`` (every iteration
+            factorizes) or ``"auto"`` (the measured rule of :func:`reuse_pays`: on the CPU;
+            on a CUDA device from 5 000 tets on). Direct solvers only; CG ignores it.
 
     Raises:
         InputError: A value of the wrong type or out of range (``column`` names the key).
@@ -94,7 +124,7 @@ class NewtonOptions:
     nonlinear_elimination: bool | str = "auto"
     predictor: str = "linearized"
     damping: bool = True
-    reuse_factorization: bool = True
+    reuse_factorization: bool | str = "auto"
 
     def __post_init__(self) -> None:
         choices = {"linear_solver": LINEAR_SOLVERS, "predictor": PREDICTORS}
@@ -116,16 +146,12 @@ class NewtonOptions:
                 raise InputError("must be an integer", key=key, value=value)
             if value < minimum:
                 raise InputError(f"must be at least {minimum}", key=key, value=value)
-        elimination = self.nonlinear_elimination
-        if not (isinstance(elimination, bool) or elimination == "auto"):
-            raise InputError(
-                'must be true, false or "auto"',
-                key="nonlinear_elimination",
-                value=self.nonlinear_elimination,
-            )
-        for key in ("damping", "reuse_factorization"):
-            if not isinstance(getattr(self, key), bool):
-                raise InputError("must be true or false", key=key, value=getattr(self, key))
+        for key in ("nonlinear_elimination", "reuse_factorization"):
+            value = getattr(self, key)
+            if not (isinstance(value, bool) or value == "auto"):
+                raise InputError('must be true, false or "auto"', key=key, value=value)
+        if not isinstance(self.damping, bool):
+            raise InputError("must be true or false", key="damping", value=self.damping)
 
     def eliminates(self, *, is_cuda: bool, tets_per_problem: int, problem_count: int) -> bool:
         """Whether the nonlinear elimination runs for these problems on this device: the
@@ -135,6 +161,13 @@ class NewtonOptions:
                 is_cuda=is_cuda, tets_per_problem=tets_per_problem, problem_count=problem_count
             )
         return bool(self.nonlinear_elimination)
+
+    def reuses(self, *, is_cuda: bool, tet_count: int) -> bool:
+        """Whether Newton's solves with earlier factors are on for this system on this
+        device: the option itself, or for ``"auto"`` the rule of :func:`reuse_pays`."""
+        if self.reuse_factorization == "auto":
+            return reuse_pays(is_cuda=is_cuda, tet_count=tet_count)
+        return bool(self.reuse_factorization)
 
     @classmethod
     def keys(cls) -> tuple[str, ...]:
