@@ -100,36 +100,8 @@ def simulate_indentation(
         SolveInterrupted: Ctrl-C; its ``partial_result`` is the :class:`IndentationResult` of
             the depths that converged before it.
     """
-    depths = np.atleast_1d(np.asarray(depths_m, dtype=np.float64))
-    if depths.ndim != 1 or depths.size == 0 or not np.all(np.isfinite(depths)):
-        raise InputError("depths_m must be a non-empty 1-D sequence of numbers", value=depths_m)
-    if times_s is None:
-        if np.any(depths <= 0) or np.any(np.diff(depths) <= 0):
-            raise InputError(
-                "depths_m must be positive and strictly increasing (give times_s for a "
-                "loading history that holds or unloads)",
-                value=depths.tolist(),
-            )
-        if isinstance(problem.material, Viscoelastic):
-            raise InputError(
-                "a viscoelastic material needs the time of each depth (times_s)",
-                key="times_s",
-            )
-    elif np.any(depths < 0):
-        raise InputError(
-            "depths_m must be >= 0 (the probe stays in contact)", value=depths.tolist()
-        )
-    mesh = problem.mesh
-    if assembler is None:
-        assembler = Assembler(
-            mesh, problem.material, formulation=problem.formulation, device=device
-        )
-    elif assembler.node_count != mesh.node_count or assembler.formulation != problem.formulation:
-        raise InputError("the assembler was built for another mesh or formulation")
-    else:
-        assembler.set_material(problem.material)  # also resets a viscous history
-    assembler.set_contact(problem.rigid_contact())
-    assembler.set_springs(problem.support_springs())
+    depths = _checked_depths(problem, depths_m, times_s)
+    assembler = _problem_assembler(problem, assembler, device)
     weights = problem.reaction_weights()
     conditions = problem.dirichlet_conditions()
     names = check_sensitivity_names(sensitivities)
@@ -159,6 +131,51 @@ def simulate_indentation(
     if strict and not result.completed:
         raise ConvergenceError(result.message, partial_result=result)
     return result
+
+
+def _checked_depths(
+    problem: IndentationProblem, depths_m: np.ndarray, times_s: np.ndarray | None
+) -> np.ndarray:
+    """The depths (S,) float64, checked as :func:`simulate_indentation` documents them."""
+    depths = np.atleast_1d(np.asarray(depths_m, dtype=np.float64))
+    if depths.ndim != 1 or depths.size == 0 or not np.all(np.isfinite(depths)):
+        raise InputError("depths_m must be a non-empty 1-D sequence of numbers", value=depths_m)
+    if times_s is None:
+        if np.any(depths <= 0) or np.any(np.diff(depths) <= 0):
+            raise InputError(
+                "depths_m must be positive and strictly increasing (give times_s for a "
+                "loading history that holds or unloads)",
+                value=depths.tolist(),
+            )
+        if isinstance(problem.material, Viscoelastic):
+            raise InputError(
+                "a viscoelastic material needs the time of each depth (times_s)",
+                key="times_s",
+            )
+    elif np.any(depths < 0):
+        raise InputError(
+            "depths_m must be >= 0 (the probe stays in contact)", value=depths.tolist()
+        )
+    return depths
+
+
+def _problem_assembler(
+    problem: IndentationProblem, assembler: Assembler | None, device: str | None
+) -> Assembler:
+    """An assembler of ``problem`` with its material, contact and springs: ``assembler``
+    (checked to be of this mesh and formulation) or a new one on ``device``."""
+    mesh = problem.mesh
+    if assembler is None:
+        assembler = Assembler(
+            mesh, problem.material, formulation=problem.formulation, device=device
+        )
+    elif assembler.node_count != mesh.node_count or assembler.formulation != problem.formulation:
+        raise InputError("the assembler was built for another mesh or formulation")
+    else:
+        assembler.set_material(problem.material)  # also resets a viscous history
+    assembler.set_contact(problem.rigid_contact())
+    assembler.set_springs(problem.support_springs())
+    return assembler
 
 
 def _last_stress(assembler: Assembler, path: QuasistaticResult) -> np.ndarray:
@@ -317,6 +334,38 @@ def simulate_indentation_batch(
             formulation.
     """
     problems = list(problems)
+    depths, times_list = _batch_paths(problems, depths_m, times_s)
+    formulation = problems[0].formulation
+    packed = pack_meshes([problem.mesh for problem in problems])
+    if assembler is None:
+        assembler = _packed_assembler(problems, packed, device)
+    else:
+        check_packed_assembler(assembler, packed, formulation)
+        assembler.set_material([problem.material for problem in problems])
+    # Each contact's stiffness follows its problem's material: set on every call.
+    assembler.set_contact([problem.rigid_contact() for problem in problems])
+    assembler.set_springs([problem.support_springs() for problem in problems])
+    paths = solve_quasistatic_batch(
+        assembler,
+        packed,
+        [problem.dirichlet_conditions() for problem in problems],
+        depths,
+        reaction_weights=[problem.reaction_weights() for problem in problems],
+        options=options,
+        load_name="depth (m)",
+        sensitivities=sensitivities,
+        times_s=times_list,
+    )
+    return _batch_results(problems, assembler, packed, paths, tuple(sensitivities))
+
+
+def _batch_paths(
+    problems: list[IndentationProblem],
+    depths_m: Sequence[np.ndarray],
+    times_s: Sequence[np.ndarray | None] | None,
+) -> tuple[list[np.ndarray], list[np.ndarray | None]]:
+    """Each problem's depths (float64) and times (None entries for a quasi-static path),
+    checked as :func:`simulate_indentation_batch` documents them."""
     if not problems:
         raise InputError("at least one problem is needed", key="problems", value=0)
     if len(depths_m) != len(problems):
@@ -354,27 +403,18 @@ def simulate_indentation_batch(
                 value=path.tolist(),
             )
         depths.append(path)
-    packed = pack_meshes([problem.mesh for problem in problems])
-    if assembler is None:
-        assembler = _packed_assembler(problems, packed, device)
-    else:
-        check_packed_assembler(assembler, packed, formulation)
-        assembler.set_material([problem.material for problem in problems])
-    # Each contact's stiffness follows its problem's material: set on every call.
-    assembler.set_contact([problem.rigid_contact() for problem in problems])
-    assembler.set_springs([problem.support_springs() for problem in problems])
-    paths = solve_quasistatic_batch(
-        assembler,
-        packed,
-        [problem.dirichlet_conditions() for problem in problems],
-        depths,
-        reaction_weights=[problem.reaction_weights() for problem in problems],
-        options=options,
-        load_name="depth (m)",
-        sensitivities=sensitivities,
-        times_s=times_list,
-    )
-    # Every problem's stress at its last converged state, in one launch over the union.
+    return depths, times_list
+
+
+def _batch_results(
+    problems: list[IndentationProblem],
+    assembler: Assembler,
+    packed: PackedMeshes,
+    paths: Sequence[QuasistaticResult],
+    sensitivity_names: tuple[str, ...],
+) -> list[IndentationResult]:
+    """Each packed problem's result, with every problem's stress at its last converged state
+    and its contact states read from ``assembler`` in launches over the union."""
     last = np.zeros((packed.mesh.node_count, 3))
     for k, path in enumerate(paths):
         if len(path.loads):
@@ -388,7 +428,7 @@ def simulate_indentation_batch(
             _indentation_result(
                 problem,
                 path,
-                tuple(sensitivities),
+                sensitivity_names,
                 stress_Pa=stress[tets] if len(path.loads) else np.zeros((0, 6)),
                 contact_states=states[k],
             )
