@@ -19,6 +19,7 @@ import numpy as np
 import warp as wp
 import warp.sparse as wps
 
+from warptissue._deprecated import moved_names
 from warptissue.device import resolve_device
 from warptissue.errors import InputError
 from warptissue.fem.assembled import Assembly, von_mises
@@ -588,3 +589,8 @@ class Assembler(PatchAssembly, ParameterResidual):
         if array.shape != (self.node_count, 3):
             raise InputError(f"{name} must have shape ({self.node_count}, 3)", value=array.shape)
         return array
+
+
+# The old paths of names that moved, with a DeprecationWarning naming the new one
+# (warptissue._deprecated.MOVED).
+__getattr__ = moved_names(__name__)

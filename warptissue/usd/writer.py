@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, Vt
 
+from warptissue._deprecated import moved_names
 from warptissue.errors import InputError, MeshError
 from warptissue.indenter import Indenter
 from warptissue.io import atomic_path, software_versions
@@ -546,3 +547,8 @@ def write_material_usd(
     with atomic_path(path) as temporary:
         layer.Export(str(temporary))
     return path
+
+
+# The old paths of names that moved, with a DeprecationWarning naming the new one
+# (warptissue._deprecated.MOVED).
+__getattr__ = moved_names(__name__)
