@@ -553,20 +553,8 @@ def prepare_record(
     Returns:
         The conditioned record with the raw columns.
     """
-    columns = record.columns if isinstance(record, ExperimentData) else dict(record)
-    for name in ("time_s", "displacement_m", "force_N"):
-        if name not in columns:
-            raise InputError("missing column", column=name)
-    raw = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    raw = _raw_columns(record)
     t, x, f = raw["time_s"], raw["displacement_m"], raw["force_N"]
-    for name in ("displacement_m", "force_N"):
-        bad = np.flatnonzero(~np.isfinite(raw[name]))
-        if bad.size:
-            raise InputError(
-                f"not a finite number at sample {int(bad[0])}",
-                column=name,
-                value=float(raw[name][bad[0]]),
-            )
     _check(t, x, f)
     _check_options(
         x,
@@ -577,6 +565,60 @@ def prepare_record(
         threshold_sigma=threshold_sigma,
     )
     steps: list[str] = []
+    rates = _physiological_rates(t, x, f, physiological_rates_Hz, steps)
+    contact = _contact_point(t, x, f, contact_position_m, threshold_sigma, steps)
+    f, offset, drift = _without_offset(t, x, f, contact, rates, harmonics, steps)
+    depth = x - contact.position_m
+    if rates:
+        depth, f = suppress_physiological(
+            t, depth, f, rates_Hz=rates, harmonics=harmonics, quality=quality
+        )
+        steps.append(f"notched {rates} Hz and {harmonics} harmonics (displacement and force)")
+    if contact_position_m is None:
+        depth = np.clip(depth, 0.0, None)
+    kept = _kept_samples(t, x, contact, keep_depth_m, window_s, steps)
+    return ConditionedRecord(
+        time_s=t[kept],
+        displacement_m=depth[kept],
+        force_N=f[kept],
+        raw=raw,
+        kept=kept,
+        contact=contact,
+        force_offset_N=offset,
+        force_drift_N_per_s=drift,
+        notch_rates_Hz=rates,
+        steps=tuple(steps),
+    )
+
+
+def _raw_columns(record: ExperimentData | dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The record's columns as float64, with ``time_s``, ``displacement_m`` and a finite
+    ``force_N`` and displacement (InputError naming the column and sample)."""
+    columns = record.columns if isinstance(record, ExperimentData) else dict(record)
+    for name in ("time_s", "displacement_m", "force_N"):
+        if name not in columns:
+            raise InputError("missing column", column=name)
+    raw = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    for name in ("displacement_m", "force_N"):
+        bad = np.flatnonzero(~np.isfinite(raw[name]))
+        if bad.size:
+            raise InputError(
+                f"not a finite number at sample {int(bad[0])}",
+                column=name,
+                value=float(raw[name][bad[0]]),
+            )
+    return raw
+
+
+def _physiological_rates(
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    physiological_rates_Hz: tuple[float, ...] | str | None,
+    steps: list[str],
+) -> tuple[float, ...]:
+    """The rates to notch, Hz: given, or estimated (``"auto"``) from the record's rest
+    before the ramp (or after it where that is too short)."""
     rates: tuple[float, ...] = ()
     if physiological_rates_Hz == "auto":
         moving = np.flatnonzero(np.abs(x - x[0]) > 1e-6)
@@ -588,6 +630,19 @@ def prepare_record(
         steps.append(f"estimated physiological rates {rates} Hz")
     elif physiological_rates_Hz is not None:
         rates = tuple(float(r) for r in physiological_rates_Hz)
+    return rates
+
+
+def _contact_point(
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    contact_position_m: float | None,
+    threshold_sigma: float,
+    steps: list[str],
+) -> ContactPoint:
+    """The contact point: detected, or at the given position (the baseline before the
+    probe moves)."""
     if contact_position_m is None:
         contact = detect_contact(t, x, f, threshold_sigma=threshold_sigma)
         steps.append(f"contact detected at {contact.position_m:.6g} m, {contact.time_s:.6g} s")
@@ -605,6 +660,20 @@ def prepare_record(
             threshold_N=0.0,
         )
         steps.append(f"contact given at {contact_position_m:.6g} m")
+    return contact
+
+
+def _without_offset(
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    contact: ContactPoint,
+    rates: tuple[float, ...],
+    harmonics: int,
+    steps: list[str],
+) -> tuple[np.ndarray, float, float]:
+    """The force without its offset and drift, fitted on the unloaded samples, with them
+    (N, N/s; zero where fewer than two samples are unloaded)."""
     # Unloaded: before the position first passes the contact, and after it comes back
     # above it (a retraction).
     loaded = np.flatnonzero(x > contact.position_m + 1e-6)
@@ -619,14 +688,18 @@ def prepare_record(
         steps.append(f"removed offset {offset:.6g} N and drift {drift:.6g} N/s")
     else:
         offset, drift = 0.0, 0.0
-    depth = x - contact.position_m
-    if rates:
-        depth, f = suppress_physiological(
-            t, depth, f, rates_Hz=rates, harmonics=harmonics, quality=quality
-        )
-        steps.append(f"notched {rates} Hz and {harmonics} harmonics (displacement and force)")
-    if contact_position_m is None:
-        depth = np.clip(depth, 0.0, None)
+    return f, offset, drift
+
+
+def _kept_samples(
+    t: np.ndarray,
+    x: np.ndarray,
+    contact: ContactPoint,
+    keep_depth_m: float | None,
+    window_s: tuple[float, float] | None,
+    steps: list[str],
+) -> np.ndarray:
+    """The samples kept, (n,) bool: the ramp to ``keep_depth_m``, within ``window_s``."""
     kept = np.ones(len(t), dtype=bool)
     if keep_depth_m is not None:
         deepest = float(np.max(x)) - contact.position_m
@@ -647,18 +720,7 @@ def prepare_record(
             + ("" if keep_depth_m is None else ", and keep_depth_m keeps the loading ramp only"),
             value=window_s,
         )
-    return ConditionedRecord(
-        time_s=t[kept],
-        displacement_m=depth[kept],
-        force_N=f[kept],
-        raw=raw,
-        kept=kept,
-        contact=contact,
-        force_offset_N=offset,
-        force_drift_N_per_s=drift,
-        notch_rates_Hz=rates,
-        steps=tuple(steps),
-    )
+    return kept
 
 
 @dataclass(frozen=True)
