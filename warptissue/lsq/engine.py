@@ -493,6 +493,44 @@ def least_squares(
     return _result(state, problem, evaluate=evaluate, jacobian_at=jacobian_at, method=method)
 
 
+def _residual_factor(
+    y: np.ndarray, weights: Any, objective: str, relative_floor: float | None
+) -> np.ndarray:
+    """The factor of each residual of :func:`fit_curve`: its weight over the data value
+    (``"relative"``, floored by ``relative_floor``) or over 1 (``"absolute"``)."""
+    if weights is None:
+        w = np.ones_like(y)
+    else:
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape != y.shape:
+            raise InputError(f"weights need {y.size} entries", value=w.size)
+        if not np.all(np.isfinite(w) & (w > 0.0)):
+            bad = int(np.flatnonzero(~(np.isfinite(w) & (w > 0.0)))[0])
+            raise InputError(
+                f"weights must be positive and finite (index {bad})", value=float(w[bad])
+            )
+    if objective == "absolute":
+        divisor = np.ones_like(y)
+    elif objective == "relative":
+        if relative_floor is None:
+            threshold = 1e-6 * float(np.max(np.abs(y)))
+            small = np.flatnonzero(np.abs(y) <= threshold)
+            if small.size:
+                raise InputError(
+                    f"relative objective: data value at index {int(small[0])} is (near) zero; "
+                    "select a data window away from zero or set relative_floor",
+                    value=float(y[small[0]]),
+                )
+            divisor = y.copy()
+        else:
+            if not (relative_floor > 0.0 and math.isfinite(relative_floor)):
+                raise InputError("relative_floor must be positive", value=relative_floor)
+            divisor = np.where(y < 0.0, -1.0, 1.0) * np.maximum(np.abs(y), relative_floor)
+    else:
+        raise InputError("objective must be 'absolute' or 'relative'", value=objective)
+    return w / divisor
+
+
 def fit_curve(
     model: Callable[[np.ndarray], np.ndarray],
     p0: Sequence[float] | np.ndarray,
@@ -551,37 +589,7 @@ def fit_curve(
     y = np.asarray(y_data, dtype=np.float64).reshape(-1)
     if y.size == 0 or not np.all(np.isfinite(y)):
         raise InputError("y_data must be a non-empty array of finite numbers")
-    if weights is None:
-        w = np.ones_like(y)
-    else:
-        w = np.asarray(weights, dtype=np.float64).reshape(-1)
-        if w.shape != y.shape:
-            raise InputError(f"weights need {y.size} entries", value=w.size)
-        if not np.all(np.isfinite(w) & (w > 0.0)):
-            bad = int(np.flatnonzero(~(np.isfinite(w) & (w > 0.0)))[0])
-            raise InputError(
-                f"weights must be positive and finite (index {bad})", value=float(w[bad])
-            )
-    if objective == "absolute":
-        divisor = np.ones_like(y)
-    elif objective == "relative":
-        if relative_floor is None:
-            threshold = 1e-6 * float(np.max(np.abs(y)))
-            small = np.flatnonzero(np.abs(y) <= threshold)
-            if small.size:
-                raise InputError(
-                    f"relative objective: data value at index {int(small[0])} is (near) zero; "
-                    "select a data window away from zero or set relative_floor",
-                    value=float(y[small[0]]),
-                )
-            divisor = y.copy()
-        else:
-            if not (relative_floor > 0.0 and math.isfinite(relative_floor)):
-                raise InputError("relative_floor must be positive", value=relative_floor)
-            divisor = np.where(y < 0.0, -1.0, 1.0) * np.maximum(np.abs(y), relative_floor)
-    else:
-        raise InputError("objective must be 'absolute' or 'relative'", value=objective)
-    factor = w / divisor
+    factor = _residual_factor(y, weights, objective, relative_floor)
 
     def predictions(p: np.ndarray) -> np.ndarray:
         values = np.asarray(model(p), dtype=np.float64).reshape(-1)
