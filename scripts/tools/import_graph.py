@@ -11,7 +11,13 @@ imported. It prints:
 - private names (leading underscore) imported from another module;
 - imports inside functions, counted per module;
 - the largest modules by code lines (lines that are neither blank nor only a comment) and the
-  largest functions by lines.
+  largest functions by lines;
+- the deprecation aliases: public names that moved, still answered at their old path for one
+  release by the old module's ``__getattr__`` (``warptissue._deprecated.MOVED``, read here
+  as a literal). They are no imports of the old module (nothing is imported until an old path
+  is used, and then by ``warptissue._deprecated``), so they count neither as cycles nor as
+  imports up a floor; they are listed apart with their floors, and one whose old module has
+  no ``__getattr__ = moved_names(__name__)`` or whose new module does not exist is reported.
 
 Floors (from docs and /work/shared/DESIGN.md's layout: data flows acquisition -> data files ->
 fit, which calls fem, which launches kernels -> usd and report). A module may import its own
@@ -110,6 +116,9 @@ class Report:
             as (module, line, text).
         module_lines: Module -> code lines (neither blank nor only a comment).
         function_lines: (module, qualified function name) -> lines.
+        deprecated: Deprecation aliases, (old path, new path), sorted.
+        deprecated_broken: The aliases whose old module does not answer them or whose new
+            module is not a project module, as (old path, why).
     """
 
     modules: dict[str, Path] = field(default_factory=dict)
@@ -121,6 +130,8 @@ class Report:
     function_imports: list[tuple[str, int, str]] = field(default_factory=list)
     module_lines: dict[str, int] = field(default_factory=dict)
     function_lines: dict[tuple[str, str], int] = field(default_factory=dict)
+    deprecated: list[tuple[str, str]] = field(default_factory=list)
+    deprecated_broken: list[tuple[str, str]] = field(default_factory=list)
 
 
 def floor(module: str) -> int:
@@ -131,6 +142,11 @@ def floor(module: str) -> int:
         if prefix in FLOORS:
             return FLOORS[prefix]
     raise KeyError(f"no floor for {module}; add it to FLOORS")
+
+
+def _owner_name(path: str) -> str:
+    """The module part of a dotted ``module.name`` path (its floor's key)."""
+    return path.rpartition(".")[0]
 
 
 def find_modules(root: Path) -> dict[str, Path]:
@@ -290,6 +306,47 @@ def _strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
     return sorted(found)
 
 
+DEPRECATIONS = f"{PACKAGE}._deprecated"
+"""The module whose ``MOVED`` table lists the deprecation aliases (old path -> new path)."""
+
+
+def _moved_table(path: Path) -> dict[str, str]:
+    """The literal ``MOVED`` dict of ``path`` (empty where it has none)."""
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        target = node.targets[0] if isinstance(node, ast.Assign) else getattr(node, "target", None)
+        if isinstance(target, ast.Name) and target.id == "MOVED" and node.value is not None:
+            return dict(ast.literal_eval(node.value))
+    return {}
+
+
+def _answers_moved_names(path: Path) -> bool:
+    """Whether a module sets ``__getattr__ = moved_names(__name__)`` at top level."""
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if (
+            isinstance(node, ast.Assign)
+            and any(isinstance(t, ast.Name) and t.id == "__getattr__" for t in node.targets)
+            and isinstance(node.value, ast.Call)
+            and getattr(node.value.func, "id", None) == "moved_names"
+        ):
+            return True
+    return False
+
+
+def _deprecations(report: Report) -> None:
+    """Fill ``report.deprecated`` and ``report.deprecated_broken`` from :data:`DEPRECATIONS`."""
+    if DEPRECATIONS not in report.modules:
+        return
+    for old, new in sorted(_moved_table(report.modules[DEPRECATIONS]).items()):
+        report.deprecated.append((old, new))
+        old_module = old.rpartition(".")[0]
+        if old_module not in report.modules:
+            report.deprecated_broken.append((old, f"no module {old_module}"))
+        elif not _answers_moved_names(report.modules[old_module]):
+            report.deprecated_broken.append((old, f"{old_module} sets no __getattr__"))
+        if _owner(new.rpartition(".")[0], report.modules) is None:
+            report.deprecated_broken.append((old, f"no module for {new}"))
+
+
 def analyse(root: Path) -> Report:
     """Read the sources under ``root`` and report their import structure.
 
@@ -320,6 +377,7 @@ def analyse(root: Path) -> Report:
                 report.private.append((item, name))
     report.cycles_top = _strongly_connected(top)
     report.cycles_all = _strongly_connected(every)
+    _deprecations(report)
     return report
 
 
@@ -353,6 +411,12 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\nprivate names imported across modules: {len(report.private)}")
     for item, name in report.private:
         print(f"  {where(item)} imports {item.target}.{name}")
+    print(f"\ndeprecation aliases (old path -> new path, {DEPRECATIONS}): {len(report.deprecated)}")
+    for old, new in report.deprecated:
+        floors = f"floor {floor(old.rpartition('.')[0])} -> {floor(_owner_name(new))}"
+        print(f"  {old} -> {new} ({floors})")
+    for old, why in report.deprecated_broken:
+        print(f"  BROKEN {old}: {why}")
     print(f"\nimport statements inside functions: {len(report.function_imports)}")
     per_module: dict[str, int] = {}
     for module, _, _ in report.function_imports:

@@ -19,13 +19,16 @@ Steps (each also usable on its own), in the order :func:`prepare_record` runs th
    response to the filtered displacement. Fitting the filtered pair is therefore unbiased;
    filtering the force alone would distort the ramp and bias the fit. For nonlinear models
    it is an approximation that holds while the filter leaves the ramp's spectrum alone.
-   :func:`estimate_rate_Hz` finds the rates when they are not known.
+   :func:`estimate_rate_Hz` finds the rates when they are not known (both in
+   :mod:`warptissue.acquisition.physiological`, still importable from here).
 5. A detected contact (approach through air) clips the depth at zero.
 6. :func:`trim_ramp` (ramp fits, Takacs et al.): keep the loading ramp up to a depth, cutting the
    probe's deceleration (Takacs et al. keep the first 3.6 mm of a 4 mm ramp).
 
 :func:`prepare_record` returns a :class:`ConditionedRecord` with the raw columns beside the
-result.
+result. The steps 1, 2 and 6 and the window live in
+:mod:`warptissue.acquisition.conditioning_steps`, step 4 in
+:mod:`warptissue.acquisition.physiological`; every name still imports from here.
 """
 
 from __future__ import annotations
@@ -36,6 +39,18 @@ from typing import Any
 
 import numpy as np
 
+from warptissue.acquisition.conditioning_steps import (
+    ContactPoint,
+    detect_contact,
+    remove_offset_and_drift,
+    select_window,
+    trim_ramp,
+)
+from warptissue.acquisition.physiological import check_samples as _check
+from warptissue.acquisition.physiological import (
+    estimate_rate_Hz,
+    suppress_physiological,
+)
 from warptissue.errors import InputError
 from warptissue.io import ExperimentData
 
@@ -59,369 +74,6 @@ CONTACT_MODES: tuple[str, ...] = ("none", "auto")
 """The contact choices of :func:`condition_for_fit` besides a position (m)."""
 OFFSET_MODES: tuple[str, ...] = ("auto", "none")
 """The force-offset choices of :func:`condition_for_fit`."""
-
-
-@dataclass(frozen=True)
-class ContactPoint:
-    """Where the probe met the specimen.
-
-    Attributes:
-        index: First sample at or after contact.
-        time_s: Contact time (s), interpolated.
-        position_m: Axis position at contact (m), extrapolated from the early loading.
-        baseline_force_N: Mean force before contact (N).
-        noise_N: Standard deviation of the baseline force (N).
-        threshold_N: Force rise that marked the contact (N).
-    """
-
-    index: int
-    time_s: float
-    position_m: float
-    baseline_force_N: float
-    noise_N: float
-    threshold_N: float
-
-
-def _check(time_s: np.ndarray, *arrays: np.ndarray) -> None:
-    t = np.asarray(time_s)
-    if t.ndim != 1 or t.size < 4:
-        raise InputError("a record needs at least 4 samples", value=t.size)
-    for array in arrays:
-        if np.asarray(array).shape != t.shape:
-            raise InputError("columns differ in length", value=(t.shape, np.shape(array)))
-    for name, array in (("time_s", t), *((None, a) for a in arrays)):
-        bad = np.flatnonzero(~np.isfinite(np.asarray(array, dtype=np.float64)))
-        if bad.size:
-            raise InputError(
-                f"not a finite number at sample {int(bad[0])}",
-                column=name,
-                value=float(np.asarray(array)[bad[0]]),
-            )
-    if not np.all(np.diff(t) > 0):
-        raise InputError("time_s must strictly increase")
-
-
-def detect_contact(
-    time_s: np.ndarray,
-    position_m: np.ndarray,
-    force_N: np.ndarray,
-    *,
-    baseline_s: float | None = None,
-    threshold_sigma: float = 6.0,
-    min_threshold_N: float = 0.0,
-    fit_multiple: float = 8.0,
-) -> ContactPoint:
-    """Find the contact point of an indentation.
-
-    Args:
-        time_s: Sample times (s), shape (n,).
-        position_m: Axis position (m, increasing into the specimen), shape (n,).
-        force_N: Force (N), shape (n,).
-        baseline_s: Length of the pre-contact baseline (s); default: the samples before the
-            probe starts moving (position within 1 um of its first value), at least 10.
-        threshold_sigma: Contact is where the force exceeds the baseline by this many noise
-            standard deviations (the noise from the baseline's sample-to-sample differences).
-        min_threshold_N: Lower bound of the threshold (N), e.g. the transducer resolution.
-        fit_multiple: The early loading used for the extrapolation runs from a rise of 2
-            thresholds to a rise of ``fit_multiple`` thresholds.
-
-    Raises:
-        InputError: The force never leaves the baseline, or the baseline is too short.
-    """
-    _check(time_s, position_m, force_N)
-    t, x, f = (np.asarray(a, dtype=np.float64) for a in (time_s, position_m, force_N))
-    if baseline_s is None:
-        moving = np.flatnonzero(np.abs(x - x[0]) > 1e-6)
-        stop = int(moving[0]) if moving.size else len(t)
-    else:
-        stop = int(np.searchsorted(t, t[0] + baseline_s))
-    if stop < 10:
-        raise InputError("the pre-contact baseline has fewer than 10 samples", value=stop)
-    baseline = f[:stop]
-    level = float(np.mean(baseline))
-    noise = float(np.std(np.diff(baseline)) / math.sqrt(2.0))
-    threshold = max(threshold_sigma * noise, min_threshold_N)
-    above = np.flatnonzero((f - level > threshold) & (np.arange(len(f)) >= stop))
-    if not above.size:
-        if np.any(level - f[stop:] > threshold):
-            raise InputError(
-                "no contact: the force falls below the pre-contact baseline instead of rising; "
-                "give the compressive force as positive",
-                column="force_N",
-                value=float(np.min(f[stop:]) - level),
-            )
-        raise InputError("no contact: the force never leaves the baseline", value=threshold)
-    crossing = int(above[0])
-    # Early loading: from the crossing until the rise reaches fit_multiple thresholds, less
-    # the first samples (picked because their noise pushed them over the threshold).
-    rise = f[crossing:] - level
-    high = np.flatnonzero(rise > fit_multiple * threshold)
-    end = crossing + (int(high[0]) if high.size else min(20, len(f) - crossing - 1))
-    clear = np.flatnonzero(rise > 2.0 * threshold)
-    begin = crossing + (int(clear[0]) if clear.size else 0)
-    begin = min(begin, max(end - 3, crossing))
-    end = max(end, begin + 3)
-    slope, intercept = np.polyfit(x[begin : end + 1], f[begin : end + 1] - level, 1)
-    if slope > 0:
-        contact_position = float(-intercept / slope)
-    else:
-        contact_position = float(x[crossing])
-    contact_position = min(max(contact_position, float(x[stop - 1])), float(x[crossing]))
-    index = int(np.searchsorted(np.maximum.accumulate(x), contact_position))
-    index = min(max(index, 0), crossing)
-    if index > 0 and x[index] != x[index - 1]:
-        share = (contact_position - x[index - 1]) / (x[index] - x[index - 1])
-        contact_time = float(t[index - 1] + np.clip(share, 0.0, 1.0) * (t[index] - t[index - 1]))
-    else:
-        contact_time = float(t[index])
-    return ContactPoint(
-        index=index,
-        time_s=contact_time,
-        position_m=contact_position,
-        baseline_force_N=level,
-        noise_N=noise,
-        threshold_N=threshold,
-    )
-
-
-def remove_offset_and_drift(
-    time_s: np.ndarray,
-    force_N: np.ndarray,
-    *,
-    unloaded: np.ndarray,
-    periodic_rates_Hz: tuple[float, ...] = (),
-    harmonics: int = 3,
-) -> tuple[np.ndarray, float, float]:
-    """Subtract the transducer baseline estimated where the probe carries no load.
-
-    With unloaded samples on one side of the test only, the baseline is a constant (an
-    offset); with unloaded samples before and after it (a probe retracted at the end), a
-    straight line (offset and drift). Both are least-squares fits to the unloaded samples;
-    with ``periodic_rates_Hz`` the fit also carries sines and cosines at those rates and
-    their harmonics, so that a baseline spanning a fraction of a breath is not biased by it.
-
-    Args:
-        time_s: Sample times (s), shape (n,).
-        force_N: Force (N), shape (n,).
-        unloaded: Boolean mask (n,) of samples without load.
-        periodic_rates_Hz: Physiological rates present in the baseline (Hz).
-        harmonics: Harmonics per rate in the baseline fit.
-
-    Returns:
-        The corrected force (n,), the offset (N, baseline at ``time_s[0]``) and the drift
-        (N/s, 0 when it cannot be told from relaxation).
-    """
-    _check(time_s, force_N, unloaded)
-    t, f = np.asarray(time_s, dtype=np.float64), np.asarray(force_N, dtype=np.float64)
-    mask = np.asarray(unloaded, dtype=bool)
-    if mask.sum() < 2:
-        raise InputError("need at least 2 unloaded samples", value=int(mask.sum()))
-    indices = np.flatnonzero(mask)
-    loaded = np.flatnonzero(~mask)
-    two_sided = bool(loaded.size and indices[0] < loaded[0] and indices[-1] > loaded[-1])
-    elapsed = t[mask] - t[0]
-    columns = [np.ones_like(elapsed)] + ([elapsed] if two_sided else [])
-    columns += _periodic_basis(elapsed, tuple(periodic_rates_Hz), harmonics)
-    basis = np.column_stack(columns)
-    if basis.shape[0] <= basis.shape[1]:
-        raise InputError("too few unloaded samples for the baseline fit", value=basis.shape[0])
-    coefficients, *_ = np.linalg.lstsq(basis, f[mask], rcond=None)
-    offset_at_zero = float(coefficients[0])
-    drift = float(coefficients[1]) if two_sided else 0.0
-    corrected = f - (offset_at_zero + drift * (t - t[0]))
-    return corrected, float(offset_at_zero), float(drift)
-
-
-def trim_ramp(
-    position_m: np.ndarray, *, contact_position_m: float, keep_depth_m: float
-) -> np.ndarray:
-    """Mask of the loading ramp from contact to ``keep_depth_m`` below it.
-
-    Takacs et al. keep the first 3.6 mm of a 4 mm ramp, dropping the end where the indenter
-    decelerates (and overshoots); the start, where it accelerates, happens in air when the
-    probe starts above the specimen.
-
-    Args:
-        position_m: Axis position (m), shape (n,).
-        contact_position_m: Position of the contact point (m).
-        keep_depth_m: Depth to keep (m).
-
-    Returns:
-        Boolean mask (n,): samples of the first, monotonic loading between contact and
-        ``contact + keep_depth_m``.
-    """
-    x = np.asarray(position_m, dtype=np.float64)
-    if not keep_depth_m > 0:
-        raise InputError("keep_depth_m must be positive", value=keep_depth_m)
-    depth = x - contact_position_m
-    beyond = np.flatnonzero(depth > keep_depth_m)
-    end = int(beyond[0]) if beyond.size else len(x)
-    mask = np.zeros(len(x), dtype=bool)
-    mask[:end] = depth[:end] >= 0.0
-    return mask
-
-
-def estimate_rate_Hz(
-    time_s: np.ndarray,
-    signal: np.ndarray,
-    band_Hz: tuple[float, float],
-    *,
-    harmonics: int = 2,
-    trend_order: int = 3,
-) -> float:
-    """Rate (Hz) of the strongest periodic component of ``signal`` within ``band_Hz``.
-
-    Scans candidate rates (a coarse grid of half the record's frequency resolution across
-    the band, then a grid 20 times finer around the best) and keeps the one whose sine and
-    cosine at the rate and its first ``harmonics`` multiples, beside a polynomial trend of
-    ``trend_order``, explain the most of the signal (linear least squares at each
-    candidate). Use a stretch where the specimen's response is
-    slow: the rest before the ramp, or the hold. :func:`prepare_record` uses the rest before
-    the ramp when it lasts 8 s or more (two breaths), else the hold.
-    """
-    _check(time_s, signal)
-    t = np.asarray(time_s, dtype=np.float64)
-    y = np.asarray(signal, dtype=np.float64)
-    low, high = band_Hz
-    # Block-average to about 10 samples per period of the highest harmonic (speed only).
-    block = max(1, int(1.0 / (10.0 * harmonics * high * float(np.median(np.diff(t))))))
-    if block > 1:
-        count = len(t) // block
-        t = t[: count * block].reshape(count, block).mean(axis=1)
-        y = y[: count * block].reshape(count, block).mean(axis=1)
-    if not 0 < low < high:
-        raise InputError("the band must be 0 < low < high", value=band_Hz)
-    span = float(t[-1] - t[0])
-    if span * high < 2.0:
-        raise InputError("the stretch is shorter than two periods of the band", value=span)
-    centred = (t - t[0]) / span - 0.5
-    trend = np.vander(centred, trend_order + 1)
-    base, *_ = np.linalg.lstsq(trend, y, rcond=None)
-    base_energy = float(np.sum((y - trend @ base) ** 2))
-
-    def explained(rate: float) -> float:
-        phase = 2 * np.pi * rate * (t - t[0])
-        waves = [g(k * phase) for k in range(1, harmonics + 1) for g in (np.sin, np.cos)]
-        basis = np.column_stack([*waves, trend])
-        coefficients, *_ = np.linalg.lstsq(basis, y, rcond=None)
-        return base_energy - float(np.sum((y - basis @ coefficients) ** 2))
-
-    coarse_step = 1.0 / (2.0 * span)
-    candidates = np.arange(low, high + coarse_step, coarse_step)
-    best = float(candidates[int(np.argmax([explained(r) for r in candidates]))])
-    candidates = np.arange(best - coarse_step, best + coarse_step, coarse_step / 20.0)
-    candidates = candidates[(candidates >= low) & (candidates <= high)]
-    return float(candidates[int(np.argmax([explained(r) for r in candidates]))])
-
-
-def _periodic_basis(elapsed: np.ndarray, rates_Hz: tuple[float, ...], harmonics: int):
-    columns = []
-    for rate in rates_Hz:
-        for multiple in range(1, harmonics + 1):
-            phase = 2 * np.pi * multiple * rate * elapsed
-            columns += [np.sin(phase), np.cos(phase)]
-    return columns
-
-
-def _extend(
-    t: np.ndarray, y: np.ndarray, rates_Hz: tuple[float, ...], harmonics: int, count: int
-) -> np.ndarray:
-    """``y`` with ``count`` samples of forecast added at each end.
-
-    Each end is continued by a least-squares fit, over the last (first) two periods of the
-    slowest rate, of a quadratic trend plus the periodic components: the relaxation goes
-    on smoothly and the breathing keeps its phase, so that the zero-phase filter's start-up
-    transients fall outside the record.
-    """
-    step = float(np.mean(np.diff(t)))
-    window = min(len(t), int(2.0 / (min(rates_Hz) * step)))
-    pieces = []
-    for side in ("start", "end"):
-        part = slice(0, window) if side == "start" else slice(len(t) - window, len(t))
-        anchor = t[0] if side == "start" else t[-1]
-        elapsed = t[part] - anchor
-        scale = max(float(np.ptp(elapsed)), step)
-        trend = [np.ones_like(elapsed), elapsed / scale, (elapsed / scale) ** 2]
-        basis = np.column_stack(trend + _periodic_basis(elapsed, rates_Hz, harmonics))
-        coefficients, *_ = np.linalg.lstsq(basis, y[part], rcond=None)
-        offsets = np.arange(1, count + 1) * step
-        future = -offsets[::-1] if side == "start" else offsets
-        trend_f = [np.ones_like(future), future / scale, (future / scale) ** 2]
-        pieces.append(np.column_stack(trend_f + _periodic_basis(future, rates_Hz, harmonics)))
-        pieces[-1] = pieces[-1] @ coefficients
-    return np.concatenate([pieces[0], y, pieces[1]])
-
-
-def suppress_physiological(
-    time_s: np.ndarray,
-    displacement_m: np.ndarray,
-    force_N: np.ndarray,
-    *,
-    rates_Hz: tuple[float, ...],
-    harmonics: int = 3,
-    quality: float = 4.0,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Band-stop the respiration and heartbeat rates (and harmonics) out of a record.
-
-    Zero-phase (forward-backward) IIR notches from ``scipy.signal.iirnotch`` at each rate
-    and its first ``harmonics`` multiples below 0.45 times the sample rate, applied to the
-    displacement and the force alike (see the module docstring for why both). Both ends are
-    first extended by a forecast (a quadratic trend plus the periodic components, fitted to
-    the two slowest periods at that end), long enough for the notches' transients to die
-    out before they reach the record.
-
-    Args:
-        time_s: Uniform sample times (s), shape (n,).
-        displacement_m: Displacement (m), shape (n,).
-        force_N: Force (N), shape (n,).
-        rates_Hz: Fundamental rates to remove (Hz), e.g. (0.25, 1.4).
-        harmonics: Multiples of each rate to notch (1: the fundamental only).
-        quality: Quality factor (centre frequency / -3 dB width) of the fundamentals'
-            notches; harmonics get ``quality * multiple`` (the same width in hertz).
-
-    Returns:
-        Filtered displacement and force, shape (n,) each.
-    """
-    from scipy.signal import filtfilt, iirnotch
-
-    _check(time_s, displacement_m, force_N)
-    t = np.asarray(time_s, dtype=np.float64)
-    steps = np.diff(t)
-    if np.ptp(steps) > 0.01 * np.mean(steps):
-        raise InputError("notch filtering needs uniform sampling (gaps found)")
-    rates = tuple(float(r) for r in rates_Hz)
-    if not rates or not all(r > 0 for r in rates):
-        raise InputError("rates must be positive", value=rates_Hz)
-    sample_rate = 1.0 / float(np.mean(steps))
-    if max(rates) >= 0.45 * sample_rate:
-        raise InputError(
-            f"a rate to notch must lie below 0.45 times the sample rate "
-            f"({0.45 * sample_rate:.6g} Hz)",
-            value=max(rates),
-        )
-    # A notch of width w = rate / quality decays as exp(-pi w t): pad 8 time constants.
-    pad = int(8.0 * quality / (np.pi * min(rates)) * sample_rate)
-    filtered = []
-    for signal in (displacement_m, force_N):
-        y = _extend(t, np.asarray(signal, dtype=np.float64), rates, harmonics, pad)
-        for rate in rates:
-            for multiple in range(1, harmonics + 1):
-                centre = multiple * rate
-                if centre >= 0.45 * sample_rate:
-                    break
-                b, a = iirnotch(centre, quality * multiple, fs=sample_rate)
-                y = filtfilt(b, a, y, padtype=None)
-        filtered.append(y[pad : pad + len(t)])
-    return filtered[0], filtered[1]
-
-
-def select_window(time_s: np.ndarray, *, start_s: float, stop_s: float) -> np.ndarray:
-    """Mask of a breath-hold window ``start_s <= t <= stop_s`` (Kim et al. held the breath
-    during each indentation)."""
-    t = np.asarray(time_s, dtype=np.float64)
-    if not stop_s > start_s:
-        raise InputError("the window must end after it starts", value=(start_s, stop_s))
-    return (t >= start_s) & (t <= stop_s)
 
 
 def _check_options(
@@ -553,20 +205,8 @@ def prepare_record(
     Returns:
         The conditioned record with the raw columns.
     """
-    columns = record.columns if isinstance(record, ExperimentData) else dict(record)
-    for name in ("time_s", "displacement_m", "force_N"):
-        if name not in columns:
-            raise InputError("missing column", column=name)
-    raw = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    raw = _raw_columns(record)
     t, x, f = raw["time_s"], raw["displacement_m"], raw["force_N"]
-    for name in ("displacement_m", "force_N"):
-        bad = np.flatnonzero(~np.isfinite(raw[name]))
-        if bad.size:
-            raise InputError(
-                f"not a finite number at sample {int(bad[0])}",
-                column=name,
-                value=float(raw[name][bad[0]]),
-            )
     _check(t, x, f)
     _check_options(
         x,
@@ -577,6 +217,60 @@ def prepare_record(
         threshold_sigma=threshold_sigma,
     )
     steps: list[str] = []
+    rates = _physiological_rates(t, x, f, physiological_rates_Hz, steps)
+    contact = _contact_point(t, x, f, contact_position_m, threshold_sigma, steps)
+    f, offset, drift = _without_offset(t, x, f, contact, rates, harmonics, steps)
+    depth = x - contact.position_m
+    if rates:
+        depth, f = suppress_physiological(
+            t, depth, f, rates_Hz=rates, harmonics=harmonics, quality=quality
+        )
+        steps.append(f"notched {rates} Hz and {harmonics} harmonics (displacement and force)")
+    if contact_position_m is None:
+        depth = np.clip(depth, 0.0, None)
+    kept = _kept_samples(t, x, contact, keep_depth_m, window_s, steps)
+    return ConditionedRecord(
+        time_s=t[kept],
+        displacement_m=depth[kept],
+        force_N=f[kept],
+        raw=raw,
+        kept=kept,
+        contact=contact,
+        force_offset_N=offset,
+        force_drift_N_per_s=drift,
+        notch_rates_Hz=rates,
+        steps=tuple(steps),
+    )
+
+
+def _raw_columns(record: ExperimentData | dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The record's columns as float64, with ``time_s``, ``displacement_m`` and a finite
+    ``force_N`` and displacement (InputError naming the column and sample)."""
+    columns = record.columns if isinstance(record, ExperimentData) else dict(record)
+    for name in ("time_s", "displacement_m", "force_N"):
+        if name not in columns:
+            raise InputError("missing column", column=name)
+    raw = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    for name in ("displacement_m", "force_N"):
+        bad = np.flatnonzero(~np.isfinite(raw[name]))
+        if bad.size:
+            raise InputError(
+                f"not a finite number at sample {int(bad[0])}",
+                column=name,
+                value=float(raw[name][bad[0]]),
+            )
+    return raw
+
+
+def _physiological_rates(
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    physiological_rates_Hz: tuple[float, ...] | str | None,
+    steps: list[str],
+) -> tuple[float, ...]:
+    """The rates to notch, Hz: given, or estimated (``"auto"``) from the record's rest
+    before the ramp (or after it where that is too short)."""
     rates: tuple[float, ...] = ()
     if physiological_rates_Hz == "auto":
         moving = np.flatnonzero(np.abs(x - x[0]) > 1e-6)
@@ -588,6 +282,19 @@ def prepare_record(
         steps.append(f"estimated physiological rates {rates} Hz")
     elif physiological_rates_Hz is not None:
         rates = tuple(float(r) for r in physiological_rates_Hz)
+    return rates
+
+
+def _contact_point(
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    contact_position_m: float | None,
+    threshold_sigma: float,
+    steps: list[str],
+) -> ContactPoint:
+    """The contact point: detected, or at the given position (the baseline before the
+    probe moves)."""
     if contact_position_m is None:
         contact = detect_contact(t, x, f, threshold_sigma=threshold_sigma)
         steps.append(f"contact detected at {contact.position_m:.6g} m, {contact.time_s:.6g} s")
@@ -605,6 +312,20 @@ def prepare_record(
             threshold_N=0.0,
         )
         steps.append(f"contact given at {contact_position_m:.6g} m")
+    return contact
+
+
+def _without_offset(
+    t: np.ndarray,
+    x: np.ndarray,
+    f: np.ndarray,
+    contact: ContactPoint,
+    rates: tuple[float, ...],
+    harmonics: int,
+    steps: list[str],
+) -> tuple[np.ndarray, float, float]:
+    """The force without its offset and drift, fitted on the unloaded samples, with them
+    (N, N/s; zero where fewer than two samples are unloaded)."""
     # Unloaded: before the position first passes the contact, and after it comes back
     # above it (a retraction).
     loaded = np.flatnonzero(x > contact.position_m + 1e-6)
@@ -619,14 +340,18 @@ def prepare_record(
         steps.append(f"removed offset {offset:.6g} N and drift {drift:.6g} N/s")
     else:
         offset, drift = 0.0, 0.0
-    depth = x - contact.position_m
-    if rates:
-        depth, f = suppress_physiological(
-            t, depth, f, rates_Hz=rates, harmonics=harmonics, quality=quality
-        )
-        steps.append(f"notched {rates} Hz and {harmonics} harmonics (displacement and force)")
-    if contact_position_m is None:
-        depth = np.clip(depth, 0.0, None)
+    return f, offset, drift
+
+
+def _kept_samples(
+    t: np.ndarray,
+    x: np.ndarray,
+    contact: ContactPoint,
+    keep_depth_m: float | None,
+    window_s: tuple[float, float] | None,
+    steps: list[str],
+) -> np.ndarray:
+    """The samples kept, (n,) bool: the ramp to ``keep_depth_m``, within ``window_s``."""
     kept = np.ones(len(t), dtype=bool)
     if keep_depth_m is not None:
         deepest = float(np.max(x)) - contact.position_m
@@ -647,18 +372,7 @@ def prepare_record(
             + ("" if keep_depth_m is None else ", and keep_depth_m keeps the loading ramp only"),
             value=window_s,
         )
-    return ConditionedRecord(
-        time_s=t[kept],
-        displacement_m=depth[kept],
-        force_N=f[kept],
-        raw=raw,
-        kept=kept,
-        contact=contact,
-        force_offset_N=offset,
-        force_drift_N_per_s=drift,
-        notch_rates_Hz=rates,
-        steps=tuple(steps),
-    )
+    return kept
 
 
 @dataclass(frozen=True)

@@ -129,37 +129,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--usd must name a .usda file", path=args.usd)
     markers = read_markers_csv(args.markers)
     forces = read_forces_csv(args.forces)
-    load_sets = list(dict.fromkeys(args.load_set or markers.load_sets))
-    for label in load_sets:
-        if label not in markers.load_sets:
-            raise InputError(
-                f"load set {label!r} is not in the file, which has {', '.join(markers.load_sets)}",
-                path=args.markers,
-            )
-        if label not in forces:
-            raise InputError(
-                f"no force for load set {label!r}; the file has {', '.join(forces)}",
-                path=args.forces,
-            )
-        if not any(vector.any() for vector in forces[label].values()):
-            raise InputError(
-                f"load set {label!r} has no applied force (all forces are zero)",
-                path=args.forces,
-            )
-        unknown = [marker for marker in forces[label] if marker not in markers.markers]
-        if unknown:
-            raise InputError(
-                f"load set {label!r}: force on marker {unknown[0]!r}, which is not in "
-                f"{args.markers}",
-                path=args.forces,
-            )
-    for label in forces:
-        if label not in markers.load_sets:
-            print(
-                f"warptissue: warning: {args.forces}: load set {label!r} has forces but no "
-                f"markers in {args.markers}; it is not fitted",
-                file=sys.stderr,
-            )
+    load_sets = _checked_load_sets(args, markers, forces)
     rows = []
     for label in tqdm(load_sets, desc="load sets", unit="set"):
         result = estimate_load_set(
@@ -220,6 +190,43 @@ def run(args: argparse.Namespace) -> int:
             print(f"warptissue: warning: load set {r.load_set}: {message}", file=sys.stderr)
     print(f"wrote {args.out}")
     return 0
+
+
+def _checked_load_sets(args: argparse.Namespace, markers: Any, forces: dict) -> list[str]:
+    """The load sets to fit (``--load-set``, else every one of the markers' file), each with
+    markers and a non-zero force on known markers; a warning for forces without markers."""
+    load_sets = list(dict.fromkeys(args.load_set or markers.load_sets))
+    for label in load_sets:
+        if label not in markers.load_sets:
+            raise InputError(
+                f"load set {label!r} is not in the file, which has {', '.join(markers.load_sets)}",
+                path=args.markers,
+            )
+        if label not in forces:
+            raise InputError(
+                f"no force for load set {label!r}; the file has {', '.join(forces)}",
+                path=args.forces,
+            )
+        if not any(vector.any() for vector in forces[label].values()):
+            raise InputError(
+                f"load set {label!r} has no applied force (all forces are zero)",
+                path=args.forces,
+            )
+        unknown = [marker for marker in forces[label] if marker not in markers.markers]
+        if unknown:
+            raise InputError(
+                f"load set {label!r}: force on marker {unknown[0]!r}, which is not in "
+                f"{args.markers}",
+                path=args.forces,
+            )
+    for label in forces:
+        if label not in markers.load_sets:
+            print(
+                f"warptissue: warning: {args.forces}: load set {label!r} has forces but no "
+                f"markers in {args.markers}; it is not fitted",
+                file=sys.stderr,
+            )
+    return load_sets
 
 
 def _write_usd(path: Path, args: argparse.Namespace, result: Any) -> None:

@@ -137,6 +137,12 @@ def _add_conditioning(parser: argparse.ArgumentParser) -> None:
 
 def register_fit(subparsers: argparse._SubParsersAction) -> None:
     """Add ``warptissue fit relaxation`` and ``warptissue fit punch-modulus``."""
+    _register_relaxation(subparsers)
+    _register_punch_modulus(subparsers)
+
+
+def _register_relaxation(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``warptissue fit relaxation``."""
     relaxation = subparsers.add_parser(
         "relaxation",
         help="fit a lumped viscoelastic model (SLS, Prony, Wiechert) to one or several "
@@ -220,6 +226,9 @@ def register_fit(subparsers: argparse._SubParsersAction) -> None:
     relaxation.add_argument("--json", action="store_true", help="print the result as JSON")
     relaxation.set_defaults(handler=run_relaxation)
 
+
+def _register_punch_modulus(subparsers: argparse._SubParsersAction) -> None:
+    """Add ``warptissue fit punch-modulus``."""
     punch = subparsers.add_parser(
         "punch-modulus",
         help="Young's modulus from a force-depth curve (Sneddon flat punch or Hertz sphere)",

@@ -12,6 +12,7 @@ parameters to its indentation records, with the FE's exact sensitivities; of sev
 studies together, their forward runs batched on one device).
 """
 
+from warptissue._deprecated import moved_names
 from warptissue.fit.indentation import (
     IndentationFit,
     IndentationFitProgress,
@@ -25,3 +26,7 @@ __all__ = [
     "RecordCurve",
     "fit_indentation",
 ]
+
+# The old paths of names that moved, with a DeprecationWarning naming the new one
+# (warptissue._deprecated.MOVED).
+__getattr__ = moved_names(__name__)

@@ -109,22 +109,7 @@ class ForwardModel:
                 value=missing[0],
             )
         self.index = [self.all_names.index(name) for name in names]
-        # fit.bulk_modulus = "follows_shear": each material b of the body (one, or one per
-        # region) keeps K_b = ratio_b mu0_b(theta) at every point, so dF/dtheta_j =
-        # dF/dtheta_j|K + sum_b dF/dK_b ratio_b dmu0_b/dtheta_j (the FE gives dF/dK_b too).
-        self.bulk_ratios: np.ndarray | None = None
-        self.sensitivity_names = names
-        parts = material.parts
-        if settings.bulk_modulus == "follows_shear":
-            self.bulk_ratios = np.array(
-                [part.bulk_modulus / part.initial_shear_modulus_Pa for _, part in parts]
-            )
-            self.sensitivity_names = (*names, *(prefix + BULK_MODULUS for prefix, _ in parts))
-        self.shear_weights = np.zeros((len(parts), len(names)))
-        for j, name in enumerate(names):
-            b, local = material.part_of(name)
-            self.shear_weights[b, j] = parts[b][1].moduli_derivative(local)[0]
-
+        self._set_sensitivities(material, names, settings.bulk_modulus)
         self.viscoelastic = isinstance(material, Viscoelastic)
         self.records = study.data
         steps = settings.time_steps
@@ -144,10 +129,41 @@ class ForwardModel:
             OFFSET_DIFFERENCE_SHARE * max(float(np.ptp(r.displacement_m)), 1e-12)
             for r in self.records
         ]
+        self.grids = self._start_grids(offset_start)
+        self.forward_solves = 0
+        self.solves_per_evaluation = len(self.grids)
+        self.cache: dict[bytes, Evaluation] = {}
+        self.best: Evaluation | None = None
+        self.evaluations = 0
+
+    def _set_sensitivities(self, material: Any, names: tuple[str, ...], bulk_modulus: str) -> None:
+        """The sensitivities each run asks for and the weights that give the free
+        parameters' from them (``bulk_ratios``, ``shear_weights``)."""
+        # fit.bulk_modulus = "follows_shear": each material b of the body (one, or one per
+        # region) keeps K_b = ratio_b mu0_b(theta) at every point, so dF/dtheta_j =
+        # dF/dtheta_j|K + sum_b dF/dK_b ratio_b dmu0_b/dtheta_j (the FE gives dF/dK_b too).
+        self.bulk_ratios: np.ndarray | None = None
+        self.sensitivity_names = names
+        parts = material.parts
+        if bulk_modulus == "follows_shear":
+            self.bulk_ratios = np.array(
+                [part.bulk_modulus / part.initial_shear_modulus_Pa for _, part in parts]
+            )
+            self.sensitivity_names = (*names, *(prefix + BULK_MODULUS for prefix, _ in parts))
+        self.shear_weights = np.zeros((len(parts), len(names)))
+        for j, name in enumerate(names):
+            b, local = material.part_of(name)
+            self.shear_weights[b, j] = parts[b][1].moduli_derivative(local)[0]
+
+    def _start_grids(self, offset_start: Any) -> list:
+        """Each FE run's steps at the start: a viscoelastic record's time steps (from its
+        touch at the start offset where offsets are fitted), else each probe's depth
+        lattice (to the records' reach at the start offsets where they are fitted)."""
+        steps, study = self.steps, self.study
         if self.viscoelastic and self.offset_count:
             offsets = np.asarray(offset_start, dtype=np.float64)
             try:
-                self.grids = [self._touch(k, offsets[k])[1] for k in range(len(self.records))]
+                return [self._touch(k, offsets[k])[1] for k in range(len(self.records))]
             except RejectStep as exc:
                 raise InputError(
                     f"the start of the depth offsets {offsets.tolist()} m: {exc}; give "
@@ -155,9 +171,9 @@ class ForwardModel:
                     path=study.path,
                     key=f"fit.start.{DEPTH_OFFSET}",
                 ) from None
-        elif self.viscoelastic:
-            self.grids = [record.load_history(steps=steps) for record in self.records]
-        elif self.offset_count:
+        if self.viscoelastic:
+            return [record.load_history(steps=steps) for record in self.records]
+        if self.offset_count:
             reach = self._reach(np.asarray(offset_start, dtype=np.float64))
             if not reach > 0.0:
                 raise InputError(
@@ -168,21 +184,16 @@ class ForwardModel:
                     key=f"fit.start.{DEPTH_OFFSET}",
                 )
             self.depth_step_m = reach / steps
-            self.grids = self._lattices(np.asarray(offset_start, dtype=np.float64))
-        else:
-            self.grids = []
-            for g in range(len(self.problems)):
-                deepest = max(
-                    float(np.max(r.displacement_m))
-                    for r, p in zip(self.records, self.problem_of, strict=True)
-                    if p == g
-                )
-                self.grids.append((None, deepest * np.arange(1, steps + 1) / steps))
-        self.forward_solves = 0
-        self.solves_per_evaluation = len(self.grids)
-        self.cache: dict[bytes, Evaluation] = {}
-        self.best: Evaluation | None = None
-        self.evaluations = 0
+            return self._lattices(np.asarray(offset_start, dtype=np.float64))
+        grids = []
+        for g in range(len(self.problems)):
+            deepest = max(
+                float(np.max(r.displacement_m))
+                for r, p in zip(self.records, self.problem_of, strict=True)
+                if p == g
+            )
+            grids.append((None, deepest * np.arange(1, steps + 1) / steps))
+        return grids
 
     def material_at(self, x: np.ndarray) -> Any:
         vector = self.material.parameter_vector.copy()

@@ -370,9 +370,6 @@ def fit_hyperelastic(
     )
     fitted = template.with_parameters(result.x)
     stability = drucker_stability(fitted)
-    result.warnings.extend(fit_quality_warnings(result))
-    result.warnings.extend(_modulus_warnings(fitted))
-    result.warnings.extend(_instability_warnings(stability, test_list))
     fit = HyperelasticFit(
         model=fitted,
         result=result,
@@ -381,17 +378,31 @@ def fit_hyperelastic(
         min_strain=window,
         stability=stability,
     )
+    result.warnings.extend(_fit_warnings(fit))
+    return fit
+
+
+def _fit_warnings(fit: HyperelasticFit) -> list[str]:
+    """What :func:`fit_hyperelastic` warns of: the fit's quality, an implausible modulus,
+    Drucker instability inside a test's range, systematic residuals, a test the model
+    describes worse than a constant, and implausible predictions of the other modes."""
+    result, test_list, fitted = fit.result, fit.tests, fit.model
+    warnings = [
+        *fit_quality_warnings(result),
+        *_modulus_warnings(fitted),
+        *_instability_warnings(fit.stability, test_list),
+    ]
     largest = max(float(np.max(t.nominal_stress_Pa)) for t in test_list)
-    result.warnings.extend(_systematic_residual_warnings(fit))
+    warnings.extend(_systematic_residual_warnings(fit))
     if len(test_list) > 1:
-        result.warnings.extend(
+        warnings.extend(
             f"in test {row['test']!r} ({row['loading']}) the fitted model is worse than a "
             f"constant (R^2 = {row['r_squared']:.4g}): it does not describe that loading"
             for row in fit.test_errors()
             if row["r_squared"] is not None and row["r_squared"] < 0.0
         )
-    result.warnings.extend(_prediction_warnings(fit.mode_predictions(), largest))
-    return fit
+    warnings.extend(_prediction_warnings(fit.mode_predictions(), largest))
+    return warnings
 
 
 def _systematic_residual_warnings(fit: HyperelasticFit) -> list[str]:

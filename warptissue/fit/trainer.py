@@ -316,6 +316,30 @@ def _volume_change(mesh: TetMesh, displacement: np.ndarray) -> float:
     return float(change / swept) if swept > 0 else 0.0
 
 
+def _checked_options(
+    nu_bounds: tuple[float, float],
+    depth_count: int,
+    check_radius_factors: Sequence[float],
+    fit_radius_factors: Sequence[float],
+) -> tuple[float, float, list[float], list[float]]:
+    """:func:`calibrate_trainer_material`'s options checked: (the bounds of nu, the check's
+    and the fit's radius factors)."""
+    low, high = (float(v) for v in nu_bounds)
+    if not 0.0 <= low < high < 0.5:
+        raise InputError(
+            "nu_bounds must satisfy 0 <= low < high < 0.5", key="nu_bounds", value=nu_bounds
+        )
+    if isinstance(depth_count, bool) or int(depth_count) != depth_count or depth_count < 1:
+        raise InputError("must be a positive integer", key="depth_count", value=depth_count)
+    factors = [float(f) for f in check_radius_factors]
+    fit_factors = [float(f) for f in fit_radius_factors]
+    for key, values in (("check_radius_factors", factors), ("fit_radius_factors", fit_factors)):
+        for factor in values:
+            if not (math.isfinite(factor) and factor > 0):
+                raise InputError("must be positive", key=key, value=factor)
+    return low, high, factors, fit_factors
+
+
 def calibrate_trainer_material(
     study: Study,
     *,
@@ -355,19 +379,9 @@ def calibrate_trainer_material(
         ``f_kd`` at ``E_0`` and the reference ``F_kd`` (probe k, depth d) the relative
         least-squares E is ``E = E_0 sum(r) / sum(r^2)`` with ``r = f_kd / F_kd``.
     """
-    low, high = (float(v) for v in nu_bounds)
-    if not 0.0 <= low < high < 0.5:
-        raise InputError(
-            "nu_bounds must satisfy 0 <= low < high < 0.5", key="nu_bounds", value=nu_bounds
-        )
-    if isinstance(depth_count, bool) or int(depth_count) != depth_count or depth_count < 1:
-        raise InputError("must be a positive integer", key="depth_count", value=depth_count)
-    factors = [float(f) for f in check_radius_factors]
-    fit_factors = [float(f) for f in fit_radius_factors]
-    for key, values in (("check_radius_factors", factors), ("fit_radius_factors", fit_factors)):
-        for factor in values:
-            if not (math.isfinite(factor) and factor > 0):
-                raise InputError("must be positive", key=key, value=factor)
+    low, high, factors, fit_factors = _checked_options(
+        nu_bounds, depth_count, check_radius_factors, fit_radius_factors
+    )
     trainer = trainer_mesh(study, max_tets=max_tets) if mesh is None else mesh
     depths = _depths(study, int(depth_count))
     study_probes = _reference_problems(study)

@@ -73,12 +73,13 @@ from typing import Any
 import numpy as np
 
 from warptissue.errors import ConvergenceError, InputError
+from warptissue.lsq.damping import MarquardtDamping, SelfAdaptingDamping
+from warptissue.lsq.jacobian import Evaluator, Jacobians, covariance_from_jacobian
 from warptissue.lsq.metrics import r_squared, rmse
-from warptissue.lsq.result import STATUS_MESSAGES, FitResult, IterationRecord, RejectStep
+from warptissue.lsq.result import STATUS_MESSAGES, FitResult, IterationRecord
 
 __all__ = ["covariance_from_jacobian", "fit_curve", "least_squares"]
 
-_EPS = float(np.finfo(np.float64).eps)
 METHODS: tuple[str, ...] = ("lm", "salm")
 """The methods of :func:`least_squares`: Levenberg-Marquardt and self-adapting LM."""
 RELATIVE_FLOOR_SHARE = 0.01
@@ -88,128 +89,8 @@ _OPTION_DEFAULTS: Mapping[str, Mapping[str, float]] = {
     "lm": {"initial_damping": 1e-3, "p0": 1e-4},
     "salm": {"theta": 0.5, "c": 1e-8, "p0": 1e-4, "eta0": 1.0},
 }
-_REFUSAL_FACTOR = 10.0
+REFUSAL_FACTOR = 10.0
 _DAMPING_LIMIT = 1e300
-
-
-class _Evaluator:
-    """Counts residual evaluations and turns refusals into None."""
-
-    def __init__(self, fun: Callable[[np.ndarray], Any], residual_count: int | None) -> None:
-        self.fun = fun
-        self.residual_count = residual_count
-        self.nfev = 0
-
-    def __call__(self, x: np.ndarray) -> np.ndarray | None:
-        self.nfev += 1
-        try:
-            value = self.fun(x.copy())
-        except RejectStep:
-            return None
-        residuals = np.asarray(value, dtype=np.float64)
-        if residuals.ndim != 1 or residuals.size == 0:
-            raise InputError(
-                "the residual function must return a non-empty 1-D array",
-                value=residuals.shape,
-            )
-        if self.residual_count is not None and residuals.size != self.residual_count:
-            raise InputError(
-                f"the residual function returned {residuals.size} values, "
-                f"expected {self.residual_count}"
-            )
-        if not np.all(np.isfinite(residuals)):
-            return None
-        return residuals
-
-
-class _MarquardtDamping:
-    """Levenberg-Marquardt with Marquardt's diagonal scaling and Nielsen's damping update."""
-
-    def __init__(self, options: Mapping[str, float], x_scale: np.ndarray | None) -> None:
-        self.damping = float(options["initial_damping"])
-        self.p0 = float(options["p0"])
-        self.nu = 2.0
-        self.fixed_scale = None if x_scale is None else 1.0 / x_scale
-
-    def scale(self, jacobian: np.ndarray) -> np.ndarray:
-        if self.fixed_scale is not None:
-            return self.fixed_scale
-        norms = np.linalg.norm(jacobian, axis=0)
-        return np.where(norms > 0.0, norms, 1.0)
-
-    def gradient_norm(
-        self, jacobian: np.ndarray, residuals: np.ndarray, gradient: np.ndarray, free: np.ndarray
-    ) -> float:
-        residual_norm = float(np.linalg.norm(residuals))
-        norms = np.linalg.norm(jacobian, axis=0)
-        active = free & (norms > 0.0)
-        if residual_norm == 0.0 or not np.any(active):
-            return 0.0
-        return float(np.max(np.abs(gradient[active]) / (norms[active] * residual_norm)))
-
-    def value(self, residual_norm: float, scaled_gradient_norm: float) -> float:
-        return self.damping
-
-    def update(self, ratio: float | None) -> None:
-        if ratio is None:
-            self.damping *= _REFUSAL_FACTOR * self.nu
-            self.nu *= 2.0
-        elif ratio > self.p0:
-            self.damping *= max(1.0 / 3.0, 1.0 - (2.0 * ratio - 1.0) ** 3)
-            self.damping = max(self.damping, 1e-300)
-            self.nu = 2.0
-        else:
-            self.damping *= self.nu
-            self.nu *= 2.0
-
-
-class _SelfAdaptingDamping:
-    """Tong et al.'s self-adapting LM (Eq. 8-12), misprints corrected."""
-
-    def __init__(self, options: Mapping[str, float], x_scale: np.ndarray | None) -> None:
-        self.theta = float(options["theta"])
-        self.c = float(options["c"])
-        self.p0 = float(options["p0"])
-        self.eta = float(options["eta0"])
-        if not 0.0 <= self.theta <= 1.0:
-            raise InputError("salm option theta must lie in [0, 1]", value=self.theta)
-        if not (self.c > 0.0 and 0.0 < self.p0 < 1.0 and self.eta > self.c):
-            raise InputError(
-                "salm options need c > 0, 0 < p0 < 1 and eta0 > c (Tong et al., Algorithm 1)",
-                value=dict(options),
-            )
-        self.fixed_scale = None if x_scale is None else 1.0 / x_scale
-        self.damping = 0.0
-
-    def scale(self, jacobian: np.ndarray) -> np.ndarray:
-        if self.fixed_scale is not None:
-            return self.fixed_scale
-        return np.ones(jacobian.shape[1])
-
-    def gradient_norm(
-        self, jacobian: np.ndarray, residuals: np.ndarray, gradient: np.ndarray, free: np.ndarray
-    ) -> float:
-        scale = self.scale(jacobian)
-        return float(np.linalg.norm(np.where(free, gradient / scale, 0.0)))
-
-    def value(self, residual_norm: float, scaled_gradient_norm: float) -> float:
-        smaller = min(residual_norm**2, scaled_gradient_norm**2)
-        self.damping = self.eta * (
-            self.theta * smaller / residual_norm
-            + (1.0 - self.theta) * smaller / scaled_gradient_norm
-        )
-        return self.damping
-
-    def update(self, ratio: float | None) -> None:
-        if ratio is None:
-            factor = _REFUSAL_FACTOR * self._q(0.0)
-        else:
-            factor = self._q(ratio)
-        self.eta = max(self.c, self.eta * factor)
-
-    @staticmethod
-    def _q(ratio: float) -> float:
-        return max(0.5, 1.0 - 2.0 * (2.0 * ratio - 1.0) ** 3)
 
 
 def _as_vector(name: str, value: Any, size: int) -> np.ndarray:
@@ -231,75 +112,6 @@ def _validate_names(
     return result
 
 
-def _finite_difference_jacobian(
-    evaluate: _Evaluator,
-    x: np.ndarray,
-    residuals: np.ndarray,
-    lower: np.ndarray,
-    upper: np.ndarray,
-    typical: np.ndarray,
-) -> np.ndarray:
-    jacobian = np.empty((residuals.size, x.size))
-    for j in range(x.size):
-        h = math.sqrt(_EPS) * max(abs(x[j]), typical[j])
-        room_up, room_down = upper[j] - x[j], x[j] - lower[j]
-        first = h if room_up >= h or room_up >= room_down else -h
-        candidates = [first, -first]
-        for k, step in enumerate(candidates):
-            room = room_up if step > 0 else room_down
-            step = math.copysign(min(abs(step), room), step)
-            if step == 0.0:
-                continue
-            probe = x.copy()
-            probe[j] += step
-            actual = probe[j] - x[j]
-            value = evaluate(probe)
-            if value is not None:
-                jacobian[:, j] = (value - residuals) / actual
-                break
-            if k == len(candidates) - 1:
-                raise ConvergenceError(
-                    f"finite differences: the model refused both x{j} +/- {abs(step):.3g} "
-                    f"around x = {x.tolist()}"
-                )
-        else:
-            raise ConvergenceError(
-                f"finite differences: no room inside the bounds for parameter {j}"
-            )
-    return jacobian
-
-
-def covariance_from_jacobian(
-    jacobian: np.ndarray, cost: float
-) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-    """(J^T J)^-1 * SSR / (m - n), its standard errors and correlation, or Nones.
-
-    Args:
-        jacobian: d residuals / d x, shape (m, n).
-        cost: 0.5 * sum(residuals**2).
-
-    Returns:
-        (covariance (n, n), standard errors (n,), correlation (n, n)); all None when
-        m <= n or J is rank deficient (smallest singular value below m * eps of the
-        largest); the correlation alone is None when a standard error is zero.
-    """
-    m, n = jacobian.shape
-    if m <= n:
-        return None, None, None
-    _, singular, vt = np.linalg.svd(jacobian, full_matrices=False)
-    if singular[0] == 0.0 or singular[-1] <= singular[0] * max(m, n) * _EPS:
-        return None, None, None
-    variance = 2.0 * cost / (m - n)
-    covariance = (vt.T / singular**2) @ vt * variance
-    errors = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    if np.all(errors > 0.0):
-        correlation = covariance / np.outer(errors, errors)
-        np.fill_diagonal(correlation, 1.0)
-    else:
-        correlation = None
-    return covariance, errors, correlation
-
-
 @dataclass(frozen=True)
 class _Problem:
     """The validated input of :func:`least_squares`."""
@@ -310,7 +122,7 @@ class _Problem:
     lower: np.ndarray
     upper: np.ndarray
     scale_vector: np.ndarray | None
-    damping: _MarquardtDamping | _SelfAdaptingDamping
+    damping: MarquardtDamping | SelfAdaptingDamping
 
 
 def _validated_problem(
@@ -372,47 +184,11 @@ def _validated_problem(
             )
         merged[key] = float(value)
     damping = (
-        _MarquardtDamping(merged, scale_vector)
+        MarquardtDamping(merged, scale_vector)
         if method == "lm"
-        else _SelfAdaptingDamping(merged, scale_vector)
+        else SelfAdaptingDamping(merged, scale_vector)
     )
     return _Problem(x, names, units, lower, upper, scale_vector, damping)
-
-
-class _Jacobians:
-    """The Jacobian at a point (``jac``, or finite differences), counting evaluations."""
-
-    def __init__(
-        self,
-        jac: Callable[[np.ndarray], np.ndarray] | None,
-        evaluate: _Evaluator,
-        problem: _Problem,
-    ) -> None:
-        self.jac = jac
-        self.evaluate = evaluate
-        self.lower, self.upper = problem.lower, problem.upper
-        n = problem.x0.size
-        self.typical = np.ones(n) if problem.scale_vector is None else problem.scale_vector
-        self.njev = 0
-
-    def __call__(self, point: np.ndarray, point_residuals: np.ndarray) -> np.ndarray:
-        self.njev += 1
-        n = point.size
-        if self.jac is None:
-            return _finite_difference_jacobian(
-                self.evaluate, point, point_residuals, self.lower, self.upper, self.typical
-            )
-        try:
-            matrix = np.asarray(self.jac(point.copy()), dtype=np.float64)
-        except RejectStep as exc:
-            raise ConvergenceError(f"the Jacobian was refused at x = {point.tolist()}") from exc
-        if matrix.shape != (point_residuals.size, n):
-            raise InputError(
-                f"jac must return shape ({point_residuals.size}, {n})", value=matrix.shape
-            )
-        if not np.all(np.isfinite(matrix)):
-            raise ConvergenceError(f"the Jacobian is not finite at x = {point.tolist()}")
-        return matrix
 
 
 @dataclass
@@ -464,8 +240,8 @@ def _iterate(
     state: _Iterate,
     problem: _Problem,
     *,
-    evaluate: _Evaluator,
-    jacobian_at: _Jacobians,
+    evaluate: Evaluator,
+    jacobian_at: Jacobians,
     max_iterations: int,
     ftol: float,
     xtol: float,
@@ -564,8 +340,8 @@ def _result(
     state: _Iterate,
     problem: _Problem,
     *,
-    evaluate: _Evaluator,
-    jacobian_at: _Jacobians,
+    evaluate: Evaluator,
+    jacobian_at: Jacobians,
     method: str,
 ) -> FitResult:
     """The :class:`FitResult` of a finished iteration: the Jacobian at its point (where not
@@ -675,12 +451,18 @@ def least_squares(
         options=options,
     )
     x = problem.x0
-    evaluate = _Evaluator(fun, None)
+    evaluate = Evaluator(fun, None)
     residuals = evaluate(x)
     if residuals is None:
         raise InputError("the model is not defined (refused or non-finite) at x0", value=x.tolist())
     evaluate.residual_count = residuals.size
-    jacobian_at = _Jacobians(jac, evaluate, problem)
+    jacobian_at = Jacobians(
+        jac,
+        evaluate,
+        lower=problem.lower,
+        upper=problem.upper,
+        scale_vector=problem.scale_vector,
+    )
     cost = 0.5 * float(residuals @ residuals)
     state = _Iterate(x=x, residuals=residuals, cost=cost, jacobian=jacobian_at(x, residuals))
 
@@ -709,6 +491,44 @@ def least_squares(
     finally:
         bar.close()
     return _result(state, problem, evaluate=evaluate, jacobian_at=jacobian_at, method=method)
+
+
+def _residual_factor(
+    y: np.ndarray, weights: Any, objective: str, relative_floor: float | None
+) -> np.ndarray:
+    """The factor of each residual of :func:`fit_curve`: its weight over the data value
+    (``"relative"``, floored by ``relative_floor``) or over 1 (``"absolute"``)."""
+    if weights is None:
+        w = np.ones_like(y)
+    else:
+        w = np.asarray(weights, dtype=np.float64).reshape(-1)
+        if w.shape != y.shape:
+            raise InputError(f"weights need {y.size} entries", value=w.size)
+        if not np.all(np.isfinite(w) & (w > 0.0)):
+            bad = int(np.flatnonzero(~(np.isfinite(w) & (w > 0.0)))[0])
+            raise InputError(
+                f"weights must be positive and finite (index {bad})", value=float(w[bad])
+            )
+    if objective == "absolute":
+        divisor = np.ones_like(y)
+    elif objective == "relative":
+        if relative_floor is None:
+            threshold = 1e-6 * float(np.max(np.abs(y)))
+            small = np.flatnonzero(np.abs(y) <= threshold)
+            if small.size:
+                raise InputError(
+                    f"relative objective: data value at index {int(small[0])} is (near) zero; "
+                    "select a data window away from zero or set relative_floor",
+                    value=float(y[small[0]]),
+                )
+            divisor = y.copy()
+        else:
+            if not (relative_floor > 0.0 and math.isfinite(relative_floor)):
+                raise InputError("relative_floor must be positive", value=relative_floor)
+            divisor = np.where(y < 0.0, -1.0, 1.0) * np.maximum(np.abs(y), relative_floor)
+    else:
+        raise InputError("objective must be 'absolute' or 'relative'", value=objective)
+    return w / divisor
 
 
 def fit_curve(
@@ -769,37 +589,7 @@ def fit_curve(
     y = np.asarray(y_data, dtype=np.float64).reshape(-1)
     if y.size == 0 or not np.all(np.isfinite(y)):
         raise InputError("y_data must be a non-empty array of finite numbers")
-    if weights is None:
-        w = np.ones_like(y)
-    else:
-        w = np.asarray(weights, dtype=np.float64).reshape(-1)
-        if w.shape != y.shape:
-            raise InputError(f"weights need {y.size} entries", value=w.size)
-        if not np.all(np.isfinite(w) & (w > 0.0)):
-            bad = int(np.flatnonzero(~(np.isfinite(w) & (w > 0.0)))[0])
-            raise InputError(
-                f"weights must be positive and finite (index {bad})", value=float(w[bad])
-            )
-    if objective == "absolute":
-        divisor = np.ones_like(y)
-    elif objective == "relative":
-        if relative_floor is None:
-            threshold = 1e-6 * float(np.max(np.abs(y)))
-            small = np.flatnonzero(np.abs(y) <= threshold)
-            if small.size:
-                raise InputError(
-                    f"relative objective: data value at index {int(small[0])} is (near) zero; "
-                    "select a data window away from zero or set relative_floor",
-                    value=float(y[small[0]]),
-                )
-            divisor = y.copy()
-        else:
-            if not (relative_floor > 0.0 and math.isfinite(relative_floor)):
-                raise InputError("relative_floor must be positive", value=relative_floor)
-            divisor = np.where(y < 0.0, -1.0, 1.0) * np.maximum(np.abs(y), relative_floor)
-    else:
-        raise InputError("objective must be 'absolute' or 'relative'", value=objective)
-    factor = w / divisor
+    factor = _residual_factor(y, weights, objective, relative_floor)
 
     def predictions(p: np.ndarray) -> np.ndarray:
         values = np.asarray(model(p), dtype=np.float64).reshape(-1)

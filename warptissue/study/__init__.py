@@ -27,6 +27,7 @@ Example:
     0.0005
 """
 
+from warptissue._deprecated import moved_names
 from warptissue.study._collect import collect_studies, folder_names
 from warptissue.study._organ import (
     MESH_UNITS,
@@ -91,3 +92,7 @@ __all__ = [
     "save_study",
     "study_from_dict",
 ]
+
+# The old paths of names that moved, with a DeprecationWarning naming the new one
+# (warptissue._deprecated.MOVED).
+__getattr__ = moved_names(__name__)

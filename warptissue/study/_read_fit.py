@@ -68,32 +68,10 @@ def _parameter_table(
 
 
 def read_fit(table: Table, material: Any) -> FitSettings:
-    free_raw = table.raw("free")
-    if (
-        not isinstance(free_raw, list)
-        or not free_raw
-        or not all(isinstance(name, str) for name in free_raw)
-    ):
-        raise table.error("free", "must be a non-empty list of parameter names", free_raw)
-    for name in free_raw:
-        if name not in material.parameter_names:
-            raise table.error("free", f"{name!r} {_free_name_problem(name, material)}", name)
-        if free_raw.count(name) > 1:
-            raise table.error("free", f"names {name!r} twice", free_raw)
-    free = tuple(free_raw)
+    free = _free_names(table, material)
     contact_point = table.string("contact_point", default="given", choices=CONTACT_POINTS)
     bounds_table = optional_table(table, "bounds")
-    bounds: dict[str, tuple[float, float]] = {}
-    for key in _parameter_table(bounds_table, free, material, contact_point=contact_point):
-        pair = bounds_table.raw(key)
-        if not isinstance(pair, list) or len(pair) != 2:
-            raise bounds_table.error(key, "must be [lower, upper]", pair)
-        low, high = (plain(v) for v in pair)
-        if any(isinstance(v, bool) or not isinstance(v, int | float) for v in (low, high)):
-            raise bounds_table.error(key, "must be [lower, upper], two numbers", pair)
-        if math.isnan(low) or math.isnan(high) or not low < high:
-            raise bounds_table.error(key, "the lower bound must be below the upper", pair)
-        bounds[key] = (float(low), float(high))
+    bounds = _bounds(bounds_table, free, material, contact_point)
     start_table = optional_table(table, "start")
     start = {
         key: start_table.number(key, positive=False)
@@ -118,25 +96,7 @@ def read_fit(table: Table, material: Any) -> FitSettings:
     stop_r_squared = table.number("stop_r_squared", default=None)
     if stop_r_squared is not None and not stop_r_squared < 1.0:
         raise table.error("stop_r_squared", "must lie between 0 and 1", stop_r_squared)
-    strategy = table.string("strategy", default="joint", choices=FIT_STRATEGIES)
-    if strategy == "two_stage":
-        prony = [name for name in material.parameter_names if prony_term(name) is not None]
-        if not prony:
-            raise table.error(
-                "strategy",
-                "'two_stage' (Ahn & Kim) fits Prony terms first, and [material] has none "
-                f"(model {material.model_name!r}): add g1, tau1_s, ... to [material], or use "
-                "'joint'",
-                strategy,
-            )
-        if all(prony_term(name) is not None for name in free):
-            raise table.error(
-                "strategy",
-                "'two_stage' fits the Prony terms in stage (i) and the other free parameters "
-                "by inverse FE in stage (ii), and fit.free names no other: free an elastic "
-                "parameter too (C10_Pa, ...), or use 'joint'",
-                strategy,
-            )
+    strategy = _strategy(table, material, free)
     bulk_modulus = table.string("bulk_modulus", default="fixed", choices=BULK_MODULUS_RULES)
     if bulk_modulus == "follows_shear" and not hasattr(material, "with_bulk_modulus"):
         raise table.error(
@@ -166,6 +126,74 @@ def read_fit(table: Table, material: Any) -> FitSettings:
         bulk_modulus=bulk_modulus,
         **tolerances,
     )
+    _check_start(settings, material, table, start_table)
+    return settings
+
+
+def _free_names(table: Table, material: Any) -> tuple[str, ...]:
+    """``fit.free``: a non-empty list of the material's parameter names, each once."""
+    free_raw = table.raw("free")
+    if (
+        not isinstance(free_raw, list)
+        or not free_raw
+        or not all(isinstance(name, str) for name in free_raw)
+    ):
+        raise table.error("free", "must be a non-empty list of parameter names", free_raw)
+    for name in free_raw:
+        if name not in material.parameter_names:
+            raise table.error("free", f"{name!r} {_free_name_problem(name, material)}", name)
+        if free_raw.count(name) > 1:
+            raise table.error("free", f"names {name!r} twice", free_raw)
+    return tuple(free_raw)
+
+
+def _bounds(
+    bounds_table: Table, free: tuple[str, ...], material: Any, contact_point: str
+) -> dict[str, tuple[float, float]]:
+    """``[fit.bounds]``: ``[lower, upper]`` of free parameters, lower below upper."""
+    bounds: dict[str, tuple[float, float]] = {}
+    for key in _parameter_table(bounds_table, free, material, contact_point=contact_point):
+        pair = bounds_table.raw(key)
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise bounds_table.error(key, "must be [lower, upper]", pair)
+        low, high = (plain(v) for v in pair)
+        if any(isinstance(v, bool) or not isinstance(v, int | float) for v in (low, high)):
+            raise bounds_table.error(key, "must be [lower, upper], two numbers", pair)
+        if math.isnan(low) or math.isnan(high) or not low < high:
+            raise bounds_table.error(key, "the lower bound must be below the upper", pair)
+        bounds[key] = (float(low), float(high))
+    return bounds
+
+
+def _strategy(table: Table, material: Any, free: tuple[str, ...]) -> str:
+    """``fit.strategy``; ``"two_stage"`` needs Prony terms and a free parameter that is not
+    one."""
+    strategy = table.string("strategy", default="joint", choices=FIT_STRATEGIES)
+    if strategy == "two_stage":
+        prony = [name for name in material.parameter_names if prony_term(name) is not None]
+        if not prony:
+            raise table.error(
+                "strategy",
+                "'two_stage' (Ahn & Kim) fits Prony terms first, and [material] has none "
+                f"(model {material.model_name!r}): add g1, tau1_s, ... to [material], or use "
+                "'joint'",
+                strategy,
+            )
+        if all(prony_term(name) is not None for name in free):
+            raise table.error(
+                "strategy",
+                "'two_stage' fits the Prony terms in stage (i) and the other free parameters "
+                "by inverse FE in stage (ii), and fit.free names no other: free an elastic "
+                "parameter too (C10_Pa, ...), or use 'joint'",
+                strategy,
+            )
+    return strategy
+
+
+def _check_start(settings: FitSettings, material: Any, table: Table, start_table: Table) -> None:
+    """Refuse a start value (given, or the material's with ``start_from = "material"``)
+    outside its bounds, and given start values the material refuses."""
+    free, start, start_from = settings.free, settings.start, settings.start_from
     lower, upper = settings.parameter_bounds(material)
     current = dict(zip(material.parameter_names, material.parameter_vector.tolist(), strict=True))
     for j, name in enumerate(free):
@@ -190,7 +218,6 @@ def read_fit(table: Table, material: Any) -> FitSettings:
         except InputError as exc:
             key = exc.column if exc.column in given else next(iter(given))
             raise start_table.error(key, exc.message, given[key]) from None
-    return settings
 
 
 def optional_table(root: Table, key: str) -> Table:

@@ -57,20 +57,7 @@ from warptissue.study._toml import Source, Table
 
 def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     root = Table(data, "", source)
-    version = root.raw("schema_version")
-    if isinstance(version, bool) or not isinstance(version, int):
-        raise root.error("schema_version", "must be an integer", version)
-    if version not in SCHEMA_VERSIONS:
-        raise root.error(
-            "schema_version",
-            f"unsupported schema version; this reader knows {', '.join(map(str, SCHEMA_VERSIONS))}",
-            version,
-        )
-    name = root.string("name", default=default_name)
-    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\0"):
-        raise root.error(
-            "name", "must be a plain name (it names the default output folder runs/<name>)", name
-        )
+    version, name = _version_and_name(root, default_name)
     description = root.string("description", default="")
     indenter, site_m, direction, edge = read_indenter(root.table("indenter"))
     # The depths come before the rest of the specimen: they size a sphere's refined zone.
@@ -99,61 +86,14 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     if organ is None:
         specimen = read_specimen(specimen_table, indenter, deepest_m=deepest_m)
     material = read_material(root.table("material"))
-    if len(material.parts) > 1:
-        if organ is None:
-            raise source.error(
-                "material.regions",
-                "material regions are the tet regions of a mesh file: give [specimen] mesh (a "
-                "generated block or disc is one material)",
-            )
-        present = np.unique(organ[0].tet_regions)
-        for region, ids in material.tet_regions.items():
-            missing = sorted(set(ids) - set(present.tolist()))
-            if missing:
-                raise source.error(
-                    f"material.regions.{region}.tet_regions",
-                    f"tet region {missing[0]} is not in the mesh (its tet regions: "
-                    f"{present.tolist()[:20]})",
-                    list(ids),
-                )
+    _check_regions(material, organ, source)
     boundary = read_boundary(optional_table(root, "boundary"), organ)
     _check_placed_records(records, root.source, organ, boundary, indenter)
     solver = read_solver(optional_table(root, "solver"), specimen.element, material)
-    if solver.formulation == "mixed" and specimen.element != "TET10":
-        key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
-        raise source.error(
-            key,
-            f"formulation 'mixed' needs element 'TET10' (specimen.element is "
-            f"{specimen.element!r}); TET4 takes formulation 'displacement', which locks when "
-            "nearly incompressible",
-        )
-    if specimen.force_accuracy is not None and solver.formulation != "mixed":
-        raise source.error(
-            "solver.formulation",
-            "specimen.force_accuracy was measured with the 'mixed' formulation only: give "
-            "specimen.size_near_m",
-            solver.formulation,
-        )
-    fit = None
-    if version >= 2:
-        if root.has("fit"):
-            if not records:
-                raise root.error("fit", "a fit needs measured records: add [[data]] tables")
-            fit = read_fit(root.table("fit"), material)
-    else:
-        for key in ("data", "fit"):
-            if root.has(key):
-                raise root.error(key, "needs schema_version = 2 (this file says 1)", None)
+    _check_formulation(specimen, solver, source)
+    fit = _fit_table(root, version, records, material)
     root.finish()
-    if specimen.force_accuracy is not None:
-        message = force_accuracy_depth_warning(
-            specimen.force_accuracy,
-            depth_m=deepest_m,
-            probe_radius_m=mesh_probe_radius(indenter, specimen.half_size_m, depth_m=deepest_m),
-        )
-        if message is not None:
-            where = source.path if source.path is not None else "the study"
-            warnings.warn(f"{where}: {message}", UserWarning, stacklevel=2)
+    _warn_force_accuracy(specimen, indenter, deepest_m, source)
     study = Study(
         name=name,
         description=description,
@@ -180,6 +120,98 @@ def _build(data: Mapping[str, Any], source: Source, default_name: str) -> Study:
     if organ is not None:
         study = dataclasses.replace(study, specimen=refined_specimen(specimen, study, source))
     return study
+
+
+def _version_and_name(root: Table, default_name: str) -> tuple[int, str]:
+    """The study's ``schema_version`` (one this reader knows) and its ``name`` (a plain
+    name: it names the default output folder)."""
+    version = root.raw("schema_version")
+    if isinstance(version, bool) or not isinstance(version, int):
+        raise root.error("schema_version", "must be an integer", version)
+    if version not in SCHEMA_VERSIONS:
+        raise root.error(
+            "schema_version",
+            f"unsupported schema version; this reader knows {', '.join(map(str, SCHEMA_VERSIONS))}",
+            version,
+        )
+    name = root.string("name", default=default_name)
+    if not name.strip() or name in (".", "..") or any(c in name for c in "/\\\0"):
+        raise root.error(
+            "name", "must be a plain name (it names the default output folder runs/<name>)", name
+        )
+    return version, name
+
+
+def _check_regions(material: Any, organ: Sequence[Any] | None, source: Source) -> None:
+    """Refuse material regions without a mesh file, or naming a tet region it lacks."""
+    if len(material.parts) > 1:
+        if organ is None:
+            raise source.error(
+                "material.regions",
+                "material regions are the tet regions of a mesh file: give [specimen] mesh (a "
+                "generated block or disc is one material)",
+            )
+        present = np.unique(organ[0].tet_regions)
+        for region, ids in material.tet_regions.items():
+            missing = sorted(set(ids) - set(present.tolist()))
+            if missing:
+                raise source.error(
+                    f"material.regions.{region}.tet_regions",
+                    f"tet region {missing[0]} is not in the mesh (its tet regions: "
+                    f"{present.tolist()[:20]})",
+                    list(ids),
+                )
+
+
+def _check_formulation(specimen: Any, solver: Any, source: Source) -> None:
+    """Refuse a formulation the specimen's element cannot take, and a force accuracy (of
+    the mixed formulation) with another formulation."""
+    if solver.formulation == "mixed" and specimen.element != "TET10":
+        key = "solver.formulation" if source.line("solver.formulation") else "specimen.element"
+        raise source.error(
+            key,
+            f"formulation 'mixed' needs element 'TET10' (specimen.element is "
+            f"{specimen.element!r}); TET4 takes formulation 'displacement', which locks when "
+            "nearly incompressible",
+        )
+    if specimen.force_accuracy is not None and solver.formulation != "mixed":
+        raise source.error(
+            "solver.formulation",
+            "specimen.force_accuracy was measured with the 'mixed' formulation only: give "
+            "specimen.size_near_m",
+            solver.formulation,
+        )
+
+
+def _fit_table(root: Table, version: int, records: Sequence[DataRecord], material: Any) -> Any:
+    """The ``[fit]`` table read (None without one); refused without records, and ``[fit]``
+    or ``[[data]]`` in a version-1 file."""
+    fit = None
+    if version >= 2:
+        if root.has("fit"):
+            if not records:
+                raise root.error("fit", "a fit needs measured records: add [[data]] tables")
+            fit = read_fit(root.table("fit"), material)
+    else:
+        for key in ("data", "fit"):
+            if root.has(key):
+                raise root.error(key, "needs schema_version = 2 (this file says 1)", None)
+    return fit
+
+
+def _warn_force_accuracy(
+    specimen: Any, indenter: Indenter, deepest_m: float, source: Source
+) -> None:
+    """Warn where the depth lies outside the force accuracy's measured range."""
+    if specimen.force_accuracy is not None:
+        message = force_accuracy_depth_warning(
+            specimen.force_accuracy,
+            depth_m=deepest_m,
+            probe_radius_m=mesh_probe_radius(indenter, specimen.half_size_m, depth_m=deepest_m),
+        )
+        if message is not None:
+            where = source.path if source.path is not None else "the study"
+            warnings.warn(f"{where}: {message}", UserWarning, stacklevel=3)
 
 
 def _check_placed_records(

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -181,68 +182,15 @@ def write_results_over_asset(
         InputError: A root that is not ``.usda``, an asset not in metres, or a run's mesh
             that is neither the asset's nor refined from it: one line naming ``--over``.
     """
-    from warptissue._stage import open_stage
-    from warptissue.mesh import tetmesh_prim
-
     root_path, asset_path = Path(root_path), Path(asset_path)
     if root_path.suffix != ".usda":
         raise InputError("the root layer must be a .usda file", path=root_path)
-    organ = open_stage(asset_path)
+    organ = _OrganAsset.read(asset_path)
     if density_kg_per_m3 is None:
-        held = organ.GetPrimAtPath(MATERIAL)
-        held = held.GetAttribute("physics:density").Get() if held else None
-        density_kg_per_m3 = 1000.0 if held is None else float(held)
+        density_kg_per_m3 = organ.density_kg_per_m3
     check_density(density_kg_per_m3)
-    units = UsdGeom.GetStageMetersPerUnit(organ)
-    if units != 1.0:
-        raise InputError(
-            f"the asset is in metersPerUnit {units:g}: a result layered over it would be read "
-            "in its units; layering needs an asset in metres",
-            path=asset_path,
-            key="--over",
-        )
-    volume_path = str(tetmesh_prim(organ, asset_path).GetPath())
-    asset_mesh = UsdGeom.TetMesh(organ.GetPrimAtPath(volume_path))
-    asset_points = np.asarray(asset_mesh.GetPointsAttr().Get(), dtype=np.float64).reshape(-1, 3)
-    asset_tets = np.asarray(asset_mesh.GetTetVertexIndicesAttr().Get(), dtype=np.int64)
-    asset_tets = asset_tets.reshape(-1, 4)
-    kept, tets, _ = corner_mesh(mesh)
-    rest = mesh.points[kept]
-    extent = float(np.ptp(asset_points, axis=0).max())
-    same = (
-        rest.shape == asset_points.shape
-        and tets.shape == asset_tets.shape
-        and np.array_equal(np.sort(tets, axis=1), np.sort(asset_tets, axis=1))
-        and float(np.abs(rest - asset_points).max()) <= 1e-6 * extent
-    )
-    arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
-    transferred: dict[str, Any] | None = None
-    if not same:  # a mesh refined around the sites: its fields onto the asset's mesh
-        arrays, transferred = _transfer_onto_asset(
-            mesh, arrays, asset_points, asset_tets, extent=extent, volume_path=volume_path
-        )
-        if transferred is None:
-            raise InputError(
-                f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the "
-                f"asset's ({len(asset_points)} nodes, {len(asset_tets)} tets at "
-                f"{volume_path}), nor refined from it (the asset's surface nodes are not "
-                "nodes of the run): export the run as its own scene (without --over)",
-                path=asset_path,
-                key="--over",
-            )
-        kept, rest = np.arange(len(asset_points)), asset_points
-    surface_path = None
-    for sibling in organ.GetPrimAtPath(volume_path).GetParent().GetChildren():
-        indices = sibling.GetAttribute("tissue:volumePointIndices")
-        if sibling.IsA(UsdGeom.Mesh) and indices:
-            surface_path = str(sibling.GetPath())
-            surface_nodes = np.asarray(indices.Get(), dtype=np.int64)
-            owners = np.asarray(sibling.GetAttribute("tissue:volumeTetIndices").Get())
-            break
-    else:
-        surface_nodes = owners = None
-    del organ
-
+    volume_path, surface_path = organ.volume_path, organ.surface_path
+    arrays, transferred, kept, rest = organ.fields_of(mesh, result)
     stem = root_path.name[: -len(".usda")]
     paths = UsdScenePaths(
         root=root_path,
@@ -281,15 +229,123 @@ def write_results_over_asset(
         stage,
         arrays,
         kept=kept,
-        surface_nodes=surface_nodes,
-        owners=owners,
+        surface_nodes=organ.surface_nodes,
+        owners=organ.owners,
         rest=rest,
         volume_path=volume_path,
         surface_path=surface_path,
     )
     del stage
+    _export_layers(paths, root_layer, results_layer, overlay, relative, len(arrays["depths_m"]))
+    return paths
+
+
+@dataclass(frozen=True)
+class _OrganAsset:
+    """What a run layered over an organ's asset needs of it: its TetMesh (path, points,
+    tets), the surface Mesh of :func:`write_simulation_usd` where it has one (path, its
+    volume nodes and their tets), and its density."""
+
+    path: Path
+    volume_path: str
+    points: np.ndarray
+    tets: np.ndarray
+    surface_path: str | None
+    surface_nodes: np.ndarray | None
+    owners: np.ndarray | None
+    density_kg_per_m3: float
+
+    @classmethod
+    def read(cls, asset_path: Path) -> _OrganAsset:
+        """Read the asset (refused where it is not in metres)."""
+        from warptissue._stage import open_stage
+        from warptissue.mesh import tetmesh_prim
+
+        organ = open_stage(asset_path)
+        held = organ.GetPrimAtPath(MATERIAL)
+        held = held.GetAttribute("physics:density").Get() if held else None
+        units = UsdGeom.GetStageMetersPerUnit(organ)
+        if units != 1.0:
+            raise InputError(
+                f"the asset is in metersPerUnit {units:g}: a result layered over it would be "
+                "read in its units; layering needs an asset in metres",
+                path=asset_path,
+                key="--over",
+            )
+        volume_path = str(tetmesh_prim(organ, asset_path).GetPath())
+        volume = UsdGeom.TetMesh(organ.GetPrimAtPath(volume_path))
+        points = np.asarray(volume.GetPointsAttr().Get(), dtype=np.float64).reshape(-1, 3)
+        tets = np.asarray(volume.GetTetVertexIndicesAttr().Get(), dtype=np.int64).reshape(-1, 4)
+        surface_path = surface_nodes = owners = None
+        for sibling in organ.GetPrimAtPath(volume_path).GetParent().GetChildren():
+            indices = sibling.GetAttribute("tissue:volumePointIndices")
+            if sibling.IsA(UsdGeom.Mesh) and indices:
+                surface_path = str(sibling.GetPath())
+                surface_nodes = np.asarray(indices.Get(), dtype=np.int64)
+                owners = np.asarray(sibling.GetAttribute("tissue:volumeTetIndices").Get())
+                break
+        return cls(
+            path=asset_path,
+            volume_path=volume_path,
+            points=points,
+            tets=tets,
+            surface_path=surface_path,
+            surface_nodes=surface_nodes,
+            owners=owners,
+            density_kg_per_m3=1000.0 if held is None else float(held),
+        )
+
+    def fields_of(
+        self, mesh: TetMesh, result: Any
+    ) -> tuple[dict[str, Any], dict[str, Any] | None, np.ndarray, np.ndarray]:
+        """The run's fields on the asset's mesh: as they are where the run's mesh is the
+        asset's, else transferred onto it (refused where the run's mesh is not refined from
+        the asset's).
+
+        Returns:
+            (the fields, how they were transferred (None: not), the run's nodes that are the
+            asset's, in its order, and their rest positions (n, 3), m).
+        """
+        kept, tets, _ = corner_mesh(mesh)
+        rest = mesh.points[kept]
+        extent = float(np.ptp(self.points, axis=0).max())
+        same = (
+            rest.shape == self.points.shape
+            and tets.shape == self.tets.shape
+            and np.array_equal(np.sort(tets, axis=1), np.sort(self.tets, axis=1))
+            and float(np.abs(rest - self.points).max()) <= 1e-6 * extent
+        )
+        arrays = result_arrays(result, node_count=mesh.node_count, tet_count=mesh.tet_count)
+        if same:
+            return arrays, None, kept, rest
+        # A mesh refined around the sites: its fields onto the asset's mesh.
+        arrays, transferred = _transfer_onto_asset(
+            mesh, arrays, self.points, self.tets, extent=extent, volume_path=self.volume_path
+        )
+        if transferred is None:
+            raise InputError(
+                f"the run's mesh ({len(rest)} corner nodes, {len(tets)} tets) is not the "
+                f"asset's ({len(self.points)} nodes, {len(self.tets)} tets at "
+                f"{self.volume_path}), nor refined from it (the asset's surface nodes are not "
+                "nodes of the run): export the run as its own scene (without --over)",
+                path=self.path,
+                key="--over",
+            )
+        return arrays, transferred, np.arange(len(self.points)), self.points
+
+
+def _export_layers(
+    paths: UsdScenePaths,
+    root_layer: Sdf.Layer,
+    results_layer: Sdf.Layer,
+    overlay: Sdf.Layer,
+    relative: Path,
+    steps: int,
+) -> None:
+    """Write the three layers, the root's time range ``[0, steps]`` and its sublayers by
+    their relative paths (results, overlay, the organ's asset), each file atomically."""
     root_layer.startTimeCode = 0.0
-    root_layer.endTimeCode = float(len(arrays["depths_m"]))
+    root_layer.endTimeCode = float(steps)
     del root_layer.subLayerPaths[:]
     root_layer.subLayerPaths.append(f"./{paths.results.name}")
     root_layer.subLayerPaths.append(f"./{paths.asset.name}")
@@ -300,4 +356,3 @@ def write_results_over_asset(
         overlay.Export(str(temporary))
     with atomic_path(paths.root) as temporary:
         root_layer.Export(str(temporary))
-    return paths

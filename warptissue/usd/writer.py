@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from pxr import Gf, Sdf, Tf, Usd, UsdGeom, UsdPhysics, Vt
 
+from warptissue._deprecated import moved_names
 from warptissue.errors import InputError, MeshError
 from warptissue.indenter import Indenter
 from warptissue.io import atomic_path, software_versions
@@ -405,24 +406,7 @@ def write_simulation_usd(
     root_path = Path(root_path)
     if trainer is not None and material is None:
         raise InputError("a trainer calibration needs the material", key="trainer")
-    if root_path.suffix != ".usda":
-        raise InputError("the root layer must be a .usda file", path=root_path)
-    check_density(density_kg_per_m3)
-    if mesh.tet_count == 0:
-        raise MeshError("cannot export a mesh without tetrahedra")
-    field_arrays = (
-        None
-        if material_field is None
-        else material_field_arrays(material_field, tet_count=mesh.tet_count)
-    )
-    volumes = mesh.volumes()
-    if np.any(volumes <= 0):
-        bad = int(np.flatnonzero(volumes <= 0)[0])
-        raise MeshError(
-            f"tetrahedron {bad} is inverted or degenerate (volume {volumes[bad]:.3e} m^3)",
-            element=bad,
-        )
-
+    field_arrays = _checked_scene_inputs(root_path, mesh, density_kg_per_m3, material_field)
     stem = root_path.name[: -len(".usda")]
     asset_name = f"{stem}.asset.usda"
     results_name = f"{stem}.results.usdc"
@@ -502,6 +486,31 @@ def write_simulation_usd(
     return paths
 
 
+def _checked_scene_inputs(
+    root_path: Path, mesh: TetMesh, density_kg_per_m3: float, material_field: Any
+) -> Any:
+    """Refuse a root that is not ``.usda``, a bad density, and a mesh without tets or with an
+    inverted or degenerate one; the material field's arrays (None without one)."""
+    if root_path.suffix != ".usda":
+        raise InputError("the root layer must be a .usda file", path=root_path)
+    check_density(density_kg_per_m3)
+    if mesh.tet_count == 0:
+        raise MeshError("cannot export a mesh without tetrahedra")
+    field_arrays = (
+        None
+        if material_field is None
+        else material_field_arrays(material_field, tet_count=mesh.tet_count)
+    )
+    volumes = mesh.volumes()
+    if np.any(volumes <= 0):
+        bad = int(np.flatnonzero(volumes <= 0)[0])
+        raise MeshError(
+            f"tetrahedron {bad} is inverted or degenerate (volume {volumes[bad]:.3e} m^3)",
+            element=bad,
+        )
+    return field_arrays
+
+
 def write_material_usd(
     path: str | Path,
     material: Any,
@@ -546,3 +555,8 @@ def write_material_usd(
     with atomic_path(path) as temporary:
         layer.Export(str(temporary))
     return path
+
+
+# The old paths of names that moved, with a DeprecationWarning naming the new one
+# (warptissue._deprecated.MOVED).
+__getattr__ = moved_names(__name__)

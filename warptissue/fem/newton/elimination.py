@@ -106,93 +106,179 @@ def nonlinear_elimination(
                 ratio=ratio,
                 arrays=arrays,
             )
-    xp = arrays.xp
     u, free = arrays.asarray(u), arrays.asarray(free)
     residual = arrays.view(assembly.residual)
-    free_residual = residual * free
     if nodes is None:
         nodes = slice(0, assembler.node_count)
+    free_residual = residual * free
     patch = _residual_patch(assembler, arrays, free_residual, nodes, seed_count)
     if patch is None:
         return u, assembly, 0
-    # Only the tets holding a patch node change, and with them the residual at their nodes:
-    # the whole residual and energy follow from the last ones and the change of that part.
-    # The host works on the part's nodes alone (no array of the whole mesh per trial).
-    part = assembler.element_part(nodes=patch)
-    nodes_at = xp.asarray(part.nodes)
-    patch_at = xp.asarray(patch)
-    at_patch = np.searchsorted(part.nodes, patch)
-    free_part = arrays.host(free[nodes_at])
-    free_patch = free_part[at_patch]
-    patch_free = free_patch.reshape(-1) > 0.5
-    outside = xp.zeros(len(u), dtype=bool)
-    outside[nodes] = True
-    outside[nodes_at] = False
-    rest_squared, total_squared = arrays.floats(
-        arrays.squared_norm(free_residual[outside]), arrays.squared_norm(free_residual[nodes])
+    local = _Patch.around(assembler, arrays, patch, free)
+    trials, state = local.start(
+        assembler, arrays, assembly, u, free_residual, nodes=nodes, problem=problem
     )
-    trials = _PatchTrials(
-        assembler=assembler,
-        part=part,
-        patch=wp.array(patch.astype(np.int32), dtype=wp.int32, device=assembler.device),
-        values=wp.zeros(len(patch), dtype=wp.vec3d, device=assembler.device),
-        state=arrays.warp(u.copy()),  # the trials are scattered into it
-        free_part=free_part,
-        rest_squared=rest_squared,
+    state, iterations = local.newton(
+        assembler, trials, state, limit=limit, max_iterations=max_iterations, ratio=ratio
     )
-    forces, part_energy, _ = assembler.assemble_part(trials.state, part)
-    state = _PatchState(
-        u_patch=arrays.host(u[patch_at]),
-        residual_part=arrays.host(residual[nodes_at]),
-        energy=float(assembly.problem_energies_J[problem]),
-        total=math.sqrt(total_squared),
-        forces=forces,
-        part_energy=part_energy,
-        min_jacobian=float(assembly.problem_min_jacobians[problem]),
-    )
-    iterations = 0
-    for _ in range(max_iterations):
-        if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
-            state.forces, state.part_energy, _ = assembler.assemble_part(
-                trials.state, part, with_tangent=True
-            )
-        local_residual = (state.residual_part[at_patch] * free_patch).reshape(-1)[patch_free]
-        step = patch_solve(assembler, patch, patch_free, local_residual)
-        if step is None:
-            break
-        slope = float(local_residual @ step)
-        if not (np.all(np.isfinite(step)) and slope < 0.0):
-            break
-        patch_step = np.zeros(3 * len(patch))
-        patch_step[patch_free] = step
-        accepted = trials.backtrack(state, patch_step.reshape(-1, 3), slope)
-        if accepted is None:
-            break
-        iterations += 1
-        state = accepted
-        local = _norm(state.residual_part[at_patch] * free_patch)
-        total = state.total
-        if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
-            break
     if iterations == 0:
         # Nothing moved and the tangent is untouched (it is only reassembled after a step).
         return u, assembly, 0
-    u = u.copy()
-    u[patch_at] = arrays.asarray(state.u_patch)
-    residual = residual.copy()
-    residual[nodes_at] = arrays.asarray(state.residual_part)
-    energies = np.array(assembly.problem_energies_J, dtype=np.float64)
-    min_jacobians = np.array(assembly.problem_min_jacobians, dtype=np.float64)
-    energies[problem], min_jacobians[problem] = state.energy, state.min_jacobian
-    assembly = Assembly(
-        residual=assembler.set_residual(residual),
-        matrix=None,
-        energy_J=float(energies.sum()),
-        min_jacobian=float(min_jacobians.min()),
-        problem_energies_J=energies,
-        problem_min_jacobians=min_jacobians,
-    )
+    u, assembly = local.relaxed(assembler, arrays, assembly, u, residual, state, problem=problem)
     return u, assembly, iterations
+
+
+@dataclass(frozen=True)
+class _Patch:
+    """The patch's nodes and its tets' (the part's) nodes, and where each sits: on the host
+    (``at_patch``: the patch's positions among the part's nodes) and in the arrays of the
+    whole mesh (``nodes_at``, ``patch_at``); its free dofs (``free_part``, ``free_patch``
+    (P, 3), ``patch_free`` (3P,) bool)."""
+
+    nodes: np.ndarray
+    part: Any
+    nodes_at: Any
+    patch_at: Any
+    at_patch: np.ndarray
+    free_part: np.ndarray
+    free_patch: np.ndarray
+    patch_free: np.ndarray
+
+    @classmethod
+    def around(
+        cls, assembler: Assembler, arrays: DeviceArrays, patch: np.ndarray, free: Any
+    ) -> _Patch:
+        # Only the tets holding a patch node change, and with them the residual at their
+        # nodes: the whole residual and energy follow from the last ones and the change of
+        # that part. The host works on the part's nodes alone (no array of the whole mesh
+        # per trial).
+        part = assembler.element_part(nodes=patch)
+        xp = arrays.xp
+        at_patch = np.searchsorted(part.nodes, patch)
+        free_part = arrays.host(free[xp.asarray(part.nodes)])
+        free_patch = free_part[at_patch]
+        return cls(
+            nodes=patch,
+            part=part,
+            nodes_at=xp.asarray(part.nodes),
+            patch_at=xp.asarray(patch),
+            at_patch=at_patch,
+            free_part=free_part,
+            free_patch=free_patch,
+            patch_free=free_patch.reshape(-1) > 0.5,
+        )
+
+    def start(
+        self,
+        assembler: Assembler,
+        arrays: DeviceArrays,
+        assembly: Assembly,
+        u: Any,
+        free_residual: Any,
+        *,
+        nodes: slice,
+        problem: int,
+    ) -> tuple[_PatchTrials, _PatchState]:
+        """The trials' buffers and the patch's state at ``u`` (its part assembled)."""
+        outside = arrays.xp.zeros(len(u), dtype=bool)
+        outside[nodes] = True
+        outside[self.nodes_at] = False
+        rest_squared, total_squared = arrays.floats(
+            arrays.squared_norm(free_residual[outside]),
+            arrays.squared_norm(free_residual[nodes]),
+        )
+        trials = _PatchTrials(
+            assembler=assembler,
+            part=self.part,
+            patch=wp.array(self.nodes.astype(np.int32), dtype=wp.int32, device=assembler.device),
+            values=wp.zeros(len(self.nodes), dtype=wp.vec3d, device=assembler.device),
+            state=arrays.warp(u.copy()),  # the trials are scattered into it
+            free_part=self.free_part,
+            rest_squared=rest_squared,
+        )
+        forces, part_energy, _ = assembler.assemble_part(trials.state, self.part)
+        state = _PatchState(
+            u_patch=arrays.host(u[self.patch_at]),
+            residual_part=arrays.host(arrays.view(assembly.residual)[self.nodes_at]),
+            energy=float(assembly.problem_energies_J[problem]),
+            total=math.sqrt(total_squared),
+            forces=forces,
+            part_energy=part_energy,
+            min_jacobian=float(assembly.problem_min_jacobians[problem]),
+        )
+        return trials, state
+
+    def newton(
+        self,
+        assembler: Assembler,
+        trials: _PatchTrials,
+        state: _PatchState,
+        *,
+        limit: float,
+        max_iterations: int,
+        ratio: float,
+    ) -> tuple[_PatchState, int]:
+        """Newton's method on the patch alone (as :func:`nonlinear_elimination` says).
+
+        Returns:
+            (the last accepted state, the local iterations taken).
+        """
+        at_patch, free_patch, patch_free = self.at_patch, self.free_patch, self.patch_free
+        iterations = 0
+        for _ in range(max_iterations):
+            if iterations:  # the patch's tangent at the new state (the whole matrix is spoilt)
+                state.forces, state.part_energy, _ = assembler.assemble_part(
+                    trials.state, self.part, with_tangent=True
+                )
+            local_residual = (state.residual_part[at_patch] * free_patch).reshape(-1)[patch_free]
+            step = patch_solve(assembler, self.nodes, patch_free, local_residual)
+            if step is None:
+                break
+            slope = float(local_residual @ step)
+            if not (np.all(np.isfinite(step)) and slope < 0.0):
+                break
+            patch_step = np.zeros(3 * len(self.nodes))
+            patch_step[patch_free] = step
+            accepted = trials.backtrack(state, patch_step.reshape(-1, 3), slope)
+            if accepted is None:
+                break
+            iterations += 1
+            state = accepted
+            local = _norm(state.residual_part[at_patch] * free_patch)
+            total = state.total
+            if total <= limit or local <= ratio * math.sqrt(max(total**2 - local**2, 0.0)):
+                break
+        return state, iterations
+
+    def relaxed(
+        self,
+        assembler: Assembler,
+        arrays: DeviceArrays,
+        assembly: Assembly,
+        u: Any,
+        residual: Any,
+        state: _PatchState,
+        *,
+        problem: int,
+    ) -> tuple[Any, Assembly]:
+        """The whole state with the patch's relaxed, and its assembly (residual, energies and
+        smallest J; no tangent)."""
+        u = u.copy()
+        u[self.patch_at] = arrays.asarray(state.u_patch)
+        residual = residual.copy()
+        residual[self.nodes_at] = arrays.asarray(state.residual_part)
+        energies = np.array(assembly.problem_energies_J, dtype=np.float64)
+        min_jacobians = np.array(assembly.problem_min_jacobians, dtype=np.float64)
+        energies[problem], min_jacobians[problem] = state.energy, state.min_jacobian
+        assembly = Assembly(
+            residual=assembler.set_residual(residual),
+            matrix=None,
+            energy_J=float(energies.sum()),
+            min_jacobian=float(min_jacobians.min()),
+            problem_energies_J=energies,
+            problem_min_jacobians=min_jacobians,
+        )
+        return u, assembly
 
 
 def _residual_patch(

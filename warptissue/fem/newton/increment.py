@@ -125,74 +125,158 @@ def newton_increment(
     Returns:
         An :class:`Increment`.
     """
-    arrays = problems.arrays
-    count = problems.count
-    if reuse is None:
-        reuse = ReuseTracker()
-    if timer is None:
-        timer = PhaseTimer(enabled=False)
-    single = count == 1
-    iterating = np.array(active, dtype=bool)
-    converged = np.zeros(count, dtype=bool)
-    iterations = np.zeros(count, dtype=np.int64)
-    linear = np.zeros(count, dtype=np.int64)
-    local = np.zeros(count, dtype=np.int64)
-    reasons = [""] * count
-    fixed = constrained
-    u, assembly, linearized = _start(
+    state = _Iterations(
         assembler,
+        solver,
         problems,
         u_start,
         prescribed_increment,
         free,
-        free_guess,
-        iterating if guessed is None else iterating & guessed,
-        timer,
+        constrained,
+        active=active,
+        tolerance=tolerance,
+        force_floors=force_floors,
+        start_guess=(free_guess, guessed),
+        reuse=ReuseTracker() if reuse is None else reuse,
+        timer=PhaseTimer(enabled=False) if timer is None else timer,
     )
-    residual = arrays.view(assembly.residual)
-    (reaction_squared,) = problems.read(problems.squared(residual * fixed))
-    limits = np.maximum(tolerance * np.sqrt(reaction_squared), force_floors)
-    norms = _ResidualNorms(problems, free, fixed, tolerance, force_floors)
-    increment_wp = arrays.warp(prescribed_increment)
-    k_times_increment = wp.zeros_like(increment_wp)
-    constrained_wp = arrays.warp(constrained)
-    frozen_wp = constrained_wp
-    frozen = None
-    on: Any = None
-    factor = np.zeros(count)
     for iteration in range(1, max_iterations + 1):
-        first = iterating & linearized if iteration == 1 else np.zeros(count, dtype=bool)
-        if not single:
-            on = problems.per_node(iterating.astype(np.float64))
-            frozen = arrays.xp.ascontiguousarray(arrays.xp.maximum(constrained, 1.0 - on))
-            frozen_wp = arrays.warp(frozen)  # ``frozen`` is kept alive while Warp uses it
+        first = state.iterating & state.linearized if iteration == 1 else state.none()
+        direction = state.direction(first, reuse_factorization=reuse_factorization)
+        if direction is None:
+            break
+        free_du, slopes, old_squared = direction
+        search = state.line_search(free_du, first, slopes, old_squared)
+        if search is None:
+            break
+        state.take_step(
+            search, free_du, first, damping=damping, elimination=nonlinear_elimination_on
+        )
+        if not state.iterating.any():
+            break
+        state.next_tangent()
+    return state.outcome(max_iterations)
+
+
+class _Iterations:
+    """The state of one increment's Newton iterations over K problems (the arguments as
+    :func:`newton_increment`'s): the current state, its assembly and residual, the damping
+    factors, and each problem's counters, reason and whether it still iterates. Each
+    iteration's named steps are its methods: :meth:`direction` (the Newton system solved),
+    :meth:`line_search`, :meth:`take_step` (the step, the elimination and the convergence
+    test) and :meth:`next_tangent`."""
+
+    def __init__(
+        self,
+        assembler: Assembler,
+        solver: LinearSolver,
+        problems: Problems,
+        u_start: Any,
+        prescribed_increment: Any,
+        free: Any,
+        constrained: Any,
+        *,
+        active: np.ndarray,
+        tolerance: float,
+        force_floors: np.ndarray,
+        start_guess: tuple[Any, np.ndarray | None],
+        reuse: ReuseTracker,
+        timer: PhaseTimer,
+    ) -> None:
+        self.assembler, self.solver, self.problems = assembler, solver, problems
+        self.u_start, self.prescribed_increment = u_start, prescribed_increment
+        self.free, self.constrained = free, constrained
+        self.reuse, self.timer = reuse, timer
+        arrays = problems.arrays
+        count = problems.count
+        self.single = count == 1
+        self.iterating = np.array(active, dtype=bool)
+        self.converged = np.zeros(count, dtype=bool)
+        self.iterations = np.zeros(count, dtype=np.int64)
+        self.linear = np.zeros(count, dtype=np.int64)
+        self.local = np.zeros(count, dtype=np.int64)
+        self.reasons = [""] * count
+        free_guess, guessed = start_guess
+        self.u, self.assembly, self.linearized = _start(
+            assembler,
+            problems,
+            u_start,
+            prescribed_increment,
+            free,
+            free_guess,
+            self.iterating if guessed is None else self.iterating & guessed,
+            timer,
+        )
+        self.residual = arrays.view(self.assembly.residual)
+        (reaction_squared,) = problems.read(problems.squared(self.residual * constrained))
+        self.limits = np.maximum(tolerance * np.sqrt(reaction_squared), force_floors)
+        self.norms = _ResidualNorms(problems, free, constrained, tolerance, force_floors)
+        self.increment_wp = arrays.warp(prescribed_increment)
+        self.k_times_increment = wp.zeros_like(self.increment_wp)
+        self.frozen_wp = arrays.warp(constrained)
+        self.frozen = None
+        self.on: Any = None
+        self.factor = np.zeros(count)
+
+    def none(self) -> np.ndarray:
+        """No problem, (K,) bool."""
+        return np.zeros(self.problems.count, dtype=bool)
+
+    def stop(self, which: np.ndarray, reason: str | list[str]) -> None:
+        """Stop iterating the problems ``which`` (K,), each with ``reason`` (one for all, or
+        one per problem)."""
+        for k in np.flatnonzero(which):
+            self.reasons[k] = reason if isinstance(reason, str) else reason[k]
+        self.iterating &= ~which
+
+    def direction(
+        self, first: np.ndarray, *, reuse_factorization: bool
+    ) -> tuple[Any, np.ndarray, np.ndarray] | None:
+        """The Newton direction of the iterating problems: the frozen ones' dofs held, the
+        tangent damped, the system solved (with the old factors where ``reuse`` finds that
+        promising); problems whose solve gave non-finite values stop.
+
+        Returns:
+            (the free part of the direction (N, 3), each problem's slope ``r . du`` and
+            squared free residual (K,)), or None where no problem iterates any more.
+        """
+        problems, arrays, iterating = self.problems, self.problems.arrays, self.iterating
+        if not self.single:
+            self.on = problems.per_node(iterating.astype(np.float64))
+            self.frozen = arrays.xp.ascontiguousarray(
+                arrays.xp.maximum(self.constrained, 1.0 - self.on)
+            )
+            self.frozen_wp = arrays.warp(self.frozen)  # ``frozen`` kept alive while Warp uses it
+        on, assembly = self.on, self.assembly
         rhs = _newton_rhs(
             problems,
             assembly.matrix,
-            residual,
-            free,
-            prescribed_increment,
+            self.residual,
+            self.free,
+            self.prescribed_increment,
             first,
             on,
-            scratch=(increment_wp, k_times_increment),
+            scratch=(self.increment_wp, self.k_times_increment),
         )
-        with timer.phase("assembly"):
-            assembler.eliminate(frozen_wp, damping=factor)
+        with self.timer.phase("assembly"):
+            self.assembler.eliminate(self.frozen_wp, damping=self.factor)
         try_old, rhs_squared = (
-            reuse.promising(u, factor, problems, iterating, problems.squared(rhs))
+            self.reuse.promising(self.u, self.factor, problems, iterating, problems.squared(rhs))
             if reuse_factorization
             else (False, [])
         )
         # The forcing term matters only to a solve with the old factors.
-        rtol = forcing_term(limits, np.sqrt(rhs_squared[0]), iterating) if try_old else 1.0
-        factorizations = solver.factorizations
-        du, linear_iterations = solver.solve_newton(assembly.matrix, rhs, rtol=rtol, reuse=try_old)
-        if solver.factorizations > factorizations:
-            reuse.factorized(u, factor)
-        iterations[iterating] += 1
-        linear[iterating] += linear_iterations
-        free_du = du * free if on is None else du * free * on
-        free_residual = residual * free
+        rtol = forcing_term(self.limits, np.sqrt(rhs_squared[0]), iterating) if try_old else 1.0
+        factorizations = self.solver.factorizations
+        du, linear_iterations = self.solver.solve_newton(
+            assembly.matrix, rhs, rtol=rtol, reuse=try_old
+        )
+        if self.solver.factorizations > factorizations:
+            self.reuse.factorized(self.u, self.factor)
+        self.iterations[iterating] += 1
+        self.linear[iterating] += linear_iterations
+        free_du = du * self.free if on is None else du * self.free * on
+        free_residual = self.residual * self.free
         du_squared, old_squared, slopes, free_du_squared, *scalars = problems.read(
             problems.squared(du if on is None else du * on),
             problems.squared(free_residual),
@@ -201,90 +285,110 @@ def newton_increment(
             scalars=None if assembly.scalars is None else arrays.view(assembly.scalars),
         )
         if scalars:  # the tangent's energies, read with the step's reductions
-            assembly = assembly.with_scalars(scalars[0])
+            self.assembly = assembly.with_scalars(scalars[0])
         broken = iterating & ~np.isfinite(du_squared)
-        for k in np.flatnonzero(broken):
-            reasons[k] = "the linear solve gave non-finite values"
-        iterating &= ~broken
-        if not iterating.any():
-            break
+        self.stop(broken, "the linear solve gave non-finite values")
+        if not self.iterating.any():
+            return None
         if broken.any():  # their rows of the direction are not numbers
-            free_du = free_du * problems.per_node(iterating.astype(np.float64))
+            free_du = free_du * problems.per_node(self.iterating.astype(np.float64))
             free_du = arrays.xp.nan_to_num(free_du)
-        reuse.first_step(first, np.sqrt(free_du_squared))
-        with timer.phase("line_search"):
+        self.reuse.first_step(first, np.sqrt(free_du_squared))
+        return free_du, slopes, old_squared
+
+    def line_search(
+        self, free_du: Any, first: np.ndarray, slopes: np.ndarray, old_squared: np.ndarray
+    ) -> Any:
+        """Each iterating problem's step along ``free_du``
+        (:func:`~warptissue.fem.newton.search.search_steps`); problems without one stop.
+
+        Returns:
+            The search's outcome, or None where no problem iterates any more.
+        """
+        with self.timer.phase("line_search"):
             search = search_steps(
-                assembler,
-                problems,
-                u,
+                self.assembler,
+                self.problems,
+                self.u,
                 free_du,
-                free,
-                searching=iterating,
-                first=first & iterating,
-                prescribed_increment=prescribed_increment,
-                energies_J=np.asarray(assembly.problem_energies_J, dtype=np.float64),
+                self.free,
+                searching=self.iterating,
+                first=first & self.iterating,
+                prescribed_increment=self.prescribed_increment,
+                energies_J=np.asarray(self.assembly.problem_energies_J, dtype=np.float64),
                 slopes=slopes,
                 residual_norms=np.sqrt(old_squared),
             )
-        failed = iterating & ~search.found
-        for k in np.flatnonzero(failed):
-            reasons[k] = search.reasons[k]
-        iterating &= search.found
-        if not iterating.any():
-            break
-        u, alpha = search.state, search.alpha
+        self.stop(self.iterating & ~search.found, search.reasons)
+        return search if self.iterating.any() else None
+
+    def take_step(
+        self, search: Any, free_du: Any, first: np.ndarray, *, damping: bool, elimination: bool
+    ) -> None:
+        """Move to the line search's state, update the damping, relax each problem's residual
+        peak (``elimination``) and test each problem's convergence."""
+        problems, arrays, iterating = self.problems, self.problems.arrays, self.iterating
+        self.u, alpha = search.state, search.alpha
         if damping:
             stepped = iterating & ~first
-            factor = np.where(stepped, next_damping(factor, alpha), factor)
+            self.factor = np.where(stepped, next_damping(self.factor, alpha), self.factor)
         if search.current:
             # The line search's residual at u; the tangent only where another iteration
             # (or the elimination) needs it, not at the converged state.
-            assembly = search.assembly
+            self.assembly = search.assembly
         else:
-            with timer.phase("assembly"):
-                assembly = assembler.assemble(u)
-        residual = arrays.view(assembly.residual)
-        moves = _moves(problems, alpha, free_du, u, u_start)
-        free_norms, reaction_norms, limits, *moved = norms(residual, *moves)
-        relax = iterating & (free_norms > limits) if nonlinear_elimination_on else None
+            with self.timer.phase("assembly"):
+                self.assembly = self.assembler.assemble(self.u)
+        self.residual = arrays.view(self.assembly.residual)
+        moves = _moves(problems, alpha, free_du, self.u, self.u_start)
+        free_norms, reaction_norms, self.limits, *moved = self.norms(self.residual, *moves)
+        relax = iterating & (free_norms > self.limits) if elimination else None
         if relax is not None and relax.any():
-            u, assembly, steps = _relax(
-                assembler, problems, assembly, u, free, limits, relax, timer
+            self.u, self.assembly, steps = _relax(
+                self.assembler,
+                problems,
+                self.assembly,
+                self.u,
+                self.free,
+                self.limits,
+                relax,
+                self.timer,
             )
-            local += steps
-            residual = arrays.view(assembly.residual)
+            self.local += steps
+            self.residual = arrays.view(self.assembly.residual)
             if steps.any():
-                moves = _moves(problems, alpha, free_du, u, u_start)
-                free_norms, reaction_norms, limits, *moved = norms(residual, *moves)
+                moves = _moves(problems, alpha, free_du, self.u, self.u_start)
+                free_norms, reaction_norms, self.limits, *moved = self.norms(self.residual, *moves)
         at_roundoff = _at_roundoff(*moved, free_norms, reaction_norms)
-        done = iterating & ((free_norms <= limits) | at_roundoff)
-        converged |= done
-        for k in np.flatnonzero(done):
-            reasons[k] = "converged"
-        broken = iterating & ~done & ~np.isfinite(free_norms)
-        for k in np.flatnonzero(broken):
-            reasons[k] = "the residual became non-finite"
-        iterating &= ~done & ~broken
-        if not iterating.any():
-            break
-        if assembly.matrix is None:  # the next iteration's tangent (its energies read later)
-            with timer.phase("assembly"):
-                assembly = assembler.assemble(u, read_scalars=False)
-            residual = arrays.view(assembly.residual)
-    for k in np.flatnonzero(iterating):
-        reasons[k] = f"no convergence in {max_iterations} iterations"
-    displacement = u if converged.all() else problems.where(converged, u, u_start)
-    return Increment(
-        converged=converged,
-        displacement=displacement,
-        iterations=iterations,
-        linear_iterations=linear,
-        local_iterations=local,
-        reasons=reasons,
-        from_guess=~linearized,
-        residual=residual if converged.any() else None,
-        last_iterate=u,
-    )
+        done = iterating & ((free_norms <= self.limits) | at_roundoff)
+        self.converged |= done
+        self.stop(done, "converged")
+        self.stop(self.iterating & ~np.isfinite(free_norms), "the residual became non-finite")
+
+    def next_tangent(self) -> None:
+        """Assemble the tangent at the state where the last step did not (its energies read
+        with the next direction's reductions)."""
+        if self.assembly.matrix is None:
+            with self.timer.phase("assembly"):
+                self.assembly = self.assembler.assemble(self.u, read_scalars=False)
+            self.residual = self.problems.arrays.view(self.assembly.residual)
+
+    def outcome(self, max_iterations: int) -> Increment:
+        """The :class:`Increment`: the problems still iterating ran out of iterations."""
+        self.stop(self.iterating, f"no convergence in {max_iterations} iterations")
+        converged, u = self.converged, self.u
+        displacement = u if converged.all() else self.problems.where(converged, u, self.u_start)
+        return Increment(
+            converged=converged,
+            displacement=displacement,
+            iterations=self.iterations,
+            linear_iterations=self.linear,
+            local_iterations=self.local,
+            reasons=self.reasons,
+            from_guess=~self.linearized,
+            residual=self.residual if converged.any() else None,
+            last_iterate=u,
+        )
 
 
 class _ResidualNorms:

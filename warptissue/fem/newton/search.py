@@ -163,15 +163,7 @@ def search_steps(
         high[upper], g_high[upper] = alpha[upper], g[upper]
         high[broken], g_high[broken] = alpha[broken], math.nan
         halve = (move & (slopes >= 0.0)) | (pending & first & ~ok)
-        width = high - low
-        with np.errstate(invalid="ignore", divide="ignore"):
-            secant = low - g_low * width / (g_high - g_low)
-            secant = np.minimum(np.maximum(secant, low + 0.1 * width), high - 0.1 * width)
-        use_secant = move & ~halve & np.isfinite(g_high) & (g_high > g_low)
-        bisect = move & ~halve & ~use_secant
-        alpha = np.where(halve, 0.5 * alpha, alpha)
-        alpha = np.where(use_secant, secant, alpha)
-        alpha = np.where(bisect, low + 0.5 * width, alpha)
+        alpha = _next_alpha(alpha, (low, g_low), (high, g_high), move=move, halve=halve)
     took_best = searching & line & np.isnan(accepted) & np.isfinite(best)
     accepted[took_best] = best[took_best]
     found = searching & np.isfinite(accepted)
@@ -185,3 +177,28 @@ def search_steps(
     else:
         state = problems.where(found, base + problems.per_node(steps) * direction, u)
     return StepSearch(steps, found, state, check, bool(current), reasons)
+
+
+def _next_alpha(
+    alpha: np.ndarray,
+    lower: tuple[np.ndarray, np.ndarray],
+    upper: tuple[np.ndarray, np.ndarray],
+    *,
+    move: np.ndarray,
+    halve: np.ndarray,
+) -> np.ndarray:
+    """The next trial step of each problem that moves (K,): half of it where ``halve``; else
+    the secant of the slopes at the bracket's ends ``lower`` and ``upper`` (each (alpha,
+    g)), kept a tenth of the bracket inside it, where the upper slope is known and larger;
+    else the bracket's middle."""
+    low, g_low = lower
+    high, g_high = upper
+    width = high - low
+    with np.errstate(invalid="ignore", divide="ignore"):
+        secant = low - g_low * width / (g_high - g_low)
+        secant = np.minimum(np.maximum(secant, low + 0.1 * width), high - 0.1 * width)
+    use_secant = move & ~halve & np.isfinite(g_high) & (g_high > g_low)
+    bisect = move & ~halve & ~use_secant
+    alpha = np.where(halve, 0.5 * alpha, alpha)
+    alpha = np.where(use_secant, secant, alpha)
+    return np.where(bisect, low + 0.5 * width, alpha)
