@@ -187,3 +187,45 @@ def test_pardiso_that_does_not_load_is_a_one_line_device_error(monkeypatch):
             CpuDirectSolver(matrix, method="pardiso")
     finally:
         direct.pardiso_unavailable_reason.cache_clear()
+
+
+def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch, tmp_path):
+    """A virtual environment made with --system-site-packages has MKL under the base Python's
+    prefix, where pypardiso does not look: the routine is loaded from there (through
+    PYPARDISO_MKL_RT) instead of falling back to SuperLU; where the base prefix has none, or
+    the variable is set already, pypardiso's own ImportError stands."""
+    import sys
+    import types
+
+    from warptissue.fem.linear import direct
+
+    base = tmp_path / "base"
+    (base / "lib").mkdir(parents=True)
+    (base / "lib" / "libmkl_rt.so.2").write_bytes(b"")
+    seen = []
+
+    class FakeSolver:
+        def __init__(self):
+            path = direct.os.environ.get("PYPARDISO_MKL_RT")
+            seen.append(path)
+            if path is None:
+                raise ImportError("Shared library mkl_rt not found.")
+            self._mkl_pardiso = ("routine from", path)
+
+    monkeypatch.setitem(sys.modules, "pypardiso", types.SimpleNamespace(PyPardisoSolver=FakeSolver))
+    monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+    monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
+    monkeypatch.setattr(direct.sys, "base_prefix", str(base))
+    direct._pardiso_routine.cache_clear()
+    try:
+        routine = direct._pardiso_routine()
+        assert routine == ("routine from", str(base / "lib" / "libmkl_rt.so.2"))
+        assert seen == [None, str(base / "lib" / "libmkl_rt.so.2")]
+        # No MKL under the base prefix either: pypardiso's error stands.
+        (base / "lib" / "libmkl_rt.so.2").unlink()
+        monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+        direct._pardiso_routine.cache_clear()
+        with pytest.raises(ImportError, match="mkl_rt not found"):
+            direct._pardiso_routine()
+    finally:
+        direct._pardiso_routine.cache_clear()

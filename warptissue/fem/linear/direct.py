@@ -25,6 +25,9 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import glob
+import os
+import sys
 
 import numpy as np
 import scipy.sparse as sp
@@ -49,10 +52,38 @@ _PARDISO_SYMMETRIC_INDEFINITE = -2
 @functools.cache
 def _pardiso_routine():
     """MKL's ``pardiso`` routine, loaded once per process (pypardiso searches for the library
-    and declares the argument types)."""
+    and declares the argument types).
+
+    pypardiso looks for MKL's ``mkl_rt`` under ``sys.prefix`` only. In a virtual environment
+    made with ``--system-site-packages`` MKL may lie under the base Python's prefix instead;
+    there PARDISO would not load and every CPU solve would fall back to SuperLU, 5 to 10
+    times slower (``scripts/examples/hertz_ball.py``: 258 CPU-seconds unfinished against 69).
+    Where pypardiso finds no ``mkl_rt`` and no ``PYPARDISO_MKL_RT`` is set, the base
+    prefix's is tried (:func:`_base_prefix_mkl_rt`).
+    """
     from pypardiso import PyPardisoSolver
 
+    try:
+        return PyPardisoSolver()._mkl_pardiso
+    except ImportError:
+        fallback = _base_prefix_mkl_rt()
+        if fallback is None or os.environ.get(_MKL_RT_VARIABLE):
+            raise
+    os.environ[_MKL_RT_VARIABLE] = fallback  # pypardiso reads it; subprocesses inherit it
     return PyPardisoSolver()._mkl_pardiso
+
+
+_MKL_RT_VARIABLE = "PYPARDISO_MKL_RT"
+"""The environment variable in which pypardiso takes the path of MKL's ``mkl_rt``."""
+
+
+def _base_prefix_mkl_rt() -> str | None:
+    """The shortest path of an ``mkl_rt`` library under the base Python's prefix, where this
+    is a virtual environment (``sys.prefix != sys.base_prefix``); else None."""
+    if sys.prefix == sys.base_prefix:
+        return None
+    found = sorted(glob.glob(f"{sys.base_prefix}/[Ll]ib*/**/*mkl_rt*", recursive=True), key=len)
+    return found[0] if found else None
 
 
 @functools.cache
