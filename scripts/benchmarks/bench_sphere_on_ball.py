@@ -1,6 +1,7 @@
 """A rigid sphere on an elastic ball against Hertz (issue 44): node-to-surface against
 surface-integrated contact, at the pole and at a site turned off it, over radius ratios and
-near sizes; F / Hertz and Newton iterations per load step.
+near sizes; F / Hertz, the contact area over Hertz's pi R* d, and Newton iterations per
+load step and per increment.
 
 The ball (radius R2, neo-Hookean C10 = 500 Pa, K = 1000 mu) is meshed by
 :func:`warptissue.mesh.ball_mesh` finer around its pole (pole size ``c sqrt(R* d_min)``),
@@ -69,6 +70,8 @@ def run_case(ratio: float, site_deg: float, pole: float, integration: str, devic
     seconds = time.perf_counter() - start
     count = len(result.reaction_force_N)
     ratio_to_hertz = result.reaction_force_N / hertz_N(depths[:count], reduced_radius)
+    hertz_area = np.pi * reduced_radius * depths[:count]  # a^2 = R* d
+    per_increment = [each["iterations"] for each in result.increments]
     return {
         "R1_over_R2": ratio,
         "site_deg": site_deg,
@@ -81,6 +84,10 @@ def run_case(ratio: float, site_deg: float, pole: float, integration: str, devic
         "d_over_Rstar": DEPTHS_OVER_RSTAR[:count].tolist(),
         "F_over_hertz": ratio_to_hertz.tolist(),
         "newton_iterations": np.asarray(result.newton_iterations).tolist(),
+        "area_over_hertz": (result.contact_area_m2 / hertz_area).tolist(),
+        "increment_iterations": per_increment,
+        "max_increment_iterations": max(per_increment) if per_increment else 0,
+        "cutbacks": int(result.cutbacks),
     }
 
 
@@ -105,6 +112,8 @@ def main() -> None:
                         f"nodes {row['nodes']} {row['seconds']:.0f} s "
                         f"F/H {np.round(row['F_over_hertz'], 4).tolist()} "
                         f"its {row['newton_iterations']} "
+                        f"A/H {np.round(row['area_over_hertz'], 3).tolist()} "
+                        f"increments {row['increment_iterations']} "
                         + ("" if row["completed"] else row["message"]),
                         flush=True,
                     )

@@ -503,6 +503,9 @@ class IndentationResult:
             each depth, (S, N), Pa (zero off the contact; the normal contact force over the
             node's tributary area, :class:`warptissue.fem.contact.ContactSurface`); shape
             (0, N) for a sharp flat punch.
+        increments: One record per attempted load increment (``load``, ``converged``,
+            ``iterations``, ``local_iterations``, ``reason``; cutbacks and substeps
+            included), :attr:`warptissue.fem.QuasistaticResult.history`.
         timings: Where the load path's wall time went, per phase of the Newton iterations
             (:class:`warptissue.fem.NewtonTimings`), when run with ``profile=True``; else
             None.
@@ -536,6 +539,7 @@ class IndentationResult:
     contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     tangential_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mean_contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    increments: list[dict] = field(default_factory=list)
     timings: NewtonTimings | None = None
     linear_solver_statistics: dict[str, int] = field(default_factory=dict)
 
@@ -804,6 +808,7 @@ def _indentation_result(
         mean_contact_pressure_Pa=np.divide(
             contact_force, area, out=np.zeros_like(area), where=area > 0.0
         ),
+        increments=list(path.history),
         timings=path.timings,
         linear_solver_statistics=path.linear_solver_statistics,
     )

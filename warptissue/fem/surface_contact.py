@@ -183,9 +183,9 @@ class SurfaceQuadrature:
     def areas_m2(self, points_m: np.ndarray) -> np.ndarray:
         """The area each point stands for with the nodes at ``points_m`` (N, 3), m (the
         current configuration, for the contact area), (Q,), m^2."""
-        return type(self).for_faces(
-            points_m, self.faces, subdivisions=self.subdivisions
-        ).point_area_m2
+        return (
+            type(self).for_faces(points_m, self.faces, subdivisions=self.subdivisions).point_area_m2
+        )
 
     @classmethod
     def for_faces(

@@ -11,8 +11,8 @@ from warptissue.errors import InputError
 from warptissue.fem.assembly import FORMULATIONS
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
 from warptissue.fem.newton import NewtonOptions
-from warptissue.fem.surface_contact import CONTACT_INTEGRATIONS
 from warptissue.fem.support import Foundation
+from warptissue.fem.surface_contact import CONTACT_INTEGRATIONS
 from warptissue.materials import material_from_dict
 from warptissue.study._organ import (
     OPPOSITE,
