@@ -241,3 +241,41 @@ def test_the_points_contact_area_follows_the_deformed_surface():
     np.testing.assert_allclose(
         result.mean_contact_pressure_Pa, result.contact_force_N / result.contact_area_m2
     )
+
+
+@pytest.mark.slow
+def test_newton_iterations_of_a_sphere_on_a_small_ball():
+    """Issue 44's sphere on a ball (R1 = R2 / 2, neo-Hookean C10 = 500 Pa, K = 1000 mu), on a
+    coarse ball (908 TET10 nodes) under the surface contact, at the pole and 45 degrees off
+    it, in load steps of d / R* = 0.005 to 0.02: every step converges in at most 15 Newton
+    iterations (the soft and the stiff stage of the penalty continuation counted together),
+    and the force follows Hertz with R* = R1 R2 / (R1 + R2) within this coarse mesh's 6 %."""
+    import runpy
+    from pathlib import Path
+
+    from warptissue.fem import simulate_indentation
+
+    script = Path(__file__).resolve().parents[1] / "scripts/benchmarks/bench_sphere_on_ball.py"
+    bench = runpy.run_path(str(script))
+    BALL_RADIUS_M, C10_PA = bench["BALL_RADIUS_M"], bench["C10_PA"]  # noqa: N806
+    hertz_N, turned_ball = bench["hertz_N"], bench["turned_ball"]  # noqa: N806
+    reduced = BALL_RADIUS_M / 3.0
+    pole = np.sqrt(0.005) * reduced  # the contact radius at the first depth
+    depths = reduced * np.array([0.005, 0.01, 0.015, 0.02])
+    for site_deg in (0.0, 45.0):
+        mesh, normal = turned_ball(pole, site_deg, far=0.5, growth=0.5)
+        problem = IndentationProblem(
+            mesh,
+            NeoHookean(C10_PA, 2000.0 * C10_PA),
+            Indenter("sphere", radius_m=BALL_RADIUS_M / 2.0),
+            site_m=BALL_RADIUS_M * normal,
+            direction=-normal,
+            symmetry_planes=(),
+            contact_integration="surface",
+        )
+        result = simulate_indentation(problem, depths, device="cpu", progress=False)
+        assert result.completed, result.message
+        iterations = [each["iterations"] for each in result.increments]
+        assert max(iterations) <= 15, iterations
+        ratio = result.reaction_force_N / hertz_N(depths, reduced)
+        assert np.all(np.abs(ratio - 1.0) < 0.06), ratio
