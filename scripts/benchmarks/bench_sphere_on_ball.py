@@ -5,8 +5,8 @@ load step and per increment.
 
 The ball (radius R2, neo-Hookean C10 = 500 Pa, K = 1000 mu) is meshed by
 :func:`warptissue.mesh.ball_mesh` finer around its pole (pole size ``c sqrt(R* d_min)``),
-turned so that the pole lies ``--site-deg`` degrees from +z about y, and held on the half
-opposite the site. The sphere (R1) comes in along the inward normal at the site. Hertz with
+turned so that the pole lies ``--site-deg`` degrees from +z about y, and held on its lower
+half (z < 0; at 45 degrees the support's edge lies 45 degrees of arc from the site). The sphere (R1) comes in along the inward normal at the site. Hertz with
 R* = R1 R2 / (R1 + R2), E* = E / (1 - nu^2).
 
 Usage:
@@ -50,7 +50,12 @@ def turned_ball(
     c, s = np.cos(angle), np.sin(angle)
     rotation = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
     points = mesh.points @ rotation.T
-    turned = TetMesh(points=points, tets=mesh.tets, node_sets=dict(mesh.node_sets))
+    # The support stays the world's lower half (z < 0), not the turned one: turned with the
+    # mesh it would make every site the pole again.
+    surface = mesh.node_sets["surface"]
+    lower = points[surface, 2] < 0.0
+    sets = dict(mesh.node_sets, top=surface[~lower], bottom=surface[lower])
+    turned = TetMesh(points=points, tets=mesh.tets, node_sets=sets)
     return turned, rotation @ [0.0, 0.0, 1.0]
 
 
