@@ -247,7 +247,6 @@ def rigid_surface_contact_kernel(
     point_area: wp.array(dtype=wp.float64),
     bodies: wp.array(dtype=RigidBody),
     stiffness: wp.array(dtype=wp.float64),
-    smoothing: wp.array(dtype=wp.float64),
     with_tangent: int,
     residual: wp.array(dtype=wp.vec3d),
     matrix_values: wp.array(dtype=wp.mat33d),
@@ -269,14 +268,6 @@ def rigid_surface_contact_kernel(
     (``R -= f_a``) and the tangent blocks ``K_ab = eps w N_a N_b (n n^T + g dn/dx)`` at
     ``face_blocks[f, a * count + b]`` (BSR), ``count`` the triangle's node count.
     ``point_gap[q]`` holds ``g`` (m).
-
-    ``smoothing[k] = delta > 0`` (m) replaces the penetration's energy ``p^2 / 2``
-    (``p = -g``) by its C2 smoothing over ``|p| < delta / 2``: ``(p + delta / 2)^3 /
-    (6 delta)`` there, ``p^2 / 2 + delta^2 / 24`` beyond (the pressure ``eps psi'(p)``, the
-    tangent ``eps w N_a N_b (psi'' n n^T - psi' dn/dx)``); 0: the penalty as above. The
-    smoothed form serves the soft stage of the penalty continuation
-    (:func:`warptissue.fem.newton.increment.penalty_ramped_increment`), whose state is only
-    a start for the exact one.
     """
     q = wp.tid()
     f = point_face[q]
@@ -289,31 +280,19 @@ def rigid_surface_contact_kernel(
         x = x + point_shape[q, a] * (points[node] + displacement[node])
     hit = rigid_contact_point(body, body.axes @ x)
     point_gap[q] = hit.gap
-    depth = -hit.gap
-    delta = smoothing[problem]
-    half = wp.float64(0.5) * delta
-    if depth <= half:
-        if delta <= wp.float64(0.0) or depth <= -half:
-            return
-    psi = wp.float64(0.5) * depth * depth + delta * delta / wp.float64(24.0)
-    slope = depth
-    curvature = wp.float64(1.0)
-    if depth < half:  # the smoothed band
-        shifted = depth + half
-        psi = shifted * shifted * shifted / (wp.float64(6.0) * delta)
-        slope = wp.float64(0.5) * shifted * shifted / delta
-        curvature = shifted / delta
+    if hit.gap >= wp.float64(0.0):
+        return
     back = wp.transpose(body.axes)
     normal = back @ hit.normal
     weight = stiffness[problem] * point_area[q]
-    force = weight * slope * normal
+    force = -weight * hit.gap * normal
     wp.atomic_add(contact_force, problem, force)
-    wp.atomic_add(energy, problem, weight * psi)
+    wp.atomic_add(energy, problem, wp.float64(0.5) * weight * hit.gap * hit.gap)
     for a in range(count):
         wp.atomic_sub(residual, face_nodes[f, a], point_shape[q, a] * force)
     if with_tangent != 0:
         gradient = back @ hit.normal_gradient @ body.axes
-        block = weight * (curvature * wp.outer(normal, normal) - slope * gradient)
+        block = weight * (wp.outer(normal, normal) + hit.gap * gradient)
         for a in range(count):
             for b in range(count):
                 scale = point_shape[q, a] * point_shape[q, b]

@@ -96,11 +96,6 @@ class RigidContact:
             integrated at these points of the surface's triangles
             (:mod:`warptissue.fem.surface_contact`) and ``stiffness_N_per_m`` is the
             penalty per unit area ``eps``, Pa/m (``nodes`` still give the outputs' gaps).
-        edge_m: The mean element edge ``h`` under the indenter, m (0: not known).
-        smoothing_m: Under a surface-integrated contact, the width ``delta`` of the
-            penalty's C2 smoothing about ``g = 0``, m (``rigid_surface_contact_kernel``);
-            0, the default, is the exact penalty. Set only during the soft stage of
-            :func:`warptissue.fem.newton.increment.penalty_ramped_increment`.
     """
 
     indenter: Indenter
@@ -110,8 +105,6 @@ class RigidContact:
     depth_m: float = 0.0
     frame: ProbeFrame | None = None
     quadrature: SurfaceQuadrature | None = None
-    edge_m: float = 0.0
-    smoothing_m: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.indenter.is_rigid_contact:
@@ -234,7 +227,7 @@ class RigidContact:
             faces = surface_triangles(mesh, nodes)
             quadrature = SurfaceQuadrature.for_faces(mesh.points, faces)
         origin = float(frame.origin_m[2])
-        return cls(indenter, nodes, origin, stiffness, frame=frame, quadrature=quadrature, edge_m=h)
+        return cls(indenter, nodes, origin, stiffness, frame=frame, quadrature=quadrature)
 
 
 @dataclass(frozen=True)
@@ -617,13 +610,12 @@ class RigidContacts:
             )
             self._bodies_key = bodies_key
         stiffness_key = tuple(
-            (0.0, 0.0) if each is None else (float(each.stiffness_N_per_m), each.smoothing_m)
-            for each in self.contacts
+            0.0 if each is None else float(each.stiffness_N_per_m) for each in self.contacts
         )
         if stiffness_key != self._stiffness_key:
-            values = np.array(stiffness_key, dtype=np.float64).reshape(-1, 2)
-            self._stiffness = wp.array(values[:, 0], dtype=wp.float64, device=self.device)
-            self._smoothing = wp.array(values[:, 1], dtype=wp.float64, device=self.device)
+            self._stiffness = wp.array(
+                np.array(stiffness_key, dtype=np.float64), dtype=wp.float64, device=self.device
+            )
             self._stiffness_key = stiffness_key
         return [self._bodies, self._stiffness]
 
@@ -649,14 +641,7 @@ class RigidContacts:
             wp.launch(
                 kc.rigid_surface_contact_kernel,
                 dim=surface.point_count,
-                inputs=[
-                    self._points,
-                    u,
-                    *surface.inputs,
-                    *self._inputs(),
-                    self._smoothing,
-                    with_tangent,
-                ],
+                inputs=[self._points, u, *surface.inputs, *self._inputs(), with_tangent],
                 outputs=[residual, values, energy, force, surface.gap],
                 device=self.device,
             )

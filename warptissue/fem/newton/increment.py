@@ -28,7 +28,6 @@ from warptissue.fem.timing import PhaseTimer
 
 __all__ = [
     "CONTACT_PENALTY_RAMP",
-    "CONTACT_RAMP_SMOOTHING",
     "CONTACT_RAMP_TOLERANCE",
     "Increment",
     "newton_increment",
@@ -366,11 +365,6 @@ times this factor (to :data:`CONTACT_RAMP_TOLERANCE`), then with the full stiffn
 (:func:`penalty_ramped_increment`); 1 solves with the full stiffness at once."""
 CONTACT_RAMP_TOLERANCE = 1.0e-3
 """Relative tolerance of the softened first stage of a contact increment."""
-CONTACT_RAMP_SMOOTHING = 0.0
-"""Under a surface-integrated contact, the soft stage's penalty is also smoothed (C2) over a
-band ``delta = CONTACT_RAMP_SMOOTHING h`` about the indenter's surface (``h`` the contact's
-mean edge; ``rigid_surface_contact_kernel``), so that the quadrature points at the contact's
-edge enter and leave it without a kink in the tangent; the stiff stage is exact."""
 
 
 def penalty_ramped_increment(
@@ -412,8 +406,6 @@ def penalty_ramped_increment(
     stiffnesses = [each.stiffness_N_per_m for each in contacts]
     for each, stiffness in zip(contacts, stiffnesses, strict=True):
         each.stiffness_N_per_m = stiffness * CONTACT_PENALTY_RAMP
-        if each.quadrature is not None:
-            each.smoothing_m = CONTACT_RAMP_SMOOTHING * each.edge_m
     try:
         soft = newton_increment(
             assembler,
@@ -429,7 +421,6 @@ def penalty_ramped_increment(
     finally:
         for each, stiffness in zip(contacts, stiffnesses, strict=True):
             each.stiffness_N_per_m = stiffness
-            each.smoothing_m = 0.0
     if not soft.converged.any():
         return soft
     stiff = newton_increment(
