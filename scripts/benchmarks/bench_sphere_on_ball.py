@@ -6,8 +6,9 @@ load step and per increment.
 The ball (radius R2, neo-Hookean C10 = 500 Pa, K = 1000 mu) is meshed by
 :func:`warptissue.mesh.ball_mesh` finer around its pole (pole size ``c sqrt(R* d_min)``),
 turned so that the pole lies ``--site-deg`` degrees from +z about y, and held on its lower
-half (z < 0; at 45 degrees the support's edge lies 45 degrees of arc from the site). The sphere (R1) comes in along the inward normal at the site. Hertz with
-R* = R1 R2 / (R1 + R2), E* = E / (1 - nu^2).
+half (z < 0; at 45 degrees the support's edge lies 45 degrees of arc from the site). The
+sphere (R1) comes in along the inward normal at the site. Hertz with R* = R1 R2 / (R1 + R2),
+E* = E / (1 - nu^2).
 
 Usage:
     python scripts/benchmarks/bench_sphere_on_ball.py --ratios 0.05 0.0741 0.5 \
