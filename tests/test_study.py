@@ -104,6 +104,7 @@ def test_minimal_study_gets_documented_defaults(tmp_path):
     assert study.solver.device == "auto"
     assert study.solver.formulation == "mixed"
     assert study.solver.options == NewtonOptions()
+    assert study.solver.contact_integration == "nodes"
     options = study.solver.options
     assert options.linear_solver == "auto"
     assert options.tolerance == pytest.approx(1e-9)
@@ -271,6 +272,20 @@ BAD_INPUTS = [
         "solver.damping",
         "1",
         id="damping-not-boolean",
+    ),
+    pytest.param(
+        "[material]",
+        '[solver]\ncontact_integration = "surfaces"\n[material]',
+        "solver.contact_integration",
+        "'surfaces'",
+        id="unknown-contact-integration",
+    ),
+    pytest.param(
+        "[material]",
+        "[solver]\ncontact_integration = 1\n[material]",
+        "solver.contact_integration",
+        "1",
+        id="contact-integration-not-a-string",
     ),
 ]
 
@@ -538,10 +553,38 @@ def test_solver_table_keys_are_the_options_names(tmp_path):
     study = study_from_dict(record)
     assert study.solver.options == NewtonOptions(**values)
     assert study.to_dict()["solver"] == dict(
-        values, device="auto", formulation="mixed", penalty_factor=1000.0
+        values,
+        device="auto",
+        formulation="mixed",
+        penalty_factor=1000.0,
+        contact_integration="nodes",
     )
     path = write(tmp_path, tomli_w.dumps(study.to_dict()))
     assert load_study(path).solver == study.solver
+
+
+def test_surface_contact_integration_is_read_written_and_reaches_the_problem(tmp_path):
+    """``[solver] contact_integration = "surface"`` selects the contact integrated at the
+    surface's quadrature points (warptissue.fem.surface_contact): read, echoed by to_dict,
+    read back from the TOML it writes, and passed to the indentation problem, whose rigid
+    contact then carries a quadrature (a coarse block under a sphere: meshing and the
+    problem's set-up, no solve)."""
+    from warptissue.simulate import build_mesh, build_problem
+
+    text = MINIMAL.replace('kind = "flat_punch"', 'kind = "sphere"').replace(
+        "[material]", '[solver]\ncontact_integration = "surface"\n[material]', 1
+    )
+    text = text.replace("thickness_m = 0.01", "thickness_m = 0.01\nsize_near_m = 0.001", 1)
+    study = load_study(write(tmp_path, text))
+    assert study.solver.contact_integration == "surface"
+    assert study.to_dict()["solver"]["contact_integration"] == "surface"
+    again = load_study(write(tmp_path, tomli_w.dumps(study.to_dict()), name="again.toml"))
+    assert again.solver == study.solver
+    problem = build_problem(study, build_mesh(study))
+    assert problem.contact_integration == "surface"
+    assert problem.rigid_contact().quadrature is not None
+    nodal = load_study(write(tmp_path, text.replace('"surface"', '"nodes"'), name="n.toml"))
+    assert build_problem(nodal, build_mesh(nodal)).rigid_contact().quadrature is None
 
 
 def test_extrapolated_predictor_is_read_and_written(tmp_path):

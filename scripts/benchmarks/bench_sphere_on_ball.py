@@ -1,12 +1,14 @@
 """A rigid sphere on an elastic ball against Hertz (issue 44): node-to-surface against
 surface-integrated contact, at the pole and at a site turned off it, over radius ratios and
-near sizes; F / Hertz and Newton iterations per load step.
+near sizes; F / Hertz, the contact area over Hertz's pi R* d, and Newton iterations per
+load step and per increment.
 
 The ball (radius R2, neo-Hookean C10 = 500 Pa, K = 1000 mu) is meshed by
 :func:`warptissue.mesh.ball_mesh` finer around its pole (pole size ``c sqrt(R* d_min)``),
-turned so that the pole lies ``--site-deg`` degrees from +z about y, and held on the half
-opposite the site. The sphere (R1) comes in along the inward normal at the site. Hertz with
-R* = R1 R2 / (R1 + R2), E* = E / (1 - nu^2).
+turned so that the pole lies ``--site-deg`` degrees from +z about y, and held on its lower
+half (z < 0; at 45 degrees the support's edge lies 45 degrees of arc from the site). The
+sphere (R1) comes in along the inward normal at the site. Hertz with R* = R1 R2 / (R1 + R2),
+E* = E / (1 - nu^2).
 
 Usage:
     python scripts/benchmarks/bench_sphere_on_ball.py --ratios 0.05 0.0741 0.5 \
@@ -39,21 +41,40 @@ def hertz_N(depth_m: np.ndarray, reduced_radius_m: float) -> np.ndarray:
     return 4.0 / 3.0 * reduced * np.sqrt(reduced_radius_m) * depth_m**1.5
 
 
-def turned_ball(pole_m: float, site_deg: float) -> tuple[TetMesh, np.ndarray]:
-    mesh = ball_mesh(BALL_RADIUS_M, pole_size_m=pole_m, far_size_m=0.15 * BALL_RADIUS_M)
+def turned_ball(
+    pole_m: float, site_deg: float, *, far: float = 0.15, growth: float = 0.25
+) -> tuple[TetMesh, np.ndarray]:
+    mesh = ball_mesh(
+        BALL_RADIUS_M, pole_size_m=pole_m, far_size_m=far * BALL_RADIUS_M, growth=growth
+    )
     angle = np.radians(site_deg)
     c, s = np.cos(angle), np.sin(angle)
     rotation = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
     points = mesh.points @ rotation.T
-    turned = TetMesh(points=points, tets=mesh.tets, node_sets=dict(mesh.node_sets))
+    # The support stays the world's lower half (z < 0), not the turned one: turned with the
+    # mesh it would make every site the pole again.
+    surface = mesh.node_sets["surface"]
+    lower = points[surface, 2] < 0.0
+    sets = dict(mesh.node_sets, top=surface[~lower], bottom=surface[lower])
+    turned = TetMesh(points=points, tets=mesh.tets, node_sets=sets)
     return turned, rotation @ [0.0, 0.0, 1.0]
 
 
-def run_case(ratio: float, site_deg: float, pole: float, integration: str, device: str) -> dict:
+def run_case(
+    ratio: float,
+    site_deg: float,
+    pole: float,
+    integration: str,
+    device: str,
+    *,
+    far: float = 0.15,
+    growth: float = 0.25,
+    depths_over_rstar: np.ndarray = DEPTHS_OVER_RSTAR,
+) -> dict:
     probe_radius = ratio * BALL_RADIUS_M
     reduced_radius = probe_radius * BALL_RADIUS_M / (probe_radius + BALL_RADIUS_M)
     contact = np.sqrt(reduced_radius * DEPTHS_OVER_RSTAR.min() * reduced_radius)
-    mesh, normal = turned_ball(pole * contact, site_deg)
+    mesh, normal = turned_ball(pole * contact, site_deg, far=far, growth=growth)
     problem = IndentationProblem(
         mesh,
         NeoHookean(C10_PA, BULK_OVER_SHEAR * 2.0 * C10_PA),
@@ -63,12 +84,14 @@ def run_case(ratio: float, site_deg: float, pole: float, integration: str, devic
         symmetry_planes=(),
         contact_integration=integration,
     )
-    depths = DEPTHS_OVER_RSTAR * reduced_radius
+    depths = np.asarray(depths_over_rstar) * reduced_radius
     start = time.perf_counter()
     result = simulate_indentation(problem, depths, device=device, progress=False)
     seconds = time.perf_counter() - start
     count = len(result.reaction_force_N)
     ratio_to_hertz = result.reaction_force_N / hertz_N(depths[:count], reduced_radius)
+    hertz_area = np.pi * reduced_radius * depths[:count]  # a^2 = R* d
+    per_increment = [each["iterations"] for each in result.increments]
     return {
         "R1_over_R2": ratio,
         "site_deg": site_deg,
@@ -78,9 +101,15 @@ def run_case(ratio: float, site_deg: float, pole: float, integration: str, devic
         "seconds": seconds,
         "completed": bool(result.completed),
         "message": result.message,
-        "d_over_Rstar": DEPTHS_OVER_RSTAR[:count].tolist(),
+        "far_over_R2": far,
+        "growth": growth,
+        "d_over_Rstar": np.asarray(depths_over_rstar)[:count].tolist(),
         "F_over_hertz": ratio_to_hertz.tolist(),
         "newton_iterations": np.asarray(result.newton_iterations).tolist(),
+        "area_over_hertz": (result.contact_area_m2 / hertz_area).tolist(),
+        "increment_iterations": per_increment,
+        "max_increment_iterations": max(per_increment) if per_increment else 0,
+        "cutbacks": int(result.cutbacks),
     }
 
 
@@ -90,6 +119,9 @@ def main() -> None:
     parser.add_argument("--site-deg", type=float, nargs="+", default=[0.0])
     parser.add_argument("--pole", type=float, nargs="+", default=[0.3])
     parser.add_argument("--integration", nargs="+", default=["nodes", "surface"])
+    parser.add_argument("--far", type=float, default=0.15, help="far size over R2")
+    parser.add_argument("--growth", type=float, default=0.25, help="ball_mesh's growth")
+    parser.add_argument("--depths", type=float, nargs="+", default=DEPTHS_OVER_RSTAR.tolist())
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
@@ -98,19 +130,30 @@ def main() -> None:
         for site in args.site_deg:
             for pole in args.pole:
                 for integration in args.integration:
-                    row = run_case(ratio, site, pole, integration, args.device)
+                    row = run_case(
+                        ratio,
+                        site,
+                        pole,
+                        integration,
+                        args.device,
+                        far=args.far,
+                        growth=args.growth,
+                        depths_over_rstar=np.array(args.depths),
+                    )
                     rows.append(row)
                     print(
                         f"R1/R2 {ratio:.4g} site {site:g} pole {pole:g} {integration:8s} "
                         f"nodes {row['nodes']} {row['seconds']:.0f} s "
                         f"F/H {np.round(row['F_over_hertz'], 4).tolist()} "
                         f"its {row['newton_iterations']} "
+                        f"A/H {np.round(row['area_over_hertz'], 3).tolist()} "
+                        f"increments {row['increment_iterations']} "
                         + ("" if row["completed"] else row["message"]),
                         flush=True,
                     )
-    if args.out:
-        with open(args.out, "w", encoding="utf-8") as handle:
-            json.dump(rows, handle, indent=1)
+                    if args.out:  # after every case: a long sweep keeps what it has
+                        with open(args.out, "w", encoding="utf-8") as handle:
+                            json.dump(rows, handle, indent=1)
 
 
 if __name__ == "__main__":

@@ -239,11 +239,18 @@ class ContactState:
         gap_m: Signed distance of each node to the indenter (negative: penetration), (k,), m.
         force_N: Contact force on each node (zero where the gap is >= 0), (k, 3), N; of the
             modelled part of the specimen (not scaled by a symmetry factor).
+        point_gap_m: Under a surface-integrated contact
+            (:mod:`warptissue.fem.surface_contact`), the gap at each quadrature point, (Q,),
+            m; None under the nodal one.
+        point_area_m2: The current area each quadrature point stands for, (Q,), m^2; None
+            under the nodal contact.
     """
 
     nodes: np.ndarray
     gap_m: np.ndarray
     force_N: np.ndarray
+    point_gap_m: np.ndarray | None = None
+    point_area_m2: np.ndarray | None = None
 
     @property
     def total_force_N(self) -> np.ndarray:
@@ -252,8 +259,23 @@ class ContactState:
 
     @property
     def max_penetration_m(self) -> float:
-        """The largest penetration of a node into the indenter, m (0 out of contact)."""
-        return max(0.0, -float(self.gap_m.min()))
+        """The largest penetration into the indenter, m (0 out of contact): of a node, or
+        under a surface-integrated contact of a node or a quadrature point."""
+        deepest = -float(self.gap_m.min())
+        if self.point_gap_m is not None and self.point_gap_m.size:
+            deepest = max(deepest, -float(self.point_gap_m.min()))
+        return max(0.0, deepest)
+
+    @property
+    def point_contact_area_m2(self) -> float | None:
+        """Under a surface-integrated contact, the current area of the quadrature points
+        that penetrate the indenter (gap < 0), m^2, of the modelled part; None under the
+        nodal contact. The contact's edge is resolved to the points' spacing, a fraction
+        ``1 / (2 s)`` of a triangle (:func:`warptissue.fem.surface_contact.triangle_rule`),
+        not to a ring of nodes."""
+        if self.point_gap_m is None or self.point_area_m2 is None:
+            return None
+        return float(self.point_area_m2[self.point_gap_m < 0.0].sum())
 
 
 @dataclass(frozen=True)
@@ -332,12 +354,16 @@ class ContactSurface:
         return weights
 
     def contact_area_m2(self, state: ContactState, points_m: np.ndarray) -> float:
-        """Area of the surface in contact (nodes with gap < 0), m^2, of the modelled part.
+        """Area of the surface in contact, m^2, of the modelled part: the tributary areas
+        of the nodes with gap < 0; under a surface-integrated contact the areas of the
+        quadrature points with gap < 0 (:attr:`ContactState.point_contact_area_m2`).
 
         Args:
             state: The contact at ``points_m``.
             points_m: Current node positions (reference plus displacement), (N, 3), m.
         """
+        if state.point_contact_area_m2 is not None:
+            return state.point_contact_area_m2
         weights = self.tributary_areas_m2(points_m)
         return float(weights[state.nodes[state.gap_m < 0.0]].sum())
 
@@ -536,10 +562,22 @@ class RigidContacts:
         force = wp.zeros(self.problem_count, dtype=wp.vec3d, device=self.device)
         self.launch(u, 0, scratch, values, energy, force)
         gaps, forces = self._gap.numpy(), self._node_force.numpy()
-        if self._surface is not None:  # the nodes' gaps, and the forces the points put on them
+        points = [{} for _ in self.contacts]
+        surface = self._surface
+        if surface is not None:  # the nodes' gaps, and the forces the points put on them
+            point_gaps = surface.gap.numpy()
             zeros = wp.zeros_like(scratch)
             self.launch(u, 0, zeros, values, energy, wp.zeros_like(force), nodes=True)
             gaps, forces = self._gap.numpy(), -scratch.numpy()[self._nodes.numpy()]
+            current = self._points.numpy() + u.numpy()
+            offsets = self._node_offsets
+            for k, each in enumerate(self.contacts):
+                if each is not None:
+                    own = current[offsets[k] : offsets[k + 1]]
+                    points[k] = {
+                        "point_gap_m": point_gaps[surface.point_problem == k].copy(),
+                        "point_area_m2": each.quadrature.areas_m2(own),
+                    }
         ranges = self._ranges
         return [
             None
@@ -548,6 +586,7 @@ class RigidContacts:
                 nodes=each.nodes.copy(),
                 gap_m=gaps[ranges[k] : ranges[k + 1]].copy(),
                 force_N=forces[ranges[k] : ranges[k + 1]].copy(),
+                **points[k],
             )
             for k, each in enumerate(self.contacts)
         ]

@@ -282,6 +282,10 @@ def _indentation_result(
         contact_area_m2=area,
         contact_pressure_Pa=pressure,
         tangential_force_N=tangential,
+        mean_contact_pressure_Pa=np.divide(
+            contact_force, area, out=np.zeros_like(area), where=area > 0.0
+        ),
+        increments=list(path.history),
         timings=path.timings,
         linear_solver_statistics=path.linear_solver_statistics,
     )

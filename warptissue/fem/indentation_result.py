@@ -50,11 +50,19 @@ class IndentationResult:
             depth, of the whole specimen (the modelled part's times the symmetry factor),
             current configuration, (S,), m^2; empty for a sharp flat punch
             (:class:`warptissue.fem.contact.ContactSurface`: the sum of the tributary areas of
-            the penetrating nodes, uncertain by a ring of nodes at the contact edge).
+            the penetrating nodes, uncertain by a ring of nodes at the contact edge; under
+            ``contact_integration="surface"`` the areas of the penetrating quadrature
+            points, :attr:`warptissue.fem.contact.ContactState.point_contact_area_m2`).
+        mean_contact_pressure_Pa: Under a rigid indenter: ``contact_force_N`` over
+            ``contact_area_m2`` at each depth, (S,), Pa (0 where the area is 0; Hertz's is
+            ``2 p0 / 3``); empty for a sharp flat punch.
         contact_pressure_Pa: Under a rigid indenter: the contact pressure at every node at
             each depth, (S, N), Pa (zero off the contact; the normal contact force over the
             node's tributary area, :class:`warptissue.fem.contact.ContactSurface`); shape
             (0, N) for a sharp flat punch.
+        increments: One record per attempted load increment (``load``, ``converged``,
+            ``iterations``, ``local_iterations``, ``reason``; cutbacks and substeps
+            included), :attr:`warptissue.fem.QuasistaticResult.history`.
         timings: Where the load path's wall time went, per phase of the Newton iterations
             (:class:`warptissue.fem.NewtonTimings`), when run with ``profile=True``; else
             None.
@@ -87,6 +95,8 @@ class IndentationResult:
     contact_area_m2: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     tangential_force_N: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mean_contact_pressure_Pa: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    increments: list[dict] = field(default_factory=list)
     timings: NewtonTimings | None = None
     linear_solver_statistics: dict[str, int] = field(default_factory=dict)
 
@@ -120,6 +130,7 @@ class IndentationResult:
                     "contact_force_N": self.contact_force_N.tolist(),
                     "max_penetration_m": self.max_penetration_m.tolist(),
                     "contact_area_m2": self.contact_area_m2.tolist(),
+                    "mean_contact_pressure_Pa": self.mean_contact_pressure_Pa.tolist(),
                     "max_contact_pressure_Pa": (
                         self.contact_pressure_Pa.max(axis=1).tolist()
                         if self.contact_pressure_Pa.size

@@ -171,12 +171,21 @@ class SurfaceQuadrature:
         point_shape: The triangle's shape functions at each point, (Q, 3 or 6).
         point_area_m2: The reference area each point stands for, (Q,), m^2 (summing to the
             surface's area, curved faces included).
+        subdivisions: ``s`` of :func:`triangle_rule`.
     """
 
     faces: np.ndarray
     point_face: np.ndarray
     point_shape: np.ndarray
     point_area_m2: np.ndarray
+    subdivisions: int = SURFACE_SUBDIVISIONS
+
+    def areas_m2(self, points_m: np.ndarray) -> np.ndarray:
+        """The area each point stands for with the nodes at ``points_m`` (N, 3), m (the
+        current configuration, for the contact area), (Q,), m^2."""
+        return (
+            type(self).for_faces(points_m, self.faces, subdivisions=self.subdivisions).point_area_m2
+        )
 
     @classmethod
     def for_faces(
@@ -206,6 +215,7 @@ class SurfaceQuadrature:
             point_face=np.repeat(np.arange(count), len(xi)),
             point_shape=np.tile(shape, (count, 1)),
             point_area_m2=(jacobian * weights).ravel(),
+            subdivisions=int(subdivisions),
         )
 
 

@@ -155,6 +155,7 @@ def build_problem(study: Study, mesh: Any) -> Any:
         symmetry_planes=("symmetry_x", "symmetry_y") if study.specimen.quarter else (),
         formulation=study.solver.formulation,
         penalty_factor=study.solver.penalty_factor,
+        contact_integration=study.solver.contact_integration,
         **placement,
     )
 

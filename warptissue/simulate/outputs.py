@@ -288,6 +288,9 @@ def _contact_outputs(
     contact_curve = {
         "contact_force_N": np.asarray(result.contact_force_N, dtype=np.float64)[:converged],
         "contact_area_m2": area,
+        "mean_contact_pressure_Pa": np.asarray(result.mean_contact_pressure_Pa, dtype=np.float64)[
+            :converged
+        ],
         "max_penetration_m": penetration,
         "max_contact_pressure_Pa": (pressure.max(axis=1) if pressure.size else np.zeros(converged)),
     }
@@ -295,6 +298,7 @@ def _contact_outputs(
         "contact": {
             "indenter": study.indenter.kind,
             "penalty_factor": float(problem.penalty_factor),
+            "contact_integration": problem.contact_integration,
             "penalty_stiffness_N_per_m": float(problem.rigid_contact().stiffness_N_per_m),
             "max_penetration_m": float(penetration.max()) if penetration.size else 0.0,
             "max_penetration_step": (int(np.argmax(penetration)) + 1 if penetration.size else None),

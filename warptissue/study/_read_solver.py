@@ -12,6 +12,7 @@ from warptissue.fem.assembly import FORMULATIONS
 from warptissue.fem.contact import DEFAULT_PENALTY_FACTOR
 from warptissue.fem.newton import NewtonOptions
 from warptissue.fem.support import Foundation
+from warptissue.fem.surface_contact import CONTACT_INTEGRATIONS
 from warptissue.materials import material_from_dict
 from warptissue.study._organ import (
     OPPOSITE,
@@ -125,10 +126,17 @@ def read_solver(table: Table, element: str, material: Any) -> Solver:
                 stacklevel=2,
             )
     penalty_factor = table.number("penalty_factor", default=DEFAULT_PENALTY_FACTOR)
+    contact_integration = table.string(
+        "contact_integration", default="nodes", choices=CONTACT_INTEGRATIONS
+    )
     options = table.build(
         lambda values: NewtonOptions(**values), table.present(NewtonOptions.keys())
     )
     table.finish()
     return Solver(
-        device=device, formulation=formulation, options=options, penalty_factor=penalty_factor
+        device=device,
+        formulation=formulation,
+        options=options,
+        penalty_factor=penalty_factor,
+        contact_integration=contact_integration,
     )

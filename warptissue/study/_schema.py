@@ -280,7 +280,8 @@ class Boundary:
 class Solver:
     """Solver settings: the ``[solver]`` table.
 
-    The table is flat: ``device``, ``formulation``, ``penalty_factor`` and the keys of
+    The table is flat: ``device``, ``formulation``, ``penalty_factor``,
+    ``contact_integration`` and the keys of
     :class:`warptissue.fem.NewtonOptions` under the same names (``linear_solver``,
     ``tolerance``, ``max_newton_iterations``, ``max_cutbacks``, ``nonlinear_elimination``,
     ``predictor``, ``damping``), each with its default there.
@@ -296,12 +297,17 @@ class Solver:
             (:class:`warptissue.fem.IndentationProblem`; default
             :data:`warptissue.fem.contact.DEFAULT_PENALTY_FACTOR`); unused by a sharp flat
             punch, whose nodes are prescribed.
+        contact_integration: How a rigid indenter's contact is discretized: ``"nodes"``
+            (node-to-surface penalty, the default) or ``"surface"`` (integrated at
+            quadrature points of the surface's triangles,
+            :mod:`warptissue.fem.surface_contact`); unused by a sharp flat punch.
     """
 
     device: str
     formulation: str
     options: NewtonOptions
     penalty_factor: float
+    contact_integration: str = "nodes"
 
     def to_dict(self) -> dict[str, Any]:
         """The ``[solver]`` table (flat: device, formulation, penalty factor, then the Newton
@@ -310,6 +316,7 @@ class Solver:
             "device": self.device,
             "formulation": self.formulation,
             "penalty_factor": self.penalty_factor,
+            "contact_integration": self.contact_integration,
             **self.options.to_dict(),
         }
 
