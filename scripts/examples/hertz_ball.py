@@ -23,7 +23,8 @@ d / R* = 0.04 (F / Hertz = 0.954). ``--mid``, the slow test's size (issue 47), r
 run's four depths and pole elements with the far elements 0.25 R2 instead of 0.15 R2 (5 061
 TET10 nodes instead of 7 891): the far half, 2 R2 from the contact, carries little strain.
 Measured: F / Hertz 0.994, 0.988, 0.992, 0.979 (the full size: 0.994, 0.985, 0.989, 0.974),
-33-49 CPU-seconds of FE against 72 (2-core CPU, load 6).
+33-49 CPU-seconds of FE against 72 (2-core CPU, load 6); at load 2 its test took 23-43 s
+against 37-39 s at full size (the Newton iterations vary from run to run).
 """
 
 from __future__ import annotations
