@@ -28,8 +28,18 @@ transferred onto the asset's mesh, whose surface nodes the refined mesh shares, 
 deformed points, stress and probe sit in layers over it); the scene is validated and its
 findings printed.
 
+``--quick`` runs the same three-site fit and export on the same mesh at looser stopping
+tolerances, for the slow test (issue 47): the fit's ``ftol`` and ``xtol`` 1e-4 instead of
+1e-8 (a cost reduction below 0.01 % of the cost, or a step below 0.01 % of C10, stops it) and
+the Newton tolerance 1e-6 instead of 1e-9 (the same forces to 9e-9 on the benchmark,
+docs/study-files.md). Measured: 9 forward runs instead of 12, to the same C10 (287.56 Pa,
++0.02 %; R^2 0.9989, 0.9992, 0.9993) and 0 validation findings. The refinement stays 4 mm,
+the radius of site B's punch: refined to 8 mm instead (22 845 TET10 nodes instead of 31 473;
+the asset's own mesh holds about 20 000), the same quick fit on the records of the 4 mm mesh
+gave C10 = 304.09 Pa (+5.8 %) and R^2 = 0.990, 0.948, 0.985 (docs/organs.md).
+
 Usage:
-    python scripts/examples/liver_organ_sites.py [--out DIR] [--device cpu]
+    python scripts/examples/liver_organ_sites.py [--out DIR] [--device cpu] [--quick]
     python scripts/examples/liver_organ_sites.py --make-records scenes/data
 """
 
@@ -58,6 +68,17 @@ STUDY = ROOT / "scenes" / "liver_organ_sites.toml"
 TRUE_C10_PA = 287.5
 NOISE_SHARE = 0.01
 SAMPLES = 12
+QUICK_TOLERANCES = {"fit": {"ftol": 1e-4, "xtol": 1e-4}, "solver": {"tolerance": 1e-6}}
+"""``--quick``: the fit's stopping tolerances and the Newton tolerance (the study's defaults
+are 1e-8, 1e-8 and 1e-9)."""
+
+
+def quick_study():
+    """The study with ``--quick``'s QUICK_TOLERANCES."""
+    text = tomllib.loads(STUDY.read_text(encoding="utf-8"))
+    for table, values in QUICK_TOLERANCES.items():
+        text.setdefault(table, {}).update(values)
+    return study_from_dict(text, path=STUDY)
 
 
 def make_records(folder: Path) -> None:
@@ -99,9 +120,10 @@ def make_records(folder: Path) -> None:
         print(f"{name}: {study.indenter.kind} at {where} m, {force[-1]:.4g} N at 2 mm")
 
 
-def fit_and_export(out: Path, *, device: str | None) -> dict:
-    """The joint fit, C10 against the truth, and the fitted organ at site A as USD."""
-    study = load_study(STUDY)
+def fit_and_export(out: Path, *, device: str | None, quick: bool = False) -> dict:
+    """The joint fit, C10 against the truth, and the fitted organ at site A as USD; ``quick``:
+    at the looser tolerances of :func:`quick_study`."""
+    study = quick_study() if quick else load_study(STUDY)
     start = time.perf_counter()
     fit = fit_indentation(study, device=device, progress=False)
     fit_s = time.perf_counter() - start
@@ -123,6 +145,7 @@ def fit_and_export(out: Path, *, device: str | None) -> dict:
     print(f"USD over {asset.name}: {layered.root} ({len(findings)} validation findings)")
     summary = {
         "status": fit.status,
+        "quick": quick,
         "c10_Pa": fitted,
         "true_c10_Pa": TRUE_C10_PA,
         "relative_error": error,
@@ -142,11 +165,12 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("runs/liver_organ_sites"))
     parser.add_argument("--device", default=None, help="cpu, cuda, ... (default: the study's)")
     parser.add_argument("--make-records", type=Path, metavar="FOLDER")
+    parser.add_argument("--quick", action="store_true", help="looser fit and Newton tolerances")
     arguments = parser.parse_args()
     if arguments.make_records is not None:
         make_records(arguments.make_records)
         return
-    fit_and_export(arguments.out, device=arguments.device)
+    fit_and_export(arguments.out, device=arguments.device, quick=arguments.quick)
 
 
 if __name__ == "__main__":
