@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import glob
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -12,18 +10,6 @@ import warp as wp
 
 from warptissue._stage import register_schema_plugin
 from warptissue.device import quiet_warp
-
-# pypardiso looks for MKL's mkl_rt under sys.prefix only: in a virtual environment made with
-# --system-site-packages (the development set-up) MKL lies under the base Python's prefix,
-# PARDISO does not load and every CPU solve falls back to SuperLU, 5 to 10 times slower on the
-# slow tests than CI's fresh environment, where MKL lies in the environment itself (issue 47:
-# scripts/examples/hertz_ball.py had used 258 CPU-seconds with SuperLU and not finished; it
-# took 69 with PARDISO). Point pypardiso at the base Python's MKL there, so that the tests
-# here solve as CI does; the examples' subprocesses inherit it.
-if "PYPARDISO_MKL_RT" not in os.environ and not glob.glob(f"{sys.prefix}/lib/libmkl_rt.so*"):
-    _base_mkl = sorted(glob.glob(f"{sys.base_prefix}/lib/libmkl_rt.so*"), key=len)
-    if _base_mkl:
-        os.environ["PYPARDISO_MKL_RT"] = _base_mkl[0]
 
 quiet_warp()
 wp.init()
