@@ -465,6 +465,82 @@ def _indentation_specimen(
     force_accuracy: float | None = None,
 ) -> TetMesh:
     """Shared body of the block and disc generators (``outer`` is "square" or "circle")."""
+    size_near_m = _checked_near_size(
+        size_near_m=size_near_m,
+        force_accuracy=force_accuracy,
+        half_extent_m=half_extent_m,
+        probe_radius_m=probe_radius_m,
+        size_far_m=size_far_m,
+        growth=growth,
+        element=element,
+        mesher=mesher,
+    )
+    estimate_indentation_mesh(
+        shape="disc" if outer == "circle" else "block",
+        half_extent_m=half_extent_m,
+        thickness_m=thickness_m,
+        probe_radius_m=probe_radius_m,
+        quarter=quarter,
+        element=element,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+        layer_max_m=layer_max_m,
+    ).require_fits()
+    points_2d, triangles = _ogrid_quarter(
+        outer=outer,
+        half_extent_m=half_extent_m,
+        probe_radius_m=probe_radius_m,
+        size_near_m=size_near_m,
+        size_far_m=size_far_m,
+        growth=growth,
+    )
+    if not quarter:
+        points_2d, triangles = _mirror_quarter(points_2d, triangles)
+    layer_max_m = size_far_m if layer_max_m is None else layer_max_m
+    require_positive(layer_max_m=layer_max_m)
+    depth = graded_spacing(thickness_m, size_near_m, max(layer_max_m, size_near_m), growth=growth)
+    z = thickness_m - depth[::-1]
+    z[0] = 0.0
+    points, tets = extrude_triangles(points_2d, triangles, z)
+    node_sets, face_sets = _extruded_sets(
+        points_2d,
+        tets,
+        layer_count=len(z) - 1,
+        outer=outer,
+        half_extent_m=half_extent_m,
+        probe_radius_m=probe_radius_m,
+        quarter=quarter,
+    )
+    mesh = TetMesh(points=points, tets=tets, node_sets=node_sets, face_sets=face_sets)
+    if mesher == "delaunay":
+        mesh = _delaunay_refill(mesh)
+        if curved_side and outer == "circle":
+            # TetGen's Steiner points on the side lie on its flat facets: onto the cylinder.
+            _project_to_cylinder(mesh, mesh.node_sets["side"], half_extent_m)
+    side = np.zeros(mesh.node_count, dtype=bool)
+    side[mesh.node_sets["side"]] = True
+    if element == "TET4":
+        return mesh
+    mesh = to_tet10(mesh)
+    if curved_side and outer == "circle":
+        _project_midnodes_to_cylinder(mesh, side, half_extent_m)
+    return mesh
+
+
+def _checked_near_size(
+    *,
+    size_near_m: float | None,
+    force_accuracy: float | None,
+    half_extent_m: float,
+    probe_radius_m: float,
+    size_far_m: float,
+    growth: float,
+    element: str,
+    mesher: str,
+) -> float:
+    """The specimen generator's sizes and choices checked, and its near size, m: the one
+    given, or the one of ``force_accuracy`` (:func:`size_near_for_force_accuracy`)."""
     if (size_near_m is None) == (force_accuracy is None):
         raise InputError(
             "give either size_near_m or force_accuracy"
@@ -495,41 +571,29 @@ def _indentation_specimen(
         )
     if not (np.isfinite(growth) and growth >= 1.0):
         raise InputError("growth must be a finite number >= 1", key="growth", value=growth)
-    estimate_indentation_mesh(
-        shape="disc" if outer == "circle" else "block",
-        half_extent_m=half_extent_m,
-        thickness_m=thickness_m,
-        probe_radius_m=probe_radius_m,
-        quarter=quarter,
-        element=element,
-        size_near_m=size_near_m,
-        size_far_m=size_far_m,
-        growth=growth,
-        layer_max_m=layer_max_m,
-    ).require_fits()
-    points_2d, triangles = _ogrid_quarter(
-        outer=outer,
-        half_extent_m=half_extent_m,
-        probe_radius_m=probe_radius_m,
-        size_near_m=size_near_m,
-        size_far_m=size_far_m,
-        growth=growth,
-    )
-    if not quarter:
-        points_2d, triangles = _mirror_quarter(points_2d, triangles)
-    layer_max_m = size_far_m if layer_max_m is None else layer_max_m
-    require_positive(layer_max_m=layer_max_m)
-    depth = graded_spacing(thickness_m, size_near_m, max(layer_max_m, size_near_m), growth=growth)
-    z = thickness_m - depth[::-1]
-    z[0] = 0.0
-    points, tets = extrude_triangles(points_2d, triangles, z)
+    return size_near_m
 
-    plane_count, layer_count = len(points_2d), len(z) - 1
+
+def _extruded_sets(
+    points_2d: np.ndarray,
+    tets: np.ndarray,
+    *,
+    layer_count: int,
+    outer: str,
+    half_extent_m: float,
+    probe_radius_m: float,
+    quarter: bool,
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The node and face sets of a specimen extruded from ``points_2d`` (its plane's points,
+    (P, 2), m) in ``layer_count`` layers, bottom plane first: top, bottom, side, probe, and
+    on a quarter the symmetry planes."""
+    plane_count = len(points_2d)
+    point_count = plane_count * (layer_count + 1)
     radius_2d = np.hypot(points_2d[:, 0], points_2d[:, 1])
     tolerance = 1e-9 * half_extent_m
-    on_top = np.zeros(len(points), dtype=bool)
+    on_top = np.zeros(point_count, dtype=bool)
     on_top[plane_count * layer_count :] = True
-    on_bottom = np.zeros(len(points), dtype=bool)
+    on_bottom = np.zeros(point_count, dtype=bool)
     on_bottom[:plane_count] = True
     in_plane = {
         "symmetry_x": points_2d[:, 0] == 0.0,
@@ -557,20 +621,7 @@ def _indentation_specimen(
     face_sets = {name: faces[mask[faces].all(axis=1)] for name, mask in masks.items()}
     face_sets["side"] = np.concatenate([faces[m[faces].all(axis=1)] for m in side_columns])
     node_sets = {name: np.flatnonzero(mask).astype(np.int32) for name, mask in masks.items()}
-    mesh = TetMesh(points=points, tets=tets, node_sets=node_sets, face_sets=face_sets)
-    if mesher == "delaunay":
-        mesh = _delaunay_refill(mesh)
-        if curved_side and outer == "circle":
-            # TetGen's Steiner points on the side lie on its flat facets: onto the cylinder.
-            _project_to_cylinder(mesh, mesh.node_sets["side"], half_extent_m)
-    side = np.zeros(mesh.node_count, dtype=bool)
-    side[mesh.node_sets["side"]] = True
-    if element == "TET4":
-        return mesh
-    mesh = to_tet10(mesh)
-    if curved_side and outer == "circle":
-        _project_midnodes_to_cylinder(mesh, side, half_extent_m)
-    return mesh
+    return node_sets, face_sets
 
 
 _DELAUNAY_RADIUS_EDGE_RATIO = 1.4
