@@ -12,8 +12,8 @@
 # tables, each with the factorization reused by GMRES and without), "quick" (the main job's
 # forward-run latency and fit alone), "batch" (the batched fits at K = 1, 8, 32, 128 with a
 # cProfile of K = 32), "cluster" (32 fits batched on the GPU against a warmed Dask
-# LocalCluster of 16 CPU workers), "equality" (the main job and its forward run on this host's
-# CPU, compared with the GPU's of "time") or "suite" (the fast test suite, `pytest -n 14`, run
+# LocalCluster of 16 CPU workers), "equality" (the main job and its forward run on the GPU and
+# on this host's CPU, compared) or "suite" (the fast test suite, `pytest -n 14`, run
 # from a copy of the checkout). Every output goes to $OUT/LABEL/ (JSON, pstats summaries as
 # text, logs); nothing is asserted here.
 set -uo pipefail
@@ -95,7 +95,12 @@ if [ "$mode" = cluster ]; then  # the same 32 fits: batched on the GPU, and on 1
     --what fits --counts 32 --sequential-limit 1 --cluster-workers 16 --label "$label" \
     --out "$out/batch_cluster.json"
 fi
-if [ "$mode" = equality ]; then  # this host's CPU against the GPU's runs of "time"
+if [ "$mode" = equality ]; then  # this host's CPU against the GPU, each run here
+  # (every call starts with an empty $OUT and a fresh work folder: nothing of "time" is left)
+  timed simulate_cuda "${cli[@]}" simulate scenes/liver_fit.toml --device cuda --quiet --out runs/simcuda
+  timed fit_cuda "${cli[@]}" fit indentation scenes/liver_fit.toml --device cuda --quiet --out runs/fitcuda
+  cp runs/simcuda/result.json "$out/simulate_cuda_result.json"
+  cp runs/fitcuda/fit.json "$out/fit.json"
   timed simulate_cpu "${cli[@]}" simulate scenes/liver_fit.toml --device cpu --quiet --out runs/simcpu
   timed fit_cpu "${cli[@]}" fit indentation scenes/liver_fit.toml --device cpu --quiet --out runs/fitcpu
   cp runs/simcpu/result.json "$out/simulate_cpu_result.json"
