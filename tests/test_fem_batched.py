@@ -6,6 +6,7 @@ outputs."""
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -550,3 +551,33 @@ def test_the_penalty_ramp_decides_per_problem(monkeypatch):
     np.testing.assert_array_equal(step.displacement, [[2.0] * 3] * 2 + [[0.0] * 3] * 3)
     np.testing.assert_array_equal(step.iterations, [4, 3, 8])
     assert step.reasons == ["converged", "stage 0 failed", "stage 1 failed"]
+
+
+def test_a_batch_starts_each_problem_from_its_own_warm_states(device):
+    """A fit's next batched evaluation: each problem started from the states of the last
+    batch (the first two), or cold (the third), at new materials, gives the forces of a
+    cold batch to the Newton tolerance, in fewer Newton iterations where it starts warm."""
+    problems = _problems()
+    depths = [RADIUS_M * np.array([0.05, 0.1])] * len(problems)
+    options = NewtonOptions(tolerance=TOLERANCE)
+    earlier = simulate_indentation_batch(problems, depths, device=device, options=options)
+    moved = []  # the last parameter (K, or Mooney-Rivlin's C01) down 10 %, the others up 30 %
+    for problem in problems:
+        vector = problem.material.parameter_vector.copy()
+        vector[:-1] *= 1.3
+        vector[-1] *= 0.9
+        moved.append(
+            dataclasses.replace(problem, material=problem.material.with_parameters(vector))
+        )
+    cold = simulate_indentation_batch(moved, depths, device=device, options=options)
+    warm_states = [earlier[0].displacement_m, earlier[1].displacement_m, None]
+    warm = simulate_indentation_batch(
+        moved, depths, device=device, options=options, warm_states_m=warm_states
+    )
+    for mine, theirs in zip(warm, cold, strict=True):
+        assert mine.completed and theirs.completed
+        np.testing.assert_allclose(mine.reaction_force_N, theirs.reaction_force_N, rtol=1e-8)
+    for k in (0, 1):
+        assert warm[k].newton_iterations.sum() < cold[k].newton_iterations.sum()
+    with pytest.raises(InputError, match="one entry per packed problem"):
+        simulate_indentation_batch(moved, depths, device=device, warm_states_m=warm_states[:2])

@@ -221,3 +221,68 @@ def test_cpu_and_device_agree(device):
         rtol=0,
         atol=1e-7 * np.abs(cpu.cauchy_stress_Pa).max(),
     )
+
+
+def _warm_case(kind: str):
+    """A coarse block under a bonded punch or a rigid sphere (the contact penalty's ramp),
+    and the four depths a fit's evaluations share."""
+    mesh = _block(near=1.0)
+    if kind == "sphere":
+        indenter = Indenter("sphere", radius_m=2.0 * RADIUS_M)
+        depths = RADIUS_M * np.array([0.05, 0.1, 0.15, 0.2])
+    else:
+        indenter = _punch()
+        depths = RADIUS_M * np.array([0.1, 0.2, 0.3, 0.4])
+    return mesh, indenter, depths
+
+
+@pytest.mark.parametrize("kind", ["punch", "sphere"])
+def test_a_warm_start_gives_the_cold_run_s_forces_in_fewer_iterations(device, kind):
+    """A fit's next evaluation started from the last one's states: at another C10 and
+    another K / mu (so the displacements differ too), the forces and their C10
+    sensitivities are those of a run from the predictor, to the Newton tolerance, in fewer
+    Newton iterations."""
+    mesh, indenter, depths = _warm_case(kind)
+    first = IndentationProblem(mesh, _material(10.0), indenter)
+    moved = IndentationProblem(mesh, NeoHookean(1.2 * SHEAR_MODULUS_PA / 2, 8.0 * 240.0), indenter)
+    run = dict(device=device, progress=False, sensitivities=("C10_Pa",))
+    earlier = simulate_indentation(first, depths, **run)
+    cold = simulate_indentation(moved, depths, **run)
+    warm = simulate_indentation(moved, depths, warm_states_m=earlier.displacement_m, **run)
+    assert earlier.completed and cold.completed and warm.completed
+    np.testing.assert_allclose(warm.reaction_force_N, cold.reaction_force_N, rtol=1e-7)
+    np.testing.assert_allclose(
+        warm.force_sensitivity_N_per_unit, cold.force_sensitivity_N_per_unit, rtol=1e-6
+    )
+    assert not np.allclose(earlier.displacement_m, cold.displacement_m, rtol=1e-3)
+    assert warm.newton_iterations.sum() < cold.newton_iterations.sum()
+
+
+def test_a_warm_start_that_inverts_elements_falls_back_to_the_predictor():
+    """States that invert elements (the earlier run's turned inside out) are not taken: each
+    depth starts from the predictor, with the cold run's forces and iterations."""
+    mesh, indenter, depths = _warm_case("punch")
+    problem = IndentationProblem(mesh, _material(10.0), indenter)
+    cold = simulate_indentation(problem, depths, device="cpu", progress=False)
+    bad = -40.0 * cold.displacement_m[:2]  # for the first two depths only
+    warm = simulate_indentation(problem, depths, device="cpu", progress=False, warm_states_m=bad)
+    assert warm.completed
+    np.testing.assert_allclose(warm.reaction_force_N, cold.reaction_force_N, rtol=1e-9)
+    np.testing.assert_array_equal(warm.newton_iterations, cold.newton_iterations)
+
+
+def test_a_warm_start_of_another_shape_is_refused():
+    mesh, indenter, depths = _warm_case("punch")
+    problem = IndentationProblem(mesh, _material(10.0), indenter)
+    wrong = np.zeros((5, mesh.node_count, 3))  # one state more than the four depths
+    with pytest.raises(InputError, match=r"warm_states_m must have shape") as caught:
+        simulate_indentation(problem, depths, device="cpu", progress=False, warm_states_m=wrong)
+    assert caught.value.key == "warm_states_m" and caught.value.value == (5, mesh.node_count, 3)
+    with pytest.raises(InputError, match="finite"):
+        simulate_indentation(
+            problem,
+            depths,
+            device="cpu",
+            progress=False,
+            warm_states_m=np.full((1, mesh.node_count, 3), np.nan),
+        )

@@ -78,6 +78,7 @@ def _linear_forward(calls: list, interrupt_at: int | None = None):
                 depths_m=d,
                 reaction_force_N=p.material.parameter_vector[0] * d,
                 force_sensitivity_N_per_unit=d[:, None],
+                displacement_m=np.zeros((d.size, 1, 3)),  # the states a warm start keeps
             )
             for p, d in zip(problems, depths, strict=True)
         ]

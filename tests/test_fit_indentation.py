@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import warptissue.fem
 from warptissue.errors import InputError
 from warptissue.fem import simulate_indentation
 from warptissue.fit import IndentationFit, fit_indentation
@@ -1263,3 +1264,37 @@ def test_each_region_s_c10_is_recovered_by_a_joint_fit_over_two_sites(regions_fo
         100.0 * fit.parameters["right.C10_Pa"]
     )
     assert fit.to_dict()["fitted_material"]["regions"]["right"]["tet_regions"] == [1]
+
+
+def test_each_evaluation_starts_from_the_last_one_s_states(tmp_path, monkeypatch):
+    """The forward model hands each FE run the states of the last completed evaluation at
+    the depths they share (a warm start), and its residuals and Jacobian are those of a
+    model that starts cold, to the Newton tolerance."""
+    study = make_study(
+        tmp_path,
+        truth=NEO_HOOKEAN,
+        start=NEO_HOOKEAN,
+        fit='free = ["C10_Pa"]\ntime_steps = 4\n',
+        history=ramp(0.3 * RADIUS_M, samples=8),
+    )
+    calls = []
+    original = warptissue.fem.simulate_indentation
+
+    def recording(problem, depths, **kwargs):
+        result = original(problem, depths, **kwargs)
+        calls.append((kwargs.get("warm_states_m"), result))
+        return result
+
+    monkeypatch.setattr(warptissue.fem, "simulate_indentation", recording)
+    model = forward_model(study, study.material, ("C10_Pa",), device="cpu", progress=False)
+    model.evaluate(np.array([250.0]))
+    warm = model.evaluate(np.array([300.0]))
+    (first_start, first), (second_start, second) = calls
+    assert first_start is None
+    np.testing.assert_array_equal(second_start, first.displacement_m)
+    assert second.newton_iterations.sum() < first.newton_iterations.sum()
+    monkeypatch.setattr(warptissue.fem, "simulate_indentation", original)
+    cold = forward_model(study, study.material, ("C10_Pa",), device="cpu", progress=False)
+    reference = cold.evaluate(np.array([300.0]))
+    np.testing.assert_allclose(warm.residuals, reference.residuals, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(warm.jacobian, reference.jacobian, rtol=1e-6)

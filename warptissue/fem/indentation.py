@@ -61,6 +61,7 @@ def simulate_indentation(
     sensitivity_factorization: str = "reuse",
     times_s: np.ndarray | None = None,
     profile: bool = False,
+    warm_states_m: np.ndarray | None = None,
 ) -> IndentationResult:
     """Push the punch to each depth in turn and record the reaction force.
 
@@ -91,6 +92,11 @@ def simulate_indentation(
             parameters included); an elastic material gives the same forces as without.
         profile: Time each phase of the Newton iterations into ``result.timings`` (see
             :func:`warptissue.fem.solve_quasistatic` and :mod:`warptissue.fem.timing`).
+        warm_states_m: A warm start, (S', N, 3), m: the ``displacement_m`` of an earlier
+            run of this mesh and indenter at the first S' of these depths (and times), for a
+            nearby material (a fit's previous evaluation). Each depth is first tried from
+            its state (:func:`warptissue.fem.solve_quasistatic`); the forces are those of a
+            run without it, to the Newton tolerance.
 
     Returns:
         An :class:`IndentationResult` (``completed=False`` with a message when the cutbacks ran
@@ -123,6 +129,7 @@ def simulate_indentation(
             sensitivity=sensitivity,
             times_s=times_s,
             profile=profile,
+            warm_states_m=warm_states_m,
         )
     except SolveInterrupted as interrupted:
         partial = _finished(problem, assembler, interrupted.partial_result, names)
@@ -300,6 +307,7 @@ def simulate_indentation_batch(
     sensitivities: Sequence[str] = (),
     assembler: Assembler | None = None,
     times_s: Sequence[np.ndarray | None] | None = None,
+    warm_states_m: Sequence[np.ndarray | None] | None = None,
 ) -> list[IndentationResult]:
     """K indentations solved together on one device, in one Newton loop.
 
@@ -322,6 +330,8 @@ def simulate_indentation_batch(
             uses its device. None builds one on ``device``.
         times_s: Each problem's times, s (None entries, or None: quasi-static paths); a
             viscoelastic material needs them.
+        warm_states_m: Each problem's warm start (None entries, or None: none), as
+            :func:`simulate_indentation`'s.
 
     Returns:
         One :class:`warptissue.fem.IndentationResult` per problem, as
@@ -359,6 +369,7 @@ def simulate_indentation_batch(
         load_name="depth (m)",
         sensitivities=sensitivities,
         times_s=times_list,
+        warm_states_m=warm_states_m,
     )
     return _batch_results(problems, assembler, packed, paths, tuple(sensitivities))
 

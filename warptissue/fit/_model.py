@@ -131,6 +131,7 @@ class ForwardModel:
         ]
         self.grids = self._start_grids(offset_start)
         self.forward_solves = 0
+        self.warm: dict[int, tuple[np.ndarray | None, np.ndarray, np.ndarray]] = {}
         self.solves_per_evaluation = len(self.grids)
         self.cache: dict[bytes, Evaluation] = {}
         self.best: Evaluation | None = None
@@ -281,6 +282,33 @@ class ForwardModel:
         one per record (a viscoelastic material's)."""
         return list(self.problem_of if self.viscoelastic else range(len(self.problems)))
 
+    def _warm_start(
+        self, j: int, times: np.ndarray | None, depths: np.ndarray
+    ) -> np.ndarray | None:
+        """Load path ``j``'s warm start: the states of its last completed run at the
+        requested loads its depths (and times) share from the first, or None."""
+        kept = self.warm.get(j)
+        if kept is None:
+            return None
+        old_times, old_depths, states = kept
+        count = min(old_depths.size, depths.size)
+        same = old_depths[:count] == depths[:count]
+        if (old_times is None) != (times is None):
+            return None
+        if times is not None:
+            same &= old_times[:count] == times[:count]
+        shared = count if same.all() else int(np.argmin(same))
+        return states[:shared] if shared else None
+
+    def _keep_warm(self, grids: Sequence[tuple[np.ndarray | None, np.ndarray]], runs: list) -> None:
+        """Keep each load path's converged states for the next evaluation's warm start."""
+        for j, ((times, depths), run) in enumerate(zip(grids, runs, strict=True)):
+            self.warm[j] = (
+                None if times is None else np.asarray(times, dtype=np.float64),
+                np.asarray(depths, dtype=np.float64),
+                run.displacement_m,
+            )
+
     def _run(
         self,
         material: Any,
@@ -289,9 +317,12 @@ class ForwardModel:
         depths: np.ndarray,
         *,
         sensitivities: bool = True,
+        warm: np.ndarray | None = None,
     ) -> Any:
         problem = self._problem_at(g, material)
         extra = {} if times is None else {"times_s": times}
+        if warm is not None:
+            extra["warm_states_m"] = warm
         self.forward_solves += 1
         try:
             result = _simulate()(
@@ -325,6 +356,7 @@ class ForwardModel:
         material) or one per record (a viscoelastic one)."""
         which = self._path_problems()
         problems = [self._problem_at(g, material) for g in which]
+        warm = [self._warm_start(j, times, depths) for j, (times, depths) in enumerate(grids)]
         if self.meeting is not None:
             meeting, fit = self.meeting
             self.forward_solves += len(grids)
@@ -336,17 +368,21 @@ class ForwardModel:
                     names=self.sensitivity_names if sensitivities else (),
                     options=self.options,
                     device=self.device,
+                    warm=warm,
                 ),
             )
             for result in results:
                 if not result.completed:
                     raise RejectStep(f"the FE did not converge: {result.message}")
+            self._keep_warm(grids, results)
             return results
         if not (self.batch_records and len(grids) > 1):
-            return [
-                self._run(material, g, times, depths, sensitivities=sensitivities)
-                for g, (times, depths) in zip(which, grids, strict=True)
+            runs = [
+                self._run(material, g, times, depths, sensitivities=sensitivities, warm=start)
+                for g, (times, depths), start in zip(which, grids, warm, strict=True)
             ]
+            self._keep_warm(grids, runs)
+            return runs
 
         if self._packed_assembler is None or self._packed_assembler[0] != which:
             self._packed_assembler = (which, fem.batch_assembler(problems, device=self.device))
@@ -358,10 +394,12 @@ class ForwardModel:
             sensitivities=self.sensitivity_names if sensitivities else (),
             assembler=self._packed_assembler[1],
             times_s=[times for times, _ in grids],
+            warm_states_m=warm,
         )
         for result in results:
             if not result.completed:
                 raise RejectStep(f"the FE did not converge: {result.message}")
+        self._keep_warm(grids, results)
         return results
 
     def evaluate(self, x: np.ndarray) -> Evaluation:
@@ -679,6 +717,7 @@ class RunRequest:
     names: tuple[str, ...]
     options: Any
     device: Any
+    warm: list[np.ndarray | None] | None = None
 
 
 class SharedRuns:
@@ -706,6 +745,11 @@ class SharedRuns:
         for key, fits in groups.items():
             problems = [problem for fit in fits for problem in batch[fit].problems]
             grids = [grid for fit in fits for grid in batch[fit].grids]
+            warm = [
+                start
+                for fit in fits
+                for start in (batch[fit].warm or [None] * len(batch[fit].grids))
+            ]
             meshes = (key, tuple(id(problem.mesh) for problem in problems))
             try:
                 if meshes not in self._assemblers:
@@ -722,6 +766,7 @@ class SharedRuns:
                     sensitivities=key[0],
                     assembler=assembler,
                     times_s=[times for times, _ in grids],
+                    warm_states_m=warm,
                 )
             except Exception as exc:  # every fit of the group gets it
                 answers.update(dict.fromkeys(fits, exc))

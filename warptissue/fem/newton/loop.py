@@ -46,6 +46,7 @@ class LoadPath:
     cutbacks: int = 0
     retry_linearized: bool = False
     previous: tuple[float, Any] | None = None
+    warm: np.ndarray | None = None
     step_counts: np.ndarray = field(default_factory=lambda: np.zeros(3, dtype=np.int64))
     step_sensitivity: np.ndarray | None = None
     finished: bool = False
@@ -79,6 +80,20 @@ class LoadPath:
         """The prescribed dofs' increment from the current load to ``load``, (N_k, 3), m."""
         size = self.node_count
         return self.conditions.values(load, size) - self.conditions.values(self.load, size)
+
+    def warm_state(self, step: tuple[float, float, float]) -> np.ndarray | None:
+        """The state (N_k, 3) an earlier run converged to at the requested load that the
+        increment to ``step`` reaches (the warm start), or None: none given for that load, the
+        increment stops short of it, or it failed from there and runs again linearized. Read
+        before :meth:`extrapolation`, which clears the retry."""
+        if (
+            self.warm is None
+            or self.retry_linearized
+            or step[0] != 1.0
+            or self.index >= len(self.warm)
+        ):
+            return None
+        return self.warm[self.index]
 
     def extrapolation(self, step: tuple[float, float, float], predictor: str) -> float | None:
         """The factor of the last converged change that predicts the free dofs of the
@@ -231,30 +246,40 @@ class NewtonLoop:
     def count(self) -> int:
         return len(self.paths)
 
-    def predict(self, u: Any) -> tuple[np.ndarray, np.ndarray, Any, np.ndarray, dict]:
+    def predict(self, u: Any) -> tuple[np.ndarray, np.ndarray, Any, np.ndarray, np.ndarray, dict]:
         """Each unfinished path's next increment: (active, prescribed dof increments (n, 3),
-        the extrapolated guess of the free dofs or None, which paths guessed, the steps)."""
+        the guessed change of the free dofs or None, which paths guessed, which of them from
+        a warm start, the steps). A path guesses from its warm start
+        (:meth:`LoadPath.warm_state`) where it has one for the load the increment reaches,
+        else by the extrapolated predictor where that is chosen."""
         count, paths = self.count, self.paths
         active = np.array([not path.finished for path in paths])
         prescribed = np.zeros((self.assembler.node_count, 3))
         guess = None
         guessed = np.zeros(count, dtype=bool)
+        warmed = np.zeros(count, dtype=bool)
         steps = {}
         for k in np.flatnonzero(active):
             path = paths[k]
             steps[k] = path.next_step()
             prescribed[path.nodes] = path.prescribed_increment(steps[k][1])
+            warm = path.warm_state(steps[k])
             ratio = path.extrapolation(steps[k], self.options.predictor)
-            if ratio is not None:
-                change = (u - path.previous[1]) * ratio
-                if count == 1:
-                    guess = change
-                else:
-                    if guess is None:
-                        guess = self.arrays.xp.zeros_like(u)
-                    guess[path.nodes] = change[path.nodes]
-                guessed[k] = True
-        return active, prescribed, guess, guessed, steps
+            if warm is None and ratio is None:
+                continue
+            if warm is not None:
+                change = self.arrays.asarray(warm) - u[path.nodes]
+                warmed[k] = True
+            else:
+                change = (u[path.nodes] - path.previous[1][path.nodes]) * ratio
+            guessed[k] = True
+            if count == 1:
+                guess = change
+                continue
+            if guess is None:
+                guess = self.arrays.xp.zeros_like(u)
+            guess[path.nodes] = change
+        return active, prescribed, guess, guessed, warmed, steps
 
     def load(self, steps: dict) -> None:
         """Each problem's viscous step and rigid indenter depth for this increment (a
@@ -271,13 +296,21 @@ class NewtonLoop:
         self.assembler.set_load(next_loads if count > 1 else float(next_loads[0]))
 
     def advance(
-        self, u: Any, prescribed: np.ndarray, active: np.ndarray, guess: Any, guessed: np.ndarray
+        self,
+        u: Any,
+        prescribed: np.ndarray,
+        active: np.ndarray,
+        guess: Any,
+        guessed: np.ndarray,
+        warmed: np.ndarray,
     ) -> Any:
         """One Newton increment of every active problem
         (:func:`~warptissue.fem.newton.increment.newton_increment`, or under the contact
-        penalty ramp its ramped form)."""
+        penalty ramp its ramped form; not where every active problem starts warm: a state
+        converged under the full penalty needs no soft stage to reach its contact)."""
         options = self.options
-        advance = increment.penalty_ramped_increment if self.ramped else increment.newton_increment
+        ramped = self.ramped and not warmed[active].all()
+        advance = increment.penalty_ramped_increment if ramped else increment.newton_increment
         step = advance(
             self.assembler,
             self.solver,
@@ -535,9 +568,9 @@ def follow_paths(
     try:
         with loop.arrays.context():
             while not all(path.finished for path in paths):
-                active, prescribed, guess, guessed, steps = loop.predict(u)
+                active, prescribed, guess, guessed, warmed, steps = loop.predict(u)
                 loop.load(steps)
-                step = loop.advance(u, prescribed, active, guess, guessed)
+                step = loop.advance(u, prescribed, active, guess, guessed, warmed)
                 at_target = np.zeros(loop.count, dtype=bool)
                 for k in np.flatnonzero(active & step.converged):
                     at_target[k] = steps[k][0] == 1.0

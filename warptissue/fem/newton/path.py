@@ -61,6 +61,24 @@ def _checked_loads(values: Any, times_s: Any, what: str) -> tuple[np.ndarray, np
     return loads, times
 
 
+def _checked_warm(states: Any, loads: np.ndarray, node_count: int, what: str) -> np.ndarray | None:
+    """A path's warm start (None: none), checked: float64 states (S', N, 3) for at most its
+    S loads, finite."""
+    if states is None:
+        return None
+    warm = np.asarray(states, dtype=np.float64)
+    if warm.ndim != 3 or warm.shape[1:] != (node_count, 3) or warm.shape[0] > loads.size:
+        raise InputError(
+            f"{what}warm_states_m must have shape (S', {node_count}, 3) with S' <= "
+            f"{loads.size} (one state per requested load, from the first)",
+            key="warm_states_m",
+            value=warm.shape,
+        )
+    if not np.all(np.isfinite(warm)):
+        raise InputError(f"{what}warm_states_m must be finite", key="warm_states_m")
+    return warm
+
+
 def _force_floors(assembler: Assembler, problem_of_tet: np.ndarray | None) -> np.ndarray:
     """Each problem's absolute floor of the residual norm: a roundoff-level force for its
     body and material, ``1e-13 mu0 L^2`` with L the cube root of its volume, N."""
@@ -89,6 +107,7 @@ def solve_quasistatic(
     sensitivity: ForceSensitivity | None = None,
     times_s: np.ndarray | None = None,
     profile: bool = False,
+    warm_states_m: np.ndarray | None = None,
 ) -> QuasistaticResult:
     """Follow a displacement-controlled load path with Newton's method.
 
@@ -141,6 +160,14 @@ def solve_quasistatic(
             line search, nonlinear elimination, sensitivities, host work) into the result's
             ``timings`` (:mod:`warptissue.fem.timing`). On a CUDA device this synchronizes
             the device at every phase boundary; off, nothing is timed.
+        warm_states_m: A warm start: the states (S', N, 3), m, that an earlier run of the
+            same body and loads (and times) converged to at the first S' <= S requested
+            loads, for a nearby material (a fit's previous evaluation). An increment that
+            reaches one of these loads starts from its state (with the prescribed dofs of
+            the load) instead of the predictor, and under rigid contact without the soft
+            penalty stage; where that start inverts an element or Newton fails from it, the
+            increment runs again from the linearized predictor. It changes where Newton
+            starts, not the convergence test. None: no warm start.
 
     Returns:
         A :class:`QuasistaticResult`.
@@ -165,7 +192,13 @@ def solve_quasistatic(
         raise InputError(
             "a viscoelastic material needs the time of each load (times_s)", key="times_s"
         )
-    path = LoadPath(loads=loads, times=times, conditions=conditions, nodes=slice(0, n))
+    path = LoadPath(
+        loads=loads,
+        times=times,
+        conditions=conditions,
+        nodes=slice(0, n),
+        warm=_checked_warm(warm_states_m, loads, n, ""),
+    )
     (result,) = follow_paths(
         assembler,
         [path],
@@ -195,6 +228,7 @@ def solve_quasistatic_batch(
     times_s: Sequence[np.ndarray | None] | None = None,
     progress: bool = False,
     profile: bool = False,
+    warm_states_m: Sequence[np.ndarray | None] | None = None,
 ) -> list[QuasistaticResult]:
     """Follow K displacement-controlled load paths together, one per packed problem.
 
@@ -226,6 +260,8 @@ def solve_quasistatic_batch(
             elastic material ignores them, as in :func:`solve_quasistatic`.
         progress: Show a tqdm bar over all problems' requested loads.
         profile: Time the Newton phases into each result's ``timings`` (shared by all).
+        warm_states_m: Each problem's warm start (None entries, or None: none), each as
+            :func:`solve_quasistatic`'s, (S'_k, N_k, 3) in the problem's own nodes.
 
     Returns:
         One :class:`QuasistaticResult` per problem (the linear solver's statistics and
@@ -240,11 +276,13 @@ def solve_quasistatic_batch(
     options = checked_options(options)
     count = packed.problem_count
     times_list = [None] * count if times_s is None else list(times_s)
+    warm_list = [None] * count if warm_states_m is None else list(warm_states_m)
     for name, values in (
         ("conditions", conditions),
         ("loads", loads),
         ("reaction_weights", reaction_weights),
         ("times_s", times_list),
+        ("warm_states_m", warm_list),
     ):
         if len(values) != count:
             raise InputError(f"one entry per packed problem ({count})", key=name, value=len(values))
@@ -263,9 +301,14 @@ def solve_quasistatic_batch(
         if path_loads.size == 0:
             raise InputError(f"problem {k}: loads must not be empty", key="loads")
         nodes = packed.nodes(k)
-        paths.append(LoadPath(loads=path_loads, times=times, conditions=conditions[k], nodes=nodes))
-        weight = np.asarray(reaction_weights[k], dtype=np.float64)
         size = nodes.stop - nodes.start
+        warm = _checked_warm(warm_list[k], path_loads, size, f"problem {k}: ")
+        paths.append(
+            LoadPath(
+                loads=path_loads, times=times, conditions=conditions[k], nodes=nodes, warm=warm
+            )
+        )
+        weight = np.asarray(reaction_weights[k], dtype=np.float64)
         if weight.shape != (size, 3):
             raise InputError(
                 f"problem {k}: reaction_weights must have shape ({size}, 3)",
