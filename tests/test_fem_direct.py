@@ -229,3 +229,46 @@ def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch
             direct._pardiso_routine()
     finally:
         direct._pardiso_routine.cache_clear()
+
+
+def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(tmp_path, monkeypatch):
+    """pypardiso makes a solver as it is imported: without ``mkl_rt`` under the environment's
+    prefix its import raises (as in a ``--system-site-packages`` environment). The base
+    prefix's ``mkl_rt`` is then tried with the import run again; a missing pypardiso stays
+    a ModuleNotFoundError."""
+    import sys
+
+    from warptissue.fem.linear import direct
+
+    base = tmp_path / "base"
+    (base / "lib").mkdir(parents=True)
+    (base / "lib" / "libmkl_rt.so.2").write_bytes(b"")
+    package = tmp_path / "site" / "pypardiso"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text(
+        "import os\n"
+        "class PyPardisoSolver:\n"
+        "    def __init__(self):\n"
+        "        path = os.environ.get('PYPARDISO_MKL_RT')\n"
+        "        if path is None:\n"
+        "            raise ImportError('Shared library mkl_rt not found.')\n"
+        "        self._mkl_pardiso = ('routine from', path)\n"
+        "solver = PyPardisoSolver()  # as pypardiso's scipy aliases do on import\n"
+    )
+    monkeypatch.delitem(sys.modules, "pypardiso", raising=False)
+    monkeypatch.syspath_prepend(str(tmp_path / "site"))
+    monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+    monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
+    monkeypatch.setattr(direct.sys, "base_prefix", str(base))
+    direct._pardiso_routine.cache_clear()
+    try:
+        assert direct._pardiso_routine() == ("routine from", str(base / "lib" / "libmkl_rt.so.2"))
+        monkeypatch.setitem(sys.modules, "pypardiso", None)  # not installed
+        monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+        direct._pardiso_routine.cache_clear()
+        with pytest.raises(ModuleNotFoundError):
+            direct._pardiso_routine()
+        assert "PYPARDISO_MKL_RT" not in direct.os.environ
+    finally:
+        sys.modules.pop("pypardiso", None)
+        direct._pardiso_routine.cache_clear()

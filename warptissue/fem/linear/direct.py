@@ -61,15 +61,24 @@ def _pardiso_routine():
     Where pypardiso finds no ``mkl_rt`` and no ``PYPARDISO_MKL_RT`` is set, the base
     prefix's is tried (:func:`_base_prefix_mkl_rt`).
     """
-    from pypardiso import PyPardisoSolver
-
     try:
-        return PyPardisoSolver()._mkl_pardiso
-    except ImportError:
+        return _loaded_pardiso()
+    except ImportError as exc:
+        if isinstance(exc, ModuleNotFoundError) and exc.name == "pypardiso":
+            raise  # not installed
         fallback = _base_prefix_mkl_rt()
         if fallback is None or os.environ.get(_MKL_RT_VARIABLE):
             raise
     os.environ[_MKL_RT_VARIABLE] = fallback  # pypardiso reads it; subprocesses inherit it
+    return _loaded_pardiso()
+
+
+def _loaded_pardiso():
+    """pypardiso's ``pardiso`` routine. pypardiso makes a solver as it is imported (its
+    scipy aliases), so a missing ``mkl_rt`` fails the import itself; Python forgets a module
+    whose import failed, and the next import runs it again."""
+    from pypardiso import PyPardisoSolver
+
     return PyPardisoSolver()._mkl_pardiso
 
 
