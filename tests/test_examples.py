@@ -253,8 +253,9 @@ def test_liver_organ_sites_recovers_c10_and_writes_a_valid_usd(tmp_path):
     of 12 to the same C10 (287.56 Pa, +0.02 %, R^2 >= 0.998). A coarser refinement is no
     quick form: at 8 mm, twice site B's punch radius, C10 came back +5.8 % and R^2 = 0.948 at
     site B (the script's docstring)."""
-    # Estimated 9 minutes alone on a quiet 2-core CPU (9 of the full size's 12 forward runs,
-    # whose script took 721 s); 23 minutes on the shared 2-core machine at load 5 to 8.
+    # 338 s for the script on the 2-core CPU beside another process (load 2.4-3.2), its fit
+    # 297 s: the second and third evaluations start warm (docs/design-notes/warm-start.md);
+    # 725 s before, at load 3.0-3.7.
     out = run_example(
         "liver_organ_sites.py",
         *("--out", "organ", "--device", "cpu", "--quick"),
