@@ -12,6 +12,7 @@ import contextlib
 import io
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -126,24 +127,7 @@ def read_mesh(
     tets = np.vstack([np.asarray(data.cells[i].data, dtype=np.int64) for i in tet_blocks])
     regions = _read_regions(data, tet_blocks)
 
-    node_sets: dict[str, np.ndarray] = {
-        name: np.asarray(nodes, dtype=np.int64) for name, nodes in data.point_sets.items()
-    }
-    for name, per_block in data.cell_sets.items():
-        if name.startswith("gmsh:"):
-            continue
-        members = [
-            np.asarray(data.cells[b].data)[np.asarray(cells, dtype=np.int64)].ravel()
-            for b, cells in enumerate(per_block)
-            if cells is not None and len(cells)
-        ]
-        if members:
-            node_sets.setdefault(name, np.unique(np.concatenate(members)))
-    node_sets.update(_gmsh_physical_node_sets(data))
-    for key, values in data.point_data.items():
-        if key.startswith(NODE_SET_PREFIX):
-            node_sets[key[len(NODE_SET_PREFIX) :]] = np.flatnonzero(np.asarray(values) != 0)
-
+    node_sets = _read_node_sets(data)
     used = np.unique(tets)
     renumber = np.full(len(points), -1, dtype=np.int64)
     renumber[used] = np.arange(len(used))
@@ -162,6 +146,37 @@ def read_mesh(
         raise InputError(str(exc), path=file_path) from exc
     if reorient:
         mesh = fix_orientation(mesh)
+    _add_face_sets(mesh)
+    return mesh
+
+
+def _read_node_sets(data: Any) -> dict[str, np.ndarray]:
+    """The node sets of a meshio mesh, in the file's numbering, in :func:`read_mesh`'s
+    order: Abaqus ``*NSET``; Abaqus ``*ELSET`` and named Gmsh physical groups (the nodes of
+    their cells); the ``node_set:<name>`` point-data masks."""
+    node_sets: dict[str, np.ndarray] = {
+        name: np.asarray(nodes, dtype=np.int64) for name, nodes in data.point_sets.items()
+    }
+    for name, per_block in data.cell_sets.items():
+        if name.startswith("gmsh:"):
+            continue
+        members = [
+            np.asarray(data.cells[b].data)[np.asarray(cells, dtype=np.int64)].ravel()
+            for b, cells in enumerate(per_block)
+            if cells is not None and len(cells)
+        ]
+        if members:
+            node_sets.setdefault(name, np.unique(np.concatenate(members)))
+    node_sets.update(_gmsh_physical_node_sets(data))
+    for key, values in data.point_data.items():
+        if key.startswith(NODE_SET_PREFIX):
+            node_sets[key[len(NODE_SET_PREFIX) :]] = np.flatnonzero(np.asarray(values) != 0)
+    return node_sets
+
+
+def _add_face_sets(mesh: TetMesh) -> None:
+    """Give ``mesh`` a face set per node set: the boundary triangles whose corners all lie
+    in it."""
     faces = boundary_faces(mesh.tets)
     member = np.zeros(mesh.node_count, dtype=bool)
     for name, nodes in mesh.node_sets.items():
@@ -170,7 +185,6 @@ def read_mesh(
         on_set = faces[member[faces].all(axis=1)]
         if len(on_set):
             mesh.face_sets[name] = on_set
-    return mesh
 
 
 def write_mesh(
