@@ -213,7 +213,9 @@ def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch
             self._mkl_pardiso = ("routine from", path)
 
     monkeypatch.setitem(sys.modules, "pypardiso", types.SimpleNamespace(PyPardisoSolver=FakeSolver))
-    monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+    # set first, so that the teardown removes what the code under test sets
+    monkeypatch.setenv("PYPARDISO_MKL_RT", "")
+    monkeypatch.delenv("PYPARDISO_MKL_RT")
     monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
     monkeypatch.setattr(direct.sys, "base_prefix", str(base))
     direct._pardiso_routine.cache_clear()
@@ -257,7 +259,9 @@ def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(tmp_pat
     )
     monkeypatch.delitem(sys.modules, "pypardiso", raising=False)
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
-    monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
+    # set first, so that the teardown removes what the code under test sets
+    monkeypatch.setenv("PYPARDISO_MKL_RT", "")
+    monkeypatch.delenv("PYPARDISO_MKL_RT")
     monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
     monkeypatch.setattr(direct.sys, "base_prefix", str(base))
     direct._pardiso_routine.cache_clear()
