@@ -1,9 +1,9 @@
 """Loading protocols: the probe's depths, and its depth-time histories.
 
 :func:`quasi_static_depths` gives the depths of a rate-independent run (even steps, or equal
-steps of a sphere's contact radius). Each other function returns ``(times_s, depths_m)``, two float arrays of shape (S,): the end of
-each FE time step (s, strictly increasing, > 0) and the probe depth there (m, positive into
-the specimen, >= 0). The FE (:func:`warptissue.fem.simulate_indentation` with ``times_s``)
+steps of a sphere's contact radius). Each other function returns ``(times_s, depths_m)``,
+two float arrays of shape (S,): the end of each FE time step (s, strictly increasing, > 0)
+and the probe depth there (m, positive into the specimen, >= 0). The FE (:func:`warptissue.fem.simulate_indentation` with ``times_s``)
 starts from depth 0 at time 0 and moves the probe linearly in time between steps, so a
 history is fully given by these points.
 
@@ -63,9 +63,7 @@ def _count(name: str, value: Any, minimum: int) -> int:
     return int(value)
 
 
-def quasi_static_depths(
-    *, max_depth_m: float, steps: int, spacing: str = "even"
-) -> np.ndarray:
+def quasi_static_depths(*, max_depth_m: float, steps: int, spacing: str = "even") -> np.ndarray:
     """The depths of a rate-independent run: ``steps`` load steps to ``max_depth_m``.
 
     ``"even"``: ``d_k = d_max k / n``. ``"contact_radius"``: ``d_k = d_max (k / n)^2``, the
