@@ -3,9 +3,10 @@
 :func:`quasi_static_depths` gives the depths of a rate-independent run (even steps, or equal
 steps of a sphere's contact radius). Each other function returns ``(times_s, depths_m)``,
 two float arrays of shape (S,): the end of each FE time step (s, strictly increasing, > 0)
-and the probe depth there (m, positive into the specimen, >= 0). The FE (:func:`warptissue.fem.simulate_indentation` with ``times_s``)
-starts from depth 0 at time 0 and moves the probe linearly in time between steps, so a
-history is fully given by these points.
+and the probe depth there (m, positive into the specimen, >= 0). The FE
+(:func:`warptissue.fem.simulate_indentation` with ``times_s``) starts from depth 0 at time 0
+and moves the probe linearly in time between steps, so a history is fully given by these
+points.
 
 - :func:`quasi_static_depths`: ``steps`` depths to ``max_depth_m``, even or in equal steps
   of the contact radius sqrt(R d) of a sphere.
