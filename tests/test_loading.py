@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from warptissue.errors import InputError
-from warptissue.loading import ramp_hold, resample_history, sine
+from warptissue.loading import quasi_static_depths, ramp_hold, resample_history, sine
 
 
 def test_ramp_hold_ramps_at_the_speed_then_holds_in_log_time():
@@ -53,6 +53,33 @@ def test_ramp_hold_names_a_bad_argument(key, value):
         ramp_hold(**{**arguments, key: value})
     assert info.value.key == key
     assert key in str(info.value)
+
+
+def test_quasi_static_depths_even_and_in_equal_steps_of_the_contact_radius():
+    """Even: d_max k / n. Contact radius: the Hertz radius a = sqrt(R* d) of a sphere
+    (Johnson 1985, sec. 4.2) grows by a_max / n at every step, for any R*."""
+    even = quasi_static_depths(max_depth_m=4e-4, steps=8)
+    np.testing.assert_array_equal(even, [4e-4 * (k + 1) / 8 for k in range(8)])
+    depths = quasi_static_depths(max_depth_m=4e-4, steps=8, spacing="contact_radius")
+    assert depths.shape == (8,) and depths[-1] == 4e-4 and np.all(np.diff(depths) > 0.0)
+    for reduced_radius in (1e-4, 2.3e-3):
+        radii = np.sqrt(reduced_radius * depths)
+        steps = np.diff(radii, prepend=0.0)
+        np.testing.assert_allclose(steps, np.sqrt(reduced_radius * 4e-4) / 8, rtol=1e-12)
+    # the last step is (2 n - 1) / n^2 of the depth: 15 / 64 here, against 1 / 8 even
+    assert depths[-1] - depths[-2] == pytest.approx(4e-4 * 15 / 64, rel=1e-12)
+    assert quasi_static_depths(max_depth_m=1e-3, steps=1, spacing="contact_radius") == [1e-3]
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("max_depth_m", -1e-3), ("steps", 0), ("steps", 2.0), ("spacing", "square")],
+)
+def test_quasi_static_depths_names_a_bad_argument(key, value):
+    arguments = {"max_depth_m": 1e-3, "steps": 4, "spacing": "contact_radius"}
+    with pytest.raises(InputError) as info:
+        quasi_static_depths(**{**arguments, key: value})
+    assert info.value.key == key
 
 
 def test_sine_ramps_to_the_preload_then_oscillates_about_it():

@@ -190,6 +190,20 @@ BAD_INPUTS = [
         "steps = 4", "steps = 4\ndepths_m = [1e-4]", "protocol", None, id="two-protocol-forms"
     ),
     pytest.param(
+        "steps = 4",
+        'steps = 4\nspacing = "square"',
+        "protocol.spacing",
+        "'square'",
+        id="unknown-spacing",
+    ),
+    pytest.param(
+        "max_depth_m = 0.0005\nsteps = 4",
+        'depths_m = [1e-4, 2e-4]\nspacing = "contact_radius"',
+        "protocol.spacing",
+        None,
+        id="spacing-of-a-depth-list",
+    ),
+    pytest.param(
         "thickness_m = 0.01",
         "thickness_m = 0.01\nsize_near_m = 0.002",
         "specimen.size_near_m",
@@ -1326,6 +1340,28 @@ def test_a_quasi_static_protocol_is_untimed_and_echoed_without_a_kind(tmp_path):
     assert load_study(write(tmp_path, text, "explicit.toml")).protocol == study.protocol
     # kind = "quasi_static" is read in a version-1 file too (a timed kind is not).
     assert load_study(write(tmp_path, text.replace("schema_version = 2", "schema_version = 1")))
+
+
+def test_a_quasi_static_protocol_spaced_by_the_contact_radius(tmp_path):
+    """spacing = "contact_radius": d_k = d_max (k / n)^2, so that a sphere's Hertz contact
+    radius sqrt(R* d) grows by the same sqrt(R* d_max) / n at every step; echoed as the keys
+    that made it and read back the same."""
+    text = MINIMAL.replace("steps = 4", 'steps = 4\nspacing = "contact_radius"')
+    study = load_study(write(tmp_path, text))
+    depths = np.array(study.protocol.depths_m)
+    np.testing.assert_allclose(depths, 5e-4 * np.array([1, 4, 9, 16]) / 16, rtol=1e-15)
+    reduced_radius = 1e-3  # any R*: the steps of a = sqrt(R* d) are equal
+    steps_of_a = np.diff(np.sqrt(reduced_radius * depths), prepend=0.0)
+    np.testing.assert_allclose(steps_of_a, np.sqrt(reduced_radius * 5e-4) / 4, rtol=1e-12)
+    assert study.protocol.to_dict() == {
+        "max_depth_m": 5e-4,
+        "steps": 4,
+        "spacing": "contact_radius",
+    }
+    again = load_study(save_study(study, tmp_path / "again.toml"))
+    assert again.protocol == study.protocol
+    even = load_study(write(tmp_path, text.replace('"contact_radius"', '"even"'), "even.toml"))
+    assert even.protocol == load_study(write(tmp_path, MINIMAL, "minimal.toml")).protocol
 
 
 def record_protocol(**keys: str) -> str:

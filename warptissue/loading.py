@@ -1,11 +1,15 @@
-"""Time-dependent loading protocols: depth-time histories of the probe.
+"""Loading protocols: the probe's depths, and its depth-time histories.
 
-Each function returns ``(times_s, depths_m)``, two float arrays of shape (S,): the end of
-each FE time step (s, strictly increasing, > 0) and the probe depth there (m, positive into
-the specimen, >= 0). The FE (:func:`warptissue.fem.simulate_indentation` with ``times_s``)
-starts from depth 0 at time 0 and moves the probe linearly in time between steps, so a
-history is fully given by these points.
+:func:`quasi_static_depths` gives the depths of a rate-independent run (even steps, or equal
+steps of a sphere's contact radius). Each other function returns ``(times_s, depths_m)``,
+two float arrays of shape (S,): the end of each FE time step (s, strictly increasing, > 0)
+and the probe depth there (m, positive into the specimen, >= 0). The FE
+(:func:`warptissue.fem.simulate_indentation` with ``times_s``) starts from depth 0 at time 0
+and moves the probe linearly in time between steps, so a history is fully given by these
+points.
 
+- :func:`quasi_static_depths`: ``steps`` depths to ``max_depth_m``, even or in equal steps
+  of the contact radius sqrt(R d) of a sphere.
 - :func:`ramp_hold`: a constant-speed ramp, then a hold with geometrically growing steps
   (stress relaxation; Ahn & Kim's protocol).
 - :func:`sine`: a ramp to a preload, then a sine about it.
@@ -30,7 +34,10 @@ import numpy as np
 
 from warptissue.errors import InputError
 
-__all__ = ["ramp_hold", "resample_history", "sine"]
+__all__ = ["DEPTH_SPACINGS", "quasi_static_depths", "ramp_hold", "resample_history", "sine"]
+
+DEPTH_SPACINGS: tuple[str, ...] = ("even", "contact_radius")
+"""The spacings of :func:`quasi_static_depths`."""
 
 DEPTH_WEIGHT: float = 0.4
 """Share of :func:`resample_history`'s path measure given to the depth travelled (the rest
@@ -55,6 +62,45 @@ def _count(name: str, value: Any, minimum: int) -> int:
     if value < minimum:
         raise InputError(f"must be at least {minimum}", key=name, value=value)
     return int(value)
+
+
+def quasi_static_depths(*, max_depth_m: float, steps: int, spacing: str = "even") -> np.ndarray:
+    """The depths of a rate-independent run: ``steps`` load steps to ``max_depth_m``.
+
+    ``"even"``: ``d_k = d_max k / n``. ``"contact_radius"``: ``d_k = d_max (k / n)^2``, the
+    depths at which a sphere's Hertz contact radius ``a = sqrt(R* d)`` grows in equal steps
+    of ``a_max / n`` (k = 1 ... n): fine steps at first touch, where the contact radius
+    grows fastest, and the last step ``(2 n - 1) / n^2`` of the depth, about twice the even
+    one.
+
+    Args:
+        max_depth_m: The last depth, m (> 0).
+        steps: The number of load steps n (>= 1).
+        spacing: ``"even"`` or ``"contact_radius"`` (:data:`DEPTH_SPACINGS`).
+
+    Returns:
+        The depths, shape (steps,), m, positive and strictly increasing.
+
+    Raises:
+        InputError: A depth that is not a positive number, a count below 1, or another
+            spacing.
+
+    Notes:
+        Under a sphere the contact radius follows Hertz, ``a^2 = R* d`` (Johnson, Contact
+        Mechanics, 1985, sec. 4.2), so equal steps of ``a`` are ``d_k = (k a_max / n)^2 /
+        R* = d_max (k / n)^2`` whatever ``R*`` is. To keep the contact edge within a share
+        ``s`` of the near element size ``h`` per step, take ``n >= sqrt(R* d_max) / (s h)``.
+        Measured on a sphere on a ball (docs/design-notes/surface-contact.md).
+    """
+    depth = _positive("max_depth_m", max_depth_m)
+    count = _count("steps", steps, 1)
+    if spacing not in DEPTH_SPACINGS:
+        raise InputError(
+            f"must be one of {', '.join(map(repr, DEPTH_SPACINGS))}", key="spacing", value=spacing
+        )
+    if spacing == "even":
+        return np.array([depth * (k + 1) / count for k in range(count)], dtype=np.float64)
+    return np.array([depth * ((k + 1) / count) ** 2 for k in range(count)], dtype=np.float64)
 
 
 def ramp_hold(

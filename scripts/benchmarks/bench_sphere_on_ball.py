@@ -13,6 +13,9 @@ E* = E / (1 - nu^2).
 Usage:
     python scripts/benchmarks/bench_sphere_on_ball.py --ratios 0.05 0.0741 0.5 \
         --site-deg 0 45 --pole 0.3 --integration nodes surface --device cuda --out table.json
+
+``--steps N --spacing contact_radius`` takes N load steps to the deepest of ``--depths``
+with the contact radius growing evenly (:func:`warptissue.loading.quasi_static_depths`).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import numpy as np
 
 from warptissue.fem import IndentationProblem, simulate_indentation
 from warptissue.indenter import Indenter
+from warptissue.loading import DEPTH_SPACINGS, quasi_static_depths
 from warptissue.materials import NeoHookean
 from warptissue.mesh import TetMesh, ball_mesh
 
@@ -108,6 +112,7 @@ def run_case(
         "newton_iterations": np.asarray(result.newton_iterations).tolist(),
         "area_over_hertz": (result.contact_area_m2 / hertz_area).tolist(),
         "increment_iterations": per_increment,
+        "increment_converged": [bool(each["converged"]) for each in result.increments],
         "max_increment_iterations": max(per_increment) if per_increment else 0,
         "cutbacks": int(result.cutbacks),
     }
@@ -122,9 +127,21 @@ def main() -> None:
     parser.add_argument("--far", type=float, default=0.15, help="far size over R2")
     parser.add_argument("--growth", type=float, default=0.25, help="ball_mesh's growth")
     parser.add_argument("--depths", type=float, nargs="+", default=DEPTHS_OVER_RSTAR.tolist())
+    parser.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="load steps to the deepest of --depths, spaced by --spacing (replaces --depths)",
+    )
+    parser.add_argument("--spacing", choices=DEPTH_SPACINGS, default="even")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--out", default=None)
     args = parser.parse_args()
+    depths = np.array(args.depths)
+    if args.steps is not None:
+        depths = quasi_static_depths(
+            max_depth_m=float(depths.max()), steps=args.steps, spacing=args.spacing
+        )
     rows = []
     for ratio in args.ratios:
         for site in args.site_deg:
@@ -138,8 +155,9 @@ def main() -> None:
                         args.device,
                         far=args.far,
                         growth=args.growth,
-                        depths_over_rstar=np.array(args.depths),
+                        depths_over_rstar=depths,
                     )
+                    row["spacing"] = args.spacing if args.steps is not None else "listed"
                     rows.append(row)
                     print(
                         f"R1/R2 {ratio:.4g} site {site:g} pole {pole:g} {integration:8s} "

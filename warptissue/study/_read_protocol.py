@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from warptissue.errors import InputError
-from warptissue.loading import ramp_hold, sine
+from warptissue.loading import DEPTH_SPACINGS, quasi_static_depths, ramp_hold, sine
 from warptissue.study._records import condition_record, record_options
 from warptissue.study._schema import (
     MAX_STEPS,
@@ -16,7 +16,7 @@ from warptissue.study._schema import (
 from warptissue.study._toml import Table
 
 PROTOCOL_KEYS: dict[str, tuple[str, ...]] = {
-    "quasi_static": ("depths_m", "max_depth_m", "steps"),
+    "quasi_static": ("depths_m", "max_depth_m", "steps", "spacing"),
     "timed": ("depths_m", "times_s"),
     "ramp_hold": ("max_depth_m", "speed_m_per_s", "hold_s", "ramp_steps", "hold_steps"),
     "sine": (
@@ -143,6 +143,11 @@ def _read_quasi_static(table: Table, thickness_m: float) -> Protocol:
             table.prefix,
             "give either depths_m, or max_depth_m and steps (exactly one of the two forms)",
         )
+    settings: dict[str, Any] = {}
+    if has_list and table.has("spacing"):
+        raise table.error(
+            "spacing", "spaces the steps of max_depth_m and steps, not a depths_m list", None
+        )
     if has_list:
         depths = table.number_list("depths_m")
         if len(depths) > MAX_STEPS:
@@ -158,7 +163,12 @@ def _read_quasi_static(table: Table, thickness_m: float) -> Protocol:
         steps = table.integer("steps")
         if steps > MAX_STEPS:
             raise table.error("steps", f"must be at most {MAX_STEPS}", steps)
-        depths = tuple(max_depth_m * (k + 1) / steps for k in range(steps))
+        spacing = table.string("spacing", default="even", choices=DEPTH_SPACINGS)
+        depths = tuple(
+            map(float, quasi_static_depths(max_depth_m=max_depth_m, steps=steps, spacing=spacing))
+        )
+        if spacing != "even":  # echoed as the keys that made the depths
+            settings = {"max_depth_m": max_depth_m, "steps": steps, "spacing": spacing}
         last_key = "max_depth_m"
     if depths[-1] >= thickness_m:
         raise table.error(
@@ -167,4 +177,4 @@ def _read_quasi_static(table: Table, thickness_m: float) -> Protocol:
             depths[-1],
         )
     table.finish(also_known=("kind", *PROTOCOL_KEYS["quasi_static"]))
-    return Protocol(depths_m=depths)
+    return Protocol(depths_m=depths, settings=settings)

@@ -168,7 +168,9 @@ class Protocol:
         kind: ``"quasi_static"``, ``"timed"`` (explicit ``depths_m`` and ``times_s``),
             ``"ramp_hold"``, ``"sine"`` or ``"record"``.
         settings: The keys that generated a ``ramp_hold`` or ``sine`` protocol (every
-            default filled in), or ``{"steps": n}`` for a record; empty otherwise.
+            default filled in), ``{"steps": n}`` for a record, ``max_depth_m``, ``steps``
+            and ``spacing`` for a quasi-static one spaced by the contact radius
+            (:func:`warptissue.loading.quasi_static_depths`); empty otherwise.
         record: The record whose depth-time history a ``"record"`` protocol follows (its
             force, where the CSV has one, is not used), else None.
     """
@@ -227,8 +229,8 @@ class Protocol:
         filled in (``"timed"``: the two lists; ``"record"``: the record's keys, its file
         relative to ``relative_to`` where given, as :meth:`Study.to_dict`).
         """
-        if self.kind == "quasi_static":
-            return {"depths_m": list(self.depths_m)}
+        if self.kind == "quasi_static":  # spaced by the contact radius: the keys that did it
+            return dict(self.settings) if self.settings else {"depths_m": list(self.depths_m)}
         table: dict[str, Any] = {"kind": self.kind}
         if self.kind == "timed":
             table.update(depths_m=list(self.depths_m), times_s=list(self.times_s or ()))
