@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from warptissue.fem import IndentationProblem, simulate_indentation
+from warptissue.fem import IndentationProblem, NewtonOptions, simulate_indentation
 from warptissue.indenter import Indenter
 from warptissue.loading import DEPTH_SPACINGS, quasi_static_depths
 from warptissue.materials import NeoHookean
@@ -74,6 +74,7 @@ def run_case(
     far: float = 0.15,
     growth: float = 0.25,
     depths_over_rstar: np.ndarray = DEPTHS_OVER_RSTAR,
+    options: NewtonOptions | None = None,
 ) -> dict:
     probe_radius = ratio * BALL_RADIUS_M
     reduced_radius = probe_radius * BALL_RADIUS_M / (probe_radius + BALL_RADIUS_M)
@@ -90,7 +91,7 @@ def run_case(
     )
     depths = np.asarray(depths_over_rstar) * reduced_radius
     start = time.perf_counter()
-    result = simulate_indentation(problem, depths, device=device, progress=False)
+    result = simulate_indentation(problem, depths, device=device, progress=False, options=options)
     seconds = time.perf_counter() - start
     count = len(result.reaction_force_N)
     ratio_to_hertz = result.reaction_force_N / hertz_N(depths[:count], reduced_radius)
