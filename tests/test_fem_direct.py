@@ -189,7 +189,28 @@ def test_pardiso_that_does_not_load_is_a_one_line_device_error(monkeypatch):
         direct.pardiso_unavailable_reason.cache_clear()
 
 
-def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch, tmp_path):
+@pytest.fixture
+def base_prefix_mkl(monkeypatch, tmp_path):
+    """A virtual environment whose base Python holds ``lib/libmkl_rt.so.2`` (an empty
+    file): ``sys.prefix`` and ``sys.base_prefix`` pointed there, ``PYPARDISO_MKL_RT`` unset
+    (and removed again at teardown, whatever the code under test set), the routine's cache
+    cleared before and after. Yields the library's path."""
+    from warptissue.fem.linear import direct
+
+    library = tmp_path / "base" / "lib" / "libmkl_rt.so.2"
+    library.parent.mkdir(parents=True)
+    library.write_bytes(b"")
+    # set first, so that the teardown removes what the code under test sets
+    monkeypatch.setenv("PYPARDISO_MKL_RT", "")
+    monkeypatch.delenv("PYPARDISO_MKL_RT")
+    monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
+    monkeypatch.setattr(direct.sys, "base_prefix", str(tmp_path / "base"))
+    direct._pardiso_routine.cache_clear()
+    yield library
+    direct._pardiso_routine.cache_clear()
+
+
+def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch, base_prefix_mkl):
     """A virtual environment made with --system-site-packages has MKL under the base Python's
     prefix, where pypardiso does not look: the routine is loaded from there (through
     PYPARDISO_MKL_RT) instead of falling back to SuperLU; where the base prefix has none, or
@@ -199,9 +220,6 @@ def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch
 
     from warptissue.fem.linear import direct
 
-    base = tmp_path / "base"
-    (base / "lib").mkdir(parents=True)
-    (base / "lib" / "libmkl_rt.so.2").write_bytes(b"")
     seen = []
 
     class FakeSolver:
@@ -213,27 +231,20 @@ def test_pardiso_takes_the_base_pythons_mkl_in_a_virtual_environment(monkeypatch
             self._mkl_pardiso = ("routine from", path)
 
     monkeypatch.setitem(sys.modules, "pypardiso", types.SimpleNamespace(PyPardisoSolver=FakeSolver))
-    # set first, so that the teardown removes what the code under test sets
-    monkeypatch.setenv("PYPARDISO_MKL_RT", "")
-    monkeypatch.delenv("PYPARDISO_MKL_RT")
-    monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
-    monkeypatch.setattr(direct.sys, "base_prefix", str(base))
+    routine = direct._pardiso_routine()
+    assert routine == ("routine from", str(base_prefix_mkl))
+    assert seen == [None, str(base_prefix_mkl)]
+    # No MKL under the base prefix either: pypardiso's error stands.
+    base_prefix_mkl.unlink()
+    monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
     direct._pardiso_routine.cache_clear()
-    try:
-        routine = direct._pardiso_routine()
-        assert routine == ("routine from", str(base / "lib" / "libmkl_rt.so.2"))
-        assert seen == [None, str(base / "lib" / "libmkl_rt.so.2")]
-        # No MKL under the base prefix either: pypardiso's error stands.
-        (base / "lib" / "libmkl_rt.so.2").unlink()
-        monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
-        direct._pardiso_routine.cache_clear()
-        with pytest.raises(ImportError, match="mkl_rt not found"):
-            direct._pardiso_routine()
-    finally:
-        direct._pardiso_routine.cache_clear()
+    with pytest.raises(ImportError, match="mkl_rt not found"):
+        direct._pardiso_routine()
 
 
-def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(tmp_path, monkeypatch):
+def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(
+    tmp_path, monkeypatch, base_prefix_mkl
+):
     """pypardiso makes a solver as it is imported: without ``mkl_rt`` under the environment's
     prefix its import raises (as in a ``--system-site-packages`` environment). The base
     prefix's ``mkl_rt`` is then tried with the import run again; a missing pypardiso stays
@@ -242,9 +253,6 @@ def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(tmp_pat
 
     from warptissue.fem.linear import direct
 
-    base = tmp_path / "base"
-    (base / "lib").mkdir(parents=True)
-    (base / "lib" / "libmkl_rt.so.2").write_bytes(b"")
     package = tmp_path / "site" / "pypardiso"
     package.mkdir(parents=True)
     (package / "__init__.py").write_text(
@@ -259,14 +267,8 @@ def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(tmp_pat
     )
     monkeypatch.delitem(sys.modules, "pypardiso", raising=False)
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
-    # set first, so that the teardown removes what the code under test sets
-    monkeypatch.setenv("PYPARDISO_MKL_RT", "")
-    monkeypatch.delenv("PYPARDISO_MKL_RT")
-    monkeypatch.setattr(direct.sys, "prefix", str(tmp_path / "venv"))
-    monkeypatch.setattr(direct.sys, "base_prefix", str(base))
-    direct._pardiso_routine.cache_clear()
     try:
-        assert direct._pardiso_routine() == ("routine from", str(base / "lib" / "libmkl_rt.so.2"))
+        assert direct._pardiso_routine() == ("routine from", str(base_prefix_mkl))
         monkeypatch.setitem(sys.modules, "pypardiso", None)  # not installed
         monkeypatch.delenv("PYPARDISO_MKL_RT", raising=False)
         direct._pardiso_routine.cache_clear()
@@ -275,4 +277,3 @@ def test_pardiso_loads_where_pypardiso_s_import_itself_fails_without_mkl(tmp_pat
         assert "PYPARDISO_MKL_RT" not in direct.os.environ
     finally:
         sys.modules.pop("pypardiso", None)
-        direct._pardiso_routine.cache_clear()
